@@ -1,0 +1,432 @@
+"""Native steady BEM: all sections of all operating points and azimuth sectors at once.
+
+The flow follows CCBlade (Ning 2014): local velocities from precone, precurve,
+presweep, tilt, yaw and shear per azimuth sector; Ning's residual solved by a
+bracketed vectorized iteration; loads integrated along the blade path and averaged
+over the sectors. Sensitivities come from the implicit-function theorem at the root
+with exact partials (forward-mode duals of the same equations).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calib.bem import dual as dl
+from calib.bem.kinematics import curvature, wind_components
+from calib.bem.polar_grid import SectionPolars
+from calib.bem.residual import SectionGeometry, section_equations, section_loads
+from calib.bem.rootfind import bracket, solve_brackets
+from calib.corrections import CorrectionGrid
+from calib.errors import InputError
+from calib.models.base import OperatingConditions, Status
+from calib.rotor.geometry import Rotor
+
+RESIDUAL_TOL = 1e-8
+"""A section counts as converged when |R(φ*)| is below this [-]."""
+
+
+@dataclass(frozen=True)
+class BemSettings:
+    """Options of the native BEM.
+
+    Parameters
+    ----------
+    tip_loss, hub_loss : bool
+        Prandtl tip / hub loss factors.
+    use_drag : bool
+        Include drag in the induction equations (Ning 2014 recommends it).
+    wake_rotation : bool
+        Tangential induction a'.
+    n_sectors : int or None
+        Azimuth sectors averaged per point; ``None`` picks 1 for an axisymmetric case
+        (no tilt, yaw or shear) and 4 otherwise (as CCBlade).
+    shear_exponent : float
+        Power-law wind-shear exponent [-].
+    use_tilt : bool
+        Apply the rotor's shaft tilt to the inflow.
+    max_iter : int
+        Iteration limit of the root search.
+    """
+
+    tip_loss: bool = True
+    hub_loss: bool = True
+    use_drag: bool = True
+    wake_rotation: bool = True
+    n_sectors: int | None = None
+    shear_exponent: float = 0.0
+    use_tilt: bool = True
+    max_iter: int = 100
+
+    def sectors_for(self, rotor: Rotor, conditions: OperatingConditions) -> int:
+        if self.n_sectors is not None:
+            if int(self.n_sectors) < 1:
+                raise InputError(f"must be >= 1, got {self.n_sectors}", "BemSettings", field="n_sectors")
+            return int(self.n_sectors)
+        symmetric = (self.shear_exponent == 0.0 and (not self.use_tilt or rotor.tilt_deg == 0.0)
+                     and np.all(conditions.yaw == 0.0))
+        return 1 if symmetric else 4
+
+
+@dataclass(frozen=True, eq=False)
+class SectionSensitivities:
+    """Total derivatives of section quantities at the BEM root.
+
+    Each entry is a dict quantity -> ndarray (n_points, n_sectors, n_stations), for the
+    quantities ``Np``, ``Tp`` [N/m], ``cn``, ``ct`` [-] (chord axes) and ``alpha_deg``.
+
+    Attributes
+    ----------
+    d_cl, d_cd : dict
+        Derivative with respect to an additive change of C_L / C_D at the section.
+    d_pitch : dict
+        Per degree of collective pitch offset.
+    d_wind_scale : dict
+        Per unit wind-speed scale factor.
+    basis_index, basis_value : ndarray, shape (n_points, n_sectors, n_stations, 4)
+        Correction shape functions active at each section (when a grid is used).
+    """
+
+    d_cl: dict
+    d_cd: dict
+    d_pitch: dict
+    d_wind_scale: dict
+    basis_index: np.ndarray | None = None
+    basis_value: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class BemResult:
+    """Outputs of :func:`solve_bem`.
+
+    Rotor quantities have shape (n_points,); section fields (``sections``) have shape
+    (n_points, n_sectors, n_stations) and are zero at stations on the hub or tip.
+
+    Attributes
+    ----------
+    power [W], thrust [N], torque [N m] : ndarray
+    root_flap_moment, root_edge_moment : ndarray
+        Out-of-plane and in-plane bending moment of one blade about the blade root
+        (r = hub radius) [N m], azimuth-averaged.
+    hub_flap_moment : ndarray
+        Out-of-plane moment of one blade about the rotor centre [N m] (CCBlade's ``Mb``).
+    cp, ct, cq : ndarray
+        Power, thrust and torque coefficients [-] on the swept area.
+    status : ndarray of int
+        :class:`calib.models.base.Status` per point.
+    messages : tuple of str
+    sections : dict of ndarray
+        ``phi`` [rad], ``alpha_deg``, ``a``, ``ap``, ``cl``, ``cd``, ``cn``, ``ct`` (chord
+        axes), ``Np``, ``Tp`` [N/m], ``W`` [m/s], ``residual``, ``iterations``.
+    weights : dict
+        Integration weights used for the rotor quantities (for sensitivities).
+    sensitivities : SectionSensitivities or None
+    """
+
+    power: np.ndarray
+    thrust: np.ndarray
+    torque: np.ndarray
+    root_flap_moment: np.ndarray
+    root_edge_moment: np.ndarray
+    hub_flap_moment: np.ndarray
+    cp: np.ndarray
+    ct: np.ndarray
+    cq: np.ndarray
+    status: np.ndarray
+    messages: tuple
+    sections: dict
+    weights: dict
+    omega: np.ndarray
+    n_sectors: int
+    rotor: Rotor = field(repr=False)
+    sensitivities: SectionSensitivities | None = None
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == Status.CONVERGED
+
+    @property
+    def n_failed(self) -> int:
+        return int(np.count_nonzero(~self.ok))
+
+
+def interior_stations(rotor: Rotor) -> np.ndarray:
+    """Stations strictly between hub and tip (the ones that carry load) [bool]."""
+    tol = 1e-9 * rotor.tip_radius
+    return (rotor.r > rotor.hub_radius + tol) & (rotor.r < rotor.tip_radius - tol)
+
+
+def integration_weights(rotor: Rotor, interior: np.ndarray | None = None) -> dict:
+    """Trapezoid weights along the blade path, with zero load at hub and tip (CCBlade).
+
+    Returns
+    -------
+    dict of ndarray, shape (n_stations,)
+        ``thrust`` (ds cos(cone)) [m], ``torque`` (ds z) [m^2], ``flap_root`` (ds (z - z_root))
+        [m^2] and ``flap_hub`` (ds z) [m^2], such that e.g. thrust per blade = Σ w N'.
+    """
+    interior = interior_stations(rotor) if interior is None else interior
+    r, pc = rotor.r, np.radians(rotor.precone_deg)
+    keep_hub = int(r[0] > rotor.hub_radius * (1 + 1e-9))
+    keep_tip = int(r[-1] < rotor.tip_radius * (1 - 1e-9))
+    rf = np.concatenate([[rotor.hub_radius]] * keep_hub + [r] + [[rotor.tip_radius]] * keep_tip)
+    cf = np.concatenate([[0.0]] * keep_hub + [rotor.precurve] + [[rotor.precurve_tip]] * keep_tip)
+    sf = np.concatenate([[0.0]] * keep_hub + [rotor.presweep] + [[rotor.presweep_tip]] * keep_tip)
+    x_az, y_az, z_az, cone, s = curvature(rf, cf, sf, pc)
+    ds = np.zeros_like(s)
+    ds[1:-1] = 0.5 * (s[2:] - s[:-2])
+    ds[0], ds[-1] = 0.5 * (s[1] - s[0]), 0.5 * (s[-1] - s[-2])
+    sl = slice(int(keep_hub), int(keep_hub) + r.size)
+    ds, z, cone = ds[sl] * interior, z_az[sl], cone[sl]
+    z_root = rotor.hub_radius * np.cos(pc)
+    return {"thrust": ds * np.cos(cone), "torque": ds * z, "flap_root": ds * (z - z_root),
+            "flap_hub": ds * z}
+
+
+def _check_conditions(conditions: OperatingConditions):
+    """Per-point validity of the operating conditions: (bad mask, messages)."""
+    n = len(conditions)
+    msgs = [""] * n
+    bad = np.zeros(n, bool)
+    checks = (("wind_speed", conditions.wind_speed, lambda v: v > 0, "wind speed must be > 0 m/s"),
+              ("rotor_speed", conditions.rotor_speed, lambda v: v > 0,
+               "rotor speed must be > 0 rpm (parked rotors are outside the steady BEM)"),
+              ("pitch", conditions.pitch, lambda v: np.abs(v) <= 180, "pitch must lie in [-180, 180] deg"),
+              ("air_density", conditions.air_density, lambda v: v > 0, "air density must be > 0 kg/m^3"),
+              ("yaw", conditions.yaw, lambda v: np.abs(v) < 90, "yaw must lie in (-90, 90) deg"))
+    for name, v, ok, text in checks:
+        with np.errstate(invalid="ignore"):
+            fail = ~np.isfinite(v) | ~ok(v)
+        for k in np.flatnonzero(fail & ~bad):
+            msgs[k] = f"invalid input: {name} = {v[k]!r}; {text}"
+        bad |= fail
+    return bad, msgs
+
+
+def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings | None = None,
+              grid: CorrectionGrid | None = None, p=None, pitch_offset: float = 0.0,
+              wind_scale: float = 1.0, sensitivities: bool = False,
+              polars: SectionPolars | None = None) -> BemResult:
+    """Solve the steady BEM for a batch of operating points.
+
+    Parameters
+    ----------
+    rotor : Rotor
+    conditions : OperatingConditions
+        Wind speed [m/s], rotor speed [rpm], pitch [deg], air density [kg/m^3], yaw [deg].
+    settings : BemSettings, optional
+    grid : CorrectionGrid, optional
+        Correction field applied to every section's C_L and C_D.
+    p : array_like, shape (grid.n_params,), optional
+        Nodal corrections ``[p^L; p^D]`` [-]; zeros if omitted.
+    pitch_offset : float
+        Collective pitch offset added to every point [deg] (nuisance parameter).
+    wind_scale : float
+        Factor on the wind speed [-] (nuisance parameter: anemometry, blockage).
+    sensitivities : bool
+        Also return exact section sensitivities (for :mod:`calib.bem.jacobian`).
+    polars : SectionPolars, optional
+        Pre-built look-up tables (re-used across calls by :class:`BemModel`).
+
+    Returns
+    -------
+    BemResult
+        Every point has a status; failed points have NaN values and a message.
+
+    References
+    ----------
+    S.A. Ning, Wind Energy 17 (2014) 1327-1345 (method, bracketing, CCBlade conventions).
+    """
+    settings = settings or BemSettings()
+    polars = polars or SectionPolars.from_rotor(rotor)
+    if grid is not None:
+        p = np.zeros(grid.n_params) if p is None else np.asarray(p, float)
+        if p.shape != (grid.n_params,) or not np.all(np.isfinite(p)):
+            raise InputError(f"expected {grid.n_params} finite correction values, got shape {p.shape}",
+                             "solve_bem", field="p")
+    for name, v in (("pitch_offset", pitch_offset), ("wind_scale", wind_scale)):
+        if not np.isfinite(v):
+            raise InputError(f"must be finite, got {v!r}", "solve_bem", field=name)
+    n_pts = len(conditions)
+    n_sec = settings.sectors_for(rotor, conditions)
+    n_st = rotor.n_stations
+    bad_pt, msgs = _check_conditions(conditions)
+    if not np.isfinite(rotor.hub_height) and settings.shear_exponent != 0.0:
+        raise InputError("wind shear needs a finite hub height", rotor.source, field="hub_height")
+
+    # ---- kinematics per (point, sector, station)
+    pc = np.radians(rotor.precone_deg)
+    x_az, y_az, z_az, cone, _ = curvature(rotor.r, rotor.precurve, rotor.presweep, pc)
+    omega = conditions.rotor_speed * np.pi / 30.0
+    wind = np.where(bad_pt, 1.0, conditions.wind_speed * wind_scale)
+    azimuth = np.linspace(0.0, 2 * np.pi, n_sec + 1)[:-1]
+    tilt = np.radians(rotor.tilt_deg) if settings.use_tilt else 0.0
+    vx, vy, vxw, vyw = wind_components(x_az, y_az, z_az, cone, azimuth, wind, np.where(bad_pt, 1.0, omega),
+                                       np.radians(np.where(bad_pt, 0.0, conditions.yaw)), tilt,
+                                       rotor.hub_height, settings.shear_exponent)
+    if wind_scale != 0.0:
+        vxw, vyw = vxw / wind_scale, vyw / wind_scale   # d v / d wind_scale
+
+    interior = interior_stations(rotor)
+    shape = (n_pts, n_sec, n_st)
+    station = np.broadcast_to(np.arange(n_st), shape)
+    pitch = np.radians(np.where(bad_pt, 0.0, conditions.pitch) + pitch_offset)
+    theta = np.radians(rotor.twist_deg)[None, None, :] + pitch[:, None, None]
+    theta = np.broadcast_to(theta, shape)
+    eta = np.broadcast_to(rotor.eta, shape)
+    rho = np.broadcast_to(conditions.air_density[:, None, None], shape)
+    active = np.broadcast_to(interior, shape) & ~bad_pt[:, None, None] & (vx > 0)
+
+    sel = np.flatnonzero(active.reshape(-1))
+    f_station, f_theta, f_eta = station.reshape(-1)[sel], theta.reshape(-1)[sel], eta.reshape(-1)[sel]
+    f_vx, f_vy = vx.reshape(-1)[sel], vy.reshape(-1)[sel]
+    r_full = np.broadcast_to(rotor.r, shape).reshape(-1)[sel]
+    c_full = np.broadcast_to(rotor.chord, shape).reshape(-1)[sel]
+    geo = SectionGeometry(r_full, c_full, rotor.n_blades * c_full / (2 * np.pi * r_full),
+                          rotor.hub_radius, rotor.tip_radius, rotor.n_blades)
+    opts = dict(tip_loss=settings.tip_loss, hub_loss=settings.hub_loss, use_drag=settings.use_drag,
+                wake_rotation=settings.wake_rotation)
+
+    def coefficients(idx, phi):
+        alpha_deg = np.degrees(phi - f_theta[idx])
+        cl, cd, dcl, dcd = polars.lookup(alpha_deg, f_station[idx])
+        if grid is not None:
+            dl_, dd_, sl_, sd_ = grid.evaluate(p, alpha_deg, f_eta[idx])
+            cl, cd, dcl, dcd = cl + dl_, cd + dd_, dcl + sl_, dcd + sd_
+        return alpha_deg, cl, cd, dcl, dcd
+
+    def residual(idx, phi):
+        _, cl, cd, _, _ = coefficients(idx, phi)
+        eq = section_equations(phi, cl, cd, f_vx[idx], f_vy[idx], geo.take(idx), **opts)
+        return eq["residual"]
+
+    lo, hi, flo, fhi, found = bracket(residual, sel.size)
+    phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
+    conv = found & np.isfinite(fphi) & (np.abs(fphi) <= RESIDUAL_TOL)
+
+    # ---- section quantities at the root (duals when sensitivities are wanted)
+    allidx = np.arange(sel.size)
+    phi_eval = np.where(conv, phi, 0.5 * np.pi)
+    alpha_deg, cl, cd, dcl, dcd = coefficients(allidx, phi_eval)
+    if sensitivities:
+        # seeds: 0 phi, 1 theta, 2 vx, 3 vy, 4 additive dCL, 5 additive dCD
+        k = 6
+        phi_d = dl.Dual.seed(phi_eval, k, 0)
+        theta_d = dl.Dual.seed(f_theta, k, 1)
+        vx_d, vy_d = dl.Dual.seed(f_vx, k, 2), dl.Dual.seed(f_vy, k, 3)
+        slope_cl, slope_cd = np.degrees(dcl), np.degrees(dcd)   # per rad
+        d_cl = np.zeros((sel.size, k)); d_cl[:, 0], d_cl[:, 1], d_cl[:, 4] = slope_cl, -slope_cl, 1.0
+        d_cd = np.zeros((sel.size, k)); d_cd[:, 0], d_cd[:, 1], d_cd[:, 5] = slope_cd, -slope_cd, 1.0
+        cl_in, cd_in = dl.Dual(cl, d_cl), dl.Dual(cd, d_cd)
+    else:
+        phi_d, theta_d, vx_d, vy_d, cl_in, cd_in = phi_eval, f_theta, f_vx, f_vy, cl, cd
+    eq = section_equations(phi_d, cl_in, cd_in, vx_d, vy_d, geo, **opts)
+    rho_f = rho.reshape(-1)[sel]
+    loads = section_loads(eq, vx_d, vy_d, geo.chord, rho_f)
+    alpha_rad = phi_d - theta_d
+    cn_chord = cl_in * dl.cos(alpha_rad) + cd_in * dl.sin(alpha_rad)
+    ct_chord = cl_in * dl.sin(alpha_rad) - cd_in * dl.cos(alpha_rad)
+    quantities = {"Np": loads["Np"], "Tp": loads["Tp"], "cn": cn_chord, "ct": ct_chord}
+
+    def scatter(values, fill=0.0):
+        out = np.full(n_pts * n_sec * n_st, fill)
+        out[sel] = np.where(conv, values, np.nan)
+        return out.reshape(shape)
+
+    sections = {"phi": scatter(phi_eval), "alpha_deg": scatter(alpha_deg), "cl": scatter(cl),
+                "cd": scatter(cd), "a": scatter(dl.value(eq["a"])), "ap": scatter(dl.value(eq["ap"])),
+                "W": scatter(dl.value(loads["W"])), "residual": scatter(fphi),
+                "iterations": scatter(iters.astype(float))}
+    for name, q in quantities.items():
+        sections[name] = scatter(dl.value(q))
+
+    # ---- per-point status
+    sec_fail = np.zeros(n_pts * n_sec * n_st, bool)
+    sec_fail[sel] = ~conv
+    sec_fail = sec_fail.reshape(shape)
+    neg_drag = np.zeros(n_pts * n_sec * n_st, bool)
+    neg_drag[sel] = cd <= 0.0
+    neg_drag = neg_drag.reshape(shape)
+    reversed_flow = np.broadcast_to(interior, shape) & ~bad_pt[:, None, None] & ~(vx > 0)
+    status = np.full(n_pts, int(Status.CONVERGED))
+    status[bad_pt] = int(Status.INVALID_INPUT)
+    trouble = sec_fail | neg_drag | reversed_flow
+    for kpt in np.flatnonzero(~bad_pt & trouble.any(axis=(1, 2))):
+        parts = []
+        nd = int(neg_drag[kpt].sum())
+        if nd:
+            status[kpt] = int(Status.INVALID_INPUT)
+            parts.append(f"C_D <= 0 at {nd} section(s) (corrected polar; the BEM needs positive drag)")
+        else:
+            status[kpt] = int(Status.NOT_CONVERGED)
+        nf = int(sec_fail[kpt].sum())
+        if nf:
+            parts.append(f"{nf} section(s) without a converged root (no sign change of the residual "
+                         f"in Ning's brackets or |R| > {RESIDUAL_TOL:g})")
+        nr = int(reversed_flow[kpt].sum())
+        if nr:
+            parts.append(f"{nr} section(s) with reversed inflow (V_x <= 0)")
+        msgs[kpt] = "BEM: " + "; ".join(parts)
+
+    # ---- rotor quantities
+    w = integration_weights(rotor, interior)
+    B = rotor.n_blades
+    Np, Tp = sections["Np"], sections["Tp"]
+    thrust = B * np.einsum("ksi,i->k", Np, w["thrust"]) / n_sec
+    torque = B * np.einsum("ksi,i->k", Tp, w["torque"]) / n_sec
+    flap = np.einsum("ksi,i->k", Np, w["flap_root"]) / n_sec
+    edge = np.einsum("ksi,i->k", Tp, w["flap_root"]) / n_sec
+    flap_hub = np.einsum("ksi,i->k", Np, w["flap_hub"]) / n_sec
+    power = torque * omega
+    failed = status != Status.CONVERGED
+    q_dyn = 0.5 * conditions.air_density * conditions.wind_speed ** 2
+    area, radius = rotor.swept_area, rotor.rotor_radius
+    with np.errstate(all="ignore"):
+        cp = power / (q_dyn * area * conditions.wind_speed)
+        ct_ = thrust / (q_dyn * area)
+        cq = torque / (q_dyn * area * radius)
+    outs = [power, thrust, torque, flap, edge, flap_hub, cp, ct_, cq]
+    for arr in outs:
+        arr[failed] = np.nan
+
+    sens = None
+    if sensitivities:
+        sens = _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid,
+                                      sections, rotor, f_eta)
+    return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
+                     omega=omega, n_sectors=n_sec, rotor=rotor, sensitivities=sens)
+
+
+def _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid, sections, rotor,
+                           f_eta):
+    """Implicit-function total derivatives of section quantities (Ning 2014, §3)."""
+    R = eq["residual"]
+    r_phi = R.d[:, 0]
+    with np.errstate(all="ignore"):
+        dphi = -R.d / r_phi[:, None]          # dφ/d(seed) for seeds 1..5 (column 0 unused)
+    size = int(np.prod(shape))
+    f_vxw, f_vyw = vxw.reshape(-1)[sel], vyw.reshape(-1)[sel]
+
+    def total(q):
+        d = q.d[:, 1:] + q.d[:, [0]] * dphi[:, 1:]    # columns: theta, vx, vy, dcl, dcd
+        return d
+
+    out = {"d_cl": {}, "d_cd": {}, "d_pitch": {}, "d_wind_scale": {}}
+    qs = dict(quantities)
+    qs["alpha_deg"] = alpha_rad * (180.0 / np.pi)
+    for name, q in qs.items():
+        d = total(q)
+        per = {"d_pitch": d[:, 0] * (np.pi / 180.0),
+               "d_wind_scale": d[:, 1] * f_vxw + d[:, 2] * f_vyw,
+               "d_cl": d[:, 3], "d_cd": d[:, 4]}
+        for key, v in per.items():
+            full = np.zeros(size)
+            full[sel] = np.where(conv, v, 0.0)
+            out[key][name] = full.reshape(shape)
+    bi = bv = None
+    if grid is not None:
+        idx, val, _ = grid.basis(sections["alpha_deg"], np.broadcast_to(rotor.eta, shape))
+        mask = np.isfinite(sections["alpha_deg"])[..., None]
+        bi, bv = np.where(mask, idx, 0), np.where(mask, val, 0.0)
+    return SectionSensitivities(out["d_cl"], out["d_cd"], out["d_pitch"], out["d_wind_scale"], bi, bv)

@@ -1,0 +1,221 @@
+"""The additive polar-correction field ΔC_L(α, η), ΔC_D(α, η).
+
+Notes
+-----
+Following Bottasso, Cacciola & Iriarte (2014), the corrections are written on
+tensor products of one-dimensional piecewise-linear "hat" functions:
+
+.. math::
+    ΔC_L(α, η) = \\sum_{i,j} N_i(α) H_j(η) p^L_{ij},\\qquad
+    ΔC_D(α, η) = \\sum_{i,j} N_i(α) H_j(η) p^D_{ij}
+
+with nodes α_i [deg] and η_j = r/R [-]. Inside the node range the hats form a
+partition of unity and the field is bilinear in every cell. Outside it, the first
+and last hats ramp linearly to zero over one node spacing, so the field is
+continuous everywhere and vanishes far from the grid (the tables are left as they are
+where no node is placed).
+
+The parameter vector is ``p = [p^L; p^D]`` with ``p^L[i * n_eta + j]`` the lift node at
+(α_i, η_j). Because the field is linear in ``p``, ∂ΔC/∂p is the shape-function value.
+
+References
+----------
+C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line
+models from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.errors import InputError
+from calib.models.base import Parameter
+
+
+def _check_nodes(nodes, name: str) -> np.ndarray:
+    a = np.asarray(nodes, dtype=float).reshape(-1)
+    if a.size < 2:
+        raise InputError(f"need at least 2 nodes, got {a.size}", "CorrectionGrid", field=name)
+    if not np.all(np.isfinite(a)):
+        raise InputError("nodes must be finite", "CorrectionGrid", field=name)
+    if np.any(np.diff(a) <= 0):
+        raise InputError("nodes must be strictly increasing", "CorrectionGrid", field=name)
+    return a
+
+
+def hat_weights(x, nodes: np.ndarray):
+    """Values and slopes of the 1-D hat functions at ``x``.
+
+    Parameters
+    ----------
+    x : array_like
+        Evaluation points (any shape), in the unit of ``nodes``.
+    nodes : ndarray, shape (n_nodes,)
+        Strictly increasing node locations.
+
+    Returns
+    -------
+    index : ndarray of int, shape x.shape + (2,)
+        The two node indices with (possibly) non-zero weight.
+    weight : ndarray, shape x.shape + (2,)
+        Hat values N_index(x) [-].
+    slope : ndarray, shape x.shape + (2,)
+        dN_index/dx [1/unit of x].
+    """
+    x = np.asarray(x, dtype=float)
+    n = nodes.size
+    k = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, n - 2)
+    h = nodes[k + 1] - nodes[k]
+    t = (x - nodes[k]) / h
+    index = np.stack([k, k + 1], axis=-1)
+    weight = np.stack([1.0 - t, t], axis=-1)
+    slope = np.stack([-1.0 / h, 1.0 / h], axis=-1)
+    # below the first node: the first hat ramps to zero over one spacing
+    h0 = nodes[1] - nodes[0]
+    below = x < nodes[0]
+    tb = (nodes[0] - x) / h0
+    wb = np.where(tb < 1.0, 1.0 - tb, 0.0)
+    sb = np.where(tb < 1.0, 1.0 / h0, 0.0)
+    # above the last node: the last hat ramps to zero over one spacing
+    hn = nodes[-1] - nodes[-2]
+    above = x > nodes[-1]
+    ta = (x - nodes[-1]) / hn
+    wa = np.where(ta < 1.0, 1.0 - ta, 0.0)
+    sa = np.where(ta < 1.0, -1.0 / hn, 0.0)
+    weight[..., 0] = np.where(below, wb, np.where(above, 0.0, weight[..., 0]))
+    slope[..., 0] = np.where(below, sb, np.where(above, 0.0, slope[..., 0]))
+    weight[..., 1] = np.where(above, wa, np.where(below, 0.0, weight[..., 1]))
+    slope[..., 1] = np.where(above, sa, np.where(below, 0.0, slope[..., 1]))
+    return index, weight, slope
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionGrid:
+    """Node grid of the correction field.
+
+    Parameters
+    ----------
+    alpha_nodes_deg : array_like, shape (n_alpha,)
+        Angle-of-attack nodes [deg], strictly increasing.
+    eta_nodes : array_like, shape (n_eta,)
+        Spanwise nodes η = r/R [-], strictly increasing.
+    cl_scale, cd_scale : float
+        Typical magnitude of a lift / drag correction [-] (SVD scaling, DESIGN §5).
+    cl_bound, cd_bound : float
+        Symmetric bounds on each nodal correction [-].
+    """
+
+    alpha_nodes_deg: np.ndarray
+    eta_nodes: np.ndarray
+    cl_scale: float = 0.1
+    cd_scale: float = 0.01
+    cl_bound: float = 1.0
+    cd_bound: float = 0.2
+
+    def __post_init__(self):
+        object.__setattr__(self, "alpha_nodes_deg", _check_nodes(self.alpha_nodes_deg, "alpha_nodes_deg"))
+        object.__setattr__(self, "eta_nodes", _check_nodes(self.eta_nodes, "eta_nodes"))
+        for name in ("cl_scale", "cd_scale", "cl_bound", "cd_bound"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise InputError(f"must be a positive number, got {getattr(self, name)!r}",
+                                 "CorrectionGrid", field=name)
+
+    @property
+    def n_alpha(self) -> int:
+        return int(self.alpha_nodes_deg.size)
+
+    @property
+    def n_eta(self) -> int:
+        return int(self.eta_nodes.size)
+
+    @property
+    def n_lift(self) -> int:
+        """Number of lift (and of drag) nodal parameters."""
+        return self.n_alpha * self.n_eta
+
+    @property
+    def n_params(self) -> int:
+        return 2 * self.n_lift
+
+    def node_index(self, i_alpha: int, j_eta: int) -> int:
+        """Position of lift node (i_alpha, j_eta) in the lift block."""
+        return i_alpha * self.n_eta + j_eta
+
+    def basis(self, alpha_deg, eta):
+        """Sparse tensor-product basis at points (α, η).
+
+        Parameters
+        ----------
+        alpha_deg : array_like
+            Angle of attack [deg].
+        eta : array_like
+            r/R [-], broadcastable with ``alpha_deg``.
+
+        Returns
+        -------
+        index : ndarray of int, shape (..., 4)
+            Lift-block node indices (add ``n_lift`` for the drag block).
+        value : ndarray, shape (..., 4)
+            N_i(α) H_j(η).
+        dvalue_dalpha : ndarray, shape (..., 4)
+            ∂/∂α of ``value`` [1/deg].
+        """
+        alpha_deg, eta = np.broadcast_arrays(np.asarray(alpha_deg, float), np.asarray(eta, float))
+        ia, wa, sa = hat_weights(alpha_deg, self.alpha_nodes_deg)
+        je, we, _ = hat_weights(eta, self.eta_nodes)
+        index = (ia[..., :, None] * self.n_eta + je[..., None, :]).reshape(*alpha_deg.shape, 4)
+        value = (wa[..., :, None] * we[..., None, :]).reshape(*alpha_deg.shape, 4)
+        dvalue = (sa[..., :, None] * we[..., None, :]).reshape(*alpha_deg.shape, 4)
+        return index, value, dvalue
+
+    def evaluate(self, p, alpha_deg, eta):
+        """ΔC_L, ΔC_D and their α-slopes at (α, η).
+
+        Parameters
+        ----------
+        p : array_like, shape (n_params,)
+            Nodal values ``[p^L; p^D]`` [-].
+        alpha_deg, eta : array_like
+            Angle of attack [deg] and r/R [-].
+
+        Returns
+        -------
+        dcl, dcd : ndarray
+            Corrections [-].
+        dcl_dalpha, dcd_dalpha : ndarray
+            Their slopes [1/deg].
+        """
+        p = np.asarray(p, dtype=float)
+        if p.shape != (self.n_params,):
+            raise InputError(f"expected {self.n_params} correction values, got shape {p.shape}",
+                             "CorrectionGrid.evaluate", field="p")
+        index, value, dvalue = self.basis(alpha_deg, eta)
+        pl, pd = p[: self.n_lift][index], p[self.n_lift:][index]
+        return ((value * pl).sum(-1), (value * pd).sum(-1),
+                (dvalue * pl).sum(-1), (dvalue * pd).sum(-1))
+
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The nodal parameters, lift block then drag block, in ``p`` order."""
+        out = []
+        for kind, letter, scale, bound in (("lift_correction", "L", self.cl_scale, self.cl_bound),
+                                           ("drag_correction", "D", self.cd_scale, self.cd_bound)):
+            for a in self.alpha_nodes_deg:
+                for e in self.eta_nodes:
+                    out.append(Parameter(
+                        name=f"dC{letter}[alpha={a:g},eta={e:g}]", nominal=0.0, lower=-bound,
+                        upper=bound, scale=scale, unit="-", kind=kind, alpha_deg=float(a), eta=float(e),
+                        description=f"additive C_{letter} correction at alpha={a:g} deg, eta={e:g}"))
+        return tuple(out)
+
+    def field_on(self, p, alpha_deg, eta):
+        """ΔC_L and ΔC_D on a mesh: ``alpha_deg`` (n_a,), ``eta`` (n_e,) -> two (n_e, n_a) arrays."""
+        A, E = np.meshgrid(np.asarray(alpha_deg, float), np.asarray(eta, float))
+        dcl, dcd, _, _ = self.evaluate(p, A, E)
+        return dcl, dcd
+
+    def to_dict(self) -> dict:
+        return {"alpha_nodes_deg": self.alpha_nodes_deg.tolist(), "eta_nodes": self.eta_nodes.tolist(),
+                "cl_scale": self.cl_scale, "cd_scale": self.cd_scale,
+                "cl_bound": self.cl_bound, "cd_bound": self.cd_bound}
