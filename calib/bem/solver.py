@@ -378,7 +378,8 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     flap = np.einsum("ksi,i->k", Np, w["flap_root"]) / n_sec
     edge = np.einsum("ksi,i->k", Tp, w["flap_root"]) / n_sec
     flap_hub = np.einsum("ksi,i->k", Np, w["flap_hub"]) / n_sec
-    power = torque * omega
+    with np.errstate(invalid="ignore"):
+        power = torque * omega
     failed = status != Status.CONVERGED
     q_dyn = 0.5 * conditions.air_density * conditions.wind_speed ** 2
     area, radius = rotor.swept_area, rotor.rotor_radius
