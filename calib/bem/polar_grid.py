@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
+from scipy.interpolate import PchipInterpolator, RectBivariateSpline
 
 from calib.rotor.geometry import Rotor
 from calib.rotor.polar import PolarTable
@@ -82,7 +82,22 @@ class SectionPolars:
     cd_slopes: np.ndarray
 
     @classmethod
-    def from_rotor(cls, rotor: Rotor, step_deg: float = GRID_STEP_DEG) -> "SectionPolars":
+    def from_rotor(cls, rotor: Rotor, step_deg: float = GRID_STEP_DEG,
+                   smoothing: tuple[float, float] | None = None) -> "SectionPolars":
+        """Build the tables.
+
+        Parameters
+        ----------
+        rotor : Rotor
+        step_deg : float
+            Grid step [deg].
+        smoothing : (s_cl, s_cd), optional
+            Replace the shape-preserving interpolant by a smoothing cubic spline in α [rad]
+            with these residual-sum bounds (scipy ``RectBivariateSpline(..., s=...)`` over the
+            table duplicated at two Reynolds numbers), the polar treatment of CCBlade
+            (s = 0.1 for C_L and 0.001 for C_D in WISDEM releases of 2019-2023). Use it to
+            reproduce CCBlade tables; the default (None) interpolates the data exactly.
+        """
         n = int(round(360.0 / step_deg))
         grid = np.linspace(-180.0, 180.0, n + 1)
         tables = station_tables(rotor)
@@ -92,11 +107,19 @@ class SectionPolars:
             key = id(t)
             if key not in cache:
                 vals = []
-                for y in (t.cl, t.cd):
-                    f = PchipInterpolator(t.alpha_deg, y, extrapolate=True)
-                    a = np.clip(grid, t.alpha_deg[0], t.alpha_deg[-1])
-                    vals.append((f(a), np.where((grid >= t.alpha_deg[0]) & (grid <= t.alpha_deg[-1]),
-                                                f.derivative()(a), 0.0)))
+                inside = (grid >= t.alpha_deg[0]) & (grid <= t.alpha_deg[-1])
+                a = np.clip(grid, t.alpha_deg[0], t.alpha_deg[-1])
+                for y, s in zip((t.cl, t.cd), smoothing or (None, None)):
+                    if s is None:
+                        f = PchipInterpolator(t.alpha_deg, y, extrapolate=True)
+                        vals.append((f(a), np.where(inside, f.derivative()(a), 0.0)))
+                    else:
+                        rad = np.radians(t.alpha_deg)
+                        spl = RectBivariateSpline(rad, [1e1, 1e15], np.c_[y, y],
+                                                  kx=min(rad.size - 1, 3), ky=1, s=s)
+                        ar = np.radians(a)
+                        vals.append((spl.ev(ar, 1e6), np.where(inside, spl.ev(ar, 1e6, dx=1), 0.0)
+                                     * np.pi / 180.0))
                 cache[key] = (vals[0][0], vals[1][0], vals[0][1], vals[1][1])
             rows.append(cache[key])
         cl, cd, dcl, dcd = (np.array([r[j] for r in rows]) for j in range(4))

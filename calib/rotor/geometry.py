@@ -63,14 +63,16 @@ class Rotor:
         [m].
     n_blades : int
     precone_deg : float
-        Precone [deg], positive tilts the blades downwind (away from the tower).
+        Precone [deg], positive tilts the blades away from the tower (upwind for an upwind
+        rotor), the CCBlade/WISDEM convention.
     tilt_deg : float
         Shaft tilt [deg], positive tilts the rotor disc upward.
     hub_height : float
         [m]; needed for wind shear.
     precurve, presweep : array_like, shape (n_stations,), optional
-        Out-of-plane (positive downwind) and in-plane offsets of the blade reference
-        axis [m] (AeroDyn ``BlCrvAC`` and ``BlSwpAC``; CCBlade ``precurve``, ``presweep``).
+        Out-of-plane and in-plane offsets of the blade reference axis [m], in the CCBlade
+        convention: precurve positive away from the tower (upwind for an upwind rotor), so
+        AeroDyn's ``BlCrvAC`` (positive downwind) enters with its sign reversed.
     precurve_tip, presweep_tip : float
         The same at the tip [m].
     schedule : OperatingSchedule, optional

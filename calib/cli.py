@@ -1,0 +1,75 @@
+"""The ``calib`` command.
+
+``calib demo``        the embedded default job (C_P surface and power curve)
+``calib run FILE``    run a workflow TOML (calibration, report)
+``calib fmu build``   build the turbine FMUs from C source
+``calib rotors``      list the embedded rotors
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from calib.errors import CalibError
+
+
+def _demo(args) -> int:
+    from calib.demo import run_demo
+    run_demo(args.out, args.rotor)
+    return 0
+
+
+def _run(args) -> int:
+    from calib.workflow import main as workflow_main
+    return int(workflow_main([args.file, "--out", args.out]) or 0)
+
+
+def _fmu(args) -> int:
+    from calib.fmu.build import main as fmu_main
+    return int(fmu_main(args.rest) or 0)
+
+
+def _rotors(args) -> int:
+    from calib.rotor.library import ROTORS, load_rotor
+    for name in ROTORS:
+        r = load_rotor(name)
+        print(f"{name:10s} R = {r.tip_radius:7.3f} m  B = {r.n_blades}  stations = {r.n_stations:3d}  "
+              f"precone = {r.precone_deg:g} deg  tilt = {r.tilt_deg:g} deg")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="calib", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("demo", help="C_P surface and power curve of an embedded rotor")
+    p.add_argument("--out", default="demo_output", help="output folder (default: demo_output)")
+    p.add_argument("--rotor", default="nrel5mw", help="embedded rotor name (default: nrel5mw)")
+    p.set_defaults(func=_demo)
+    p = sub.add_parser("run", help="run a workflow TOML file")
+    p.add_argument("file")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=_run)
+    p = sub.add_parser("fmu", help="FMU tools: 'calib fmu build [--variant A|B|all] ...'")
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=_fmu)
+    p = sub.add_parser("rotors", help="list the embedded rotors")
+    p.set_defaults(func=_rotors)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except CalibError as exc:
+        print(f"calib: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("calib: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
