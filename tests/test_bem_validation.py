@@ -60,16 +60,20 @@ def test_nrel5mw_against_openfast_steady_table():
     cond = OperatingConditions(col("WS_[m/s]"), col("RotSpeed_[rpm]"), col("BldPitch_[deg]"))
     res = solve_bem(rotor, cond, BemSettings())
     assert res.n_failed == 0
-    cp_ref, ct_ref = col("RtAeroCp_[-]"), col("RtAeroCt_[-]")
-    # OpenFAST (AeroDyn 15 on a flexible, time-marched turbine) and the steady rigid BEM on the
-    # same polars: C_P within 5 % and C_T within 6 % everywhere, closer in region 2
-    dcp = res.cp / cp_ref - 1
-    dct = res.ct / ct_ref - 1
+    # aerodynamic power from the shaft torque (steady: no acceleration) and the aero thrust; the
+    # table's RtAeroCp uses the disc-averaged relative wind, so C_P is not compared directly
+    power_ref = col("RotTorq_[kN-m]") * 1e3 * cond.rotor_speed * np.pi / 30
+    thrust_ref = col("RtAeroFxh_[kN]") * 1e3
+    dp = res.power / power_ref - 1
+    dt = res.thrust / thrust_ref - 1
     region2 = col("BldPitch_[deg]") < 0.5
-    assert np.max(np.abs(dcp[region2])) < 0.03
-    assert np.max(np.abs(dct[region2])) < 0.04
-    assert np.max(np.abs(dcp)) < 0.05
-    assert np.max(np.abs(dct)) < 0.06
+    # region 2: the rigid steady BEM is 1-3 % above OpenFAST in power, within 1.5 % in thrust
+    assert np.all(np.abs(dp[region2]) < 0.03)
+    assert np.all(np.abs(dt[region2]) < 0.015)
+    # above rated OpenFAST's flexible blades deflect downwind (coning, less swept area) at the same
+    # pitch, so the rigid BEM carries more load; the gap grows with wind speed but stays below 8 %
+    assert np.all((dp[~region2] > 0) & (dp[~region2] < 0.08))
+    assert np.all((dt[~region2] > 0) & (dt[~region2] < 0.05))
 
 
 def test_phase_vi_two_dimensional_polars_underpredict_stalled_torque(capsys):
