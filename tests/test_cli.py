@@ -1,0 +1,23 @@
+"""The calib command: the demo job and clean errors."""
+
+import json
+
+from calib.cli import main
+
+
+def test_demo_writes_figures_and_summary(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert (tmp_path / "cp_surface.png").stat().st_size > 10_000
+    assert (tmp_path / "power_curve.png").stat().st_size > 10_000
+    # NREL 5-MW: maximum C_P near 0.48 at λ ≈ 7-8 and fine pitch (Jonkman et al. 2009, §7)
+    assert 0.46 < summary["cp_max"] < 0.50
+    assert 6.5 < summary["tsr_at_cp_max"] < 8.5
+    assert summary["surface_failed"] == 0 and summary["power_curve_failed"] == 0
+    assert 10.5 < summary["rated_wind_speed"] < 12.5
+
+
+def test_unknown_rotor_is_a_clean_error(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--rotor", "vestas"]) == 2
+    err = capsys.readouterr().err
+    assert "nrel5mw" in err and "Traceback" not in err
