@@ -1,0 +1,192 @@
+"""Benchmark (c): the NREL 5-MW C_P(λ, β) surface computed by WISDEM's CCBlade.
+
+Runs in the MAIN venv. CCBlade lives in a separate environment (``.bench-venv``,
+made by ``ccblade_env.sh``; never a calib dependency): this module ensures that
+environment, exports the calib rotor to JSON (``export_rotor.py``), runs
+``ccblade_runner.py`` with ``.bench-venv/bin/python`` and reads back the surface and
+its timing. ``run()`` never raises: on failure it returns ``{"error": message}``.
+
+Environment: ``CALIB_BENCH_CCBLADE_REPEATS`` (default 3, best time kept),
+``CALIB_BENCH_ROTOR`` (default ``nrel5mw``), ``CALIB_BENCH_CCBLADE_SPLINE``
+(``ccairfoil``, default: CCAirfoil's smoothing spline as CCBlade always uses it;
+``linear``: interpolation through the table points, a diagnostic), plus those of
+``ccblade_env.sh``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+VENV = os.environ.get("CALIB_BENCH_VENV", os.path.join(ROOT, ".bench-venv"))
+OUT_DIR = os.path.join(ROOT, "bench_output", "ccblade")
+RUN_TIMEOUT_S = 3600
+
+
+def _dir_size_mb(path: str) -> float:
+    total = 0
+    for base, _, files in os.walk(path):
+        for f in files:
+            try:
+                total += os.lstat(os.path.join(base, f)).st_size
+            except OSError:
+                pass
+    return total / 2**20
+
+
+def _tail(text: str, n: int = 15) -> str:
+    lines = [ln for ln in (text or "").splitlines() if "WARNING: Location" not in ln]
+    return "\n".join(lines[-n:])
+
+
+def ensure_env() -> dict:
+    """Run ``ccblade_env.sh``; returns ``{"env_seconds", "env_log"}`` or ``{"error"}``."""
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(["bash", os.path.join(HERE, "ccblade_env.sh")], capture_output=True,
+                              text=True, timeout=RUN_TIMEOUT_S, env={**os.environ, "CALIB_BENCH_VENV": VENV})
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return {"error": f"could not set up the CCBlade environment {VENV}: {exc}"}
+    seconds = time.perf_counter() - t0
+    log = _tail(proc.stderr + proc.stdout)
+    if proc.returncode != 0:
+        return {"error": f"could not install WISDEM's CCBlade into {VENV} "
+                         f"(benchmarks/ccblade_env.sh exit {proc.returncode}):\n{log}",
+                "env_seconds": seconds}
+    return {"env_seconds": seconds, "env_log": log}
+
+
+def _grid_dict(grid) -> dict:
+    sys.path.insert(0, HERE)
+    from surface_grid import MU, RHO, surface_grid  # noqa: PLC0415
+    if grid is None:
+        grid = surface_grid()
+    if isinstance(grid, dict):
+        g = dict(grid)
+    else:
+        tsr, pitch, rpm = grid
+        g = {"tsr": tsr, "pitch": pitch, "rotor_speed_rpm": rpm}
+    g["tsr"] = np.asarray(g["tsr"], float).tolist()
+    g["pitch"] = np.asarray(g["pitch"], float).tolist()
+    g["rotor_speed_rpm"] = float(g["rotor_speed_rpm"])
+    g.setdefault("rho", RHO)
+    g.setdefault("mu", MU)
+    g.setdefault("airfoil_spline", os.environ.get("CALIB_BENCH_CCBLADE_SPLINE", "ccairfoil"))
+    return g
+
+
+def run(grid=None, rotor: str | None = None, repeats: int | None = None) -> dict:
+    """CCBlade's surface and timing.
+
+    Parameters
+    ----------
+    grid : tuple ``(tsr, pitch_deg, rotor_speed_rpm)`` or dict, optional
+        Default :func:`surface_grid.surface_grid`. A dict may also set ``rho``, ``mu``,
+        ``tilt_deg``, ``yaw_deg``, ``shear_exp``, ``n_sector``, ``tiploss``, ... (see
+        ``ccblade_runner.py``).
+
+    Returns
+    -------
+    dict
+        ``ccblade_surface_seconds`` (best of the repeats, evaluation only), ``n_points``,
+        ``cp``, ``ct`` (arrays ``(n_tsr, n_pitch)``, NaN where not converged),
+        ``converged`` (bool array), ``tsr``, ``pitch``, ``rotor_speed_rpm``,
+        ``ccblade_points_per_second``, ``ccblade_cp_max`` (+ its λ, β), versions,
+        ``env_seconds`` (set-up / check of ``.bench-venv``), ``env_size_mb``; or
+        ``{"error": message}``.
+    """
+    rotor = rotor or os.environ.get("CALIB_BENCH_ROTOR", "nrel5mw")
+    repeats = int(repeats or os.environ.get("CALIB_BENCH_CCBLADE_REPEATS", 3))
+    out: dict = {}
+    try:
+        env = ensure_env()
+        out.update({k: v for k, v in env.items() if k != "env_log"})
+        if "error" in env:
+            return out
+        out["env_size_mb"] = round(_dir_size_mb(VENV), 1)
+
+        os.makedirs(OUT_DIR, exist_ok=True)
+        rotor_json = os.path.join(OUT_DIR, f"rotor_{rotor}.json")
+        grid_json = os.path.join(OUT_DIR, "grid.json")
+        result_json = os.path.join(OUT_DIR, f"ccblade_surface_{rotor}.json")
+        try:
+            from export_rotor import export_rotor  # noqa: PLC0415  (HERE is on sys.path)
+        except ImportError:
+            sys.path.insert(0, HERE)
+            from export_rotor import export_rotor  # noqa: PLC0415
+        try:
+            export_rotor(rotor, rotor_json)
+        except Exception as exc:  # noqa: BLE001
+            out["error"] = f"could not export rotor {rotor!r} for CCBlade: {type(exc).__name__}: {exc}"
+            return out
+        with open(grid_json, "w") as fh:
+            json.dump(_grid_dict(grid), fh)
+        if os.path.exists(result_json):
+            os.remove(result_json)
+
+        py = os.path.join(VENV, "bin", "python")
+        cmd = [py, os.path.join(HERE, "ccblade_runner.py"), rotor_json, result_json,
+               "--grid", grid_json, "--repeats", str(repeats)]
+        t0 = time.perf_counter()
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            out["error"] = f"CCBlade surface run exceeded {RUN_TIMEOUT_S} s"
+            return out
+        out["ccblade_wall_seconds"] = time.perf_counter() - t0
+        if proc.returncode != 0 or not os.path.exists(result_json):
+            out["error"] = f"CCBlade run failed (exit {proc.returncode}):\n{_tail(proc.stderr + proc.stdout)}"
+            return out
+        with open(result_json) as fh:
+            res = json.load(fh)
+    except Exception as exc:  # noqa: BLE001  (never crash the benchmark runner)
+        out["error"] = f"CCBlade benchmark failed: {type(exc).__name__}: {exc}"
+        return out
+
+    cp = np.array(res["cp"], dtype=float)
+    ct = np.array(res["ct"], dtype=float)
+    conv = np.array(res["converged"], dtype=bool)
+    cp[~conv] = np.nan
+    ct[~conv] = np.nan
+    tsr = np.array(res["tsr"])
+    pitch = np.array(res["pitch"])
+    i, j = np.unravel_index(np.nanargmax(cp), cp.shape) if np.isfinite(cp).any() else (0, 0)
+    out.update({
+        "ccblade_surface_seconds": float(res["seconds"]),
+        "ccblade_seconds_all": res["seconds_all"],
+        "ccblade_repeats": res["repeats"],
+        "n_points": int(res["n_points"]),
+        "ccblade_points_per_second": res["n_points"] / res["seconds"],
+        "cp": cp,
+        "ct": ct,
+        "converged": conv,
+        "tsr": tsr,
+        "pitch": pitch,
+        "rotor_speed_rpm": res["rotor_speed_rpm"],
+        "rotor_radius": res["rotor_radius"],
+        "ccblade_n_not_converged": int(res["n_not_converged"]),
+        "ccblade_cp_max": float(cp[i, j]),
+        "ccblade_cp_max_tsr": float(tsr[i]),
+        "ccblade_cp_max_pitch": float(pitch[j]),
+        "ccblade_setup_seconds": res["setup_seconds"],
+        "ccblade_version": f"wisdem {res['wisdem_version']} (numpy {res['numpy_version']}, "
+                           f"scipy {res['scipy_version']}, python {res['python']})",
+        "ccblade_settings": res["settings"],
+        "ccblade_result_file": os.path.relpath(result_json, ROOT),
+    })
+    return out
+
+
+if __name__ == "__main__":
+    r = run()
+    if "error" in r:
+        print(r["error"])
+        sys.exit(1)
+    print({k: v for k, v in r.items() if not isinstance(v, np.ndarray)})
