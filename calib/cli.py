@@ -26,8 +26,12 @@ def _run(args) -> int:
 
 
 def _fmu(args) -> int:
+    if not args.rest or args.rest[0] != "build":
+        print("calib fmu: expected 'calib fmu build [--variant A|B|all] [--rotor NAME] [--out DIR] "
+              "[--force]'", file=sys.stderr)
+        return 2
     from calib.fmu.build import main as fmu_main
-    return int(fmu_main(args.rest) or 0)
+    return int(fmu_main(args.rest[1:]) or 0)
 
 
 def _rotors(args) -> int:

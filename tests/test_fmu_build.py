@@ -1,0 +1,140 @@
+"""Building, validating and running the rotor FMUs (variants A and B) and their mappings."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+
+fmpy = pytest.importorskip("fmpy")
+
+from calib.fmu import build as fmu_build  # noqa: E402
+from calib.fmu.build import FmuBuildError, build_fmu, mapping_path  # noqa: E402
+from calib.fmu.resources import default_grid  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def fmus():
+    try:
+        return {v: build_fmu(v) for v in ("A", "B")}
+    except FmuBuildError as exc:  # pragma: no cover - machines without a compiler
+        pytest.skip(str(exc))
+
+
+@pytest.mark.parametrize("variant", ["A", "B"])
+def test_fmpy_validate_passes(fmus, variant):
+    from fmpy.validation import validate_fmu
+    assert validate_fmu(str(fmus[variant])) == []
+
+
+@pytest.mark.parametrize("variant", ["A", "B"])
+def test_plain_fmpy_simulation(fmus, variant):
+    res = fmpy.simulate_fmu(str(fmus[variant]), stop_time=10.0, output_interval=0.05)
+    md = fmpy.read_model_description(str(fmus[variant]))
+    assert md.fmiVersion == {"A": "2.0", "B": "3.0"}[variant]
+    for name in res.dtype.names:
+        assert np.all(np.isfinite(res[name])), name
+    power = res["power" if variant == "A" else "Rotor.Power"]
+    assert power.min() > 0
+    assert np.ptp(power) > 0  # tower, shear, gravity and flexibility are on by default
+
+
+def test_build_is_cached(fmus, tmp_path):
+    path = fmus["A"]
+    mtime = path.stat().st_mtime_ns
+    assert build_fmu("A") == path and path.stat().st_mtime_ns == mtime
+    copy = build_fmu("A", out_dir=tmp_path)
+    assert copy.is_file() and (tmp_path / "calib_rotor_a.mapping.toml").is_file()
+
+
+def test_no_binaries_or_sources_in_repository():
+    tracked = list(fmu_build.FMU_MODELS.rglob("*.so")) + list(fmu_build.FMU_MODELS.rglob("*.fmu"))
+    assert tracked == []
+
+
+def test_missing_compiler_or_cmake_says_what_to_install(monkeypatch, tmp_path):
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("CC", raising=False)
+    with pytest.raises(FmuBuildError) as info:
+        build_fmu("A", force=True)
+    msg = str(info.value)
+    assert "CMake" in msg and "C compiler" in msg and "apt-get install" in msg
+
+
+def test_unknown_variant_is_named():
+    with pytest.raises(ValueError, match="valid: A, B"):
+        build_fmu("C")
+
+
+@pytest.mark.parametrize("variant", ["A", "B"])
+def test_mapping_names_exist_with_right_causality(fmus, variant):
+    with open(mapping_path(variant), "rb") as fh:
+        m = tomllib.load(fh)
+    md = fmpy.read_model_description(str(fmus[variant]))
+    vars_ = {v.name: v for v in md.modelVariables}
+    assert m["fmi_version"] == md.fmiVersion
+    for name, e in m["inputs"].items():
+        assert vars_[e["variable"]].causality == "input", name
+    for name, e in m["outputs"].items():
+        for v in e.get("variables", [e.get("variable")]):
+            assert vars_[v].causality == "output", name
+    for table in ("switches", "settings", "parameters"):
+        for name, e in m[table].items():
+            assert vars_[e["variable"]].causality == "parameter", name
+    grid = default_grid()
+    c = m["corrections"]
+    if c["layout"] == "scalar":
+        names = [c[b].format(i=i, j=j) for b in ("lift", "drag") for i in range(grid.n_alpha)
+                 for j in range(grid.n_eta)]
+    else:
+        names = [c["lift"], c["drag"]]
+        assert all(int(vars_[n].dimensions[0].start) == grid.n_lift for n in names)
+    assert all(vars_[n].variability == "tunable" for n in names)
+
+
+def test_variants_agree_after_mapping(fmus):
+    """Same physics behind both vendor interfaces: mapped to package units, A and B agree."""
+    common = dict(stop_time=6.0, output_interval=0.1)
+    a = fmpy.simulate_fmu(str(fmus["A"]), start_values={"wind_speed": 9.0, "rotor_speed": 10.0,
+                                                         "flap_damping_ratio": 0.01, "edge_damping_ratio": 0.01,
+                                                         "shear_exponent": 0.2}, **common)
+    b = fmpy.simulate_fmu(str(fmus["B"]), start_values={"Wind.Vhub": 9.0, "Rotor.Omega": 10.0 * np.pi / 30},
+                          **common)
+    np.testing.assert_allclose(b["Rotor.Power"] * 1e3, a["power"], rtol=1e-9)
+    np.testing.assert_allclose(b["Blade.RootMyFlap"][:, 1] * 1e3, a["root_flap_moment_blade2"], rtol=1e-9)
+    np.testing.assert_allclose(-b["Blade.RootMxEdge"][:, 0] * 1e3, a["root_edge_moment_blade1"], rtol=1e-9)
+    np.testing.assert_allclose(np.mod(b["Rotor.Azimuth"] - 180.0, 360.0), a["azimuth"], atol=1e-9)
+
+
+def test_bad_input_is_an_error_not_a_nan(fmus):
+    with pytest.raises(Exception, match="fmi2DoStep|Error|failed"):
+        fmpy.simulate_fmu(str(fmus["A"]), stop_time=1.0, start_values={"air_density": -1.0})
+
+
+def test_fmu_state_round_trip(fmus):
+    """Save/restore of the FMU state reproduces a continuation exactly (FMI 2 and 3)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    path = str(fmus["A"])
+    md = read_model_description(path)
+    unzip = extract(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    for k in range(20):
+        fmu.doStep(k * 0.05, 0.05)
+    state = fmu.getFMUstate()
+    for k in range(20, 40):
+        fmu.doStep(k * 0.05, 0.05)
+    first = fmu.getReal([vr["root_flap_moment_blade1"], vr["power"]])
+    fmu.setFMUstate(state)
+    for k in range(20, 40):
+        fmu.doStep(k * 0.05, 0.05)
+    assert fmu.getReal([vr["root_flap_moment_blade1"], vr["power"]]) == first
+    fmu.freeFMUstate(state)
+    fmu.terminate()
+    fmu.freeInstance()
