@@ -21,3 +21,8 @@ def test_unknown_rotor_is_a_clean_error(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--rotor", "vestas"]) == 2
     err = capsys.readouterr().err
     assert "nrel5mw" in err and "Traceback" not in err
+
+
+def test_fmu_without_subcommand_is_a_usage_error(capsys):
+    assert main(["fmu"]) == 2
+    assert "calib fmu build" in capsys.readouterr().err
