@@ -20,7 +20,7 @@ from calib.bem.residual import SectionGeometry, section_equations, section_loads
 from calib.bem.rootfind import bracket, solve_brackets
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.models.base import OperatingConditions, Status
+from calib.models.base import OperatingConditions, Status, StatusCounts
 from calib.rotor.geometry import Rotor
 
 RESIDUAL_TOL = 1e-8
@@ -97,7 +97,7 @@ class SectionSensitivities:
 
 
 @dataclass(frozen=True, eq=False)
-class BemResult:
+class BemResult(StatusCounts):
     """Outputs of :func:`solve_bem`.
 
     Rotor quantities have shape (n_points,); section fields (``sections``) have shape
@@ -141,14 +141,6 @@ class BemResult:
     n_sectors: int
     rotor: Rotor = field(repr=False)
     sensitivities: SectionSensitivities | None = None
-
-    @property
-    def ok(self) -> np.ndarray:
-        return self.status == Status.CONVERGED
-
-    @property
-    def n_failed(self) -> int:
-        return int(np.count_nonzero(~self.ok))
 
 
 def interior_stations(rotor: Rotor) -> np.ndarray:

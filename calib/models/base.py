@@ -137,8 +137,23 @@ class OperatingConditions:
         return self.rotor_speed * np.pi / 30.0 * radius / self.wind_speed
 
 
+class StatusCounts:
+    """Mixin for results carrying a per-point ``status`` array."""
+
+    status: np.ndarray
+
+    @property
+    def ok(self) -> np.ndarray:
+        """True where the point converged."""
+        return self.status == Status.CONVERGED
+
+    @property
+    def n_failed(self) -> int:
+        return int(np.count_nonzero(~self.ok))
+
+
 @dataclass(frozen=True, eq=False)
-class Evaluation:
+class Evaluation(StatusCounts):
     """Outputs of a forward model over a batch of conditions.
 
     Attributes
@@ -159,14 +174,6 @@ class Evaluation:
     messages: tuple[str, ...]
     channels: tuple[Channel, ...]
     extras: dict = field(default_factory=dict)
-
-    @property
-    def ok(self) -> np.ndarray:
-        return self.status == Status.CONVERGED
-
-    @property
-    def n_failed(self) -> int:
-        return int(np.count_nonzero(~self.ok))
 
     def channel(self, name: str) -> np.ndarray:
         """Values of one channel, shape (n_points,)."""
