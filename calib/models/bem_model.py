@@ -99,7 +99,10 @@ class BemModel:
     def _evaluation(self, res) -> Evaluation:
         values = channel_values(self._specs, res.sections, self.rotor.n_blades, res.omega, res.n_sectors)
         values[~res.ok] = np.nan
-        extras = {"alpha_deg": np.nanmean(res.sections["alpha_deg"], axis=1),
+        alpha = np.nanmean(res.sections["alpha_deg"], axis=1) if res.n_sectors > 1 else \
+            res.sections["alpha_deg"][:, 0, :].copy()
+        alpha[:, ~self._interior] = np.nan          # hub and tip stations carry no load
+        extras = {"alpha_deg": alpha,
                   "eta": self.rotor.eta.copy(), "interior": self._interior.copy(),
                   "cp": res.cp, "ct": res.ct}
         return Evaluation(values, res.status.copy(), res.messages, self.channels, extras)

@@ -1,0 +1,345 @@
+"""The Calibrator: ML estimation in the identifiable subspace, re-linearized until stable.
+
+Procedure (Bottasso, Cacciola & Iriarte 2014; DESIGN §5)
+--------------------------------------------------------
+1. Noise R: known (σ from the table or the settings), from repeated records, or
+   estimated by iterated ML (R = (1/N) Σ r_k r_kᵀ, diagonal, alternating with step 2-4).
+2. Linearize at the current estimate: whitened scaled sensitivities M = R^(−½) G D,
+   SVD M = U S Vᵀ, retain θ_i = v_iᵀ p̃ with σ(θ_i) = 1/s_i <= σ̄.
+3. Estimate the retained θ under bounds (corrections and C_D >= C_D,min at the nodes) by
+   constrained Gauss–Newton (:func:`calib.estimation.estimate`); the others stay at 0.
+4. Re-linearize at the estimate and redo the SVD; stop when the retained set is stable
+   (same count, principal-angle cosines >= ``stability_cosine``).
+5. Covariance of the estimate Cov(θ̂) = (V_IDᵀ F̃ V_ID)⁻¹, Cov(p̂) = D V_ID Cov(θ̂) V_IDᵀ D;
+   confidence bands on the corrected polars; a verdict per physical parameter.
+
+Every model call reports a per-point status; failed points are left out of the cost and
+counted in the result.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+from scipy import stats
+
+from calib.errors import InputError
+from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
+from calib.identifiability import (cramer_rao, field_basis, fisher_matrix, node_layout, observability,
+                                   parameter_verdicts, subspace_cosines, svd_analysis)
+from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
+from calib.models.base import nominal_vector
+from calib.result import CalibrationResult
+
+NOISE_MODES = ("known", "ml", "repeats")
+RETAIN_MODES = ("threshold", "all")
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """Settings of a calibration.
+
+    Parameters
+    ----------
+    sigma_bar : float
+        Retain θ_i with σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
+        (see :func:`calib.identifiability.sigma_bar_for`).
+    retain : {"threshold", "all"}
+        ``"all"`` gives the full nodal ML estimate (every direction with s_i > 0).
+    max_retained : int, optional
+        Cap on the number of retained parameters.
+    optimizer : str
+        ``sqpmethod``, ``ipopt``, ``slsqp`` or ``trust-constr``.
+    noise : {"known", "ml", "repeats"}
+        Where R comes from.
+    sigma : dict channel -> float, optional
+        Absolute 1-σ noise per channel [channel unit]; overrides the table's σ.
+    cd_min : float or None
+        Lower bound on C_D at the correction nodes [-] (needs ``model.nominal_coefficients``).
+    max_relinearizations, max_iterations, max_noise_iterations : int
+    tolerance : float
+        Relative cost decrease that ends a Gauss–Newton iteration.
+    stability_cosine : float
+        Principal-angle cosine above which two retained subspaces count as equal.
+    observability_threshold : float
+        Verdict "identified" when the parameter's observability >= this.
+    band_confidence : float
+        Confidence level of the polar bands.
+    band_eta : tuple of float, optional
+        Spanwise positions of the polar bands (default: the η nodes).
+    """
+
+    sigma_bar: float = 0.5
+    retain: str = "threshold"
+    max_retained: int | None = None
+    optimizer: str = "sqpmethod"
+    noise: str = "known"
+    sigma: dict | None = None
+    cd_min: float | None = 0.0
+    max_relinearizations: int = 6
+    max_iterations: int = 30
+    max_noise_iterations: int = 10
+    tolerance: float = 1e-9
+    stability_cosine: float = 0.98
+    observability_threshold: float = 0.5
+    band_confidence: float = 0.95
+    band_eta: tuple | None = None
+    verbose: bool = False
+
+    def validate(self, source: str = "CalibrationSettings") -> "CalibrationSettings":
+        if self.noise not in NOISE_MODES:
+            raise InputError(f"unknown noise mode {self.noise!r}; valid: {', '.join(NOISE_MODES)}", source,
+                             field="noise")
+        if self.retain not in RETAIN_MODES:
+            raise InputError(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", source,
+                             field="retain")
+        if not self.sigma_bar > 0:
+            raise InputError(f"sigma_bar must be > 0, got {self.sigma_bar!r}", source, field="sigma_bar")
+        get_optimizer(self.optimizer)
+        return self
+
+
+def _progress_printer(rec: dict) -> None:
+    keys = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rec.items()
+                    if k not in ("stage", "qp"))
+    print(f"[calib {rec.get('stage', '')}] {keys}", flush=True)
+
+
+class Calibrator:
+    """Calibrate a ForwardModel from measurements (see the module docstring).
+
+    Parameters
+    ----------
+    model : ForwardModel
+    measurements : Measurements
+        Channels must be outputs of ``model``.
+    settings : CalibrationSettings, optional
+    callback : callable(dict), optional
+        Called with a progress record after every iteration (``stage`` says which loop);
+        with ``settings.verbose`` a line is also printed.
+    name : str
+        Name of the run (reports, files).
+    """
+
+    def __init__(self, model, measurements: Measurements, settings: CalibrationSettings | None = None,
+                 callback: Callable[[dict], None] | None = None, name: str = "calibration"):
+        self.model = model
+        self.measurements = measurements
+        self.settings = (settings or CalibrationSettings()).validate()
+        self.name = name
+        self._callbacks = [c for c in (callback, _progress_printer if self.settings.verbose else None) if c]
+        self.parameters = tuple(model.parameters)
+        model_channels = [c.name for c in model.channels]
+        check_channels(measurements, model_channels)
+        self.channel_index = [model_channels.index(c) for c in measurements.channels]
+        self.channel_units = [model.channels[i].unit for i in self.channel_index]
+        self.p0 = nominal_vector(self.parameters)
+        self.scale = np.array([q.scale for q in self.parameters], float)
+        if np.any(~(self.scale > 0)):
+            j = int(np.flatnonzero(~(self.scale > 0))[0])
+            raise InputError(f"parameter scale must be > 0, got {self.scale[j]!r}", "model.parameters",
+                             field=self.parameters[j].name)
+        self.lower, self.upper = self._effective_bounds()
+        self.layout = node_layout(self.parameters)
+        self.history: list[dict] = []
+
+    # ------------------------------------------------------------------ setup
+    def _effective_bounds(self):
+        lower = np.array([q.lower for q in self.parameters], float)
+        upper = np.array([q.upper for q in self.parameters], float)
+        cd_min = self.settings.cd_min
+        if cd_min is not None and hasattr(self.model, "nominal_coefficients"):
+            for j, q in enumerate(self.parameters):
+                if q.kind == "drag_correction":
+                    _, cd0 = self.model.nominal_coefficients(np.array([q.alpha_deg]), np.array([q.eta]))
+                    lower[j] = min(max(lower[j], cd_min - float(np.ravel(cd0)[0])), self.p0[j])
+        return lower, upper
+
+    def _emit(self, rec: dict) -> None:
+        self.history.append(rec)
+        for cb in self._callbacks:
+            cb(rec)
+
+    def _initial_sigma(self) -> np.ndarray:
+        m = self.measurements
+        shape = m.values.shape
+        s = self.settings
+        if s.noise == "repeats":
+            return np.broadcast_to(noise_from_repeats(m), shape).copy()
+        if s.sigma:
+            unknown = [c for c in s.sigma if c not in m.channels]
+            if unknown:
+                raise InputError(f"sigma given for unmeasured channel(s) {', '.join(unknown)}; measured: "
+                                 f"{', '.join(m.channels)}", "settings", field="sigma")
+            missing = [c for c in m.channels if c not in s.sigma]
+            if not missing:
+                sig = np.array([float(s.sigma[c]) for c in m.channels])
+                if np.any(~(sig > 0)):
+                    raise InputError("sigma must be > 0", "settings", field="sigma")
+                return np.broadcast_to(sig, shape).copy()
+            if m.sigma is None and s.noise == "known":
+                raise InputError(f"no sigma for channel(s) {', '.join(missing)}", "settings", field="sigma")
+        if m.sigma is not None:
+            return m.sigma.copy()
+        if s.noise == "known":
+            raise InputError("noise 'known' needs sigma: give <channel>_sigma columns or settings.sigma, or "
+                             "choose noise = 'ml' or 'repeats'", m.source, field="sigma")
+        return None  # ml: from the nominal residual
+
+    # ------------------------------------------------------------------ run
+    def run(self) -> CalibrationResult:
+        """Calibrate; returns a :class:`CalibrationResult`."""
+        t0 = time.perf_counter()
+        st = self.settings
+        m = self.measurements
+        sigma = self._initial_sigma()
+        problem = LeastSquaresProblem(self.model, m.conditions, m.values,
+                                      sigma if sigma is not None else np.ones_like(m.values),
+                                      self.channel_index, self.p0, self.scale, self.lower, self.upper)
+        nominal = problem.evaluate(self.p0)
+        if nominal.n_failed == len(m.conditions):
+            from calib.errors import ModelError
+
+            raise ModelError(f"the nominal model fails at every point: {nominal.evaluation.failure_summary()}")
+        if sigma is None:  # ML noise: start from the nominal residual
+            resid = m.values - nominal.evaluation.values[:, self.channel_index]
+            sigma = np.broadcast_to(ml_noise(resid, nominal.ok), m.values.shape).copy()
+            problem = problem.with_sigma(sigma)
+        noise_iters = st.max_noise_iterations if st.noise == "ml" else 1
+        p = self.p0.copy()
+        for k_noise in range(noise_iters):
+            p, svd, lin, status, message = self._relinearize_loop(problem, p)
+            if st.noise != "ml":
+                break
+            resid = m.values - lin.evaluation.values[:, self.channel_index]
+            new_sigma = np.broadcast_to(ml_noise(resid, lin.ok), m.values.shape).copy()
+            change = float(np.max(np.abs(new_sigma[0] / problem.sigma[0] - 1.0)))
+            self._emit({"stage": "noise", "iteration": k_noise + 1, "sigma": new_sigma[0].tolist(),
+                        "change": change})
+            problem = problem.with_sigma(new_sigma)
+            if change < 1e-3:
+                break
+        lin = problem.linearize(p)
+        svd = self._svd(lin.M)
+        return self._finish(problem, nominal, lin, svd, status, message, time.perf_counter() - t0)
+
+    def _svd(self, M):
+        st = self.settings
+        sigma_bar = np.inf if st.retain == "all" else st.sigma_bar
+        return svd_analysis(M, sigma_bar, st.max_retained)
+
+    def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
+        st = self.settings
+        prev_basis = None
+        status, message = "not_stable", f"retained set not stable after {st.max_relinearizations} re-linearizations"
+        lin = problem.linearize(p)
+        svd = self._svd(lin.M)
+        for k in range(st.max_relinearizations):
+            basis = svd.basis
+            if prev_basis is not None and prev_basis.shape == basis.shape:
+                cos = subspace_cosines(prev_basis, basis)
+                if cos.size == 0 or cos.min() >= st.stability_cosine:
+                    status, message = "converged", f"retained set stable after {k} re-linearization(s)"
+                    break
+            theta0 = basis.T @ problem.scaled(p)
+            out = estimate(problem, basis, theta0, st.optimizer, st.max_iterations, st.tolerance,
+                           callback=self._emit, stage=f"estimate[{k + 1}]")
+            self._emit({"stage": "relinearize", "iteration": k + 1, "n_retained": svd.n_retained,
+                        "cost": out.cost, "estimate_status": out.status, "n_failed": out.linearization.n_failed})
+            if out.status in ("qp_failed",):
+                status, message = "failed", out.message
+                p = out.p
+                break
+            p = out.p
+            prev_basis = basis
+            lin = problem.linearize(p)
+            svd = self._svd(lin.M)
+        return p, svd, lin, status, message
+
+    # ------------------------------------------------------------------ outputs
+    def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
+        st = self.settings
+        m = self.measurements
+        B = svd.basis
+        F = fisher_matrix(lin.M)
+        Fr = B.T @ F @ B
+        cov_theta = np.linalg.inv(Fr) if B.shape[1] else np.zeros((0, 0))
+        cov_pt = B @ cov_theta @ B.T
+        cov_p = cov_pt * np.outer(self.scale, self.scale)
+        std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
+        crb_cov, crb_std_scaled, corr = cramer_rao(F)
+        obs = observability(svd.V, svd.retained)
+        verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, obs, std_p,
+                                      st.observability_threshold)
+        ev = lin.evaluation
+        alpha_seen = eta_seen = np.zeros(0)
+        if "alpha_deg" in ev.extras and "eta" in ev.extras:
+            a = np.asarray(ev.extras["alpha_deg"], float)
+            e = np.broadcast_to(np.asarray(ev.extras["eta"], float), a.shape)
+            okm = lin.ok[:, None] & np.isfinite(a)
+            alpha_seen, eta_seen = a[okm], e[okm]
+        radius = None
+        rotor = getattr(self.model, "rotor", None)
+        for attr in ("rotor_radius", "tip_radius"):
+            if rotor is not None and getattr(rotor, attr, None):
+                radius = float(getattr(rotor, attr))
+                break
+        if radius is None and getattr(self.model, "rotor_radius", None):
+            radius = float(self.model.rotor_radius)
+        failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
+                    "total_failed_point_evaluations": problem.n_failed_points_total,
+                    "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
+        settings = asdict(st)
+        settings["model"] = type(self.model).__name__
+        settings["lower_effective"] = self.lower.tolist()
+        inputs = {m.source: m.sha256} if m.sha256 else {}
+        chi2 = lambda lz: float(np.sum(lz.residual[lz.ok] ** 2))  # noqa: E731
+        res = CalibrationResult(
+            parameters=[asdict(q) for q in self.parameters], channels=list(m.channels),
+            channel_units=self.channel_units, conditions=m.conditions.as_dict(), settings=settings,
+            p_nominal=self.p0, p_hat=lin.p, lower=self.lower, upper=self.upper, scale=self.scale,
+            cov_p=cov_p, std_p=std_p, singular_values=svd.singular_values, V=svd.V,
+            sigma_theta=svd.sigma_theta, retained=svd.retained, theta_hat=B.T @ problem.scaled(lin.p),
+            cov_theta=cov_theta, theta_nominal_linearization=np.zeros(0), correlation=corr,
+            crb_std=crb_std_scaled * self.scale, observability=obs, measured=m.values, sigma=problem.sigma,
+            model_before=nominal.evaluation.values[:, self.channel_index],
+            model_after=ev.values[:, self.channel_index], status_before=nominal.evaluation.status,
+            status_after=ev.status, alpha_seen=alpha_seen, eta_seen=eta_seen, noise_sigma=problem.sigma[0],
+            sigma_bar=float(svd.sigma_bar), verdicts=verdicts, history=self.history, status=status,
+            message=message, failures=failures, chi2_before=chi2(problem.evaluate(self.p0)),
+            chi2_after=chi2(lin), rotor_radius=radius, inputs=inputs, wall_time=wall, name=self.name)
+        res.polar_bands = self._polar_bands(res)
+        return res
+
+    def _polar_bands(self, res: CalibrationResult) -> dict:
+        """Corrected polars C = C₀ + ΔC(α, η; p̂) with confidence bands at a few η."""
+        if not self.layout.has_field:
+            return {}
+        grid = self.layout.grid
+        a_nodes = grid.alpha_nodes_deg
+        alpha = np.linspace(a_nodes[0], a_nodes[-1], 121)
+        eta = np.asarray(self.settings.band_eta if self.settings.band_eta else grid.eta_nodes, float)
+        A, E = np.meshgrid(alpha, eta)
+        z = stats.norm.ppf(0.5 * (1 + self.settings.band_confidence))
+        out = {"alpha_deg": alpha, "eta": eta, "confidence": np.array(self.settings.band_confidence)}
+        n = self.p0.size
+        for block, letter in (("lift", "cl"), ("drag", "cd")):
+            Bf = field_basis(self.layout, A, E, block, n_params=n)
+            d = (Bf @ res.p_hat).reshape(A.shape)
+            var = np.einsum("ij,jk,ik->i", Bf, res.cov_p, Bf).reshape(A.shape)
+            out[f"d{letter}"] = d
+            out[f"d{letter}_half_width"] = z * np.sqrt(np.maximum(var, 0.0))
+        if hasattr(self.model, "nominal_coefficients"):
+            cl0, cd0 = self.model.nominal_coefficients(A, E)
+            out["cl0"], out["cd0"] = np.asarray(cl0, float), np.asarray(cd0, float)
+        return out
+
+
+def calibrate(model, measurements: Measurements, **settings) -> CalibrationResult:
+    """Shortcut: ``Calibrator(model, measurements, CalibrationSettings(**settings)).run()``."""
+    callback = settings.pop("callback", None)
+    name = settings.pop("name", "calibration")
+    return Calibrator(model, measurements, CalibrationSettings(**settings), callback, name).run()

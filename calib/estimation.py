@@ -1,0 +1,385 @@
+"""Maximum-likelihood estimation under bound constraints (Gauss–Newton / SQP).
+
+Notes
+-----
+Measured outputs z_k at operating points u_k, model outputs y_k(p), output noise
+v_k ~ N(0, R) with R diagonal per channel and point. The ML cost (known R) is
+
+.. math::  J(p) = ½ Σ_k r_kᵀ R⁻¹ r_k,\\qquad r_k = z_k − y_k(p),
+
+i.e. half the sum of squared *whitened* residuals r̃ = R^(−½) r. The parameters are
+moved in a subspace of the scaled parameters p̃ = (p − p₀)/scale:
+
+.. math::  p = p₀ + D B θ,
+
+with B = I (full nodal ML) or B = V_ID (the retained right singular vectors, the
+truncated-SVD estimator of Bottasso et al. 2014). Each iteration linearizes the model
+(exact model Jacobian, ``ForwardModel.jacobian``) and solves the Gauss–Newton
+(Levenberg–Marquardt damped) quadratic program
+
+.. math::  \\min_δ ½ δᵀ(JᵀJ + μ\\,\\mathrm{diag}(JᵀJ))δ + (Jᵀr̃)ᵀδ
+           \\quad\\text{s.t.}\\quad l̃ − Bθ ≤ Bδ ≤ ũ − Bθ,
+
+where l̃, ũ are the parameter bounds (including C_D ≥ C_D,min at the grid points) in
+scaled units. That subproblem is what the named optimizer solves: CasADi ``nlpsol``
+with ``sqpmethod`` (the SQP of the method) or ``ipopt``, or SciPy ``slsqp`` /
+``trust-constr``. A step is accepted when the true cost decreases and no additional
+model point fails; otherwise μ grows.
+
+References
+----------
+C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
+from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+J. Nocedal, S.J. Wright, Numerical Optimization, 2nd ed., Springer (2006), ch. 10, 18.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from calib.errors import InputError
+from calib.identifiability import whitened_sensitivities
+from calib.models.base import Evaluation, OperatingConditions
+
+
+# ----------------------------------------------------------------------------- problem
+@dataclass(eq=False)
+class Linearization:
+    """Model outputs and whitened sensitivities at one parameter vector.
+
+    Attributes
+    ----------
+    p : ndarray, shape (n_params,)
+    residual : ndarray, shape (n_points, n_channels)
+        Whitened residuals (z − y)/σ [-]; 0 at failed points.
+    ok : ndarray of bool, shape (n_points,)
+        Converged points.
+    M : ndarray, shape (n_points * n_channels, n_params) or None
+        Whitened scaled sensitivities ∂y/∂p̃ / σ (zero rows at failed points).
+    evaluation : Evaluation
+    """
+
+    p: np.ndarray
+    residual: np.ndarray
+    ok: np.ndarray
+    M: np.ndarray | None
+    evaluation: Evaluation
+
+    @property
+    def cost(self) -> float:
+        """½ Σ r̃² over converged points."""
+        return 0.5 * float(np.sum(self.residual[self.ok] ** 2))
+
+    @property
+    def n_failed(self) -> int:
+        return int(np.count_nonzero(~self.ok))
+
+
+class LeastSquaresProblem:
+    """The weighted least-squares (ML, known R) problem on a ForwardModel.
+
+    Parameters
+    ----------
+    model : ForwardModel
+    conditions : OperatingConditions
+        n_points operating conditions.
+    measured : ndarray, shape (n_points, n_channels)
+        Measured outputs z [channel units].
+    sigma : ndarray, shape (n_points, n_channels)
+        1-σ noise [channel units].
+    channel_index : sequence of int
+        Column of each measured channel in the model's output.
+    p0, scale, lower, upper : ndarray, shape (n_params,)
+        Nominal values, scales and (effective) bounds.
+    """
+
+    def __init__(self, model, conditions: OperatingConditions, measured: np.ndarray, sigma: np.ndarray,
+                 channel_index: Sequence[int], p0, scale, lower, upper):
+        self.model = model
+        self.conditions = conditions
+        self.measured = np.asarray(measured, float)
+        self.sigma = np.asarray(sigma, float)
+        self.channel_index = np.asarray(channel_index, int)
+        self.p0 = np.asarray(p0, float)
+        self.scale = np.asarray(scale, float)
+        self.lower = np.asarray(lower, float)
+        self.upper = np.asarray(upper, float)
+        self.n_evaluations = 0
+        self.n_jacobians = 0
+        self.n_failed_points_total = 0
+        self._cache: Linearization | None = None
+
+    @property
+    def n_params(self) -> int:
+        return self.p0.size
+
+    def with_sigma(self, sigma: np.ndarray) -> "LeastSquaresProblem":
+        """The same problem with another noise level (the cache is dropped)."""
+        new = LeastSquaresProblem(self.model, self.conditions, self.measured, sigma, self.channel_index,
+                                  self.p0, self.scale, self.lower, self.upper)
+        new.n_evaluations, new.n_jacobians = self.n_evaluations, self.n_jacobians
+        new.n_failed_points_total = self.n_failed_points_total
+        return new
+
+    def p_of(self, basis: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """p = p₀ + D B θ."""
+        return self.p0 + self.scale * (basis @ theta)
+
+    def scaled(self, p: np.ndarray) -> np.ndarray:
+        """p̃ = (p − p₀)/scale."""
+        return (np.asarray(p, float) - self.p0) / self.scale
+
+    def _residual(self, ev: Evaluation):
+        y = ev.values[:, self.channel_index]
+        ok = ev.ok & np.all(np.isfinite(y), axis=1)
+        r = np.where(ok[:, None], (self.measured - np.where(ok[:, None], y, 0.0)) / self.sigma, 0.0)
+        self.n_failed_points_total += int(np.count_nonzero(~ok))
+        return r, ok
+
+    def evaluate(self, p: np.ndarray) -> Linearization:
+        """Outputs and residuals at ``p`` (no sensitivities)."""
+        p = np.asarray(p, float)
+        if self._cache is not None and np.array_equal(self._cache.p, p):
+            return self._cache
+        ev = self.model.evaluate(p, self.conditions)
+        self.n_evaluations += 1
+        r, ok = self._residual(ev)
+        return Linearization(p.copy(), r, ok, None, ev)
+
+    def linearize(self, p: np.ndarray) -> Linearization:
+        """Outputs, residuals and whitened scaled sensitivities at ``p`` (cached)."""
+        p = np.asarray(p, float)
+        if self._cache is not None and self._cache.M is not None and np.array_equal(self._cache.p, p):
+            return self._cache
+        ev, G = self.model.jacobian(p, self.conditions)
+        self.n_jacobians += 1
+        r, ok = self._residual(ev)
+        M = whitened_sensitivities(G[:, self.channel_index, :], self.sigma, self.scale, ok)
+        self._cache = Linearization(p.copy(), r, ok, M, ev)
+        return self._cache
+
+
+# ----------------------------------------------------------------------------- QP solvers
+@dataclass
+class QpSolution:
+    x: np.ndarray
+    success: bool
+    message: str
+
+
+class CasadiQp:
+    """Bound-constrained QP through CasADi ``nlpsol`` (``sqpmethod`` or ``ipopt``).
+
+    The QP data (H, g, A) enter as NLP parameters, so one solver instance per problem
+    size is built and reused.
+    """
+
+    def __init__(self, plugin: str):
+        self.plugin = plugin
+        self._solvers: dict = {}
+
+    def _solver(self, n: int, m: int):
+        key = (n, m)
+        if key not in self._solvers:
+            import casadi as ca
+
+            x = ca.SX.sym("x", n)
+            H = ca.SX.sym("H", n, n)
+            g = ca.SX.sym("g", n)
+            A = ca.SX.sym("A", m, n)
+            f = 0.5 * ca.dot(x, ca.mtimes(H, x)) + ca.dot(g, x)
+            nlp = {"x": x, "p": ca.vertcat(ca.vec(H), g, ca.vec(A)), "f": f, "g": ca.mtimes(A, x)}
+            if self.plugin == "ipopt":
+                opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+                        "ipopt.tol": 1e-10, "ipopt.max_iter": 200, "error_on_fail": False}
+            else:
+                opts = {"qpsol": "qrqp", "print_time": False, "print_header": False,
+                        "print_iteration": False, "print_status": False, "max_iter": 50,
+                        "error_on_fail": False,
+                        "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False,
+                                          "error_on_fail": False}}
+            self._solvers[key] = ca.nlpsol(f"qp_{self.plugin}_{n}_{m}", self.plugin, nlp, opts)
+        return self._solvers[key]
+
+    def __call__(self, H, g, A, lb, ub) -> QpSolution:
+        n, m = H.shape[0], A.shape[0]
+        solver = self._solver(n, m)
+        par = np.concatenate([H.reshape(-1, order="F"), g, A.reshape(-1, order="F")])
+        sol = solver(x0=np.zeros(n), p=par, lbg=lb, ubg=ub)
+        stats = solver.stats()
+        x = np.asarray(sol["x"]).reshape(-1)
+        ok = bool(stats.get("success", False)) and np.all(np.isfinite(x))
+        return QpSolution(x, ok, str(stats.get("return_status", "")))
+
+
+class ScipyQp:
+    """Bound-constrained QP through ``scipy.optimize.minimize`` (SLSQP or trust-constr)."""
+
+    def __init__(self, method: str):
+        self.method = method
+
+    def __call__(self, H, g, A, lb, ub) -> QpSolution:
+        from scipy.optimize import LinearConstraint, minimize
+
+        n = H.shape[0]
+        fun = lambda x: 0.5 * x @ H @ x + g @ x  # noqa: E731
+        jac = lambda x: H @ x + g  # noqa: E731
+        if self.method == "SLSQP":
+            cons = []
+            lo, hi = np.isfinite(lb), np.isfinite(ub)
+            if lo.any():
+                cons.append({"type": "ineq", "fun": lambda x: A[lo] @ x - lb[lo], "jac": lambda x: A[lo]})
+            if hi.any():
+                cons.append({"type": "ineq", "fun": lambda x: ub[hi] - A[hi] @ x, "jac": lambda x: -A[hi]})
+            res = minimize(fun, np.zeros(n), jac=jac, method="SLSQP", constraints=cons,
+                           options={"maxiter": 500, "ftol": 1e-12})
+        else:
+            res = minimize(fun, np.zeros(n), jac=jac, hess=lambda x: H, method="trust-constr",
+                           constraints=[LinearConstraint(A, lb, ub)],
+                           options={"maxiter": 1000, "gtol": 1e-10, "xtol": 1e-12})
+        x = np.asarray(res.x, float)
+        return QpSolution(x, bool(res.success) and np.all(np.isfinite(x)), str(res.message))
+
+
+#: Optimizers by name (the QP subproblem solver of the Gauss–Newton iteration).
+OPTIMIZERS: dict[str, Callable] = {
+    "sqpmethod": lambda: CasadiQp("sqpmethod"),
+    "ipopt": lambda: CasadiQp("ipopt"),
+    "slsqp": lambda: ScipyQp("SLSQP"),
+    "trust-constr": lambda: ScipyQp("trust-constr"),
+}
+_INSTANCES: dict = {}
+
+
+def get_optimizer(name: str):
+    """The optimizer registered as ``name``; the error lists the valid names."""
+    if name not in OPTIMIZERS:
+        raise InputError(f"unknown optimizer {name!r}; valid optimizers: {', '.join(OPTIMIZERS)}",
+                         "estimation", field="optimizer")
+    if name not in _INSTANCES:
+        _INSTANCES[name] = OPTIMIZERS[name]()
+    return _INSTANCES[name]
+
+
+# ----------------------------------------------------------------------------- Gauss–Newton
+@dataclass
+class EstimationOutcome:
+    """Result of one constrained ML estimation in a fixed subspace.
+
+    Attributes
+    ----------
+    theta : ndarray, shape (n_theta,)
+        Estimated coordinates [scale units].
+    p : ndarray, shape (n_params,)
+        Estimated parameters.
+    status : str
+        ``converged``, ``max_iterations``, ``stalled`` or ``qp_failed``.
+    linearization : Linearization
+        Outputs and sensitivities at ``p``.
+    history : list of dict
+        Per iteration: cost, step, damping, failed points.
+    """
+
+    theta: np.ndarray
+    p: np.ndarray
+    cost: float
+    iterations: int
+    status: str
+    message: str
+    linearization: Linearization
+    history: list = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "converged"
+
+
+def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
+             optimizer: str = "sqpmethod", max_iterations: int = 30, tolerance: float = 1e-9,
+             step_tolerance: float = 1e-7, callback: Callable[[dict], None] | None = None,
+             stage: str = "estimate") -> EstimationOutcome:
+    """Constrained ML estimate of θ in p = p₀ + D B θ by damped Gauss–Newton.
+
+    Parameters
+    ----------
+    problem : LeastSquaresProblem
+    basis : ndarray, shape (n_params, n_theta)
+        B (identity for full nodal ML, V_ID for the truncated-SVD estimator).
+    theta0 : ndarray, shape (n_theta,), optional
+        Start (default 0, i.e. nominal).
+    optimizer : str
+        Name in :data:`OPTIMIZERS`.
+    max_iterations : int
+    tolerance : float
+        Relative cost decrease below which the iteration stops.
+    step_tolerance : float
+        Step norm [scale units] below which the iteration stops.
+    callback : callable(dict), optional
+        Called after every iteration with keys stage, iteration, cost, step, damping, n_failed.
+
+    Returns
+    -------
+    EstimationOutcome
+    """
+    qp = get_optimizer(optimizer)
+    basis = np.asarray(basis, float)
+    n_theta = basis.shape[1]
+    theta = np.zeros(n_theta) if theta0 is None else np.asarray(theta0, float).copy()
+    lb = (problem.lower - problem.p0) / problem.scale
+    ub = (problem.upper - problem.p0) / problem.scale
+    # keep the start feasible
+    pt = np.clip(basis @ theta, lb, ub)
+    if n_theta and not np.allclose(pt, basis @ theta):
+        theta = np.linalg.lstsq(basis, pt, rcond=None)[0]
+    lin = problem.linearize(problem.p_of(basis, theta))
+    history = []
+    if n_theta == 0:
+        return EstimationOutcome(theta, lin.p, lin.cost, 0, "converged", "nothing to estimate", lin, history)
+    mu = 1e-6
+    status, message = "max_iterations", f"stopped after {max_iterations} iterations"
+    it = 0
+    for it in range(1, max_iterations + 1):
+        J = -(lin.M @ basis)
+        r = lin.residual.reshape(-1)
+        H = J.T @ J
+        g = J.T @ r
+        dH = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
+        accepted = False
+        for _ in range(12):
+            sol = qp(H + mu * np.diag(dH), g, basis, lb - basis @ theta, ub - basis @ theta)
+            if not sol.success and not np.all(np.isfinite(sol.x)):
+                status, message = "qp_failed", f"{optimizer}: {sol.message}"
+                break
+            x = sol.x
+            trial = problem.linearize(problem.p_of(basis, theta + x))
+            predicted = -(g @ x + 0.5 * x @ H @ x)
+            if trial.n_failed <= lin.n_failed and trial.cost <= lin.cost:
+                rho = (lin.cost - trial.cost) / predicted if predicted > 0 else 1.0
+                mu = max(mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
+                accepted = True
+                break
+            mu = max(mu * 4.0, 1e-6)
+        if status == "qp_failed":
+            break
+        if not accepted:
+            status, message = "stalled", "no step decreased the cost (damping exhausted)"
+            # linearization cache may hold the last rejected trial: restore
+            problem._cache = lin
+            break
+        decrease = lin.cost - trial.cost
+        theta = theta + x
+        step = float(np.linalg.norm(x))
+        lin = trial
+        rec = {"stage": stage, "iteration": it, "cost": lin.cost, "step": step, "damping": mu,
+               "n_failed": lin.n_failed, "qp": sol.message}
+        history.append(rec)
+        if callback:
+            callback(rec)
+        if decrease <= tolerance * (1.0 + lin.cost) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
+            status, message = "converged", f"converged in {it} iterations"
+            break
+    problem._cache = lin
+    return EstimationOutcome(theta, lin.p, lin.cost, it, status, message, lin, history)
