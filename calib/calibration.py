@@ -265,8 +265,9 @@ class Calibrator:
         m = self.measurements
         B = svd.basis
         F = fisher_matrix(lin.M)
-        Fr = B.T @ F @ B
-        cov_theta = np.linalg.inv(Fr) if B.shape[1] else np.zeros((0, 0))
+        # B holds right singular vectors of M at this linearization, so Bᵀ F B = diag(s²) and
+        # Cov(θ̂) = diag(σ(θ)²) exactly, without inverting a possibly ill-conditioned matrix
+        cov_theta = np.diag(svd.sigma_theta[svd.retained] ** 2)
         cov_pt = B @ cov_theta @ B.T
         cov_p = cov_pt * np.outer(self.scale, self.scale)
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))

@@ -164,7 +164,7 @@ def svd_analysis(M: np.ndarray, sigma_bar: float, max_retained: int | None = Non
     tiny = 1e-12 * max(float(s_full[0]) if n else 0.0, 1e-300)
     with np.errstate(divide="ignore"):
         sig = np.where(s_full > tiny, 1.0 / np.where(s_full > tiny, s_full, 1.0), np.inf)
-    retained = sig <= sigma_bar
+    retained = np.isfinite(sig) & (sig <= sigma_bar)
     if max_retained is not None and retained.sum() > max_retained:
         retained[np.flatnonzero(retained)[max_retained:]] = False
     return SvdAnalysis(s_full, V, sig, float(sigma_bar), retained)

@@ -55,7 +55,7 @@ UNITS: dict[str, dict[str, float]] = {
 _FIXED_QUANTITY = {
     "wind_speed": "speed", "rotor_speed": "rotor_speed", "pitch": "angle", "yaw": "angle",
     "air_density": "density", "power": "power", "thrust": "force", "torque": "moment",
-    "root_flap_moment": "moment", "root_edge_moment": "moment",
+    "root_flap_moment": "moment", "root_edge_moment": "moment", "hub_flap_moment": "moment",
 }
 _SPANWISE = re.compile(r"^(cn|ct|fn|ft)@([0-9]*\.?[0-9]+)$")
 _HEADER = re.compile(r"^\s*([^\[\]]+?)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
