@@ -24,7 +24,7 @@ from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.errors import CalibError, InputError
-from calib.measurements import Measurements, read_measurements, synthesize
+from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
 from calib.models.base import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
@@ -254,6 +254,8 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
                           f"{rec.get('n_retained')} retained, cost {rec.get('cost', float('nan')):.4g}", flush=True)
         cal = Calibrator(model, meas.select_channels(stage["channels"]), st, callback, name=name)
         res = cal.run()
+        res.inputs[src] = sha256_of(src)
+        res.inputs["workflow"] = cfg["name"]
         stage_dir = out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
         stage_dir.mkdir(exist_ok=True)
         res.save(stage_dir)
