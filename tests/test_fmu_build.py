@@ -7,19 +7,13 @@ import tomllib
 import numpy as np
 import pytest
 
-fmpy = pytest.importorskip("fmpy")
+import fmpy  # noqa: E402  (a core dependency: a missing install must fail, not skip)
 
 from calib.fmu import build as fmu_build  # noqa: E402
 from calib.fmu.build import FmuBuildError, build_fmu, mapping_path  # noqa: E402
 from calib.fmu.resources import default_grid  # noqa: E402
 
 
-@pytest.fixture(scope="module")
-def fmus():
-    try:
-        return {v: build_fmu(v) for v in ("A", "B")}
-    except FmuBuildError as exc:  # pragma: no cover - machines without a compiler
-        pytest.skip(str(exc))
 
 
 @pytest.mark.parametrize("variant", ["A", "B"])

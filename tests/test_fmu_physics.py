@@ -13,7 +13,7 @@ import tomllib
 import numpy as np
 import pytest
 
-fmpy = pytest.importorskip("fmpy")
+import fmpy  # noqa: E402  (a core dependency: a missing install must fail, not skip)
 
 from calib.fmu.build import FmuBuildError, build_fmu, mapping_path  # noqa: E402
 from calib.fmu.resources import default_grid, tabulated_polars  # noqa: E402
@@ -22,12 +22,6 @@ from calib.rotor.library import load_rotor  # noqa: E402
 N_PER_REV = 180  # output samples per revolution (2 deg)
 
 
-@pytest.fixture(scope="module")
-def fmus():
-    try:
-        return {v: build_fmu(v) for v in ("A", "B")}
-    except FmuBuildError as exc:  # pragma: no cover - machines without a compiler
-        pytest.skip(str(exc))
 
 
 @pytest.fixture(scope="module")

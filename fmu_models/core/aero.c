@@ -45,21 +45,7 @@ static void base_polar(const RotorData *d, int st, double alpha_deg, double *cl,
 /* Hat-function weights along alpha (same rule as calib.corrections.hat_weights). */
 static void alpha_hats(const RotorData *d, double x, int *k, double w[2])
 {
-    const double *nodes = d->alpha_nodes_deg;
-    int n = d->n_alpha_nodes;
-    if (x < nodes[0]) {
-        double t = (nodes[0] - x) / (nodes[1] - nodes[0]);
-        *k = 0; w[0] = t < 1.0 ? 1.0 - t : 0.0; w[1] = 0.0;
-    } else if (x > nodes[n - 1]) {
-        double t = (x - nodes[n - 1]) / (nodes[n - 1] - nodes[n - 2]);
-        *k = n - 2; w[0] = 0.0; w[1] = t < 1.0 ? 1.0 - t : 0.0;
-    } else {
-        int j = 0;
-        double t;
-        while (j < n - 2 && nodes[j + 1] <= x) j++;
-        t = (x - nodes[j]) / (nodes[j + 1] - nodes[j]);
-        *k = j; w[0] = 1.0 - t; w[1] = t;
-    }
+    core_hat_weights(x, d->alpha_nodes_deg, d->n_alpha_nodes, k, w);
 }
 
 static double stall_delay_increment(const Element *e, double alpha_deg, double cl)

@@ -19,6 +19,7 @@ void core_logf(const RotorCore *core, int level, const char *fmt, ...);
 /* ---- rotor_data.c ---------------------------------------------------------- */
 int rotor_data_read(RotorData *data, const char *path, const RotorCore *core);
 void rotor_data_free(RotorData *data);
+void core_hat_weights(double x, const double *nodes, int n, int *k, double w[2]);
 
 /* ---- aero.c ------------------------------------------------------------------ */
 /* Local flow and geometry of one blade element. */

@@ -96,8 +96,9 @@ static int read_axis(FILE *f, const char *key, int *n, double *nodes, const Roto
     return 0;
 }
 
-/* Spanwise hat weights (same rule as calib.corrections.hat_weights). */
-static void hat_weights(double x, const double *nodes, int n, int *k, double w[2])
+/* Hat-function weights on a node grid (same rule as calib.corrections.hat_weights):
+ * inside the grid linear interpolation, outside it the end hat ramps to zero over one spacing. */
+void core_hat_weights(double x, const double *nodes, int n, int *k, double w[2])
 {
     if (x < nodes[0]) {
         double t = (nodes[0] - x) / (nodes[1] - nodes[0]);
@@ -205,7 +206,7 @@ int rotor_data_read(RotorData *d, const char *path, const RotorCore *core)
     fclose(f);
     for (j = 0; j < d->n_stations; j++) {
         x = d->r[j] / d->tip_radius;
-        hat_weights(x, d->eta_nodes, d->n_eta_nodes, &d->eta_index[j], d->eta_weight[j]);
+        core_hat_weights(x, d->eta_nodes, d->n_eta_nodes, &d->eta_index[j], d->eta_weight[j]);
     }
     return 0;
 fail:
