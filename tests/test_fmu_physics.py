@@ -251,3 +251,17 @@ def test_stall_delay_adds_inboard_lift(fmus, rotor):
     assert abs(outboard) < 0.2 * gain
     assert on["power"].mean() > off["power"].mean()
     assert m["switches"]["stall_delay"]["values"]["snel"] == 1
+
+
+def test_du_selig_stall_delay_adds_inboard_lift_only(fmus):
+    """Du & Selig (1998): the lift increment f_L (C_L,pot − C_L) decays with (c/r) and the rotational
+    speed ratio, so at a stalled low-λ point the inboard normal force rises, the attached outboard
+    station barely changes, and rotor power goes up."""
+    kw = dict(wind_speed=14.0, rotor_speed=7.0, settle=1, revolutions=1)
+    off = simulate(fmus["A"], "A", **kw)
+    on = simulate(fmus["A"], "A", switches=dict(stall_delay="du_selig"), **kw)
+    gain = on["normal_force"][:, 0].mean() / off["normal_force"][:, 0].mean() - 1.0
+    outboard = on["normal_force"][:, -1].mean() / off["normal_force"][:, -1].mean() - 1.0
+    assert gain > 0.01, f"inboard gain {gain:.4f}"
+    assert abs(outboard) < 0.2 * gain
+    assert on["power"].mean() > off["power"].mean()
