@@ -225,6 +225,18 @@ class ScipyQp:
         from scipy.optimize import LinearConstraint, minimize
 
         n = H.shape[0]
+        # SLSQP's tolerances are absolute: solve in variables w with x = √gain D⁻¹ w, D = √diag(H),
+        # and cost divided by gain = ½ gᵀH⁺g (the unconstrained Newton decrease), so that the
+        # Hessian has a unit diagonal and the optimal w and cost are of order one
+        newton = np.linalg.lstsq(H, g, rcond=None)[0]
+        gain = 0.5 * float(g @ newton)
+        if not gain > 1e-14:  # even the unconstrained step gains nothing: x = 0 is optimal
+            return QpSolution(np.zeros(n), True, "already optimal (no decrease available)")
+        d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+        x_of = np.sqrt(gain) / d
+        H = H * np.outer(x_of, x_of) / gain
+        g = g * x_of / gain
+        A = A * x_of[None, :]
         fun = lambda x: 0.5 * x @ H @ x + g @ x  # noqa: E731
         jac = lambda x: H @ x + g  # noqa: E731
         if self.method == "SLSQP":
@@ -240,7 +252,7 @@ class ScipyQp:
             res = minimize(fun, np.zeros(n), jac=jac, hess=lambda x: H, method="trust-constr",
                            constraints=[LinearConstraint(A, lb, ub)],
                            options={"maxiter": 1000, "gtol": 1e-10, "xtol": 1e-12})
-        x = np.asarray(res.x, float)
+        x = np.asarray(res.x, float) * x_of
         return QpSolution(x, bool(res.success) and np.all(np.isfinite(x)), str(res.message))
 
 
@@ -379,7 +391,10 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         if callback:
             callback(rec)
         if decrease <= tolerance * (1.0 + lin.cost) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
-            status, message = "converged", f"converged in {it} iterations"
+            if sol.success:
+                status, message = "converged", f"converged in {it} iterations"
+            else:  # no progress because the subproblem solver gave up: not a converged estimate
+                status, message = "qp_failed", f"{optimizer} made no progress: {sol.message}"
             break
     problem._cache = lin
     return EstimationOutcome(theta, lin.p, lin.cost, it, status, message, lin, history)

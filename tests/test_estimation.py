@@ -1,0 +1,127 @@
+"""Constrained Gauss–Newton ML estimation: exact recovery, bounds, subspaces, optimizers by name."""
+
+import numpy as np
+import pytest
+
+from calib.errors import InputError
+from calib.estimation import OPTIMIZERS, LeastSquaresProblem, estimate, get_optimizer
+from calib.models.base import Channel, Evaluation, OperatingConditions, Parameter
+
+
+class LinearModel:
+    """y(p) = A(u) p + c(u): a ForwardModel whose ML estimate is a linear least-squares solution."""
+
+    def __init__(self, n_params=4, n_channels=2, seed=0, fail_if_p0_above=None):
+        rng = np.random.default_rng(seed)
+        self.seed = seed
+        self.n, self.c = n_params, n_channels
+        self.W = rng.standard_normal((n_channels, n_params, 3))
+        self.fail_if_p0_above = fail_if_p0_above
+        self._params = tuple(Parameter(f"p{j}", 0.0, -1.0, 1.0, 0.5) for j in range(n_params))
+        self._channels = tuple(Channel(f"y{i}", "-") for i in range(n_channels))
+
+    parameters = property(lambda self: self._params)
+    channels = property(lambda self: self._channels)
+
+    def _A(self, cond):
+        basis = np.column_stack([np.ones(len(cond)), cond.wind_speed / 10, cond.pitch / 5])  # (k, 3)
+        return np.einsum("kb,cnb->kcn", basis, self.W)
+
+    def evaluate(self, p, cond):
+        y = self._A(cond) @ np.asarray(p, float)
+        status = np.zeros(len(cond), int)
+        if self.fail_if_p0_above is not None and p[0] > self.fail_if_p0_above:
+            status[0] = 1
+            y[0] = np.nan
+        msgs = tuple("failed" if s else "" for s in status)
+        return Evaluation(y, status, msgs, self._channels)
+
+    def jacobian(self, p, cond):
+        return self.evaluate(p, cond), self._A(cond)
+
+
+def _conditions(n=12):
+    V = np.linspace(5, 12, n)
+    return OperatingConditions(V, 10.0 * np.ones(n), np.tile([0.0, 2.0, 4.0], n // 3 + 1)[:n])
+
+
+def _problem(model, p_true, noise=0.0, seed=1, lower=None, upper=None):
+    cond = _conditions()
+    z = LinearModel(model.n, model.c, model.seed).evaluate(p_true, cond).values  # complete data, same A
+    z = z + noise * np.random.default_rng(seed).standard_normal(z.shape)
+    sigma = np.full(z.shape, noise if noise > 0 else 1e-3)
+    qs = model.parameters
+    lo = np.array([q.lower for q in qs]) if lower is None else lower
+    hi = np.array([q.upper for q in qs]) if upper is None else upper
+    return LeastSquaresProblem(model, cond, z, sigma, list(range(model.c)), np.zeros(model.n),
+                               np.array([q.scale for q in qs]), lo, hi)
+
+
+@pytest.mark.parametrize("optimizer", sorted(OPTIMIZERS))
+def test_noise_free_linear_problem_is_recovered_exactly(optimizer):
+    model = LinearModel()
+    p_true = np.array([0.3, -0.2, 0.5, 0.1])
+    prob = _problem(model, p_true)
+    out = estimate(prob, np.eye(model.n), optimizer=optimizer)
+    assert out.converged, out.message
+    np.testing.assert_allclose(out.p, p_true, atol=1e-6)
+    assert out.cost < 1e-6
+
+
+def test_bounds_are_respected_and_active():
+    model = LinearModel()
+    p_true = np.array([0.3, -0.2, 0.5, 0.1])
+    upper = np.array([1.0, 1.0, 0.2, 1.0])  # truth violates the bound on p2
+    prob = _problem(model, p_true, upper=upper)
+    out = estimate(prob, np.eye(model.n), optimizer="sqpmethod")
+    assert np.all(out.p <= upper + 1e-9) and np.all(out.p >= prob.lower - 1e-9)
+    assert out.p[2] == pytest.approx(0.2, abs=1e-7)
+
+
+def test_subspace_estimate_is_the_projected_least_squares_solution():
+    model = LinearModel(n_params=4, seed=3)
+    p_true = np.array([0.2, 0.1, -0.3, 0.05])
+    prob = _problem(model, p_true, noise=0.01)
+    B = np.linalg.qr(np.random.default_rng(0).standard_normal((4, 2)))[0]
+    out = estimate(prob, B, optimizer="slsqp")
+    # closed form: min ||(z - A p0 - A D B θ)/σ||
+    lin = prob.linearize(prob.p0)
+    J = lin.M @ B
+    theta_ls = np.linalg.lstsq(J, lin.residual.reshape(-1), rcond=None)[0]
+    np.testing.assert_allclose(out.theta, theta_ls, atol=1e-6)
+    np.testing.assert_allclose(out.p, prob.p_of(B, theta_ls), atol=1e-6)
+
+
+def test_progress_callback_reports_every_iteration():
+    model = LinearModel()
+    prob = _problem(model, np.array([0.3, -0.2, 0.5, 0.1]), noise=0.01)
+    records = []
+    out = estimate(prob, np.eye(model.n), callback=records.append, stage="unit")
+    assert len(records) == out.iterations == len(out.history)
+    assert all(r["stage"] == "unit" and "cost" in r and "n_failed" in r for r in records)
+    costs = [r["cost"] for r in records]
+    assert all(b <= a + 1e-12 for a, b in zip(costs, costs[1:]))
+
+
+def test_steps_that_make_points_fail_are_rejected():
+    model = LinearModel(fail_if_p0_above=0.25)
+    p_true = np.array([0.3, -0.2, 0.5, 0.1])  # the truth lies in the failing region
+    prob = _problem(model, p_true)
+    out = estimate(prob, np.eye(model.n))
+    assert out.linearization.n_failed == 0
+    assert out.p[0] <= 0.25 + 1e-12
+    assert prob.n_failed_points_total >= 1  # the rejected trials were counted
+
+
+def test_empty_subspace_returns_nominal():
+    model = LinearModel()
+    prob = _problem(model, np.array([0.3, -0.2, 0.5, 0.1]))
+    out = estimate(prob, np.zeros((model.n, 0)))
+    assert out.converged and np.array_equal(out.p, prob.p0)
+
+
+def test_unknown_optimizer_error_lists_valid_names():
+    with pytest.raises(InputError) as err:
+        get_optimizer("newton")
+    msg = str(err.value)
+    assert "newton" in msg and all(name in msg for name in OPTIMIZERS)

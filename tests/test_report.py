@@ -1,0 +1,80 @@
+"""Result serialization round trip, figures (PNG and SVG) and the self-contained HTML report."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.errors import InputError
+from calib.measurements import synthesize
+from calib.models.base import nominal_vector
+from calib.report import figures as F
+from calib.report.html import write_report
+from calib.result import _ARRAY_FIELDS, load_result
+from twin_model import TwinModel, twin_conditions
+
+
+@pytest.fixture(scope="module")
+def result():
+    model = TwinModel(channels=("power", "thrust", "root_flap_moment"))
+    p_true = nominal_vector(model.parameters)
+    n = model.grid.n_lift
+    p_true[:n] = 0.05 * np.sin(np.arange(n))
+    meas = synthesize(model, p_true, twin_conditions(),
+                      relative_sigma={"power": 0.005, "thrust": 0.005, "root_flap_moment": 0.005}, seed=2)
+    return Calibrator(model, meas, CalibrationSettings(sigma_bar=0.3), name="twin").run()
+
+
+@pytest.fixture(scope="module")
+def figure_paths(result, tmp_path_factory):
+    return F.write_figures(result, tmp_path_factory.mktemp("figures"), formats=("png",))
+
+
+def test_result_round_trip(result, tmp_path):
+    jpath, npath = result.save(tmp_path)
+    back = load_result(tmp_path)
+    for name in _ARRAY_FIELDS:
+        np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(result, name)),
+                                      err_msg=name)
+    for k, v in result.conditions.items():
+        np.testing.assert_array_equal(back.conditions[k], v)
+    for k, v in result.polar_bands.items():
+        np.testing.assert_array_equal(back.polar_bands[k], v)
+    assert back.verdicts == result.verdicts and back.status == result.status
+    assert back.n_retained == result.n_retained and back.summary() == result.summary()
+    data = json.loads(jpath.read_text())
+    assert {"settings", "versions", "inputs", "failures", "verdicts", "summary"} <= set(data)
+    assert {"numpy", "scipy", "casadi", "python"} <= set(data["versions"])
+    assert load_result(jpath).n_params == result.n_params          # the file path works too
+
+
+def test_load_result_names_the_missing_file(tmp_path):
+    with pytest.raises(InputError, match="result.json"):
+        load_result(tmp_path)
+
+
+def test_every_figure_is_written(result, figure_paths, tmp_path):
+    paths = figure_paths
+    assert set(paths) == set(F.FIGURES)
+    for p in paths.values():
+        assert p["png"].stat().st_size > 5000
+    svg = F.save_figure(F.plot_singular_values(result), tmp_path, "spectrum", formats=("svg",))["svg"]
+    assert svg.read_text().lstrip().startswith("<?xml") and "<svg" in svg.read_text()[:2000]
+
+
+def test_eigenshape_figure_has_one_panel_per_retained_mode(result):
+    fig = F.plot_eigenshapes(result, "drag", max_modes=50)
+    maps = [ax for ax in fig.axes if ax.get_title().startswith("θ")]
+    assert len(maps) == result.n_retained
+
+
+def test_html_report_is_self_contained_with_key_numbers(result, figure_paths, tmp_path):
+    figs = {"twin": figure_paths}
+    path = write_report(tmp_path / "report.html", title="twin report", results={"twin": result}, figures=figs)
+    text = path.read_text(encoding="utf-8")
+    assert text.count("data:image/png;base64,") == len(figs["twin"])
+    assert not re.search(r'src="(?!data:)', text)            # nothing loaded from elsewhere
+    assert f"{result.n_retained}" in text and "χ²/dof after" in text
+    assert "Failed model points" in text and result.status in text
