@@ -5,33 +5,34 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from calib.bem import BemSettings, solve_bem
+from calib.bem.kinematics import curvature, wind_components
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.residual import SectionGeometry, section_equations
 from calib.models.base import OperatingConditions, Status
 from synthetic import synthetic_rotor
 
 
-def recomputed_residual(rotor, res, settings, k):
-    """Residual of the section equations at the returned φ, computed independently of the solver."""
+def recomputed_residual(rotor, res, settings, cond, k):
+    """Residual of the section equations at the returned φ for point ``k``, with the local
+    velocities rebuilt from the kinematics (not from the solver's own inductions, which would
+    make the check circular)."""
     polars = SectionPolars.from_rotor(rotor)
     interior = (rotor.r > rotor.hub_radius * (1 + 1e-9)) & (rotor.r < rotor.tip_radius * (1 - 1e-9))
-    phi = res.sections["phi"][k][:, interior]
-    alpha = res.sections["alpha_deg"][k][:, interior]
-    ns = phi.shape[0]
-    station = np.broadcast_to(np.flatnonzero(interior), phi.shape).ravel()
-    cl, cd, _, _ = polars.lookup(alpha.ravel(), station)
-    r = rotor.r[station]
-    c = rotor.chord[station]
+    x_az, y_az, z_az, cone, _ = curvature(rotor.r, rotor.precurve, rotor.presweep, np.radians(rotor.precone_deg))
+    azimuth = np.linspace(0.0, 2 * np.pi, res.n_sectors + 1)[:-1]
+    vx, vy, _, _ = wind_components(x_az, y_az, z_az, cone, azimuth, cond.wind_speed[[k]],
+                                   cond.rotor_speed[[k]] * np.pi / 30, np.radians(cond.yaw[[k]]),
+                                   np.radians(rotor.tilt_deg), rotor.hub_height, settings.shear_exponent)
+    phi = res.sections["phi"][k][:, interior].ravel()
+    alpha = res.sections["alpha_deg"][k][:, interior].ravel()
+    station = np.broadcast_to(np.flatnonzero(interior), (res.n_sectors, interior.sum())).ravel()
+    cl, cd, _, _ = polars.lookup(alpha, station)
+    r, c = rotor.r[station], rotor.chord[station]
     geo = SectionGeometry(r, c, rotor.n_blades * c / (2 * np.pi * r), rotor.hub_radius, rotor.tip_radius,
                           rotor.n_blades)
-    # local velocities from the solution: tan φ = Vx(1-a)/(Vy(1+a')) is not needed; use the
-    # residual's own form with λ_r from the solver's inputs, rebuilt from W and the inductions
-    a, ap, W = (res.sections[q][k][:, interior].ravel() for q in ("a", "ap", "W"))
-    vx = W * np.sin(phi.ravel()) / (1 - a)
-    vy = W * np.cos(phi.ravel()) / (1 + ap)
-    eq = section_equations(phi.ravel(), cl, cd, vx, vy, geo, tip_loss=settings.tip_loss,
-                           hub_loss=settings.hub_loss)
-    return eq["residual"], phi.ravel()
+    eq = section_equations(phi, cl, cd, vx[0][:, interior].ravel(), vy[0][:, interior].ravel(), geo,
+                           tip_loss=settings.tip_loss, hub_loss=settings.hub_loss)
+    return eq["residual"], phi
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -52,7 +53,7 @@ def test_random_rotors_converge_to_a_root(n_st, radius, hub, blades, tsr, chord_
     assert res.status[0] == Status.CONVERGED, res.messages[0]
     for name in ("power", "thrust", "torque", "root_flap_moment", "root_edge_moment"):
         assert np.isfinite(getattr(res, name)[0])
-    R, phi = recomputed_residual(rotor, res, s, 0)
+    R, phi = recomputed_residual(rotor, res, s, cond, 0)
     assert np.all(np.abs(R) < 1e-7)
     assert np.all((phi > -np.pi / 4 - 1e-12) & (phi < np.pi))
 

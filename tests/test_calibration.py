@@ -37,8 +37,7 @@ def twin_truth(model, rng_seed=0):
 
 
 def run_twin(model, cond, p_true, seed, **settings):
-    meas = synthesize(model, p_true, cond, relative_sigma={c: 0.01 for c in model.channels and
-                                                            [c.name for c in model.channels]}, seed=seed)
+    meas = synthesize(model, p_true, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=seed)
     st = dict(sigma_bar=0.5, optimizer="sqpmethod", cd_min=None)
     st.update(settings)
     return Calibrator(model, meas, CalibrationSettings(**st)).run()

@@ -386,13 +386,12 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     sens = None
     if sensitivities:
         sens = _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid,
-                                      sections, rotor, f_eta)
+                                      sections, rotor)
     return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
                      omega=omega, n_sectors=n_sec, rotor=rotor, sensitivities=sens)
 
 
-def _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid, sections, rotor,
-                           f_eta):
+def _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid, sections, rotor):
     """Implicit-function total derivatives of section quantities (Ning 2014, §3)."""
     R = eq["residual"]
     r_phi = R.d[:, 0]
