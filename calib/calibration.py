@@ -31,7 +31,7 @@ from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
 from calib.identifiability import (cramer_rao, field_basis, fisher_matrix, node_layout, observability,
                                    parameter_verdicts, subspace_cosines, svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.result import CalibrationResult
 
 NOISE_MODES = ("known", "ml", "repeats")

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.errors import InputError
-from calib.models.base import Parameter
+from calib.types import Parameter
 
 
 def _check_nodes(nodes, name: str) -> np.ndarray:

@@ -42,7 +42,7 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.identifiability import whitened_sensitivities
-from calib.models.base import Evaluation, OperatingConditions
+from calib.types import Evaluation, OperatingConditions
 
 
 # ----------------------------------------------------------------------------- problem

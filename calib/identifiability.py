@@ -31,7 +31,7 @@ from scipy import stats
 
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.models.base import Parameter
+from calib.types import Parameter
 
 VERDICTS = ("identified", "poorly observable", "at bound")
 

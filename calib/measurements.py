@@ -34,7 +34,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.models.base import CONDITION_FIELDS, OperatingConditions
+from calib.types import CONDITION_FIELDS, OperatingConditions
 
 REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
 CONDITION_DEFAULTS = {"air_density": 1.225, "yaw": 0.0}

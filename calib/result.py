@@ -18,7 +18,7 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.identifiability import NodeLayout, eigenshapes, node_layout
-from calib.models.base import Parameter
+from calib.types import Parameter
 
 SCHEMA_VERSION = 1
 

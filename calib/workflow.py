@@ -25,7 +25,7 @@ from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
-from calib.models.base import OperatingConditions, nominal_vector
+from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.errors import InputError
-from calib.models.base import Channel
+from calib.types import Channel
 
 ROTOR_CHANNELS = {
     "power": ("W", "Tp", "torque", "omega", "aerodynamic rotor power"),

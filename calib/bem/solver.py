@@ -20,7 +20,7 @@ from calib.bem.residual import SectionGeometry, section_equations, section_loads
 from calib.bem.rootfind import bracket, solve_brackets
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.models.base import OperatingConditions, Status, StatusCounts
+from calib.types import OperatingConditions, Status, StatusCounts
 from calib.rotor.geometry import Rotor
 
 RESIDUAL_TOL = 1e-8
@@ -114,7 +114,7 @@ class BemResult(StatusCounts):
     cp, ct, cq : ndarray
         Power, thrust and torque coefficients [-] on the swept area.
     status : ndarray of int
-        :class:`calib.models.base.Status` per point.
+        :class:`calib.types.Status` per point.
     messages : tuple of str
     sections : dict of ndarray
         ``phi`` [rad], ``alpha_deg``, ``a``, ``ap``, ``cl``, ``cd``, ``cn``, ``ct`` (chord

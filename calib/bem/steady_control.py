@@ -15,7 +15,7 @@ import numpy as np
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemResult, BemSettings, solve_bem
 from calib.errors import InputError
-from calib.models.base import OperatingConditions, Status
+from calib.types import OperatingConditions, Status
 from calib.rotor.geometry import Rotor
 
 
