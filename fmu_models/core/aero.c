@@ -180,32 +180,52 @@ static double brent(const Element *e, double xa, double xb, double fa, double fb
     return xb;
 }
 
-int aero_solve_element(const Element *e, double *phi, double *a, double *ap)
+/* Sign change on [lo, hi] with finite end values (a root is bracketed). */
+static int brackets(double flo, double fhi)
+{
+    return isfinite(flo) && isfinite(fhi) && flo * fhi <= 0.0;
+}
+
+/* Ning's (2014, section 2.3) bracketing rule, as calib.bem.rootfind.bracket:
+ *   1. [eps, pi/2] (windmill) if the residual changes sign there;
+ *   2. else [-pi/4, -eps] (propeller brake) only if R(-pi/4) < 0 < R(-eps);
+ *   3. else [pi/2, pi - eps] (windmill with phi > 90 deg, e.g. where the in-plane
+ *      velocity reverses near the root in yaw).
+ * Taking rule 2 on any sign change would pick a spurious phi < 0 root where R(-eps) < 0
+ * < R(-pi/4). Returns 0 and the bracket, or -1 when none of the three brackets a root. */
+static int ning_bracket(const Element *e, double *lo, double *hi, double *flo, double *fhi)
 {
     const double eps = 1e-6;
+    double fa, fb;
+    *lo = eps; *hi = M_PI / 2.0;
+    *flo = residual(e, *lo, NULL, NULL);
+    *fhi = residual(e, *hi, NULL, NULL);
+    if (brackets(*flo, *fhi)) return 0;
+    fa = residual(e, -M_PI / 4.0, NULL, NULL);
+    fb = residual(e, -eps, NULL, NULL);
+    if (fa < 0.0 && fb > 0.0) {
+        *lo = -M_PI / 4.0; *hi = -eps;
+        *flo = fa; *fhi = fb;
+        return 0;
+    }
+    *lo = M_PI / 2.0; *hi = M_PI - eps;
+    *flo = *fhi;
+    *fhi = residual(e, *hi, NULL, NULL);
+    return brackets(*flo, *fhi) ? 0 : -1;
+}
+
+int aero_solve_element(const Element *e, double *phi, double *a, double *ap)
+{
     double lo, hi, flo, fhi;
     if (fabs(e->vx) < 1e-8 || fabs(e->vy) < 1e-8) {   /* no axial or no tangential flow */
         *phi = atan2(e->vx, e->vy);
         *a = 0.0; *ap = 0.0;
         return 0;
     }
-    lo = eps; hi = M_PI / 2.0;
-    flo = residual(e, lo, NULL, NULL);
-    fhi = residual(e, hi, NULL, NULL);
-    if (flo * fhi > 0.0) {
-        double fm = residual(e, -M_PI / 4.0, NULL, NULL);
-        if (residual(e, -eps, NULL, NULL) * fm < 0.0) {       /* propeller brake */
-            lo = -M_PI / 4.0; hi = -eps;
-            flo = fm; fhi = residual(e, hi, NULL, NULL);
-        } else {                                              /* windmill, phi > 90 deg */
-            lo = M_PI / 2.0; hi = M_PI - eps;
-            flo = fhi; fhi = residual(e, hi, NULL, NULL);
-        }
-        if (flo * fhi > 0.0) {
-            *phi = atan2(e->vx, e->vy);
-            *a = 0.0; *ap = 0.0;
-            return -1;
-        }
+    if (ning_bracket(e, &lo, &hi, &flo, &fhi) != 0) {
+        *phi = atan2(e->vx, e->vy);
+        *a = 0.0; *ap = 0.0;
+        return -1;
     }
     *phi = brent(e, lo, hi, flo, fhi);
     residual(e, *phi, a, ap);
