@@ -5,7 +5,8 @@ outputs z_k of some model channels, optionally with their 1-σ noise.
 
 CSV layout
 ----------
-One header line, then one row per record. Columns (order free):
+Optional comment lines (starting with ``#``), one header line, then one row per record.
+Columns (order free; names are case-insensitive, spaces and hyphens count as ``_``):
 
 - conditions: ``wind_speed`` [m/s], ``rotor_speed`` [rpm], ``pitch`` [deg] (required);
   ``air_density`` [kg/m^3] (optional, default 1.225), ``yaw`` [deg] (optional, default 0);
@@ -15,17 +16,36 @@ One header line, then one row per record. Columns (order free):
   e.g. ``cn@0.30`` is the normal-force coefficient at r/R = 0.30;
 - noise: ``<channel>_sigma``, the 1-σ noise of that channel, in the same unit.
 
-A header may give a unit in brackets, ``power [kW]``; it is converted to SI on load
-(see :data:`UNITS`). Without brackets SI is assumed. Rows with the same conditions are
-*repeated records*; :func:`noise_from_repeats` estimates the noise from them.
+A header may give a unit as ``power [kW]``, ``Power_[kW]`` (OpenFAST style) or
+``power (kW)``; units are case-insensitive (``kw`` is kW, ``mw`` is MW, never milliwatt)
+and converted to SI on load (see :data:`UNITS` and :data:`UNIT_ALIASES`). Without a unit
+SI is assumed. Rows with the same conditions are *repeated records*;
+:func:`noise_from_repeats` estimates the noise from them.
 
-Lines starting with ``#`` are comments.
+Files as spreadsheets and loggers export them are accepted, and what was done is said in
+:attr:`Measurements.notes`:
+
+- encoding UTF-8, with or without byte-order mark, or UTF-16 with byte-order mark (Excel's
+  "Unicode text"); anything else, including binary files (an ``.xlsx`` workbook, an image),
+  is refused with :class:`~calib.errors.InputError`;
+- the delimiter (comma, semicolon or tab) is detected from the header and the first rows;
+- a *decimal comma* (``8,5``) is accepted when the delimiter is a semicolon or a tab: the
+  comma is then read as the decimal separator in the whole file, and a cell with a point
+  (``1.500``, possibly a thousands separator) is refused as ambiguous;
+- columns that are not known names are ignored: non-numeric ones (timestamps, IDs) and
+  numeric ones are named in separate notes;
+- a missing value (empty cell, ``nan``, ``NA``, ``N/A``, ``#N/A``, ``null``, or a row cut
+  short) in a column that is needed is refused with file, line and column, or, with
+  ``drop_incomplete_rows=True``, the row is dropped and the count reported.
 """
 
 from __future__ import annotations
 
+import codecs
 import csv
+import difflib
 import hashlib
+import os
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -39,7 +59,8 @@ from calib.types import CONDITION_FIELDS, OperatingConditions
 REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
 CONDITION_DEFAULTS = {"air_density": 1.225, "yaw": 0.0}
 
-#: Accepted units per physical quantity: unit -> factor to SI.
+#: Accepted units per physical quantity: unit -> factor to SI. The first unit of each
+#: quantity is the SI unit of the ForwardModel contract.
 UNITS: dict[str, dict[str, float]] = {
     "speed": {"m/s": 1.0, "km/h": 1.0 / 3.6},
     "rotor_speed": {"rpm": 1.0, "rad/s": 30.0 / np.pi},          # SI of the contract is rpm
@@ -52,13 +73,67 @@ UNITS: dict[str, dict[str, float]] = {
     "force_per_length": {"N/m": 1.0, "kN/m": 1e3},
 }
 
+#: Further spellings, per quantity: key after :func:`_unit_key` -> unit of :data:`UNITS`.
+UNIT_ALIASES: dict[str, dict[str, str]] = {
+    "speed": {"ms1": "m/s", "kmh": "km/h", "kph": "km/h", "km/hr": "km/h", "kmh1": "km/h"},
+    "rotor_speed": {"r/min": "rpm", "1/min": "rpm", "min1": "rpm", "rads1": "rad/s"},
+    "angle": {"°": "deg", "degree": "deg", "degrees": "deg", "radian": "rad", "radians": "rad"},
+    "density": {"kgm3": "kg/m^3", "kg/m³": "kg/m^3"},
+    "power": {},
+    "force": {},
+    "moment": {},
+    "coefficient": {"": "-"},
+    "force_per_length": {"nm1": "N/m", "knm1": "kN/m"},
+}
+
+#: Cell texts that mean "no value" (compared lower-case, after stripping blanks).
+MISSING_CELLS = frozenset({"", "nan", "na", "n/a", "#n/a", "null", "none"})
+
 _FIXED_QUANTITY = {
     "wind_speed": "speed", "rotor_speed": "rotor_speed", "pitch": "angle", "yaw": "angle",
     "air_density": "density", "power": "power", "thrust": "force", "torque": "moment",
     "root_flap_moment": "moment", "root_edge_moment": "moment", "hub_flap_moment": "moment",
 }
 _SPANWISE = re.compile(r"^(cn|ct|fn|ft)@([0-9]*\.?[0-9]+)$")
-_HEADER = re.compile(r"^\s*([^\[\]]+?)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
+# name, then optionally "_" and a unit in [] or (): "power [kW]", "Power_[kW]", "power (kW)"
+_HEADER = re.compile(r"^\s*(?P<name>.+?)\s*_?\s*(?:\[\s*(?P<u1>[^\[\]]*?)\s*\]|\(\s*(?P<u2>[^()]*?)\s*\))\s*$")
+_DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
+_DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
+_MAGIC = (  # leading bytes of files people pick by mistake -> what they are
+    (b"PK\x03\x04", "a zip archive (an .xlsx/.ods workbook is one: export the sheet as CSV)"),
+    (b"\xd0\xcf\x11\xe0", "an OLE2 document (an .xls workbook: export the sheet as CSV)"),
+    (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"%PDF", "a PDF document"),
+    (b"\x1f\x8b", "a gzip archive"), (b"\x89HDF", "an HDF5 file"), (b"\x93NUMPY", "a NumPy .npy file"),
+)
+
+
+def _unit_key(unit: str) -> str:
+    """Spelling-insensitive key of a unit: lower case, without blanks, '·', '*', '-', '.', '^'."""
+    u = unit.strip().lower()
+    if u in ("-", "1"):
+        return u
+    for ch in (" ", "·", "*", "-", ".", "^"):
+        u = u.replace(ch, "")
+    return u.replace("³", "3")
+
+
+def canonical_unit(quantity: str, unit: str) -> str | None:
+    """The :data:`UNITS` spelling of ``unit`` for ``quantity`` (``None`` if not accepted).
+
+    Matching ignores case, blanks and the separators ``·``, ``*``, ``-``, ``.`` and ``^``,
+    so ``kN-m`` (OpenFAST), ``KNm`` and ``kN·m`` all give ``kN m``.
+    """
+    key = _unit_key(unit)
+    for u in UNITS[quantity]:
+        if _unit_key(u) == key:
+            return u
+    return UNIT_ALIASES.get(quantity, {}).get(key)
+
+
+def normalize_name(name: str) -> str:
+    """Column name as the loader compares it: lower case, blanks and hyphens as ``_``."""
+    n = re.sub(r"[\s\-]+", "_", name.strip().lower())
+    return n.strip("_")
 
 
 def quantity_of(column: str) -> str | None:
@@ -70,6 +145,11 @@ def quantity_of(column: str) -> str | None:
     if m:
         return "coefficient" if m.group(1) in ("cn", "ct") else "force_per_length"
     return None
+
+
+def si_unit(quantity: str) -> str:
+    """The SI unit of a quantity in the ForwardModel contract (``rpm`` and ``deg`` included)."""
+    return next(iter(UNITS[quantity]))
 
 
 def is_channel_name(name: str) -> bool:
@@ -104,6 +184,13 @@ class Measurements:
         File it came from, or a description (``"synthetic"``).
     sha256 : str
         SHA-256 of the file (empty for in-memory data).
+    metadata : dict
+        Free-form; :func:`read_measurements` stores ``units`` (column -> unit as declared in
+        the header, in :data:`UNITS` spelling, ``None`` where the header gave none),
+        ``delimiter``, ``decimal_comma`` and ``lines`` (file line of each point).
+    notes : tuple of str
+        What the reader did that a user should know (delimiter detected, columns
+        ignored, rows dropped ...), one sentence each.
     """
 
     conditions: OperatingConditions
@@ -113,6 +200,7 @@ class Measurements:
     source: str = "memory"
     sha256: str = ""
     metadata: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self):
         v = np.asarray(self.values, dtype=float)
@@ -120,6 +208,7 @@ class Measurements:
             v = v[:, None]
         object.__setattr__(self, "values", v)
         object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
         if v.shape != (len(self.conditions), len(self.channels)):
             raise InputError(f"values have shape {v.shape}, expected "
                              f"({len(self.conditions)}, {len(self.channels)})", self.source)
@@ -143,7 +232,7 @@ class Measurements:
         return self.values[:, self.channels.index(name)]
 
     def select_channels(self, names: Sequence[str]) -> "Measurements":
-        """A copy restricted to ``names`` (in that order)."""
+        """A copy restricted to ``names`` (in that order); notes and metadata are kept."""
         missing = [n for n in names if n not in self.channels]
         if missing:
             raise InputError(f"channel(s) {', '.join(missing)} not measured; measured channels are: "
@@ -158,135 +247,336 @@ class Measurements:
         return replace(self, sigma=s)
 
     def write_csv(self, path: str | Path) -> Path:
-        """Write the table as CSV in SI units (with ``_sigma`` columns when known)."""
+        """Write the table as CSV in SI units, each column header with its unit.
+
+        ``_sigma`` columns are written when the noise is known. The source and the
+        :attr:`notes` are written as ``#`` comment lines above the header (reading the
+        file back gives fresh notes about the written file). The file is written to a
+        temporary name and renamed, so an interruption never leaves a truncated table.
+        """
         path = Path(path)
+
+        def header(name: str) -> str:
+            q = quantity_of(name)
+            return f"{name} [{si_unit(q)}]" if q is not None else name
+
         cols = list(CONDITION_FIELDS) + list(self.channels)
         data = [getattr(self.conditions, f) for f in CONDITION_FIELDS] + list(self.values.T)
         if self.sigma is not None:
             cols += [f"{c}_sigma" for c in self.channels]
             data += list(self.sigma.T)
         path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(cols)
-            for row in np.column_stack(data):
-                w.writerow([repr(float(x)) for x in row])
+        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+        try:
+            with open(tmp, "w", newline="", encoding="utf-8") as f:
+                f.write(f"# written by calib from {self.source}\n")
+                for note in self.notes:
+                    f.write("# note: " + " ".join(note.splitlines()) + "\n")
+                w = csv.writer(f)
+                w.writerow([header(c) for c in cols])
+                for row in np.column_stack(data):
+                    w.writerow([repr(float(x)) for x in row])
+            os.replace(tmp, path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
         return path
 
 
-def _parse_header(name: str, path: str, line: int) -> tuple[str, str | None]:
-    m = _HEADER.match(name)
-    if not m:
-        raise InputError(f"cannot read column header {name!r}; expected 'name' or 'name [unit]'",
-                         path, line, field=name)
-    return m.group(1).strip(), (m.group(2).strip() if m.group(2) is not None else None)
+# ----------------------------------------------------------------------------- reading
+def _known_names_text() -> str:
+    return (", ".join(list(CONDITION_FIELDS) + [n for n in _FIXED_QUANTITY if n not in CONDITION_FIELDS])
+            + ", cn@<r/R>, ct@<r/R>, fn@<r/R>, ft@<r/R>, <channel>_sigma")
 
 
-def _factor(column: str, unit: str | None, path: str, line: int) -> float:
+def _decode(raw: bytes, src: str) -> tuple[str, list[str]]:
+    """Text of a table file and a note on its encoding; refuses binary and non-UTF-8 files."""
+    if raw.startswith(codecs.BOM_UTF8):
+        encoding, note = "utf-8-sig", "encoding: UTF-8 with byte-order mark"
+    elif raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        encoding, note = "utf-16", "encoding: UTF-16 with byte-order mark"
+    else:
+        for magic, what in _MAGIC:
+            if raw.startswith(magic):
+                raise InputError(f"not a text table: the file is {what}; expected a CSV text file "
+                                 "(UTF-8, columns separated by comma, semicolon or tab)", src)
+        if b"\x00" in raw[:1 << 16]:
+            raise InputError("not a text table: the file contains NUL bytes (a binary file?); expected a "
+                             "CSV text file (UTF-8, columns separated by comma, semicolon or tab)", src)
+        encoding, note = "utf-8", None
+    try:
+        text = raw.decode(encoding)
+    except UnicodeDecodeError as e:
+        if encoding == "utf-16":
+            raise InputError(f"not valid UTF-16 text (byte {e.start}): {e.reason}", src) from None
+        start = e.start + (3 if encoding == "utf-8-sig" else 0)
+        line = raw[:start].count(b"\n") + 1
+        column = start - raw.rfind(b"\n", 0, start)
+        raise InputError(f"not UTF-8 text: byte 0x{raw[start]:02x} at column {column} cannot be decoded; "
+                         "save the table as UTF-8 ('CSV UTF-8' in a spreadsheet), or check that this is "
+                         "the measurement table", src, line) from None
+    bad = re.search(r"[\x00-\x08\x0e-\x1f\x7f]", text)
+    if bad:
+        line = text.count("\n", 0, bad.start()) + 1
+        raise InputError(f"not a text table: control character U+{ord(bad.group()):04X} (a binary file?); "
+                         "expected a CSV text file", src, line)
+    return text, [note] if note else []
+
+
+def _split(text: str, delimiter: str) -> list[str]:
+    return next(csv.reader([text], delimiter=delimiter))
+
+
+def _detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
+    """The delimiter (``,``, ``;`` or tab) that splits the header into the most columns,
+    preferring one that splits the sample rows into as many (``None``: a single column)."""
+    best = None
+    for d in _DELIMITERS:
+        n = len(_split(header, d))
+        if n < 2:
+            continue
+        score = (all(len(_split(s, d)) == n for s in sample), n)
+        if best is None or score > best[0]:
+            best = (score, d)
+    return None if best is None else best[1]
+
+
+def _parse_header(text: str, src: str, line: int) -> tuple[str, str | None]:
+    """(normalized name, unit as written or None) of one header cell."""
+    m = _HEADER.match(text)
+    if m:
+        name, unit = m.group("name"), m.group("u1") if m.group("u1") is not None else m.group("u2")
+    else:
+        name, unit = text, None
+    name = normalize_name(name)
+    if not name or any(c in name for c in "[]()"):
+        raise InputError(f"cannot read column header {text!r}; expected 'name', 'name [unit]', "
+                         "'name_[unit]' or 'name (unit)'", src, line, field=text.strip())
+    return name, unit
+
+
+def _declared_unit(column: str, unit: str | None, src: str, line: int) -> str | None:
+    """:data:`UNITS` spelling of a known column's header unit (``None`` when none was given)."""
     quantity = quantity_of(column)
-    if quantity is None:
-        return 1.0  # unknown columns are ignored by the loader
-    if unit is None:
-        return 1.0
-    table = UNITS[quantity]
-    if unit not in table:
+    if quantity is None or unit is None:
+        return None
+    canon = canonical_unit(quantity, unit)
+    if canon is None:
         raise InputError(f"unknown unit [{unit}] for {quantity}; accepted units: "
-                         f"{', '.join(table)}", path, line, field=column)
-    return table[unit]
+                         f"{', '.join(UNITS[quantity])}", src, line, field=column)
+    return canon
 
 
-def read_measurements(path: str | Path, channels: Sequence[str] | None = None) -> Measurements:
+def _to_float(cell: str, decimal_comma: bool) -> float:
+    """A cell as a float (ValueError if it is not a number)."""
+    if decimal_comma:
+        if "." in cell:
+            raise ValueError("point in decimal-comma file")
+        cell = cell.replace(",", ".")
+    return float(cell)
+
+
+def _did_you_mean(name: str, candidates: Sequence[str]) -> str:
+    close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def _short_list(items: Sequence, n: int = 8) -> str:
+    items = [str(i) for i in items]
+    return ", ".join(items[:n]) + (f" ... ({len(items)} in all)" if len(items) > n else "")
+
+
+def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *,
+                      drop_incomplete_rows: bool = False) -> Measurements:
     """Read a measurement table from CSV (see the module docstring for the layout).
 
     Parameters
     ----------
     path : str or Path
-        CSV file.
+        CSV file (UTF-8 with or without byte-order mark; comma, semicolon or tab).
     channels : sequence of str, optional
         Channels to keep (default: every known channel column present).
+    drop_incomplete_rows : bool
+        Drop rows with a missing value (empty cell, ``nan``, ``NA`` ...) in a needed column
+        (the conditions, the kept channels and their σ) and report the count in
+        :attr:`Measurements.notes`. Default: refuse such a row, naming its line and column.
 
     Returns
     -------
     Measurements
-        Values in SI units; ``sigma`` set when every kept channel has a ``_sigma`` column.
+        Values in SI units; ``sigma`` set when every kept channel has a ``_sigma`` column;
+        ``notes`` say what was detected, ignored or dropped.
 
     Raises
     ------
     InputError
-        Empty file, missing required column, unknown unit, NaN or non-numeric cell
-        (row and column named), σ <= 0, requested channel absent.
+        File not found, binary or not UTF-8/UTF-16 text; empty file; missing required
+        column; unknown unit; missing value (unless dropped), non-numeric or non-finite cell
+        (line and column named); σ <= 0; requested channel absent.
     """
     path = Path(path)
     src = str(path)
     if not path.is_file():
         raise InputError("file not found", src)
-    with open(path, newline="") as f:
-        lines = [(i + 1, ln) for i, ln in enumerate(f.read().splitlines())
-                 if ln.strip() and not ln.lstrip().startswith("#")]
+    text, notes = _decode(path.read_bytes(), src)
+    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
+             if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise InputError("empty file: expected a header line and at least one data row", src)
     header_line, header = lines[0]
-    names_units = [_parse_header(h, src, header_line) for h in next(csv.reader([header]))]
-    names = [n for n, _ in names_units]
+    delimiter = _detect_delimiter(header, [t for _, t in lines[1:6]])
+    if delimiter is None:
+        raise InputError(f"found a single column {header.strip()!r}; expected columns separated by a comma, "
+                         "a semicolon or a tab", src, header_line)
+    notes.append(f"delimiter: {_DELIMITERS[delimiter]} (detected)")
+    raw_names = [h.strip() for h in _split(header, delimiter)]
+    parsed = [_parse_header(h, src, header_line) for h in raw_names]
+    names = [n for n, _ in parsed]
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
-        raise InputError(f"duplicate column(s) {', '.join(dupes)}", src, header_line, field=dupes[0])
+        same = [r for r, n in zip(raw_names, names) if n == dupes[0]]
+        raise InputError(f"duplicate column(s) {', '.join(dupes)} (headers {', '.join(map(repr, same))})",
+                         src, header_line, field=dupes[0])
+    unknown_cols = [n for n in names if quantity_of(n) is None]
     for req in REQUIRED_CONDITIONS:
         if req not in names:
-            raise InputError(f"missing required column '{req}'; columns present: {', '.join(names)}",
-                             src, header_line, field=req)
+            raise InputError(f"missing required column '{req}'{_did_you_mean(req, unknown_cols)}; columns "
+                             f"present: {', '.join(raw_names)}", src, header_line, field=req)
     if len(lines) < 2:
         raise InputError("no data rows after the header", src, header_line)
-    factors = [_factor(n, u, src, header_line) for n, u in names_units]
+    declared = {n: _declared_unit(n, u, src, header_line) for n, u in parsed if quantity_of(n) is not None}
+
+    def cells_error(n_cells: int, line_no: int) -> InputError:
+        hint = ("; numbers with a decimal comma need columns separated by ';' or tab"
+                if delimiter == "," and n_cells > len(names) else "")
+        return InputError(f"row has {n_cells} cells, header has {len(names)}{hint}", src, line_no)
+
     rows = []
-    for line_no, text in lines[1:]:
-        cells = next(csv.reader([text]))
-        if len(cells) != len(names):
-            raise InputError(f"row has {len(cells)} cells, header has {len(names)}", src, line_no)
-        row = []
-        for cell, name in zip(cells, names):
-            try:
-                x = float(cell)
-            except ValueError:
-                raise InputError(f"not a number: {cell.strip()!r}", src, line_no, field=name) from None
-            if not np.isfinite(x):
-                raise InputError(f"value is {cell.strip()!r}; every cell must be a finite number",
-                                 src, line_no, field=name)
-            row.append(x)
-        rows.append((line_no, row))
-    data = np.array([r for _, r in rows], dtype=float) * np.array(factors)
-    col = {n: data[:, i] for i, n in enumerate(names)}
-    line_of = [ln for ln, _ in rows]
-    cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
+    for line_no, t in lines[1:]:
+        cells = _split(t, delimiter)
+        if len(cells) > len(names):
+            raise cells_error(len(cells), line_no)
+        rows.append((line_no, [c.strip() for c in cells]))
+
     present = [n for n in names if is_channel_name(n)]
-    if channels is None:
-        channels = present
-    channels = list(channels)
+    channels = present if channels is None else list(channels)
     for c in channels:
         if c not in present:
-            raise InputError(f"channel '{c}' is not in the file; channel columns present: "
-                             f"{', '.join(present) or '(none)'}", src, header_line, field=c)
+            raise InputError(f"channel '{c}' is not in the file{_did_you_mean(c, unknown_cols)}; channel "
+                             f"columns present: {', '.join(present) or '(none)'}", src, header_line, field=c)
     if not channels:
-        raise InputError("no channel columns (e.g. power, thrust, cn@0.30)", src, header_line)
+        guesses = [f"'{raw_names[names.index(n)]}'{_did_you_mean(n, list(_FIXED_QUANTITY))}"
+                   for n in unknown_cols]
+        raise InputError("no channel columns (e.g. power, thrust, cn@0.30; a unit goes in brackets: "
+                         f"'power [kW]'); unrecognised columns: {', '.join(guesses) or '(none)'}",
+                         src, header_line)
+    sig_cols = [f"{c}_sigma" for c in channels]
+    has_sigma = any(s in names for s in sig_cols)
+    if has_sigma:
+        missing = [s for s in sig_cols if s not in names]
+        if missing:
+            given = [s for s in sig_cols if s in names]
+            raise InputError(f"sigma given for some channels ({', '.join(given)}) but not for "
+                             f"{', '.join(missing)}; give a _sigma column for every kept channel or none",
+                             src, header_line, field=missing[0])
+    needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in names] + channels
+    needed += sig_cols if has_sigma else []
+    col_of = {n: names.index(n) for n in needed}
+
+    decimal_comma = delimiter in (";", "\t") and any(
+        _DECIMAL_COMMA.match(cells[i]) for _, cells in rows for i in col_of.values() if i < len(cells))
+    if decimal_comma:
+        notes.append("decimal comma: ',' read as the decimal separator")
+
+    def is_number(cell: str) -> bool:
+        try:
+            _to_float(cell, decimal_comma)
+            return True
+        except ValueError:
+            return False
+
+    ignored_text, ignored_numeric = [], []
+    for i, n in enumerate(names):
+        if quantity_of(n) is not None:
+            continue
+        column = [cells[i] for _, cells in rows if i < len(cells) and cells[i].lower() not in MISSING_CELLS]
+        (ignored_numeric if column and all(map(is_number, column)) else ignored_text).append(i)
+    if ignored_text:
+        notes.append(f"ignored non-numeric column(s): {', '.join(raw_names[i] for i in ignored_text)}")
+    if ignored_numeric:
+        named = ", ".join(raw_names[i] + _did_you_mean(names[i], list(_FIXED_QUANTITY)) for i in ignored_numeric)
+        notes.append(f"ignored unrecognised numeric column(s): {named}; known names: {_known_names_text()}")
+    no_unit = [n for n in needed if declared.get(n) is None]
+    if no_unit:
+        notes.append("no unit in the header, SI assumed: "
+                     + ", ".join(f"{n} [{si_unit(quantity_of(n))}]" for n in no_unit))
+
+    drop_hint = ("; to drop incomplete rows instead, pass drop_incomplete_rows=True "
+                 "(workflow: [measurements] drop_incomplete_rows = true)")
+    data = np.full((len(rows), len(needed)), np.nan)
+    incomplete = []
+    for r, (line_no, cells) in enumerate(rows):
+        missing_here = False
+        for j, n in enumerate(needed):
+            i = col_of[n]
+            where = f"column {i + 1} '{raw_names[i]}'"
+            if i >= len(cells):
+                if not drop_incomplete_rows:
+                    e = cells_error(len(cells), line_no)
+                    raise InputError(e.message + f" (no value for {where})" + drop_hint, src, line_no, field=n)
+                missing_here = True
+                continue
+            cell = cells[i]
+            if cell.lower() in MISSING_CELLS:
+                if not drop_incomplete_rows:
+                    what = "empty cell" if not cell else repr(cell)
+                    raise InputError(f"missing value ({what}) in {where}: expected a finite number{drop_hint}",
+                                     src, line_no, field=n)
+                missing_here = True
+                continue
+            try:
+                x = _to_float(cell, decimal_comma)
+            except ValueError:
+                if decimal_comma and "." in cell and is_number(cell.replace(".", "")):
+                    raise InputError(f"ambiguous number {cell!r} in {where}: this file uses a decimal comma, so "
+                                     "a point could be a thousands separator; export the table without "
+                                     "thousands separators", src, line_no, field=n) from None
+                raise InputError(f"not a number: {cell!r} in {where}", src, line_no, field=n) from None
+            if not np.isfinite(x):
+                raise InputError(f"value is {cell!r} in {where}; every cell must be a finite number",
+                                 src, line_no, field=n)
+            data[r, j] = x
+        if missing_here:
+            incomplete.append(r)
+    line_of = [ln for ln, _ in rows]
+    if incomplete:
+        if len(incomplete) == len(rows):
+            raise InputError(f"every one of the {len(rows)} rows has a missing value in a needed column "
+                             f"({', '.join(needed)})", src, header_line)
+        notes.append(f"dropped {len(incomplete)} of {len(rows)} rows with a missing value in a needed column "
+                     f"(lines {_short_list([line_of[r] for r in incomplete])})")
+        keep = np.setdiff1d(np.arange(len(rows)), incomplete)
+        data = data[keep]
+        line_of = [line_of[k] for k in keep]
+    factors = np.array([UNITS[quantity_of(n)][declared[n]] if declared.get(n) else 1.0 for n in needed])
+    data = data * factors
+    col = {n: data[:, j] for j, n in enumerate(needed)}
+    cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
     values = np.column_stack([col[c] for c in channels])
     sigma = None
-    sig_cols = [f"{c}_sigma" for c in channels]
-    if any(s in col for s in sig_cols):
-        missing = [s for s in sig_cols if s not in col]
-        if missing:
-            raise InputError(f"sigma given for some channels but not for {', '.join(missing)}",
-                             src, header_line, field=missing[0])
+    if has_sigma:
         sigma = np.column_stack([col[s] for s in sig_cols])
         bad = np.argwhere(~(sigma > 0))
         if bad.size:
             k, c = bad[0]
-            raise InputError(f"noise sigma must be > 0, got {sigma[k, c]!r}", src, line_of[k],
-                             field=sig_cols[c])
-    for f in REQUIRED_CONDITIONS:
-        bad = np.flatnonzero(col[f] <= 0) if f != "pitch" else np.array([], int)
-        if f == "wind_speed" and bad.size:
-            raise InputError("wind speed must be > 0", src, line_of[bad[0]], field=f)
-    return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256_of(path))
+            raise InputError(f"noise sigma must be > 0, got {sigma[k, c]!r}", src, line_of[k], field=sig_cols[c])
+    bad = np.flatnonzero(~(col["wind_speed"] > 0))
+    if bad.size:
+        raise InputError("wind speed must be > 0", src, line_of[bad[0]], field="wind_speed")
+    metadata = {"units": declared, "delimiter": delimiter, "decimal_comma": decimal_comma,
+                "lines": tuple(line_of)}
+    return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256_of(path),
+                        metadata=metadata, notes=tuple(notes))
 
 
 def check_channels(measurements: Measurements, model_channels: Sequence[str]) -> None:

@@ -1,5 +1,7 @@
 """Measurement tables: units, noise models and every bad-input path (file, row, column named)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -42,11 +44,14 @@ def test_round_trip_through_write_csv(tmp_path):
 @pytest.mark.parametrize("text, line, field, words", [
     ("rotor_speed,pitch,power\n10,0,1\n", 1, "wind_speed", "missing required column"),
     ("wind_speed,rotor_speed,pitch,power\n8,10,0,nan\n", 2, "power", "finite"),
-    ("wind_speed,rotor_speed,pitch,power\n8,10,0,\n", 2, "power", "not a number"),
+    ("wind_speed,rotor_speed,pitch,power\n8,10,0,\n", 2, "power", "missing value (empty cell) in column 4"),
+    ("wind_speed,rotor_speed,pitch,power\n8,10,0,abc\n", 2, "power", "not a number: 'abc'"),
+    ("wind_speed,rotor_speed,pitch,power\n8,10,0,inf\n", 2, "power", "finite"),
     ("wind_speed,rotor_speed,pitch,power [hp]\n8,10,0,1\n", 1, "power", "unknown unit [hp]"),
     ("wind_speed,rotor_speed,pitch,power,power_sigma\n8,10,0,1,0\n", 2, "power_sigma", "sigma must be > 0"),
     ("wind_speed,rotor_speed,pitch,power,power_sigma\n8,10,0,1,-2\n", 2, "power_sigma", "sigma must be > 0"),
-    ("wind_speed,rotor_speed,pitch,power\n8,10,0\n", 2, None, "cells"),
+    ("wind_speed,rotor_speed,pitch,power\n8,10,0\n", 2, "power", "cells"),
+    ("wind_speed,rotor_speed,pitch,power\n8,10,0,1,2\n", 2, None, "cells"),
     ("wind_speed,rotor_speed,pitch,power\n", 1, None, "no data rows"),
 ])
 def test_bad_csv_names_file_line_and_column(tmp_path, text, line, field, words):
@@ -109,3 +114,145 @@ def test_unknown_noise_is_estimated_by_iterated_ml():
     # ML noise is biased low by the fitted degrees of freedom, sqrt(1 - n_ret/N) per channel
     np.testing.assert_allclose(res.noise_sigma, true_sigma, rtol=0.25)
     assert any(h.get("stage") == "noise" for h in res.history)
+
+
+# ----------------------------------------------------------------------------- field exports
+FIXTURES = Path(__file__).parent / "data" / "measurements"
+SI = {"wind_speed": [6.0, 8.0, 10.0], "rotor_speed": [8.0, 9.5, 11.5], "pitch": [0.0, 0.0, 1.5],
+      "power": [0.75e6, 1.8e6, 3.5e6], "thrust": [2.1e5, 3.4e5, 4.9e5]}
+
+
+def assert_reference_table(m):
+    """The fixture's three points, in SI units (every fixture holds the same numbers)."""
+    assert m.channels == ("power", "thrust")
+    for f in ("wind_speed", "rotor_speed", "pitch"):
+        np.testing.assert_allclose(getattr(m.conditions, f), SI[f], rtol=1e-9, err_msg=f)
+    np.testing.assert_allclose(m.channel("power"), SI["power"], rtol=1e-12)
+    np.testing.assert_allclose(m.channel("thrust"), SI["thrust"], rtol=1e-12)
+
+
+def test_utf8_byte_order_mark_is_removed():
+    m = read_measurements(FIXTURES / "bom.csv")
+    assert_reference_table(m)
+    assert "encoding: UTF-8 with byte-order mark" in m.notes
+    assert "delimiter: comma (detected)" in m.notes
+
+
+def test_timestamp_and_id_columns_are_ignored_with_a_note():
+    m = read_measurements(FIXTURES / "timestamp.csv")
+    assert_reference_table(m)
+    assert "ignored non-numeric column(s): timestamp, turbine_id" in m.notes
+
+
+def test_openfast_style_header_name_underscore_bracket_unit():
+    m = read_measurements(FIXTURES / "openfast_header.csv")   # Power_[kW], Rotor_Speed_[RPM]
+    assert_reference_table(m)
+    assert m.metadata["units"]["power"] == "kW" and m.metadata["units"]["rotor_speed"] == "rpm"
+    note = [n for n in m.notes if n.startswith("ignored unrecognised numeric column(s)")]
+    assert note and "GenPwr_[kW]" in note[0] and "power" in note[0]
+
+
+def test_header_unit_in_parentheses_and_blanks_in_names():
+    m = read_measurements(FIXTURES / "parenthesis_units.csv")  # "wind speed (m/s)", "rotor speed (rad/s)"
+    assert_reference_table(m)
+    assert m.metadata["units"]["rotor_speed"] == "rad/s"
+
+
+def test_semicolon_delimiter_is_detected_and_said():
+    m = read_measurements(FIXTURES / "semicolon.csv")
+    assert_reference_table(m)
+    assert "delimiter: semicolon (detected)" in m.notes
+    assert not m.metadata["decimal_comma"]
+
+
+def test_semicolon_with_decimal_comma():
+    m = read_measurements(FIXTURES / "semicolon_decimal_comma.csv")   # 1,5 means 1.5
+    assert_reference_table(m)
+    assert "decimal comma: ',' read as the decimal separator" in m.notes
+
+
+def test_decimal_comma_file_refuses_a_point_as_ambiguous(tmp_path):
+    path = write(tmp_path, "wind_speed;rotor_speed;pitch;power\n8,5;10;0;1.500,5\n")
+    with pytest.raises(InputError, match="thousands separator") as err:
+        read_measurements(path)
+    assert err.value.line == 2 and err.value.field == "power"
+
+
+def test_tab_delimiter_is_detected():
+    m = read_measurements(FIXTURES / "tab.tsv")
+    assert_reference_table(m)
+    assert "delimiter: tab (detected)" in m.notes
+
+
+@pytest.mark.parametrize("name, words", [("image.csv", "PNG image"), ("workbook.csv", "zip archive"),
+                                         ("latin1.csv", "not UTF-8 text: byte 0xb0")])
+def test_binary_or_non_utf8_file_gives_the_package_error(name, words):
+    path = FIXTURES / name
+    with pytest.raises(InputError) as err:                 # never a raw UnicodeDecodeError
+        read_measurements(path)
+    assert not isinstance(err.value, UnicodeDecodeError)
+    assert words in str(err.value) and str(path) in str(err.value)
+
+
+def test_incomplete_row_is_refused_naming_line_and_column():
+    path = FIXTURES / "incomplete.csv"
+    with pytest.raises(InputError) as err:
+        read_measurements(path)
+    assert err.value.line == 4 and err.value.field == "thrust"
+    msg = str(err.value)
+    assert "column 5 'thrust [kN]'" in msg and "drop_incomplete_rows" in msg and str(path) in msg
+
+
+def test_incomplete_rows_dropped_on_request_with_the_count():
+    m = read_measurements(FIXTURES / "incomplete.csv", drop_incomplete_rows=True)
+    assert_reference_table(m)
+    assert m.metadata["lines"] == (3, 5, 7)
+    assert "dropped 2 of 5 rows with a missing value in a needed column (lines 4, 6)" in m.notes
+
+
+def test_missing_value_in_an_unneeded_column_is_not_a_reason_to_refuse(tmp_path):
+    path = write(tmp_path, "wind_speed,rotor_speed,pitch,power,thrust\n8,10,0,1e6,\n9,10,0,1.2e6,3e5\n")
+    m = read_measurements(path, ["power"])                 # thrust not needed
+    np.testing.assert_allclose(m.channel("power"), [1e6, 1.2e6])
+    with pytest.raises(InputError, match="missing value"):
+        read_measurements(path)
+
+
+def test_names_and_units_are_case_insensitive(tmp_path):
+    path = write(tmp_path, "WIND_SPEED [M/S],Rotor_Speed [RAD/S],PITCH [DEG],POWER [MW],Root_Flap_Moment [kN-m]\n"
+                           "8,1,2,1.5,4000\n")
+    m = read_measurements(path)
+    assert m.channels == ("power", "root_flap_moment")
+    np.testing.assert_allclose(m.values, [[1.5e6, 4.0e6]])
+    np.testing.assert_allclose(m.conditions.rotor_speed, [30 / np.pi])
+
+
+def test_unit_inside_the_name_is_pointed_out(tmp_path):
+    path = write(tmp_path, "wind_speed,rotor_speed,pitch,power_kw\n8,10,0,1\n")
+    with pytest.raises(InputError, match=r"'power_kw' \(did you mean 'power'\?\)"):
+        read_measurements(path)
+
+
+def test_columns_without_unit_are_said_to_be_si(tmp_path):
+    m = read_measurements(write(tmp_path, "wind_speed [m/s],rotor_speed,pitch [deg],power\n8,10,0,1e6\n"))
+    assert "no unit in the header, SI assumed: rotor_speed [rpm], power [W]" in m.notes
+
+
+def test_space_separated_file_is_refused_with_the_accepted_delimiters(tmp_path):
+    path = write(tmp_path, "wind_speed rotor_speed pitch power\n8 10 0 1\n")
+    with pytest.raises(InputError, match="comma, a semicolon or a tab") as err:
+        read_measurements(path)
+    assert err.value.line == 1
+
+
+def test_notes_survive_select_channels_and_are_written_as_comments(tmp_path):
+    m = read_measurements(FIXTURES / "timestamp.csv")
+    sub = m.select_channels(["thrust"])
+    assert sub.notes == m.notes
+    out = sub.write_csv(tmp_path / "out.csv")
+    text = out.read_text()
+    assert "# note: ignored non-numeric column(s): timestamp, turbine_id" in text
+    assert "thrust [N]" in text and "rotor_speed [rpm]" in text
+    back = read_measurements(out)
+    np.testing.assert_allclose(back.values, sub.values)
+    assert not any("timestamp" in n for n in back.notes)  # fresh notes describe the written file
