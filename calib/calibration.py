@@ -5,13 +5,19 @@ Procedure (Bottasso, Cacciola & Iriarte 2014; DESIGN §5)
 1. Noise R: known (σ from the table or the settings), from repeated records, or
    estimated by iterated ML (R = (1/N) Σ r_k r_kᵀ, diagonal, alternating with step 2-4).
 2. Linearize at the current estimate: whitened scaled sensitivities M = R^(−½) G D,
-   SVD M = U S Vᵀ, retain θ_i = v_iᵀ p̃ with σ(θ_i) = 1/s_i <= σ̄.
+   SVD M = U S Vᵀ, retain θ_i = v_iᵀ p̃ with σ(θ_i) = 1/s_i <= σ̄, or (``sigma_bar =
+   "auto"``, the default) the number of θ that minimizes the leave-one-operating-point-out
+   prediction error of the linearized problem (:mod:`calib.truncation`).
 3. Estimate the retained θ under bounds (corrections and C_D >= C_D,min at the nodes) by
    constrained Gauss–Newton (:func:`calib.estimation.estimate`); the others stay at 0.
 4. Re-linearize at the estimate and redo the SVD; stop when the retained set is stable
    (same count, principal-angle cosines >= ``stability_cosine``).
-5. Covariance of the estimate Cov(θ̂) = (V_IDᵀ F̃ V_ID)⁻¹, Cov(p̂) = D V_ID Cov(θ̂) V_IDᵀ D;
-   confidence bands on the corrected polars; a verdict per physical parameter.
+5. Covariance of the estimate including the frozen directions: Cov(p̃̂) = V_ID S_ID⁻² V_IDᵀ
+   + V_NID (V_NIDᵀ P V_NID) V_NIDᵀ with the prior P = diag(prior σ²)
+   (:func:`calib.identifiability.frozen_aware_covariance`); confidence bands on the corrected
+   polars; confounding of the non-field parameters with the field; a verdict per parameter
+   from posterior vs prior; goodness of fit (χ² before over N, after over N − n_retained,
+   p-value, per channel, worst points).
 
 Every model call reports a per-point status; failed points are left out of the cost and
 counted in the result.
@@ -20,19 +26,20 @@ counted in the result.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
-from scipy import stats
 
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
-from calib.identifiability import (cramer_rao, field_basis, fisher_matrix, node_layout, observability,
-                                   parameter_verdicts, subspace_cosines, svd_analysis)
+from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, frozen_aware_covariance,
+                                   observability, parameter_verdicts, subspace_cosines, svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
-from calib.types import nominal_vector
+from calib.models.base import FieldModel, RebuildableModel
 from calib.result import CalibrationResult
+from calib.truncation import loo_curve
+from calib.types import ParameterKind, nominal_vector
 
 NOISE_MODES = ("known", "ml", "repeats")
 RETAIN_MODES = ("threshold", "all")
@@ -44,9 +51,16 @@ class CalibrationSettings:
 
     Parameters
     ----------
-    sigma_bar : float
-        Retain θ_i with σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
+    sigma_bar : float or "auto"
+        ``"auto"`` (default): retain the number of θ that minimizes the leave-one-point-out
+        prediction error (:func:`calib.truncation.loo_curve`). A number: retain θ_i with
+        σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
         (see :func:`calib.identifiability.sigma_bar_for`).
+    prior_sigma : float
+        Prior 1-σ of every parameter without its own ``prior_std``, in units of its scale [-]
+        (default 1: a correction node is believed to be within about ±1 scale of nominal,
+        ±0.1 on C_L and ±0.01 on C_D with the default scales). It sets the width of the bands
+        in the directions the truncation froze.
     retain : {"threshold", "all"}
         ``"all"`` gives the full nodal ML estimate (every direction with s_i > 0).
     max_retained : int, optional
@@ -64,15 +78,19 @@ class CalibrationSettings:
         Relative cost decrease that ends a Gauss–Newton iteration.
     stability_cosine : float
         Principal-angle cosine above which two retained subspaces count as equal.
-    observability_threshold : float
-        Verdict "identified" when the parameter's observability >= this.
+    identified_ratio : float
+        Verdict "identified" when posterior σ <= this × prior σ.
+    confounded_share : float
+        Verdict "confounded" for a non-field parameter sharing at least this fraction of its
+        information with the others.
     band_confidence : float
         Confidence level of the polar bands.
     band_eta : tuple of float, optional
         Spanwise positions of the polar bands (default: the η nodes).
     """
 
-    sigma_bar: float = 0.5
+    sigma_bar: float | str = "auto"
+    prior_sigma: float = 1.0
     retain: str = "threshold"
     max_retained: int | None = None
     optimizer: str = "sqpmethod"
@@ -84,7 +102,8 @@ class CalibrationSettings:
     max_noise_iterations: int = 10
     tolerance: float = 1e-9
     stability_cosine: float = 0.98
-    observability_threshold: float = 0.5
+    identified_ratio: float = 0.5
+    confounded_share: float = 0.75
     band_confidence: float = 0.95
     band_eta: tuple | None = None
     verbose: bool = False
@@ -96,8 +115,15 @@ class CalibrationSettings:
         if self.retain not in RETAIN_MODES:
             raise InputError(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", source,
                              field="retain")
-        if not self.sigma_bar > 0:
-            raise InputError(f"sigma_bar must be > 0, got {self.sigma_bar!r}", source, field="sigma_bar")
+        if isinstance(self.sigma_bar, str):
+            if self.sigma_bar != "auto":
+                raise InputError(f"sigma_bar must be \"auto\" or a number > 0, got {self.sigma_bar!r}", source,
+                                 field="sigma_bar")
+        elif not self.sigma_bar > 0:
+            raise InputError(f"sigma_bar must be \"auto\" or a number > 0, got {self.sigma_bar!r}", source,
+                             field="sigma_bar")
+        if not self.prior_sigma > 0:
+            raise InputError(f"prior_sigma must be > 0, got {self.prior_sigma!r}", source, field="prior_sigma")
         get_optimizer(self.optimizer)
         return self
 
@@ -142,20 +168,19 @@ class Calibrator:
             j = int(np.flatnonzero(~(self.scale > 0))[0])
             raise InputError(f"parameter scale must be > 0, got {self.scale[j]!r}", "model.parameters",
                              field=self.parameters[j].name)
+        self.field = model.correction_field() if isinstance(model, FieldModel) else None
         self.lower, self.upper = self._effective_bounds()
-        self.layout = node_layout(self.parameters)
+        self.prior_std = np.array([q.prior_std if np.isfinite(q.prior_std) else self.settings.prior_sigma * q.scale
+                                   for q in self.parameters], float)
         self.history: list[dict] = []
+        self._curve = None
 
     # ------------------------------------------------------------------ setup
     def _effective_bounds(self):
         lower = np.array([q.lower for q in self.parameters], float)
         upper = np.array([q.upper for q in self.parameters], float)
-        cd_min = self.settings.cd_min
-        if cd_min is not None and hasattr(self.model, "nominal_coefficients"):
-            for j, q in enumerate(self.parameters):
-                if q.kind == "drag_correction":
-                    _, cd0 = self.model.nominal_coefficients(np.array([q.alpha_deg]), np.array([q.eta]))
-                    lower[j] = min(max(lower[j], cd_min - float(np.ravel(cd0)[0])), self.p0[j])
+        if self.field is not None:
+            lower = self.field.lower_bounds(lower, self.p0, self.settings.cd_min)
         return lower, upper
 
     def _emit(self, rec: dict) -> None:
@@ -223,20 +248,31 @@ class Calibrator:
             if change < 1e-3:
                 break
         lin = problem.linearize(p)
-        svd = self._svd(lin.M)
+        svd = self._svd(problem, lin)
         return self._finish(problem, nominal, lin, svd, status, message, time.perf_counter() - t0)
 
-    def _svd(self, M):
+    def _svd(self, problem: LeastSquaresProblem, lin) -> SvdAnalysis:
+        """SVD at a linearization and the retained set (threshold, all, or chosen by the data)."""
         st = self.settings
-        sigma_bar = np.inf if st.retain == "all" else st.sigma_bar
-        return svd_analysis(M, sigma_bar, st.max_retained)
+        if st.retain == "all":
+            return svd_analysis(lin.M, np.inf, st.max_retained)
+        if st.sigma_bar != "auto":
+            return svd_analysis(lin.M, float(st.sigma_bar), st.max_retained)
+        n_ch = len(self.channel_index)
+        pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
+        curve = loo_curve(lin.M, pseudo, n_ch, lin.ok, st.max_retained)
+        svd = svd_analysis(lin.M, np.inf)
+        retained = np.zeros_like(svd.retained)
+        retained[:curve.chosen] = svd.retained[:curve.chosen]
+        self._curve = curve
+        return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, curve.sigma_bar, retained)
 
     def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
         st = self.settings
         prev_basis = None
         status, message = "not_stable", f"retained set not stable after {st.max_relinearizations} re-linearizations"
         lin = problem.linearize(p)
-        svd = self._svd(lin.M)
+        svd = self._svd(problem, lin)
         for k in range(st.max_relinearizations):
             basis = svd.basis
             if prev_basis is not None and prev_basis.shape == basis.shape:
@@ -256,7 +292,7 @@ class Calibrator:
             p = out.p
             prev_basis = basis
             lin = problem.linearize(p)
-            svd = self._svd(lin.M)
+            svd = self._svd(problem, lin)
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
@@ -268,28 +304,25 @@ class Calibrator:
         # B holds right singular vectors of M at this linearization, so Bᵀ F B = diag(s²) and
         # Cov(θ̂) = diag(σ(θ)²) exactly, without inverting a possibly ill-conditioned matrix
         cov_theta = np.diag(svd.sigma_theta[svd.retained] ** 2)
-        cov_pt = B @ cov_theta @ B.T
-        cov_p = cov_pt * np.outer(self.scale, self.scale)
+        prior_scaled = self.prior_std / self.scale
+        cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_scaled)
+        D = np.outer(self.scale, self.scale)
+        cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
-        crb_cov, crb_std_scaled, corr = cramer_rao(F)
+        _, crb_std_scaled, corr = cramer_rao(F)
         obs = observability(svd.V, svd.retained)
-        verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, obs, std_p,
-                                      st.observability_threshold)
+        conf = confounding(F, prior_scaled, self.parameters)
+        verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
+                                      conf, st.identified_ratio, st.confounded_share)
         ev = lin.evaluation
-        alpha_seen = eta_seen = np.zeros(0)
-        if "alpha_deg" in ev.extras and "eta" in ev.extras:
-            a = np.asarray(ev.extras["alpha_deg"], float)
-            e = np.broadcast_to(np.asarray(ev.extras["eta"], float), a.shape)
-            okm = lin.ok[:, None] & np.isfinite(a)
-            alpha_seen, eta_seen = a[okm], e[okm]
-        radius = None
-        rotor = getattr(self.model, "rotor", None)
-        for attr in ("rotor_radius", "tip_radius"):
-            if rotor is not None and getattr(rotor, attr, None):
-                radius = float(getattr(rotor, attr))
-                break
-        if radius is None and getattr(self.model, "rotor_radius", None):
-            radius = float(self.model.rotor_radius)
+        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
+        spec, radius = None, None
+        if isinstance(self.model, RebuildableModel):
+            radius = self.model.rotor_radius
+            try:
+                spec = self.model.spec()
+            except InputError:
+                spec = None
         failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
                     "total_failed_point_evaluations": problem.n_failed_points_total,
                     "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
@@ -297,7 +330,7 @@ class Calibrator:
         settings["model"] = type(self.model).__name__
         settings["lower_effective"] = self.lower.tolist()
         inputs = {m.source: m.sha256} if m.sha256 else {}
-        chi2 = lambda lz: float(np.sum(lz.residual[lz.ok] ** 2))  # noqa: E731
+        truncation = self._curve.to_dict() if st.sigma_bar == "auto" and st.retain != "all" else {}
         res = CalibrationResult(
             parameters=[asdict(q) for q in self.parameters], channels=list(m.channels),
             channel_units=self.channel_units, conditions=m.conditions.as_dict(), settings=settings,
@@ -310,33 +343,15 @@ class Calibrator:
             model_after=ev.values[:, self.channel_index], status_before=nominal.evaluation.status,
             status_after=ev.status, alpha_seen=alpha_seen, eta_seen=eta_seen, noise_sigma=problem.sigma[0],
             sigma_bar=float(svd.sigma_bar), verdicts=verdicts, history=self.history, status=status,
-            message=message, failures=failures, chi2_before=chi2(problem.evaluate(self.p0)),
-            chi2_after=chi2(lin), rotor_radius=radius, inputs=inputs, wall_time=wall, name=self.name)
-        res.polar_bands = self._polar_bands(res)
+            message=message, failures=failures, chi2_before=float(np.sum(nominal.residual[nominal.ok] ** 2)),
+            chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
+            wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
+            truncation=truncation, model_spec=spec, confounding=conf,
+            multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
+        if self.field is not None and self.field.grid is not None:
+            res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
+                                               confidence=st.band_confidence)
         return res
-
-    def _polar_bands(self, res: CalibrationResult) -> dict:
-        """Corrected polars C = C₀ + ΔC(α, η; p̂) with confidence bands at a few η."""
-        if not self.layout.has_field:
-            return {}
-        grid = self.layout.grid
-        a_nodes = grid.alpha_nodes_deg
-        alpha = np.linspace(a_nodes[0], a_nodes[-1], 121)
-        eta = np.asarray(self.settings.band_eta if self.settings.band_eta else grid.eta_nodes, float)
-        A, E = np.meshgrid(alpha, eta)
-        z = stats.norm.ppf(0.5 * (1 + self.settings.band_confidence))
-        out = {"alpha_deg": alpha, "eta": eta, "confidence": np.array(self.settings.band_confidence)}
-        n = self.p0.size
-        for block, letter in (("lift", "cl"), ("drag", "cd")):
-            Bf = field_basis(self.layout, A, E, block, n_params=n)
-            d = (Bf @ res.p_hat).reshape(A.shape)
-            var = np.einsum("ij,jk,ik->i", Bf, res.cov_p, Bf).reshape(A.shape)
-            out[f"d{letter}"] = d
-            out[f"d{letter}_half_width"] = z * np.sqrt(np.maximum(var, 0.0))
-        if hasattr(self.model, "nominal_coefficients"):
-            cl0, cd0 = self.model.nominal_coefficients(A, E)
-            out["cl0"], out["cd0"] = np.asarray(cl0, float), np.asarray(cd0, float)
-        return out
 
 
 def calibrate(model, measurements: Measurements, **settings) -> CalibrationResult:

@@ -29,11 +29,12 @@ from typing import Sequence
 import numpy as np
 from scipy import stats
 
-from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.types import Parameter
+from calib.parametrizations.correction_field import (NodeLayout, eigenshapes, field_basis,  # noqa: F401
+                                                     node_layout)
+from calib.types import Parameter, ParameterKind
 
-VERDICTS = ("identified", "poorly observable", "at bound")
+VERDICTS = ("identified", "poorly observable", "at bound", "confounded")
 
 
 def whitened_sensitivities(G: np.ndarray, sigma: np.ndarray, scale: np.ndarray,
@@ -187,113 +188,6 @@ def subspace_cosines(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.clip(np.linalg.svd(A.T @ B, compute_uv=False), 0.0, 1.0)
 
 
-# ----------------------------------------------------------------------------- eigenshapes
-@dataclass(frozen=True, eq=False)
-class NodeLayout:
-    """Where the correction nodes sit in the parameter vector.
-
-    Attributes
-    ----------
-    grid : CorrectionGrid or None
-        Node grid rebuilt from the parameters (``None`` if the model has no correction field).
-    lift_index, drag_index : ndarray of int, shape (n_alpha, n_eta)
-        Parameter index of each node (-1 where absent).
-    """
-
-    grid: CorrectionGrid | None
-    lift_index: np.ndarray
-    drag_index: np.ndarray
-
-    @property
-    def has_field(self) -> bool:
-        return self.grid is not None
-
-
-def node_layout(parameters: Sequence[Parameter]) -> NodeLayout:
-    """Rebuild the (α, η) node grid from the parameters of kind lift/drag_correction."""
-    nodes = [(i, q) for i, q in enumerate(parameters) if q.kind in ("lift_correction", "drag_correction")]
-    if not nodes:
-        empty = np.zeros((0, 0), int)
-        return NodeLayout(None, empty, empty)
-    alphas = np.unique(np.round([q.alpha_deg for _, q in nodes], 9))
-    etas = np.unique(np.round([q.eta for _, q in nodes], 9))
-    if alphas.size < 2 or etas.size < 2:
-        empty = np.zeros((0, 0), int)
-        return NodeLayout(None, empty, empty)
-    lift = -np.ones((alphas.size, etas.size), int)
-    drag = -np.ones_like(lift)
-    for i, q in nodes:
-        a = int(np.searchsorted(alphas, round(q.alpha_deg, 9)))
-        e = int(np.searchsorted(etas, round(q.eta, 9)))
-        (lift if q.kind == "lift_correction" else drag)[a, e] = i
-    grid = CorrectionGrid(alphas, etas)
-    return NodeLayout(grid, lift, drag)
-
-
-def field_basis(layout: NodeLayout, alpha_deg, eta, block: str, n_params: int | None = None) -> np.ndarray:
-    """Dense basis B with ΔC(α, η) = B @ p for one block.
-
-    Parameters
-    ----------
-    alpha_deg, eta : array_like, broadcastable
-        Evaluation points [deg], [-].
-    block : {"lift", "drag"}
-    n_params : int, optional
-        Length of the parameter vector (default: the last node index + 1).
-
-    Returns
-    -------
-    ndarray, shape (n_points_flat, n_params_total)
-        Rows in C order of the broadcast (α, η) shape.
-    """
-    if not layout.has_field:
-        raise InputError("the model has no correction-field parameters", "field_basis")
-    idx_map = layout.lift_index if block == "lift" else layout.drag_index
-    index, value, _ = layout.grid.basis(alpha_deg, eta)
-    index = index.reshape(-1, 4)
-    value = value.reshape(-1, 4)
-    n_total = n_params or int(max(layout.lift_index.max(), layout.drag_index.max())) + 1
-    flat_map = idx_map.reshape(-1)  # lift-block node index -> parameter index
-    B = np.zeros((index.shape[0], n_total))
-    rows = np.repeat(np.arange(index.shape[0]), 4)
-    cols = flat_map[index.reshape(-1)]
-    vals = value.reshape(-1)
-    good = cols >= 0
-    np.add.at(B, (rows[good], cols[good]), vals[good])
-    return B
-
-
-def eigenshapes(V: np.ndarray, layout: NodeLayout, alpha_deg, eta, modes=None):
-    """Eigenshapes ψ_i(α, η) of the lift and drag blocks on a mesh.
-
-    Parameters
-    ----------
-    V : ndarray, shape (n_params, n_modes_total)
-        Right singular vectors (columns), in scaled parameters.
-    layout : NodeLayout
-    alpha_deg : array_like, shape (n_a,)
-    eta : array_like, shape (n_e,)
-    modes : sequence of int, optional
-        Columns of V to map (default: all).
-
-    Returns
-    -------
-    lift, drag : ndarray, shape (n_modes, n_e, n_a)
-        ψ in units of the block's scale per unit θ_i (multiply by ``cl_scale`` or
-        ``cd_scale`` for ΔC per unit θ).
-    """
-    alpha_deg = np.asarray(alpha_deg, float)
-    eta = np.asarray(eta, float)
-    A, E = np.meshgrid(alpha_deg, eta)
-    Vm = V if modes is None else V[:, list(modes)]
-    n_total = V.shape[0]
-    out = []
-    for block in ("lift", "drag"):
-        B = field_basis(layout, A, E, block, n_params=n_total)
-        out.append((B @ Vm).T.reshape(Vm.shape[1], eta.size, alpha_deg.size))
-    return out[0], out[1]
-
-
 def observability(V: np.ndarray, retained: np.ndarray) -> np.ndarray:
     """Fraction of each scaled parameter's direction inside the retained subspace [-].
 
@@ -303,33 +197,159 @@ def observability(V: np.ndarray, retained: np.ndarray) -> np.ndarray:
     return (V[:, retained] ** 2).sum(axis=1)
 
 
-def parameter_verdicts(parameters: Sequence[Parameter], p_hat: np.ndarray, lower: np.ndarray,
-                       upper: np.ndarray, obs: np.ndarray, std: np.ndarray,
-                       observability_threshold: float = 0.5, bound_tolerance: float = 1e-3) -> list[dict]:
-    """A plain verdict per physical parameter.
+def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np.ndarray,
+                            prior_std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""Covariance of the truncated estimate that accounts for the frozen directions.
 
-    Rules
-    -----
+    The truncated-SVD estimate sets θ_NID = V_NIDᵀ p̃ to 0 (nominal); the truth has
+    components there too. With a Gaussian prior p̃ ~ N(0, P), P = diag(prior_std²), the
+    frozen coordinates have prior covariance V_NIDᵀ P V_NID, so the error of p̃̂ has
+
+    .. math::  Cov(p̃̂) = V_{ID}\,diag(σ(θ_{ID})^2)\,V_{ID}^T
+                        + V_{NID} (V_{NID}^T P V_{NID}) V_{NID}^T
+
+    (DESIGN §5, option b). In a linear model the two parts are exact and uncorrelated:
+    the retained θ̂ are unbiased whatever the frozen components are, because U_ID ⟂ U_NID.
+    Where the data say nothing the band is as wide as the prior.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, n)
+        Right singular vectors (columns) of the whitened scaled sensitivities.
+    sigma_theta : ndarray, shape (n,)
+        σ(θ_i) = 1/s_i [scale units].
+    retained : ndarray of bool, shape (n,)
+    prior_std : ndarray, shape (n,)
+        Prior 1-σ of each scaled parameter [scale units].
+
+    Returns
+    -------
+    cov_retained, cov_frozen : ndarray, shape (n, n)
+        The two parts in scaled units; their sum is Cov(p̃̂).
+    """
+    Vr, Vn = V[:, retained], V[:, ~retained]
+    cov_retained = (Vr * sigma_theta[retained] ** 2) @ Vr.T
+    prior_theta = (Vn.T * prior_std ** 2) @ Vn
+    cov_frozen = Vn @ prior_theta @ Vn.T
+    return cov_retained, cov_frozen
+
+
+def _ranges(values: np.ndarray) -> str:
+    lo, hi = float(np.min(values)), float(np.max(values))
+    return f"{lo:g}" if np.isclose(lo, hi) else f"{lo:g}–{hi:g}"
+
+
+def confounding(F: np.ndarray, prior_std: np.ndarray, parameters: Sequence[Parameter],
+                correlation_fraction: float = 0.5) -> dict[str, dict]:
+    """How much of each non-field parameter's information the correction field shares.
+
+    With the prior-regularized information A = F̃ + P⁻¹ (scaled units), the variance of
+    parameter j with every other parameter free is (A⁻¹)_jj and with the others fixed
+    1/A_jj. The *variance inflation* VIF_j = (A⁻¹)_jj A_jj ≥ 1, and the share of its
+    information taken by the others is 1 − 1/VIF_j. The share taken by the correction field
+    alone uses the sub-matrix of {j} ∪ field. The field nodes most correlated with j (|ρ| ≥
+    ``correlation_fraction`` × the largest) say where: "lift, η 0.8–1.0, α 4–12 deg".
+
+    Parameters
+    ----------
+    F : ndarray, shape (n, n)
+        Scaled Fisher information F̃ = MᵀM.
+    prior_std : ndarray, shape (n,)
+        Prior 1-σ of each scaled parameter [scale units].
+    parameters : sequence of Parameter
+
+    Returns
+    -------
+    dict name -> dict
+        For every parameter that is not a correction node: ``variance_inflation``,
+        ``shared_information`` (with all others), ``shared_with_field``, ``region`` (text,
+        "" without a field) and ``correlated_nodes`` (names).
+    """
+    n = F.shape[0]
+    A = F + np.diag(1.0 / prior_std ** 2)
+    C = np.linalg.inv(A)
+    field_idx = np.array([j for j, q in enumerate(parameters)
+                          if q.kind in (ParameterKind.LIFT_CORRECTION, ParameterKind.DRAG_CORRECTION)], int)
+    out = {}
+    for j, q in enumerate(parameters):
+        if j in set(field_idx.tolist()):
+            continue
+        vif = float(C[j, j] * A[j, j])
+        entry = {"variance_inflation": vif, "shared_information": 1.0 - 1.0 / vif, "shared_with_field": 0.0,
+                 "region": "", "correlated_nodes": []}
+        if field_idx.size:
+            sub = np.concatenate([[j], field_idx])
+            Cs = np.linalg.inv(A[np.ix_(sub, sub)])
+            entry["shared_with_field"] = 1.0 - 1.0 / float(Cs[0, 0] * A[j, j])
+            rho = C[j, field_idx] / np.sqrt(C[j, j] * np.diag(C)[field_idx])
+            strong = np.abs(rho) >= correlation_fraction * np.max(np.abs(rho))
+            parts = []
+            for kind, label in ((ParameterKind.LIFT_CORRECTION, "lift"), (ParameterKind.DRAG_CORRECTION, "drag")):
+                sel = [int(field_idx[k]) for k in np.flatnonzero(strong) if parameters[field_idx[k]].kind == kind]
+                if sel:
+                    parts.append(f"{label} near η {_ranges(np.array([parameters[i].eta for i in sel]))}, "
+                                 f"α {_ranges(np.array([parameters[i].alpha_deg for i in sel]))} deg")
+            entry["region"] = "; ".join(parts)
+            entry["correlated_nodes"] = [parameters[int(field_idx[k])].name for k in np.flatnonzero(strong)]
+        out[q.name] = entry
+    return out
+
+
+def parameter_verdicts(parameters: Sequence[Parameter], p_hat: np.ndarray, lower: np.ndarray,
+                       upper: np.ndarray, std: np.ndarray, prior_std: np.ndarray,
+                       obs: np.ndarray | None = None, confounded: dict | None = None,
+                       identified_ratio: float = 0.5, confounded_share: float = 0.75,
+                       bound_tolerance: float = 1e-3) -> list[dict]:
+    """A plain verdict per physical parameter, from its posterior and prior.
+
+    Rules (in this order)
+    ---------------------
     - ``at bound``: the estimate is within ``bound_tolerance`` × scale of a bound.
-    - ``identified``: observability o_j >= ``observability_threshold``.
-    - ``poorly observable``: otherwise (the estimate stays close to nominal and is
-      driven by the prior, not the data).
+    - ``confounded``: a non-field parameter that shares at least ``confounded_share`` of its
+      information with the other parameters (see :func:`confounding`).
+    - ``identified``: posterior σ ≤ ``identified_ratio`` × prior σ (the data, not the prior,
+      determine it).
+    - ``poorly observable``: otherwise. Its band stays close to the prior's width; an
+      estimate more than 2σ from nominal is said so in ``note`` (it is not "frozen").
+
+    Parameters
+    ----------
+    std, prior_std : ndarray, shape (n,)
+        Posterior and prior 1-σ in parameter units.
+    obs : ndarray, shape (n,), optional
+        Observability (fraction inside the retained subspace), reported alongside.
+    confounded : dict, optional
+        Output of :func:`confounding`.
 
     Returns
     -------
     list of dict
-        name, kind, verdict, value, nominal, std, observability, lower, upper.
+        name, kind, verdict, value, nominal, std, prior_std, std_ratio, observability, lower,
+        upper, unit, note (and shared_information, confounded_with for non-field parameters).
     """
     out = []
+    confounded = confounded or {}
     for j, q in enumerate(parameters):
         tol = bound_tolerance * q.scale
+        ratio = float(std[j] / prior_std[j])
+        c = confounded.get(q.name)
         if p_hat[j] <= lower[j] + tol or p_hat[j] >= upper[j] - tol:
             verdict = "at bound"
-        elif obs[j] >= observability_threshold:
+        elif c is not None and c["shared_information"] >= confounded_share:
+            verdict = "confounded"
+        elif ratio <= identified_ratio:
             verdict = "identified"
         else:
             verdict = "poorly observable"
-        out.append({"name": q.name, "kind": q.kind, "verdict": verdict, "value": float(p_hat[j]),
-                    "nominal": float(q.nominal), "std": float(std[j]), "observability": float(obs[j]),
-                    "lower": float(lower[j]), "upper": float(upper[j]), "unit": q.unit})
+        shift = (p_hat[j] - q.nominal) / std[j] if std[j] > 0 else 0.0
+        note = f"{abs(shift):.1f}σ from nominal" if abs(shift) > 2.0 else ""
+        d = {"name": q.name, "kind": str(q.kind), "verdict": verdict, "value": float(p_hat[j]),
+             "nominal": float(q.nominal), "std": float(std[j]), "prior_std": float(prior_std[j]),
+             "std_ratio": ratio, "observability": float(obs[j]) if obs is not None else float("nan"),
+             "lower": float(lower[j]), "upper": float(upper[j]), "unit": q.unit, "note": note}
+        if c is not None:
+            d["shared_information"] = c["shared_information"]
+            d["shared_with_field"] = c["shared_with_field"]
+            d["confounded_with"] = c["region"]
+        out.append(d)
     return out

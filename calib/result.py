@@ -7,6 +7,7 @@ array. Both are written atomically (temporary file, then rename).
 
 from __future__ import annotations
 
+import enum
 import json
 import os
 import platform
@@ -20,7 +21,7 @@ from calib.errors import InputError
 from calib.identifiability import NodeLayout, eigenshapes, node_layout
 from calib.types import Parameter
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 
 def package_versions() -> dict[str, str]:
@@ -52,7 +53,8 @@ def _atomic_write(path: Path, writer) -> None:
 _ARRAY_FIELDS = ("p_nominal", "p_hat", "lower", "upper", "scale", "cov_p", "std_p", "singular_values", "V",
                  "sigma_theta", "retained", "theta_hat", "cov_theta", "theta_nominal_linearization",
                  "correlation", "crb_std", "observability", "measured", "sigma", "model_before",
-                 "model_after", "status_before", "status_after", "alpha_seen", "eta_seen", "noise_sigma")
+                 "model_after", "status_before", "status_after", "alpha_seen", "eta_seen", "noise_sigma", "prior_std", "cov_frozen",
+                 "multiple_roots")
 
 
 @dataclass(eq=False)
@@ -64,8 +66,12 @@ class CalibrationResult:
     p_nominal, p_hat, lower, upper, scale : (n,)
         Nominal and estimated parameters, effective bounds and scales.
     cov_p, std_p : (n, n), (n,)
-        Covariance / standard deviation of p̂ (truncated-SVD estimator: zero outside the
-        retained subspace).
+        Covariance / standard deviation of p̂, including the prior variance of the directions
+        the truncation froze (:func:`calib.identifiability.frozen_aware_covariance`).
+    cov_frozen : (n, n)
+        The frozen directions' part of ``cov_p`` (what the prior, not the data, says).
+    prior_std : (n,)
+        Prior 1-σ of each parameter [parameter unit].
     singular_values, V, sigma_theta, retained : (n,), (n, n), (n,), (n,) bool
         SVD of the whitened scaled sensitivities at p̂ (DESIGN §5).
     theta_hat, cov_theta : (r,), (r, r)
@@ -80,6 +86,19 @@ class CalibrationResult:
         (α, η) the converged operating points see at p̂ (empty if the model does not report it).
     noise_sigma : (c,)
         Per-channel noise used in the final estimate.
+    multiple_roots : (m,) bool
+        Points where the model reported several roots of its equations (native BEM).
+
+    Other attributes
+    ----------------
+    truncation : dict
+        The automatic-truncation curve (:class:`calib.truncation.TruncationCurve`), empty
+        for an explicit σ̄.
+    confounding : dict
+        Per non-field parameter, its information shared with the others
+        (:func:`calib.identifiability.confounding`).
+    model_spec : dict or None
+        What :func:`calib.models.registry.build_model` needs to rebuild the model (predictions).
     """
 
     parameters: list[dict]
@@ -127,6 +146,12 @@ class CalibrationResult:
     versions: dict = field(default_factory=package_versions)
     wall_time: float = 0.0
     name: str = "calibration"
+    prior_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cov_frozen: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    multiple_roots: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    truncation: dict = field(default_factory=dict)
+    confounding: dict = field(default_factory=dict)
+    model_spec: dict | None = None
 
     # ------------------------------------------------------------------ derived
     @property
@@ -143,9 +168,103 @@ class CalibrationResult:
 
     @property
     def dof(self) -> int:
-        """Degrees of freedom of χ²: converged residuals minus retained parameters."""
+        """Degrees of freedom of χ² after: converged residuals minus retained parameters."""
         ok = self.status_after == 0
         return int(ok.sum() * len(self.channels) - self.n_retained)
+
+    @property
+    def dof_before(self) -> int:
+        """Degrees of freedom of χ² before: converged residuals of the nominal model (nothing fitted)."""
+        return int((self.status_before == 0).sum() * len(self.channels))
+
+    @property
+    def chi2_per_dof_before(self) -> float:
+        return self.chi2_before / max(self.dof_before, 1)
+
+    @property
+    def chi2_per_dof_after(self) -> float:
+        return self.chi2_after / max(self.dof, 1)
+
+    def goodness_of_fit(self, n_worst: int = 5) -> dict:
+        """χ² before (dof N) and after (dof N − n_retained), p-values, per channel, worst points.
+
+        Returns
+        -------
+        dict
+            ``chi2_before``, ``dof_before``, ``chi2_per_dof_before``, ``p_value_before``, the same
+            ``_after``, ``per_channel`` {channel: {chi2_per_point_before, chi2_per_point_after,
+            rms_before, rms_after}} and ``worst`` (list of {point, channel, whitened_residual}
+            after calibration, largest |r| first).
+        """
+        from scipy import stats
+
+        out = {"chi2_before": self.chi2_before, "dof_before": self.dof_before,
+               "chi2_per_dof_before": self.chi2_per_dof_before,
+               "p_value_before": float(stats.chi2.sf(self.chi2_before, max(self.dof_before, 1))),
+               "chi2_after": self.chi2_after, "dof_after": self.dof, "chi2_per_dof_after": self.chi2_per_dof_after,
+               "p_value_after": float(stats.chi2.sf(self.chi2_after, max(self.dof, 1)))}
+        per = {}
+        rb, ra = self.rms("before"), self.rms("after")
+        for i, c in enumerate(self.channels):
+            row = {}
+            for which, model, status in (("before", self.model_before, self.status_before),
+                                         ("after", self.model_after, self.status_after)):
+                ok = status == 0
+                w = (self.measured[ok, i] - model[ok, i]) / self.sigma[ok, i]
+                row[f"chi2_per_point_{which}"] = float(np.mean(w ** 2)) if w.size else float("nan")
+            row["rms_before"], row["rms_after"] = rb[c], ra[c]
+            per[c] = row
+        out["per_channel"] = per
+        ok = self.status_after == 0
+        w = np.where(ok[:, None], (self.measured - np.where(ok[:, None], self.model_after, 0.0)) / self.sigma, 0.0)
+        order = np.argsort(-np.abs(w), axis=None)[:n_worst]
+        out["worst"] = [{"point": int(k // w.shape[1]), "channel": self.channels[int(k % w.shape[1])],
+                         "whitened_residual": float(w.flat[k]),
+                         "conditions": {n: float(v[k // w.shape[1]]) for n, v in self.conditions.items()}}
+                        for k in order if ok[k // w.shape[1]]]
+        return out
+
+    def predict(self, conditions, model=None, confidence: float = 0.95) -> "Prediction":
+        """Model outputs at new conditions with intervals from the estimate's covariance.
+
+        The variance of each output is g Cov(p̂) gᵀ with g its row of the model Jacobian at p̂
+        and Cov(p̂) the covariance including the frozen directions (DESIGN §5): an interval of
+        the *model output*, not of a new measurement (add the noise σ for that).
+
+        Parameters
+        ----------
+        conditions : OperatingConditions
+        model : ForwardModel, optional
+            Default: rebuilt from ``model_spec``.
+        confidence : float
+
+        Returns
+        -------
+        Prediction
+        """
+        from scipy import stats
+
+        if model is None:
+            if not self.model_spec:
+                raise InputError("this result recorded no model spec to rebuild its model; pass model=",
+                                 self.name, field="model_spec")
+            from calib.models.registry import build_model
+
+            model = build_model(self.model_spec, source=f"{self.name}: model_spec")
+        names = [c.name for c in model.channels]
+        missing = [c for c in self.channels if c not in names]
+        if missing:
+            raise InputError(f"model lacks channel(s) {', '.join(missing)}", self.name, field="channels")
+        idx = [names.index(c) for c in self.channels]
+        ev, G = model.jacobian(self.p_hat, conditions)
+        G = G[:, idx, :]
+        var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), self.cov_p, np.nan_to_num(G))
+        std = np.sqrt(np.maximum(var, 0.0))
+        z = float(stats.norm.ppf(0.5 * (1 + confidence)))
+        values = ev.values[:, idx]
+        std = np.where(ev.ok[:, None], std, np.nan)
+        return Prediction(tuple(self.channels), tuple(self.channel_units), values, std, values - z * std,
+                          values + z * std, ev.status.copy(), tuple(ev.messages), confidence)
 
     @property
     def parameter_objects(self) -> tuple[Parameter, ...]:
@@ -157,7 +276,7 @@ class CalibrationResult:
         return node_layout(self.parameter_objects)
 
     def verdict_counts(self) -> dict[str, int]:
-        out = {"identified": 0, "poorly observable": 0, "at bound": 0}
+        out = {"identified": 0, "poorly observable": 0, "at bound": 0, "confounded": 0}
         for v in self.verdicts:
             out[v["verdict"]] = out.get(v["verdict"], 0) + 1
         return out
@@ -185,10 +304,11 @@ class CalibrationResult:
     def summary(self) -> str:
         """A few plain lines with the key numbers."""
         counts = self.verdict_counts()
+        how = "chosen by leave-one-point-out cross-validation" if self.truncation else "set"
         lines = [f"{self.name}: {self.status} ({self.message})",
-                 f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {self.sigma_bar:g})",
-                 f"  chi2/dof before {self.chi2_before / max(self.dof, 1):.3g}, after "
-                 f"{self.chi2_after / max(self.dof, 1):.3g} (dof {self.dof})",
+                 f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {self.sigma_bar:.3g}, {how})",
+                 f"  chi2/dof before {self.chi2_per_dof_before:.3g} (dof {self.dof_before}), after "
+                 f"{self.chi2_per_dof_after:.3g} (dof {self.dof})",
                  "  verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
                  "  failed model points: " + ", ".join(f"{k} {v}" for k, v in self.failures.items())]
         rb, ra = self.rms("before"), self.rms("after")
@@ -200,14 +320,16 @@ class CalibrationResult:
     def to_json_dict(self) -> dict:
         scalars = {}
         for f in fields(self):
-            if f.name in _ARRAY_FIELDS or f.name in ("conditions", "polar_bands"):
+            if f.name in _ARRAY_FIELDS or f.name in ("conditions", "polar_bands", "truncation"):
                 continue
             scalars[f.name] = getattr(self, f.name)
         scalars["schema_version"] = SCHEMA_VERSION
         scalars["summary"] = {"n_params": self.n_params, "n_retained": self.n_retained, "dof": self.dof,
-                              "chi2_per_dof_before": self.chi2_before / max(self.dof, 1),
-                              "chi2_per_dof_after": self.chi2_after / max(self.dof, 1),
-                              "rms_before": self.rms("before"), "rms_after": self.rms("after"),
+                              "goodness_of_fit": self.goodness_of_fit(),
+                              "truncation": {"criterion": "leave-one-point-out cross-validation",
+                                             "chosen": self.truncation.get("chosen"),
+                                             "sigma_bar": self.sigma_bar} if self.truncation else
+                              {"criterion": "threshold", "sigma_bar": self.sigma_bar},
                               "verdict_counts": self.verdict_counts()}
         return _jsonable(scalars)
 
@@ -220,6 +342,7 @@ class CalibrationResult:
         arrays = {k: np.asarray(getattr(self, k)) for k in _ARRAY_FIELDS}
         arrays.update({f"conditions__{k}": np.asarray(v) for k, v in self.conditions.items()})
         arrays.update({f"polar__{k}": np.asarray(v) for k, v in self.polar_bands.items()})
+        arrays.update({f"truncation__{k}": np.asarray(v) for k, v in self.truncation.items()})
 
         def write_npz(tmp):
             with open(tmp, "wb") as f:
@@ -227,6 +350,32 @@ class CalibrationResult:
 
         _atomic_write(npath, write_npz)
         return jpath, npath
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """Model outputs at new conditions with their intervals.
+
+    Attributes
+    ----------
+    channels, units : tuple of str
+    values, std, lower, upper : ndarray, shape (n_points, n_channels)
+        Prediction, its 1-σ and the two-sided interval at ``confidence`` [channel units];
+        NaN where ``status != 0``.
+    status : ndarray of int, shape (n_points,)
+    messages : tuple of str
+    confidence : float
+    """
+
+    channels: tuple
+    units: tuple
+    values: np.ndarray
+    std: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    status: np.ndarray
+    messages: tuple
+    confidence: float
 
 
 def _jsonable(x):
@@ -244,6 +393,8 @@ def _jsonable(x):
         return bool(x)
     if isinstance(x, Path):
         return str(x)
+    if isinstance(x, enum.Enum):
+        return x.value
     return x
 
 
@@ -275,6 +426,9 @@ def load_result(path: str | Path, stem: str = "result") -> CalibrationResult:
     kwargs["retained"] = kwargs["retained"].astype(bool)
     kwargs["conditions"] = {k.split("__", 1)[1]: v for k, v in arrays.items() if k.startswith("conditions__")}
     kwargs["polar_bands"] = {k.split("__", 1)[1]: v for k, v in arrays.items() if k.startswith("polar__")}
+    kwargs["truncation"] = {k.split("__", 1)[1]: (v.item() if v.ndim == 0 else v)
+                            for k, v in arrays.items() if k.startswith("truncation__")}
+    kwargs["multiple_roots"] = kwargs["multiple_roots"].astype(bool)
     names = {f.name for f in fields(CalibrationResult)}
     kwargs.update({k: v for k, v in data.items() if k in names})
     return CalibrationResult(**kwargs)

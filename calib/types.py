@@ -62,6 +62,10 @@ class Parameter:
         ``"effect"`` (a string is converted; anything else is refused).
     alpha_deg, eta : float
         For correction nodes: the node location on the (α, η) plane [deg], [-]; NaN otherwise.
+    description : str
+    prior_std : float
+        1-σ of the Gaussian prior on the parameter, in ``unit`` (what is believed before the
+        data: e.g. 2 deg for a pitch-offset). NaN: the calibration's ``prior_sigma`` × ``scale``.
     """
 
     name: str
@@ -74,8 +78,12 @@ class Parameter:
     alpha_deg: float = float("nan")
     eta: float = float("nan")
     description: str = ""
+    prior_std: float = float("nan")
 
     def __post_init__(self):
+        if not (np.isnan(self.prior_std) or self.prior_std > 0):
+            raise InputError(f"prior_std must be > 0 or NaN, got {self.prior_std!r}", f"parameter {self.name!r}",
+                             field="prior_std")
         try:
             object.__setattr__(self, "kind", ParameterKind(self.kind))
         except ValueError:

@@ -128,7 +128,15 @@ def test_observability_and_verdicts():
     obs = observability(V, retained)
     np.testing.assert_allclose(obs, [1, 1, 0, 0])
     params = tuple(Parameter(f"q{j}", 0.0, -1.0, 1.0, 0.1) for j in range(n))
-    p_hat = np.array([0.2, 1.0, 0.0, 0.05])
-    v = parameter_verdicts(params, p_hat, -np.ones(n), np.ones(n), obs, np.full(n, 0.01))
+    p_hat = np.array([0.2, 1.0, 0.0, 0.5])
+    prior = np.full(n, 0.1)
+    std = np.array([0.01, 0.01, 0.1, 0.09])
+    v = parameter_verdicts(params, p_hat, -np.ones(n), np.ones(n), std, prior, obs)
     assert [d["verdict"] for d in v] == ["identified", "at bound", "poorly observable", "poorly observable"]
-    assert all({"name", "value", "std", "observability", "kind"} <= set(d) for d in v)
+    # an estimate far from nominal is never silent: the note says how far
+    assert v[3]["note"].startswith("5.6σ") and v[2]["note"] == ""
+    # a parameter sharing most of its information with others is "confounded", not "identified"
+    conf = {"q0": {"shared_information": 0.9, "shared_with_field": 0.9, "region": "lift near η 0.8–1"}}
+    v = parameter_verdicts(params, p_hat, -np.ones(n), np.ones(n), std, prior, obs, conf)
+    assert v[0]["verdict"] == "confounded" and v[0]["confounded_with"] == "lift near η 0.8–1"
+

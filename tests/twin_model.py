@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from calib.corrections import CorrectionGrid
-from calib.models.base import Channel, Evaluation, OperatingConditions, Parameter, Status
+from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
+from calib.types import Channel, Evaluation, OperatingConditions, Parameter, Status
 
 RADIUS = 10.0
 
@@ -46,6 +47,9 @@ class TwinModel:
     @property
     def channels(self):
         return self._channels
+
+    def correction_field(self) -> CorrectionField:
+        return CorrectionField(self._params, self.nominal_coefficients, seen_from_extras)
 
     def nominal_coefficients(self, alpha_deg, eta):
         a = np.radians(np.asarray(alpha_deg, float))

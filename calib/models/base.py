@@ -36,3 +36,32 @@ class ForwardModel(Protocol):
     def evaluate(self, p: np.ndarray, conditions: OperatingConditions) -> Evaluation: ...
 
     def jacobian(self, p: np.ndarray, conditions: OperatingConditions) -> tuple[Evaluation, np.ndarray]: ...
+
+
+@runtime_checkable
+class FieldModel(Protocol):
+    """Optional: a model whose parameters include an additive polar-correction field.
+
+    The calibrator asks through this protocol (never by probing attributes) for what
+    only a correction field has: eigenshapes, the C_D ≥ C_D,min bound, polar bands.
+    """
+
+    def correction_field(self) -> "CorrectionField": ...
+
+
+@runtime_checkable
+class RebuildableModel(Protocol):
+    """Optional: a model that can describe itself so a saved result can rebuild it.
+
+    ``spec()`` returns a JSON-able dict with a ``kind`` key understood by
+    :func:`calib.models.registry.build_model`; ``rotor_radius`` [m] (or ``None``) lets
+    reports use the tip-speed ratio.
+    """
+
+    def spec(self) -> dict: ...
+
+    @property
+    def rotor_radius(self) -> float | None: ...
+
+
+from calib.parametrizations.correction_field import CorrectionField  # noqa: E402  (for annotations)

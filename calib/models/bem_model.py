@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from typing import Sequence
 
 import numpy as np
@@ -11,15 +12,17 @@ from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemSettings, integration_weights, interior_stations, solve_bem
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.models.base import (Channel, Evaluation, OperatingConditions, Parameter,
-                               check_parameter_vector)
+from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
+from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 from calib.rotor.geometry import Rotor
 
 NUISANCE = {
     "pitch_offset": Parameter("pitch_offset", 0.0, -5.0, 5.0, 0.5, "deg", "nuisance",
-                              description="collective pitch offset added to the measured pitch"),
+                              description="collective pitch offset added to the measured pitch",
+                              prior_std=2.0),
     "wind_scale": Parameter("wind_scale", 1.0, 0.8, 1.2, 0.02, "-", "nuisance",
-                            description="factor on the measured wind speed (anemometry, blockage)"),
+                            description="factor on the measured wind speed (anemometry, blockage)",
+                            prior_std=0.05),
 }
 
 
@@ -39,6 +42,9 @@ class BemModel:
     nuisance : sequence of str
         Nuisance parameters appended after the corrections: ``pitch_offset`` [deg],
         ``wind_scale`` [-].
+    rotor_source : dict, optional
+        How to rebuild the rotor (a workflow ``[rotor]`` table); default ``{"name": rotor.name}``
+        for an embedded rotor. Needed by :meth:`spec` (saved results rebuild their model).
 
     Notes
     -----
@@ -49,8 +55,13 @@ class BemModel:
 
     def __init__(self, rotor: Rotor, grid: CorrectionGrid | None = None,
                  channels: Sequence[str] = ("power", "thrust"), settings: BemSettings | None = None,
-                 nuisance: Sequence[str] = ("pitch_offset", "wind_scale")):
+                 nuisance: Sequence[str] = ("pitch_offset", "wind_scale"), rotor_source: dict | None = None):
         self.rotor = rotor
+        if rotor_source is None:
+            from calib.rotor.library import ROTORS
+
+            rotor_source = {"name": rotor.name} if rotor.name in ROTORS else None
+        self.rotor_source = rotor_source
         self.grid = grid
         self.settings = settings or BemSettings()
         for name in nuisance:
@@ -142,7 +153,47 @@ class BemModel:
         G[~res.ok] = np.nan
         return ev, G
 
-    # -- helpers for the calibrator -------------------------------------
+    # -- optional protocols (FieldModel, RebuildableModel) -----------------
+    def correction_field(self) -> CorrectionField:
+        """The correction field of this model's parameters (empty layout without a grid)."""
+        return CorrectionField(self._parameters, self.nominal_coefficients, seen_from_extras)
+
+    @property
+    def rotor_radius(self) -> float:
+        """Rotor radius [m] (for tip-speed ratios)."""
+        return float(self.rotor.rotor_radius)
+
+    def spec(self) -> dict:
+        """A JSON-able description from which :func:`calib.models.registry.build_model` rebuilds the model.
+
+        Raises
+        ------
+        InputError
+            When the rotor has no source description (neither an embedded name nor files).
+        """
+        if self.rotor_source is None:
+            raise InputError("the rotor has no recorded source (embedded name or files); pass rotor_source=",
+                             "BemModel", field="rotor_source")
+        return {"kind": "bem", "rotor": dict(self.rotor_source), "settings": asdict(self.settings),
+                "grid": self.grid.to_dict() if self.grid is not None else None,
+                "channels": [c.name for c in self.channels], "nuisance": list(self.nuisance)}
+
+    @classmethod
+    def from_spec(cls, spec: dict, base_dir=None) -> "BemModel":
+        """Rebuild a model from :meth:`spec`."""
+        from calib.rotor.library import load_rotor
+
+        rotor_table = dict(spec["rotor"])
+        if set(rotor_table) != {"name"}:
+            from calib.rotor.sources import rotor_from_table
+
+            rotor = rotor_from_table(rotor_table, "model spec", base_dir).rotor
+        else:
+            rotor = load_rotor(rotor_table["name"])
+        grid = CorrectionGrid(**spec["grid"]) if spec.get("grid") else None
+        return cls(rotor, grid, spec["channels"], BemSettings(**spec["settings"]), spec["nuisance"],
+                   rotor_source=rotor_table)
+
     def nominal_coefficients(self, alpha_deg, eta):
         """Nominal C_L, C_D [-] of the station nearest to each η, at ``alpha_deg`` [deg]."""
         alpha_deg, eta = np.broadcast_arrays(np.asarray(alpha_deg, float), np.asarray(eta, float))
