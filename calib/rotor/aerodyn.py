@@ -5,7 +5,18 @@
 - :func:`read_aerodyn_polar`: airfoil file (``NumTabs`` tables, each with Re, optional
   unsteady-aero block and ``NumAlf`` rows of Alpha, Cl, Cd[, Cm]).
 - :func:`read_aerodyn_afnames`: the ``AFNames`` list of the AeroDyn main input.
+- :func:`read_aerodyn_main`: the BEM set-up, fluid and file names of the AeroDyn main input,
+  both field generations (:class:`AeroDynMain`).
 - :func:`rotor_from_aerodyn`: a :class:`~calib.rotor.geometry.Rotor` from these files.
+- :class:`InputFileValues`: the ``value  Keyword  - description`` lines of any OpenFAST input
+  file, looked up by keyword (also used by :mod:`calib.rotor.openfast`).
+
+AeroDyn main-file field generations (both read):
+
+1. OpenFAST up to 3.5: ``WakeMod`` {0 none, 1 BEMT, 2 DBEMT, 3 OLAF} and ``AFAeroMod``
+   {1 steady, 2 Beddoes-Leishman with ``UAMod``};
+2. OpenFAST 4: ``Wake_Mod`` {0 none, 1 BEMT, 3 OLAF} (dynamic BEMT moved to ``DBEMT_Mod``)
+   and ``UA_Mod`` {0 quasi-steady, 2..7 unsteady models}.
 
 Every error is an :class:`~calib.errors.InputError` naming the file, the 1-based line
 and the field (column or keyword as spelled in the file).
@@ -17,7 +28,8 @@ Reference: OpenFAST documentation, AeroDyn v15 input files
 from __future__ import annotations
 
 import re
-from pathlib import Path
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath, PureWindowsPath
 
 import numpy as np
 
@@ -339,6 +351,281 @@ def read_aerodyn_afnames(path) -> list[str]:
         raise InputError(f"NumAFfiles = {n_files} but only {len(names)} file names follow",
                          src, i_n + 1, "NumAFfiles")
     return names
+
+
+# ---------------------------------------------------------------- keyword lookup
+@dataclass(frozen=True)
+class KeyedValue:
+    """One ``value  Keyword`` line of an OpenFAST input file.
+
+    Attributes
+    ----------
+    text : str
+        The value as written, quotes removed.
+    quoted : bool
+        Whether the value was quoted.
+    line : int
+        1-based line number.
+    key : str
+        The keyword as spelled in the file.
+    """
+
+    text: str
+    quoted: bool
+    line: int
+    key: str
+
+
+class InputFileValues:
+    """The ``value  Keyword  - description`` lines of an OpenFAST input file, by keyword.
+
+    OpenFAST reads its input files line by line in a fixed order that changes between
+    versions; looking values up by their keyword instead reads every generation that
+    keeps the keyword. Keywords match case-insensitively (``PLExp`` = ``PLexp``); the first
+    occurrence wins. Every error names the file, the line and the keyword.
+
+    Parameters
+    ----------
+    path : str or Path
+        The input file.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        lines, self.source = _read_lines(path)
+        self.n_lines = len(lines)
+        self._values: dict[str, KeyedValue] = {}
+        for i, line in enumerate(lines):
+            if _is_comment(line):
+                continue
+            tokens = list(_TOKEN.finditer(line))
+            if len(tokens) < 2 or tokens[1].group(1) is not None:
+                continue
+            first = tokens[0]
+            quoted = first.group(1) is not None
+            text = first.group(1) if quoted else first.group(2)
+            key = tokens[1].group(2)
+            self._values.setdefault(key.lower(), KeyedValue(text, quoted, i + 1, key))
+
+    def __contains__(self, key: str) -> bool:
+        return key.lower() in self._values
+
+    def get(self, key: str) -> KeyedValue | None:
+        """The value of ``key``, or None when the file does not have it."""
+        return self._values.get(key.lower())
+
+    def require(self, key: str, expected: str) -> KeyedValue:
+        """The value of ``key``; an :class:`InputError` naming ``expected`` when absent."""
+        value = self.get(key)
+        if value is None:
+            raise InputError(f"keyword {key} not found; expected a line '<{expected}>  {key}'",
+                             self.source, None, key)
+        return value
+
+    def number(self, key: str, expected: str = "number", allow_default: bool = False) -> float | None:
+        """A finite number; ``"default"`` gives None when ``allow_default``."""
+        value = self.require(key, expected)
+        if allow_default and value.text.strip().lower() == "default":
+            return None
+        try:
+            out = float(value.text)
+        except ValueError:
+            hint = ' or "default"' if allow_default else ""
+            raise InputError(f"expected {expected}{hint}, got {value.text!r}", self.source, value.line,
+                             value.key) from None
+        if not np.isfinite(out):
+            raise InputError(f"expected a finite {expected}, got {value.text!r}", self.source, value.line,
+                             value.key)
+        return out
+
+    def integer(self, key: str, expected: str = "integer switch") -> int:
+        """An integer (switches, counts)."""
+        value = self.require(key, expected)
+        try:
+            return int(value.text)
+        except ValueError:
+            raise InputError(f"expected an {expected}, got {value.text!r}", self.source, value.line,
+                             value.key) from None
+
+    def flag(self, key: str) -> bool:
+        """A logical flag (``True``/``False``, ``T``/``F``, any case)."""
+        value = self.require(key, "True or False")
+        word = value.text.strip().lower()
+        if word in ("true", "t"):
+            return True
+        if word in ("false", "f"):
+            return False
+        raise InputError(f"expected True or False, got {value.text!r}", self.source, value.line, value.key)
+
+    def file(self, key: str, required: bool = True) -> Path | None:
+        """The file named by ``key``, resolved relative to this file's folder.
+
+        ``"unused"`` or an empty name gives None when not ``required``.
+
+        Raises
+        ------
+        InputError
+            The keyword is missing, the name is ``"unused"`` while ``required``, or the
+            file does not exist (the error names this file, the line and ``key``).
+        """
+        value = self.require(key, "quoted file name")
+        return resolve_input_file(value.text, self, value.line, value.key, required)
+
+
+def resolve_input_file(name: str, referrer: InputFileValues, line: int, key: str,
+                       required: bool = True) -> Path | None:
+    """Resolve a file name written in an OpenFAST input file.
+
+    Relative names are relative to the folder of the referring file (OpenFAST's rule);
+    Windows separators are accepted.
+    """
+    text = name.strip()
+    if text == "" or text.lower() in ("unused", "none"):
+        if required:
+            raise InputError(f"a file is needed here, got {name!r}", referrer.source, line, key)
+        return None
+    text = text.replace("\\", "/")
+    path = Path(text)
+    if not path.is_absolute() and not PureWindowsPath(name).is_absolute():
+        path = referrer.path.parent / PurePosixPath(text)
+    if not path.is_file():
+        raise InputError(f"the file it names does not exist: {name!r} (looked for {path})",
+                         referrer.source, line, key)
+    return path
+
+
+# ---------------------------------------------------------------- main input: BEM set-up
+@dataclass(frozen=True)
+class AeroDynMain:
+    """What an AeroDyn v15 main input file says about the rotor model and the fluid.
+
+    Attributes
+    ----------
+    blade_file : Path
+        ``ADBlFile(1)``, resolved relative to the main file.
+    airfoil_files : tuple of Path
+        ``AFNames`` in order (``BlAFID = k`` uses entry k - 1), resolved.
+    generation : int
+        1: ``WakeMod``/``AFAeroMod`` (OpenFAST <= 3.5); 2: ``Wake_Mod``/``UA_Mod`` (OpenFAST 4).
+    wake_model : int
+        0 none, 1 BEMT, 2 dynamic BEMT (generation 1 only), 3 OLAF.
+    unsteady_airfoil : bool
+        Unsteady airfoil aerodynamics on (``AFAeroMod = 2`` or ``UA_Mod > 0``).
+    tip_loss, hub_loss : bool
+        ``TipLoss``, ``HubLoss``: Prandtl factors.
+    tangential_induction : bool
+        ``TanInd``.
+    drag_in_axial_induction, drag_in_tangential_induction : bool
+        ``AIDrag``, ``TIDrag``.
+    air_density : float or None
+        ``AirDens`` [kg/m^3]; None when the file says ``"default"`` (the OpenFAST glue code
+        then supplies the ``.fst`` value, see :func:`calib.rotor.openfast.read_openfast`).
+    kinematic_viscosity : float or None
+        ``KinVisc`` [m^2/s]; None for ``"default"``.
+    source : str
+        The file.
+    lines : dict
+        Keyword -> 1-based line of each value read (for messages).
+    """
+
+    blade_file: Path
+    airfoil_files: tuple[Path, ...]
+    generation: int
+    wake_model: int
+    unsteady_airfoil: bool
+    tip_loss: bool
+    hub_loss: bool
+    tangential_induction: bool
+    drag_in_axial_induction: bool
+    drag_in_tangential_induction: bool
+    air_density: float | None
+    kinematic_viscosity: float | None
+    source: str
+    lines: dict
+
+
+def _afnames_with_lines(values: InputFileValues) -> list[tuple[str, int]]:
+    """``AFNames`` entries with their 1-based lines (the list runs over NumAFfiles lines)."""
+    names = read_aerodyn_afnames(values.path)
+    lines, _ = _read_lines(values.path)
+    start = values.require("AFNames", "quoted file name").line - 1
+    out, i = [], start
+    while len(out) < len(names) and i < len(lines):
+        if not _is_comment(lines[i]):
+            out.append((names[len(out)], i + 1))
+        i += 1
+    return out
+
+
+def read_aerodyn_main(path) -> AeroDynMain:
+    """Read the BEM set-up and the fluid of an AeroDyn v15 main input file.
+
+    Both field generations are read (``WakeMod``/``AFAeroMod`` and ``Wake_Mod``/``UA_Mod``);
+    values are looked up by keyword, so the line order of a generation does not matter.
+    ``AirDens`` and ``KinVisc`` may be ``"default"`` (OpenFAST then takes them from the
+    ``.fst``): they are returned as None, never replaced by a guess.
+
+    Parameters
+    ----------
+    path : str or Path
+        AeroDyn main input file.
+
+    Returns
+    -------
+    AeroDynMain
+
+    Raises
+    ------
+    InputError
+        A keyword missing, a value of the wrong kind, both or neither of ``WakeMod`` and
+        ``Wake_Mod``, or a referenced blade or airfoil file that does not exist (naming
+        this file, the line and the keyword).
+    """
+    v = InputFileValues(path)
+    src = v.source
+    if "WakeMod" in v and "Wake_Mod" in v:
+        raise InputError("both WakeMod (OpenFAST <= 3.5) and Wake_Mod (OpenFAST 4) are present; "
+                         "a file uses one generation", src, v.get("Wake_Mod").line, "Wake_Mod")
+    if "Wake_Mod" in v:
+        generation = 2
+        wake = v.integer("Wake_Mod")
+        unsteady = v.integer("UA_Mod") != 0
+        lines = {"Wake_Mod": v.get("Wake_Mod").line, "UA_Mod": v.get("UA_Mod").line}
+    elif "WakeMod" in v:
+        generation = 1
+        wake = v.integer("WakeMod")
+        af_mod = v.integer("AFAeroMod")
+        if af_mod not in (1, 2):
+            raise InputError(f"expected 1 (steady) or 2 (Beddoes-Leishman), got {af_mod}", src,
+                             v.get("AFAeroMod").line, "AFAeroMod")
+        unsteady = af_mod == 2
+        lines = {"WakeMod": v.get("WakeMod").line, "AFAeroMod": v.get("AFAeroMod").line}
+    else:
+        raise InputError("neither WakeMod (OpenFAST <= 3.5) nor Wake_Mod (OpenFAST 4) found: "
+                         "not an AeroDyn v15 main input file?", src, None, "WakeMod")
+    valid_wake = (0, 1, 2, 3) if generation == 1 else (0, 1, 3)
+    if wake not in valid_wake:
+        key = "WakeMod" if generation == 1 else "Wake_Mod"
+        raise InputError(f"expected one of {valid_wake}, got {wake}", src, v.get(key).line, key)
+    flags = {}
+    for key in ("TipLoss", "HubLoss", "TanInd", "AIDrag", "TIDrag"):
+        flags[key] = v.flag(key)
+        lines[key] = v.get(key).line
+    fluid = {}
+    for key, what in (("AirDens", "density [kg/m^3]"), ("KinVisc", "kinematic viscosity [m^2/s]")):
+        fluid[key] = v.number(key, f"a {what}", allow_default=True)
+        lines[key] = v.get(key).line
+        if fluid[key] is not None and fluid[key] <= 0:
+            raise InputError(f"must be > 0, got {fluid[key]:g}", src, lines[key], key)
+    blade = v.file("ADBlFile(1)")
+    lines["ADBlFile(1)"] = v.get("ADBlFile(1)").line
+    airfoils = tuple(resolve_input_file(name, v, line, "AFNames") for name, line in _afnames_with_lines(v))
+    lines["AFNames"] = v.get("AFNames").line
+    return AeroDynMain(blade_file=blade, airfoil_files=airfoils, generation=generation, wake_model=wake,
+                       unsteady_airfoil=unsteady, tip_loss=flags["TipLoss"], hub_loss=flags["HubLoss"],
+                       tangential_induction=flags["TanInd"], drag_in_axial_induction=flags["AIDrag"],
+                       drag_in_tangential_induction=flags["TIDrag"], air_density=fluid["AirDens"],
+                       kinematic_viscosity=fluid["KinVisc"], source=src, lines=lines)
 
 
 # ---------------------------------------------------------------- rotor
