@@ -132,3 +132,31 @@ def test_fmu_state_round_trip(fmus):
     fmu.freeFMUstate(state)
     fmu.terminate()
     fmu.freeInstance()
+
+
+def test_spec_ranges_are_required_and_checked(tmp_path):
+    """variables.toml: inputs and Real/Integer parameters need min <= start <= max (they become
+    the model description's range and the FMU's refusal rule); outputs and Booleans take none."""
+    from calib.errors import InputError
+    from calib.fmu import model_description as md
+    ids = md.core_variable_ids(fmu_build.CORE_DIR / "rotor_core.h")
+    kw = dict(n_nodes=1, alpha_nodes=[0.0], eta_nodes=[1.0], out_radius=[], out_eta=[], rotor_facts={})
+    head = '[fmu]\nfmi_version = "2.0"\nmodel_identifier = "x"\nmodel_name = "x"\nwrapper = "w.c"\n'
+    cases = {
+        'name = "v"\ncore = "WIND_SPEED"\nkind = "input"\nstart = 8.0\n': "min",
+        'name = "v"\ncore = "WIND_SPEED"\nkind = "input"\nstart = 8.0\nmin = 9.0\nmax = 50.0\n': "start",
+        'name = "v"\ncore = "WIND_SPEED"\nkind = "input"\nstart = 8.0\nmin = 60.0\nmax = 50.0\n': "min",
+        'name = "v"\ncore = "POWER"\nkind = "output"\nmin = 0.0\nmax = 1.0\n': "min",
+        'name = "v"\ncore = "N_BLADES"\nkind = "fixed"\ntype = "Integer"\nstart = 3\nmin = 2.5\nmax = 3\n': "min",
+    }
+    for body, field in cases.items():
+        path = tmp_path / "v.toml"
+        path.write_text(head + "[[variable]]\n" + body)
+        with pytest.raises(InputError) as info:
+            md.load_spec(path, ids, **kw)
+        assert info.value.field == field, body
+    path.write_text(head + "[[variable]]\n" + 'name = "v"\ncore = "WIND_SPEED"\nkind = "input"\nstart = 8.0\n'
+                    'min = 0.0\nmax = 50.0\n')
+    spec = md.load_spec(path, ids, **kw)
+    assert (spec.variables[0].min, spec.variables[0].max) == (0.0, 50.0)
+    assert 'min="0.0" max="50.0"' in md.render_fmi2(spec, "{g}")

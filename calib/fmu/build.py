@@ -4,7 +4,8 @@
 sources, generated ``fmu_variables.h``, ``resources/`` written from a calib rotor),
 compiles the shared library with fmpy's CMake project and the FMI headers that ship
 with fmpy (``fmpy/c-code``), links libm, and zips the result. Builds are cached by a
-hash of everything that goes in (sources, specs, resources, fmpy's build files) in
+hash of everything that goes in (sources, specs, resources, this generator's Python,
+fmpy's build files, sanitizer flags) in
 ``$CALIB_CACHE/fmus`` (default ``<repo>/.calib_cache/fmus``); binaries are never
 written into the source tree.
 
@@ -93,6 +94,12 @@ def _source_files(variant: str) -> list[Path]:
     return files
 
 
+def _generator_files() -> list[Path]:
+    """The Python that writes the model description, C table and resources (part of the key)."""
+    from calib.fmu import resources
+    return [Path(__file__), Path(md.__file__), Path(resources.__file__)]
+
+
 def _fmpy_build_files() -> list[Path]:
     import fmpy
     c_code = Path(fmpy.__file__).parent / "c-code"
@@ -117,8 +124,16 @@ def _run(cmd: list[str], what: str):
         raise FmuBuildError(f"{what} failed (exit code {proc.returncode}): {' '.join(cmd)}\n{tail}")
 
 
+#: Compiler and linker flags of a sanitized build (``build_fmu(..., sanitize=True)``):
+#: AddressSanitizer and UndefinedBehaviorSanitizer (plus float-to-int overflow, which GCC
+#: leaves out of ``undefined``), every report fatal.
+SANITIZE_FLAGS = (
+    "-fsanitize=address,undefined,float-cast-overflow "   # GCC: float-cast-overflow is not in `undefined`
+    "-fno-sanitize-recover=undefined,float-cast-overflow -fno-omit-frame-pointer -g")
+
+
 def build_fmu(variant: str, rotor=None, grid: CorrectionGrid | None = None, out_dir=None,
-              force: bool = False) -> Path:
+              force: bool = False, sanitize: bool = False) -> Path:
     """Build (or fetch from the cache) the rotor FMU of one variant.
 
     Parameters
@@ -136,6 +151,12 @@ def build_fmu(variant: str, rotor=None, grid: CorrectionGrid | None = None, out_
         Also copy the FMU (and its ``mapping.toml``) there.
     force : bool
         Rebuild even if the cache holds this build.
+    sanitize : bool
+        Compile with ``-fsanitize=address,undefined -fno-sanitize-recover=undefined``
+        (:data:`SANITIZE_FLAGS`), cached under a separate key (suffix ``-sanitize``). The
+        binary needs the sanitizer runtime loaded first: a Python process that loads it
+        must run with ``LD_PRELOAD=$(cc -print-file-name=libasan.so)`` (and usually
+        ``ASAN_OPTIONS=detect_leaks=0``), see :func:`sanitizer_environment`.
 
     Returns
     -------
@@ -165,15 +186,18 @@ def build_fmu(variant: str, rotor=None, grid: CorrectionGrid | None = None, out_
                      out_eta=list(facts["out_eta"]), rotor_facts=rotor_facts(rotor))
     core_ids = md.core_variable_ids(CORE_DIR / "rotor_core.h")
     spec = md.load_spec(vdir / "variables.toml", core_ids, **spec_args)
-    digest = _hash(_source_files(key) + _fmpy_build_files(), resource_bytes + [Path(cc).name.encode()])
+    flavour = [SANITIZE_FLAGS.encode()] if sanitize else []
+    digest = _hash(_source_files(key) + _generator_files() + _fmpy_build_files(),
+                   resource_bytes + [Path(cc).name.encode()] + flavour)
     token = "{" + str(uuid.UUID(digest[:32])) + "}"
-    target_dir = cache_dir() / f"{spec.model_identifier}-{rotor.name}-{digest[:16]}"
+    suffix = "-sanitize" if sanitize else ""
+    target_dir = cache_dir() / f"{spec.model_identifier}-{rotor.name}-{digest[:16]}{suffix}"
     fmu_path = target_dir / f"{spec.model_identifier}.fmu"
 
     if force or not fmu_path.is_file():
         target_dir.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(prefix="build_", dir=target_dir) as work:
-            _build_into(Path(work), fmu_path, spec, token, rotor, grid, key, cmake)
+            _build_into(Path(work), fmu_path, spec, token, rotor, grid, key, cmake, sanitize)
     if out_dir is None:
         return fmu_path
     out_dir = Path(out_dir).resolve()
@@ -184,7 +208,32 @@ def build_fmu(variant: str, rotor=None, grid: CorrectionGrid | None = None, out_
     return dest
 
 
-def _write_cmake_cache(build_dir: Path, spec, stage: Path, sources: list[str], fmi3: bool):
+def sanitizer_environment(base: dict | None = None) -> dict:
+    """Environment for a process that loads a sanitized FMU (``build_fmu(..., sanitize=True)``).
+
+    A sanitized shared library ``dlopen``'ed by an unsanitized executable (CPython) needs
+    the ASan runtime loaded first: ``LD_PRELOAD`` gets ``cc -print-file-name=libasan.so``.
+    Leak detection is off (CPython itself keeps memory until exit), reports abort the process.
+
+    Raises
+    ------
+    FmuBuildError
+        The compiler has no ASan runtime.
+    """
+    _, cc = find_tools()
+    lib = subprocess.run([cc, "-print-file-name=libasan.so"], capture_output=True, text=True).stdout.strip()
+    if not lib or not Path(lib).is_file():
+        raise FmuBuildError(f"{cc} has no AddressSanitizer runtime (libasan.so); install it "
+                            "(Debian/Ubuntu: the libasan package of your gcc, e.g. `apt-get install libasan8`)")
+    env = dict(os.environ if base is None else base)
+    env["LD_PRELOAD"] = lib
+    env["ASAN_OPTIONS"] = "detect_leaks=0:abort_on_error=1"
+    env["UBSAN_OPTIONS"] = "print_stacktrace=1:halt_on_error=1"
+    return env
+
+
+def _write_cmake_cache(build_dir: Path, spec, stage: Path, sources: list[str], fmi3: bool,
+                       sanitize: bool = False):
     """Pre-seed the cache of fmpy's CMake project (``fmpy/c-code/CMakeLists.txt``).
 
     Same entries as :func:`fmpy.build.create_cmake_settings` (which needs a build
@@ -203,11 +252,14 @@ def _write_cmake_cache(build_dir: Path, spec, stage: Path, sources: list[str], f
         "CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm",   # link libm
         "CMAKE_C_STANDARD:STRING": "99",
     }
+    if sanitize:
+        entries["CMAKE_C_FLAGS:STRING"] = SANITIZE_FLAGS
+        entries["CMAKE_SHARED_LINKER_FLAGS:STRING"] = SANITIZE_FLAGS
     (build_dir / "CMakeCache.txt").write_text("".join(f"{k}={v}\n" for k, v in entries.items()))
 
 
 def _build_into(work: Path, fmu_path: Path, spec: md.VariantSpec, token: str, rotor, grid, key: str,
-                cmake: str):
+                cmake: str, sanitize: bool = False):
     import fmpy
 
     stage = work / "fmu"
@@ -227,7 +279,7 @@ def _build_into(work: Path, fmu_path: Path, spec: md.VariantSpec, token: str, ro
 
     build_dir = work / "cmake-build"
     build_dir.mkdir()
-    _write_cmake_cache(build_dir, spec, stage, names, fmi3=spec.fmi_version == "3.0")
+    _write_cmake_cache(build_dir, spec, stage, names, fmi3=spec.fmi_version == "3.0", sanitize=sanitize)
     c_code = Path(fmpy.__file__).parent / "c-code"
     _run([cmake, "-S", str(c_code.resolve()), "-B", str(build_dir.resolve())], "CMake configure")
     _run([cmake, "--build", str(build_dir.resolve()), "--target", "install", "--config", "Release"],

@@ -69,6 +69,8 @@ class FmuVariable:
     start: list = field(default_factory=list)
     description: str = ""
     array: str | None = None
+    min: float | None = None    # accepted range in FMU units (inputs and parameters)
+    max: float | None = None
 
 
 @dataclass
@@ -124,7 +126,7 @@ def load_spec(path: Path, core_ids: dict[str, int], *, n_nodes: int, alpha_nodes
         raise InputError(f"fmi_version must be '2.0' or '3.0', got {fmu['fmi_version']!r}", path,
                          field="fmi_version")
     allowed = {"name", "core", "kind", "type", "unit", "scale", "offset", "wrap360", "start",
-               "description", "expand", "array"}
+               "description", "expand", "array", "min", "max"}
     counts = {"nodes": n_nodes, "blades": MAX_BLADES, "out_stations": len(out_radius)}
     out: list[FmuVariable] = []
     vr = 1
@@ -155,9 +157,10 @@ def load_spec(path: Path, core_ids: dict[str, int], *, n_nodes: int, alpha_nodes
             start = rotor_facts[start[7:]]
         if isinstance(start, bool):
             start = float(start)
+        vmin, vmax = _range(v, vtype, start, where)
         common = dict(core=v["core"], kind=v["kind"], type=vtype, unit=unit,
                       scale=float(v.get("scale", 1.0)), offset=float(v.get("offset", 0.0)),
-                      wrap360=bool(v.get("wrap360", False)))
+                      wrap360=bool(v.get("wrap360", False)), min=vmin, max=vmax)
         expand, array = v.get("expand"), v.get("array")
         if expand and array:
             raise InputError("use either 'expand' or 'array'", where)
@@ -194,6 +197,31 @@ def load_spec(path: Path, core_ids: dict[str, int], *, n_nodes: int, alpha_nodes
         raise InputError(f"duplicate variable names: {', '.join(dup)}", path)
     return VariantSpec(fmu["fmi_version"], fmu["model_identifier"], fmu["model_name"], fmu["wrapper"],
                        fmu.get("description", ""), out)
+
+
+def _range(v: dict, vtype: str, start, where: str) -> tuple[float | None, float | None]:
+    """The ``min``/``max`` of a variable: required for Real and Integer inputs and parameters,
+    not allowed on outputs and Booleans; ``min <= start <= max``."""
+    has = [k for k in ("min", "max") if k in v]
+    if v["kind"] == "output" or vtype == "Boolean":
+        if has:
+            raise InputError(f"'{has[0]}' is only for Real and Integer inputs and parameters", where,
+                             field=has[0])
+        return None, None
+    if len(has) != 2:
+        raise InputError("inputs and parameters need a range: 'min' and 'max' in the FMU's units", where,
+                         field="min" if "min" not in v else "max")
+    lo, hi = v["min"], v["max"]
+    for key, x in (("min", lo), ("max", hi)):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise InputError(f"{key} must be a finite number, got {x!r}", where, field=key)
+        if vtype == "Integer" and float(x) != int(x):
+            raise InputError(f"{key} of an Integer must be an integer, got {x!r}", where, field=key)
+    if not lo <= hi:
+        raise InputError(f"min {lo!r} > max {hi!r}", where, field="min")
+    if not lo <= float(start) <= hi:
+        raise InputError(f"start {start!r} lies outside [min, max] = [{lo!r}, {hi!r}]", where, field="start")
+    return float(lo), float(hi)
 
 
 # ---------------------------------------------------------------------------- rendering
@@ -248,6 +276,8 @@ def render_fmi2(spec: VariantSpec, guid: str, *, default_stop: float = 60.0,
         inner = ""
         if v.start:
             inner += f' start="{_fmt(v.start[0], v.type, False)}"'
+        if v.min is not None:
+            inner += f' min="{_fmt(v.min, v.type, False)}" max="{_fmt(v.max, v.type, False)}"'
         if v.unit and v.type == "Real":
             inner += f' unit="{escape(v.unit)}"'
         body.append(f"    <!-- {pos} -->\n    <ScalarVariable {attrs}>\n      <{v.type}{inner}/>\n"
@@ -290,6 +320,8 @@ def render_fmi3(spec: VariantSpec, token: str, *, default_stop: float = 60.0,
             attrs += f" description={quoteattr(v.description)}"
         if v.start:
             attrs += ' start="' + " ".join(_fmt(s, v.type, True) for s in v.start) + '"'
+        if v.min is not None:
+            attrs += f' min="{_fmt(v.min, v.type, True)}" max="{_fmt(v.max, v.type, True)}"'
         if v.unit and v.type == "Real":
             attrs += f' unit="{escape(v.unit)}"'
         if v.array:
@@ -313,8 +345,15 @@ def render_c_table(spec: VariantSpec, token: str) -> str:
     rows = []
     for v in sorted(spec.variables, key=lambda x: x.vr):
         start = float(v.start[0]) if v.start else 0.0
+        if v.min is not None:
+            lo, hi = v.min, v.max
+        elif v.type == "Boolean":
+            lo, hi = 0.0, 1.0
+        else:                       # outputs: no range
+            lo, hi = -1e308, 1e308
         rows.append(f'    {{{v.vr}u, CV_{v.core}, {v.index}, {v.count}, {types[v.type]}, {kinds[v.kind]}, '
-                    f'{v.scale!r}, {v.offset!r}, {int(v.wrap360)}, {start!r}, "{v.name}"}},')
+                    f'{v.scale!r}, {v.offset!r}, {int(v.wrap360)}, {start!r}, {lo!r}, {hi!r}, '
+                    f'"{v.name}", "{v.unit or ""}"}},')
     return ("/* fmu_variables.h -- GENERATED by calib/fmu/build.py from "
             f"fmu_models/.../variables.toml; do not edit. */\n"
             "#ifndef FMU_VARIABLES_H\n#define FMU_VARIABLES_H\n#include \"fmu_common.h\"\n"

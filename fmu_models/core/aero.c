@@ -34,9 +34,11 @@ static void base_polar(const RotorData *d, int st, double alpha_deg, double *cl,
     const double *rcl = d->cl + (size_t)st * (size_t)d->n_polar;
     const double *rcd = d->cd + (size_t)st * (size_t)d->n_polar;
     x = (alpha_deg - d->alpha_start_deg) / d->alpha_step_deg;
-    k = (int)floor(x);
-    if (k < 0) k = 0;
-    if (k > d->n_polar - 2) k = d->n_polar - 2;
+    /* clamp before converting: (int) of NaN or of a value beyond int is undefined
+     * behaviour; a NaN angle gives NaN coefficients (and a step error), never UB */
+    if (!(x >= 0.0)) k = 0;
+    else if (x >= d->n_polar - 2) k = d->n_polar - 2;
+    else k = (int)x;
     t = x - k;
     *cl = rcl[k] + t * (rcl[k + 1] - rcl[k]);
     *cd = rcd[k] + t * (rcd[k + 1] - rcd[k]);

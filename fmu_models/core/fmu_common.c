@@ -33,12 +33,25 @@ int fmu_get(const RotorCore *core, const FmuVar *v, int k, double *value)
     return 0;
 }
 
+int fmu_check_range(const RotorCore *core, const FmuVar *v, int k, double value)
+{
+    if (value >= v->min && value <= v->max) return 0;   /* false for NaN */
+    if (v->count > 1)
+        core_logf(core, 2, "variable '%s'[%d] = %g is outside its range [%g, %g]%s%s; value refused",
+                  v->name, k, value, v->min, v->max, v->unit[0] ? " " : "", v->unit);
+    else
+        core_logf(core, 2, "variable '%s' = %g is outside its range [%g, %g]%s%s; value refused",
+                  v->name, value, v->min, v->max, v->unit[0] ? " " : "", v->unit);
+    return -1;
+}
+
 int fmu_set(RotorCore *core, const FmuVar *v, int k, double value)
 {
     if (v->kind == FK_OUTPUT || v->kind == FK_INDEPENDENT) {
         core_logf(core, 2, "variable '%s' (vr %u) is not settable", v->name, v->vr);
         return -1;
     }
+    if (fmu_check_range(core, v, k, value) != 0) return -1;
     return core_set(core, (CoreVar)v->var, v->index + k, (value - v->offset) / v->scale);
 }
 

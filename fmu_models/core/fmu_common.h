@@ -26,7 +26,9 @@ typedef struct {
     double scale, offset;   /* fmu = scale * core + offset */
     int wrap360;            /* wrap the FMU value into [0, 360) */
     double start;           /* start value in FMU units (inputs and parameters) */
+    double min, max;        /* accepted range in FMU units (variables.toml min/max; outputs: none) */
     const char *name;
+    const char *unit;       /* FMU unit ("" if none), for messages */
 } FmuVar;
 
 /* Binary search of a table sorted by value reference; NULL if absent. */
@@ -34,6 +36,12 @@ const FmuVar *fmu_find(const FmuVar *vars, int n, unsigned int vr);
 
 /* Element k of variable v, in FMU units. 0 on success. */
 int fmu_get(const RotorCore *core, const FmuVar *v, int k, double *value);
+
+/* Is value (FMU units) inside the variable's range [min, max] (and finite)? If not, log an
+ * error naming the variable, the value and the range, and return -1. */
+int fmu_check_range(const RotorCore *core, const FmuVar *v, int k, double value);
+
+/* Set element k of v (range-checked). 0 on success. */
 int fmu_set(RotorCore *core, const FmuVar *v, int k, double value);
 
 /* Apply every start value of the table. 0 on success. */

@@ -304,8 +304,8 @@ static int check_inputs(const RotorCore *core)
         core_logf(core, 2, "wind speed must lie in [0, 100) m/s, got %g", in->wind_speed);
         return -1;
     }
-    if (!(fabs(in->rotor_speed_rpm) < 1000.0)) {
-        core_logf(core, 2, "rotor speed must lie in (-1000, 1000) rpm, got %g", in->rotor_speed_rpm);
+    if (!(in->rotor_speed_rpm >= 0.0 && in->rotor_speed_rpm < 1000.0)) {
+        core_logf(core, 2, "rotor speed must lie in [0, 1000) rpm, got %g", in->rotor_speed_rpm);
         return -1;
     }
     if (!(in->air_density > 0.0 && in->air_density < 10.0)) {
@@ -341,6 +341,13 @@ static int check_params(const RotorCore *core)
                                p->blade_mass > 0.0)) {
         core_logf(core, 2, "flexible blades need frequencies > 0 Hz, damping ratios >= 0 "
                   "and blade mass > 0 kg");
+        return -1;
+    }
+    /* semi-implicit Euler is stable for omega dt < 2; keep it accurate (omega dt <= 0.5) */
+    if (p->flexible > 0.5 && 2.0 * M_PI * fmax(p->flap_freq_hz, p->edge_freq_hz) * p->max_step > 0.5) {
+        core_logf(core, 2, "flexible blades: 2 pi f max_step = %g exceeds 0.5 (f = %g Hz, max_step = "
+                  "%g s); lower the internal step", 2.0 * M_PI * fmax(p->flap_freq_hz, p->edge_freq_hz)
+                  * p->max_step, fmax(p->flap_freq_hz, p->edge_freq_hz), p->max_step);
         return -1;
     }
     if ((p->flexible > 0.5 || p->gravity > 0.5) && !(p->blade_mass > 0.0)) {
@@ -393,29 +400,31 @@ int core_initialize(RotorCore *core, double start_time)
 int core_do_step(RotorCore *core, double h)
 {
     CoreDynamic *dyn = &core->dyn;
-    double omega, dt_max, dt;
+    double omega, dt_max, dt, n_needed;
     int n, k;
     if (!dyn->initialized) {
         core_logf(core, 2, "do_step called before initialization");
-        return -1;
+        return CORE_STEP_REFUSED;
     }
     if (!(h > 0.0) || !isfinite(h)) {
-        core_logf(core, 2, "communication step size must be > 0, got %g", h);
-        return -1;
+        core_logf(core, 2, "communication step size must be finite and > 0, got %g", h);
+        return CORE_STEP_REFUSED;
     }
-    if (check_inputs(core)) return -1;
+    if (check_inputs(core)) return CORE_STEP_REFUSED;
     omega = dyn->in.rotor_speed_rpm * M_PI / 30.0;
     dt_max = dyn->par.max_step;
     if (fabs(omega) > 0.0) {
         double dt_az = dyn->par.max_azimuth_step_deg * DEG2RAD / fabs(omega);
         if (dt_az < dt_max) dt_max = dt_az;
     }
-    n = (int)ceil(h / dt_max - 1e-9);
-    if (n < 1) n = 1;
-    if (n > 1000000) {
-        core_logf(core, 2, "step %g s needs %d sub-steps; reduce the communication step", h, n);
-        return -1;
+    n_needed = ceil(h / dt_max - 1e-9);       /* compared as a double: no int overflow */
+    if (!(n_needed <= CORE_MAX_SUBSTEPS)) {
+        core_logf(core, 2, "a communication step of %g s needs %.0f internal steps of at most %g s, "
+                  "more than the %d allowed per doStep; use a shorter communication step",
+                  h, n_needed, dt_max, CORE_MAX_SUBSTEPS);
+        return CORE_STEP_REFUSED;
     }
+    n = n_needed < 1.0 ? 1 : (int)n_needed;
     dt = h / n;
     for (k = 0; k < n; k++) {
         dyn->azimuth = fmod(dyn->azimuth + omega * dt, 2.0 * M_PI);
@@ -424,7 +433,7 @@ int core_do_step(RotorCore *core, double h)
         if (!isfinite(dyn->power) || !isfinite(dyn->thrust)) {
             core_logf(core, 2, "non-finite loads at t = %g s (unstable structure or inflow?)",
                       dyn->time + (k + 1) * dt);
-            return -1;
+            return CORE_STEP_FAILED;
         }
     }
     dyn->time += h;

@@ -26,6 +26,9 @@
 #define CORE_MAX_NODES 512       /* lift nodes (= drag nodes) of the correction grid */
 #define CORE_MAX_AXIS_NODES 64   /* nodes along alpha or eta */
 #define CORE_MAX_OUT_STATIONS 16
+/* Internal sub-steps allowed in one core_do_step: a longer communication step is refused
+ * (bounded run time per call; at the default 0.02 s internal step, 200 s of simulation). */
+#define CORE_MAX_SUBSTEPS 10000
 
 /* Variable ids of the core.  The build script (calib/fmu/build.py) parses this enum:
  * keep one id per line, spelled CV_<NAME>. */
@@ -191,7 +194,11 @@ int core_set(RotorCore *core, CoreVar var, int index, double value);
  * quasi-steady equilibrium at start_time. 0 on success, -1 on error (logged). */
 int core_initialize(RotorCore *core, double start_time);
 
-/* Advance by h [s] with internal sub-steps. 0 on success, -1 on error (logged). */
+/* Advance by h [s] with at most CORE_MAX_SUBSTEPS internal sub-steps. Returns 0 on
+ * success, CORE_STEP_REFUSED (nothing changed: bad h, inputs, too many sub-steps) or
+ * CORE_STEP_FAILED (non-finite loads part-way: the state is unusable); logged. */
+#define CORE_STEP_REFUSED (-1)
+#define CORE_STEP_FAILED (-2)
 int core_do_step(RotorCore *core, double h);
 
 #endif

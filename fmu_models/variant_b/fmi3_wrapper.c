@@ -12,43 +12,35 @@
 #include <string.h>
 
 #include "fmi3Functions.h"
-#include "fmu_common.h"
+#include "fmu_slave.h"
 #include "fmu_variables.h"
 
-typedef enum { MODE_INSTANTIATED, MODE_INIT, MODE_STEP, MODE_TERMINATED, MODE_ERROR } Mode;
-
 typedef struct {
-    RotorCore *core;
+    FmuSlave slave;                 /* everything FMI-version independent */
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
-    char name[128];
     int logging;
-    Mode mode;
-    double start_time;
 } Instance;
 
-typedef struct {
-    CoreDynamic dyn;
-    Mode mode;
-    double start_time;
-} Snapshot;
-
-static void log_core(void *env, int level, const char *message)
+static void log_message(void *env, int level, const char *message)
 {
     Instance *inst = (Instance *)env;
     fmi3Status status = level >= 2 ? fmi3Error : (level == 1 ? fmi3Warning : fmi3OK);
     if (!inst->log) return;
     if (level == 0 && !inst->logging) return;
-    inst->log(inst->env, status, level >= 2 ? "logStatusError" : "logEvents", message);
+    inst->log(inst->env, status,
+              level >= 2 ? "logStatusError" : (level == 1 ? "logStatusWarning" : "logEvents"), message);
 }
 
-static fmi3Status fail(Instance *inst, const char *fmt, const char *arg)
+static fmi3Status status_of(int rc) { return rc == 0 ? fmi3OK : fmi3Error; }
+
+static fmi3Status fail(fmi3Instance instance, const char *message)
 {
-    char buf[512];
-    snprintf(buf, sizeof buf, fmt, arg ? arg : "");
-    log_core(inst, 2, buf);
+    log_message(instance, 2, message);
     return fmi3Error;
 }
+
+#define SLAVE(c) (&((Instance *)(c))->slave)
 
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
@@ -94,201 +86,110 @@ fmi3Instance fmi3InstantiateCoSimulation(
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate)
 {
     Instance *inst;
-    (void)visible; (void)eventModeUsed; (void)earlyReturnAllowed;
+    (void)instanceName; (void)visible; (void)eventModeUsed; (void)earlyReturnAllowed;
     (void)requiredIntermediateVariables; (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
     inst = (Instance *)calloc(1, sizeof(Instance));
     if (!inst) return NULL;
     inst->env = instanceEnvironment;
     inst->log = logMessage;
     inst->logging = loggingOn ? 1 : 0;
-    snprintf(inst->name, sizeof inst->name, "%s", instanceName ? instanceName : "rotor");
-    if (!instantiationToken || strcmp(instantiationToken, FMU_INSTANTIATION_TOKEN) != 0) {
-        fail(inst, "instantiation token mismatch: got '%s', the binary was built for "
-             FMU_INSTANTIATION_TOKEN, instantiationToken ? instantiationToken : "(null)");
+    if (fmu_slave_create(&inst->slave, instantiationToken, resourcePath, FMU_VARS, FMU_N_VARS,
+                         FMU_INSTANTIATION_TOKEN, log_message, inst) != 0) {
         free(inst);
         return NULL;
     }
-    if (!resourcePath || !resourcePath[0]) {
-        fail(inst, "no resource path given%s", NULL);
-        free(inst);
-        return NULL;
-    }
-    inst->core = core_create(resourcePath, log_core, inst);
-    if (!inst->core || fmu_check_table(inst->core, FMU_VARS, FMU_N_VARS) != 0 ||
-        fmu_apply_starts(inst->core, FMU_VARS, FMU_N_VARS) != 0) {
-        fail(inst, "instantiation failed (see the messages above)%s", NULL);
-        core_free(inst->core);
-        free(inst);
-        return NULL;
-    }
-    inst->mode = MODE_INSTANTIATED;
     return inst;
 }
 
 void fmi3FreeInstance(fmi3Instance instance)
 {
-    Instance *inst = (Instance *)instance;
-    if (!inst) return;
-    core_free(inst->core);
-    free(inst);
+    if (!instance) return;
+    fmu_slave_destroy(SLAVE(instance));
+    free(instance);
 }
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
                                        fmi3Float64 tolerance, fmi3Float64 startTime,
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
-    Instance *inst = (Instance *)instance;
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    if (!inst) return fmi3Error;
-    if (inst->mode != MODE_INSTANTIATED)
-        return fail(inst, "fmi3EnterInitializationMode: wrong state%s", NULL);
-    inst->start_time = startTime;
-    inst->mode = MODE_INIT;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    if (fmu_slave_set_start_time(SLAVE(instance), startTime) != 0) return fmi3Error;
+    return status_of(fmu_slave_enter_init(SLAVE(instance)));
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
-    Instance *inst = (Instance *)instance;
-    if (!inst) return fmi3Error;
-    if (inst->mode != MODE_INIT)
-        return fail(inst, "fmi3ExitInitializationMode: not in initialization mode%s", NULL);
-    if (core_initialize(inst->core, inst->start_time) != 0) {
-        inst->mode = MODE_ERROR;
-        return fail(inst, "initialization failed (see the messages above)%s", NULL);
-    }
-    inst->mode = MODE_STEP;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_exit_init(SLAVE(instance)));
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "event mode is not supported%s", NULL);
+    return fail(instance, "event mode is not supported");
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    Instance *inst = (Instance *)instance;
-    if (!inst) return fmi3Error;
-    inst->mode = MODE_TERMINATED;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_terminate(SLAVE(instance)));
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
-    Instance *inst = (Instance *)instance;
-    if (!inst) return fmi3Error;
-    memset(&inst->core->dyn, 0, sizeof inst->core->dyn);
-    if (fmu_apply_starts(inst->core, FMU_VARS, FMU_N_VARS) != 0)
-        return fail(inst, "reset failed%s", NULL);
-    inst->mode = MODE_INSTANTIATED;
-    inst->start_time = 0.0;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_reset(SLAVE(instance)));
 }
 
-/* ---- getters and setters ----------------------------------------------------- */
-static const FmuVar *lookup(Instance *inst, fmi3ValueReference vr, int type)
-{
-    const FmuVar *v = fmu_find(FMU_VARS, FMU_N_VARS, vr);
-    char buf[64];
-    if (!v) {
-        snprintf(buf, sizeof buf, "%u", vr);
-        fail(inst, "unknown value reference %s", buf);
-        return NULL;
-    }
-    if (v->type != type) {
-        fail(inst, "variable '%s' has another type than the one requested", v->name);
-        return NULL;
-    }
-    return v;
-}
-
-/* Read all elements of the variables vr into out (nValues in total). */
-static fmi3Status get_values(Instance *inst, const fmi3ValueReference vr[], size_t nvr, int type,
-                             double *out, size_t nValues)
-{
-    size_t i, j = 0;
-    int k;
-    for (i = 0; i < nvr; i++) {
-        const FmuVar *v = lookup(inst, vr[i], type);
-        if (!v) return fmi3Error;
-        for (k = 0; k < v->count; k++, j++) {
-            if (j >= nValues) return fail(inst, "value array too short for '%s'", v->name);
-            if (fmu_get(inst->core, v, k, &out[j]) != 0) return fmi3Error;
-        }
-    }
-    if (j != nValues) return fail(inst, "nValues does not match the variables' sizes%s", NULL);
-    return fmi3OK;
-}
-
-static fmi3Status set_values(Instance *inst, const fmi3ValueReference vr[], size_t nvr, int type,
-                             const double *in, size_t nValues)
-{
-    size_t i, j = 0;
-    int k;
-    for (i = 0; i < nvr; i++) {
-        const FmuVar *v = lookup(inst, vr[i], type);
-        if (!v) return fmi3Error;
-        if (v->kind == FK_OUTPUT || v->kind == FK_INDEPENDENT)
-            return fail(inst, "variable '%s' is not settable", v->name);
-        if (v->kind == FK_FIXED && inst->mode != MODE_INSTANTIATED && inst->mode != MODE_INIT)
-            return fail(inst, "fixed parameter '%s' can only be set before initialization ends",
-                        v->name);
-        if (inst->mode == MODE_TERMINATED || inst->mode == MODE_ERROR)
-            return fail(inst, "cannot set '%s': the instance is terminated or in error", v->name);
-        for (k = 0; k < v->count; k++, j++) {
-            if (j >= nValues) return fail(inst, "value array too short for '%s'", v->name);
-            if (fmu_set(inst->core, v, k, in[j]) != 0) return fmi3Error;
-        }
-    }
-    if (j != nValues) return fail(inst, "nValues does not match the variables' sizes%s", NULL);
-    return fmi3OK;
-}
-
+/* ---- getters and setters (arrays: all elements in order; sets are atomic) -------------- */
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                           fmi3Float64 values[], size_t nValues)
 {
     if (!instance) return fmi3Error;
-    return get_values((Instance *)instance, vr, nvr, FT_REAL, values, nValues);
+    return status_of(fmu_slave_get(SLAVE(instance), vr, nvr, FT_REAL, values, nValues));
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                           const fmi3Float64 values[], size_t nValues)
 {
     if (!instance) return fmi3Error;
-    return set_values((Instance *)instance, vr, nvr, FT_REAL, values, nValues);
+    return status_of(fmu_slave_set(SLAVE(instance), vr, nvr, FT_REAL, values, nValues));
 }
 
-/* Int32 and Boolean go through a double buffer (few values; selectors and switches). */
-#define SMALL_BUFFER 256
+/* Int32 and Boolean go through a double buffer (few values: selectors and switches). */
 #define CONVERTING_ACCESSORS(Name, CType, FT, TO_C)                                             \
     fmi3Status fmi3Get##Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
                              CType values[], size_t nValues)                                     \
     {                                                                                            \
-        double buf[SMALL_BUFFER];                                                                \
+        double *buf;                                                                             \
         size_t i;                                                                                \
-        fmi3Status s;                                                                            \
+        int rc;                                                                                  \
         if (!instance) return fmi3Error;                                                         \
-        if (nValues > SMALL_BUFFER)                                                              \
-            return fail((Instance *)instance, "too many values requested at once%s", NULL);      \
-        s = get_values((Instance *)instance, vr, nvr, FT, buf, nValues);                         \
-        for (i = 0; s == fmi3OK && i < nValues; i++) values[i] = TO_C(buf[i]);                   \
-        return s;                                                                                \
+        if (nvr == 0 && nValues == 0) return fmi3OK;                                             \
+        if (!(buf = (double *)malloc((nValues ? nValues : 1) * sizeof(double)))) return fmi3Error; \
+        rc = fmu_slave_get(SLAVE(instance), vr, nvr, FT, buf, nValues);                          \
+        for (i = 0; rc == 0 && i < nValues; i++) values[i] = TO_C(buf[i]);                       \
+        free(buf);                                                                               \
+        return status_of(rc);                                                                    \
     }                                                                                            \
     fmi3Status fmi3Set##Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
                              const CType values[], size_t nValues)                               \
     {                                                                                            \
-        double buf[SMALL_BUFFER];                                                                \
+        double *buf;                                                                             \
         size_t i;                                                                                \
+        int rc;                                                                                  \
         if (!instance) return fmi3Error;                                                         \
-        if (nValues > SMALL_BUFFER)                                                              \
-            return fail((Instance *)instance, "too many values set at once%s", NULL);            \
+        if (nvr == 0 && nValues == 0) return fmi3OK;                                             \
+        if (nValues > 0 && !values) return fail(instance, "null value array");                   \
+        if (!(buf = (double *)malloc((nValues ? nValues : 1) * sizeof(double)))) return fmi3Error; \
         for (i = 0; i < nValues; i++) buf[i] = (double)values[i];                                \
-        return set_values((Instance *)instance, vr, nvr, FT, buf, nValues);                      \
+        rc = fmu_slave_set(SLAVE(instance), vr, nvr, FT, buf, nValues);                          \
+        free(buf);                                                                               \
+        return status_of(rc);                                                                    \
     }
 
-#define TO_INT32(x) ((fmi3Int32)(x))
+#define TO_INT32(x) ((fmi3Int32)fmu_to_int(x))
 #define TO_BOOL(x) ((x) != 0.0 ? fmi3True : fmi3False)
 CONVERTING_ACCESSORS(Int32, fmi3Int32, FT_INTEGER, TO_INT32)
 CONVERTING_ACCESSORS(Boolean, fmi3Boolean, FT_BOOLEAN, TO_BOOL)
@@ -301,7 +202,7 @@ CONVERTING_ACCESSORS(Boolean, fmi3Boolean, FT_BOOLEAN, TO_BOOL)
         (void)vr; (void)values; (void)nValues;                                                   \
         if (!instance) return fmi3Error;                                                         \
         if (nvr == 0) return fmi3OK;                                                             \
-        return fail((Instance *)instance, "this FMU has no " #Name " variables%s", NULL);        \
+        return fail(instance, "this FMU has no " #Name " variables");        \
     }                                                                                            \
     fmi3Status fmi3Set##Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
                              const CType values[], size_t nValues)                               \
@@ -309,7 +210,7 @@ CONVERTING_ACCESSORS(Boolean, fmi3Boolean, FT_BOOLEAN, TO_BOOL)
         (void)vr; (void)values; (void)nValues;                                                   \
         if (!instance) return fmi3Error;                                                         \
         if (nvr == 0) return fmi3OK;                                                             \
-        return fail((Instance *)instance, "this FMU has no " #Name " variables%s", NULL);        \
+        return fail(instance, "this FMU has no " #Name " variables");        \
     }
 
 UNUSED_ACCESSORS(Float32, fmi3Float32)
@@ -328,7 +229,7 @@ fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference vr[], s
     (void)vr; (void)valueSizes; (void)values; (void)nValues;
     if (!instance) return fmi3Error;
     if (nvr == 0) return fmi3OK;
-    return fail((Instance *)instance, "this FMU has no Binary variables%s", NULL);
+    return fail(instance, "this FMU has no Binary variables");
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -337,7 +238,7 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference vr[], s
     (void)vr; (void)valueSizes; (void)values; (void)nValues;
     if (!instance) return fmi3Error;
     if (nvr == 0) return fmi3OK;
-    return fail((Instance *)instance, "this FMU has no Binary variables%s", NULL);
+    return fail(instance, "this FMU has no Binary variables");
 }
 
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -346,7 +247,7 @@ fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     (void)vr; (void)values;
     if (!instance) return fmi3Error;
     if (nvr == 0) return fmi3OK;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -355,7 +256,7 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     (void)vr; (void)values;
     if (!instance) return fmi3Error;
     if (nvr == 0) return fmi3OK;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 /* ---- dependencies, state, derivatives ------------------------------------------ */
@@ -364,7 +265,7 @@ fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueR
 {
     (void)vr; (void)nDependencies;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "variable dependencies are not provided%s", NULL);
+    return fail(instance, "variable dependencies are not provided");
 }
 
 fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference dependent,
@@ -376,75 +277,48 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
     (void)dependent; (void)elementIndicesOfDependent; (void)independents;
     (void)elementIndicesOfIndependents; (void)dependencyKinds; (void)nDependencies;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "variable dependencies are not provided%s", NULL);
+    return fail(instance, "variable dependencies are not provided");
 }
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *state)
 {
-    Instance *inst = (Instance *)instance;
-    Snapshot *s;
-    if (!inst || !state) return fmi3Error;
-    s = (Snapshot *)(*state ? *state : malloc(sizeof(Snapshot)));
-    if (!s) return fail(inst, "out of memory saving the FMU state%s", NULL);
-    s->dyn = inst->core->dyn;
-    s->mode = inst->mode;
-    s->start_time = inst->start_time;
-    *state = s;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_get_state(SLAVE(instance), state));
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState state)
 {
-    Instance *inst = (Instance *)instance;
-    const Snapshot *s = (const Snapshot *)state;
-    if (!inst) return fmi3Error;
-    if (!s) return fail(inst, "fmi3SetFMUState: null state%s", NULL);
-    inst->core->dyn = s->dyn;
-    inst->mode = s->mode;
-    inst->start_time = s->start_time;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_set_state(SLAVE(instance), state));
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *state)
 {
     (void)instance;
-    if (state) {
-        free(*state);
-        *state = NULL;
-    }
+    fmu_slave_free_state(state);
     return fmi3OK;
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState state, size_t *size)
 {
-    (void)instance; (void)state;
-    *size = sizeof(Snapshot);
+    (void)state;
+    if (!instance || !size) return fmi3Error;
+    *size = fmu_slave_state_size();
     return fmi3OK;
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState state,
                                  fmi3Byte serializedState[], size_t size)
 {
-    Instance *inst = (Instance *)instance;
-    if (!inst || !state) return fmi3Error;
-    if (size < sizeof(Snapshot)) return fail(inst, "serialization buffer too small%s", NULL);
-    memcpy(serializedState, state, sizeof(Snapshot));
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_serialize_state(SLAVE(instance), state, serializedState, size));
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
                                    size_t size, fmi3FMUState *state)
 {
-    Instance *inst = (Instance *)instance;
-    Snapshot *s;
-    if (!inst || !state) return fmi3Error;
-    if (size != sizeof(Snapshot))
-        return fail(inst, "serialized state has the wrong size (another build?)%s", NULL);
-    s = (Snapshot *)malloc(sizeof(Snapshot));
-    if (!s) return fail(inst, "out of memory restoring the FMU state%s", NULL);
-    memcpy(s, serializedState, sizeof(Snapshot));
-    *state = s;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_deserialize_state(SLAVE(instance), serializedState, size, state));
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
@@ -455,7 +329,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
     (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed;
     (void)sensitivity; (void)nSensitivity;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "directional derivatives are not provided%s", NULL);
+    return fail(instance, "directional derivatives are not provided");
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],
@@ -466,7 +340,7 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueRefere
     (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed;
     (void)sensitivity; (void)nSensitivity;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "adjoint derivatives are not provided%s", NULL);
+    return fail(instance, "adjoint derivatives are not provided");
 }
 
 /* ---- modes this FMU does not have ------------------------------------------------ */
@@ -474,7 +348,7 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueRefere
     fmi3Status fmi3##Name(fmi3Instance instance)                                                 \
     {                                                                                            \
         if (!instance) return fmi3Error;                                                         \
-        return fail((Instance *)instance, "fmi3" #Name " is not supported by this FMU%s", NULL);  \
+        return fail(instance, "fmi3" #Name " is not supported by this FMU");  \
     }
 
 UNSUPPORTED_MODE(EnterConfigurationMode)
@@ -487,7 +361,7 @@ fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReferenc
 {
     (void)vr; (void)nvr; (void)intervals; (void)qualifiers;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -496,7 +370,7 @@ fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReferen
 {
     (void)vr; (void)nvr; (void)counters; (void)resolutions; (void)qualifiers;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -504,7 +378,7 @@ fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference v
 {
     (void)vr; (void)nvr; (void)shifts;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -512,7 +386,7 @@ fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
 {
     (void)vr; (void)nvr; (void)counters; (void)resolutions;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -520,7 +394,7 @@ fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance, const fmi3ValueReferenc
 {
     (void)vr; (void)nvr; (void)intervals;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -528,7 +402,7 @@ fmi3Status fmi3SetIntervalFraction(fmi3Instance instance, const fmi3ValueReferen
 {
     (void)vr; (void)nvr; (void)counters; (void)resolutions;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -536,7 +410,7 @@ fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference v
 {
     (void)vr; (void)nvr; (void)shifts;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -544,7 +418,7 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
 {
     (void)vr; (void)nvr; (void)counters; (void)resolutions;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "this FMU has no clocks%s", NULL);
+    return fail(instance, "this FMU has no clocks");
 }
 
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
@@ -556,7 +430,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     (void)discreteStatesNeedUpdate; (void)terminateSimulation; (void)nominalsOfContinuousStatesChanged;
     (void)valuesOfContinuousStatesChanged; (void)nextEventTimeDefined; (void)nextEventTime;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "event mode is not supported%s", NULL);
+    return fail(instance, "event mode is not supported");
 }
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
@@ -564,14 +438,14 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
 {
     (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "model exchange is not supported%s", NULL);
+    return fail(instance, "model exchange is not supported");
 }
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
 {
     (void)time;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "model exchange is not supported%s", NULL);
+    return fail(instance, "model exchange is not supported");
 }
 
 #define ME_ARRAY_STUB(Name, CType)                                                               \
@@ -579,7 +453,7 @@ fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time)
     {                                                                                            \
         (void)values; (void)n;                                                                   \
         if (!instance) return fmi3Error;                                                         \
-        return fail((Instance *)instance, "model exchange is not supported%s", NULL);            \
+        return fail(instance, "model exchange is not supported");            \
     }
 ME_ARRAY_STUB(SetContinuousStates, const fmi3Float64)
 ME_ARRAY_STUB(GetContinuousStateDerivatives, fmi3Float64)
@@ -604,10 +478,9 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *n)
 /* ---- co-simulation ------------------------------------------------------------ */
 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
 {
-    Instance *inst = (Instance *)instance;
-    if (!inst) return fmi3Error;
-    if (inst->mode != MODE_STEP)
-        return fail(inst, "fmi3EnterStepMode: the instance is not initialized%s", NULL);
+    if (!instance) return fmi3Error;
+    if (SLAVE(instance)->mode != FMU_MODE_STEP)
+        return fail(instance, "fmi3EnterStepMode: the instance is not initialized");
     return fmi3OK;
 }
 
@@ -616,7 +489,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
 {
     (void)vr; (void)nvr; (void)orders; (void)values; (void)nValues;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "output derivatives are not supported%s", NULL);
+    return fail(instance, "output derivatives are not supported");
 }
 
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
@@ -624,21 +497,15 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
                       fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
 {
-    Instance *inst = (Instance *)instance;
-    (void)currentCommunicationPoint; (void)noSetFMUStatePriorToCurrentPoint;
-    if (!inst) return fmi3Error;
+    int rc;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!instance) return fmi3Error;
     if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (earlyReturn) *earlyReturn = fmi3False;
-    if (inst->mode != MODE_STEP)
-        return fail(inst, "fmi3DoStep: the instance is not initialized (or in error)%s", NULL);
-    if (core_do_step(inst->core, communicationStepSize) != 0) {
-        inst->mode = MODE_ERROR;
-        if (lastSuccessfulTime) *lastSuccessfulTime = currentCommunicationPoint;
-        return fail(inst, "step failed (see the messages above)%s", NULL);
-    }
-    if (lastSuccessfulTime) *lastSuccessfulTime = inst->core->dyn.time;
-    return fmi3OK;
+    rc = fmu_slave_do_step(SLAVE(instance), currentCommunicationPoint, communicationStepSize);
+    if (lastSuccessfulTime) *lastSuccessfulTime = SLAVE(instance)->core->dyn.time;
+    return status_of(rc);
 }
 
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
@@ -646,5 +513,5 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
 {
     (void)clockReference; (void)activationTime;
     if (!instance) return fmi3Error;
-    return fail((Instance *)instance, "scheduled execution is not supported%s", NULL);
+    return fail(instance, "scheduled execution is not supported");
 }

@@ -1,0 +1,324 @@
+/* fmu_slave.c -- the FMI-version-independent half of both wrappers (see fmu_slave.h). */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "core_internal.h"
+#include "fmu_slave.h"
+
+void fmu_slave_logf(const FmuSlave *s, int level, const char *fmt, ...)
+{
+    char buf[1024];
+    va_list ap;
+    if (!s || !s->log) return;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    s->log(s->log_env, level, buf);
+}
+
+int fmu_slave_create(FmuSlave *s, const char *given_token, const char *resource_dir,
+                     const FmuVar *vars, int n_vars, const char *token, CoreLogger log,
+                     void *log_env)
+{
+    memset(s, 0, sizeof *s);
+    s->vars = vars;
+    s->n_vars = n_vars;
+    s->token = token;
+    s->log = log;
+    s->log_env = log_env;
+    if (!given_token || strcmp(given_token, token) != 0) {
+        fmu_slave_logf(s, 2, "GUID / instantiation token mismatch: got '%s', the binary was built "
+                       "for %s", given_token ? given_token : "(null)", token);
+        return -1;
+    }
+    if (!resource_dir || !resource_dir[0]) {
+        fmu_slave_logf(s, 2, "no resource location given; the FMU needs resources/rotor.dat");
+        return -1;
+    }
+    s->core = core_create(resource_dir, log, log_env);
+    if (!s->core || fmu_check_table(s->core, vars, n_vars) != 0 ||
+        fmu_apply_starts(s->core, vars, n_vars) != 0) {
+        fmu_slave_logf(s, 2, "instantiation failed (see the messages above)");
+        core_free(s->core);
+        s->core = NULL;
+        return -1;
+    }
+    s->mode = FMU_MODE_INSTANTIATED;
+    return 0;
+}
+
+void fmu_slave_destroy(FmuSlave *s)
+{
+    core_free(s->core);
+    s->core = NULL;
+}
+
+/* ---- life cycle -------------------------------------------------------------------- */
+int fmu_slave_set_start_time(FmuSlave *s, double start_time)
+{
+    if (s->mode != FMU_MODE_INSTANTIATED) {
+        fmu_slave_logf(s, 2, "the start time can only be set after instantiation");
+        return -1;
+    }
+    if (!isfinite(start_time)) {
+        fmu_slave_logf(s, 2, "start time must be finite, got %g", start_time);
+        return -1;
+    }
+    s->start_time = start_time;
+    return 0;
+}
+
+int fmu_slave_enter_init(FmuSlave *s)
+{
+    if (s->mode != FMU_MODE_INSTANTIATED) {
+        fmu_slave_logf(s, 2, "initialization mode can only be entered after instantiation or reset");
+        return -1;
+    }
+    s->mode = FMU_MODE_INIT;
+    return 0;
+}
+
+int fmu_slave_exit_init(FmuSlave *s)
+{
+    if (s->mode != FMU_MODE_INIT) {
+        fmu_slave_logf(s, 2, "exit initialization mode: the instance is not in initialization mode");
+        return -1;
+    }
+    if (core_initialize(s->core, s->start_time) != 0) {
+        s->mode = FMU_MODE_ERROR;
+        fmu_slave_logf(s, 2, "initialization failed (see the messages above)");
+        return -1;
+    }
+    s->mode = FMU_MODE_STEP;
+    fmu_slave_logf(s, 0, "initialized at t = %g s", s->start_time);
+    return 0;
+}
+
+int fmu_slave_terminate(FmuSlave *s)
+{
+    s->mode = FMU_MODE_TERMINATED;
+    return 0;
+}
+
+int fmu_slave_reset(FmuSlave *s)
+{
+    memset(&s->core->dyn, 0, sizeof s->core->dyn);
+    if (fmu_apply_starts(s->core, s->vars, s->n_vars) != 0) {
+        fmu_slave_logf(s, 2, "reset failed (see the messages above)");
+        s->mode = FMU_MODE_ERROR;
+        return -1;
+    }
+    s->mode = FMU_MODE_INSTANTIATED;
+    s->start_time = 0.0;
+    return 0;
+}
+
+/* ---- get / set ------------------------------------------------------------------------ */
+static const FmuVar *lookup(const FmuSlave *s, unsigned int vr, int type)
+{
+    const FmuVar *v = fmu_find(s->vars, s->n_vars, vr);
+    if (!v) {
+        fmu_slave_logf(s, 2, "unknown value reference %u", vr);
+        return NULL;
+    }
+    if (v->type != type) {
+        fmu_slave_logf(s, 2, "variable '%s' has another type than the one requested", v->name);
+        return NULL;
+    }
+    return v;
+}
+
+int fmu_slave_get(FmuSlave *s, const unsigned int vr[], size_t nvr, int type, double values[],
+                  size_t n_values)
+{
+    size_t i, j = 0;
+    int k;
+    if (nvr > 0 && (!vr || !values)) {
+        fmu_slave_logf(s, 2, "null value-reference or value array");
+        return -1;
+    }
+    for (i = 0; i < nvr; i++) {
+        const FmuVar *v = lookup(s, vr[i], type);
+        if (!v) return -1;
+        if ((size_t)v->count > n_values - j) {
+            fmu_slave_logf(s, 2, "value array too short for '%s' (%zu values given)", v->name, n_values);
+            return -1;
+        }
+        for (k = 0; k < v->count; k++, j++)
+            if (fmu_get(s->core, v, k, &values[j]) != 0) return -1;
+    }
+    if (j != n_values) {
+        fmu_slave_logf(s, 2, "%zu values given for variables with %zu elements", n_values, j);
+        return -1;
+    }
+    return 0;
+}
+
+/* May v be set in the current mode? */
+static int settable_now(const FmuSlave *s, const FmuVar *v)
+{
+    if (v->kind == FK_OUTPUT || v->kind == FK_INDEPENDENT) {
+        fmu_slave_logf(s, 2, "variable '%s' is an output and cannot be set", v->name);
+        return 0;
+    }
+    if (s->mode == FMU_MODE_TERMINATED || s->mode == FMU_MODE_ERROR) {
+        fmu_slave_logf(s, 2, "cannot set '%s': the instance is terminated or in error", v->name);
+        return 0;
+    }
+    if (v->kind == FK_FIXED && s->mode != FMU_MODE_INSTANTIATED && s->mode != FMU_MODE_INIT) {
+        fmu_slave_logf(s, 2, "fixed parameter '%s' can only be set before initialization ends", v->name);
+        return 0;
+    }
+    return 1;
+}
+
+int fmu_slave_set(FmuSlave *s, const unsigned int vr[], size_t nvr, int type,
+                  const double values[], size_t n_values)
+{
+    size_t i, j = 0;
+    int k;
+    if (nvr > 0 && (!vr || !values)) {
+        fmu_slave_logf(s, 2, "null value-reference or value array");
+        return -1;
+    }
+    for (i = 0; i < nvr; i++) {             /* 1. validate everything */
+        const FmuVar *v = lookup(s, vr[i], type);
+        if (!v || !settable_now(s, v)) return -1;
+        if ((size_t)v->count > n_values - j) {
+            fmu_slave_logf(s, 2, "value array too short for '%s' (%zu values given)", v->name, n_values);
+            return -1;
+        }
+        for (k = 0; k < v->count; k++, j++)
+            if (fmu_check_range(s->core, v, k, values[j]) != 0) return -1;
+    }
+    if (j != n_values) {
+        fmu_slave_logf(s, 2, "%zu values given for variables with %zu elements; nothing set", n_values, j);
+        return -1;
+    }
+    for (i = 0, j = 0; i < nvr; i++) {      /* 2. write */
+        const FmuVar *v = fmu_find(s->vars, s->n_vars, vr[i]);
+        for (k = 0; k < v->count; k++, j++)
+            if (fmu_set(s->core, v, k, values[j]) != 0) return -1;
+    }
+    return 0;
+}
+
+/* ---- stepping ---------------------------------------------------------------------------- */
+int fmu_slave_do_step(FmuSlave *s, double current_time, double h)
+{
+    double now = s->core->dyn.time;
+    int rc;
+    if (s->mode != FMU_MODE_STEP) {
+        fmu_slave_logf(s, 2, "doStep: the instance is not initialized (or terminated or in error)");
+        return -1;
+    }
+    if (!(fabs(current_time - now) <= FMU_TIME_RTOL * fmax(1.0, fabs(now)))) {
+        fmu_slave_logf(s, 2, "doStep: currentCommunicationPoint %.17g s is not the FMU's time "
+                       "%.17g s (tolerance %g relative); steps must continue where the last one "
+                       "ended (restore a saved FMU state to go back)", current_time, now,
+                       FMU_TIME_RTOL);
+        return -1;
+    }
+    s->core->dyn.time = current_time;
+    rc = core_do_step(s->core, h);
+    if (rc == CORE_STEP_FAILED) {
+        s->mode = FMU_MODE_ERROR;
+        fmu_slave_logf(s, 2, "step failed part-way (see the messages above); reset or restore a state");
+    }
+    return rc == 0 ? 0 : -1;
+}
+
+/* ---- FMU state ---------------------------------------------------------------------------- */
+typedef struct {
+    CoreDynamic dyn;
+    FmuMode mode;
+    double start_time;
+} Snapshot;
+
+int fmu_slave_get_state(FmuSlave *s, void **state)
+{
+    Snapshot *snap;
+    if (!state) {
+        fmu_slave_logf(s, 2, "get FMU state: null state pointer");
+        return -1;
+    }
+    snap = (Snapshot *)(*state ? *state : malloc(sizeof(Snapshot)));
+    if (!snap) {
+        fmu_slave_logf(s, 2, "out of memory saving the FMU state");
+        return -1;
+    }
+    snap->dyn = s->core->dyn;
+    snap->mode = s->mode;
+    snap->start_time = s->start_time;
+    *state = snap;
+    return 0;
+}
+
+int fmu_slave_set_state(FmuSlave *s, const void *state)
+{
+    const Snapshot *snap = (const Snapshot *)state;
+    if (!snap) {
+        fmu_slave_logf(s, 2, "set FMU state: null state");
+        return -1;
+    }
+    s->core->dyn = snap->dyn;
+    s->mode = snap->mode;
+    s->start_time = snap->start_time;
+    return 0;
+}
+
+void fmu_slave_free_state(void **state)
+{
+    if (state) {
+        free(*state);
+        *state = NULL;
+    }
+}
+
+size_t fmu_slave_state_size(void) { return sizeof(Snapshot); }
+
+int fmu_slave_serialize_state(FmuSlave *s, const void *state, unsigned char *bytes, size_t size)
+{
+    if (!state || !bytes) {
+        fmu_slave_logf(s, 2, "serialize FMU state: null state or buffer");
+        return -1;
+    }
+    if (size < sizeof(Snapshot)) {
+        fmu_slave_logf(s, 2, "serialization buffer too small (%zu < %zu bytes)", size, sizeof(Snapshot));
+        return -1;
+    }
+    memcpy(bytes, state, sizeof(Snapshot));
+    return 0;
+}
+
+int fmu_slave_deserialize_state(FmuSlave *s, const unsigned char *bytes, size_t size, void **state)
+{
+    Snapshot *snap;
+    if (!bytes || !state) {
+        fmu_slave_logf(s, 2, "deserialize FMU state: null bytes or state pointer");
+        return -1;
+    }
+    if (size != sizeof(Snapshot)) {
+        fmu_slave_logf(s, 2, "serialized state has the wrong size (another build?)");
+        return -1;
+    }
+    snap = (Snapshot *)malloc(sizeof(Snapshot));
+    if (!snap) {
+        fmu_slave_logf(s, 2, "out of memory restoring the FMU state");
+        return -1;
+    }
+    memcpy(snap, bytes, sizeof(Snapshot));
+    *state = snap;
+    return 0;
+}
+
+int fmu_to_int(double x)
+{
+    if (!(x == x)) return 0;
+    if (x >= 2147483647.0) return 2147483647;
+    if (x <= -2147483648.0) return -2147483647 - 1;
+    return (int)x;
+}
