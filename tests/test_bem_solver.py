@@ -115,17 +115,56 @@ def test_axisymmetric_case_independent_of_sector_count():
 
 
 def test_momentum_limits_without_losses():
-    """Without losses, drag and wake rotation the local thrust equals momentum: dT = 4πρ r V² a(1-a) dr."""
+    """Without losses and wake rotation the local thrust equals momentum: dT = 4πρ r V² a(1-a) dr.
+
+    Exact (drag included) because the same c_n drives the axial induction and the normal load."""
     rotor = synthetic_rotor(n_stations=30)
-    s = BemSettings(tip_loss=False, hub_loss=False, use_drag=False, wake_rotation=False)
+    s = BemSettings(tip_loss=False, hub_loss=False, wake_rotation=False)
     res = solve_bem(rotor, OperatingConditions([8.0], [14.0], [2.0]), s)
     a = res.sections["a"][0, 0]
     r = rotor.r
     inner = (r > rotor.hub_radius * 1.01) & (r < rotor.tip_radius * 0.99) & (a < 0.4)
-    # blade element thrust per unit length (all blades) with use_drag=False: N' B = ½ρW²c cl cosφ B
-    npb = rotor.n_blades * res.sections["Np"][0, 0]
+    npb = rotor.n_blades * res.sections["Np"][0, 0]          # N' B = ½ρW²c c_n B
     momentum = 4 * np.pi * 1.225 * r * 8.0 ** 2 * a * (1 - a)
     np.testing.assert_allclose(npb[inner], momentum[inner], rtol=1e-6)
+
+
+@pytest.mark.parametrize("axial,tangential", [(True, True), (False, True), (True, False), (False, False)])
+def test_drag_switches_act_on_the_induction_only(axial, tangential):
+    """AeroDyn's AIDrag / TIDrag: each switch removes C_D from its own induction equation only;
+    the loads are rebuilt by hand from φ, a, a' and the polar and always contain the drag."""
+    rotor = synthetic_rotor(n_stations=25)
+    wind, rpm, rho = 8.0, 14.0, 1.225
+    s = BemSettings(tip_loss=False, hub_loss=False, drag_in_axial_induction=axial,
+                    drag_in_tangential_induction=tangential, use_tilt=False)
+    res = solve_bem(rotor, OperatingConditions([wind], [rpm], [1.0], rho), s)
+    assert res.status[0] == Status.CONVERGED, res.messages[0]
+    sec = {k: v[0, 0] for k, v in res.sections.items()}
+    r = rotor.r
+    inner = (r > rotor.hub_radius * 1.01) & (r < rotor.tip_radius * 0.99)
+    phi, a, ap, cl, cd = (sec[k][inner] for k in ("phi", "a", "ap", "cl", "cd"))
+    r, chord = r[inner], rotor.chord[inner]
+    sp, cp = np.sin(phi), np.cos(phi)
+    # loads from the kinematics (no precone, tilt or yaw: V_x = V, V_y = Ωr) and the full c_n, c_t
+    w2 = (wind * (1 - a)) ** 2 + (rpm * np.pi / 30 * r * (1 + ap)) ** 2
+    q = 0.5 * rho * w2 * chord
+    np.testing.assert_allclose(sec["Np"][inner], q * (cl * cp + cd * sp), rtol=1e-10)
+    np.testing.assert_allclose(sec["Tp"][inner], q * (cl * sp - cd * cp), rtol=1e-10)
+    # the drag terms are not negligible here, so the load check above can tell them apart
+    assert np.max(np.abs(cd * cp / (cl * sp - cd * cp))) > 0.05
+    # induction from drag-free or full coefficients, each switch on its own equation (F = 1)
+    sigma = rotor.n_blades * chord / (2 * np.pi * r)
+    kappa = {d: sigma * (cl * cp + d * cd * sp) / (4 * sp ** 2) for d in (0, 1)}
+    kappa_p = {d: sigma * (cl * sp - d * cd * cp) / (4 * sp * cp) for d in (0, 1)}
+    mom = kappa[int(axial)] <= 2 / 3                       # momentum branch (not Buhl's)
+    assert mom.sum() >= 10
+    np.testing.assert_allclose(a[mom], (kappa[int(axial)] / (1 + kappa[int(axial)]))[mom], rtol=1e-10)
+    np.testing.assert_allclose(ap, kappa_p[int(tangential)] / (1 - kappa_p[int(tangential)]), rtol=1e-10)
+    # ... and not the other variant (the switches change the solution measurably)
+    other_a = kappa[1 - int(axial)] / (1 + kappa[1 - int(axial)])
+    other_ap = kappa_p[1 - int(tangential)] / (1 - kappa_p[1 - int(tangential)])
+    assert np.max(np.abs(other_a[mom] / a[mom] - 1)) > 1e-3
+    assert np.max(np.abs(other_ap / ap - 1)) > 1e-3
 
 
 def test_power_equals_torque_times_speed_and_coefficients():

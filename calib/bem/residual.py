@@ -26,6 +26,8 @@ velocities V_x (normal to the rotor plane) and V_y (in-plane), local solidity
 
 with λ_r = V_y / V_x. Loads per unit length N' = ½ρW²c c_n, T' = ½ρW²c c_t,
 W² = (V_x(1-a))² + (V_y(1+a'))².
+Drag can be left out of the induction alone, as AeroDyn's ``AIDrag`` / ``TIDrag``:
+κ then uses C_L cos φ, κ' uses C_L sin φ, while N', T' keep the full c_n, c_t.
 
 References
 ----------
@@ -80,7 +82,7 @@ def loss_factor(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
 
 
 def section_equations(phi, cl, cd, vx, vy, geo: SectionGeometry, *, tip_loss=True, hub_loss=True,
-                      use_drag=True, wake_rotation=True):
+                      drag_in_axial_induction=True, drag_in_tangential_induction=True, wake_rotation=True):
     """Residual and induction of the BEM section equations.
 
     Parameters
@@ -92,23 +94,35 @@ def section_equations(phi, cl, cd, vx, vy, geo: SectionGeometry, *, tip_loss=Tru
     vx, vy : array or Dual, shape (n,)
         Velocity normal to the rotor plane and in-plane (rotation) [m/s].
     geo : SectionGeometry
+    tip_loss, hub_loss : bool
+        Prandtl tip / hub loss factors.
+    drag_in_axial_induction, drag_in_tangential_induction : bool
+        Keep C_D in the force coefficient that drives κ (axial) / κ' (tangential induction),
+        AeroDyn's ``AIDrag`` / ``TIDrag``. They act on the induction only: the returned
+        ``cn``, ``ct`` (and hence the loads) always contain the drag.
+    wake_rotation : bool
+        Tangential induction a' (else a' = 0).
 
     Returns
     -------
     dict
-        ``residual`` [-], ``a``, ``ap`` (axial, tangential induction) [-], ``cn``, ``ct`` [-].
+        ``residual`` [-], ``a``, ``ap`` (axial, tangential induction) [-], ``cn``, ``ct``
+        (rotor axes, with drag) [-], ``F`` [-].
+
+    References
+    ----------
+    AeroDyn v15 user guide (J. Jonkman et al., NREL), input switches ``AIDrag``, ``TIDrag``;
+    CCBlade's ``useCd`` (Ning 2014) is the two switches set together.
     """
     s = dl.sin(phi)
     c = dl.cos(phi)
-    if use_drag:
-        cn = cl * c + cd * s
-        ct = cl * s - cd * c
-    else:
-        cn = cl * c
-        ct = cl * s
+    cn = cl * c + cd * s
+    ct = cl * s - cd * c
+    cn_induction = cn if drag_in_axial_induction else cl * c
+    ct_induction = ct if drag_in_tangential_induction else cl * s
     F = loss_factor(phi, geo, tip_loss, hub_loss)
-    k = geo.sigma * cn / (4.0 * F * s * s)
-    kp = geo.sigma * ct / (4.0 * F * s * c)
+    k = geo.sigma * cn_induction / (4.0 * F * s * s)
+    kp = geo.sigma * ct_induction / (4.0 * F * s * c)
     pos = dl.value(phi) > 0
     kv = dl.value(k)
     with np.errstate(all="ignore"):

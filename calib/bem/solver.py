@@ -35,8 +35,11 @@ class BemSettings:
     ----------
     tip_loss, hub_loss : bool
         Prandtl tip / hub loss factors.
-    use_drag : bool
-        Include drag in the induction equations (Ning 2014 recommends it).
+    drag_in_axial_induction, drag_in_tangential_induction : bool
+        Include C_D in the force coefficients that drive the axial (κ) and tangential (κ')
+        induction, separately (AeroDyn's ``AIDrag``, ``TIDrag``; CCBlade's ``useCd`` sets
+        both). Ning (2014) recommends drag in the induction. These switches act on the
+        induction only: the loads always contain the drag.
     wake_rotation : bool
         Tangential induction a'.
     n_sectors : int or None
@@ -52,7 +55,8 @@ class BemSettings:
 
     tip_loss: bool = True
     hub_loss: bool = True
-    use_drag: bool = True
+    drag_in_axial_induction: bool = True
+    drag_in_tangential_induction: bool = True
     wake_rotation: bool = True
     n_sectors: int | None = None
     shear_exponent: float = 0.0
@@ -277,7 +281,9 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     c_full = np.broadcast_to(rotor.chord, shape).reshape(-1)[sel]
     geo = SectionGeometry(r_full, c_full, rotor.n_blades * c_full / (2 * np.pi * r_full),
                           rotor.hub_radius, rotor.tip_radius, rotor.n_blades)
-    opts = dict(tip_loss=settings.tip_loss, hub_loss=settings.hub_loss, use_drag=settings.use_drag,
+    opts = dict(tip_loss=settings.tip_loss, hub_loss=settings.hub_loss,
+                drag_in_axial_induction=settings.drag_in_axial_induction,
+                drag_in_tangential_induction=settings.drag_in_tangential_induction,
                 wake_rotation=settings.wake_rotation)
 
     def coefficients(idx, phi):
