@@ -159,8 +159,8 @@ def _check_keys(table: dict, source: str) -> str:
             raise InputError(f"the {_LABEL[kind]} ({kind}) already defines {key}; remove it from [rotor] "
                              f"(one value per quantity).{hint}", source, None, _key(key))
         if key not in table and key not in carried:
-            raise InputError(f"required with {kind}: the {_LABEL[kind]} does not give the {_WHAT[key]}", source, None,
-                             _key(key))
+            raise InputError(f"required with {kind}: the {_LABEL[kind]} does not give the {_WHAT[key]}",
+                             source, None, _key(key))
     return kind
 
 
@@ -211,7 +211,8 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
                            reference_height=None if inflow is None else inflow.reference_height,
                            files=deck.files, notes=deck.notes)
 
-    geometry = dict(hub_radius=setup.get("hub_radius"), n_blades=setup.get("n_blades"), precone_deg=setup.get("precone"),
+    geometry = dict(hub_radius=setup.get("hub_radius"), n_blades=setup.get("n_blades"),
+                    precone_deg=setup.get("precone"),
                     tilt_deg=setup.get("tilt"), hub_height=setup.get("hub_height"))
 
     if kind == "aerodyn":
