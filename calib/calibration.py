@@ -26,7 +26,7 @@ counted in the result.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -42,6 +42,8 @@ from calib.truncation import loo_curve
 from calib.types import ParameterKind, nominal_vector
 
 NOISE_MODES = ("known", "ml", "repeats")
+AUTO_CHOICES = 2
+"""Linearizations at which ``sigma_bar = "auto"`` chooses the retained count; later ones keep it."""
 RETAIN_MODES = ("threshold", "all")
 
 
@@ -78,6 +80,10 @@ class CalibrationSettings:
         Relative cost decrease that ends a Gauss–Newton iteration.
     stability_cosine : float
         Principal-angle cosine above which two retained subspaces count as equal.
+    representation_error : bool
+        Add to the polar bands the variance of the true field between the nodes that the
+        hat functions cannot carry
+        (:meth:`calib.parametrizations.CorrectionField.representation_variance`).
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float
@@ -102,6 +108,7 @@ class CalibrationSettings:
     max_noise_iterations: int = 10
     tolerance: float = 1e-9
     stability_cosine: float = 0.98
+    representation_error: bool = True
     identified_ratio: float = 0.5
     confounded_share: float = 0.75
     band_confidence: float = 0.95
@@ -174,6 +181,7 @@ class Calibrator:
                                    for q in self.parameters], float)
         self.history: list[dict] = []
         self._curve = None
+        self._n_auto = 0
 
     # ------------------------------------------------------------------ setup
     def _effective_bounds(self):
@@ -261,10 +269,18 @@ class Calibrator:
         n_ch = len(self.channel_index)
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
         curve = loo_curve(lin.M, pseudo, n_ch, lin.ok, st.max_retained)
+        # the count is chosen afresh at the first AUTO_CHOICES linearizations, then kept, so
+        # that the re-linearization loop converges on a subspace instead of chasing a count
+        # that flips by one between nearly equal criterion values
+        self._n_auto += 1
+        if self._n_auto <= AUTO_CHOICES or self._curve is None:
+            self._curve = curve
+        else:
+            curve = replace(curve, chosen=min(self._curve.chosen, curve.n_retained[-1]))
+            self._curve = curve
         svd = svd_analysis(lin.M, np.inf)
         retained = np.zeros_like(svd.retained)
         retained[:curve.chosen] = svd.retained[:curve.chosen]
-        self._curve = curve
         return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, curve.sigma_bar, retained)
 
     def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
@@ -350,7 +366,8 @@ class Calibrator:
             multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
-                                               confidence=st.band_confidence)
+                                               confidence=st.band_confidence,
+                                               prior_std=self.prior_std if st.representation_error else None)
         return res
 
 

@@ -215,8 +215,41 @@ class CorrectionField:
         a, e = self.seen_points(evaluation)
         return np.asarray(a, float).reshape(-1), np.asarray(e, float).reshape(-1)
 
+    def representation_variance(self, alpha_deg, eta, block: str, prior_std: np.ndarray) -> np.ndarray:
+        """Variance of the true field between the nodes that the hat functions cannot carry [-²].
+
+        The shape functions interpolate the nodal values bilinearly; a true correction varies
+        between the nodes too. If the field at any point is as uncertain a priori as at a
+        node (variance σ_p², the block's mean prior variance) and independent of the nodes
+        beyond the interpolation, the part the interpolant cannot represent has variance
+
+        .. math::  σ_{rep}^2(α, η) = σ_p^2 \,(1 − Σ_i N_i(α, η)^2)
+
+        zero at the nodes, 0.75 σ_p² at a cell centre (bilinear hats). It is the roughest
+        field compatible with the node spacing, so the bands it widens are conservative
+        when the truth is smooth on the node scale.
+
+        Parameters
+        ----------
+        alpha_deg, eta : array_like, broadcastable
+        block : {"lift", "drag"}
+        prior_std : ndarray, shape (n_params,)
+            Prior 1-σ of every parameter [parameter unit].
+
+        Returns
+        -------
+        ndarray, flat over the broadcast shape
+        """
+        kind = ParameterKind.LIFT_CORRECTION if block == "lift" else ParameterKind.DRAG_CORRECTION
+        idx = [j for j, q in enumerate(self.parameters) if q.kind == kind]
+        if not idx or self.grid is None:
+            return np.zeros(np.broadcast(np.asarray(alpha_deg), np.asarray(eta)).size)
+        var_node = float(np.mean(np.asarray(prior_std, float)[idx] ** 2))
+        _, value, _ = self.grid.basis(alpha_deg, eta)
+        return (var_node * np.clip(1.0 - (value ** 2).sum(-1), 0.0, 1.0)).reshape(-1)
+
     def bands(self, p_hat: np.ndarray, cov_p: np.ndarray, cov_frozen: np.ndarray | None = None,
-              alpha_deg=None, eta=None, confidence: float = 0.95) -> dict:
+              alpha_deg=None, eta=None, confidence: float = 0.95, prior_std: np.ndarray | None = None) -> dict:
         """Corrected polars C = C₀ + ΔC(α, η; p̂) with two-sided confidence bands.
 
         Parameters
@@ -232,6 +265,9 @@ class CorrectionField:
         eta : array_like, shape (n_e,), optional
             Default: the η nodes.
         confidence : float
+        prior_std : ndarray, shape (n_params,), optional
+            With it, the representation variance (:meth:`representation_variance`) is added
+            to the bands and counted as prior.
 
         Returns
         -------
@@ -252,10 +288,12 @@ class CorrectionField:
         for block, letter in (("lift", "cl"), ("drag", "cd")):
             Bf = self.basis(A, E, block)
             out[f"d{letter}"] = (Bf @ p_hat).reshape(A.shape)
-            var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0).reshape(A.shape)
+            rep = self.representation_variance(A, E, block, prior_std).reshape(A.shape) if prior_std is not None \
+                else 0.0
+            var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0).reshape(A.shape) + rep
             out[f"d{letter}_half_width"] = z * np.sqrt(var)
             if cov_frozen is not None:
-                vf = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_frozen, Bf), 0.0).reshape(A.shape)
+                vf = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_frozen, Bf), 0.0).reshape(A.shape) + rep
                 out[f"d{letter}_prior_fraction"] = np.where(var > 0, vf / np.where(var > 0, var, 1.0), 1.0)
         if self.nominal_coefficients is not None:
             cl0, cd0 = self.nominal_coefficients(A, E)
@@ -263,7 +301,7 @@ class CorrectionField:
         return out
 
     def coverage(self, p_hat: np.ndarray, cov_p: np.ndarray, alpha_deg, eta, truth_dcl, truth_dcd,
-                 confidence: float = 0.95) -> dict:
+                 confidence: float = 0.95, prior_std: np.ndarray | None = None) -> dict:
         """Fraction of points (α, η) where the band contains a known true correction.
 
         Parameters
@@ -272,6 +310,8 @@ class CorrectionField:
             Points [deg], [-] (e.g. those the operating points reach).
         truth_dcl, truth_dcd : ndarray, shape (k,)
             True ΔC_L, ΔC_D there [-].
+        prior_std : ndarray, shape (n_params,), optional
+            Adds the representation variance, as :meth:`bands` does.
 
         Returns
         -------
@@ -283,7 +323,10 @@ class CorrectionField:
         for block, truth in (("lift", truth_dcl), ("drag", truth_dcd)):
             Bf = self.basis(alpha_deg, eta, block)
             est = Bf @ p_hat
-            sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0))
+            var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0)
+            if prior_std is not None:
+                var = var + self.representation_variance(alpha_deg, eta, block, prior_std)
+            sd = np.sqrt(var)
             out[block] = float(np.mean(np.abs(est - np.asarray(truth).reshape(-1)) <= z * sd)) if sd.size else \
                 float("nan")
         return out
