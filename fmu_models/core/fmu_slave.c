@@ -1,6 +1,7 @@
 /* fmu_slave.c -- the FMI-version-independent half of both wrappers (see fmu_slave.h). */
 #include <math.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -231,12 +232,134 @@ int fmu_slave_do_step(FmuSlave *s, double current_time, double h)
     return rc == 0 ? 0 : -1;
 }
 
-/* ---- FMU state ---------------------------------------------------------------------------- */
+/* ---- FMU state ----------------------------------------------------------------------------
+ * In memory and serialized alike: a header that identifies the build, then the payload.
+ *   magic "calib-rotor-state" | format | header and payload sizes | FNV-1a 64 checksum of the
+ *   payload | the build's GUID / instantiation token
+ * Restoring checks all of it, then every number of the payload (core_check_dynamic) and
+ * every settable variable against its range; a state of another build, a truncated or
+ * edited one, is refused with a message. The payload is a plain copy of the core's
+ * dynamic part (native byte order: a state moves between instances of one build on one
+ * platform, not between platforms). */
+#define STATE_MAGIC "calib-rotor-state"
+#define STATE_FORMAT 1u
+#define STATE_TOKEN_BYTES 64
+
+typedef struct {
+    char magic[24];
+    uint32_t format;
+    uint32_t header_bytes;
+    uint64_t payload_bytes;
+    uint64_t checksum;
+    char token[STATE_TOKEN_BYTES];
+} StateHeader;
+
 typedef struct {
     CoreDynamic dyn;
-    FmuMode mode;
+    int32_t mode;
+    int32_t reserved;
     double start_time;
+} StatePayload;
+
+typedef struct {
+    StateHeader head;
+    StatePayload body;
 } Snapshot;
+
+static uint64_t fnv1a64(const unsigned char *p, size_t n)
+{
+    uint64_t h = 14695981039346656037ull;
+    size_t i;
+    for (i = 0; i < n; i++) {
+        h ^= p[i];
+        h *= 1099511628211ull;
+    }
+    return h;
+}
+
+static void fill_snapshot(const FmuSlave *s, Snapshot *snap)
+{
+    memset(snap, 0, sizeof *snap);
+    memcpy(snap->head.magic, STATE_MAGIC, sizeof STATE_MAGIC);
+    snap->head.format = STATE_FORMAT;
+    snap->head.header_bytes = (uint32_t)sizeof(StateHeader);
+    snap->head.payload_bytes = (uint64_t)sizeof(StatePayload);
+    snprintf(snap->head.token, sizeof snap->head.token, "%s", s->token);
+    memcpy(&snap->body.dyn, &s->core->dyn, sizeof snap->body.dyn);
+    snap->body.mode = (int32_t)s->mode;
+    snap->body.start_time = s->start_time;
+    snap->head.checksum = fnv1a64((const unsigned char *)&snap->body, sizeof snap->body);
+}
+
+/* Every settable variable of the snapshot inside its range, Integer/Boolean integral. */
+static int check_ranges(const FmuSlave *s, const CoreDynamic *dyn)
+{
+    RotorCore *view = (RotorCore *)malloc(sizeof(RotorCore));
+    int i, k, rc = 0;
+    if (!view) {
+        fmu_slave_logf(s, 2, "out of memory checking the FMU state");
+        return -1;
+    }
+    memcpy(view, s->core, sizeof *view);            /* shares the rotor data; never freed */
+    memcpy(&view->dyn, dyn, sizeof view->dyn);
+    for (i = 0; i < s->n_vars && rc == 0; i++) {
+        const FmuVar *v = &s->vars[i];
+        if (v->kind == FK_OUTPUT || v->kind == FK_INDEPENDENT) continue;
+        for (k = 0; k < v->count && rc == 0; k++) {
+            double x;
+            if (fmu_get(view, v, k, &x) != 0 || fmu_check_range(view, v, k, x) != 0) rc = -1;
+            else if (v->type != FT_REAL && x != floor(x)) {
+                fmu_slave_logf(s, 2, "variable '%s' = %g is not an integer", v->name, x);
+                rc = -1;
+            }
+        }
+    }
+    free(view);
+    return rc;
+}
+
+/* Is snap a state this build could have written? 0 if so, else -1 (logged). */
+static int check_snapshot(const FmuSlave *s, const Snapshot *snap, const char *what)
+{
+    const StateHeader *h = &snap->head;
+    if (memcmp(h->magic, STATE_MAGIC, sizeof STATE_MAGIC) != 0) {
+        fmu_slave_logf(s, 2, "%s: not a state of this rotor FMU (no header)", what);
+        return -1;
+    }
+    if (h->format != STATE_FORMAT || h->header_bytes != sizeof(StateHeader) ||
+        h->payload_bytes != sizeof(StatePayload)) {
+        fmu_slave_logf(s, 2, "%s: state format %u with %u + %llu bytes, this build writes format %u "
+                       "with %zu + %zu bytes", what, h->format, h->header_bytes,
+                       (unsigned long long)h->payload_bytes, STATE_FORMAT, sizeof(StateHeader),
+                       sizeof(StatePayload));
+        return -1;
+    }
+    if (memchr(h->token, 0, sizeof h->token) == NULL || strcmp(h->token, s->token) != 0) {
+        fmu_slave_logf(s, 2, "%s: the state comes from another build (token %.*s), this FMU is %s",
+                       what, STATE_TOKEN_BYTES, h->token, s->token);
+        return -1;
+    }
+    if (h->checksum != fnv1a64((const unsigned char *)&snap->body, sizeof snap->body)) {
+        fmu_slave_logf(s, 2, "%s: checksum mismatch: the state was altered or truncated", what);
+        return -1;
+    }
+    if (snap->body.mode < FMU_MODE_INSTANTIATED || snap->body.mode > FMU_MODE_ERROR ||
+        !isfinite(snap->body.start_time)) {
+        fmu_slave_logf(s, 2, "%s: invalid mode %d or start time", what, (int)snap->body.mode);
+        return -1;
+    }
+    if ((snap->body.mode == FMU_MODE_STEP && !snap->body.dyn.initialized) ||
+        ((snap->body.mode == FMU_MODE_INSTANTIATED || snap->body.mode == FMU_MODE_INIT) &&
+         snap->body.dyn.initialized)) {
+        fmu_slave_logf(s, 2, "%s: mode and initialization flag disagree", what);
+        return -1;
+    }
+    if (core_check_dynamic(s->core, &snap->body.dyn) != 0 || check_ranges(s, &snap->body.dyn) != 0) {
+        fmu_slave_logf(s, 2, "%s: the state holds invalid values (see above)", what);
+        return -1;
+    }
+    return 0;
+}
 
 int fmu_slave_get_state(FmuSlave *s, void **state)
 {
@@ -250,9 +373,7 @@ int fmu_slave_get_state(FmuSlave *s, void **state)
         fmu_slave_logf(s, 2, "out of memory saving the FMU state");
         return -1;
     }
-    snap->dyn = s->core->dyn;
-    snap->mode = s->mode;
-    snap->start_time = s->start_time;
+    fill_snapshot(s, snap);
     *state = snap;
     return 0;
 }
@@ -264,9 +385,10 @@ int fmu_slave_set_state(FmuSlave *s, const void *state)
         fmu_slave_logf(s, 2, "set FMU state: null state");
         return -1;
     }
-    s->core->dyn = snap->dyn;
-    s->mode = snap->mode;
-    s->start_time = snap->start_time;
+    if (check_snapshot(s, snap, "set FMU state") != 0) return -1;
+    core_restore_dynamic(s->core, &snap->body.dyn);
+    s->mode = (FmuMode)snap->body.mode;
+    s->start_time = snap->body.start_time;
     return 0;
 }
 
@@ -302,7 +424,8 @@ int fmu_slave_deserialize_state(FmuSlave *s, const unsigned char *bytes, size_t 
         return -1;
     }
     if (size != sizeof(Snapshot)) {
-        fmu_slave_logf(s, 2, "serialized state has the wrong size (another build?)");
+        fmu_slave_logf(s, 2, "deserialize FMU state: %zu bytes, a state of this build has %zu", size,
+                       sizeof(Snapshot));
         return -1;
     }
     snap = (Snapshot *)malloc(sizeof(Snapshot));
@@ -311,7 +434,16 @@ int fmu_slave_deserialize_state(FmuSlave *s, const unsigned char *bytes, size_t 
         return -1;
     }
     memcpy(snap, bytes, sizeof(Snapshot));
-    *state = snap;
+    if (check_snapshot(s, snap, "deserialize FMU state") != 0) {
+        free(snap);
+        return -1;
+    }
+    if (*state) {                      /* reuse the importer's state object */
+        memcpy(*state, snap, sizeof(Snapshot));
+        free(snap);
+    } else {
+        *state = snap;
+    }
     return 0;
 }
 

@@ -297,9 +297,9 @@ static void evaluate(RotorCore *core, double dt)
     dyn->power = omega * dyn->torque;
 }
 
-static int check_inputs(const RotorCore *core)
+static int check_inputs(const RotorCore *core, const CoreDynamic *dyn)
 {
-    const CoreInputs *in = &core->dyn.in;
+    const CoreInputs *in = &dyn->in;
     if (!(in->wind_speed >= 0.0 && in->wind_speed < 100.0)) {
         core_logf(core, 2, "wind speed must lie in [0, 100) m/s, got %g", in->wind_speed);
         return -1;
@@ -323,9 +323,9 @@ static int check_inputs(const RotorCore *core)
     return 0;
 }
 
-static int check_params(const RotorCore *core)
+static int check_params(const RotorCore *core, const CoreDynamic *dyn)
 {
-    const CoreParams *p = &core->dyn.par;
+    const CoreParams *p = &dyn->par;
     const RotorData *d = &core->data;
     if (p->n_blades != 2.0 && p->n_blades != 3.0) {
         core_logf(core, 2, "n_blades must be 2 or 3, got %g", p->n_blades);
@@ -376,7 +376,7 @@ int core_initialize(RotorCore *core, double start_time)
 {
     CoreDynamic *dyn = &core->dyn;
     int b, nb;
-    if (check_params(core) || check_inputs(core)) return -1;
+    if (check_params(core, dyn) || check_inputs(core, dyn)) return -1;
     structure_setup(core);
     dyn->time = start_time;
     dyn->azimuth = dyn->par.initial_azimuth_deg * DEG2RAD;
@@ -410,7 +410,7 @@ int core_do_step(RotorCore *core, double h)
         core_logf(core, 2, "communication step size must be finite and > 0, got %g", h);
         return CORE_STEP_REFUSED;
     }
-    if (check_inputs(core)) return CORE_STEP_REFUSED;
+    if (check_inputs(core, dyn)) return CORE_STEP_REFUSED;
     omega = dyn->in.rotor_speed_rpm * M_PI / 30.0;
     dt_max = dyn->par.max_step;
     if (fabs(omega) > 0.0) {
@@ -438,4 +438,79 @@ int core_do_step(RotorCore *core, double h)
     }
     dyn->time += h;
     return 0;
+}
+
+/* ---- FMU state ------------------------------------------------------------------------ */
+/* Are the n doubles stored from address p (a struct made of doubles only, or an array)
+ * finite? Read with memcpy: no aliasing or bounds assumptions. */
+static int finite_doubles(const void *p, size_t n_bytes)
+{
+    size_t i;
+    for (i = 0; i + sizeof(double) <= n_bytes; i += sizeof(double)) {
+        double x;
+        memcpy(&x, (const char *)p + i, sizeof x);
+        if (!isfinite(x)) return 0;
+    }
+    return 1;
+}
+
+int core_check_dynamic(const RotorCore *core, const CoreDynamic *dyn)
+{
+    const CoreParams *p = &dyn->par;
+    struct { const char *what; const void *where; size_t bytes; } blocks[] = {
+        {"parameters", &dyn->par, sizeof dyn->par},
+        {"inputs", &dyn->in, sizeof dyn->in},
+        {"induced velocities", dyn->w, sizeof dyn->w},
+        {"induced velocities", dyn->w_int, sizeof dyn->w_int},
+        {"induced velocities", dyn->w_qs_prev, sizeof dyn->w_qs_prev},
+        {"induced velocities", dyn->w_qs, sizeof dyn->w_qs},
+        {"modal coordinates", dyn->q, sizeof dyn->q},
+        {"modal rates", dyn->qd, sizeof dyn->qd},
+        {"modal accelerations", dyn->qdd, sizeof dyn->qdd},
+        {"element loads", dyn->fn, sizeof dyn->fn},
+        {"element loads", dyn->ft, sizeof dyn->ft},
+        {"angles of attack", dyn->aoa, sizeof dyn->aoa},
+        {"root moments", dyn->flap_moment, sizeof dyn->flap_moment},
+        {"root moments", dyn->edge_moment, sizeof dyn->edge_moment},
+    };
+    size_t k;
+    for (k = 0; k < sizeof blocks / sizeof blocks[0]; k++) {
+        if (!finite_doubles(blocks[k].where, blocks[k].bytes)) {
+            core_logf(core, 2, "FMU state: non-finite %s", blocks[k].what);
+            return -1;
+        }
+    }
+    if (!isfinite(dyn->time) || !isfinite(dyn->azimuth) || !isfinite(dyn->power) ||
+        !isfinite(dyn->torque) || !isfinite(dyn->thrust)) {
+        core_logf(core, 2, "FMU state: non-finite time, azimuth or rotor loads");
+        return -1;
+    }
+    if (dyn->initialized != 0 && dyn->initialized != 1) {
+        core_logf(core, 2, "FMU state: initialization flag %d is neither 0 nor 1", dyn->initialized);
+        return -1;
+    }
+    /* what indexes arrays or bounds loops must hold even before initialization */
+    if (p->n_blades != 2.0 && p->n_blades != 3.0) {
+        core_logf(core, 2, "FMU state: number of blades %g is not 2 or 3", p->n_blades);
+        return -1;
+    }
+    if (!(dyn->aero_failures >= 0.0)) {
+        core_logf(core, 2, "FMU state: negative failure count %g", dyn->aero_failures);
+        return -1;
+    }
+    if (!(fabs(dyn->azimuth) <= 2.0 * M_PI)) {
+        core_logf(core, 2, "FMU state: azimuth %g rad outside [-2 pi, 2 pi]", dyn->azimuth);
+        return -1;
+    }
+    if (dyn->initialized && (check_params(core, dyn) || check_inputs(core, dyn))) {
+        core_logf(core, 2, "FMU state: parameters or inputs invalid (see above)");
+        return -1;
+    }
+    return 0;
+}
+
+void core_restore_dynamic(RotorCore *core, const CoreDynamic *dyn)
+{
+    memcpy(&core->dyn, dyn, sizeof core->dyn);
+    if (core->dyn.initialized) structure_setup(core);   /* derived from the restored parameters */
 }

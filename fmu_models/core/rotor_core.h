@@ -201,4 +201,13 @@ int core_initialize(RotorCore *core, double start_time);
 #define CORE_STEP_FAILED (-2)
 int core_do_step(RotorCore *core, double h);
 
+/* Could dyn (e.g. from a serialized FMU state) have been produced by this core? Every
+ * number finite, flags and counts valid, the number of blades 2 or 3, and, once
+ * initialized, the parameter and input checks of core_initialize. 0 if so, else -1
+ * (logged). The wrapper checks the variables' ranges (fmu_slave.c). */
+int core_check_dynamic(const RotorCore *core, const CoreDynamic *dyn);
+
+/* Replace the dynamic part by dyn (checked) and recompute what derives from it. */
+void core_restore_dynamic(RotorCore *core, const CoreDynamic *dyn);
+
 #endif
