@@ -11,6 +11,11 @@ Environment: ``CALIB_BENCH_CCBLADE_REPEATS`` (default 3, best time kept),
 (``ccairfoil``, default: CCAirfoil's smoothing spline as CCBlade always uses it;
 ``linear``: interpolation through the table points, a diagnostic), plus those of
 ``ccblade_env.sh``.
+
+With CCAirfoil's spline, the native BEM is also run on the same grid with the same
+smoothing of its polars (``SectionPolars.from_rotor(..., smoothing=CCAIRFOIL_SMOOTHING)``)
+and the largest |ΔC_P| to CCBlade is reported: it isolates everything but the polar
+treatment.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ ROOT = os.path.dirname(HERE)
 VENV = os.environ.get("CALIB_BENCH_VENV", os.path.join(ROOT, ".bench-venv"))
 OUT_DIR = os.path.join(ROOT, "bench_output", "ccblade")
 RUN_TIMEOUT_S = 3600
+CCAIRFOIL_SMOOTHING = (0.01, 0.001)   # WISDEM 4.2.9 CCAirfoil: RectBivariateSpline s on C_L, C_D
 
 
 def _dir_size_mb(path: str) -> float:
@@ -181,7 +187,44 @@ def run(grid=None, rotor: str | None = None, repeats: int | None = None) -> dict
         "ccblade_settings": res["settings"],
         "ccblade_result_file": os.path.relpath(result_json, ROOT),
     })
+    if res["settings"].get("airfoil_spline", "ccairfoil") == "ccairfoil":
+        out.update(native_with_ccairfoil_smoothing(rotor, res, cp, conv))
     return out
+
+
+def native_with_ccairfoil_smoothing(rotor_name: str, res: dict, cp_cc: np.ndarray, conv: np.ndarray) -> dict:
+    """The native surface on CCBlade's grid with CCAirfoil's polar smoothing, against CCBlade.
+
+    Same set-up as CCBlade's run (axisymmetric, one sector); returns ``smoothed_native_max_abs_dcp``
+    (and its λ, β) and ``smoothed_native_median_abs_dcp`` over the points converged in both, or
+    ``{"smoothed_native_error": message}``.
+    """
+    try:
+        from surface_grid import surface_points  # noqa: PLC0415  (HERE is on sys.path)
+
+        from calib.bem import BemSettings, SectionPolars, solve_bem  # noqa: PLC0415
+        from calib.rotor.library import load_rotor  # noqa: PLC0415
+        from calib.types import OperatingConditions  # noqa: PLC0415
+
+        rotor = load_rotor(rotor_name)
+        tsr, pitch = np.asarray(res["tsr"], float), np.asarray(res["pitch"], float)
+        v, om, beta = surface_points(tsr, pitch, res["rotor_speed_rpm"], rotor.rotor_radius)
+        settings = res["settings"]
+        cond = OperatingConditions(v, om, beta, settings["rho"])
+        nat = solve_bem(rotor, cond, BemSettings(use_tilt=False, n_sectors=1),
+                        polars=SectionPolars.from_rotor(rotor, smoothing=CCAIRFOIL_SMOOTHING))
+    except Exception as exc:  # noqa: BLE001  (never crash the benchmark runner)
+        return {"smoothed_native_error": f"{type(exc).__name__}: {exc}"}
+    cp = nat.cp.reshape(cp_cc.shape)
+    both = conv & np.isfinite(cp) & np.isfinite(cp_cc)
+    if not both.any():
+        return {"smoothed_native_error": "no point converged in both"}
+    d = np.where(both, np.abs(cp - cp_cc), -np.inf)
+    i, j = np.unravel_index(np.argmax(d), d.shape)
+    return {"smoothed_native_max_abs_dcp": float(d[i, j]), "smoothed_native_max_abs_dcp_tsr": float(tsr[i]),
+            "smoothed_native_max_abs_dcp_pitch": float(pitch[j]),
+            "smoothed_native_median_abs_dcp": float(np.median(np.abs(cp - cp_cc)[both])),
+            "smoothed_native_points_compared": int(both.sum())}
 
 
 if __name__ == "__main__":

@@ -94,9 +94,10 @@ class SectionPolars:
         smoothing : (s_cl, s_cd), optional
             Replace the shape-preserving interpolant by a smoothing cubic spline in α [rad]
             with these residual-sum bounds (scipy ``RectBivariateSpline(..., s=...)`` over the
-            table duplicated at two Reynolds numbers), the polar treatment of CCBlade
-            (s = 0.1 for C_L and 0.001 for C_D in WISDEM releases of 2019-2023). Use it to
-            reproduce CCBlade tables; the default (None) interpolates the data exactly.
+            table duplicated at two Reynolds numbers), the polar treatment of CCBlade's
+            ``CCAirfoil`` (s = 0.01 for C_L and 0.001 for C_D in WISDEM 4.2.9, "to prevent
+            spurious multiple solutions"). Use ``(0.01, 0.001)`` to reproduce CCBlade tables;
+            the default (None) interpolates the data exactly.
         """
         n = int(round(360.0 / step_deg))
         grid = np.linspace(-180.0, 180.0, n + 1)
