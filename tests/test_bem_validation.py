@@ -38,8 +38,10 @@ def test_iea34_reproduces_ccblade_table(capsys):
     assert res.n_failed == 0
     assert rel["power"].size == 50
     for name in ("power", "thrust"):
-        assert np.median(np.abs(rel[name])) <= 0.01, name
         assert np.max(np.abs(rel[name][below])) <= 0.02, name
+        # with CCAirfoil's own smoothing (s = 0.01 on C_L) the median row agrees to 0.3 %; the s = 0.1
+        # once used here gives 0.48 % in thrust
+        assert np.median(np.abs(rel[name])) <= 0.003, name
     with capsys.disabled():
         print("\nIEA 3.4-MW vs CCBlade table, |relative difference| [%]: median / max below rated / "
               "max above rated")
