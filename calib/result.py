@@ -99,6 +99,8 @@ class CalibrationResult:
         (:func:`calib.identifiability.confounding`).
     model_spec : dict or None
         What :func:`calib.models.registry.build_model` needs to rebuild the model (predictions).
+    checks : dict
+        Named statements added after the run (e.g. coverage of a known truth in a synthetic run).
     """
 
     parameters: list[dict]
@@ -152,6 +154,7 @@ class CalibrationResult:
     truncation: dict = field(default_factory=dict)
     confounding: dict = field(default_factory=dict)
     model_spec: dict | None = None
+    checks: dict = field(default_factory=dict)
 
     # ------------------------------------------------------------------ derived
     @property

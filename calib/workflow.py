@@ -25,6 +25,7 @@ from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
+from calib.models.base import FieldModel
 from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
@@ -50,13 +51,14 @@ SCHEMA = {
                     "alpha_width": (NUM, True), "eta": (NUM, False), "eta_width": (NUM, False),
                     "eta_range": (list, False), "edge_width": (NUM, False)},
     "noise": {"relative": (dict, True), "seed": (int, False)},
-    "calibration": {"sigma_bar": (NUM, False), "optimizer": (str, False), "noise": (str, False),
+    "calibration": {"sigma_bar": ((int, float, str), False), "prior_sigma": (NUM, False), "optimizer": (str, False),
+                    "noise": (str, False),
                     "cd_min": (NUM, False), "max_relinearizations": (int, False),
                     "max_iterations": (int, False), "max_retained": (int, False)},
     "stages": {"name": (str, True), "channels": (list, True), "retain": (str, False)},
 }
 TYPE_NAMES = {str: "a string", dict: "a table", list: "an array", bool: "true/false", int: "an integer",
-              NUM: "a number"}
+              NUM: "a number", (int, float, str): "\"auto\" or a number"}
 
 
 def _check_table(table: dict, section: str, source: str) -> None:
@@ -171,6 +173,31 @@ def truth_model(rotor, channels, settings, truth: dict, nuisance):
     return model, p
 
 
+def truth_checks(model, result, truth: dict) -> dict[str, str]:
+    """Statements about a synthetic run against its known truth: band coverage, nuisance errors.
+
+    Coverage is counted at the (α, η) points the operating points reach, with the same bands
+    the report draws (frozen-direction prior and representation variance included).
+    """
+    out = {}
+    if isinstance(model, FieldModel) and result.alpha_seen.size:
+        field = model.correction_field()
+        a, e = result.alpha_seen, result.eta_seen
+        tl, td = smooth_field(truth["bumps"], a, e)
+        prior = result.prior_std if result.settings.get("representation_error", True) else None
+        cov = field.coverage(result.p_hat, result.cov_p, a, e, tl, td, result.settings.get("band_confidence", 0.95),
+                             prior)
+        out["coverage of the known truth"] = (
+            f"the {100 * cov['confidence']:.0f} % bands contain the true ΔC_L at {100 * cov['lift']:.1f} % and the "
+            f"true ΔC_D at {100 * cov['drag']:.1f} % of the {cov['n_points']} (α, η) points the operating points reach")
+    for v in result.verdicts:
+        if v["name"] in truth and v["std"] > 0:
+            z = (v["value"] - float(truth[v["name"]])) / v["std"]
+            out[f"{v['name']} against its truth"] = (f"estimate {v['value']:.4g} ± {v['std']:.2g} {v['unit']}, truth "
+                                                     f"{float(truth[v['name']]):.4g}: {z:+.1f}σ")
+    return out
+
+
 # ----------------------------------------------------------------------------- running
 @dataclass
 class StageOutcome:
@@ -253,18 +280,26 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
                     print(f"[calib run] {_name}: re-linearization {rec.get('iteration')}: "
                           f"{rec.get('n_retained')} retained, cost {rec.get('cost', float('nan')):.4g}", flush=True)
         cal = Calibrator(model, meas.select_channels(stage["channels"]), st, callback, name=name)
+        t_cal = time.perf_counter()
         res = cal.run()
+        t_cal = time.perf_counter() - t_cal
         res.inputs[src] = sha256_of(src)
         res.inputs["workflow"] = cfg["name"]
+        if truth_p is not None:
+            res.checks.update(truth_checks(model, res, cfg["truth"]))
         stage_dir = out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
         stage_dir.mkdir(exist_ok=True)
+        t_rep = time.perf_counter()
         res.save(stage_dir)
         figs = write_figures(res, stage_dir)
+        t_rep = time.perf_counter() - t_rep
         outcomes.append(StageOutcome(name, res, figs, stage_dir))
         if progress:
-            print(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {res.n_retained} of {res.n_params} "
-                  f"retained; chi2/dof {res.chi2_before / max(res.dof, 1):.3g} -> "
-                  f"{res.chi2_after / max(res.dof, 1):.3g}; results in {stage_dir}", flush=True)
+            print(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {res.n_retained} of "
+                  f"{res.n_params} retained; chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g}; "
+                  f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}", flush=True)
+            for label, text in res.checks.items():
+                print(f"[calib run] {name}: {label}: {text}", flush=True)
     extra = {}
     if len(outcomes) > 1:
         fig = plot_spectra({o.name: o.result for o in outcomes})
@@ -275,7 +310,8 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
                  "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
     report = write_report(out / "report.html", title=f"calib: {cfg['name']}",
                           results={o.name: o.result for o in outcomes},
-                          figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra)
+                          figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra,
+                          checks={o.name: o.result.checks for o in outcomes})
     if progress:
         print(f"[calib run] report: {report}", flush=True)
     return outcomes

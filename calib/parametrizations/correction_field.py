@@ -223,7 +223,7 @@ class CorrectionField:
         node (variance σ_p², the block's mean prior variance) and independent of the nodes
         beyond the interpolation, the part the interpolant cannot represent has variance
 
-        .. math::  σ_{rep}^2(α, η) = σ_p^2 \,(1 − Σ_i N_i(α, η)^2)
+        .. math::  σ_{rep}^2(α, η) = σ_p^2 (1 − Σ_i N_i(α, η)^2)
 
         zero at the nodes, 0.75 σ_p² at a cell centre (bilinear hats). It is the roughest
         field compatible with the node spacing, so the bands it widens are conservative

@@ -1,6 +1,7 @@
 """Figures of a calibration (matplotlib, Agg backend; PNG and SVG).
 
 - singular-value spectrum with the cut s = 1/σ̄,
+- the truncation criterion against the number retained (automatic truncation),
 - eigenshape maps ψ_i(α, η) of the retained parameters, lift and drag blocks separately,
   with the (α, η) points the data see,
 - Cramér–Rao correlation matrix,
@@ -168,6 +169,12 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5):
             ax.plot(alpha, base + d, color="C0", lw=1.2, label="calibrated")
             ax.fill_between(alpha, base + d - hw, base + d + hw, color="C0", alpha=0.25,
                             label=f"{100 * conf:.0f}% band")
+            frac_key = f"d{letter}_prior_fraction"
+            if frac_key in pb:
+                prior_dom = np.asarray(pb[frac_key])[j] > 0.5
+                if prior_dom.any():
+                    ax.fill_between(alpha, base + d - hw, base + d + hw, where=prior_dom, color="C1",
+                                    alpha=0.25, label="band set by the prior (data say little)")
             if result.alpha_seen.size:
                 near = np.abs(result.eta_seen - eta[j]) <= 0.5 * _spacing(eta, j)
                 if near.any():
@@ -182,6 +189,27 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5):
                 ax.legend(fontsize=7)
     fig.suptitle(f"{result.name}: corrected polars" + ("" if "cl0" in pb else " (corrections only)"),
                  fontsize=10)
+    return fig
+
+
+def plot_truncation(result: CalibrationResult, ax=None):
+    """Leave-one-point-out criterion against the number of retained θ, with the choice."""
+    t = result.truncation
+    if not t:
+        return None
+    fig, ax = _fig_ax(ax, (6.4, 3.6))
+    k, cv, fit = np.asarray(t["n_retained"]), np.asarray(t["cv"], float), np.asarray(t["fit"], float)
+    finite = np.isfinite(cv)
+    ax.semilogy(k[finite], cv[finite], "o-", ms=3, color="C0", label="leave-one-point-out error (criterion)")
+    ax.semilogy(k, np.maximum(fit, 1e-12), "s-", ms=2, color="0.5", lw=0.8, label="in-sample fit")
+    chosen = int(t["chosen"])
+    ax.axvline(chosen, color="C3", ls="--", lw=1, label=f"chosen: {chosen} retained")
+    ax.axhline(1.0, color="k", lw=0.6, ls=":")
+    ax.set_xlabel("number of retained θ")
+    ax.set_ylabel("mean squared whitened error [-]")
+    ax.set_title(f"{result.name}: truncation chosen by the data")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
     return fig
 
 
@@ -200,6 +228,7 @@ def _fig_ax(ax, size):
 
 FIGURES = {
     "singular_values": plot_singular_values,
+    "truncation": plot_truncation,
     "eigenshapes_lift": lambda r: plot_eigenshapes(r, "lift"),
     "eigenshapes_drag": lambda r: plot_eigenshapes(r, "drag"),
     "correlation": plot_correlation,

@@ -39,19 +39,84 @@ def _fmt(x, digits=4) -> str:
     return html.escape(str(x))
 
 
-def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str, Path]] | None = None) -> str:
-    """HTML of one calibration: key numbers, verdicts, failures, figures."""
+def _sentences(r: CalibrationResult) -> list[str]:
+    """Plain statements generated from the numbers they describe."""
+    gof = r.goodness_of_fit()
+    out = []
+    if r.truncation:
+        out.append(f"The number of retained θ was chosen by leave-one-operating-point-out cross-validation: "
+                   f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {r.sigma_bar:.3g} scale units; criterion "
+                   f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
+                   f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained).")
+    else:
+        out.append(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
+                   f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")
+    out.append(f"Before calibration χ²/dof = {gof['chi2_per_dof_before']:.3g} over {gof['dof_before']} residuals "
+               f"(nothing fitted, p = {gof['p_value_before']:.2g}); after, χ²/dof = "
+               f"{gof['chi2_per_dof_after']:.3g} with {gof['dof_after']} degrees of freedom "
+               f"(p = {gof['p_value_after']:.2g}" + ("; the model is consistent with the noise)." if
+                                                      gof["p_value_after"] > 0.01 else
+                                                      "; the fit is worse than the stated noise explains)."))
+    counts = r.verdict_counts()
+    field = [v for v in r.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
+    if field:
+        poor = [v for v in field if v["verdict"] == "poorly observable"]
+        moved = [v for v in poor if v["note"]]
+        txt = (f"Of {len(field)} correction nodes, {sum(v['verdict'] == 'identified' for v in field)} are identified "
+               f"(posterior σ at most {r.settings.get('identified_ratio', 0.5):g} × prior σ), "
+               f"{sum(v['verdict'] == 'at bound' for v in field)} at a bound and {len(poor)} poorly observable: "
+               f"their bands stay close to the prior's width")
+        txt += (f"; {len(moved)} of these nevertheless moved more than 2σ from nominal (listed below)." if moved
+                else ".")
+        out.append(txt)
+    for v in r.verdicts:
+        if v["kind"] in ("lift_correction", "drag_correction"):
+            continue
+        line = (f"{v['name']} = {v['value']:.4g} ± {v['std']:.2g} {v['unit']} (1σ; prior σ {v['prior_std']:.3g}, "
+                f"nominal {v['nominal']:.4g}): {v['verdict']}")
+        if "shared_information" in v:
+            line += f"; shares {100 * v['shared_information']:.0f} % of its information with the other parameters"
+            if v.get("confounded_with"):
+                line += f" (most with {v['confounded_with']})"
+        out.append(line + ".")
+    fail = r.failures
+    if fail.get("total_failed_point_evaluations", 0):
+        out.append(f"{fail['total_failed_point_evaluations']} point evaluations failed over the run "
+                   f"({fail.get('final', 0)} at the estimate); failed points are left out of the cost.")
+    n_multi = int(np.count_nonzero(r.multiple_roots)) if r.multiple_roots.size else 0
+    if n_multi:
+        out.append(f"At {n_multi} operating points the BEM residual has several roots at some station; the "
+                   f"root was chosen by the solver's documented rule and those points are flagged.")
+    if counts.get("confounded"):
+        out.append("A confounded parameter's estimate trades off against the correction field: read it with "
+                   "its σ, not as a measurement of that quantity alone.")
+    return out
+
+
+def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str, Path]] | None = None,
+                   checks: Mapping[str, str] | None = None) -> str:
+    """HTML of one calibration: statements, key numbers, verdicts, fit, failures, figures.
+
+    ``checks`` adds named statements (e.g. coverage of a known truth in a synthetic run).
+    """
     r = result
-    dof = max(r.dof, 1)
+    gof = r.goodness_of_fit()
     status_cls = "ok" if r.status == "converged" else "bad"
     parts = [f"<h2>{html.escape(r.name)}</h2>",
              f'<p>Status: <b class="{status_cls}">{html.escape(r.status)}</b> — {html.escape(r.message)}. '
              f"Wall time {r.wall_time:.2f} s.</p>"]
+    parts.append("<ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in _sentences(r)) + "".join(
+        f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>" for k, v in (checks or {}).items()) + "</ul>")
     counts = r.verdict_counts()
     key = [("operating points", r.n_points), ("channels", ", ".join(r.channels)),
-           ("parameters", r.n_params), ("retained θ (σ(θ) ≤ σ̄)", r.n_retained), ("σ̄ [scale units]", r.sigma_bar),
-           ("χ²/dof before", r.chi2_before / dof), ("χ²/dof after", r.chi2_after / dof), ("dof", r.dof),
-           ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise"))]
+           ("parameters", r.n_params), ("retained θ", r.n_retained),
+           ("truncation", "leave-one-point-out CV" if r.truncation else "threshold σ̄"),
+           ("σ̄ [scale units]", r.sigma_bar),
+           ("χ²/dof before (dof = N)", gof["chi2_per_dof_before"]), ("N", gof["dof_before"]),
+           ("χ²/dof after (dof = N − retained)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
+           ("p-value after", gof["p_value_after"]),
+           ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise")),
+           ("prior σ of correction nodes [scale units]", r.settings.get("prior_sigma"))]
     key += [(f"verdict: {k}", v) for k, v in counts.items()]
     parts.append(_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]))
     fail = r.failures
@@ -60,21 +125,31 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
                  f'{fail.get("final", 0)}, over all evaluations {fail.get("total_failed_point_evaluations", 0)} '
                  f'({fail.get("model_evaluations", 0)} evaluations, {fail.get("model_jacobians", 0)} '
                  f"Jacobians).</p>")
-    rb, ra = r.rms("before"), r.rms("after")
     parts.append("<h3>Fit per channel</h3>" + _table(
-        ["channel", "unit", "noise σ", "RMS before", "RMS after"],
-        [(html.escape(c), html.escape(u), _fmt(float(s)), _fmt(rb[c]), _fmt(ra[c]))
+        ["channel", "unit", "noise σ", "χ²/point before", "χ²/point after", "RMS before", "RMS after"],
+        [(html.escape(c), html.escape(u), _fmt(float(s)), _fmt(gof["per_channel"][c]["chi2_per_point_before"]),
+          _fmt(gof["per_channel"][c]["chi2_per_point_after"]), _fmt(gof["per_channel"][c]["rms_before"]),
+          _fmt(gof["per_channel"][c]["rms_after"]))
          for c, u, s in zip(r.channels, r.channel_units, r.noise_sigma)]))
-    # verdicts: non-correction parameters in full, correction nodes summarized
+    parts.append("<h3>Worst points after calibration</h3>" + _table(
+        ["point", "channel", "whitened residual", "conditions"],
+        [(w["point"], html.escape(w["channel"]), _fmt(w["whitened_residual"], 3),
+          html.escape(", ".join(f"{k} {v:.4g}" for k, v in w["conditions"].items())))
+         for w in gof["worst"]]))
     rows = []
     for v in r.verdicts:
-        if v["kind"] in ("lift_correction", "drag_correction") and v["verdict"] == "poorly observable":
+        if v["kind"] in ("lift_correction", "drag_correction") and v["verdict"] == "poorly observable" \
+                and not v["note"]:
             continue
         rows.append((html.escape(v["name"]), html.escape(v["verdict"]), _fmt(v["nominal"]), _fmt(v["value"]),
-                     _fmt(v["std"]), _fmt(v["observability"], 2)))
-    parts.append("<h3>Verdicts</h3><p>Identified / at-bound parameters and all nuisance parameters "
-                 "(poorly observable correction nodes are frozen near nominal and omitted).</p>" +
-                 _table(["parameter", "verdict", "nominal", "estimate", "std", "observability"], rows, left=2))
+                     _fmt(v["std"]), _fmt(v["prior_std"]), _fmt(v["std_ratio"], 2),
+                     html.escape(v.get("note", "")), html.escape(v.get("confounded_with", ""))))
+    n_hidden = len(r.verdicts) - len(rows)
+    parts.append(f"<h3>Verdicts</h3><p>Every non-field parameter, and every correction node that is identified, "
+                 f"at a bound, or moved more than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are "
+                 f"not listed (their bands are as wide as the prior).</p>" +
+                 _table(["parameter", "verdict", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
+                         "note", "confounded with"], rows, left=2))
     if figures:
         parts.append("<h3>Figures</h3>")
         for name, paths in figures.items():
@@ -90,7 +165,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
 def write_report(path: str | Path, sections: list[str] | None = None, title: str = "calib report",
                  results: Mapping[str, CalibrationResult] | None = None,
                  figures: Mapping[str, Mapping[str, Mapping[str, Path]]] | None = None,
-                 intro: str = "", extra_figures: Mapping[str, Mapping[str, Path]] | None = None) -> Path:
+                 intro: str = "", extra_figures: Mapping[str, Mapping[str, Path]] | None = None,
+                 checks: Mapping[str, Mapping[str, str]] | None = None) -> Path:
     """Write a self-contained HTML report.
 
     Parameters
@@ -105,6 +181,8 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
         Plain text paragraph under the title.
     extra_figures : mapping name -> {format: path}
         Figures shown at the top (e.g. comparisons).
+    checks : mapping name -> {label: statement}, optional
+        Extra statements per result (e.g. coverage of a known truth).
     """
     body = [f"<h1>{html.escape(title)}</h1>"]
     if intro:
@@ -113,14 +191,14 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
         body.append("<h2>Comparison</h2>" + _table(
             ["calibration", "channels", "retained θ", "identified", "χ²/dof before", "χ²/dof after", "failed"],
             [(html.escape(n), html.escape(", ".join(r.channels)), r.n_retained, r.verdict_counts()["identified"],
-              _fmt(r.chi2_before / max(r.dof, 1)), _fmt(r.chi2_after / max(r.dof, 1)),
+              _fmt(r.chi2_per_dof_before), _fmt(r.chi2_per_dof_after),
               r.failures.get("total_failed_point_evaluations", 0)) for n, r in results.items()]))
     for name, paths in (extra_figures or {}).items():
         if "png" in paths:
             body.append(f"<h4>{html.escape(name.replace('_', ' '))}</h4>" + _img(paths["png"]))
     body += list(sections or [])
     for name, r in (results or {}).items():
-        body.append(result_section(r, (figures or {}).get(name)))
+        body.append(result_section(r, (figures or {}).get(name), (checks or {}).get(name)))
     text = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
             f"<style>{_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
     path = Path(path)
