@@ -256,3 +256,13 @@ def test_notes_survive_select_channels_and_are_written_as_comments(tmp_path):
     back = read_measurements(out)
     np.testing.assert_allclose(back.values, sub.values)
     assert not any("timestamp" in n for n in back.notes)  # fresh notes describe the written file
+
+
+def test_utf16_unicode_text_export(tmp_path):
+    """A spreadsheet's "Unicode text" export: UTF-16 with byte-order mark, tab-separated."""
+    text = (FIXTURES / "tab.tsv").read_text(encoding="utf-8")
+    path = tmp_path / "unicode.txt"
+    path.write_bytes(text.encode("utf-16"))
+    m = read_measurements(path)
+    assert_reference_table(m)
+    assert "encoding: UTF-16 with byte-order mark" in m.notes and "delimiter: tab (detected)" in m.notes
