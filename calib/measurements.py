@@ -341,18 +341,19 @@ def _detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
     return None if best is None else best[1]
 
 
-def _parse_header(text: str, src: str, line: int) -> tuple[str, str | None]:
-    """(normalized name, unit as written or None) of one header cell."""
+def _parse_header(text: str, column: int) -> tuple[str, str | None]:
+    """(normalized name, unit as written or None) of the header cell of 1-based ``column``.
+
+    A cell that does not read as ``name [unit]`` keeps its whole text as the name (an unknown
+    column, ignored with a note); an empty cell (a trailing delimiter) is named ``<column N>``.
+    """
     m = _HEADER.match(text)
     if m:
         name, unit = m.group("name"), m.group("u1") if m.group("u1") is not None else m.group("u2")
     else:
         name, unit = text, None
     name = normalize_name(name)
-    if not name or any(c in name for c in "[]()"):
-        raise InputError(f"cannot read column header {text!r}; expected 'name', 'name [unit]', "
-                         "'name_[unit]' or 'name (unit)'", src, line, field=text.strip())
-    return name, unit
+    return (name, unit) if name else (f"<column {column}>", None)
 
 
 def _declared_unit(column: str, unit: str | None, src: str, line: int) -> str | None:
@@ -387,7 +388,7 @@ def _short_list(items: Sequence, n: int = 8) -> str:
 
 
 def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *,
-                      drop_incomplete_rows: bool = False) -> Measurements:
+                      drop_incomplete_rows: bool = False, allow_no_channels: bool = False) -> Measurements:
     """Read a measurement table from CSV (see the module docstring for the layout).
 
     Parameters
@@ -400,6 +401,8 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         Drop rows with a missing value (empty cell, ``nan``, ``NA`` ...) in a needed column
         (the conditions, the kept channels and their σ) and report the count in
         :attr:`Measurements.notes`. Default: refuse such a row, naming its line and column.
+    allow_no_channels : bool
+        Accept a table of conditions only (e.g. for predictions); default: refuse it.
 
     Returns
     -------
@@ -430,7 +433,8 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
                          "a semicolon or a tab", src, header_line)
     notes.append(f"delimiter: {_DELIMITERS[delimiter]} (detected)")
     raw_names = [h.strip() for h in _split(header, delimiter)]
-    parsed = [_parse_header(h, src, header_line) for h in raw_names]
+    parsed = [_parse_header(h, i + 1) for i, h in enumerate(raw_names)]
+    raw_names = [h or n for h, (n, _) in zip(raw_names, parsed)]
     names = [n for n, _ in parsed]
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
@@ -464,7 +468,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         if c not in present:
             raise InputError(f"channel '{c}' is not in the file{_did_you_mean(c, unknown_cols)}; channel "
                              f"columns present: {', '.join(present) or '(none)'}", src, header_line, field=c)
-    if not channels:
+    if not channels and not allow_no_channels:
         guesses = [f"'{raw_names[names.index(n)]}'{_did_you_mean(n, list(_FIXED_QUANTITY))}"
                    for n in unknown_cols]
         raise InputError("no channel columns (e.g. power, thrust, cn@0.30; a unit goes in brackets: "

@@ -238,14 +238,13 @@ def _fit(label: str, y: np.ndarray, ok: np.ndarray, z: np.ndarray, sigma: np.nda
 
 # ----------------------------------------------------------------------------- words
 def _factor_words(factor: float) -> str:
-    """'0.001 = 10⁻³, a k prefix', '9.549 = 30/π, rpm ↔ rad/s', '-1'."""
+    """'0.001 (10⁻³, a k prefix)', '9.549 (30/π, rpm ↔ rad/s)', '3.6 (km/h ↔ m/s)', '-1'."""
     a = abs(factor)
     text = f"{factor:.4g}"
     for f, up, down, words in _FACTOR_WORDS:
-        if abs(a / f - 1) < 1e-6:
-            return f"{text} = {up}, {words}"
-        if abs(a * f - 1) < 1e-6:
-            return f"{text} = {down}, {words}"
+        for exact, name in ((abs(a / f - 1) < 1e-6, up), (abs(a * f - 1) < 1e-6, down)):
+            if exact:
+                return f"{text} ({words})" if name == text else f"{text} ({name}, {words})"
     return text
 
 

@@ -266,3 +266,12 @@ def test_utf16_unicode_text_export(tmp_path):
     m = read_measurements(path)
     assert_reference_table(m)
     assert "encoding: UTF-16 with byte-order mark" in m.notes and "delimiter: tab (detected)" in m.notes
+
+
+def test_trailing_delimiter_and_odd_headers_are_ignored_columns(tmp_path):
+    """A spreadsheet's trailing empty column and a header that is not 'name [unit]' do not refuse the file."""
+    path = write(tmp_path, "wind_speed,rotor_speed,pitch,power [kW],power (avg) [kW],\n8,10,0,1500,1490,\n")
+    m = read_measurements(path)
+    np.testing.assert_allclose(m.channel("power"), [1.5e6])
+    assert any(n.startswith("ignored unrecognised numeric column(s): power (avg) [kW]") for n in m.notes)
+    assert "ignored non-numeric column(s): <column 6>" in m.notes
