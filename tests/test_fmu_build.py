@@ -88,17 +88,58 @@ def test_mapping_names_exist_with_right_causality(fmus, variant):
 
 
 def test_variants_agree_after_mapping(fmus):
-    """Same physics behind both vendor interfaces: mapped to package units, A and B agree."""
+    """Same physics behind both vendor interfaces: with only what the mapping files say (their
+    [settings] values override the vendors' different defaults -- shear exponent 0.14 vs 0.2,
+    damping ratios 0.5 % vs 1 %), mapped to package units, A and B agree; flexible blades,
+    shear, tower shadow and gravity are on (the vendors' defaults)."""
+    def start(variant, wind, rpm):
+        with open(mapping_path(variant), "rb") as fh:
+            m = tomllib.load(fh)
+        values = {e["variable"]: (e.get("sign", 1) * e["value"] - e.get("offset", 0.0)) / e.get("scale", 1.0)
+                  for e in m["settings"].values() if "value" in e}
+        for name, x in (("wind_speed", wind), ("rotor_speed", rpm)):
+            e = m["inputs"][name]
+            values[e["variable"]] = x / e.get("scale", 1.0)
+        return values
+
     common = dict(stop_time=6.0, output_interval=0.1)
-    a = fmpy.simulate_fmu(str(fmus["A"]), start_values={"wind_speed": 9.0, "rotor_speed": 10.0,
-                                                         "flap_damping_ratio": 0.01, "edge_damping_ratio": 0.01,
-                                                         "shear_exponent": 0.2}, **common)
-    b = fmpy.simulate_fmu(str(fmus["B"]), start_values={"Wind.Vhub": 9.0, "Rotor.Omega": 10.0 * np.pi / 30},
-                          **common)
+    a = fmpy.simulate_fmu(str(fmus["A"]), start_values=start("A", 9.0, 10.0), **common)
+    b = fmpy.simulate_fmu(str(fmus["B"]), start_values=start("B", 9.0, 10.0), **common)
+    assert np.ptp(a["tip_flap_deflection_blade1"]) > 0.01   # the structure moves: damping matters
     np.testing.assert_allclose(b["Rotor.Power"] * 1e3, a["power"], rtol=1e-9)
     np.testing.assert_allclose(b["Blade.RootMyFlap"][:, 1] * 1e3, a["root_flap_moment_blade2"], rtol=1e-9)
     np.testing.assert_allclose(-b["Blade.RootMxEdge"][:, 0] * 1e3, a["root_edge_moment_blade1"], rtol=1e-9)
     np.testing.assert_allclose(np.mod(b["Rotor.Azimuth"] - 180.0, 360.0), a["azimuth"], atol=1e-9)
+
+
+@pytest.mark.parametrize("variant", ["A", "B"])
+def test_log_categories_declared_and_honoured(fmus, variant):
+    """The model description lists the log categories; fmi*SetDebugLogging accepts each,
+    refuses an unknown one (with a message), and switching a category off silences it."""
+    from fmpy.fmi1 import FMICallException
+    from test_fmu_inputs import NAMES, Fmu
+    md = fmpy.read_model_description(str(fmus[variant]))
+    names = [c.name for c in md.logCategories]
+    assert names == ["logEvents", "logStatusWarning", "logStatusError"]
+    f = Fmu(fmus[variant], variant)
+    try:
+        f.slave.setDebugLogging(True, names)
+        with pytest.raises(FMICallException):
+            f.slave.setDebugLogging(True, ["logEverything"])
+        assert "unknown log category 'logEverything'" in f.errors()
+        f.initialize()
+        assert any(c == "logEvents" and "initialized" in m for _, c, m in f.messages)
+        f.slave.setDebugLogging(False, ["logStatusError"])
+        f.messages.clear()
+        with pytest.raises(FMICallException):      # still refused, but silently
+            f.set(**{NAMES[variant]["rotor_speed"]: -1.0})
+        assert f.messages == []
+        f.slave.setDebugLogging(True, [])            # no categories: all on
+        with pytest.raises(FMICallException):
+            f.set(**{NAMES[variant]["rotor_speed"]: -1.0})
+        assert [c for _, c, _ in f.messages] == ["logStatusError"]
+    finally:
+        f.slave.freeInstance()
 
 
 def test_bad_input_is_an_error_not_a_nan(fmus):

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import re
 import tomllib
-from ctypes import byref
-
 import numpy as np
 import pytest
 
@@ -26,7 +24,7 @@ from calib.fmu.build import variant_dir
 class Fmu:
     """One co-simulation instance of variant A (FMI 2) or B (FMI 3), driven by name.
 
-    Log messages are collected in ``messages`` (status, text).
+    Log messages are collected in ``messages`` (status, category, text).
     """
 
     def __init__(self, path, variant: str):
@@ -34,22 +32,22 @@ class Fmu:
         self.md = fmpy.read_model_description(str(path))
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.unzip = fmpy.extract(str(path))
-        self.messages: list[tuple[int, str]] = []
+        self.messages: list[tuple[int, str, str]] = []
         mi = self.md.coSimulation.modelIdentifier
         if variant == "A":
             from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                                    fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
             from fmpy.fmi1 import calloc, free
-            from fmpy.logging import addLoggerProxy
 
+            # no fmpy logger proxy (one global in fmpy): these FMUs pass the whole message as
+            # the format, '%' doubled, without variadic arguments
             def logger(env, name, status, category, message):
-                self.messages.append((status, message.decode()))
+                self.messages.append((status, category.decode(), message.decode().replace("%%", "%")))
 
             cb = fmi2CallbackFunctions()
             cb.logger = fmi2CallbackLoggerTYPE(logger)
             cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
             cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-            addLoggerProxy(byref(cb))
             self._keep = (cb, logger)
             self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip, modelIdentifier=mi)
             self.slave.instantiate(callbacks=cb)
@@ -57,7 +55,7 @@ class Fmu:
             from fmpy.fmi3 import FMU3Slave
 
             def logger(env, status, category, message):
-                self.messages.append((status, message.decode()))
+                self.messages.append((status, category.decode(), message.decode()))
 
             self._keep = (logger,)
             self.slave = FMU3Slave(guid=self.md.instantiationToken, unzipDirectory=self.unzip, modelIdentifier=mi)
@@ -120,7 +118,7 @@ class Fmu:
                  "Boolean": self.slave.setBoolean}[kind](refs, vals)
 
     def errors(self) -> str:
-        return "\n".join(m for s, m in self.messages if s >= 3)
+        return "\n".join(m for s, _, m in self.messages if s >= 3)
 
 
 # the same physical quantity under each vendor's name and unit

@@ -47,9 +47,38 @@ QUIET = dict(tower_shadow=False, shear=False, yaw=True, flexible_blades=False, g
              dynamic_inflow=True, stall_delay=False)
 
 
+def steady_window(steady: dict, rotor_speed: float) -> tuple[float, int, int]:
+    """The rule of a mapping's ``[steady]`` table (``fmu_models/README.md``).
+
+    Parameters
+    ----------
+    steady : dict
+        ``steps_per_revolution``, ``settle_revolutions``, ``average_revolutions``,
+        ``standstill_step_size`` [s].
+    rotor_speed : float
+        [rpm].
+
+    Returns
+    -------
+    step_size : float
+        Communication step [s]: one revolution / ``steps_per_revolution``.
+    n_settle, n_average : int
+        Steps discarded, then steps whose end samples are averaged: whole revolutions.
+    """
+    n = int(steady["steps_per_revolution"])
+    step = 60.0 / (rotor_speed * n) if rotor_speed > 0 else float(steady["standstill_step_size"])
+    return step, int(steady["settle_revolutions"]) * n, int(steady["average_revolutions"]) * n
+
+
 def simulate(fmu, variant, *, wind_speed, rotor_speed, pitch=0.0, yaw=0.0, air_density=1.225,
-             switches=None, settings=None, p=None, settle=1, revolutions=2):
+             switches=None, settings=None, p=None, settle=1, revolutions=2, steps_per_revolution=N_PER_REV,
+             step_size=None):
     """Run an FMU through its mapping; return time series in package units.
+
+    The mapping's ``[settings]`` values are applied first, then ``settings``; the window
+    follows :func:`steady_window` with ``settle`` and ``revolutions`` revolutions and
+    ``steps_per_revolution`` samples per revolution (None: the mapping's). ``step_size`` [s]
+    instead imposes a step and rounds the windows to whole steps (to show what that costs).
 
     Returns
     -------
@@ -67,7 +96,8 @@ def simulate(fmu, variant, *, wind_speed, rotor_speed, pitch=0.0, yaw=0.0, air_d
     for name, on in sw.items():
         e = m["switches"][name]
         start[e["variable"]] = e["values"][on] if isinstance(on, str) else (e["on"] if on else e["off"])
-    for name, value in dict(dict(shaft_tilt=0.0), **(settings or {})).items():
+    imposed = {name: e["value"] for name, e in m["settings"].items() if "value" in e}
+    for name, value in {**imposed, "shaft_tilt": 0.0, **(settings or {})}.items():
         e = m["settings"][name]
         start[e["variable"]] = _to_fmu(e, value)
     if p is not None:
@@ -81,10 +111,14 @@ def simulate(fmu, variant, *, wind_speed, rotor_speed, pitch=0.0, yaw=0.0, air_d
                     k = i * grid.n_eta + j
                     start[c["lift"].format(i=i, j=j)] = lift[k] / c["scale"]
                     start[c["drag"].format(i=i, j=j)] = drag[k] / c["scale"]
-    rev = 60.0 / rotor_speed
-    dt = rev / N_PER_REV
-    n_settle = settle * N_PER_REV
-    n_total = n_settle + revolutions * N_PER_REV
+    steady = dict(m["steady"], settle_revolutions=settle, average_revolutions=revolutions)
+    if steps_per_revolution is not None:
+        steady["steps_per_revolution"] = steps_per_revolution
+    dt, n_settle, n_average = steady_window(steady, rotor_speed)
+    if step_size is not None:
+        dt = step_size
+        n_settle, n_average = (round(k * 60.0 / rotor_speed / dt) for k in (settle, revolutions))
+    n_total = n_settle + n_average
     outs = {k: v for k, v in m["outputs"].items() if k != "normal_force"}
     nf = m["outputs"]["normal_force"]
     names = sorted({e["variable"] for e in outs.values()} | set(nf.get("variables", [nf.get("variable")])))
@@ -188,6 +222,35 @@ def test_yawed_tilted_sheared_average_matches_native_bem(fmus, rotor, variant):
         for ch, ref in (("power", res.power[k]), ("thrust", res.thrust[k])):
             avg = out[ch].mean()
             assert abs(avg / ref - 1.0) < 0.005, f"{variant} {ch} at {w} m/s, yaw 20 deg: {avg:g} vs BEM {ref:g}"
+
+
+@pytest.mark.parametrize("variant", ["A", "B"])
+def test_steady_window_spans_whole_revolutions(fmus, variant):
+    """The mapping's [steady] rule makes the settling and averaging windows whole revolutions at
+    any rotor speed, so the average of an azimuth-periodic output does not depend on where the
+    window starts. With shear and tower shadow, blade 1's flap moment carries a strong 1P: a
+    window of 2 revolutions at 12.1 rpm in 0.05 s steps (198.35 steps, the old rule) shifts its
+    mean by ~1e-4 with the start phase; whole revolutions leave rounding only."""
+    m = _mapping(variant)
+    for rpm in (12.1, 9.2, 7.0):
+        step, n_settle, n_average = steady_window(m["steady"], rpm)
+        assert n_settle * step * rpm / 60.0 == pytest.approx(m["steady"]["settle_revolutions"], rel=1e-12)
+        assert n_average * step * rpm / 60.0 == pytest.approx(m["steady"]["average_revolutions"], rel=1e-12)
+    # exactly periodic case: rigid blades, quasi-steady induction, shear and tower shadow on
+    kw = dict(wind_speed=11.4, rotor_speed=12.1, switches=dict(shear=True, tower_shadow=True, dynamic_inflow=False))
+    n = m["steady"]["steps_per_revolution"]
+    n_avg = m["steady"]["average_revolutions"] * n
+    out = simulate(fmus[variant], variant, settle=1, revolutions=m["steady"]["average_revolutions"] + 1,
+                   steps_per_revolution=None, **kw)
+    flap = out["root_flap_moment"]
+    means = [flap[k:k + n_avg].mean() for k in range(0, n + 1, n // 6)]
+    assert np.ptp(means) < 1e-9 * abs(np.mean(means)), np.ptp(means) / abs(np.mean(means))
+    assert np.ptp(flap) > 0.05 * abs(flap.mean())     # a strong 1P that a partial window would bias
+    # the old rule: 0.05 s steps, round(2 revolutions / 0.05 s) samples
+    old = simulate(fmus[variant], variant, settle=1, revolutions=4, step_size=0.05, **kw)
+    n_old = round(2 * 60.0 / 12.1 / 0.05)
+    old_means = [old["root_flap_moment"][k:k + n_old].mean() for k in range(0, 100, 10)]
+    assert np.ptp(old_means) > 1e-5 * abs(np.mean(old_means))
 
 
 # ------------------------------------------------------------------ switchable effects

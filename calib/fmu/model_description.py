@@ -30,6 +30,14 @@ TYPES = ("Real", "Integer", "Boolean")
 EXPANSIONS = ("nodes", "blades", "out_stations")
 MAX_BLADES = 3
 
+#: Log categories of both FMUs (the same names, in this order, as LOG_CATEGORY in
+#: fmu_models/core/fmu_slave.c): written into ``<LogCategories>`` of the model descriptions.
+LOG_CATEGORIES = (
+    ("logEvents", "Life-cycle events (initialization); off unless logging is on"),
+    ("logStatusWarning", "Warnings"),
+    ("logStatusError", "Refused calls and failures: the variable and its range, the time, the state"),
+)
+
 #: Units known to the generator: name -> (SI base-unit exponents, factor, offset)
 UNITS = {
     "m/s": ({"m": 1, "s": -1}, 1.0), "rpm": ({"rad": 1, "s": -1}, math.pi / 30.0),
@@ -243,6 +251,11 @@ def _unit_xml(units: set[str]) -> str:
     return "  <UnitDefinitions>\n" + "\n".join(rows) + "\n  </UnitDefinitions>\n" if rows else ""
 
 
+def _log_categories_xml() -> str:
+    rows = "".join(f"    <Category name={quoteattr(n)} description={quoteattr(d)}/>\n" for n, d in LOG_CATEGORIES)
+    return f"  <LogCategories>\n{rows}  </LogCategories>\n"
+
+
 def _causality(v: FmuVariable) -> tuple[str, str]:
     if v.kind == "input":
         return "input", ("continuous" if v.type == "Real" else "discrete")
@@ -262,7 +275,7 @@ def render_fmi2(spec: VariantSpec, guid: str, *, default_stop: float = 60.0,
             f'  <CoSimulation modelIdentifier="{spec.model_identifier}" '
             f'canHandleVariableCommunicationStepSize="true" canGetAndSetFMUstate="true" '
             f'canSerializeFMUstate="true" canNotUseMemoryManagementFunctions="true"/>\n')
-    body = [_unit_xml(units),
+    body = [_unit_xml(units), _log_categories_xml(),
             f'  <DefaultExperiment startTime="0" stopTime="{default_stop:g}" stepSize="{default_step:g}"/>\n',
             "  <ModelVariables>\n"]
     outputs = []
@@ -305,7 +318,7 @@ def render_fmi3(spec: VariantSpec, token: str, *, default_stop: float = 60.0,
             f'  <CoSimulation modelIdentifier="{spec.model_identifier}" '
             f'canHandleVariableCommunicationStepSize="true" canGetAndSetFMUState="true" '
             f'canSerializeFMUState="true" providesIntermediateUpdate="false" hasEventMode="false"/>\n')
-    body = [_unit_xml(units | {"s"}),
+    body = [_unit_xml(units | {"s"}), _log_categories_xml(),
             f'  <DefaultExperiment startTime="0" stopTime="{default_stop:g}" stepSize="{default_step:g}"/>\n',
             "  <ModelVariables>\n",
             '    <Float64 name="time" valueReference="0" causality="independent" variability="continuous" '

@@ -6,6 +6,8 @@
 #ifndef CORE_INTERNAL_H
 #define CORE_INTERNAL_H
 
+#include <stdarg.h>
+
 #include "rotor_core.h"
 
 #ifndef M_PI
@@ -15,6 +17,8 @@
 #define RAD2DEG (180.0 / M_PI)
 
 void core_logf(const RotorCore *core, int level, const char *fmt, ...);
+/* Format and pass a message to log (if any): the one formatter of core and wrappers. */
+void core_vlog(CoreLogger log, void *env, int level, const char *fmt, va_list ap);
 
 /* ---- rotor_data.c ---------------------------------------------------------- */
 int rotor_data_read(RotorData *data, const char *path, const RotorCore *core);

@@ -11,13 +11,42 @@
 
 void fmu_slave_logf(const FmuSlave *s, int level, const char *fmt, ...)
 {
-    char buf[1024];
     va_list ap;
-    if (!s || !s->log) return;
     va_start(ap, fmt);
-    vsnprintf(buf, sizeof buf, fmt, ap);
+    core_vlog(s->log, s->log_env, level, fmt, ap);
     va_end(ap);
-    s->log(s->log_env, level, buf);
+}
+
+/* ---- logging categories (also listed in the model descriptions, calib/fmu/model_description.py):
+ * index = message level */
+static const char *const LOG_CATEGORY[FMU_LOG_LEVELS] = {"logEvents", "logStatusWarning", "logStatusError"};
+
+int fmu_slave_set_logging(FmuSlave *s, int on, size_t n_categories, const char *const categories[])
+{
+    int enable[FMU_LOG_LEVELS], level;
+    size_t i;
+    for (level = 0; level < FMU_LOG_LEVELS; level++)
+        enable[level] = n_categories == 0 ? on : s->log_on[level];
+    for (i = 0; i < n_categories; i++) {
+        for (level = 0; level < FMU_LOG_LEVELS; level++)
+            if (categories && categories[i] && strcmp(categories[i], LOG_CATEGORY[level]) == 0) break;
+        if (level == FMU_LOG_LEVELS) {
+            fmu_slave_logf(s, 2, "unknown log category '%s'; valid: %s, %s, %s",
+                           categories && categories[i] ? categories[i] : "(null)", LOG_CATEGORY[0],
+                           LOG_CATEGORY[1], LOG_CATEGORY[2]);
+            return -1;
+        }
+        enable[level] = on;
+    }
+    memcpy(s->log_on, enable, sizeof enable);
+    return 0;
+}
+
+const char *fmu_slave_log_category(const FmuSlave *s, int level)
+{
+    if (level < 0) level = 0;
+    if (level >= FMU_LOG_LEVELS) level = FMU_LOG_LEVELS - 1;
+    return s->log_on[level] ? LOG_CATEGORY[level] : NULL;
 }
 
 int fmu_slave_create(FmuSlave *s, const char *given_token, const char *resource_dir,
@@ -30,6 +59,8 @@ int fmu_slave_create(FmuSlave *s, const char *given_token, const char *resource_
     s->token = token;
     s->log = log;
     s->log_env = log_env;
+    s->log_on[0] = 0;                 /* logEvents: fmi*SetDebugLogging or loggingOn */
+    s->log_on[1] = s->log_on[2] = 1;  /* warnings and errors unless switched off */
     if (!given_token || strcmp(given_token, token) != 0) {
         fmu_slave_logf(s, 2, "GUID / instantiation token mismatch: got '%s', the binary was built "
                        "for %s", given_token ? given_token : "(null)", token);

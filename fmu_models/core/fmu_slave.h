@@ -31,6 +31,8 @@ typedef enum {
  * FMU_TIME_RTOL * max(1 s, |time|). */
 #define FMU_TIME_RTOL 1e-9
 
+#define FMU_LOG_LEVELS 3   /* 0 logEvents, 1 logStatusWarning, 2 logStatusError */
+
 typedef struct {
     RotorCore *core;
     const FmuVar *vars;      /* the generated table (fmu_variables.h) */
@@ -40,6 +42,7 @@ typedef struct {
     double start_time;
     CoreLogger log;
     void *log_env;
+    int log_on[FMU_LOG_LEVELS];   /* per category; see fmu_slave_set_logging */
 } FmuSlave;
 
 /* Check the token given by the importer against this build's, read the resources and apply
@@ -50,6 +53,13 @@ int fmu_slave_create(FmuSlave *s, const char *given_token, const char *resource_
 void fmu_slave_destroy(FmuSlave *s);
 
 void fmu_slave_logf(const FmuSlave *s, int level, const char *fmt, ...);
+
+/* fmi*SetDebugLogging: no categories -> all categories on/off; else the named ones
+ * (logEvents, logStatusWarning, logStatusError); an unknown name is an error. */
+int fmu_slave_set_logging(FmuSlave *s, int on, size_t n_categories, const char *const categories[]);
+
+/* The category of a message of this level, or NULL if that category is off. */
+const char *fmu_slave_log_category(const FmuSlave *s, int level);
 
 int fmu_slave_set_start_time(FmuSlave *s, double start_time);   /* before initialization */
 int fmu_slave_enter_init(FmuSlave *s);

@@ -20,15 +20,21 @@
 
 #include "core_internal.h"
 
-void core_logf(const RotorCore *core, int level, const char *fmt, ...)
+void core_vlog(CoreLogger log, void *env, int level, const char *fmt, va_list ap)
 {
     char buf[1024];
-    va_list ap;
-    if (!core || !core->log) return;
-    va_start(ap, fmt);
+    if (!log) return;
     vsnprintf(buf, sizeof buf, fmt, ap);
+    log(env, level, buf);
+}
+
+void core_logf(const RotorCore *core, int level, const char *fmt, ...)
+{
+    va_list ap;
+    if (!core) return;
+    va_start(ap, fmt);
+    core_vlog(core->log, core->log_env, level, fmt, ap);
     va_end(ap);
-    core->log(core->log_env, level, buf);
 }
 
 RotorCore *core_create(const char *resource_dir, CoreLogger log, void *log_env)

@@ -19,18 +19,25 @@ typedef struct {
     FmuSlave slave;                 /* everything FMI-version independent */
     fmi2CallbackFunctions cb;
     char name[128];
-    int logging;
 } Instance;
 
+/* The FMI 2 logger takes a printf format: pass the message itself with '%' doubled and no
+ * variadic arguments, so that importers that cannot read variadic arguments (ctypes) get
+ * the whole text too. */
 static void log_message(void *env, int level, const char *message)
 {
     Instance *inst = (Instance *)env;
     fmi2Status status = level >= 2 ? fmi2Error : (level == 1 ? fmi2Warning : fmi2OK);
-    if (!inst->cb.logger) return;
-    if (level == 0 && !inst->logging) return;
-    inst->cb.logger(inst->cb.componentEnvironment, inst->name, status,
-                    level >= 2 ? "logStatusError" : (level == 1 ? "logStatusWarning" : "logEvents"),
-                    "%s", message);
+    const char *category = fmu_slave_log_category(&inst->slave, level);
+    char text[2048];
+    size_t i, j = 0;
+    if (!inst->cb.logger || !category) return;
+    for (i = 0; message[i] && j + 2 < sizeof text; i++) {
+        if (message[i] == '%') text[j++] = '%';
+        text[j++] = message[i];
+    }
+    text[j] = 0;
+    inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, text);
 }
 
 static fmi2Status status_of(int rc) { return rc == 0 ? fmi2OK : fmi2Error; }
@@ -64,11 +71,8 @@ const char *fmi2GetVersion(void) { return fmi2Version; }
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[])
 {
-    Instance *inst = (Instance *)c;
-    (void)nCategories; (void)categories;
-    if (!inst) return fmi2Error;
-    inst->logging = loggingOn ? 1 : 0;
-    return fmi2OK;
+    if (!c) return fmi2Error;
+    return status_of(fmu_slave_set_logging(SLAVE(c), loggingOn ? 1 : 0, nCategories, categories));
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -84,14 +88,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     if (!inst) return NULL;
     inst->cb = *functions;
     snprintf(inst->name, sizeof inst->name, "%s", instanceName ? instanceName : "rotor");
-    inst->logging = loggingOn ? 1 : 0;
-    if (fmuType != fmi2CoSimulation) {
-        log_message(inst, 2, "this FMU supports co-simulation only");
-        free(inst);
-        return NULL;
-    }
-    if (!fmuResourceLocation || uri_to_path(fmuResourceLocation, path, sizeof path) != 0) {
-        log_message(inst, 2, "invalid resource location");
+    if (fmuType != fmi2CoSimulation || !fmuResourceLocation ||
+        uri_to_path(fmuResourceLocation, path, sizeof path) != 0) {
+        log_message(inst, 2, fmuType != fmi2CoSimulation ? "this FMU supports co-simulation only"
+                                                         : "invalid resource location");
         free(inst);
         return NULL;
     }
@@ -100,6 +100,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free(inst);
         return NULL;
     }
+    fmu_slave_set_logging(&inst->slave, loggingOn ? 1 : 0, 1, (const char *const[]){"logEvents"});
     return inst;
 }
 
@@ -118,29 +119,17 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     return status_of(fmu_slave_set_start_time(SLAVE(c), startTime));
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c)
-{
-    if (!c) return fmi2Error;
-    return status_of(fmu_slave_enter_init(SLAVE(c)));
-}
-
-fmi2Status fmi2ExitInitializationMode(fmi2Component c)
-{
-    if (!c) return fmi2Error;
-    return status_of(fmu_slave_exit_init(SLAVE(c)));
-}
-
-fmi2Status fmi2Terminate(fmi2Component c)
-{
-    if (!c) return fmi2Error;
-    return status_of(fmu_slave_terminate(SLAVE(c)));
-}
-
-fmi2Status fmi2Reset(fmi2Component c)
-{
-    if (!c) return fmi2Error;
-    return status_of(fmu_slave_reset(SLAVE(c)));
-}
+/* Life-cycle calls that only forward to the slave. */
+#define FORWARD(Name, slave_function)                                                           \
+    fmi2Status fmi2##Name(fmi2Component c)                                                      \
+    {                                                                                           \
+        if (!c) return fmi2Error;                                                               \
+        return status_of(slave_function(SLAVE(c)));                                             \
+    }
+FORWARD(EnterInitializationMode, fmu_slave_enter_init)
+FORWARD(ExitInitializationMode, fmu_slave_exit_init)
+FORWARD(Terminate, fmu_slave_terminate)
+FORWARD(Reset, fmu_slave_reset)
 
 /* ---- getters and setters (all variables of this variant are scalars) ----------------- */
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])

@@ -19,17 +19,14 @@ typedef struct {
     FmuSlave slave;                 /* everything FMI-version independent */
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
-    int logging;
 } Instance;
 
 static void log_message(void *env, int level, const char *message)
 {
     Instance *inst = (Instance *)env;
     fmi3Status status = level >= 2 ? fmi3Error : (level == 1 ? fmi3Warning : fmi3OK);
-    if (!inst->log) return;
-    if (level == 0 && !inst->logging) return;
-    inst->log(inst->env, status,
-              level >= 2 ? "logStatusError" : (level == 1 ? "logStatusWarning" : "logEvents"), message);
+    const char *category = fmu_slave_log_category(&inst->slave, level);
+    if (inst->log && category) inst->log(inst->env, status, category, message);
 }
 
 static fmi3Status status_of(int rc) { return rc == 0 ? fmi3OK : fmi3Error; }
@@ -47,11 +44,8 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[])
 {
-    Instance *inst = (Instance *)instance;
-    (void)nCategories; (void)categories;
-    if (!inst) return fmi3Error;
-    inst->logging = loggingOn ? 1 : 0;
-    return fmi3OK;
+    if (!instance) return fmi3Error;
+    return status_of(fmu_slave_set_logging(SLAVE(instance), loggingOn ? 1 : 0, nCategories, categories));
 }
 
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
@@ -92,12 +86,12 @@ fmi3Instance fmi3InstantiateCoSimulation(
     if (!inst) return NULL;
     inst->env = instanceEnvironment;
     inst->log = logMessage;
-    inst->logging = loggingOn ? 1 : 0;
     if (fmu_slave_create(&inst->slave, instantiationToken, resourcePath, FMU_VARS, FMU_N_VARS,
                          FMU_INSTANTIATION_TOKEN, log_message, inst) != 0) {
         free(inst);
         return NULL;
     }
+    fmu_slave_set_logging(&inst->slave, loggingOn ? 1 : 0, 1, (const char *const[]){"logEvents"});
     return inst;
 }
 
@@ -118,11 +112,16 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     return status_of(fmu_slave_enter_init(SLAVE(instance)));
 }
 
-fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
-{
-    if (!instance) return fmi3Error;
-    return status_of(fmu_slave_exit_init(SLAVE(instance)));
-}
+/* Life-cycle calls that only forward to the slave. */
+#define FORWARD(Name, slave_function)                                                            \
+    fmi3Status fmi3##Name(fmi3Instance instance)                                                 \
+    {                                                                                            \
+        if (!instance) return fmi3Error;                                                         \
+        return status_of(slave_function(SLAVE(instance)));                                       \
+    }
+FORWARD(ExitInitializationMode, fmu_slave_exit_init)
+FORWARD(Terminate, fmu_slave_terminate)
+FORWARD(Reset, fmu_slave_reset)
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
@@ -130,17 +129,6 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance)
     return fail(instance, "event mode is not supported");
 }
 
-fmi3Status fmi3Terminate(fmi3Instance instance)
-{
-    if (!instance) return fmi3Error;
-    return status_of(fmu_slave_terminate(SLAVE(instance)));
-}
-
-fmi3Status fmi3Reset(fmi3Instance instance)
-{
-    if (!instance) return fmi3Error;
-    return status_of(fmu_slave_reset(SLAVE(instance)));
-}
 
 /* ---- getters and setters (arrays: all elements in order; sets are atomic) -------------- */
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
