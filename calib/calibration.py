@@ -42,7 +42,7 @@ from calib.truncation import loo_curve
 from calib.types import ParameterKind, nominal_vector
 
 NOISE_MODES = ("known", "ml", "repeats")
-AUTO_CHOICES = 2
+AUTO_CHOICES = 3
 """Linearizations at which ``sigma_bar = "auto"`` chooses the retained count; later ones keep it."""
 RETAIN_MODES = ("threshold", "all")
 

@@ -2,6 +2,7 @@
 
 ``calib demo``        the embedded default job (C_P surface and power curve)
 ``calib run FILE``    run a workflow TOML (calibration, report)
+``calib predict DIR`` a calibrated model at new conditions, with 95 % intervals
 ``calib fmu build``   build the turbine FMUs from C source
 ``calib rotors``      list the embedded rotors
 """
@@ -25,6 +26,12 @@ def _run(args) -> int:
     return int(workflow_main([args.file, "--out", args.out]) or 0)
 
 
+def _predict(args) -> int:
+    from calib.predict import run_predict
+    run_predict(args.result_dir, args.data, args.out, args.confidence)
+    return 0
+
+
 def _fmu(args) -> int:
     if not args.rest or args.rest[0] != "build":
         print("calib fmu: expected 'calib fmu build [--variant A|B|all] [--rotor NAME] [--out DIR] "
@@ -46,6 +53,8 @@ def _rotors(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="calib", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    from calib import __version__
+    parser.add_argument("--version", action="version", version=f"calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="C_P surface and power curve of an embedded rotor")
     p.add_argument("--out", default="demo_output", help="output folder (default: demo_output)")
@@ -55,6 +64,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=_run)
+    p = sub.add_parser("predict", help="a calibrated model at new conditions, with intervals",
+                       description="Evaluate the model a calibration produced (rebuilt from its result folder) at "
+                                   "the conditions of a CSV file; write each channel with its lower and upper "
+                                   "interval bound (SI units). If the file also holds measured channels, print "
+                                   "chi2/dof of measured against predicted.")
+    p.add_argument("result_dir", help="folder holding result.json and result.npz (a stage folder of 'calib run')")
+    p.add_argument("--data", required=True, help="CSV with wind_speed, rotor_speed, pitch (and optionally "
+                   "measured channels and <channel>_sigma columns); layout as for measurements")
+    p.add_argument("--out", required=True, help="output CSV")
+    p.add_argument("--confidence", type=float, default=0.95, help="two-sided interval level (default 0.95)")
+    p.set_defaults(func=_predict)
     p = sub.add_parser("fmu", help="FMU tools: 'calib fmu build [--variant A|B|all] ...'")
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=_fmu)

@@ -566,7 +566,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     data = data * factors
     col = {n: data[:, j] for j, n in enumerate(needed)}
     cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
-    values = np.column_stack([col[c] for c in channels])
+    values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(rows), 0))
     sigma = None
     if has_sigma:
         sigma = np.column_stack([col[s] for s in sig_cols])

@@ -16,7 +16,8 @@ exactly for this linear problem, the prediction error
 §7.10). The criterion is the mean squared whitened leave-one-point-out error per
 residual, CV(k) = Σ_b |e_b,LOO(k)|² / n_rows; its expectation is about 1 + (prediction
 variance) for a model that is right, and grows with bias (too few θ) and with variance
-(too many). The number retained is k* = argmin CV(k). Points with leverage 1 (a point
+(too many). The number retained is the smallest k whose CV is within one standard error
+(over the operating points) of the minimum: the one-standard-error rule. Points with leverage 1 (a point
 that alone determines a direction) make CV infinite for that k, which is correct: its
 prediction from the other points is unconstrained.
 
@@ -49,7 +50,9 @@ class TruncationCurve:
     singular_values : ndarray, shape (n_k,)
         s_k of the last direction kept at each k (inf for k = 0) [1/scale].
     chosen : int
-        k* = argmin cv.
+        The fewest θ whose ``cv`` is within one standard error of the minimum.
+    cv_se : ndarray, shape (n_k,)
+        Standard error of ``cv`` over the operating points [-].
     """
 
     n_retained: np.ndarray
@@ -57,6 +60,7 @@ class TruncationCurve:
     fit: np.ndarray
     singular_values: np.ndarray
     chosen: int
+    cv_se: np.ndarray | None = None
 
     @property
     def sigma_bar(self) -> float:
@@ -65,7 +69,7 @@ class TruncationCurve:
         return float(1.0 / s) if np.isfinite(s) and s > 0 else float("inf")
 
     def to_dict(self) -> dict:
-        return {"n_retained": self.n_retained, "cv": self.cv, "fit": self.fit,
+        return {"n_retained": self.n_retained, "cv": self.cv, "cv_se": self.cv_se, "fit": self.fit,
                 "singular_values": self.singular_values, "chosen": self.chosen, "criterion": "loo_points"}
 
 
@@ -107,7 +111,7 @@ def loo_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | No
     eye = np.eye(n_channels)
     H = np.zeros((n_ok, n_channels, n_channels))
     fitted = np.zeros_like(zb)
-    ks, cv, fit, sv = [], [], [], []
+    ks, cv, se, fit, sv = [], [], [], [], []
     for k in range(k_max + 1):
         if k > 0:
             u = Ub[:, :, k - 1]
@@ -121,9 +125,16 @@ def loo_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | No
         if good.any():
             loo[good] = np.linalg.solve(A[good], e[good][..., None])[..., 0]
         ks.append(k)
-        cv.append(float(np.mean(loo ** 2)) if good.all() else float("inf"))
+        per_point = np.sum(loo ** 2, axis=1) / n_channels
+        cv.append(float(np.mean(per_point)) if good.all() else float("inf"))
+        se.append(float(np.std(per_point, ddof=1) / np.sqrt(n_ok)) if good.all() and n_ok > 1 else float("inf"))
         fit.append(float(np.mean(e ** 2)))
         sv.append(float(s[k - 1]) if k > 0 else float("inf"))
-    cv = np.array(cv)
-    chosen = int(np.argmin(cv))
-    return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), chosen)
+    cv, se = np.array(cv), np.array(se)
+    best = int(np.argmin(cv))
+    # one-standard-error rule: the fewest θ whose criterion is within one standard error of the
+    # minimum (Hastie et al. 2009, §7.10); the curve is flat near its minimum, and there the
+    # smaller model predicts as well and is more stable from one linearization to the next
+    within = np.flatnonzero(cv <= cv[best] + se[best])
+    chosen = int(within[0]) if within.size else best
+    return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), chosen, se)

@@ -1,0 +1,180 @@
+"""Honest uncertainty: automatic truncation, frozen-direction covariance, confounding,
+goodness of fit and predictions (issue: bands that cover the truth).
+
+Seeds here (7000+) are used nowhere else in the suite.
+"""
+
+import numpy as np
+import pytest
+
+from calib.bem import BemSettings
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.cli import main as cli_main
+from calib.corrections import CorrectionGrid
+from calib.identifiability import frozen_aware_covariance
+from calib.measurements import synthesize
+from calib.models.bem_model import BemModel
+from calib.result import load_result
+from calib.rotor.library import load_rotor
+from calib.truncation import loo_curve
+from calib.types import OperatingConditions, nominal_vector
+from twin_model import TwinModel, twin_conditions
+
+
+def test_loo_curve_equals_refitting_without_each_point():
+    """The block leave-one-out identity against brute force: refit the truncated SVD without
+    each point and predict it."""
+    rng = np.random.default_rng(7001)
+    n_pts, n_ch, n_par = 15, 3, 8
+    M = rng.standard_normal((n_pts * n_ch, n_par)) * np.logspace(0, -3, n_par)
+    z = M @ rng.standard_normal(n_par) + rng.standard_normal(n_pts * n_ch)
+    curve = loo_curve(M, z, n_ch)
+    U, s, Vt = np.linalg.svd(M, full_matrices=False)
+    for k in (1, 3, 6):
+        # the truncated fit is the least-squares fit in span(U_k), i.e. a regression on U_k
+        X = U[:, :k]
+        err = []
+        for b in range(n_pts):
+            rows = np.arange(b * n_ch, (b + 1) * n_ch)
+            keep = np.setdiff1d(np.arange(n_pts * n_ch), rows)
+            coef = np.linalg.lstsq(X[keep], z[keep], rcond=None)[0]
+            err.append(z[rows] - X[rows] @ coef)
+        np.testing.assert_allclose(curve.cv[k], np.mean(np.square(err)), rtol=1e-9)
+    assert curve.n_retained[0] == 0
+    best = int(np.argmin(curve.cv))
+    assert curve.chosen <= best and curve.cv[curve.chosen] <= curve.cv[best] + curve.cv_se[best]
+
+
+def test_frozen_directions_carry_prior_variance():
+    V = np.linalg.qr(np.random.default_rng(7002).standard_normal((4, 4)))[0]
+    sig = np.array([0.1, 0.2, 5.0, 50.0])
+    keep = np.array([True, True, False, False])
+    prior = np.full(4, 1.0)
+    cr, cf = frozen_aware_covariance(V, sig, keep, prior)
+    np.testing.assert_allclose(cr, (V[:, :2] * sig[:2] ** 2) @ V[:, :2].T)
+    np.testing.assert_allclose(cf, V[:, 2:] @ V[:, 2:].T)  # isotropic prior: projector onto the frozen space
+    # nothing frozen -> no prior term; everything frozen -> the prior itself
+    assert np.allclose(frozen_aware_covariance(V, sig, np.ones(4, bool), prior)[1], 0)
+    np.testing.assert_allclose(frozen_aware_covariance(V, sig, np.zeros(4, bool), prior)[1], np.eye(4), atol=1e-12)
+
+
+def _held_back_chi2(res, model, cond, measured, sigma):
+    pred = res.predict(cond, model=model)
+    return float(np.mean(((measured - pred.values) / sigma) ** 2))
+
+
+def test_auto_truncation_predicts_held_back_points_nearly_as_well_as_the_best_threshold():
+    """Calibrate on 2/3 of the points, predict the rest: the automatic choice is within 20 %
+    of the best held-back χ²/dof over a sweep of σ̄ from 0.1 to 5."""
+    grid = CorrectionGrid(np.linspace(-4.0, 20.0, 7), np.linspace(0.2, 1.0, 5))
+    model = TwinModel(grid, channels=("power", "thrust", "root_flap_moment"))
+    cond = twin_conditions(tsr=(4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0), pitch=(-2.0, 0.0, 2.0, 4.0), wind=(6.0, 9.0))
+    rng = np.random.default_rng(7003)
+    p_true = nominal_vector(model.parameters)
+    A, E = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
+    p_true[:grid.n_lift] = (-0.15 * np.exp(-0.5 * ((A - 10) / 4) ** 2) * np.exp(-0.5 * ((E - 0.7) / 0.2) ** 2)).ravel()
+    p_true[grid.n_lift:grid.n_params] = 0.004 * np.abs(rng.standard_normal(grid.n_lift))
+    meas = synthesize(model, p_true, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7004)
+    idx = np.arange(len(cond))
+    test = idx % 3 == 1
+    train_meas = type(meas)(cond.subset(~test), meas.channels, meas.values[~test], meas.sigma[~test], "train")
+    scores = {}
+    for sb in ("auto", 0.1, 0.2, 0.5, 1.0, 2.0, 5.0):
+        res = Calibrator(model, train_meas, CalibrationSettings(sigma_bar=sb, cd_min=None)).run()
+        scores[sb] = _held_back_chi2(res, model, cond.subset(test), meas.values[test], meas.sigma[test])
+    best = min(v for k, v in scores.items() if k != "auto")
+    assert scores["auto"] <= 1.2 * best, scores
+
+
+@pytest.fixture(scope="module")
+def bem_twin():
+    rotor = load_rotor("nrel5mw")
+    grid = CorrectionGrid([-4.0, 2.0, 8.0, 14.0], [0.3, 0.6, 1.0])
+    channels = ("power", "thrust", "root_flap_moment")
+    model = BemModel(rotor, grid, channels, BemSettings(use_tilt=False), nuisance=("pitch_offset", "wind_scale"))
+    tsr, pitch = np.meshgrid(np.linspace(4.5, 10.5, 7), [-1.0, 1.5, 4.0, 6.5], indexing="ij")
+    rpm = 11.0
+    v = rpm * np.pi / 30 * rotor.rotor_radius / tsr.ravel()
+    cond = OperatingConditions(v, np.full(v.size, rpm), pitch.ravel())
+    return model, cond, grid
+
+
+def _nuisance_z(res, truth):
+    return {v["name"]: (v["value"] - truth.get(v["name"], v["nominal"])) / v["std"]
+            for v in res.verdicts if v["kind"] == "nuisance"}
+
+
+def test_pure_polar_change_is_not_absorbed_by_the_nuisance_parameters(bem_twin):
+    model, cond, grid = bem_twin
+    p = nominal_vector(model.parameters)
+    A, E = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
+    p[:grid.n_lift] = (-0.12 * np.exp(-0.5 * ((A - 8) / 5) ** 2) * (E > 0.5)).ravel()
+    for seed in (7010, 7011, 7012):
+        meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=seed)
+        res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+        z = _nuisance_z(res, {})
+        assert all(abs(v) <= 3.0 for v in z.values()), (seed, z)
+
+
+def test_pure_pitch_offset_is_recovered_within_three_sigma(bem_twin):
+    model, cond, grid = bem_twin
+    p = nominal_vector(model.parameters)
+    j = [q.name for q in model.parameters].index("pitch_offset")
+    p[j] = 1.5
+    for seed in (7020, 7021, 7022):
+        meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=seed)
+        res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+        z = _nuisance_z(res, {"pitch_offset": 1.5})
+        assert abs(z["pitch_offset"]) <= 3.0 and abs(z["wind_scale"]) <= 3.0, (seed, z)
+        # the report says how much the pitch offset shares with the field instead of hiding it
+        v = next(v for v in res.verdicts if v["name"] == "pitch_offset")
+        assert 0.0 <= v["shared_information"] <= 1.0 and "confounded_with" in v
+
+
+def test_goodness_of_fit_counts_dof_right(bem_twin):
+    model, cond, grid = bem_twin
+    p = nominal_vector(model.parameters)
+    p[:grid.n_lift] = -0.05
+    meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7030)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+    gof = res.goodness_of_fit()
+    n = len(cond) * len(model.channels)
+    assert gof["dof_before"] == n and gof["dof_after"] == n - res.n_retained
+    assert gof["chi2_per_dof_before"] == pytest.approx(res.chi2_before / n)
+    assert 0.0 <= gof["p_value_after"] <= 1.0 and len(gof["worst"]) == 5
+    assert abs(gof["worst"][0]["whitened_residual"]) >= abs(gof["worst"][-1]["whitened_residual"])
+
+
+def test_prediction_intervals_cover_the_noise_free_truth(bem_twin, tmp_path):
+    """Calibrate, then `calib predict` at conditions between the calibration points: the
+    95 % intervals of the model output contain the noise-free truth at >= 90 % of them."""
+    model, cond, grid = bem_twin
+    p = nominal_vector(model.parameters)
+    A, E = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
+    p[:grid.n_lift] = (0.08 * np.sin(np.radians(A) * 6) * E).ravel()
+    p[grid.n_lift:grid.n_params] = 0.003 * (A > 10).ravel()
+    p[[q.name for q in model.parameters].index("pitch_offset")] = 0.4
+    meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7040)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+    res.save(tmp_path / "res")
+    tsr, pitch = np.meshgrid(np.linspace(5.0, 10.0, 6), [0.0, 2.5, 5.0], indexing="ij")
+    v = 11.0 * np.pi / 30 * model.rotor.rotor_radius / tsr.ravel()
+    new = OperatingConditions(v, np.full(v.size, 11.0), pitch.ravel())
+    truth = model.evaluate(p, new).values
+    noisy = synthesize(model, p, new, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7041)
+    noisy.write_csv(tmp_path / "new.csv")
+    out = tmp_path / "pred.csv"
+    assert cli_main(["predict", str(tmp_path / "res"), "--data", str(tmp_path / "new.csv"), "--out", str(out)]) == 0
+    import csv
+    rows = [r for r in csv.reader(open(out)) if r and not r[0].startswith("#")]
+    header, body = rows[0], np.array([[float(x) for x in r[:-1]] for r in rows[1:]])
+    inside = []
+    for j, c in enumerate(res.channels):
+        col = header.index(f"{c} [{res.channel_units[j]}]")
+        lo, hi = body[:, col + 1], body[:, col + 2]
+        assert np.all(lo <= body[:, col]) and np.all(body[:, col] <= hi)
+        inside.append((truth[:, j] >= lo) & (truth[:, j] <= hi))
+    assert np.mean(inside) >= 0.9, np.mean(inside, axis=1)
+    # the result reloads with everything the predictions need
+    back = load_result(tmp_path / "res")
+    np.testing.assert_allclose(back.predict(new).values, res.predict(new).values)
