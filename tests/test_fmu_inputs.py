@@ -108,7 +108,10 @@ class Fmu:
             v = self.vars[name]
             refs, vals = by_kind.setdefault(self._kind(name), ([], []))
             refs.append(v.valueReference)
-            vals.extend(np.atleast_1d(value).tolist())
+            items = np.atleast_1d(value).tolist()
+            if self._kind(name) in ("Integer", "Int32"):
+                items = [int(x) for x in items]
+            vals.extend(items)
         for kind, (refs, vals) in by_kind.items():
             if self.variant == "A":
                 {"Real": self.slave.setReal, "Integer": self.slave.setInteger,

@@ -353,6 +353,7 @@ static int check_ranges(const FmuSlave *s, const CoreDynamic *dyn)
 static int check_snapshot(const FmuSlave *s, const Snapshot *snap, const char *what)
 {
     const StateHeader *h = &snap->head;
+    char token[STATE_TOKEN_BYTES];
     if (memcmp(h->magic, STATE_MAGIC, sizeof STATE_MAGIC) != 0) {
         fmu_slave_logf(s, 2, "%s: not a state of this rotor FMU (no header)", what);
         return -1;
@@ -365,7 +366,9 @@ static int check_snapshot(const FmuSlave *s, const Snapshot *snap, const char *w
                        sizeof(StatePayload));
         return -1;
     }
-    if (memchr(h->token, 0, sizeof h->token) == NULL || strcmp(h->token, s->token) != 0) {
+    memset(token, 0, sizeof token);
+    snprintf(token, sizeof token, "%s", s->token);
+    if (memcmp(h->token, token, sizeof token) != 0) {       /* NUL padding included */
         fmu_slave_logf(s, 2, "%s: the state comes from another build (token %.*s), this FMU is %s",
                        what, STATE_TOKEN_BYTES, h->token, s->token);
         return -1;
