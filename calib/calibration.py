@@ -218,8 +218,12 @@ class Calibrator:
         if m.sigma is not None:
             return m.sigma.copy()
         if s.noise == "known":
-            raise InputError("noise 'known' needs sigma: give <channel>_sigma columns or settings.sigma, or "
-                             "choose noise = 'ml' or 'repeats'", m.source, field="sigma")
+            raise InputError(
+                "noise = 'known' needs the 1-σ noise of every channel, but the table has no _sigma columns ("
+                + ", ".join(f"{c}_sigma" for c in m.channels) + ") and no sigma is set: set [calibration] sigma = {"
+                + ", ".join(f"{c} = ..." for c in m.channels) + "} (absolute, SI units: W, N, N m), add the _sigma "
+                "columns, or choose [calibration] noise = \"ml\" (from the residuals) or \"repeats\" (from "
+                "repeated records); in Python: CalibrationSettings(sigma={...})", m.source, field="calibration.sigma")
         return None  # ml: from the nominal residual
 
     # ------------------------------------------------------------------ run

@@ -23,7 +23,7 @@ def _demo(args) -> int:
 
 def _run(args) -> int:
     from calib.workflow import main as workflow_main
-    return int(workflow_main([args.file, "--out", args.out]) or 0)
+    return int(workflow_main([args.file, "--out", args.out] + (["--force"] if args.force else [])) or 0)
 
 
 def _predict(args) -> int:
@@ -60,9 +60,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="demo_output", help="output folder (default: demo_output)")
     p.add_argument("--rotor", default="nrel5mw", help="embedded rotor name (default: nrel5mw)")
     p.set_defaults(func=_demo)
-    p = sub.add_parser("run", help="run a workflow TOML file")
-    p.add_argument("file")
+    p = sub.add_parser("run", help="run a workflow TOML file",
+                       description="Run a workflow TOML file (rotor, measurements or a synthetic truth, "
+                                   "calibration stages); writes results, figures and report.html. Every key "
+                                   "is documented in workflows/README.md.")
+    p.add_argument("file", help="workflow TOML file")
     p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--force", action="store_true", help="calibrate even when the unit check suspects a unit "
+                   "mistake in the measurements (the report says so)")
     p.set_defaults(func=_run)
     p = sub.add_parser("predict", help="a calibrated model at new conditions, with intervals",
                        description="Evaluate the model a calibration produced (rebuilt from its result folder) at "

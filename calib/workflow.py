@@ -28,7 +28,8 @@ from calib.measurements import Measurements, read_measurements, sha256_of, synth
 from calib.models.base import FieldModel
 from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
-from calib.rotor.library import load_rotor
+from calib.rotor.sources import rotor_from_table
+from calib.unit_check import check_units
 
 NUM = (int, float)
 # schema: section -> key -> (accepted types, required)
@@ -37,14 +38,14 @@ SCHEMA = {
          "grid": (dict, True), "conditions": (dict, False), "measurements": (dict, False),
          "truth": (dict, False), "noise": (dict, False), "calibration": (dict, False),
          "stages": (list, True)},
-    "rotor": {"name": (str, True)},
+    "rotor": None,  # validated by calib.rotor.sources.rotor_from_table (name | openfast | aerodyn | ... )
     "model": {"nuisance": (list, False), "use_tilt": (bool, False), "n_sectors": (int, False),
               "shear_exponent": (NUM, False), "tip_loss": (bool, False), "hub_loss": (bool, False)},
     "grid": {"alpha_nodes_deg": (list, True), "eta_nodes": (list, True), "cl_scale": (NUM, False),
              "cd_scale": (NUM, False), "cl_bound": (NUM, False), "cd_bound": (NUM, False)},
     "conditions": {"tsr": (list, True), "pitch": (list, True), "rotor_speed": (NUM, True),
                    "air_density": (NUM, False), "yaw": (NUM, False)},
-    "measurements": {"file": (str, True)},
+    "measurements": {"file": (str, True), "drop_incomplete_rows": (bool, False)},
     "truth": {"pitch_offset": (NUM, False), "wind_scale": (NUM, False), "alpha_step_deg": (NUM, False),
               "eta_step": (NUM, False), "bumps": (list, True)},
     "truth.bumps": {"block": (str, True), "amplitude": (NUM, True), "alpha_deg": (NUM, True),
@@ -54,7 +55,8 @@ SCHEMA = {
     "calibration": {"sigma_bar": ((int, float, str), False), "prior_sigma": (NUM, False), "optimizer": (str, False),
                     "noise": (str, False),
                     "cd_min": (NUM, False), "max_relinearizations": (int, False),
-                    "max_iterations": (int, False), "max_retained": (int, False)},
+                    "max_iterations": (int, False), "max_retained": (int, False), "force": (bool, False),
+                    "sigma": (dict, False)},
     "stages": {"name": (str, True), "channels": (list, True), "retain": (str, False)},
 }
 TYPE_NAMES = {str: "a string", dict: "a table", list: "an array", bool: "true/false", int: "an integer",
@@ -104,7 +106,7 @@ def load_workflow(path: str | Path) -> dict:
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML: {exc}", src) from None
     _check_table(data, "", src)
-    for section in ("rotor", "model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
+    for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
         if section in data:
             _check_table(data[section], section, src)
     for k, bump in enumerate(data.get("truth", {}).get("bumps", [])):
@@ -221,8 +223,24 @@ def _conditions(cfg: dict, rotor, src: str) -> OperatingConditions:
                                float(cfg.get("yaw", 0.0)))
 
 
-def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -> list[StageOutcome]:
-    """Run a workflow file; writes results, figures and ``report.html`` into ``out_dir``."""
+def _absolute_rotor_table(table: dict, base_dir) -> dict:
+    """The ``[rotor]`` table with file paths made absolute (results rebuild the rotor from it)."""
+    out = dict(table)
+    for key in ("openfast", "aerodyn", "aerodyn_blade", "windio"):
+        if isinstance(out.get(key), str):
+            out[key] = str((Path(base_dir) / out[key]).resolve())
+    if isinstance(out.get("airfoils"), list):
+        out["airfoils"] = [str((Path(base_dir) / a).resolve()) if isinstance(a, str) else a for a in out["airfoils"]]
+    return out
+
+
+def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
+                 force: bool = False) -> list[StageOutcome]:
+    """Run a workflow file; writes results, figures and ``report.html`` into ``out_dir``.
+
+    ``force`` (or ``[calibration] force = true``) calibrates even when the unit check
+    (:func:`calib.unit_check.check_units`) suspects a unit mistake; the report says so.
+    """
     from calib.report.figures import plot_spectra, save_figure, write_figures
     from calib.report.html import write_report
 
@@ -230,7 +248,9 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
     src = cfg["_source"]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rotor = load_rotor(cfg["rotor"]["name"])
+    rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"])
+    rotor = rsrc.rotor
+    rotor_spec = _absolute_rotor_table(cfg["rotor"], cfg["_dir"])
     mcfg = cfg.get("model", {})
     settings = BemSettings(use_tilt=mcfg.get("use_tilt", False), n_sectors=mcfg.get("n_sectors"),
                            shear_exponent=float(mcfg.get("shear_exponent", 0.0)),
@@ -245,12 +265,27 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
         if not all(isinstance(c, str) for c in s["channels"]) or not s["channels"]:
             raise InputError("channels must be a non-empty array of names", src, field=f"stages[{k}].channels")
     calib_cfg = dict(cfg.get("calibration", {}))
+    force = bool(calib_cfg.pop("force", False)) or force
 
     t0 = time.perf_counter()
+    unit_notes = {}
     if "measurements" in cfg:
         file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
-        meas = read_measurements(file, all_channels)
+        meas = read_measurements(file, all_channels,
+                                 drop_incomplete_rows=cfg["measurements"].get("drop_incomplete_rows", False))
         truth_p = None
+        if progress:
+            for note in meas.notes:
+                print(f"[calib run] {file.name}: {note}", flush=True)
+        check_model = BemModel(rotor, grid, all_channels, settings, nuisance, rotor_source=rotor_spec)
+        unit_report = check_units(check_model, nominal_vector(check_model.parameters), meas,
+                                  sigma=calib_cfg.get("sigma"))
+        if progress:
+            print("[calib run] " + unit_report.summary().replace("\n", "\n[calib run] "), flush=True)
+        if not force:
+            unit_report.raise_if_failed(str(file))
+        elif not unit_report.ok:
+            unit_notes = {"unit check (overridden by force)": "; ".join(f.message for f in unit_report.findings)}
     else:
         cond = _conditions(cfg["conditions"], rotor, src)
         noise = cfg["noise"]
@@ -270,7 +305,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
-        model = BemModel(rotor, grid, stage["channels"], settings, nuisance)
+        model = BemModel(rotor, grid, stage["channels"], settings, nuisance, rotor_source=rotor_spec)
         st = CalibrationSettings(retain=stage.get("retain", "threshold"), verbose=False, **calib_cfg)
         st.validate(src)
         callback = None
@@ -285,6 +320,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True) -
         t_cal = time.perf_counter() - t_cal
         res.inputs[src] = sha256_of(src)
         res.inputs["workflow"] = cfg["name"]
+        res.checks.update(unit_notes)
         if truth_p is not None:
             res.checks.update(truth_checks(model, res, cfg["truth"]))
         stage_dir = out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
@@ -321,9 +357,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="calib run", description="run a workflow TOML file")
     parser.add_argument("file")
     parser.add_argument("--out", required=True)
+    parser.add_argument("--force", action="store_true")
     args = parser.parse_args(argv)
     try:
-        run_workflow(args.file, args.out)
+        run_workflow(args.file, args.out, force=args.force)
     except CalibError as exc:
         print(f"calib: error: {exc}", file=sys.stderr)
         return 2
