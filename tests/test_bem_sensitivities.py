@@ -65,3 +65,16 @@ def test_jacobian_shape_and_nominal_zero_correction():
     assert G[0, 0, grid.node_index(1, 1)] > 0 or G[0, 0, grid.node_index(0, 1)] > 0
     # more drag lowers power
     assert G[0, 0, grid.n_lift + grid.node_index(0, 1)] < 0
+
+
+def test_jacobian_at_a_point_with_several_roots():
+    """Phase VI at 20 m/s keeps the smallest-φ of three roots at r/R = 0.994; the implicit-function
+    derivatives hold at that root (the perturbed evaluations keep the same root)."""
+    from calib.rotor.library import load_rotor
+    rotor = load_rotor("phase_vi")
+    model = BemModel(rotor, None, ("power", "thrust", "root_flap_moment", "ft@0.95"), BemSettings(use_tilt=False))
+    cond = OperatingConditions([20.0, 10.0], [72.08, 72.11], [3.0, 3.0], 1.22)
+    ev = model.evaluate(nominal_vector(model.parameters), cond)
+    assert ev.extras["multiple_roots"].tolist() == [True, False]
+    worst = _fd_check(model, nominal_vector(model.parameters), cond)
+    assert worst < 2e-5

@@ -6,9 +6,13 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from calib.bem import BemSettings, solve_bem
 from calib.bem.kinematics import curvature, wind_components
+from calib.bem.multiple_roots import SCAN_STEP_DEG, lowest_roots
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.residual import SectionGeometry, section_equations
-from calib.models.base import OperatingConditions, Status
+from calib.bem.solver import INDUCTION_LIMIT
+from calib.models.bem_model import BemModel
+from calib.rotor.library import load_phase_vi_measurements, load_rotor, reference_path
+from calib.types import OperatingConditions, Status
 from synthetic import synthetic_rotor
 
 
@@ -71,7 +75,12 @@ def test_invalid_conditions_give_failed_status_not_nan(field, bad):
              "air_density": bad > 0 and np.isfinite(bad), "pitch": abs(bad) <= 180,
              "yaw": abs(bad) < 90}[field]
     assert res.status[0] == Status.CONVERGED
-    if valid:
+    if valid and field == "rotor_speed" and bad == 1e3:
+        # λ ≈ 520: a valid input, but the induction leaves the physical range (|a| > 2)
+        assert res.status[1] == Status.NOT_CONVERGED
+        assert "axial induction" in res.messages[1]
+        assert np.isnan(res.power[1])
+    elif valid:
         assert res.status[1] == Status.CONVERGED, res.messages[1]
         assert np.isfinite(res.power[1])
     else:
@@ -176,3 +185,108 @@ def test_power_equals_torque_times_speed_and_coefficients():
     area = np.pi * rotor.tip_radius ** 2
     np.testing.assert_allclose(res.cp, res.power / (0.5 * cond.air_density * area * cond.wind_speed ** 3),
                                rtol=1e-12)
+
+
+def brute_force_roots(rotor, cond, k, station, polars=None, n_grid=40001):
+    """φ of every sign change of the residual on a uniform grid of Ning's first bracket (ε, π/2) at
+    one station of an axisymmetric point (one sector), independent of the solver's search.
+
+    Returns the sign-changing grid intervals, shape (n_roots, 2) [rad]."""
+    polars = polars or SectionPolars.from_rotor(rotor)
+    x_az, y_az, z_az, cone, _ = curvature(rotor.r, rotor.precurve, rotor.presweep, np.radians(rotor.precone_deg))
+    vx, vy, _, _ = wind_components(x_az, y_az, z_az, cone, np.zeros(1), cond.wind_speed[[k]],
+                                   cond.rotor_speed[[k]] * np.pi / 30, np.radians(cond.yaw[[k]]), 0.0,
+                                   rotor.hub_height, 0.0)
+    phi = np.linspace(1e-6, np.pi / 2, n_grid)
+    n = phi.size
+    theta = np.radians(rotor.twist_deg[station] + cond.pitch[k])
+    cl, cd, _, _ = polars.lookup(np.degrees(phi - theta), np.full(n, station))
+    r, c = rotor.r[station], rotor.chord[station]
+    geo = SectionGeometry(np.full(n, r), np.full(n, c), np.full(n, rotor.n_blades * c / (2 * np.pi * r)),
+                          rotor.hub_radius, rotor.tip_radius, rotor.n_blades)
+    R = section_equations(phi, cl, cd, np.full(n, vx[0, 0, station]), np.full(n, vy[0, 0, station]),
+                          geo)["residual"]
+    j = np.flatnonzero((R[1:] > 0) != (R[:-1] > 0))
+    return np.column_stack([phi[j], phi[j + 1]])
+
+
+def test_phase_vi_20ms_several_roots_flagged_and_smallest_phi_kept():
+    """Phase VI sequence H at 20 m/s: three roots at r/R = 0.994 (α ≈ 17.5, 19.5, 20.0 deg). The point
+    stays converged, is flagged (result, message, model extras) and keeps the smallest-φ root of an
+    independent brute-force scan; no other point is flagged."""
+    rotor = load_rotor("phase_vi")
+    meas = load_phase_vi_measurements()["performance"]
+    cond = OperatingConditions(meas["wind_speed"], meas["rotor_speed"], 3.0, meas["air_density"], 0.0)
+    settings = BemSettings(use_tilt=False)
+    res = solve_bem(rotor, cond, settings)
+    assert res.n_failed == 0
+    k = int(np.flatnonzero(cond.wind_speed == 20.0)[0])
+    np.testing.assert_array_equal(res.multiple_roots, np.arange(len(cond)) == k)
+    assert res.n_multiple_root_sections[k] == 1
+    assert "several roots" in res.messages[k] and "0.994" in res.messages[k]
+    assert all(m == "" for j, m in enumerate(res.messages) if j != k)
+    station = int(np.argmin(np.abs(rotor.eta - 0.994)))
+    assert res.sections["n_roots"][k, 0, station] == 3
+    roots = brute_force_roots(rotor, cond, k, station)
+    assert len(roots) == 3
+    kept = res.sections["phi"][k, 0, station]
+    assert roots[0, 0] <= kept <= roots[0, 1]
+    assert res.sections["alpha_deg"][k, 0, station] == pytest.approx(17.5, abs=0.1)
+    ev = BemModel(rotor, None, ("torque",), settings, nuisance=()).evaluate(np.zeros(0), cond)
+    np.testing.assert_array_equal(ev.extras["multiple_roots"], res.multiple_roots)
+    np.testing.assert_array_equal(ev.extras["n_multiple_root_sections"], res.n_multiple_root_sections)
+
+
+def test_root_pair_closer_than_the_sample_step_is_found():
+    """IEA 3.4-MW, row 41 of CCBlade's table (18.6 m/s, pitch 19.8 deg), one sector, CCAirfoil's polar
+    smoothing: at r/R = 0.198 two of three roots lie 0.16 deg apart, closer than the sampling step of
+    the search, and no sample falls between them; the sampled extremum is refined, the point flagged
+    and the smallest-φ root kept."""
+    rotor = load_rotor("iea3.4")
+    table = np.loadtxt(reference_path("IEA-3.4-130-RWT_performance_ccblade.dat"))
+    cond = OperatingConditions(table[[41], 0], table[[41], 1], table[[41], 2])
+    polars = SectionPolars.from_rotor(rotor, smoothing=(0.01, 0.001))
+    res = solve_bem(rotor, cond, BemSettings(use_tilt=False, n_sectors=1), polars=polars)
+    station = int(np.argmin(np.abs(rotor.eta - 0.198)))
+    roots = brute_force_roots(rotor, cond, 0, station, polars)
+    assert len(roots) == 3
+    assert np.diff(roots.mean(axis=1)).min() < np.radians(SCAN_STEP_DEG)
+    assert res.status[0] == Status.CONVERGED
+    assert res.multiple_roots[0] and res.sections["n_roots"][0, 0, station] >= 3
+    assert roots[0, 0] <= res.sections["phi"][0, 0, station] <= roots[0, 1]
+
+
+def test_lowest_roots_on_an_analytic_residual():
+    """R(φ) = (φ − r1)(φ − r2)(φ − r3) (negative below r1, like Ning's residual), started at the top root:
+    a pair 0.001 rad apart, a descent through two windows, a single root, and a pair out of reach."""
+    r = np.array([[0.300, 0.301, 0.350],      # pair closer than the step, next to the root
+                  [0.300, 0.360, 0.420],      # each root one window below the previous one
+                  [0.300, 5.000, 6.000],      # one root in the bracket
+                  [0.100, 0.120, 0.400]])     # the pair lies beyond the window: not seen
+    start = np.array([0.350, 0.420, 0.300, 0.400])
+
+    def residual(idx, phi):
+        return (phi - r[idx, 0]) * (phi - r[idx, 1]) * (phi - r[idx, 2])
+
+    phi, f, n_roots = lowest_roots(residual, start, residual(np.arange(4), start), np.full(4, 1e-6),
+                                   np.full(4, np.pi / 2), np.ones(4, bool), np.radians(SCAN_STEP_DEG),
+                                   np.radians(5.0), 1e-12)
+    np.testing.assert_allclose(phi, [0.300, 0.300, 0.300, 0.400], atol=1e-10)
+    np.testing.assert_array_equal(n_roots, [3, 3, 1, 1])
+    assert np.all(np.abs(f) <= 1e-12)
+
+
+def test_induction_far_outside_the_physical_range_is_flagged():
+    """IEA 15-MW at its minimum rotor speed in 0.1 m/s of wind (λ ≈ 630): sections with a ≈ 19 must not
+    be reported converged; the same rotor at 3 m/s is."""
+    rotor = load_rotor("iea15")
+    sch = rotor.schedule
+    cond = OperatingConditions([0.1, 3.0], [sch.min_rotor_speed] * 2, [sch.fine_pitch] * 2)
+    res = solve_bem(rotor, cond)
+    a = res.sections["a"][0]
+    assert np.nanmax(np.abs(a)) > 5 * INDUCTION_LIMIT            # the solver did find roots there (a ≈ 19)
+    assert res.status[0] == Status.NOT_CONVERGED
+    assert "axial induction" in res.messages[0] and f"|a| <= {INDUCTION_LIMIT:g}" in res.messages[0]
+    assert np.isnan(res.power[0]) and np.isnan(res.thrust[0])
+    assert res.status[1] == Status.CONVERGED, res.messages[1]
+    assert np.nanmax(np.abs(res.sections["a"][1])) <= INDUCTION_LIMIT

@@ -48,6 +48,8 @@ def test_iea34_reproduces_ccblade_table(capsys):
         for name, r in rel.items():
             print(f"  {name:17s} {100 * np.median(np.abs(r)):6.2f} {100 * np.abs(r[below]).max():6.2f} "
                   f"{100 * np.abs(r[~below]).max():6.2f}")
+        print(f"  points with several roots at a section (smallest-φ root kept, flagged): "
+              f"{int(res.multiple_roots.sum())} of {res.multiple_roots.size}")
         _, rel_raw, _ = iea34_comparison(smoothing=None)
         d = 100 * np.abs(rel_raw["power"][below])
         print("  without CCBlade's polar smoothing, power |relative difference| [%] of the first rows below "
@@ -91,8 +93,9 @@ def test_phase_vi_two_dimensional_polars_underpredict_stalled_torque(capsys):
     ratio = res.torque / meas["lss_torque"]
     with capsys.disabled():
         print("\nPhase VI sequence H: LSS torque [N m], measured vs native BEM (2-D S809 polars)")
-        for v, m, b in zip(meas["wind_speed"], meas["lss_torque"], res.torque):
-            print(f"  {v:5.1f} m/s  measured {m:8.1f}  BEM {b:8.1f}  ratio {b / m:5.2f}")
+        for v, m, b, multi in zip(meas["wind_speed"], meas["lss_torque"], res.torque, res.multiple_roots):
+            note = "  several roots at a section: smallest-φ root kept, flagged" if multi else ""
+            print(f"  {v:5.1f} m/s  measured {m:8.1f}  BEM {b:8.1f}  ratio {b / m:5.2f}{note}")
     v = meas["wind_speed"]
     # attached flow (7, 10 m/s): within 15 % of the measurement
     assert np.all(np.abs(ratio[v <= 10.0] - 1) < 0.15)

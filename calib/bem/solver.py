@@ -15,6 +15,8 @@ import numpy as np
 
 from calib.bem import dual as dl
 from calib.bem.kinematics import curvature, wind_components
+from calib.bem.multiple_roots import (SCAN_STEP_DEG, WINDOW_DEG, SlopeEnvelope, lowest_roots,
+                                      needs_search)
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.residual import SectionGeometry, section_equations, section_loads
 from calib.bem.rootfind import bracket, solve_brackets
@@ -25,6 +27,9 @@ from calib.rotor.geometry import Rotor
 
 RESIDUAL_TOL = 1e-8
 """A section counts as converged when |R(φ*)| is below this [-]."""
+
+INDUCTION_LIMIT = 2.0
+"""Largest |a| accepted at a converged section [-] (see :func:`solve_bem`, Notes)."""
 
 
 @dataclass(frozen=True)
@@ -51,6 +56,10 @@ class BemSettings:
         Apply the rotor's shaft tilt to the inflow.
     max_iter : int
         Iteration limit of the root search.
+    search_multiple_roots : bool
+        Look for further roots of the residual near stall and keep the one of smallest |φ|
+        (:mod:`calib.bem.multiple_roots`); off, the bracketing iteration's root is kept and
+        nothing is flagged.
     """
 
     tip_loss: bool = True
@@ -62,6 +71,7 @@ class BemSettings:
     shear_exponent: float = 0.0
     use_tilt: bool = True
     max_iter: int = 100
+    search_multiple_roots: bool = True
 
     def sectors_for(self, rotor: Rotor, conditions: OperatingConditions) -> int:
         if self.n_sectors is not None:
@@ -120,11 +130,18 @@ class BemResult(StatusCounts):
     status : ndarray of int
         :class:`calib.types.Status` per point.
     messages : tuple of str
+        Why a point failed; on a converged point, a note when it has sections with several roots.
     sections : dict of ndarray
         ``phi`` [rad], ``alpha_deg``, ``a``, ``ap``, ``cl``, ``cd``, ``cn``, ``ct`` (chord
-        axes), ``Np``, ``Tp`` [N/m], ``W`` [m/s], ``residual``, ``iterations``.
+        axes), ``Np``, ``Tp`` [N/m], ``W`` [m/s], ``residual``, ``iterations``, ``n_roots``
+        (roots of the residual seen near the kept one; 1 where none was searched for).
     weights : dict
         Integration weights used for the rotor quantities (for sensitivities).
+    multiple_roots : ndarray of bool, shape (n_points,)
+        Points with at least one section whose residual has several roots in its bracket (the
+        root of smallest |φ| is used; the status is unchanged).
+    n_multiple_root_sections : ndarray of int, shape (n_points,)
+        Number of such sections (over stations and sectors).
     sensitivities : SectionSensitivities or None
     """
 
@@ -143,6 +160,8 @@ class BemResult(StatusCounts):
     weights: dict
     omega: np.ndarray
     n_sectors: int
+    multiple_roots: np.ndarray
+    n_multiple_root_sections: np.ndarray
     rotor: Rotor = field(repr=False)
     sensitivities: SectionSensitivities | None = None
 
@@ -230,9 +249,25 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     BemResult
         Every point has a status; failed points have NaN values and a message.
 
+    Notes
+    -----
+    A point is NOT_CONVERGED when a section has no converged root, and also when a converged
+    section's axial induction lies outside ±:data:`INDUCTION_LIMIT` (= 2). Buhl's relation is
+    a fit to windmill-state data for a up to about 1 (C_T ≈ 2 there) and Ning's propeller-brake
+    branch extends momentum theory a little beyond; |a| > 2 says the induced velocity exceeds
+    twice the wind speed, a rotor driving the flow (fan, vortex-ring or hover-like state, where
+    a ∝ 1/V as V → 0) for which no steady stream-tube balance of this model holds. The bound is
+    a round number clear of every section of the validation and benchmark cases (|a| <= 1 on
+    the NREL 5-MW C_P surface, the IEA 3.4-MW table and Phase VI; |a| <= 1.82 on the NREL 5-MW
+    down to λ = 30) and far from the a ≈ 19 of a rotor at minimum speed in 0.1 m/s wind.
+
+    Sections whose residual has several roots in the bracket keep the root of smallest |φ|
+    and flag the point (:mod:`calib.bem.multiple_roots`); the status stays CONVERGED.
+
     References
     ----------
     S.A. Ning, Wind Energy 17 (2014) 1327-1345 (method, bracketing, CCBlade conventions).
+    M.L. Buhl, NREL/TP-500-36834 (2005) (range of the high-induction relation).
     """
     settings = settings or BemSettings()
     polars = polars or SectionPolars.from_rotor(rotor)
@@ -302,6 +337,21 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     lo, hi, flo, fhi, found = bracket(residual, sel.size)
     phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
     conv = found & np.isfinite(fphi) & (np.abs(fphi) <= RESIDUAL_TOL)
+    n_roots = conv.astype(int)
+    if settings.search_multiple_roots and conv.any():
+        # screen: a negative lift slope within the window (stall), then the exact slope budget
+        envelope = SlopeEnvelope.build(polars, WINDOW_DEG, grid, p, rotor.eta)
+        ci = np.flatnonzero(conv)
+        slopes = envelope.at(np.degrees(phi[ci] - f_theta[ci]), f_station[ci])
+        stalled = slopes[0] < 0.0
+        ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
+        _, cl_c, cd_c, _, _ = coefficients(ci, phi[ci])
+        d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, f_vx[ci], f_vy[ci], geo.take(ci), opts)
+        search = np.zeros(sel.size, bool)
+        search[ci] = needs_search(d0, d_cl, d_cd, slopes)
+        phi, fphi, n_found = lowest_roots(residual, phi, fphi, lo, hi, search, np.radians(SCAN_STEP_DEG),
+                                          np.radians(WINDOW_DEG), RESIDUAL_TOL, max_iter=settings.max_iter)
+        n_roots = np.where(conv, n_found, 0)
 
     # ---- section quantities at the root (duals when sensitivities are wanted)
     allidx = np.arange(sel.size)
@@ -335,37 +385,25 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     sections = {"phi": scatter(phi_eval), "alpha_deg": scatter(alpha_deg), "cl": scatter(cl),
                 "cd": scatter(cd), "a": scatter(dl.value(eq["a"])), "ap": scatter(dl.value(eq["ap"])),
                 "W": scatter(dl.value(loads["W"])), "residual": scatter(fphi),
-                "iterations": scatter(iters.astype(float))}
+                "iterations": scatter(iters.astype(float)), "n_roots": scatter(n_roots.astype(float))}
     for name, q in quantities.items():
         sections[name] = scatter(dl.value(q))
 
     # ---- per-point status
-    sec_fail = np.zeros(n_pts * n_sec * n_st, bool)
-    sec_fail[sel] = ~conv
-    sec_fail = sec_fail.reshape(shape)
-    neg_drag = np.zeros(n_pts * n_sec * n_st, bool)
-    neg_drag[sel] = cd <= 0.0
-    neg_drag = neg_drag.reshape(shape)
-    reversed_flow = np.broadcast_to(interior, shape) & ~bad_pt[:, None, None] & ~(vx > 0)
-    status = np.full(n_pts, int(Status.CONVERGED))
-    status[bad_pt] = int(Status.INVALID_INPUT)
-    trouble = sec_fail | neg_drag | reversed_flow
-    for kpt in np.flatnonzero(~bad_pt & trouble.any(axis=(1, 2))):
-        parts = []
-        nd = int(neg_drag[kpt].sum())
-        if nd:
-            status[kpt] = int(Status.INVALID_INPUT)
-            parts.append(f"C_D <= 0 at {nd} section(s) (corrected polar; the BEM needs positive drag)")
-        else:
-            status[kpt] = int(Status.NOT_CONVERGED)
-        nf = int(sec_fail[kpt].sum())
-        if nf:
-            parts.append(f"{nf} section(s) without a converged root (no sign change of the residual "
-                         f"in Ning's brackets or |R| > {RESIDUAL_TOL:g})")
-        nr = int(reversed_flow[kpt].sum())
-        if nr:
-            parts.append(f"{nr} section(s) with reversed inflow (V_x <= 0)")
-        msgs[kpt] = "BEM: " + "; ".join(parts)
+    def per_section(values):
+        full = np.zeros(n_pts * n_sec * n_st, bool)
+        full[sel] = values
+        return full.reshape(shape)
+
+    a_value = dl.value(eq["a"])
+    with np.errstate(invalid="ignore"):
+        wild = conv & ~(np.abs(a_value) <= INDUCTION_LIMIT)
+    flags = {"failed": per_section(~conv), "negative_drag": per_section(cd <= 0.0),
+             "reversed_flow": np.broadcast_to(interior, shape) & ~bad_pt[:, None, None] & ~(vx > 0),
+             "wild_induction": per_section(wild), "multiple_roots": per_section(n_roots > 1)}
+    status, msgs = _point_status(flags, sections["a"], bad_pt, msgs, rotor.eta)
+    multiple = flags["multiple_roots"].any(axis=(1, 2)) & ~bad_pt
+    n_multiple = flags["multiple_roots"].sum(axis=(1, 2))
 
     # ---- rotor quantities
     w = integration_weights(rotor, interior)
@@ -394,7 +432,70 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
         sens = _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid,
                                       sections, rotor)
     return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
-                     omega=omega, n_sectors=n_sec, rotor=rotor, sensitivities=sens)
+                     omega=omega, n_sectors=n_sec, multiple_roots=multiple, n_multiple_root_sections=n_multiple,
+                     rotor=rotor, sensitivities=sens)
+
+
+def _residual_partials(phi, cl, cd, vx, vy, geo: SectionGeometry, opts: dict, rel_step: float = 1e-6):
+    """∂R/∂φ at fixed C_L, C_D [1/rad], ∂R/∂C_L and ∂R/∂C_D [-] at given sections.
+
+    One-sided differences of step ``rel_step`` in one batched call (cheaper than dual numbers
+    here; they only screen sections for a search, see :mod:`calib.bem.multiple_roots`).
+    """
+    n = phi.size
+    h = rel_step * np.maximum(1.0, np.abs(phi))
+    hc = rel_step * np.maximum(1.0, np.abs(cl))
+    hd = rel_step * np.maximum(1e-2, np.abs(cd))
+    four = lambda x: np.concatenate([x, x, x, x])   # noqa: E731
+    idx = np.concatenate([np.arange(n)] * 4)
+    zero = np.zeros(n)
+    eq = section_equations(four(phi) + np.concatenate([zero, h, zero, zero]),
+                           four(cl) + np.concatenate([zero, zero, hc, zero]),
+                           four(cd) + np.concatenate([zero, zero, zero, hd]),
+                           four(vx), four(vy), geo.take(idx), **opts)
+    r = eq["residual"].reshape(4, n)
+    return (r[1] - r[0]) / h, (r[2] - r[0]) / hc, (r[3] - r[0]) / hd
+
+
+def _point_status(flags: dict, a_sections, bad_pt, msgs: list, eta):
+    """Status and message per point from per-section flags (n_points, n_sectors, n_stations).
+
+    ``flags``: ``failed`` (no converged root), ``negative_drag`` (C_D <= 0), ``reversed_flow``
+    (V_x <= 0), ``wild_induction`` (|a| > INDUCTION_LIMIT), ``multiple_roots`` (several roots;
+    a note only, the status is unchanged).
+    """
+    status = np.full(bad_pt.size, int(Status.CONVERGED))
+    status[bad_pt] = int(Status.INVALID_INPUT)
+    trouble = flags["failed"] | flags["negative_drag"] | flags["reversed_flow"] | flags["wild_induction"]
+    for kpt in np.flatnonzero(~bad_pt & (trouble | flags["multiple_roots"]).any(axis=(1, 2))):
+        parts = []
+        nd = int(flags["negative_drag"][kpt].sum())
+        if nd:
+            status[kpt] = int(Status.INVALID_INPUT)
+            parts.append(f"C_D <= 0 at {nd} section(s) (corrected polar; the BEM needs positive drag)")
+        elif trouble[kpt].any():
+            status[kpt] = int(Status.NOT_CONVERGED)
+        nf = int(flags["failed"][kpt].sum())
+        if nf:
+            parts.append(f"{nf} section(s) without a converged root (no sign change of the residual "
+                         f"in Ning's brackets or |R| > {RESIDUAL_TOL:g})")
+        nr = int(flags["reversed_flow"][kpt].sum())
+        if nr:
+            parts.append(f"{nr} section(s) with reversed inflow (V_x <= 0)")
+        wild = flags["wild_induction"][kpt]
+        if wild.any():
+            a = np.where(wild, a_sections[kpt], 0.0)
+            s_, i_ = np.unravel_index(np.argmax(np.abs(a)), a.shape)
+            parts.append(f"axial induction outside the physical range |a| <= {INDUCTION_LIMIT:g} at "
+                         f"{int(wild.sum())} section(s), e.g. a = {a[s_, i_]:.3g} at r/R = {eta[i_]:.3f} "
+                         f"(induced velocity above twice the wind speed: no steady momentum balance)")
+        multi = flags["multiple_roots"][kpt]
+        if multi.any():
+            where = ", ".join(f"{e:.3f}" for e in eta[np.flatnonzero(multi.any(axis=0))])
+            parts.append(f"note: {int(multi.sum())} section(s) with several roots of the residual in "
+                         f"their bracket (r/R = {where}); the root of smallest |φ| (least stalled) is used")
+        msgs[kpt] = "BEM: " + "; ".join(parts)
+    return status, msgs
 
 
 def _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid, sections, rotor):

@@ -115,7 +115,10 @@ class BemModel:
         alpha[:, ~self._interior] = np.nan          # hub and tip stations carry no load
         extras = {"alpha_deg": alpha,
                   "eta": self.rotor.eta.copy(), "interior": self._interior.copy(),
-                  "cp": res.cp, "ct": res.ct}
+                  "cp": res.cp, "ct": res.ct,
+                  # points whose residual has several roots at some section (root of smallest |φ| kept)
+                  "multiple_roots": res.multiple_roots.copy(),
+                  "n_multiple_root_sections": res.n_multiple_root_sections.copy()}
         return Evaluation(values, res.status.copy(), res.messages, self.channels, extras)
 
     def evaluate(self, p, conditions: OperatingConditions) -> Evaluation:
