@@ -15,7 +15,10 @@ Environment: ``CALIB_BENCH_CCBLADE_REPEATS`` (default 3, best time kept),
 With CCAirfoil's spline, the native BEM is also run on the same grid with the same
 smoothing of its polars (``SectionPolars.from_rotor(..., smoothing=CCAIRFOIL_SMOOTHING)``)
 and the largest |ΔC_P| to CCBlade is reported: it isolates everything but the polar
-treatment.
+treatment. And CCBlade is run at the 50 operating points of the IEA 3.4-MW CCBlade table
+that ``tests/test_bem_validation.py`` compares with (same set-up: tilt 5 deg, shear 0.2,
+4 sectors), to tell how much of the native-vs-table difference is the table's own
+(``iea34_*`` keys).
 """
 
 from __future__ import annotations
@@ -189,6 +192,58 @@ def run(grid=None, rotor: str | None = None, repeats: int | None = None) -> dict
     })
     if res["settings"].get("airfoil_spline", "ccairfoil") == "ccairfoil":
         out.update(native_with_ccairfoil_smoothing(rotor, res, cp, conv))
+        out.update(iea34_table_points())
+    return out
+
+
+def iea34_table_points() -> dict:
+    """CCBlade 4.2.9 and the native BEM at the operating points of the IEA 3.4-MW CCBlade table.
+
+    Returns |relative differences| in percent: ``iea34_ccblade_vs_table_*`` (CCBlade run here
+    against the published table) and ``iea34_native_vs_ccblade_*`` (native, with CCAirfoil's
+    smoothing and the validation test's set-up, against CCBlade run here), each as median and
+    max below / above rated power, for power and thrust; or ``{"iea34_error": message}``.
+    """
+    try:
+        from export_rotor import export_rotor  # noqa: PLC0415  (HERE is on sys.path)
+
+        from calib.bem import BemSettings, SectionPolars, solve_bem  # noqa: PLC0415
+        from calib.rotor.library import load_rotor, reference_path  # noqa: PLC0415
+        from calib.types import OperatingConditions  # noqa: PLC0415
+
+        table = np.loadtxt(reference_path("IEA-3.4-130-RWT_performance_ccblade.dat"))
+        rotor = load_rotor("iea3.4")
+        rotor_json = os.path.join(OUT_DIR, "rotor_iea3.4.json")
+        points_json = os.path.join(OUT_DIR, "iea34_table_points.json")
+        result_json = os.path.join(OUT_DIR, "ccblade_iea34_table_points.json")
+        export_rotor("iea3.4", rotor_json)
+        with open(points_json, "w") as fh:
+            json.dump({"wind_speed": table[:, 0].tolist(), "rotor_speed_rpm": table[:, 1].tolist(),
+                       "pitch_deg": table[:, 2].tolist(), "tilt_deg": float(rotor.tilt_deg), "shear_exp": 0.2,
+                       "n_sector": 4}, fh)
+        proc = subprocess.run([os.path.join(VENV, "bin", "python"), os.path.join(HERE, "ccblade_runner.py"),
+                               rotor_json, result_json, "--points", points_json], capture_output=True, text=True,
+                              timeout=RUN_TIMEOUT_S)
+        if proc.returncode != 0:
+            return {"iea34_error": f"CCBlade run failed (exit {proc.returncode}):\n{_tail(proc.stderr + proc.stdout)}"}
+        with open(result_json) as fh:
+            cc = json.load(fh)
+        nat = solve_bem(rotor, OperatingConditions(table[:, 0], table[:, 1], table[:, 2]),
+                        BemSettings(shear_exponent=0.2, n_sectors=4),
+                        polars=SectionPolars.from_rotor(rotor, smoothing=CCAIRFOIL_SMOOTHING))
+    except Exception as exc:  # noqa: BLE001  (never crash the benchmark runner)
+        return {"iea34_error": f"{type(exc).__name__}: {exc}"}
+    below = table[:, 4] < 0.999 * table[:, 4].max()
+    ok = np.asarray(cc["converged"], bool) & nat.ok
+    out = {"iea34_points_compared": int(ok.sum()), "iea34_native_multiple_root_points": int(nat.multiple_roots.sum())}
+    pairs = {"ccblade_vs_table": ((np.asarray(cc["P"]), table[:, 4]), (np.asarray(cc["T"]), table[:, 5])),
+             "native_vs_ccblade": ((nat.power, np.asarray(cc["P"])), (nat.thrust, np.asarray(cc["T"])))}
+    for name, ((p_a, p_b), (t_a, t_b)) in pairs.items():
+        for q, a, b in (("power", p_a, p_b), ("thrust", t_a, t_b)):
+            d = 100 * np.abs(a / b - 1)
+            out[f"iea34_{name}_{q}_median_pct"] = float(np.median(d[ok]))
+            out[f"iea34_{name}_{q}_max_below_rated_pct"] = float(d[ok & below].max())
+            out[f"iea34_{name}_{q}_max_above_rated_pct"] = float(d[ok & ~below].max())
     return out
 
 

@@ -9,6 +9,7 @@ Usage::
 
     .bench-venv/bin/python benchmarks/ccblade_runner.py ROTOR_JSON OUT_JSON \
         [--grid GRID_JSON] [--repeats N]
+    .bench-venv/bin/python benchmarks/ccblade_runner.py ROTOR_JSON OUT_JSON --points POINTS_JSON
     .bench-venv/bin/python benchmarks/ccblade_runner.py --check
 
 ``ROTOR_JSON`` is written by ``export_rotor.py``. ``GRID_JSON`` (optional; default:
@@ -25,7 +26,12 @@ The airfoils are the raw polar tables (CCAirfoil fits its smoothing bivariate sp
 to them, as CCBlade always does); a table that does not reach ±180 deg is first extended with WISDEM's
 Viterna extrapolation.
 
-Output JSON: ``cp``, ``ct``, ``cq`` and ``converged`` as nested lists of shape
+``POINTS_JSON`` (instead of a grid) holds lists ``wind_speed``, ``rotor_speed_rpm``,
+``pitch_deg`` and the same optional settings; the output then has per-point lists ``P``,
+``T``, ``Q``, ``Mb`` (CCBlade's power [W], thrust [N], torque [N m], flap moment [N m]) and
+``converged``.
+
+Output JSON (grid): ``cp``, ``ct``, ``cq`` and ``converged`` as nested lists of shape
 (n_tsr, n_pitch), ``seconds`` (best of the repeats), ``seconds_all``, ``n_points``,
 ``setup_seconds`` and the versions. Only ``rotor.evaluate`` over the whole grid is
 inside the timer (``time.perf_counter``); building CCAirfoil/CCBlade is not.
@@ -278,6 +284,24 @@ def run(rotor: dict, grid: dict, repeats: int = 1) -> dict:
     }
 
 
+def run_points(rotor: dict, spec: dict) -> dict:
+    """CCBlade's loads at a list of operating points (``--points``)."""
+    ccb = import_ccblade()
+    spec = dict(spec)
+    spec.setdefault("rho", 1.225)
+    spec.setdefault("mu", 1.81206e-5)
+    model, settings = build_rotor(ccb, rotor, spec)
+    recorder = _StatusRecorder(model)
+    wind = np.asarray(spec["wind_speed"], float)
+    out, _ = model.evaluate(wind, np.asarray(spec["rotor_speed_rpm"], float), np.asarray(spec["pitch_deg"], float),
+                            coefficients=False)
+    failed = np.asarray(recorder.failed, bool).reshape(wind.size, model.nSector).any(axis=1)
+    res = {k: np.asarray(out[k], float) for k in ("P", "T", "Q", "Mb")}
+    converged = ~failed & np.all([np.isfinite(v) for v in res.values()], axis=0)
+    return {"code": "CCBlade (WISDEM)", "wisdem_version": wisdem_version(), "settings": settings,
+            **{k: [float(x) for x in v] for k, v in res.items()}, "converged": converged.tolist()}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("rotor", nargs="?", help="rotor JSON (export_rotor.py)")
@@ -285,6 +309,7 @@ def main(argv=None) -> int:
     ap.add_argument("--grid", help="grid JSON (default: surface_grid.surface_grid())")
     ap.add_argument("--repeats", type=int, default=int(os.environ.get("CALIB_BENCH_CCBLADE_REPEATS", 1)),
                     help="time this many evaluations of the surface, keep the best (default 1)")
+    ap.add_argument("--points", help="points JSON: loads at these operating points instead of a surface")
     ap.add_argument("--check", action="store_true", help="only check that CCBlade imports")
     args = ap.parse_args(argv)
     if args.check:
@@ -295,6 +320,13 @@ def main(argv=None) -> int:
         ap.error("ROTOR_JSON and OUT_JSON are required (or --check)")
     with open(args.rotor) as fh:
         rotor = json.load(fh)
+    if args.points:
+        with open(args.points) as fh:
+            result = run_points(rotor, json.load(fh))
+        with open(args.out, "w") as fh:
+            json.dump(result, fh)
+        print(f"CCBlade {len(result['P'])} points, {len(result['P']) - sum(result['converged'])} not converged")
+        return 0
     result = run(rotor, load_grid(args.grid), args.repeats)
     with open(args.out, "w") as fh:
         json.dump(result, fh)
