@@ -141,6 +141,8 @@ static double *var_ref(RotorCore *core, CoreVar var, int i)
     case CV_MAX_STEP: return &p->max_step;
     case CV_MAX_AZIMUTH_STEP_DEG: return &p->max_azimuth_step_deg;
     case CV_INITIAL_AZIMUTH_DEG: return &p->initial_azimuth_deg;
+    case CV_DEBUG_FAULT: return &p->debug_fault;
+    case CV_DEBUG_FAULT_WIND_SPEED: return &p->debug_fault_wind_speed;
     default: return NULL;
     }
 }
@@ -199,6 +201,7 @@ int core_get(const RotorCore *core, CoreVar var, int i, double *value)
     case CV_NORMAL_FORCE: *value = dyn->fn[0][core->data.out_station[i]]; break;
     case CV_ANGLE_OF_ATTACK: *value = dyn->aoa[0][core->data.out_station[i]] * RAD2DEG; break;
     case CV_OUT_STATION_RADIUS: *value = core->data.r[core->data.out_station[i]]; break;
+    case CV_TIP_RADIUS: *value = core->data.tip_radius; break;
     case CV_AERO_FAILURES: *value = dyn->aero_failures; break;
     default:
         core_logf(core, 2, "unknown variable id %d", (int)var);
@@ -403,6 +406,24 @@ int core_initialize(RotorCore *core, double start_time)
     return 0;
 }
 
+/* TEST ONLY (adapter fault tests): what parameter debug_fault asks doStep to do instead of
+ * stepping: 1 refuse with an error, 2 abort the process (a crash), 3 never return (a hang). */
+static int debug_fault(RotorCore *core)
+{
+    volatile unsigned long spin = 0;
+    int kind = (int)core->dyn.par.debug_fault;
+    if (kind == 2) {
+        core_logf(core, 2, "debug_fault = 2: aborting the process (test of crash handling)");
+        abort();
+    }
+    if (kind == 3) {
+        core_logf(core, 1, "debug_fault = 3: doStep hangs (test of timeout handling)");
+        for (;;) spin++;
+    }
+    core_logf(core, 2, "debug_fault = %d: doStep refused (test of error handling)", kind);
+    return CORE_STEP_REFUSED;
+}
+
 int core_do_step(RotorCore *core, double h)
 {
     CoreDynamic *dyn = &core->dyn;
@@ -417,6 +438,8 @@ int core_do_step(RotorCore *core, double h)
         return CORE_STEP_REFUSED;
     }
     if (check_inputs(core, dyn)) return CORE_STEP_REFUSED;
+    if (dyn->par.debug_fault != 0.0 && dyn->in.wind_speed > dyn->par.debug_fault_wind_speed)
+        return debug_fault(core);
     omega = dyn->in.rotor_speed_rpm * M_PI / 30.0;
     dt_max = dyn->par.max_step;
     if (fabs(omega) > 0.0) {

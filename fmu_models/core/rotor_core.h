@@ -70,6 +70,8 @@ typedef enum {
     CV_MAX_STEP,                /* largest internal step [s] */
     CV_MAX_AZIMUTH_STEP_DEG,    /* largest azimuth increment per internal step [deg] */
     CV_INITIAL_AZIMUTH_DEG,     /* azimuth of blade 1 at the start time [deg] */
+    CV_DEBUG_FAULT,             /* TEST ONLY: fault injected by doStep: 0 none, 1 error, 2 abort, 3 hang */
+    CV_DEBUG_FAULT_WIND_SPEED,  /* TEST ONLY: the fault fires only while wind speed > this [m/s] */
     /* outputs */
     CV_POWER,                   /* aerodynamic power [W] */
     CV_TORQUE,                  /* aerodynamic torque [N m] */
@@ -82,6 +84,7 @@ typedef enum {
     CV_NORMAL_FORCE,            /* blade-1 normal force per length at output station k [N/m] */
     CV_ANGLE_OF_ATTACK,         /* blade-1 angle of attack at output station k [deg] */
     CV_OUT_STATION_RADIUS,      /* radius of output station k [m] */
+    CV_TIP_RADIUS,              /* rotor (tip) radius of the rotor data [m] */
     CV_AERO_FAILURES,           /* element solves without a bracketed root so far [-] */
     CV_COUNT
 } CoreVar;
@@ -127,6 +130,7 @@ typedef struct {
     double flap_freq_hz, edge_freq_hz, flap_damping, edge_damping, blade_mass;
     double tower_height, tower_base_d, tower_top_d, tower_clearance, shaft_tilt_deg;
     double n_blades, max_step, max_azimuth_step_deg, initial_azimuth_deg;
+    double debug_fault, debug_fault_wind_speed;   /* test-only fault injection (see CV_DEBUG_FAULT) */
 } CoreParams;
 
 typedef struct {
