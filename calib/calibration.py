@@ -115,23 +115,38 @@ class CalibrationSettings:
     band_eta: tuple | None = None
     verbose: bool = False
 
-    def validate(self, source: str = "CalibrationSettings") -> "CalibrationSettings":
+    def validate(self, source: str = "CalibrationSettings", prefix: str = "") -> "CalibrationSettings":
+        """Check every setting; errors name ``source`` and the key as ``prefix + name``
+        (e.g. ``calibration.noise`` for a workflow file)."""
+        def bad(message, key):
+            raise InputError(message, source, field=f"{prefix}{key}")
+
         if self.noise not in NOISE_MODES:
-            raise InputError(f"unknown noise mode {self.noise!r}; valid: {', '.join(NOISE_MODES)}", source,
-                             field="noise")
+            bad(f"unknown noise mode {self.noise!r}; valid: {', '.join(NOISE_MODES)}", "noise")
         if self.retain not in RETAIN_MODES:
-            raise InputError(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", source,
-                             field="retain")
-        if isinstance(self.sigma_bar, str):
-            if self.sigma_bar != "auto":
-                raise InputError(f"sigma_bar must be \"auto\" or a number > 0, got {self.sigma_bar!r}", source,
-                                 field="sigma_bar")
-        elif not self.sigma_bar > 0:
-            raise InputError(f"sigma_bar must be \"auto\" or a number > 0, got {self.sigma_bar!r}", source,
-                             field="sigma_bar")
-        if not self.prior_sigma > 0:
-            raise InputError(f"prior_sigma must be > 0, got {self.prior_sigma!r}", source, field="prior_sigma")
-        get_optimizer(self.optimizer)
+            bad(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", "retain")
+        if isinstance(self.sigma_bar, str) and self.sigma_bar != "auto" or \
+                not isinstance(self.sigma_bar, str) and not self.sigma_bar > 0:
+            bad(f"must be \"auto\" or a number > 0, got {self.sigma_bar!r}", "sigma_bar")
+        for key in ("prior_sigma", "tolerance"):
+            if not getattr(self, key) > 0:
+                bad(f"must be > 0, got {getattr(self, key)!r}", key)
+        for key in ("band_confidence", "stability_cosine", "identified_ratio", "confounded_share"):
+            if not 0 < getattr(self, key) <= 1:
+                bad(f"must be in (0, 1], got {getattr(self, key)!r}", key)
+        for key in ("max_relinearizations", "max_iterations", "max_noise_iterations"):
+            if not getattr(self, key) >= 1:
+                bad(f"must be >= 1, got {getattr(self, key)!r}", key)
+        if self.max_retained is not None and self.max_retained < 0:
+            bad(f"must be >= 0, got {self.max_retained!r}", "max_retained")
+        if self.sigma is not None:
+            for c, v in self.sigma.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                    bad(f"must be a number > 0 (absolute 1-σ in SI units), got {v!r}", f"sigma.{c}")
+        try:
+            get_optimizer(self.optimizer)
+        except InputError as exc:
+            bad(exc.message, "optimizer")
         return self
 
 

@@ -12,6 +12,7 @@ key in the message.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import tomllib
@@ -32,17 +33,61 @@ from calib.rotor.sources import rotor_from_table
 from calib.unit_check import check_units
 
 NUM = (int, float)
+AUTO_OR_NUM = (int, float, str)
+
+
+def _toml_type(default, override=None):
+    """The TOML type of a dataclass field from its default value."""
+    if override is not None:
+        return override
+    if isinstance(default, bool):
+        return bool
+    if isinstance(default, int):
+        return int
+    if isinstance(default, float):
+        return NUM
+    if isinstance(default, str):
+        return str
+    if isinstance(default, (tuple, list)):
+        return list
+    return None
+
+
+def _schema_from(cls, exclude=(), overrides=None) -> dict:
+    """Workflow keys of a settings dataclass: one definition, so API and TOML defaults cannot drift."""
+    overrides = overrides or {}
+    out = {}
+    for f in dataclasses.fields(cls):
+        if f.name in exclude:
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else None
+        out[f.name] = (_toml_type(default, overrides.get(f.name)), False)
+    return out
+
+
+#: [model] keys of the native BEM: every BemSettings field (same name, same default) except the fluid's
+#: viscosity (in [fluid]), plus rotor overrides and the nuisance list.
+MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
+                             overrides={"n_sectors": int, "polar_smoothing": list}),
+              "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "nuisance": (list, False)}
+#: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force``.
+CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
+                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "cd_min": NUM,
+                                              "max_retained": int, "band_eta": list}),
+                    "force": (bool, False)}
+
 # schema: section -> key -> (accepted types, required)
 SCHEMA = {
     "": {"name": (str, True), "description": (str, False), "rotor": (dict, True), "model": (dict, False),
-         "grid": (dict, True), "conditions": (dict, False), "measurements": (dict, False),
+         "fluid": (dict, False), "grid": (dict, True), "conditions": (dict, False), "measurements": (dict, False),
          "truth": (dict, False), "noise": (dict, False), "calibration": (dict, False),
          "stages": (list, True)},
     "rotor": None,  # validated by calib.rotor.sources.rotor_from_table (name | openfast | aerodyn | ... )
-    "model": {"nuisance": (list, False), "use_tilt": (bool, False), "n_sectors": (int, False),
-              "shear_exponent": (NUM, False), "tip_loss": (bool, False), "hub_loss": (bool, False)},
-    "grid": {"alpha_nodes_deg": (list, True), "eta_nodes": (list, True), "cl_scale": (NUM, False),
-             "cd_scale": (NUM, False), "cl_bound": (NUM, False), "cd_bound": (NUM, False)},
+    "model": MODEL_KEYS,
+    "fluid": {"density": (NUM, False), "kinematic_viscosity": (NUM, False)},
+    "grid": {"alpha_nodes_deg": ((list, str), True), "eta_nodes": (list, True), "cl_scale": (NUM, False),
+             "cd_scale": (NUM, False), "cl_bound": (NUM, False), "cd_bound": (NUM, False),
+             "n_alpha_nodes": (int, False), "alpha_percentiles": (list, False)},
     "conditions": {"tsr": (list, True), "pitch": (list, True), "rotor_speed": (NUM, True),
                    "air_density": (NUM, False), "yaw": (NUM, False)},
     "measurements": {"file": (str, True), "drop_incomplete_rows": (bool, False)},
@@ -52,15 +97,11 @@ SCHEMA = {
                     "alpha_width": (NUM, True), "eta": (NUM, False), "eta_width": (NUM, False),
                     "eta_range": (list, False), "edge_width": (NUM, False)},
     "noise": {"relative": (dict, True), "seed": (int, False)},
-    "calibration": {"sigma_bar": ((int, float, str), False), "prior_sigma": (NUM, False), "optimizer": (str, False),
-                    "noise": (str, False),
-                    "cd_min": (NUM, False), "max_relinearizations": (int, False),
-                    "max_iterations": (int, False), "max_retained": (int, False), "force": (bool, False),
-                    "sigma": (dict, False)},
+    "calibration": CALIBRATION_KEYS,
     "stages": {"name": (str, True), "channels": (list, True), "retain": (str, False)},
 }
 TYPE_NAMES = {str: "a string", dict: "a table", list: "an array", bool: "true/false", int: "an integer",
-              NUM: "a number", (int, float, str): "\"auto\" or a number"}
+              NUM: "a number", AUTO_OR_NUM: "\"auto\" or a number", (list, str): "an array or \"auto\""}
 
 
 def _check_table(table: dict, section: str, source: str) -> None:
@@ -209,7 +250,7 @@ class StageOutcome:
     out_dir: Path
 
 
-def _conditions(cfg: dict, rotor, src: str) -> OperatingConditions:
+def _conditions(cfg: dict, rotor, src: str, density: float = 1.225) -> OperatingConditions:
     tsr = _numbers(cfg["tsr"], "conditions.tsr", src)
     pitch = _numbers(cfg["pitch"], "conditions.pitch", src)
     if np.any(tsr <= 0):
@@ -219,8 +260,152 @@ def _conditions(cfg: dict, rotor, src: str) -> OperatingConditions:
     if rpm <= 0:
         raise InputError("rotor_speed must be > 0 rpm", src, field="conditions.rotor_speed")
     v = rpm * np.pi / 30 * rotor.rotor_radius / T.ravel()
-    return OperatingConditions(v, np.full(v.size, rpm), P.ravel(), float(cfg.get("air_density", 1.225)),
+    return OperatingConditions(v, np.full(v.size, rpm), P.ravel(), float(cfg.get("air_density", density)),
                                float(cfg.get("yaw", 0.0)))
+
+
+AIR = {"density": 1.225, "kinematic_viscosity": 1.81e-5 / 1.225}
+#: [model] keys a rotor file may set (AeroDyn TipLoss/HubLoss/AIDrag/TIDrag/TanInd, InflowWind PLExp).
+FILE_SETUP = {"tip_loss": "tip_loss", "hub_loss": "hub_loss", "drag_in_axial_induction": "drag_in_axial_induction",
+              "drag_in_tangential_induction": "drag_in_tangential_induction", "wake_rotation": "tangential_induction",
+              "shear_exponent": "shear_exponent"}
+
+
+@dataclasses.dataclass
+class WorkflowSetup:
+    """What a workflow's settings resolve to, before any data is read.
+
+    Each BEM option comes from the ``[model]`` key if given, else from the rotor files
+    (AeroDyn, InflowWind, windIO) if they state it, else from :class:`calib.bem.BemSettings`'s
+    default; ``notes`` say which came from where.
+    """
+
+    rotor: object
+    rotor_spec: dict
+    settings: BemSettings
+    nuisance: tuple
+    density: float
+    channels: list
+    calibration: dict
+    calibration_settings: CalibrationSettings
+    force: bool
+    grid_table: dict
+    source: str
+    notes: list
+
+    def grid(self, conditions: OperatingConditions, progress: bool = False) -> CorrectionGrid:
+        """The correction grid; ``alpha_nodes_deg = "auto"`` places the α nodes over the angles of
+        attack the nominal model reaches at ``conditions`` (loaded stations, converged points)."""
+        g, src = self.grid_table, self.source
+        alpha = g["alpha_nodes_deg"]
+        if isinstance(alpha, str):
+            n = int(g.get("n_alpha_nodes", 6))
+            lo_q, hi_q = (float(q) for q in g.get("alpha_percentiles", [2.0, 98.0]))
+            if n < 2:
+                raise InputError(f"must be >= 2, got {n}", src, field="grid.n_alpha_nodes")
+            if not 0 <= lo_q < hi_q <= 100:
+                raise InputError(f"must be two percentiles 0 <= lo < hi <= 100, got {g['alpha_percentiles']!r}",
+                                 src, field="grid.alpha_percentiles")
+            ev = BemModel(self.rotor, None, ("power",), self.settings, ()).evaluate(np.zeros(0), conditions)
+            a = np.asarray(ev.extras["alpha_deg"], float)[ev.ok]
+            a = a[np.isfinite(a)]
+            if a.size == 0:
+                raise InputError("no converged operating point to place the alpha nodes on", src,
+                                 field="grid.alpha_nodes_deg")
+            lo, hi = np.percentile(a, [lo_q, hi_q])
+            alpha = np.round(np.linspace(lo, hi, n), 2)
+            self.notes.append(f"alpha nodes from the data ({lo_q:g}th-{hi_q:g}th percentile of the nominal "
+                              f"model's angles of attack): {', '.join(f'{x:g}' for x in alpha)} deg")
+            if progress:
+                print(f"[calib run] set-up: {self.notes[-1]}", flush=True)
+        else:
+            alpha = _numbers(alpha, "grid.alpha_nodes_deg", src)
+        eta = _numbers(g["eta_nodes"], "grid.eta_nodes", src)
+        if np.any((eta <= 0) | (eta > 1)):
+            raise InputError(f"eta nodes must lie in (0, 1] (r/R), got {g['eta_nodes']!r}", src,
+                             field="grid.eta_nodes")
+        try:
+            return CorrectionGrid(alpha, eta, **{k: float(g[k]) for k in ("cl_scale", "cd_scale", "cl_bound",
+                                                                          "cd_bound") if k in g})
+        except InputError as exc:
+            raise InputError(exc.message, src, field=f"grid.{exc.field}") from None
+
+
+def prepare(cfg: dict) -> WorkflowSetup:
+    """Resolve a loaded workflow's rotor, model, fluid, grid and calibration settings.
+
+    Raises
+    ------
+    InputError
+        Naming the workflow file and the full key (``model.tilt``, ``calibration.noise``,
+        ``grid.eta_nodes`` ...).
+    """
+    src = cfg["_source"]
+    notes = []
+    rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"])
+    rotor = rsrc.rotor
+    mcfg = dict(cfg.get("model", {}))
+    kind = mcfg.pop("kind", "bem")
+    if kind != "bem":
+        raise InputError(f"unknown model kind {kind!r}; valid: bem", src, field="model.kind")
+    overrides = {}
+    for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
+        if key in mcfg:
+            value = float(mcfg.pop(key))
+            if not -30.0 <= value <= 30.0:
+                raise InputError(f"must be an angle in degrees within ±30, got {value!r}", src, field=f"model.{key}")
+            overrides[attr] = value
+            notes.append(f"{key} {value:g} deg from [model] (rotor files: {getattr(rotor, attr):g} deg)")
+    if overrides:
+        rotor = dataclasses.replace(rotor, **overrides)
+    nuisance = tuple(mcfg.pop("nuisance", ["pitch_offset"]))
+    kwargs = {}
+    for key, value in mcfg.items():
+        kwargs[key] = tuple(value) if key == "polar_smoothing" else value
+    for key, attr in FILE_SETUP.items():
+        file_value = getattr(rsrc, attr, None)
+        if key not in kwargs and file_value is not None:
+            kwargs[key] = file_value
+            notes.append(f"{key} = {file_value} from the rotor files")
+    fluid = dict(cfg.get("fluid", {}))
+    density = float(fluid.get("density", rsrc.air_density or AIR["density"]))
+    viscosity = float(fluid.get("kinematic_viscosity", rsrc.kinematic_viscosity or AIR["kinematic_viscosity"]))
+    for key, value in (("density", density), ("kinematic_viscosity", viscosity)):
+        if not value > 0:
+            raise InputError(f"must be > 0, got {value!r}", src, field=f"fluid.{key}")
+    try:
+        settings = BemSettings(kinematic_viscosity=viscosity, **kwargs)
+        settings.sectors_for(rotor, OperatingConditions([1.0], [1.0], [0.0]))
+    except InputError as exc:
+        raise InputError(exc.message, src, field=f"model.{exc.field}") from None
+    from calib.models.bem_model import NUISANCE
+    for name in nuisance:
+        if name not in NUISANCE:
+            raise InputError(f"unknown nuisance parameter {name!r}; valid: {', '.join(NUISANCE)}", src,
+                             field="model.nuisance")
+    channels = []
+    for k, s in enumerate(cfg["stages"]):
+        if not s["channels"] or not all(isinstance(c, str) for c in s["channels"]):
+            raise InputError("channels must be a non-empty array of names", src, field=f"stages[{k}].channels")
+        channels += [c for c in s["channels"] if c not in channels]
+    try:
+        BemModel(rotor, None, channels, settings, ())
+    except InputError as exc:
+        raise InputError(exc.message, src, field="stages.channels") from None
+    calib_cfg = dict(cfg.get("calibration", {}))
+    force = bool(calib_cfg.pop("force", False))
+    if "band_eta" in calib_cfg:
+        calib_cfg["band_eta"] = tuple(calib_cfg["band_eta"])
+    cal = CalibrationSettings(**calib_cfg).validate(src, "calibration.")
+    g = cfg["grid"]
+    if isinstance(g["alpha_nodes_deg"], str) and g["alpha_nodes_deg"] != "auto":
+        raise InputError(f"must be an array of angles [deg] or \"auto\", got {g['alpha_nodes_deg']!r}", src,
+                         field="grid.alpha_nodes_deg")
+    setup = WorkflowSetup(rotor, _absolute_rotor_table(cfg["rotor"], cfg["_dir"]), settings, nuisance, density,
+                          channels, calib_cfg, cal, force, g, src, notes)
+    if not isinstance(g["alpha_nodes_deg"], str):
+        setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
+    return setup
 
 
 def _absolute_rotor_table(table: dict, base_dir) -> dict:
@@ -246,26 +431,16 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
 
     cfg = load_workflow(path)
     src = cfg["_source"]
+    # everything the settings can get wrong is found here, before any data is read
+    setup = prepare(cfg)
+    rotor, settings, nuisance, rotor_spec = setup.rotor, setup.settings, setup.nuisance, setup.rotor_spec
+    all_channels, calib_cfg = setup.channels, setup.calibration
+    force = setup.force or force
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"])
-    rotor = rsrc.rotor
-    rotor_spec = _absolute_rotor_table(cfg["rotor"], cfg["_dir"])
-    mcfg = cfg.get("model", {})
-    settings = BemSettings(use_tilt=mcfg.get("use_tilt", False), n_sectors=mcfg.get("n_sectors"),
-                           shear_exponent=float(mcfg.get("shear_exponent", 0.0)),
-                           tip_loss=mcfg.get("tip_loss", True), hub_loss=mcfg.get("hub_loss", True))
-    nuisance = tuple(mcfg.get("nuisance", ["pitch_offset"]))
-    g = cfg["grid"]
-    grid = CorrectionGrid(_numbers(g["alpha_nodes_deg"], "grid.alpha_nodes_deg", src),
-                          _numbers(g["eta_nodes"], "grid.eta_nodes", src),
-                          **{k: float(g[k]) for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in g})
-    all_channels = list(dict.fromkeys(c for s in cfg["stages"] for c in s["channels"]))
-    for k, s in enumerate(cfg["stages"]):
-        if not all(isinstance(c, str) for c in s["channels"]) or not s["channels"]:
-            raise InputError("channels must be a non-empty array of names", src, field=f"stages[{k}].channels")
-    calib_cfg = dict(cfg.get("calibration", {}))
-    force = bool(calib_cfg.pop("force", False)) or force
+    if progress:
+        for note in setup.notes:
+            print(f"[calib run] set-up: {note}", flush=True)
 
     t0 = time.perf_counter()
     unit_notes = {}
@@ -273,10 +448,14 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
         meas = read_measurements(file, all_channels,
                                  drop_incomplete_rows=cfg["measurements"].get("drop_incomplete_rows", False))
+        if "air_density" not in meas.metadata.get("units", {}):
+            meas = dataclasses.replace(meas, conditions=dataclasses.replace(
+                meas.conditions, air_density=np.full(meas.n_points, setup.density)))
         truth_p = None
         if progress:
             for note in meas.notes:
                 print(f"[calib run] {file.name}: {note}", flush=True)
+        grid = setup.grid(meas.conditions, progress)
         check_model = BemModel(rotor, grid, all_channels, settings, nuisance, rotor_source=rotor_spec)
         unit_report = check_units(check_model, nominal_vector(check_model.parameters), meas,
                                   sigma=calib_cfg.get("sigma"))
@@ -287,7 +466,8 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         elif not unit_report.ok:
             unit_notes = {"unit check (overridden by force)": "; ".join(f.message for f in unit_report.findings)}
     else:
-        cond = _conditions(cfg["conditions"], rotor, src)
+        cond = _conditions(cfg["conditions"], rotor, src, setup.density)
+        grid = setup.grid(cond, progress)
         noise = cfg["noise"]
         rel = noise["relative"]
         missing = [c for c in all_channels if c not in rel]
@@ -306,8 +486,9 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
         model = BemModel(rotor, grid, stage["channels"], settings, nuisance, rotor_source=rotor_spec)
-        st = CalibrationSettings(retain=stage.get("retain", "threshold"), verbose=False, **calib_cfg)
-        st.validate(src)
+        st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
+                                                                            setup.calibration_settings.retain))
+        st.validate(src, f"stages[{k}].")
         callback = None
         if progress:
             def callback(rec, _name=name):

@@ -27,19 +27,30 @@ def _full_circle(table: PolarTable) -> PolarTable:
     return extrapolate_viterna(table)
 
 
-def station_reynolds(rotor: Rotor, air_density=1.225, viscosity=1.81e-5) -> np.ndarray | None:
-    """Reference chord Reynolds number per station [-] at the design tip-speed ratio and rated
-    rotor speed of the rotor's schedule (used only for airfoils with several tables)."""
+AIR_KINEMATIC_VISCOSITY = 1.81e-5 / 1.225
+"""Kinematic viscosity of air at 15 °C and 1.225 kg/m^3 [m^2/s]."""
+
+
+def station_reynolds(rotor: Rotor, kinematic_viscosity: float = AIR_KINEMATIC_VISCOSITY) -> np.ndarray | None:
+    """Reference chord Reynolds number Re = W c / ν per station [-] at the design tip-speed ratio
+    and rated rotor speed of the rotor's schedule (used only for airfoils with several tables).
+
+    Parameters
+    ----------
+    rotor : Rotor
+    kinematic_viscosity : float
+        ν of the fluid [m^2/s].
+    """
     if rotor.schedule is None:
         return None
     omega = rotor.schedule.max_rotor_speed * np.pi / 30.0
     w = omega * rotor.r * np.sqrt(1.0 + (1.0 / rotor.schedule.design_tsr * rotor.tip_radius / rotor.r) ** 2)
-    return air_density * w * rotor.chord / viscosity
+    return w * rotor.chord / kinematic_viscosity
 
 
-def station_tables(rotor: Rotor) -> list[PolarTable]:
+def station_tables(rotor: Rotor, kinematic_viscosity: float = AIR_KINEMATIC_VISCOSITY) -> list[PolarTable]:
     """The polar table of every station (Reynolds-interpolated where an airfoil has several)."""
-    re = station_reynolds(rotor)
+    re = station_reynolds(rotor, kinematic_viscosity)
     out = []
     for i, af in enumerate(rotor.airfoil_id):
         airfoil = rotor.airfoils[af]
@@ -83,7 +94,8 @@ class SectionPolars:
 
     @classmethod
     def from_rotor(cls, rotor: Rotor, step_deg: float = GRID_STEP_DEG,
-                   smoothing: tuple[float, float] | None = None) -> "SectionPolars":
+                   smoothing: tuple[float, float] | None = None,
+                   kinematic_viscosity: float = AIR_KINEMATIC_VISCOSITY) -> "SectionPolars":
         """Build the tables.
 
         Parameters
@@ -98,10 +110,12 @@ class SectionPolars:
             ``CCAirfoil`` (s = 0.01 for C_L and 0.001 for C_D in WISDEM 4.2.9, "to prevent
             spurious multiple solutions"). Use ``(0.01, 0.001)`` to reproduce CCBlade tables;
             the default (None) interpolates the data exactly.
+        kinematic_viscosity : float
+            ν of the fluid [m^2/s], for the Reynolds number of airfoils with several tables.
         """
         n = int(round(360.0 / step_deg))
         grid = np.linspace(-180.0, 180.0, n + 1)
-        tables = station_tables(rotor)
+        tables = station_tables(rotor, kinematic_viscosity)
         cache: dict[int, tuple] = {}
         rows = []
         for t in tables:

@@ -60,6 +60,12 @@ class BemSettings:
         Look for further roots of the residual near stall and keep the one of smallest |φ|
         (:mod:`calib.bem.multiple_roots`); off, the bracketing iteration's root is kept and
         nothing is flagged.
+    kinematic_viscosity : float
+        Of the fluid [m^2/s] (air at 15 °C: 1.81e-5 / 1.225; water: about 1e-6); sets the
+        chord Reynolds numbers at which airfoils with several tables are interpolated.
+    polar_smoothing : (s_cl, s_cd) or None
+        Smoothing-spline bounds for the polars (``SectionPolars.from_rotor``); ``(0.01, 0.001)``
+        reproduces CCBlade's CCAirfoil. None interpolates the tables exactly.
     """
 
     tip_loss: bool = True
@@ -72,6 +78,8 @@ class BemSettings:
     use_tilt: bool = True
     max_iter: int = 100
     search_multiple_roots: bool = True
+    kinematic_viscosity: float = 1.81e-5 / 1.225
+    polar_smoothing: tuple | None = None
 
     def sectors_for(self, rotor: Rotor, conditions: OperatingConditions) -> int:
         if self.n_sectors is not None:
@@ -270,7 +278,8 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     M.L. Buhl, NREL/TP-500-36834 (2005) (range of the high-induction relation).
     """
     settings = settings or BemSettings()
-    polars = polars or SectionPolars.from_rotor(rotor)
+    polars = polars or SectionPolars.from_rotor(rotor, smoothing=settings.polar_smoothing,
+                                                kinematic_viscosity=settings.kinematic_viscosity)
     if grid is not None:
         p = np.zeros(grid.n_params) if p is None else np.asarray(p, float)
         if p.shape != (grid.n_params,) or not np.all(np.isfinite(p)):

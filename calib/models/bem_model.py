@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Sequence
 
 import numpy as np
@@ -76,7 +76,8 @@ class BemModel:
         if len(channels) == 0:
             raise InputError("at least one channel is needed", "BemModel", field="channels")
         self._specs = channel_specs(list(channels), rotor, self._weights, self._interior)
-        self._polars = SectionPolars.from_rotor(rotor)
+        self._polars = SectionPolars.from_rotor(rotor, smoothing=self.settings.polar_smoothing,
+                                                kinematic_viscosity=self.settings.kinematic_viscosity)
         params = list(grid.parameters()) if grid is not None else []
         params += [NUISANCE[n] for n in self.nuisance]
         self._parameters = tuple(params)
@@ -178,6 +179,7 @@ class BemModel:
             raise InputError("the rotor has no recorded source (embedded name or files); pass rotor_source=",
                              "BemModel", field="rotor_source")
         return {"kind": "bem", "rotor": dict(self.rotor_source), "settings": asdict(self.settings),
+                "tilt_deg": float(self.rotor.tilt_deg), "precone_deg": float(self.rotor.precone_deg),
                 "grid": self.grid.to_dict() if self.grid is not None else None,
                 "channels": [c.name for c in self.channels], "nuisance": list(self.nuisance)}
 
@@ -193,6 +195,9 @@ class BemModel:
             rotor = rotor_from_table(rotor_table, "model spec", base_dir).rotor
         else:
             rotor = load_rotor(rotor_table["name"])
+        changes = {k: float(spec[k]) for k in ("tilt_deg", "precone_deg") if k in spec}
+        if changes:
+            rotor = replace(rotor, **changes)
         grid = CorrectionGrid(**spec["grid"]) if spec.get("grid") else None
         return cls(rotor, grid, spec["channels"], BemSettings(**spec["settings"]), spec["nuisance"],
                    rotor_source=rotor_table)
