@@ -1,11 +1,4 @@
-"""The ``calib`` command.
-
-``calib demo``        the embedded default job (C_P surface and power curve)
-``calib run FILE``    run a workflow TOML (calibration, report)
-``calib predict DIR`` a calibrated model at new conditions, with 95 % intervals
-``calib fmu build``   build the turbine FMUs from C source
-``calib rotors``      list the embedded rotors
-"""
+"""The ``calib`` command (see :data:`DESCRIPTION`)."""
 
 from __future__ import annotations
 
@@ -32,13 +25,9 @@ def _predict(args) -> int:
     return 0
 
 
-def _fmu(args) -> int:
-    if not args.rest or args.rest[0] != "build":
-        print("calib fmu: expected 'calib fmu build [--variant A|B|all] [--rotor NAME] [--out DIR] "
-              "[--force]'", file=sys.stderr)
-        return 2
-    from calib.fmu.build import main as fmu_main
-    return int(fmu_main(args.rest[1:]) or 0)
+def _fmu_build(args) -> int:
+    from calib.fmu.build import run_build
+    return run_build(args)
 
 
 def _rotors(args) -> int:
@@ -50,13 +39,26 @@ def _rotors(args) -> int:
     return 0
 
 
+DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured rotor loads
+
+  calib demo               the embedded default job
+  calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
+  calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
+  calib fmu build          build the bundled turbine FMUs from their C sources
+  calib rotors             list the embedded rotors
+
+'calib COMMAND --help' describes each command."""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="calib", description=__doc__,
+    parser = argparse.ArgumentParser(prog="calib", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     from calib import __version__
     parser.add_argument("--version", action="version", version=f"calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("demo", help="C_P surface and power curve of an embedded rotor")
+    p = sub.add_parser("demo", help="C_P surface and power curve of an embedded rotor",
+                       description="The embedded default job: C_P(lambda, beta) surface and power curve of an "
+                                   "embedded rotor, written as figures into the output folder.")
     p.add_argument("--out", default="demo_output", help="output folder (default: demo_output)")
     p.add_argument("--rotor", default="nrel5mw", help="embedded rotor name (default: nrel5mw)")
     p.set_defaults(func=_demo)
@@ -80,10 +82,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument("--confidence", type=float, default=0.95, help="two-sided interval level (default 0.95)")
     p.set_defaults(func=_predict)
-    p = sub.add_parser("fmu", help="FMU tools: 'calib fmu build [--variant A|B|all] ...'")
-    p.add_argument("rest", nargs=argparse.REMAINDER)
-    p.set_defaults(func=_fmu)
-    p = sub.add_parser("rotors", help="list the embedded rotors")
+    p = sub.add_parser("fmu", help="FMU tools (calib fmu build)",
+                       description="FMU tools. 'calib fmu build --help' lists the build options.")
+    fmu_sub = p.add_subparsers(dest="fmu_command", required=True)
+    from calib.fmu.build import BUILD_DESCRIPTION, add_build_arguments
+    b = fmu_sub.add_parser("build", help="build the bundled turbine FMUs from their C sources",
+                           description=BUILD_DESCRIPTION)
+    add_build_arguments(b)
+    b.set_defaults(func=_fmu_build)
+    p = sub.add_parser("rotors", help="list the embedded rotors",
+                       description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)
     return parser
 

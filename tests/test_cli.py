@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from calib.cli import main
 
 
@@ -24,5 +26,40 @@ def test_unknown_rotor_is_a_clean_error(tmp_path, capsys):
 
 
 def test_fmu_without_subcommand_is_a_usage_error(capsys):
-    assert main(["fmu"]) == 2
-    assert "calib fmu build" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["fmu"])
+    assert exc.value.code == 2
+    assert "build" in capsys.readouterr().err
+
+
+def _help(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(args + ["--help"])
+    assert exc.value.code == 0
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", [[], ["demo"], ["run"], ["predict"], ["fmu"], ["fmu", "build"], ["rotors"]])
+def test_help_is_plain_and_describes_every_argument(command, capsys):
+    text = _help(command, capsys)
+    assert "``" not in text and ":func:" not in text and ":class:" not in text
+    assert "rest" not in text.split()
+    # every option line of argparse's listing carries a description after the option itself
+    lines = text.splitlines()
+    for k, line in enumerate(lines):
+        stripped = line.strip()
+        if stripped.startswith("--") and stripped != "--version":
+            described = len(stripped.split("  ")) > 1 or (k + 1 < len(lines) and lines[k + 1].startswith(" " * 10))
+            assert described, line
+    if command == ["run"]:
+        assert "workflows/README.md" in text
+    if command == ["fmu", "build"]:
+        assert "--variant" in text and "--rotor" in text and "--force" in text
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    from calib import __version__
+    assert capsys.readouterr().out.strip() == f"calib {__version__}"

@@ -299,15 +299,25 @@ def _build_into(work: Path, fmu_path: Path, spec: md.VariantSpec, token: str, ro
     os.replace(tmp_zip, fmu_path)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``calib fmu build``: build the rotor FMUs and print where they are."""
-    parser = argparse.ArgumentParser(prog="calib fmu build", description=__doc__.splitlines()[0])
+BUILD_DESCRIPTION = ("Build the bundled turbine FMUs (variant A: FMI 2.0; variant B: FMI 3.0) from the C sources "
+                     "in fmu_models/ with the FMI headers and CMake project that ship with fmpy; results are "
+                     "cached by source hash in .calib_cache/. Prints the path of each FMU and its mapping file.")
+
+
+def add_build_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options of ``calib fmu build`` (shared by this module's ``main`` and ``calib.cli``)."""
     parser.add_argument("--variant", default="all", choices=["A", "B", "a", "b", "all"],
-                        help="which FMU to build (default: all)")
-    parser.add_argument("--rotor", default="nrel5mw", help="rotor from calib.rotor.library (default nrel5mw)")
-    parser.add_argument("--out", default=None, help="copy the FMUs and mapping files to this folder")
-    parser.add_argument("--force", action="store_true", help="rebuild even if cached")
-    args = parser.parse_args(argv)
+                        help="which FMU to build: A, B or all (default: all)")
+    parser.add_argument("--rotor", default="nrel5mw",
+                        help="embedded rotor whose geometry and polars go into the FMU's resources "
+                             "(see 'calib rotors'; default: nrel5mw)")
+    parser.add_argument("--out", default=None, help="also copy the FMUs and their mapping files to this folder")
+    parser.add_argument("--force", action="store_true", help="rebuild even if a cached build exists")
+    return parser
+
+
+def run_build(args) -> int:
+    """Build what ``args`` (from :func:`add_build_arguments`) asks for; 0 on success, 1 on error."""
     from calib.rotor.library import load_rotor
     try:
         rotor = load_rotor(args.rotor)
@@ -321,6 +331,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     return 0
 
+
+def main(argv: list[str] | None = None) -> int:
+    """``calib fmu build``: build the rotor FMUs and print where they are."""
+    parser = add_build_arguments(argparse.ArgumentParser(prog="calib fmu build", description=BUILD_DESCRIPTION))
+    return run_build(parser.parse_args(argv))
 
 if __name__ == "__main__":
     sys.exit(main())
