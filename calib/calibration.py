@@ -378,7 +378,9 @@ class Calibrator:
             model_after=ev.values[:, self.channel_index], status_before=nominal.evaluation.status,
             status_after=ev.status, alpha_seen=alpha_seen, eta_seen=eta_seen, noise_sigma=problem.sigma[0],
             sigma_bar=float(svd.sigma_bar), verdicts=verdicts, history=self.history, status=status,
-            message=message, failures=failures, chi2_before=float(np.sum(nominal.residual[nominal.ok] ** 2)),
+            message=message, failures=failures,
+            chi2_before=float(np.sum(((m.values - nominal.evaluation.values[:, self.channel_index])[nominal.ok]
+                                      / problem.sigma[nominal.ok]) ** 2)),
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf,

@@ -300,14 +300,17 @@ class WorkflowSetup:
         alpha = g["alpha_nodes_deg"]
         if isinstance(alpha, str):
             n = int(g.get("n_alpha_nodes", 6))
-            lo_q, hi_q = (float(q) for q in g.get("alpha_percentiles", [2.0, 98.0]))
+            lo_q, hi_q = (float(q) for q in g.get("alpha_percentiles", [5.0, 95.0]))
             if n < 2:
                 raise InputError(f"must be >= 2, got {n}", src, field="grid.n_alpha_nodes")
             if not 0 <= lo_q < hi_q <= 100:
                 raise InputError(f"must be two percentiles 0 <= lo < hi <= 100, got {g['alpha_percentiles']!r}",
                                  src, field="grid.alpha_percentiles")
             ev = BemModel(self.rotor, None, ("power",), self.settings, ()).evaluate(np.zeros(0), conditions)
-            a = np.asarray(ev.extras["alpha_deg"], float)[ev.ok]
+            eta_nodes = _numbers(g["eta_nodes"], "grid.eta_nodes", src)
+            # only stations inside the η node range (outside it the field ramps to zero)
+            reach = eta_nodes[0]
+            a = np.asarray(ev.extras["alpha_deg"], float)[ev.ok][:, np.asarray(ev.extras["eta"]) >= reach]
             a = a[np.isfinite(a)]
             if a.size == 0:
                 raise InputError("no converged operating point to place the alpha nodes on", src,

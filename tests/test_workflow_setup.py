@@ -150,3 +150,15 @@ def test_workflow_and_api_give_identical_results(tmp_path):
     np.testing.assert_array_equal(wf.cov_p, api.cov_p)
     assert np.allclose(cond.wind_speed, wf.conditions["wind_speed"])
     assert nominal_vector(model.parameters).size == wf.n_params
+
+
+def test_shipped_own_turbine_workflow_runs(tmp_path, capsys):
+    """The README's own-turbine example: OpenFAST deck + spreadsheet export, end to end."""
+    wf = Path(__file__).resolve().parents[1] / "workflows" / "own_turbine.toml"
+    outcomes = run_workflow(wf, tmp_path, progress=True)
+    out = capsys.readouterr().out
+    assert "delimiter: semicolon" in out and "timestamp, turbine_id" in out and "unit check: passed" in out
+    res = outcomes[0].result
+    assert res.status == "converged" and res.n_retained >= 1
+    assert res.chi2_per_dof_before > 5 and res.chi2_per_dof_after < 1.5
+    assert (tmp_path / "report.html").is_file()
