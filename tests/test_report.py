@@ -60,15 +60,17 @@ def test_every_figure_is_written(result, figure_paths, tmp_path):
     # the truncation curve exists only for sigma_bar = 'auto'
     assert set(paths) == set(F.FIGURES) - (set() if result.truncation else {"truncation"})
     for p in paths.values():
+        assert set(p) == {"png"}                                   # SVG only on request
         assert p["png"].stat().st_size > 5000
     svg = F.save_figure(F.plot_singular_values(result), tmp_path, "spectrum", formats=("svg",))["svg"]
     assert svg.read_text().lstrip().startswith("<?xml") and "<svg" in svg.read_text()[:2000]
 
 
-def test_eigenshape_figure_has_one_panel_per_retained_mode(result):
-    fig = F.plot_eigenshapes(result, "drag", max_modes=50)
-    maps = [ax for ax in fig.axes if ax.get_title().startswith("θ")]
-    assert len(maps) == result.n_retained
+def test_eigenshape_figure_has_one_map_per_retained_mode(result):
+    fig = F.plot_eigenshapes(result, "drag")
+    titles = [t.get_text() for ax in fig.axes for t in ax.texts if t.get_text().startswith("θ")]
+    assert len(titles) == result.n_retained
+    assert f"all {result.n_retained} retained θ" in fig._suptitle.get_text()
 
 
 def test_html_report_is_self_contained_with_key_numbers(result, figure_paths, tmp_path):

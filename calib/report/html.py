@@ -1,16 +1,22 @@
-"""A self-contained HTML report (images embedded as base64 PNG) of one or more calibrations."""
+"""A self-contained HTML report (images embedded as base64 PNG) of one or more calibrations.
+
+The report is written to a temporary name in its folder and renamed
+(:mod:`calib.report.atomic`), so an interrupted run never leaves a truncated ``report.html``.
+"""
 
 from __future__ import annotations
 
 import base64
 import html
-import os
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
+from calib.report.atomic import atomic_write_text
 from calib.result import CalibrationResult
+
+_MIME = {"png": "image/png", "svg": "image/svg+xml"}
 
 _CSS = """
 body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222;line-height:1.4}
@@ -21,8 +27,32 @@ th{background:#f0f0f0}td.l,th.l{text-align:left}img{max-width:100%;margin:0.4em 
 
 
 def _img(path: Path) -> str:
-    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
-    return f'<img alt="{html.escape(Path(path).stem)}" src="data:image/png;base64,{data}">'
+    path = Path(path)
+    mime = _MIME.get(path.suffix.lstrip(".").lower(), "image/png")
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(path.stem)}" src="data:{mime};base64,{data}">'
+
+
+def _figure_html(name: str, paths: Mapping[str, Path], caption: str = "") -> str:
+    """A figure heading, an optional caption and the embedded image (PNG, else SVG); empty if neither."""
+    fmt = next((f for f in ("png", "svg") if f in paths), None)
+    if fmt is None:
+        return ""
+    cap = f"<p>{html.escape(caption)}</p>" if caption else ""
+    return f"<h4>{html.escape(name.replace('_', ' '))}</h4>{cap}" + _img(paths[fmt])
+
+
+def _captions(r: CalibrationResult) -> dict[str, str]:
+    """Captions of the standard figures, generated from the result."""
+    from calib.report.fit_figures import fit_abscissa
+
+    _, xlabel, reason = fit_abscissa(r)
+    every = f"All {r.n_retained} retained eigenshapes are drawn, on the α and η range of the correction nodes."
+    return {"singular_values": f"{r.n_retained} of {r.n_params} directions retained.",
+            "eigenshapes_lift": every, "eigenshapes_drag": every,
+            "fit": f"Against {xlabel.split(' [')[0]} ({reason}); under each channel the whitened residual after "
+                   f"calibration.",
+            "correlation": "Correction nodes grouped by block and α node; other parameters by name."}
 
 
 def _table(header, rows, left=1) -> str:
@@ -152,9 +182,9 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
                          "note", "confounded with"], rows, left=2))
     if figures:
         parts.append("<h3>Figures</h3>")
+        captions = _captions(r)
         for name, paths in figures.items():
-            if "png" in paths:
-                parts.append(f"<h4>{html.escape(name.replace('_', ' '))}</h4>" + _img(paths["png"]))
+            parts.append(_figure_html(name, paths, captions.get(name, "")))
     parts.append("<details><summary>Reproducibility</summary><pre>" + html.escape(
         "\n".join([f"inputs: {r.inputs}", f"versions: {r.versions}",
                    f"settings: { {k: v for k, v in r.settings.items() if k != 'lower_effective'} }"])) +
@@ -172,7 +202,7 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
     Parameters
     ----------
     path : str or Path
-        Output ``.html`` file (written atomically).
+        Output ``.html`` file (written to a temporary name in its folder, then renamed).
     sections : list of str, optional
         Pre-rendered HTML sections.
     results : mapping name -> CalibrationResult, optional
@@ -180,7 +210,8 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
     intro : str
         Plain text paragraph under the title.
     extra_figures : mapping name -> {format: path}
-        Figures shown at the top (e.g. comparisons).
+        Figures shown at the top (e.g. comparisons). Figures are embedded as PNG, or as SVG
+        when no PNG was written.
     checks : mapping name -> {label: statement}, optional
         Extra statements per result (e.g. coverage of a known truth).
     """
@@ -194,16 +225,10 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
               _fmt(r.chi2_per_dof_before), _fmt(r.chi2_per_dof_after),
               r.failures.get("total_failed_point_evaluations", 0)) for n, r in results.items()]))
     for name, paths in (extra_figures or {}).items():
-        if "png" in paths:
-            body.append(f"<h4>{html.escape(name.replace('_', ' '))}</h4>" + _img(paths["png"]))
+        body.append(_figure_html(name, paths))
     body += list(sections or [])
     for name, r in (results or {}).items():
         body.append(result_section(r, (figures or {}).get(name), (checks or {}).get(name)))
     text = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
             f"<style>{_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return atomic_write_text(path, text)

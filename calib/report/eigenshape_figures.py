@@ -1,0 +1,181 @@
+"""Eigenshape maps ψ_i(α, η) of every retained parameter θ_i, one grid per block.
+
+The eigenshape of θ_i is the correction field its right singular vector makes
+(Bottasso, Cacciola & Iriarte 2014, §3): ψ_i(α, η) = Σ_j B_j(α, η) V_ji over the lift
+or the drag nodes j, with B_j the nodes' shape functions, in scale units per unit θ_i.
+Each map covers the node range; the (α, η) points the operating points reach are dotted,
+and those outside the node range are counted in the title instead of stretching the axes.
+
+References
+----------
+C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
+from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from matplotlib.collections import LineCollection, PatchCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+
+from calib.report.panels import DPI, Margins
+from calib.result import CalibrationResult
+
+MAX_COLUMNS = 6
+PANEL_SIZE = (1.9, 1.35)   # one map [in]
+MARGINS = Margins(left=0.6, right=1.05, bottom=0.5, top=0.8, wgap=0.22, hgap=0.3)
+N_ALPHA, N_ETA = 97, 49    # mesh of the maps
+
+
+def eigen_mesh(result: CalibrationResult, n_alpha: int = N_ALPHA, n_eta: int = N_ETA, layout=None):
+    """Uniform (α [deg], η [-]) mesh over the node range of the correction grid."""
+    grid = (layout or result.layout).grid
+    a, e = grid.alpha_nodes_deg, grid.eta_nodes
+    return np.linspace(a[0], a[-1], n_alpha), np.linspace(e[0], e[-1], n_eta)
+
+
+def seen_inside(result: CalibrationResult, layout=None):
+    """(α, η) seen by the data inside the node range, and how many lie outside it.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    layout : NodeLayout, optional
+        ``result.layout`` if already at hand.
+
+    Returns
+    -------
+    alpha_deg, eta : ndarray
+        Points inside the node range [deg], [-].
+    n_outside : int
+    """
+    grid = (layout or result.layout).grid
+    a, e = result.alpha_seen, result.eta_seen
+    inside = ((a >= grid.alpha_nodes_deg[0]) & (a <= grid.alpha_nodes_deg[-1])
+              & (e >= grid.eta_nodes[0]) & (e <= grid.eta_nodes[-1]))
+    return a[inside], e[inside], int(np.count_nonzero(~inside))
+
+
+def block_share(V: np.ndarray, layout, mode: int, block: str) -> float:
+    """Fraction of the squared entries of singular vector ``V[:, mode]`` on ``block``'s nodes [-].
+
+    Parameters
+    ----------
+    V : ndarray, shape (n_params, n_params)
+        Right singular vectors (columns).
+    layout : NodeLayout
+    mode : int
+    block : {"lift", "drag"}
+    """
+    idx = (layout.lift_index if block == "lift" else layout.drag_index).ravel()
+    v = V[:, mode]
+    total = float(v @ v)
+    return float(np.sum(v[idx[idx >= 0]] ** 2) / total) if total > 0 else 0.0
+
+
+def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: int | None = None):
+    """Eigenshape maps ψ_i(α, η) of the retained θ for one block, all in one grid.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    block : {"lift", "drag"}
+    max_modes : int, optional
+        Draw at most this many (default: every retained θ); the title states the count.
+
+    Returns
+    -------
+    matplotlib.figure.Figure or None
+        None when the model has no correction field.
+
+    Notes
+    -----
+    The maps are small multiples drawn as tiles of one axes (one image, a frame, node lines
+    and the seen points per tile), not one axes each: matplotlib spends most of a figure's
+    time on axes and their ticks, and a 37-map grid of separate axes took seconds. Every
+    tile spans the node range: α along x, η = r/R along y, with the node values as ticks on
+    the left column and the bottom row.
+    """
+    if block not in ("lift", "drag"):
+        raise ValueError(f"block must be 'lift' or 'drag', got {block!r}")
+    layout = result.layout
+    if not layout.has_field:
+        return None
+    retained = np.flatnonzero(result.retained)
+    modes = retained if max_modes is None else retained[:max_modes]
+    a_nodes, e_nodes = layout.grid.alpha_nodes_deg, layout.grid.eta_nodes
+    n = max(len(modes), 1)
+    ncol = min(MAX_COLUMNS, n)
+    nrow = int(np.ceil(n / ncol))
+    w, h = PANEL_SIZE
+    m = MARGINS
+    gx, gy = m.wgap / w, m.hgap / h                        # gaps in tile units
+    width = m.left + ncol * w + (ncol - 1) * m.wgap + m.right
+    height = m.bottom + nrow * h + (nrow - 1) * m.hgap + m.top
+    fig = Figure(figsize=(width, height), dpi=DPI)
+    ax = fig.add_axes((m.left / width, m.bottom / height, (width - m.left - m.right) / width,
+                       (height - m.bottom - m.top) / height))
+    ax.set_xlim(0, ncol + (ncol - 1) * gx)
+    ax.set_ylim(-(nrow + (nrow - 1) * gy), 0)
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    a_seen, e_seen, n_out = seen_inside(result, layout)
+    how_many = (f"all {len(retained)} retained θ" if len(modes) == len(retained)
+                else f"the first {len(modes)} of {len(retained)} retained θ")
+    fig.suptitle(f"{result.name}: {block} eigenshapes ψ_i(α, η) of {how_many} ({result.n_params} parameters)\n"
+                 f"dots: {a_seen.size} (α, η) seen by the data inside the node range; {n_out} outside it "
+                 f"(not drawn); grid lines: correction nodes", fontsize=9, y=1 - 0.08 / height)
+    if not len(modes):
+        ax.text(0.5, -0.5, "no retained parameter", ha="center", va="center")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        return fig
+    alpha, eta = eigen_mesh(result, layout=layout)
+    lift, drag = result.eigenshapes(alpha, eta, modes)
+    shapes = lift if block == "lift" else drag
+    vmax = max(float(np.abs(shapes).max()), 1e-12)
+    ua = (a_nodes - a_nodes[0]) / (a_nodes[-1] - a_nodes[0])   # node positions in a tile [0, 1]
+    ue = (e_nodes - e_nodes[0]) / (e_nodes[-1] - e_nodes[0])
+    us_a = (a_seen - a_nodes[0]) / (a_nodes[-1] - a_nodes[0])
+    us_e = (e_seen - e_nodes[0]) / (e_nodes[-1] - e_nodes[0])
+    da, de = 0.5 / (alpha.size - 1), 0.5 / (eta.size - 1)  # half a mesh cell in tile units
+    segments, frames, dots_x, dots_y = [], [], [], []
+    xticks, xlabels, yticks, ylabels = [], [], [], []
+    for k, i in enumerate(modes):
+        row, col = divmod(k, ncol)
+        x0, y1 = col * (1 + gx), -row * (1 + gy)
+        y0 = y1 - 1
+        im = ax.imshow(shapes[k], extent=(x0 - da, x0 + 1 + da, y0 - de, y1 + de), origin="lower", aspect="auto",
+                       cmap="RdBu_r", vmin=-vmax, vmax=vmax, interpolation="nearest")
+        im.set_clip_path(Rectangle((x0, y0), 1, 1, transform=ax.transData))
+        segments += [[(x0 + u, y0), (x0 + u, y1)] for u in ua[1:-1]]
+        segments += [[(x0, y0 + u), (x0 + 1, y0 + u)] for u in ue[1:-1]]
+        frames.append(Rectangle((x0, y0), 1, 1))
+        dots_x.append(x0 + us_a)
+        dots_y.append(y0 + us_e)
+        share = block_share(result.V, layout, i, block)
+        ax.text(x0 + 0.5, y1 + 0.03, f"θ{i + 1}  σ={result.sigma_theta[i]:.2g}  {100 * share:.0f}% {block}",
+                ha="center", va="bottom", fontsize=7)
+        if row == nrow - 1:
+            xticks += list(x0 + ua)
+            xlabels += [f"{a:g}" for a in a_nodes]
+        if col == 0:
+            yticks += list(y0 + ue)
+            ylabels += [f"{e:g}" for e in e_nodes]
+    ax.add_collection(LineCollection(segments, colors="0.55", linewidths=0.3))
+    ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="0.2", linewidths=0.6))
+    if a_seen.size:
+        ax.plot(np.concatenate(dots_x), np.concatenate(dots_y), ",", color="k", alpha=0.35, rasterized=True)
+    ax.set_xticks(xticks, xlabels, fontsize=6)
+    ax.set_yticks(yticks, ylabels, fontsize=6)
+    ax.tick_params(length=2, pad=1)
+    ax.set_xlabel("α [deg] (every tile; bottom row labelled)", fontsize=7, labelpad=2)
+    ax.set_ylabel("η = r/R [-] (every tile; left column labelled)", fontsize=7, labelpad=2)
+    cax = fig.add_axes(((width - m.right + 0.2) / width, m.bottom / height, 0.14 / width,
+                        (height - m.bottom - m.top) / height))
+    fig.colorbar(im, cax=cax)
+    cax.tick_params(labelsize=6)
+    cax.set_ylabel(f"ψ ({block}) [scale units per unit θ]", fontsize=7)
+    return fig

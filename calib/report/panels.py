@@ -1,0 +1,151 @@
+"""Figure grids with margins fixed in inches (no layout engine).
+
+Matplotlib's constrained layout measures every tick label of every panel before drawing
+and took about half of the report's time for the eigenshape grids; a grid whose panels,
+gaps and margins are given in inches lays out in no time and looks the same from one
+result to the next. Panels that are not on the outer edge get no tick labels (their ticks
+stay, so the grid is readable), and ticks are fixed where the caller puts them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.ticker import LogLocator, MaxNLocator, NullLocator
+
+DPI = 100
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Figure margins and gaps between panels [in]."""
+
+    left: float = 0.75
+    right: float = 0.2
+    bottom: float = 0.55
+    top: float = 0.45
+    wgap: float = 0.6
+    hgap: float = 0.55
+
+
+def panel_grid(nrow: int, ncol: int, panel_size: tuple[float, float], margins: Margins = Margins(),
+               height_ratios=None, sharex_col: bool = False, n_panels: int | None = None):
+    """A figure with an ``nrow`` × ``ncol`` grid of axes.
+
+    Parameters
+    ----------
+    nrow, ncol : int
+    panel_size : (float, float)
+        Width and mean height of one panel [in].
+    margins : Margins
+        Outer margins and gaps [in].
+    height_ratios : sequence of float, optional
+        Relative row heights (mean 1 keeps ``panel_size``).
+    sharex_col : bool
+        Share the x axis down each column (a fit and its residual panel).
+    n_panels : int, optional
+        Create only the first ``n_panels`` axes in row order (the others are None).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray of Axes or None, shape (nrow, ncol)
+    """
+    w, h = panel_size
+    ratios = np.ones(nrow) if height_ratios is None else np.asarray(height_ratios, float)
+    heights = h * ratios / ratios.mean()
+    width = margins.left + ncol * w + (ncol - 1) * margins.wgap + margins.right
+    height = margins.bottom + heights.sum() + (nrow - 1) * margins.hgap + margins.top
+    fig = Figure(figsize=(width, height), dpi=DPI)
+    gs = fig.add_gridspec(nrow, ncol, left=margins.left / width, right=1 - margins.right / width,
+                          bottom=margins.bottom / height, top=1 - margins.top / height,
+                          wspace=margins.wgap / w, hspace=margins.hgap / h, height_ratios=ratios)
+    axes = np.empty((nrow, ncol), dtype=object)
+    n_panels = nrow * ncol if n_panels is None else n_panels
+    for i in range(nrow):
+        for j in range(ncol):
+            if i * ncol + j >= n_panels:
+                continue
+            share = axes[0, j] if sharex_col and i > 0 else None
+            axes[i, j] = fig.add_subplot(gs[i, j], sharex=share)
+    return fig, axes
+
+
+def single_panel(size: tuple[float, float] = (6.4, 3.6), margins: Margins = Margins(left=0.9, bottom=0.6,
+                                                                                     top=0.4)):
+    """A figure of total ``size`` [in] with one axes inside fixed margins."""
+    width, height = size
+    m = margins
+    fig = Figure(figsize=size, dpi=DPI)
+    ax = fig.add_axes((m.left / width, m.bottom / height, 1 - (m.left + m.right) / width,
+                       1 - (m.bottom + m.top) / height))
+    return fig, ax
+
+
+def colorbar_axes(fig: Figure, axes, width: float = 0.14, pad: float = 0.15):
+    """An axes for a colorbar right of ``axes`` (spanning their height) [in]."""
+    boxes = [ax.get_position() for ax in np.ravel(axes) if ax is not None]
+    x1 = max(b.x1 for b in boxes)
+    y0, y1 = min(b.y0 for b in boxes), max(b.y1 for b in boxes)
+    fw, _ = fig.get_size_inches()
+    return fig.add_axes((x1 + pad / fw, y0, width / fw, y1 - y0))
+
+
+def paired_grid(nrow: int, ncol: int, panel_size: tuple[float, float], lower_ratio: float = 0.4,
+                margins: Margins = Margins(), inner_gap: float = 0.08, n_panels: int | None = None):
+    """A grid of panel pairs: a main panel over a shorter one sharing its x axis.
+
+    Parameters
+    ----------
+    nrow, ncol : int
+        Pairs down and across.
+    panel_size : (float, float)
+        Width and height of the main panel [in].
+    lower_ratio : float
+        Height of the lower panel over the main panel's [-].
+    margins : Margins
+        Outer margins; ``hgap`` separates pairs [in].
+    inner_gap : float
+        Gap between the two panels of a pair [in].
+    n_panels : int, optional
+        Create only the first ``n_panels`` pairs in row order (the others are None).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray of Axes or None, shape (nrow, ncol, 2)
+        ``[..., 0]`` main panels, ``[..., 1]`` lower panels.
+    """
+    w, h = panel_size
+    pair_h = h * (1 + lower_ratio) + inner_gap
+    width = margins.left + ncol * w + (ncol - 1) * margins.wgap + margins.right
+    height = margins.bottom + nrow * pair_h + (nrow - 1) * margins.hgap + margins.top
+    fig = Figure(figsize=(width, height), dpi=DPI)
+    n_panels = nrow * ncol if n_panels is None else n_panels
+    axes = np.empty((nrow, ncol, 2), dtype=object)
+    for i in range(nrow):
+        for j in range(ncol):
+            if i * ncol + j >= n_panels:
+                continue
+            x0 = margins.left + j * (w + margins.wgap)
+            y_top = height - margins.top - i * (pair_h + margins.hgap)
+            main = fig.add_axes((x0 / width, (y_top - h) / height, w / width, h / height))
+            low_h = h * lower_ratio
+            lower = fig.add_axes((x0 / width, (y_top - h - inner_gap - low_h) / height, w / width, low_h / height),
+                                 sharex=main)
+            axes[i, j, 0], axes[i, j, 1] = main, lower
+    return fig, axes
+
+
+def lean_ticks(ax, nbins: int = 5) -> None:
+    """At most about ``nbins`` ticks per axis (each tick is several artists to build and draw)."""
+    ax.xaxis.set_major_locator(MaxNLocator(nbins))
+    ax.yaxis.set_major_locator(MaxNLocator(nbins))
+
+
+def lean_log_ticks(ax, numticks: int = 8) -> None:
+    """Decade ticks only on a logarithmic y axis (minor ticks over many decades cost more than the plot)."""
+    ax.yaxis.set_major_locator(LogLocator(base=10.0, numticks=numticks))
+    ax.yaxis.set_minor_locator(NullLocator())
