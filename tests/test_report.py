@@ -70,7 +70,7 @@ def test_eigenshape_figure_has_one_map_per_retained_mode(result):
     fig = F.plot_eigenshapes(result, "drag")
     titles = [t.get_text() for ax in fig.axes for t in ax.texts if t.get_text().startswith("θ")]
     assert len(titles) == result.n_retained
-    assert f"all {result.n_retained} retained θ" in fig._suptitle.get_text()
+    assert f"all {result.n_retained} retained θ" in " ".join(fig._suptitle.get_text().split())
 
 
 def test_html_report_is_self_contained_with_key_numbers(result, figure_paths, tmp_path):

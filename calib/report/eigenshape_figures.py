@@ -14,13 +14,15 @@ from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from calib.report.panels import DPI, Margins
+from calib.report.panels import DPI, Margins, title_height, wrap_title
 from calib.result import CalibrationResult
 
 MAX_COLUMNS = 6
@@ -110,9 +112,15 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     ncol = min(MAX_COLUMNS, n)
     nrow = int(np.ceil(n / ncol))
     w, h = PANEL_SIZE
-    m = MARGINS
+    a_seen, e_seen, n_out = seen_inside(result, layout)
+    how_many = (f"all {len(retained)} retained θ" if len(modes) == len(retained)
+                else f"the first {len(modes)} of {len(retained)} retained θ")
+    width = MARGINS.left + ncol * w + (ncol - 1) * MARGINS.wgap + MARGINS.right
+    title = wrap_title(f"{result.name}: {block} eigenshapes ψ_i(α, η) of {how_many} ({result.n_params} "
+                       f"parameters)\ndots: {a_seen.size} (α, η) seen by the data inside the node range; {n_out} "
+                       f"outside it (not drawn); grid lines: correction nodes", width, 9)
+    m = replace(MARGINS, top=title_height(title, 9) + 0.3)
     gx, gy = m.wgap / w, m.hgap / h                        # gaps in tile units
-    width = m.left + ncol * w + (ncol - 1) * m.wgap + m.right
     height = m.bottom + nrow * h + (nrow - 1) * m.hgap + m.top
     fig = Figure(figsize=(width, height), dpi=DPI)
     ax = fig.add_axes((m.left / width, m.bottom / height, (width - m.left - m.right) / width,
@@ -121,12 +129,7 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     ax.set_ylim(-(nrow + (nrow - 1) * gy), 0)
     for spine in ax.spines.values():
         spine.set_visible(False)
-    a_seen, e_seen, n_out = seen_inside(result, layout)
-    how_many = (f"all {len(retained)} retained θ" if len(modes) == len(retained)
-                else f"the first {len(modes)} of {len(retained)} retained θ")
-    fig.suptitle(f"{result.name}: {block} eigenshapes ψ_i(α, η) of {how_many} ({result.n_params} parameters)\n"
-                 f"dots: {a_seen.size} (α, η) seen by the data inside the node range; {n_out} outside it "
-                 f"(not drawn); grid lines: correction nodes", fontsize=9, y=1 - 0.08 / height)
+    fig.suptitle(title, fontsize=9, y=1 - 0.08 / height)
     if not len(modes):
         ax.text(0.5, -0.5, "no retained parameter", ha="center", va="center")
         ax.set_xticks([])

@@ -9,14 +9,17 @@ calibration, (measured − model)/σ, is drawn with the ±1 and ±2 bands.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from calib.report.panels import Margins, lean_ticks, paired_grid
+from calib.report.panels import Margins, lean_ticks, paired_grid, title_height, wrap_title
 from calib.result import CalibrationResult
 
 ROTOR_SPEED_VARIATION = 0.01   # relative spread [-] above which the rotor speed "varies"
 MAX_PITCH_LINES = 8            # join model points of equal pitch when there are at most this many pitches
+PANEL_SIZE = (3.6, 2.2)        # main panel of a channel [in]; its residual panel is 0.45 of its height
 
 
 def fit_abscissa(result: CalibrationResult) -> tuple[np.ndarray, str, str]:
@@ -81,10 +84,17 @@ def plot_fit(result: CalibrationResult):
     nc = len(result.channels)
     ncol = min(3, nc)
     nrow = int(np.ceil(nc / ncol))
-    fig, axes = paired_grid(nrow, ncol, (3.6, 2.2), 0.45, Margins(left=0.85, right=0.2, bottom=0.55, top=0.7,
-                                                                    wgap=0.85, hgap=0.75), n_panels=nc)
     pitch = np.asarray(result.conditions.get("pitch", np.zeros_like(x)), float)
     groups = _pitch_groups(x, pitch)
+    lines = " (lines join points of equal pitch)" if groups else ""
+    margins = Margins(left=0.85, right=0.2, bottom=0.55, top=0.7, wgap=0.85, hgap=0.75)
+    width = margins.left + ncol * PANEL_SIZE[0] + (ncol - 1) * margins.wgap + margins.right
+    title = wrap_title(f"{result.name}: measured vs model before and after calibration, against "
+                       f"{xlabel.split(' [')[0]} ({reason}){lines}; under each channel: whitened residual after "
+                       f"calibration, bands ±1 and ±2", width, 9)
+    fig, axes = paired_grid(nrow, ncol, PANEL_SIZE, 0.45, replace(margins, top=title_height(title, 9) + 0.3),
+                            n_panels=nc)
+    fig.suptitle(title, fontsize=9, y=1 - 0.06 / fig.get_size_inches()[1])
     okb, oka = result.status_before == 0, result.status_after == 0
     res_after = whitened_residual(result, "after")
     gof = result.goodness_of_fit()["per_channel"]
@@ -120,8 +130,4 @@ def plot_fit(result: CalibrationResult):
         rax.set_xlabel(xlabel, fontsize=8)
         rax.tick_params(labelsize=7)
         rax.grid(True, alpha=0.3)
-    lines = " (lines join points of equal pitch)" if groups else ""
-    fig.suptitle(f"{result.name}: measured vs model before and after calibration, against "
-                 f"{xlabel.split(' [')[0]} ({reason}){lines}\nunder each channel: whitened residual after "
-                 f"calibration, bands ±1 and ±2", fontsize=9, y=1 - 0.06 / fig.get_size_inches()[1])
     return fig

@@ -9,7 +9,8 @@ stay, so the grid is readable), and ticks are fixed where the caller puts them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import textwrap
+from dataclasses import dataclass, replace
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -149,3 +150,14 @@ def lean_log_ticks(ax, numticks: int = 8) -> None:
     """Decade ticks only on a logarithmic y axis (minor ticks over many decades cost more than the plot)."""
     ax.yaxis.set_major_locator(LogLocator(base=10.0, numticks=numticks))
     ax.yaxis.set_minor_locator(NullLocator())
+
+
+def wrap_title(text: str, width: float, fontsize: float) -> str:
+    """``text`` wrapped to a figure ``width`` [in] at ``fontsize`` [pt] (existing line breaks kept)."""
+    per_line = max(20, int(width * 72.0 / (0.55 * fontsize)))
+    return "\n".join(textwrap.fill(line, per_line) for line in text.split("\n"))
+
+
+def title_height(text: str, fontsize: float) -> float:
+    """Height of a (wrapped) title [in] with a small margin."""
+    return (text.count("\n") + 1) * fontsize * 1.3 / 72.0 + 0.15

@@ -9,11 +9,12 @@ For a synthetic run a known truth ΔC(α, η) can be overlaid.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
-from calib.report.panels import Margins, lean_ticks, panel_grid
+from calib.report.panels import Margins, lean_ticks, panel_grid, title_height, wrap_title
 from calib.result import CalibrationResult
 
 TruthField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -54,8 +55,14 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
         return None
     alpha, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
     idx = station_columns(eta, max_stations)
-    fig, axes = panel_grid(2, idx.size, (2.6, 2.1), Margins(left=0.75, right=0.2, bottom=0.55, top=0.75,
-                                                            wgap=0.55, hgap=0.55))
+    margins = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, wgap=0.55, hgap=0.55)
+    size = (2.6, 2.1)
+    what = "corrected polars" + ("" if "cl0" in pb else " (corrections only)")
+    width = margins.left + idx.size * size[0] + (idx.size - 1) * margins.wgap + margins.right
+    title = wrap_title(f"{result.name}: {what} on the α range of the correction nodes ({alpha[0]:g}…{alpha[-1]:g}°)"
+                       + ("; dashed: known truth" if truth is not None else ""), width, 9)
+    fig, axes = panel_grid(2, idx.size, size, replace(margins, top=title_height(title, 9) + 0.3))
+    fig.suptitle(title, fontsize=9, y=1 - 0.08 / fig.get_size_inches()[1])
     conf = float(pb.get("confidence", 0.95))
     truth_d = None
     if truth is not None:
@@ -95,8 +102,4 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
                 ax.set_xlabel("α [deg]", fontsize=8)
             if col == 0 and row == 0:
                 ax.legend(fontsize=6, loc="best")
-    what = "corrected polars" + ("" if "cl0" in pb else " (corrections only)")
-    fig.suptitle(f"{result.name}: {what} on the α range of the correction nodes "
-                 f"({alpha[0]:g}…{alpha[-1]:g}°)" + ("; dashed: known truth" if truth is not None else ""),
-                 fontsize=9, y=1 - 0.1 / fig.get_size_inches()[1])
     return fig

@@ -1,0 +1,207 @@
+"""What the report figures show: every retained eigenshape, α on the node range, residual
+panels, the fit's abscissa, parameter-labelled correlations, a known truth, progress."""
+
+import dataclasses
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.measurements import synthesize
+from calib.models.base import nominal_vector
+from calib.report import figures as F
+from calib.report.correlation_figure import display_order
+from calib.report.eigenshape_figures import seen_inside
+from calib.report.fit_figures import fit_abscissa, whitened_residual
+from calib.report.polar_figures import station_columns
+from twin_model import RADIUS, TwinModel, twin_conditions
+
+
+@pytest.fixture(scope="module")
+def result():
+    model = TwinModel(channels=("power", "thrust", "root_flap_moment"))
+    p_true = nominal_vector(model.parameters)
+    n = model.grid.n_lift
+    p_true[:n] = 0.05 * np.sin(np.arange(n))
+    meas = synthesize(model, p_true, twin_conditions(),
+                      relative_sigma={"power": 0.005, "thrust": 0.005, "root_flap_moment": 0.005}, seed=2)
+    return Calibrator(model, meas, CalibrationSettings(sigma_bar=0.3), name="twin").run()
+
+
+def _title(fig) -> str:
+    return " ".join(fig._suptitle.get_text().split())
+
+
+def _map_titles(fig) -> list[str]:
+    return [t.get_text() for ax in fig.axes for t in ax.texts if t.get_text().startswith("θ")]
+
+
+def test_every_retained_eigenshape_is_drawn_and_counted(result):
+    # more retained directions than the 12 the old figure drew
+    many = dataclasses.replace(result, retained=np.ones(result.n_params, bool))
+    assert many.n_retained > 12
+    for block in ("lift", "drag"):
+        fig = F.plot_eigenshapes(many, block)
+        titles = _map_titles(fig)
+        assert titles == [f"θ{i + 1}" + t.split(f"θ{i + 1}", 1)[1] for i, t in enumerate(titles)]
+        assert len(titles) == many.n_params
+        assert f"all {many.n_params} retained θ" in _title(fig)
+    fig = F.plot_eigenshapes(many, "lift", max_modes=5)
+    assert len(_map_titles(fig)) == 5 and f"the first 5 of {many.n_params} retained θ" in _title(fig)
+
+
+def test_eigenshape_maps_stay_on_the_node_range(result):
+    grid = result.layout.grid
+    # the data see α beyond the last node (up to 80 deg here): they are counted, not drawn
+    wide = dataclasses.replace(result, alpha_seen=np.concatenate([result.alpha_seen, [50.0, 65.0, 80.0]]),
+                               eta_seen=np.concatenate([result.eta_seen, [0.5, 0.6, 0.7]]))
+    a_in, e_in, n_out = seen_inside(wide)
+    assert n_out >= 3 and a_in.max() <= grid.alpha_nodes_deg[-1]
+    fig = F.plot_eigenshapes(wide, "lift")
+    assert f"{n_out} outside it" in _title(fig)
+    ax = fig.axes[0]
+    [dots] = [line for line in ax.lines if line.get_marker() == ","]
+    assert dots.get_xdata().size == a_in.size * wide.n_retained
+    # every drawn point lies inside its tile: [col (1 + gap), col (1 + gap) + 1] in tile units
+    x = dots.get_xdata()
+    gap = 0.22 / 1.9
+    tile = np.repeat(np.arange(wide.n_retained) % 6, a_in.size)
+    u = x - tile * (1 + gap)
+    assert u.min() >= -1e-9 and u.max() <= 1 + 1e-9
+    assert ax.get_xlim()[1] == pytest.approx(6 + 5 * gap)     # six tiles across, nothing beyond
+
+
+def test_polar_axes_cover_the_node_range_only(result):
+    wide = dataclasses.replace(result, alpha_seen=np.concatenate([result.alpha_seen, [80.0]]),
+                               eta_seen=np.concatenate([result.eta_seen, [0.6]]))
+    fig = F.plot_polars(wide)
+    a = wide.layout.grid.alpha_nodes_deg
+    panels = [ax for ax in fig.axes if ax.get_ylabel() in ("C_L [-]", "C_D [-]")]
+    assert len(panels) == 2 * min(5, wide.layout.grid.eta_nodes.size)
+    for ax in panels:
+        assert ax.get_xlim() == pytest.approx((a[0], a[-1]))
+    assert any("α seen" in ax.get_title() and "80°" in ax.get_title() for ax in panels)
+
+
+def test_each_fit_panel_has_a_residual_panel_under_it(result):
+    fig = F.plot_fit(result)
+    mains = [ax for ax in fig.axes if ax.get_ylabel().endswith("]") and "σ" not in ax.get_ylabel()]
+    lowers = [ax for ax in fig.axes if ax.get_ylabel() == "(meas − after)/σ"]
+    assert len(mains) == len(lowers) == len(result.channels)
+    r = whitened_residual(result)
+    for k, (main, low) in enumerate(zip(mains, lowers)):
+        assert low.get_position().y1 < main.get_position().y0                  # under it
+        assert low.get_shared_x_axes().joined(low, main)                       # same abscissa
+        drawn = [line.get_ydata() for line in low.lines if line.get_marker() == "o"]
+        np.testing.assert_allclose(drawn[0], r[:, k])
+        assert np.max(np.abs(r[:, k])) <= abs(low.get_ylim()[0])              # nothing clipped
+
+
+def test_fit_abscissa_follows_the_rotor_speed(result):
+    # twin conditions: rotor speed varies between points -> wind speed
+    x, label, reason = fit_abscissa(result)
+    assert np.ptp(result.conditions["rotor_speed"]) > 0
+    np.testing.assert_array_equal(x, result.conditions["wind_speed"])
+    assert label.startswith("wind speed") and "varies" in reason
+    assert F.plot_fit(result).axes[1].get_xlabel().startswith("wind speed")
+    # constant rotor speed and a known radius -> tip-speed ratio
+    cond = dict(result.conditions)
+    cond["rotor_speed"] = np.full_like(cond["wind_speed"], 20.0)
+    sweep = dataclasses.replace(result, conditions=cond, rotor_radius=RADIUS)
+    x, label, _ = fit_abscissa(sweep)
+    np.testing.assert_allclose(x, 20.0 * np.pi / 30 * RADIUS / cond["wind_speed"])
+    assert label.startswith("tip-speed ratio")
+    assert F.plot_fit(sweep).axes[1].get_xlabel().startswith("tip-speed ratio")
+    # constant rotor speed, radius unknown -> wind speed, and the reason says why
+    x, label, reason = fit_abscissa(dataclasses.replace(sweep, rotor_radius=None))
+    assert label.startswith("wind speed") and "radius unknown" in reason
+
+
+def test_correlation_axes_are_labelled_by_parameter(result):
+    order, groups = display_order(result)
+    assert sorted(order) == list(range(result.n_params))
+    assert groups[0].start == 0 and groups[-1].stop == result.n_params
+    assert all(a.stop == b.start for a, b in zip(groups, groups[1:]))
+    fig = F.plot_correlation(result)
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_yticklabels()]
+    grid = result.layout.grid
+    assert labels[:grid.alpha_nodes_deg.size] == [f"ΔC_L α={a:g}°" for a in grid.alpha_nodes_deg]
+    assert "ΔC_D α=-4°" in labels and "pitch_offset" in labels
+    assert not any(t.strip().isdigit() for t in labels)                        # no index numbers
+    assert [t.get_text() for t in ax.get_xticklabels()] == labels
+    # the matrix is drawn in the labelled order
+    drawn = ax.images[0].get_array()
+    expected = np.asarray(result.correlation)[np.ix_(order, order)]
+    np.testing.assert_array_equal(np.ma.filled(drawn, np.nan), np.where(np.isfinite(expected), expected, np.nan))
+    # each row sits in its group: the lift node at (alpha=8, eta=0.6) is inside the "alpha=8" group
+    idx = int(result.layout.lift_index[2, 1])
+    row = int(np.flatnonzero(order == idx)[0])
+    [g] = [g for g in groups if g.start <= row < g.stop]
+    assert g.label == "ΔC_L α=8°"
+
+
+def test_known_truth_is_overlaid_on_the_polars(result):
+    def truth(alpha_deg, eta):
+        return 0.1 * np.sin(np.radians(alpha_deg)) * eta, 0.002 + 0 * alpha_deg
+
+    fig = F.plot_polars(result, truth=truth)
+    pb = result.polar_bands
+    panels = [ax for ax in fig.axes if ax.get_ylabel() in ("C_L [-]", "C_D [-]")]
+    eta_cols = station_columns(np.asarray(pb["eta"]), 5)
+    n_col = eta_cols.size
+    for k, ax in enumerate(panels):
+        row, col = divmod(k, n_col)
+        j = eta_cols[col]
+        [line] = [line for line in ax.lines if line.get_label() == "truth"]
+        letter = ("cl", "cd")[row]
+        dtrue = truth(np.asarray(pb["alpha_deg"]), pb["eta"][j])[row]
+        np.testing.assert_allclose(line.get_ydata(), np.asarray(pb[f"{letter}0"])[j] + dtrue)
+    assert "truth" in _title(fig)
+    plain = F.plot_polars(result)
+    assert not [line for ax in plain.axes for line in ax.lines if line.get_label() == "truth"]
+
+
+def test_write_figures_reports_progress_and_writes_png_only_by_default(result, tmp_path):
+    messages, existing = [], []
+
+    def progress(text):
+        messages.append(text)
+        existing.append(sorted(p.name for p in tmp_path.glob("*.png")))
+
+    paths = F.write_figures(result, tmp_path, progress=progress)
+    assert existing[0] == []                                        # told before the first figure
+    for name in paths:
+        assert sum(f" {name} (" in m for m in messages) == 1       # one line per figure, with its time
+    assert len(messages) == len(paths) + 2
+    assert all(set(p) == {"png"} for p in paths.values())
+    assert not list(tmp_path.glob("*.svg"))
+    for p in paths.values():
+        with Image.open(p["png"]) as im:
+            im.load()
+
+
+def test_svg_on_request_parses(result, tmp_path):
+    paths = F.write_figures(result, tmp_path, formats=F.ALL_FORMATS)
+    for p in paths.values():
+        assert set(p) == {"png", "svg"}
+        assert ET.parse(p["svg"]).getroot().tag.endswith("svg")
+
+
+def test_write_figures_draws_the_truth_it_is_given(result, tmp_path, monkeypatch):
+    seen = []
+    original = F.plot_polars
+
+    def spy(res, truth=None, **kw):
+        seen.append(truth)
+        return original(res, truth=truth, **kw)
+
+    monkeypatch.setattr(F, "plot_polars", spy)
+
+    def truth(alpha_deg, eta):
+        return 0 * alpha_deg, 0 * alpha_deg
+
+    F.write_figures(result, tmp_path, truth=truth)
+    assert seen == [truth]
