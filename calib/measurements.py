@@ -136,14 +136,32 @@ def normalize_name(name: str) -> str:
     return n.strip("_")
 
 
+_PER_BLADE = re.compile(r"^(root_flap_moment|root_edge_moment)_blade[1-3]$")
+# azimuth harmonics of a channel over whole revolutions: amplitude `<channel>_1p` (the channel's
+# quantity) and phase `<channel>_1p_phase` (an angle), orders 1, 2, 3 (calib.models.fmu_model)
+_HARMONIC = re.compile(r"^(?P<base>.+)_(?P<order>[123])p(?P<phase>_phase)?$")
+
+
 def quantity_of(column: str) -> str | None:
-    """Physical quantity of a column name (``None`` if unknown)."""
+    """Physical quantity of a column name (``None`` if unknown).
+
+    Known: the conditions, the hub channels, per-blade root moments
+    ``root_flap_moment_blade1`` .. ``_blade3``, spanwise ``<q>@<r/R>``, azimuth harmonics
+    of any of these channels (``root_flap_moment_1p`` has the channel's quantity,
+    ``root_flap_moment_1p_phase`` is an angle), and ``<name>_sigma`` of each.
+    """
     base = column[:-6] if column.endswith("_sigma") else column
     if base in _FIXED_QUANTITY:
         return _FIXED_QUANTITY[base]
+    if _PER_BLADE.match(base):
+        return "moment"
     m = _SPANWISE.match(base)
     if m:
         return "coefficient" if m.group(1) in ("cn", "ct") else "force_per_length"
+    h = _HARMONIC.match(base)
+    if h and h.group("base") not in CONDITION_FIELDS and quantity_of(h.group("base")) is not None \
+            and not h.group("base").endswith("_sigma"):
+        return "angle" if h.group("phase") else quantity_of(h.group("base"))
     return None
 
 
@@ -286,7 +304,8 @@ class Measurements:
 # ----------------------------------------------------------------------------- reading
 def _known_names_text() -> str:
     return (", ".join(list(CONDITION_FIELDS) + [n for n in _FIXED_QUANTITY if n not in CONDITION_FIELDS])
-            + ", cn@<r/R>, ct@<r/R>, fn@<r/R>, ft@<r/R>, <channel>_sigma")
+            + ", root_flap_moment_blade<1-3>, root_edge_moment_blade<1-3>, cn@<r/R>, ct@<r/R>, fn@<r/R>, ft@<r/R>, "
+              "<channel>_1p / _2p / _3p (harmonic amplitude), <channel>_1p_phase ... [deg], <channel>_sigma")
 
 
 def _decode(raw: bytes, src: str) -> tuple[str, list[str]]:

@@ -11,8 +11,14 @@ def _bem(spec, base_dir):
     return BemModel.from_spec(spec, base_dir)
 
 
+def _fmu(spec, base_dir):
+    from calib.models.fmu_model import FmuModel
+
+    return FmuModel.from_spec(spec, base_dir)
+
+
 #: Model kind -> builder(spec, base_dir).
-MODEL_KINDS = {"bem": _bem}
+MODEL_KINDS = {"bem": _bem, "fmu": _fmu}
 
 
 def build_model(spec: dict, base_dir=None, source: str = "model spec"):

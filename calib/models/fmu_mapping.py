@@ -1,0 +1,489 @@
+"""Declarative mapping files: how the FMU adapter reaches a vendor's FMU in calib's terms.
+
+A mapping (TOML, schema ``calib.fmu.mapping/1``, documented in ``fmu_models/README.md``)
+names, per package quantity, the FMI variable that carries it and the conversion
+
+.. math::
+    y_{package} = s\\,(a\\,x_{FMU} + b) \\quad[\\bmod w], \\qquad
+    x_{FMU} = (s\\,y_{package} - b)/a
+
+with ``scale`` a, ``offset`` b, ``sign`` s = ±1 and ``wrap`` w. Loading validates the whole
+file against the schema: an unknown table or key, a missing required key or a value of the
+wrong type is refused with :class:`~calib.errors.InputError` naming the file and the key.
+Whether the named variables exist in an FMU, with the right causality and variability, is
+checked by :class:`calib.models.fmu_model.FmuModel` at load time (it has the FMU).
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calib.errors import InputError
+from calib.types import CONDITION_FIELDS, ParameterKind
+
+SCHEMA = "calib.fmu.mapping/1"
+
+#: Package units of the standard output names (other outputs declare ``channel_unit``).
+OUTPUT_UNITS = {
+    "power": "W", "thrust": "N", "torque": "N m", "azimuth": "deg", "rotor_speed": "rpm",
+    "root_flap_moment": "N m", "root_edge_moment": "N m", "aero_failures": "-",
+    **{f"root_{d}_moment_blade{n}": "N m" for d in ("flap", "edge") for n in (1, 2, 3)},
+}
+SPANWISE_OUTPUTS = {"normal_force": ("fn", "N/m"), "angle_of_attack": (None, "deg")}
+SWITCH_EFFECTS = ("tip_loss", "hub_loss", "tower_shadow", "shear", "yaw", "skewed_wake", "dynamic_inflow",
+                  "flexible_blades", "gravity", "stall_delay")
+
+_NUM = (int, float)
+_TOP_KEYS = {"schema", "variant", "fmi_version", "model_identifier", "fmu_file", "description", "inputs",
+             "outputs", "corrections", "parameters", "switches", "settings", "steady", "jacobian", "rotor"}
+_ENTRY_KEYS = {"variable": (str, True), "element": (int, False), "unit": (str, False), "scale": (_NUM, False),
+               "offset": (_NUM, False), "sign": (int, False), "wrap": (_NUM, False), "description": (str, False)}
+_OUTPUT_KEYS = {**_ENTRY_KEYS, "channel_unit": (str, False)}
+_SETTING_KEYS = {**_ENTRY_KEYS, "value": ((int, float, bool), False)}
+_PARAMETER_KEYS = {**{k: v for k, v in _ENTRY_KEYS.items() if k != "scale"}, "conversion_scale": (_NUM, False),
+                   "kind": (str, False), "nominal": (_NUM, False), "lower": (_NUM, False), "upper": (_NUM, False),
+                   "scale": (_NUM, True), "prior_std": (_NUM, False), "package_unit": (str, False)}
+_SPANWISE_KEYS = {"variables": (list, False), "variable": (str, False), "radius_variables": (list, False),
+                  "radius_variable": (str, False), "unit": (str, False), "scale": (_NUM, False),
+                  "offset": (_NUM, False), "description": (str, False)}
+_CORRECTION_KEYS = {"grid": (str, False), "alpha_nodes_deg": (list, False), "eta_nodes": (list, False),
+                    "layout": (str, True), "lift": (str, True), "drag": (str, True), "scale": (_NUM, False),
+                    "cl_scale": (_NUM, False), "cd_scale": (_NUM, False), "cl_bound": (_NUM, False),
+                    "cd_bound": (_NUM, False)}
+_SWITCH_KEYS = {"variable": (str, True), "on": ((int, float, bool), True), "off": ((int, float, bool), True),
+                "values": (dict, False), "description": (str, False)}
+_STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int, True),
+                "average_revolutions": (int, True), "standstill_step_size": (_NUM, False),
+                "convergence_rtol": (_NUM, False), "perturbation_settle_revolutions": (int, False),
+                "perturbation_average_revolutions": (int, False)}
+_JACOBIAN_KEYS = {"relative_step": (_NUM, False), "warm_start": (bool, False),
+                  "directional_derivatives": (str, False), "check_points": (int, False),
+                  "check_rtol": (_NUM, False)}
+_TYPE_NAMES = {str: "a string", int: "an integer", _NUM: "a number", list: "an array", dict: "a table",
+               bool: "true/false", (int, float, bool): "a number or true/false"}
+
+
+def _check(table, allowed: dict, where: str, source: str) -> None:
+    if not isinstance(table, dict):
+        raise InputError(f"'{where}' must be a table, got {table!r}", source, field=where)
+    for key, value in table.items():
+        if key not in allowed:
+            raise InputError(f"unknown key '{where}.{key}'; valid keys here: {', '.join(sorted(allowed))}",
+                             source, field=f"{where}.{key}")
+        types, _ = allowed[key]
+        ok = isinstance(value, types)
+        if ok and isinstance(value, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
+            ok = False
+        if not ok:
+            raise InputError(f"'{where}.{key}' must be {_TYPE_NAMES.get(types, types)}, got {value!r}", source,
+                             field=f"{where}.{key}")
+    for key, (_, required) in allowed.items():
+        if required and key not in table:
+            raise InputError(f"missing required key '{where}.{key}'", source, field=f"{where}.{key}")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One mapped FMI variable and its conversion to package units.
+
+    Attributes
+    ----------
+    name : str
+        Package name (``wind_speed``, ``power``, ``pitch_offset_blade1`` ...).
+    variable : str
+        FMI variable name.
+    element : int or None
+        0-based element of an FMI 3 array variable.
+    scale, offset : float
+        package = sign · (scale · fmu + offset).
+    sign : int
+        ±1.
+    wrap : float or None
+        Period of the package value (e.g. 360 for an azimuth).
+    unit : str
+        The FMU's unit (informative).
+    """
+
+    name: str
+    variable: str
+    element: int | None = None
+    scale: float = 1.0
+    offset: float = 0.0
+    sign: int = 1
+    wrap: float | None = None
+    unit: str = ""
+    description: str = ""
+
+    def to_package(self, x):
+        """FMU value(s) -> package value(s)."""
+        y = self.sign * (self.scale * np.asarray(x, float) + self.offset)
+        return np.mod(y, self.wrap) if self.wrap else y
+
+    def to_fmu(self, y):
+        """Package value(s) -> FMU value(s)."""
+        return (self.sign * np.asarray(y, float) - self.offset) / self.scale
+
+
+@dataclass(frozen=True)
+class OutputEntry(Entry):
+    """A mapped output; ``channel_unit`` is its unit in package terms."""
+
+    channel_unit: str = "-"
+
+
+@dataclass(frozen=True)
+class ParameterEntry(Entry):
+    """A mapped scalar parameter with what the calibrator needs (package units).
+
+    ``nominal``, ``lower``, ``upper`` may be NaN in the file; the adapter then takes the
+    FMU's start value, min and max (converted).
+    """
+
+    kind: str = "tuning"
+    nominal: float = float("nan")
+    lower: float = float("nan")
+    upper: float = float("nan")
+    typical: float = 1.0
+    prior_std: float = float("nan")
+    package_unit: str = ""
+
+
+@dataclass(frozen=True)
+class SettingEntry(Entry):
+    """A fixed parameter; ``value`` (package units) is written at instantiation when given."""
+
+    value: float | bool | None = None
+
+
+@dataclass(frozen=True)
+class SpanwiseOutput:
+    """Outputs along blade 1 at output stations (scalars or one FMI 3 array)."""
+
+    name: str
+    variables: tuple[str, ...] = ()
+    variable: str | None = None
+    radius_variables: tuple[str, ...] = ()
+    radius_variable: str | None = None
+    scale: float = 1.0
+    offset: float = 0.0
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class Switch:
+    """An effect toggle: FMI variable and the values meaning on / off (and named models)."""
+
+    effect: str
+    variable: str
+    on: float | bool
+    off: float | bool
+    values: dict = field(default_factory=dict)
+
+    def value(self, setting, source: str = "switches"):
+        """FMU value for ``True``/``False`` or a named model (``"snel"``)."""
+        if isinstance(setting, str):
+            if setting not in self.values:
+                raise InputError(f"switch '{self.effect}' has no model {setting!r}; valid: "
+                                 f"{', '.join(['on', 'off', *self.values])}", source, field=self.effect)
+            return self.values[setting]
+        return self.on if setting else self.off
+
+
+@dataclass(frozen=True)
+class Corrections:
+    """How the correction field reaches the FMU: node grid and variables per block."""
+
+    layout: str
+    lift: str
+    drag: str
+    scale: float
+    grid_file: str | None
+    alpha_nodes_deg: tuple | None
+    eta_nodes: tuple | None
+    grid_options: dict
+
+    def variable_names(self, n_alpha: int, n_eta: int) -> tuple[list[str], list[str]]:
+        """FMI names of the lift and drag node variables (scalar layout) or the two arrays."""
+        if self.layout == "array":
+            return [self.lift], [self.drag]
+        names = []
+        for template in (self.lift, self.drag):
+            names.append([template.format(i=i, j=j) for i in range(n_alpha) for j in range(n_eta)])
+        return names[0], names[1]
+
+
+@dataclass(frozen=True)
+class SteadyRule:
+    """Steady averages over whole revolutions (``fmu_models/README.md``, "[steady]")."""
+
+    steps_per_revolution: int
+    settle_revolutions: int
+    average_revolutions: int
+    standstill_step_size: float = 0.05
+    convergence_rtol: float = 2e-3
+    perturbation_settle_revolutions: int | None = None
+    perturbation_average_revolutions: int | None = None
+
+    def __post_init__(self):
+        # a perturbed run restored from the settled base state settles and averages like the base
+        # run unless the mapping says that less is enough for this FMU
+        if self.perturbation_settle_revolutions is None:
+            object.__setattr__(self, "perturbation_settle_revolutions", self.settle_revolutions)
+        if self.perturbation_average_revolutions is None:
+            object.__setattr__(self, "perturbation_average_revolutions", self.average_revolutions)
+
+    def perturbation_window(self, rotor_speed: float) -> tuple[float, int, int]:
+        """Step [s], settling and averaging step counts of a run restored from the base state."""
+        step, _, _ = self.window(rotor_speed)
+        n = self.steps_per_revolution
+        return step, self.perturbation_settle_revolutions * n, self.perturbation_average_revolutions * n
+
+    def window(self, rotor_speed: float) -> tuple[float, int, int]:
+        """Communication step [s], settling and averaging step counts at ``rotor_speed`` [rpm].
+
+        One revolution is exactly ``steps_per_revolution`` steps, so both windows are whole
+        revolutions; at standstill the same counts of ``standstill_step_size`` are used.
+        """
+        n = self.steps_per_revolution
+        step = 60.0 / (rotor_speed * n) if rotor_speed > 0 else float(self.standstill_step_size)
+        return step, self.settle_revolutions * n, self.average_revolutions * n
+
+    def replace(self, **changes) -> "SteadyRule":
+        """A copy with some fields changed (validated)."""
+        data = {k: getattr(self, k) for k in self.__dataclass_fields__} | changes
+        return _steady_rule(data, "steady settings", "steady")
+
+
+@dataclass(frozen=True)
+class JacobianRule:
+    """How the adapter differentiates: central differences and their warm start."""
+
+    relative_step: float = 1e-2
+    warm_start: bool = True
+    directional_derivatives: str = "auto"
+    check_points: int = 1
+    check_rtol: float = 0.05
+
+
+@dataclass(frozen=True)
+class Mapping:
+    """A validated mapping file (see the module docstring)."""
+
+    source: str
+    fmi_version: str | None
+    model_identifier: str | None
+    variant: str | None
+    inputs: dict[str, Entry]
+    outputs: dict[str, OutputEntry]
+    spanwise: dict[str, SpanwiseOutput]
+    corrections: Corrections | None
+    parameters: dict[str, ParameterEntry]
+    switches: dict[str, Switch]
+    settings: dict[str, SettingEntry]
+    steady: SteadyRule
+    jacobian: JacobianRule
+    rotor_radius: float | Entry | None
+    directory: str = ""
+    raw: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def azimuth(self) -> OutputEntry | None:
+        return self.outputs.get("azimuth")
+
+    def to_dict(self) -> dict:
+        """The file's content (JSON-able), e.g. to record it with a result."""
+        return json.loads(json.dumps(self.raw))
+
+
+def _entry(cls, name: str, e: dict, where: str, source: str, allowed: dict, **extra):
+    _check(e, allowed, where, source)
+    sign = int(e.get("sign", 1))
+    if sign not in (1, -1):
+        raise InputError(f"'{where}.sign' must be 1 or -1, got {sign}", source, field=f"{where}.sign")
+    scale = float(e.get("conversion_scale" if cls is ParameterEntry else "scale", 1.0))
+    if not np.isfinite(scale) or scale == 0.0:
+        raise InputError(f"'{where}' conversion scale must be finite and non-zero, got {scale!r}", source,
+                         field=where)
+    if "element" in e and e["element"] < 0:
+        raise InputError(f"'{where}.element' must be >= 0, got {e['element']}", source, field=f"{where}.element")
+    wrap = e.get("wrap")
+    if wrap is not None and not wrap > 0:
+        raise InputError(f"'{where}.wrap' must be > 0, got {wrap!r}", source, field=f"{where}.wrap")
+    return cls(name=name, variable=e["variable"], element=e.get("element"), scale=scale,
+               offset=float(e.get("offset", 0.0)), sign=sign, wrap=float(wrap) if wrap else None,
+               unit=e.get("unit", ""), description=e.get("description", ""), **extra)
+
+
+def _steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
+    _check(s, _STEADY_KEYS, where, source)
+    rule = SteadyRule(**{k: v for k, v in s.items()})
+    positive = {"steps_per_revolution": 1, "average_revolutions": 1, "perturbation_average_revolutions": 1}
+    for key in _STEADY_KEYS:
+        value = getattr(rule, key)
+        low = positive.get(key, 0)
+        if not (np.isfinite(value) and value >= low):
+            raise InputError(f"'{where}.{key}' must be >= {low}, got {value!r}", source, field=f"{where}.{key}")
+    if not rule.standstill_step_size > 0 or not rule.convergence_rtol > 0:
+        raise InputError(f"'{where}.standstill_step_size' and '{where}.convergence_rtol' must be > 0", source,
+                         field=where)
+    if rule.average_revolutions % 2:
+        raise InputError(f"'{where}.average_revolutions' must be even (the convergence check compares two halves "
+                         f"of whole revolutions), got {rule.average_revolutions}", source,
+                         field=f"{where}.average_revolutions")
+    if rule.steps_per_revolution < 8:
+        raise InputError(f"'{where}.steps_per_revolution' must be >= 8 (3P harmonics need more than 6 samples "
+                         f"per revolution), got {rule.steps_per_revolution}", source,
+                         field=f"{where}.steps_per_revolution")
+    return rule
+
+
+def load_mapping(path) -> Mapping:
+    """Read and validate a mapping file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The mapping TOML file.
+
+    Returns
+    -------
+    Mapping
+
+    Raises
+    ------
+    InputError
+        File missing or not TOML (line and column named), wrong ``schema``, unknown table or
+        key, missing required key, wrong type, invalid value (each naming file and key).
+    """
+    path = Path(path)
+    src = str(path)
+    if not path.is_file():
+        raise InputError("mapping file not found", src)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", src) from None
+    except UnicodeDecodeError:
+        raise InputError("not a UTF-8 text file", src) from None
+    for key in data:
+        if key not in _TOP_KEYS:
+            raise InputError(f"unknown key '{key}'; valid keys here: {', '.join(sorted(_TOP_KEYS))}", src,
+                             field=key)
+    if data.get("schema") != SCHEMA:
+        raise InputError(f"'schema' must be \"{SCHEMA}\", got {data.get('schema')!r}", src, field="schema")
+    for key in ("variant", "fmi_version", "model_identifier", "fmu_file", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise InputError(f"'{key}' must be a string, got {data[key]!r}", src, field=key)
+    if data.get("fmi_version") not in (None, "2.0", "3.0"):
+        raise InputError(f"'fmi_version' must be \"2.0\" or \"3.0\", got {data['fmi_version']!r}", src,
+                         field="fmi_version")
+    for table in ("inputs", "outputs", "steady"):
+        if table not in data:
+            raise InputError(f"missing required table [{table}]", src, field=table)
+
+    inputs = {}
+    _check(data["inputs"], {f: (dict, False) for f in CONDITION_FIELDS}, "inputs", src)
+    for name, e in data["inputs"].items():
+        inputs[name] = _entry(Entry, name, e, f"inputs.{name}", src, _ENTRY_KEYS)
+    for req in ("wind_speed", "rotor_speed"):
+        if req not in inputs:
+            raise InputError(f"missing required key 'inputs.{req}' (the steady window needs the rotor speed, "
+                             "every operating point a wind speed)", src, field=f"inputs.{req}")
+
+    outputs, spanwise = {}, {}
+    for name, e in data["outputs"].items():
+        where = f"outputs.{name}"
+        if name in SPANWISE_OUTPUTS:
+            _check(e, _SPANWISE_KEYS, where, src)
+            if ("variables" in e) == ("variable" in e):
+                raise InputError(f"'{where}' needs either 'variables' (scalars) or 'variable' (an array)", src,
+                                 field=where)
+            if "variables" in e and not all(isinstance(v, str) for v in e["variables"]):
+                raise InputError(f"'{where}.variables' must be an array of names", src, field=f"{where}.variables")
+            spanwise[name] = SpanwiseOutput(name, tuple(e.get("variables", ())), e.get("variable"),
+                                            tuple(e.get("radius_variables", ())), e.get("radius_variable"),
+                                            float(e.get("scale", 1.0)), float(e.get("offset", 0.0)),
+                                            e.get("unit", ""))
+            continue
+        if not isinstance(e, dict) or "variable" not in e:
+            _check(e, _OUTPUT_KEYS, where, src)
+        unit = e.get("channel_unit", OUTPUT_UNITS.get(name, "-"))
+        outputs[name] = _entry(OutputEntry, name, e, where, src, _OUTPUT_KEYS, channel_unit=unit)
+
+    corrections = None
+    if "corrections" in data:
+        c = data["corrections"]
+        _check(c, _CORRECTION_KEYS, "corrections", src)
+        if c["layout"] not in ("scalar", "array"):
+            raise InputError(f"'corrections.layout' must be \"scalar\" or \"array\", got {c['layout']!r}", src,
+                             field="corrections.layout")
+        if ("grid" in c) == ("alpha_nodes_deg" in c or "eta_nodes" in c):
+            raise InputError("'corrections' needs either 'grid' (a JSON file inside the FMU) or 'alpha_nodes_deg' "
+                             "and 'eta_nodes'", src, field="corrections.grid")
+        if c["layout"] == "scalar":
+            for block in ("lift", "drag"):
+                if "{i}" not in c[block] or "{j}" not in c[block]:
+                    raise InputError(f"'corrections.{block}' must be a name template with {{i}} (alpha node) and "
+                                     f"{{j}} (eta node) for layout \"scalar\", got {c[block]!r}", src,
+                                     field=f"corrections.{block}")
+        options = {k: float(c[k]) for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in c}
+        corrections = Corrections(c["layout"], c["lift"], c["drag"], float(c.get("scale", 1.0)), c.get("grid"),
+                                  tuple(c["alpha_nodes_deg"]) if "alpha_nodes_deg" in c else None,
+                                  tuple(c["eta_nodes"]) if "eta_nodes" in c else None, options)
+
+    parameters = {}
+    for name, e in data.get("parameters", {}).items():
+        where = f"parameters.{name}"
+        _check(e, _PARAMETER_KEYS, where, src)
+        kind = e.get("kind", "tuning")
+        valid = [k.value for k in ParameterKind if k.value not in ("lift_correction", "drag_correction")]
+        if kind not in valid:
+            raise InputError(f"'{where}.kind' must be one of {', '.join(valid)}, got {kind!r}", src,
+                             field=f"{where}.kind")
+        if not e["scale"] > 0:
+            raise InputError(f"'{where}.scale' (typical magnitude of a change, package units) must be > 0", src,
+                             field=f"{where}.scale")
+        parameters[name] = _entry(ParameterEntry, name, e, where, src, _PARAMETER_KEYS, kind=kind,
+                                  nominal=float(e.get("nominal", np.nan)), lower=float(e.get("lower", np.nan)),
+                                  upper=float(e.get("upper", np.nan)), typical=float(e["scale"]),
+                                  prior_std=float(e.get("prior_std", np.nan)),
+                                  package_unit=e.get("package_unit", e.get("unit", "-")))
+
+    switches = {}
+    for name, e in data.get("switches", {}).items():
+        where = f"switches.{name}"
+        _check(e, _SWITCH_KEYS, where, src)
+        switches[name] = Switch(name, e["variable"], e["on"], e["off"], dict(e.get("values", {})))
+
+    settings = {}
+    for name, e in data.get("settings", {}).items():
+        settings[name] = _entry(SettingEntry, name, e, f"settings.{name}", src, _SETTING_KEYS, value=e.get("value"))
+
+    steady = _steady_rule(data["steady"], src)
+    jac = data.get("jacobian", {})
+    _check(jac, _JACOBIAN_KEYS, "jacobian", src)
+    jacobian = JacobianRule(**jac)
+    if not 0 < jacobian.relative_step <= 0.5:
+        raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
+                         field="jacobian.relative_step")
+    if jacobian.directional_derivatives not in ("auto", "off"):
+        raise InputError("'jacobian.directional_derivatives' must be \"auto\" or \"off\", got "
+                         f"{jacobian.directional_derivatives!r}", src, field="jacobian.directional_derivatives")
+
+    radius = None
+    if "rotor" in data:
+        _check(data["rotor"], {"radius": ((int, float, dict), True)}, "rotor", src)
+        r = data["rotor"]["radius"]
+        radius = (float(r) if not isinstance(r, dict) else
+                  _entry(Entry, "rotor_radius", r, "rotor.radius", src, _ENTRY_KEYS))
+        if isinstance(radius, float) and not radius > 0:
+            raise InputError(f"'rotor.radius' must be > 0 m, got {radius!r}", src, field="rotor.radius")
+
+    return Mapping(src, data.get("fmi_version"), data.get("model_identifier"), data.get("variant"), inputs,
+                   outputs, spanwise, corrections, parameters, switches, settings, steady, jacobian, radius,
+                   str(path.parent), data)
