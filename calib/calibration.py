@@ -6,8 +6,8 @@ Procedure (Bottasso, Cacciola & Iriarte 2014; DESIGN §5)
    estimated by iterated ML (R = (1/N) Σ r_k r_kᵀ, diagonal, alternating with step 2-4).
 2. Linearize at the current estimate: whitened scaled sensitivities M = R^(−½) G D,
    SVD M = U S Vᵀ, retain θ_i = v_iᵀ p̃ with σ(θ_i) = 1/s_i <= σ̄, or (``sigma_bar =
-   "auto"``, the default) the number of θ that minimizes the leave-one-operating-point-out
-   prediction error of the linearized problem (:mod:`calib.truncation`).
+   "auto"``, the default) the number of θ that minimizes the 10-fold cross-validated
+   prediction error over operating points of the linearized problem (:mod:`calib.truncation`).
 3. Estimate the retained θ under bounds (corrections and C_D >= C_D,min at the nodes) by
    constrained Gauss–Newton (:func:`calib.estimation.estimate`); the others stay at 0.
 4. Re-linearize at the estimate and redo the SVD; stop when the retained set is stable
@@ -38,12 +38,12 @@ from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.models.base import FieldModel, RebuildableModel
 from calib.result import CalibrationResult
-from calib.truncation import loo_curve
+from calib.truncation import cv_curve
 from calib.types import ParameterKind, nominal_vector
 
 NOISE_MODES = ("known", "ml", "repeats")
-AUTO_CHOICES = 3
-"""Linearizations at which ``sigma_bar = "auto"`` chooses the retained count; later ones keep it."""
+AUTO_CHOICES = 4
+"""Most linearizations at which ``sigma_bar = "auto"`` chooses the retained count (see ``_svd``)."""
 RETAIN_MODES = ("threshold", "all")
 
 
@@ -54,10 +54,12 @@ class CalibrationSettings:
     Parameters
     ----------
     sigma_bar : float or "auto"
-        ``"auto"`` (default): retain the number of θ that minimizes the leave-one-point-out
-        prediction error (:func:`calib.truncation.loo_curve`). A number: retain θ_i with
+        ``"auto"`` (default): retain the number of θ that minimizes the K-fold cross-validated
+        prediction error over operating points (:func:`calib.truncation.cv_curve`). A number: retain θ_i with
         σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
         (see :func:`calib.identifiability.sigma_bar_for`).
+    cv_folds : int
+        K of the K-fold cross-validation over operating points that ``sigma_bar = "auto"`` uses.
     prior_sigma : float
         Prior 1-σ of every parameter without its own ``prior_std``, in units of its scale [-]
         (default 1: a correction node is believed to be within about ±1 scale of nominal,
@@ -97,6 +99,7 @@ class CalibrationSettings:
 
     sigma_bar: float | str = "auto"
     prior_sigma: float = 1.0
+    cv_folds: int = 10
     retain: str = "threshold"
     max_retained: int | None = None
     optimizer: str = "sqpmethod"
@@ -134,7 +137,7 @@ class CalibrationSettings:
         for key in ("band_confidence", "stability_cosine", "identified_ratio", "confounded_share"):
             if not 0 < getattr(self, key) <= 1:
                 bad(f"must be in (0, 1], got {getattr(self, key)!r}", key)
-        for key in ("max_relinearizations", "max_iterations", "max_noise_iterations"):
+        for key in ("max_relinearizations", "max_iterations", "max_noise_iterations", "cv_folds"):
             if not getattr(self, key) >= 1:
                 bad(f"must be >= 1, got {getattr(self, key)!r}", key)
         if self.max_retained is not None and self.max_retained < 0:
@@ -196,7 +199,8 @@ class Calibrator:
                                    for q in self.parameters], float)
         self.history: list[dict] = []
         self._curve = None
-        self._n_auto = 0
+        self._auto_choices: list[tuple[float, int]] = []
+        self._auto_frozen: int | None = None
 
     # ------------------------------------------------------------------ setup
     def _effective_bounds(self):
@@ -287,16 +291,20 @@ class Calibrator:
             return svd_analysis(lin.M, float(st.sigma_bar), st.max_retained)
         n_ch = len(self.channel_index)
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
-        curve = loo_curve(lin.M, pseudo, n_ch, lin.ok, st.max_retained)
-        # the count is chosen afresh at the first AUTO_CHOICES linearizations, then kept, so
-        # that the re-linearization loop converges on a subspace instead of chasing a count
-        # that flips by one between nearly equal criterion values
-        self._n_auto += 1
-        if self._n_auto <= AUTO_CHOICES or self._curve is None:
-            self._curve = curve
+        curve = cv_curve(lin.M, pseudo, n_ch, lin.ok, st.cv_folds, st.max_retained)
+        # the count is chosen afresh at each linearization until two consecutive choices agree
+        # or AUTO_CHOICES were made; then the choice with the smallest criterion (each on its own
+        # linearization's curve) is kept, so that the re-linearization loop converges on a
+        # subspace instead of chasing a count that moves with the linearization point
+        if self._auto_frozen is None:
+            self._auto_choices.append((float(curve.cv[curve.chosen]), curve.chosen))
+            agree = len(self._auto_choices) >= 2 and self._auto_choices[-1][1] == self._auto_choices[-2][1]
+            if agree or len(self._auto_choices) >= AUTO_CHOICES:
+                self._auto_frozen = min(self._auto_choices)[1]
+                curve = replace(curve, chosen=min(self._auto_frozen, int(curve.n_retained[-1])))
         else:
-            curve = replace(curve, chosen=min(self._curve.chosen, curve.n_retained[-1]))
-            self._curve = curve
+            curve = replace(curve, chosen=min(self._auto_frozen, int(curve.n_retained[-1])))
+        self._curve = curve
         svd = svd_analysis(lin.M, np.inf)
         retained = np.zeros_like(svd.retained)
         retained[:curve.chosen] = svd.retained[:curve.chosen]

@@ -307,7 +307,8 @@ class CalibrationResult:
     def summary(self) -> str:
         """A few plain lines with the key numbers."""
         counts = self.verdict_counts()
-        how = "chosen by leave-one-point-out cross-validation" if self.truncation else "set"
+        how = (f"chosen by {self.truncation.get('criterion', 'K-fold')} cross-validation over operating points"
+               if self.truncation else "set")
         lines = [f"{self.name}: {self.status} ({self.message})",
                  f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {self.sigma_bar:.3g}, {how})",
                  f"  chi2/dof before {self.chi2_per_dof_before:.3g} (dof {self.dof_before}), after "
@@ -329,7 +330,7 @@ class CalibrationResult:
         scalars["schema_version"] = SCHEMA_VERSION
         scalars["summary"] = {"n_params": self.n_params, "n_retained": self.n_retained, "dof": self.dof,
                               "goodness_of_fit": self.goodness_of_fit(),
-                              "truncation": {"criterion": "leave-one-point-out cross-validation",
+                              "truncation": {"criterion": f"{self.truncation.get('criterion')} cross-validation",
                                              "chosen": self.truncation.get("chosen"),
                                              "sigma_bar": self.sigma_bar} if self.truncation else
                               {"criterion": "threshold", "sigma_bar": self.sigma_bar},

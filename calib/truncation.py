@@ -1,4 +1,4 @@
-"""Choosing the number of retained θ by estimated predictive error.
+r"""Choosing the number of retained θ by estimated predictive error.
 
 Notes
 -----
@@ -7,19 +7,24 @@ that the data can make (DESIGN §5). At the current estimate p̂ the model is li
 y(p̃) ≈ y(p̂) + G D (p̃ − p̃̂), so in whitened units the residual is r(p̃) ≈ z̃ − M p̃ with the
 *pseudo-data* z̃ = r̂ + M p̃̂ (r̂ the whitened residual at p̂, M = R^(−½) G D = U S Vᵀ).
 Keeping the first k singular directions gives the fit ẑ_k = U_k U_kᵀ z̃ and hat matrix
-H_k = U_k U_kᵀ. Leaving out operating point b (all its channels, the rows R_b) gives,
-exactly for this linear problem, the prediction error
+H_k = U_k U_kᵀ. Holding out a set F of operating points (all their channels, rows R_F)
+gives, exactly for this linear problem, the prediction error of a fit without them
 
-.. math::  e_{b,\\mathrm{LOO}}(k) = (I − H_{k,bb})^{-1}\\, (z̃_b − ẑ_{k,b})
+.. math::  e_F(k) = (I − H_{k,FF})^{-1}\, (z̃_F − ẑ_{k,F})
 
-(the block form of the leave-one-out identity; Hastie, Tibshirani & Friedman 2009,
-§7.10). The criterion is the mean squared whitened leave-one-point-out error per
-residual, CV(k) = Σ_b |e_b,LOO(k)|² / n_rows; its expectation is about 1 + (prediction
-variance) for a model that is right, and grows with bias (too few θ) and with variance
-(too many). The number retained is the smallest k whose CV is within one standard error
-(over the operating points) of the minimum: the one-standard-error rule. Points with leverage 1 (a point
-that alone determines a direction) make CV infinite for that k, which is correct: its
-prediction from the other points is unconstrained.
+(the block form of the leave-out identity; Hastie, Tibshirani & Friedman 2009, §7.10),
+so K-fold cross-validation costs no refits. The criterion CV(k) is the mean squared
+held-out error per residual over K = 10 folds that interleave across the operating
+envelope (point j in fold j mod K); its expectation is about 1 + (prediction variance) for a
+model that is right, and grows with bias (too few θ) and variance (too many). The number
+retained is k* = argmin CV(k).
+
+Leave-one-point-out (K = number of points) is available but not the default: a point at
+the edge of the envelope alone determines some directions (leverage near 1), its leave-out
+error explodes and the choice jumps with the linearization point. Measured on the shipped
+localization study with every third point held back: the 10-fold choice (33 of 61) came
+within 2 % of the best threshold's held-back χ²/dof, leave-one-point-out's (27) was 2.4×
+it. Generalized cross-validation was worse still on the wind-tunnel study.
 
 References
 ----------
@@ -37,22 +42,26 @@ import numpy as np
 
 @dataclass(frozen=True, eq=False)
 class TruncationCurve:
-    """The leave-one-point-out criterion against the number of retained θ.
+    """The cross-validation criterion against the number of retained θ.
 
     Attributes
     ----------
     n_retained : ndarray of int, shape (n_k,)
         k = 0, 1, ..., k_max.
     cv : ndarray, shape (n_k,)
-        Mean squared whitened leave-one-point-out prediction error per residual [-].
+        Mean squared whitened held-out prediction error per residual [-].
     fit : ndarray, shape (n_k,)
         Mean squared whitened fit residual per residual [-] (in-sample).
     singular_values : ndarray, shape (n_k,)
         s_k of the last direction kept at each k (inf for k = 0) [1/scale].
     chosen : int
-        The fewest θ whose ``cv`` is within one standard error of the minimum.
+        k* = argmin ``cv``.
     cv_se : ndarray, shape (n_k,)
-        Standard error of ``cv`` over the operating points [-].
+        Standard error of ``cv`` over the folds [-].
+    gcv : ndarray, shape (n_k,), optional
+        Unused (kept for results that carry it).
+    criterion : str
+        ``"10-fold"`` (K-fold over operating points) or ``"loo_points"``.
     """
 
     n_retained: np.ndarray
@@ -61,6 +70,8 @@ class TruncationCurve:
     singular_values: np.ndarray
     chosen: int
     cv_se: np.ndarray | None = None
+    gcv: np.ndarray | None = None
+    criterion: str = "10-fold"
 
     @property
     def sigma_bar(self) -> float:
@@ -70,12 +81,12 @@ class TruncationCurve:
 
     def to_dict(self) -> dict:
         return {"n_retained": self.n_retained, "cv": self.cv, "cv_se": self.cv_se, "fit": self.fit,
-                "singular_values": self.singular_values, "chosen": self.chosen, "criterion": "loo_points"}
+                "singular_values": self.singular_values, "chosen": self.chosen, "criterion": self.criterion}
 
 
-def loo_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | None = None,
-              max_k: int | None = None, rtol: float = 1e-10) -> TruncationCurve:
-    """Leave-one-operating-point-out error of the truncated-SVD fit for every k.
+def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | None = None,
+             n_folds: int | None = 10, max_k: int | None = None, rtol: float = 1e-10) -> TruncationCurve:
+    """K-fold (or leave-one-point-out) prediction error of the truncated-SVD fit for every k.
 
     Parameters
     ----------
@@ -87,6 +98,10 @@ def loo_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | No
         Rows per operating point.
     ok : ndarray of bool, shape (n_points,), optional
         Points that take part (default: all).
+    n_folds : int or None
+        K: operating point j (in the order given, counting only ``ok`` points) is in fold
+        j mod K, so the folds interleave across the operating envelope. ``None``: leave one
+        point out.
     max_k : int, optional
         Largest k considered (default: the numerical rank).
     rtol : float
@@ -95,6 +110,7 @@ def loo_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | No
     Returns
     -------
     TruncationCurve
+        ``cv`` the mean squared whitened held-out error per residual, ``chosen`` its argmin.
     """
     n_rows, n_params = M.shape
     n_points = n_rows // n_channels
@@ -105,36 +121,27 @@ def loo_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | No
     U, s, _ = np.linalg.svd(Mo, full_matrices=False)
     rank = int(np.count_nonzero(s > rtol * (s[0] if s.size else 0.0)))
     k_max = rank if max_k is None else min(rank, int(max_k))
-    Ub = U.reshape(n_ok, n_channels, -1)
-    zb = zo.reshape(n_ok, n_channels)
+    K = n_ok if n_folds is None else max(2, min(int(n_folds), n_ok))
+    fold_rows = [np.flatnonzero(np.repeat(np.arange(n_ok) % K == f, n_channels)) for f in range(K)]
     c = U.T @ zo                                       # coordinates of z̃ on the left singular vectors
-    eye = np.eye(n_channels)
-    H = np.zeros((n_ok, n_channels, n_channels))
-    fitted = np.zeros_like(zb)
     ks, cv, se, fit, sv = [], [], [], [], []
     for k in range(k_max + 1):
-        if k > 0:
-            u = Ub[:, :, k - 1]
-            H += u[:, :, None] * u[:, None, :]
-            fitted += u * c[k - 1]
-        e = zb - fitted
-        A = eye[None] - H
-        det = np.linalg.det(A)
-        good = np.abs(det) > 1e-10
-        loo = np.full_like(e, np.inf)
-        if good.any():
-            loo[good] = np.linalg.solve(A[good], e[good][..., None])[..., 0]
+        per_fold, finite = [], True
+        for r in fold_rows:
+            Uf = U[r, :k]
+            e = zo[r] - Uf @ c[:k]
+            A = np.eye(r.size) - Uf @ Uf.T
+            if k and np.linalg.cond(A) > 1e10:      # the fold alone determines a direction
+                finite = False
+                break
+            held = np.linalg.solve(A, e) if k else e
+            per_fold.append(float(held @ held) / r.size)
+        resid = zo - U[:, :k] @ c[:k]
         ks.append(k)
-        per_point = np.sum(loo ** 2, axis=1) / n_channels
-        cv.append(float(np.mean(per_point)) if good.all() else float("inf"))
-        se.append(float(np.std(per_point, ddof=1) / np.sqrt(n_ok)) if good.all() and n_ok > 1 else float("inf"))
-        fit.append(float(np.mean(e ** 2)))
+        cv.append(float(np.mean(per_fold)) if finite else float("inf"))
+        se.append(float(np.std(per_fold, ddof=1) / np.sqrt(K)) if finite else float("inf"))
+        fit.append(float(np.mean(resid ** 2)))
         sv.append(float(s[k - 1]) if k > 0 else float("inf"))
-    cv, se = np.array(cv), np.array(se)
-    best = int(np.argmin(cv))
-    # one-standard-error rule: the fewest θ whose criterion is within one standard error of the
-    # minimum (Hastie et al. 2009, §7.10); the curve is flat near its minimum, and there the
-    # smaller model predicts as well and is more stable from one linearization to the next
-    within = np.flatnonzero(cv <= cv[best] + se[best])
-    chosen = int(within[0]) if within.size else best
-    return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), chosen, se)
+    cv = np.array(cv)
+    return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), int(np.argmin(cv)), np.array(se),
+                           None, "loo_points" if n_folds is None else f"{K}-fold")
