@@ -256,6 +256,15 @@ class FmuModel:
         Called as operating points finish.
     """
 
+    def __new__(cls, fmu=None, mapping=None, *args, **kwargs):
+        # a mapping with correction nodes (and corrections calibrated) makes a FieldModel
+        corrections = kwargs.get("corrections", args[2] if len(args) > 2 else True)
+        if cls is FmuModel and corrections and mapping is not None:
+            m = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
+            if m.corrections is not None:
+                cls = FmuFieldModel
+        return super().__new__(cls)
+
     def __init__(self, fmu, mapping, channels: Sequence[str] | None = None,
                  parameters: Sequence[str] | None = None, corrections: bool = True,
                  switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
@@ -888,17 +897,6 @@ class FmuModel:
         return ev, G
 
     # ------------------------------------------------------------------ optional protocols
-    def correction_field(self) -> CorrectionField:
-        """The correction field of ``[corrections]`` (FieldModel protocol).
-
-        Nominal C_L, C_D are not known outside the FMU, so the C_D ≥ C_D,min bound and
-        the corrected polars are not available; the ΔC bands and eigenshapes are.
-        """
-        if self.grid is None:
-            raise InputError("this model has no correction field (mapping without [corrections], or corrections="
-                             "False)", self.mapping.source, field="corrections")
-        return CorrectionField(self._parameters, None, seen_from_extras)
-
     @property
     def rotor_radius(self) -> float | None:
         """Rotor radius [m] from the mapping's ``[rotor]`` (None without it)."""
@@ -991,5 +989,22 @@ class FmuModel:
         fw.close_workers(self._plan.key)
 
     def __repr__(self) -> str:
-        return (f"FmuModel({self.fmu_path.name!r}, mapping={Path(self.mapping.source).name!r}, "
+        return (f"{type(self).__name__}({self.fmu_path.name!r}, mapping={Path(self.mapping.source).name!r}, "
                 f"{len(self._parameters)} parameters, channels={[c.name for c in self._channels]})")
+
+
+class FmuFieldModel(FmuModel):
+    """An :class:`FmuModel` whose mapping maps correction nodes: also a FieldModel.
+
+    ``FmuModel(...)`` returns one when the mapping has ``[corrections]`` and
+    ``corrections=True``; a model without a correction field has no ``correction_field``
+    at all, so the calibrator treats it as a generic model.
+    """
+
+    def correction_field(self) -> CorrectionField:
+        """The correction field of ``[corrections]`` (FieldModel protocol).
+
+        Nominal C_L, C_D are not known outside the FMU, so the C_D ≥ C_D,min bound and
+        the corrected polars are not available; the ΔC bands and eigenshapes are.
+        """
+        return CorrectionField(self._parameters, None, seen_from_extras)

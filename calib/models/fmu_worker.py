@@ -655,8 +655,16 @@ def _signal_name(returncode: int | None) -> str:
     return f"exit status {returncode}"
 
 
-# the child imports this module by name (not as __main__), so pickled classes resolve alike
-_CHILD_COMMAND = "import sys; from calib.models.fmu_worker import child_main; sys.exit(child_main())"
+# The child imports this module by its name (not as __main__), so pickled classes resolve alike;
+# the package calib.models is registered without running its __init__ (which imports the
+# calibration stack, scipy.stats included: 2 s per worker start for nothing the child uses).
+_CHILD_COMMAND = (
+    "import sys, types, calib, os\n"
+    "pkg = types.ModuleType('calib.models')\n"
+    "pkg.__path__ = [os.path.join(os.path.dirname(calib.__file__), 'models')]\n"
+    "sys.modules['calib.models'] = pkg\n"
+    "from calib.models.fmu_worker import child_main\n"
+    "sys.exit(child_main())\n")
 
 
 class WorkerProcess:
