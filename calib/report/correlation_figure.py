@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.report.panels import Margins, colorbar_axes, panel_grid
+from calib.report.panels import Margins, colorbar_axes, panel_grid, settle_labels
 from calib.result import CalibrationResult
 
 BLOCK_LABEL = {"lift": "ΔC_L", "drag": "ΔC_D"}
@@ -107,4 +107,5 @@ def plot_correlation(result: CalibrationResult):
         etas = ", ".join(f"{e:g}" for e in lay.grid.eta_nodes)
         title += f"\ncorrection nodes grouped by α node; inside each group η = {etas}"
     ax.set_title(title, fontsize=8, y=1.0)
+    settle_labels(fig)
     return fig

@@ -22,7 +22,7 @@ from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from calib.report.panels import DPI, Margins, title_height, wrap_title
+from calib.report.panels import DPI, Margins, settle_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
 MAX_COLUMNS = 6
@@ -181,4 +181,5 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     fig.colorbar(im, cax=cax)
     cax.tick_params(labelsize=6)
     cax.set_ylabel(f"ψ ({block}) [scale units per unit θ]", fontsize=7)
+    settle_labels(fig, ticklabel_size=6)
     return fig

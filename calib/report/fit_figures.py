@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from calib.report.panels import Margins, lean_ticks, paired_grid, title_height, wrap_title
+from calib.report.panels import Margins, lean_ticks, paired_grid, settle_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
 ROTOR_SPEED_VARIATION = 0.01   # relative spread [-] above which the rotor speed "varies"
@@ -130,4 +130,5 @@ def plot_fit(result: CalibrationResult):
         rax.set_xlabel(xlabel, fontsize=8)
         rax.tick_params(labelsize=7)
         rax.grid(True, alpha=0.3)
+    settle_labels(fig)
     return fig

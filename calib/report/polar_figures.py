@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from calib.report.panels import Margins, lean_ticks, panel_grid, title_height, wrap_title
+from calib.report.panels import Margins, lean_ticks, panel_grid, settle_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
 TruthField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -102,4 +102,5 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
                 ax.set_xlabel("α [deg]", fontsize=8)
             if col == 0 and row == 0:
                 ax.legend(fontsize=6, loc="best")
+    settle_labels(fig)
     return fig

@@ -6,7 +6,7 @@ from typing import Mapping
 
 import numpy as np
 
-from calib.report.panels import lean_log_ticks, single_panel
+from calib.report.panels import lean_log_ticks, settle_labels, single_panel
 from calib.result import CalibrationResult
 
 
@@ -14,6 +14,13 @@ def _fig_ax(ax, size=(6.4, 3.6)):
     if ax is None:
         return single_panel(size)
     return ax.figure, ax
+
+
+def _finish(fig, own: bool):
+    """Fix the label positions of a figure made here (not of a caller's)."""
+    if own:
+        settle_labels(fig, ticklabel_size=10)
+    return fig
 
 
 def plot_singular_values(result: CalibrationResult, ax=None):
@@ -29,6 +36,7 @@ def plot_singular_values(result: CalibrationResult, ax=None):
     -------
     matplotlib.figure.Figure
     """
+    own = ax is None
     fig, ax = _fig_ax(ax)
     s = result.singular_values
     i = np.arange(1, s.size + 1)
@@ -40,11 +48,11 @@ def plot_singular_values(result: CalibrationResult, ax=None):
                    label=f"cut 1/σ̄ = {1 / result.sigma_bar:.3g}")
     ax.set_xlabel("index i")
     ax.set_ylabel("s_i = 1/σ(θ_i) [1/scale]")
-    ax.set_title(f"{result.name}: singular-value spectrum ({result.n_retained} of {s.size} retained)", fontsize=10)
+    ax.set_title(f"{result.name}: singular-value spectrum ({result.n_retained} of {s.size} retained)", fontsize=10, y=1.0)
     lean_log_ticks(ax)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    return fig
+    return _finish(fig, own)
 
 
 def plot_spectra(results: Mapping[str, CalibrationResult], ax=None):
@@ -59,6 +67,7 @@ def plot_spectra(results: Mapping[str, CalibrationResult], ax=None):
     -------
     matplotlib.figure.Figure
     """
+    own = ax is None
     fig, ax = _fig_ax(ax)
     for k, (name, r) in enumerate(results.items()):
         s = np.maximum(r.singular_values, 1e-16)
@@ -68,11 +77,11 @@ def plot_spectra(results: Mapping[str, CalibrationResult], ax=None):
             ax.axhline(1 / r.sigma_bar, color=f"C{k}", ls="--", lw=0.8)
     ax.set_xlabel("index i")
     ax.set_ylabel("s_i [1/scale]")
-    ax.set_title("singular-value spectra by sensor set (dashed: each cut 1/σ̄)", fontsize=10)
+    ax.set_title("singular-value spectra by sensor set (dashed: each cut 1/σ̄)", fontsize=10, y=1.0)
     lean_log_ticks(ax)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    return fig
+    return _finish(fig, own)
 
 
 def plot_truncation(result: CalibrationResult, ax=None):
@@ -86,6 +95,7 @@ def plot_truncation(result: CalibrationResult, ax=None):
     t = result.truncation
     if not t:
         return None
+    own = ax is None
     fig, ax = _fig_ax(ax)
     k, cv, fit = np.asarray(t["n_retained"]), np.asarray(t["cv"], float), np.asarray(t["fit"], float)
     finite = np.isfinite(cv)
@@ -96,8 +106,8 @@ def plot_truncation(result: CalibrationResult, ax=None):
     ax.axhline(1.0, color="k", lw=0.6, ls=":")
     ax.set_xlabel("number of retained θ")
     ax.set_ylabel("mean squared whitened error [-]")
-    ax.set_title(f"{result.name}: truncation chosen by the data", fontsize=10)
+    ax.set_title(f"{result.name}: truncation chosen by the data", fontsize=10, y=1.0)
     lean_log_ticks(ax)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    return fig
+    return _finish(fig, own)
