@@ -1,0 +1,67 @@
+"""Executors (calib.executors): one map() interface; the FMU adapter's Jacobian is the same on
+the serial executor, a local process pool and a Dask LocalCluster."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from calib.errors import InputError
+from calib.executors import DaskExecutor, ProcessExecutor, SerialExecutor, get_executor
+
+
+def test_map_keeps_task_order_and_reports_progress():
+    tasks = [9.0, 1.0, 16.0, 4.0, 25.0]
+    seen = []
+    with ProcessExecutor(2) as pool:
+        for ex in (SerialExecutor(), pool):
+            seen.clear()
+            assert ex.map(math.sqrt, tasks, progress=lambda done, total: seen.append((done, total))) == \
+                [3.0, 1.0, 4.0, 2.0, 5.0]
+            assert seen[-1] == (5, 5) and [d for d, _ in seen] == [1, 2, 3, 4, 5]
+
+
+def test_unknown_executor_names_the_valid_ones():
+    with pytest.raises(InputError, match="valid: serial, process, dask") as err:
+        get_executor("mpi", source="run.toml")
+    assert err.value.field == "kind" and "run.toml" in str(err.value)
+    with pytest.raises(InputError, match="applies to kind = \"dask\" only"):
+        get_executor("process", workers=2, address="tcp://127.0.0.1:8786")
+    with pytest.raises(InputError, match="workers"):
+        ProcessExecutor(0)
+
+
+@pytest.fixture(scope="module")
+def small_model():
+    from calib.fmu.build import build_fmu, mapping_path
+    from calib.models.fmu_model import FmuModel
+    from calib.rotor.library import load_rotor
+    from test_fmu_model import CHANNELS, FAST, GRID, QUIET, WINDOW, conditions
+
+    rotor = load_rotor("nrel5mw")
+    path = build_fmu("B", rotor, GRID)
+    make = lambda executor: FmuModel(path, mapping_path("B"), CHANNELS, parameters=["pitch_offset_blade1"],  # noqa: E731
+                                     corrections=False,
+                                     switches=QUIET, settings=FAST, steady=WINDOW, executor=executor)
+    return make, conditions(rotor, tsr=(6.0, 8.0, 10.0), pitch=(0.0, 2.0))
+
+
+def test_process_pool_and_dask_give_the_serial_jacobian(small_model):
+    """Every task (one operating point: base run and warm-started perturbations) is deterministic
+    and self-contained, so where it runs cannot change a bit of the result (tolerance 1e-12)."""
+    make, cond = small_model
+    serial = make(SerialExecutor())
+    p = np.array([q.nominal for q in serial.parameters]) + 0.01
+    ev0, G0 = serial.jacobian(p, cond)
+    serial.close()
+    assert np.all(ev0.status == 0) and np.all(np.isfinite(G0)) and np.abs(G0).max() > 0
+    for executor in (ProcessExecutor(2), DaskExecutor(workers=2)):
+        with executor:
+            model = make(executor)
+            ev, G = model.jacobian(p, cond)
+            np.testing.assert_allclose(ev.values, ev0.values, rtol=1e-12, atol=0)
+            np.testing.assert_allclose(G, G0, rtol=1e-12, atol=1e-12 * np.abs(G0).max())
+            ev2 = model.evaluate(p, cond)           # workers kept their instances: same again
+            np.testing.assert_array_equal(ev2.values, ev0.values)
