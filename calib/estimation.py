@@ -309,6 +309,24 @@ class EstimationOutcome:
         return self.status == "converged"
 
 
+def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """The step ``x`` shortened so that p̃ = B(θ + αx) stays within [lb, ub] (θ is feasible).
+
+    A QP solver that stops early (iteration limit, loose tolerance) can return a step that
+    leaves the bounds by more than round-off; the model refuses such a parameter vector, so
+    the step is cut back to the boundary (α ≤ 1) rather than evaluated outside it.
+    """
+    start, d = basis @ theta, basis @ x
+    alpha = 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = np.where(d > 0, (ub - start) / d, np.inf)
+        down = np.where(d < 0, (lb - start) / d, np.inf)
+    limit = float(np.min(np.concatenate([up, down]))) if d.size else np.inf
+    if limit < 1.0:
+        alpha = max(0.0, limit * (1.0 - 1e-12))
+    return alpha * x
+
+
 def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
              optimizer: str = "sqpmethod", max_iterations: int = 30, tolerance: float = 1e-9,
              step_tolerance: float = 1e-7, callback: Callable[[dict], None] | None = None,
@@ -365,7 +383,7 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
             if not sol.success and not np.all(np.isfinite(sol.x)):
                 status, message = "qp_failed", f"{optimizer}: {sol.message}"
                 break
-            x = sol.x
+            x = _feasible_step(basis, theta, sol.x, lb, ub)
             trial = problem.linearize(problem.p_of(basis, theta + x))
             predicted = -(g @ x + 0.5 * x @ H @ x)
             if trial.n_failed <= lin.n_failed and trial.cost <= lin.cost:

@@ -125,3 +125,15 @@ def test_unknown_optimizer_error_lists_valid_names():
         get_optimizer("newton")
     msg = str(err.value)
     assert "newton" in msg and all(name in msg for name in OPTIMIZERS)
+
+
+def test_a_step_leaving_the_bounds_is_cut_back_to_them():
+    from calib.estimation import _feasible_step
+    B = np.eye(2)
+    theta = np.array([0.5, 0.0])
+    x = np.array([1.0, 0.2])  # would reach 1.5 in the first coordinate, bound 1.0
+    step = _feasible_step(B, theta, x, np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
+    assert np.all(B @ (theta + step) <= 1.0) and np.isclose((theta + step)[0], 1.0)
+    np.testing.assert_allclose(step / np.linalg.norm(step), x / np.linalg.norm(x))
+    inside = np.array([0.1, -0.1])
+    np.testing.assert_array_equal(_feasible_step(B, theta, inside, -np.ones(2), np.ones(2)), inside)
