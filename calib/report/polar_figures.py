@@ -1,8 +1,8 @@
 """Corrected polars C = C₀ + ΔC(α, η) with confidence bands at a few span stations.
 
-Lift on top, drag below, one column per η station, on the α range of the correction nodes
-(the corrections are defined there; the α the data reach at each station is stated in the
-panel title and shaded where it overlaps the node range). Where more than half of a band's
+Lift on top, drag below (one scale per row), one column per η station, on the α range of
+the correction nodes (the corrections are defined there; the α the data reach at each
+station is stated in the panel title and shaded where it overlaps the node range). Where more than half of a band's
 variance comes from the prior (the data say little) the band is shaded in another colour.
 For a synthetic run a known truth ΔC(α, η) can be overlaid.
 """
@@ -55,7 +55,7 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
         return None
     alpha, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
     idx = station_columns(eta, max_stations)
-    margins = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, wgap=0.55, hgap=0.55)
+    margins = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, wgap=0.15, hgap=0.55)
     size = (2.6, 2.1)
     what = "corrected polars" + ("" if "cl0" in pb else " (corrections only)")
     width = margins.left + idx.size * size[0] + (idx.size - 1) * margins.wgap + margins.right
@@ -92,8 +92,9 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
                     ax.axvspan(lo, hi, color="C2", alpha=0.08, lw=0, label="α seen")
             ax.set_xlim(alpha[0], alpha[-1])
             lean_ticks(ax)
-            ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
-            ax.tick_params(labelsize=7)
+            if col == 0:
+                ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
+            ax.tick_params(labelsize=7, labelleft=col == 0)
             ax.grid(True, alpha=0.3)
             if row == 0:
                 ax.set_title(f"η = {eta[j]:.2f}" + (f"; α seen {seen.min():.0f}…{seen.max():.0f}°" if seen.size
@@ -102,5 +103,11 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
                 ax.set_xlabel("α [deg]", fontsize=8)
             if col == 0 and row == 0:
                 ax.legend(fontsize=6, loc="best")
+    for row in axes:                                     # one C_L and one C_D scale across the stations
+        lo = min(ax.dataLim.y0 for ax in row)
+        hi = max(ax.dataLim.y1 for ax in row)
+        pad = 0.05 * (hi - lo) if hi > lo else 0.05
+        for ax in row:
+            ax.set_ylim(lo - pad, hi + pad)
     settle_labels(fig)
     return fig
