@@ -44,7 +44,8 @@ def small_model():
     path = build_fmu("B", rotor, GRID)
     make = lambda executor: FmuModel(path, mapping_path("B"), CHANNELS, parameters=["pitch_offset_blade1"],  # noqa: E731
                                      corrections=False,
-                                     switches=QUIET, settings=FAST, steady=WINDOW, executor=executor)
+                                     switches=QUIET, settings=FAST, steady=WINDOW, executor=executor,
+                                     jacobian=dict(warm_start=True))
     return make, conditions(rotor, tsr=(6.0, 8.0, 10.0), pitch=(0.0, 2.0))
 
 

@@ -45,7 +45,8 @@ def small_fmus(rotor):
 
 
 def quick_model(path, variant, **kw):
-    opts = dict(channels=CHANNELS, parameters=[], switches=QUIET, settings=FAST, steady=WINDOW)
+    opts = dict(channels=CHANNELS, parameters=[], switches=QUIET, settings=FAST, steady=WINDOW,
+                jacobian=dict(warm_start=True))      # quasi-steady: a restored state has no lag
     opts.update(kw)
     return FmuModel(path, mapping_path(variant), **opts)
 

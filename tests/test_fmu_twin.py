@@ -38,7 +38,8 @@ def test_same_twin_same_theta_on_bem_and_both_fmu_variants():
     results = {"bem": calibrate(bem, meas, **SETTINGS)}
     for v in "AB":
         model = FmuModel(build_fmu(v, rotor, GRID), mapping_path(v), CHANNELS, parameters=[], switches=QUIET,
-                         settings=FAST, steady=WINDOW)
+                         settings=FAST, steady=WINDOW,
+                         jacobian=dict(warm_start=True))
         results[v] = calibrate(model, meas, **SETTINGS)
         model.close()
     ref = results["bem"]

@@ -61,9 +61,7 @@ _STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int,
                 "average_revolutions": (int, True), "standstill_step_size": (_NUM, False),
                 "convergence_rtol": (_NUM, False), "perturbation_settle_revolutions": (int, False),
                 "perturbation_average_revolutions": (int, False)}
-_JACOBIAN_KEYS = {"relative_step": (_NUM, False), "warm_start": (bool, False),
-                  "directional_derivatives": (str, False), "check_points": (int, False),
-                  "check_rtol": (_NUM, False)}
+_JACOBIAN_KEYS = {"relative_step": (_NUM, False), "warm_start": (bool, False)}
 _TYPE_NAMES = {str: "a string", int: "an integer", _NUM: "a number", list: "an array", dict: "a table",
                bool: "true/false", (int, float, bool): "a number or true/false"}
 
@@ -265,9 +263,6 @@ class JacobianRule:
 
     relative_step: float = 1e-2
     warm_start: bool = True
-    directional_derivatives: str = "auto"
-    check_points: int = 1
-    check_rtol: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -471,9 +466,6 @@ def load_mapping(path) -> Mapping:
     if not 0 < jacobian.relative_step <= 0.5:
         raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
                          field="jacobian.relative_step")
-    if jacobian.directional_derivatives not in ("auto", "off"):
-        raise InputError("'jacobian.directional_derivatives' must be \"auto\" or \"off\", got "
-                         f"{jacobian.directional_derivatives!r}", src, field="jacobian.directional_derivatives")
 
     radius = None
     if "rotor" in data:
