@@ -302,3 +302,41 @@ def test_measured_harmonic_columns_are_channels(tmp_path):
     assert meas.channels == ("root_flap_moment_1p", "root_flap_moment_1p_phase", "thrust_3p",
                              "root_edge_moment_blade2")
     np.testing.assert_allclose(meas.values[0], [812.5e3, -4.0, 2.5e3, 1.5e6])
+
+
+@pytest.mark.parametrize("fault,status,text", [(1, Status.SIMULATION_FAILED, "debug_fault = 1"),
+                                               (2, Status.SIMULATION_FAILED, "died"), (3, Status.TIMEOUT, "timeout")])
+def test_fault_in_a_perturbed_run_keeps_the_others(small_fmus, rotor, fault, status, text):
+    """An error, a crash or a hang in the middle of a point's perturbed runs: that run gets the
+    status; after an error the instance, after a crash or hang the worker process, is rebuilt
+    and the remaining runs resume from the serialized settled base state; and
+    every other run equals the fault-free one (nothing computed before is lost, nothing after is
+    skipped). The fault is provoked by a perturbed run that also raises the wind speed input above
+    the debug threshold."""
+    import dataclasses
+    from calib.models import fmu_worker as fw
+
+    cond = OperatingConditions([8.0], [10.0], [0.0])
+    p = np.zeros(GRID.n_params)
+    clean = quick_model(small_fmus["A"], "A")
+    faulty = quick_model(small_fmus["A"], "A", settings=dict(FAST, debug_fault=fault, debug_fault_wind_speed=9.0))
+    _, [task_clean], _ = clean._tasks(p, cond, perturb=True)
+    _, [task], _ = faulty._tasks(p, cond, perturb=True)
+    windy = faulty._fmu_inputs(OperatingConditions([12.0], [10.0], [0.0]))[0]
+    runs = list(task.perturbations)
+    runs[5] = runs[5] + windy                       # the 6th perturbed run sets wind 12 m/s: fault
+    task = dataclasses.replace(task, perturbations=tuple(runs))
+    ref = fw.Simulator(clean._plan).run_point(task_clean)
+    worker = fw.WorkerProcess(faulty._plan, timeout=3.0)
+    try:
+        res = worker.run_point(task)
+    finally:
+        worker.close()
+    assert res.base.ok and res.restarts == (0 if fault == 1 else 1) and res.base_state is not None
+    assert res.perturbations[5].status == status and text in res.perturbations[5].message
+    for j, (a, b) in enumerate(zip(res.perturbations, ref.perturbations)):
+        if j != 5:
+            assert a.ok, (j, a.message)
+            np.testing.assert_array_equal(a.mean, b.mean)
+    clean.close()
+    faulty.close()

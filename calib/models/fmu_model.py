@@ -25,10 +25,14 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 and ψ the azimuth of blade 1 (0 = up).
 
 Jacobians are central differences with steps ``relative_step`` × each parameter's
-``scale``. The base run of each point saves its settled state; every perturbed run
-restores it, sets the perturbed parameters and settles only
+``scale`` (one-sided inside a bound). With ``warm_start`` (``[jacobian]`` of the mapping,
+or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
+every perturbed run restores it, sets the perturbed parameters and settles only
 ``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
-(DESIGN §7). FMI directional derivatives are not used: co-simulation FMUs give them for
+(DESIGN §7). That is exact when a parameter step acts at once (quasi-steady physics) and
+wrong by the lag where the FMU filters it (dynamic inflow): the bundled mappings keep it off
+and say why. A point's runs are one executor task, so the state never leaves its worker
+except serialized, to resume after a fault. FMI directional derivatives are not used: co-simulation FMUs give them for
 inputs and states at one instant, not for the steady window averages with respect to
 parameters; whether the FMU offers them is reported by :attr:`FmuModel.jacobian_method`
 (the bundled FMUs and PythonFMU's do not).
