@@ -126,11 +126,11 @@ def overhead(path, cond) -> dict:
 
     one = cond.subset([1])
     p = np.zeros(12)
-    t_raw, y_raw = _best(raw, 3)
-    t_in, ev = _best(lambda: model.evaluate(p, one), 3)
+    t_raw, y_raw = _best(raw, 7)
+    t_in, ev = _best(lambda: model.evaluate(p, one), 7)
     iso = _model(path, QUASI_STEADY, isolate=True)
     iso.evaluate(p, one)                                   # start the worker process
-    t_iso, ev2 = _best(lambda: iso.evaluate(p, one), 3)
+    t_iso, ev2 = _best(lambda: iso.evaluate(p, one), 7)
     iso.close()
     fmu.terminate()
     fmu.freeInstance()
