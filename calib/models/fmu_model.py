@@ -57,7 +57,7 @@ import numpy as np
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError, ModelError
 from calib.models import fmu_worker as fw
-from calib.models.fmu_mapping import Mapping, SPANWISE_OUTPUTS, load_mapping
+from calib.models.fmu_mapping import Mapping, load_mapping
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditions, Parameter, Status,
                          check_parameter_vector)
