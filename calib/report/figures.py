@@ -12,7 +12,8 @@ Figures, by registry name:
 
 PNG is written by default; SVG on request (``formats=("png", "svg")``). Every file is
 written to a temporary name in its folder and renamed (:mod:`calib.report.atomic`), so an
-interrupted run never leaves a truncated figure under a final name.
+interrupted run never leaves a truncated figure under a final name, and Ctrl-C while a
+figure is drawn arrives as ``KeyboardInterrupt`` (:mod:`calib.report.interrupts`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from calib.report.atomic import atomic_path  # noqa: E402
 from calib.report.correlation_figure import plot_correlation  # noqa: E402
 from calib.report.eigenshape_figures import plot_eigenshapes  # noqa: E402
 from calib.report.fit_figures import plot_fit  # noqa: E402
+from calib.report.interrupts import interrupts_as_keyboard_interrupt  # noqa: E402
 from calib.report.panels import DPI  # noqa: E402
 from calib.report.polar_figures import TruthField, plot_polars  # noqa: E402
 from calib.report.spectrum_figures import plot_singular_values, plot_spectra, plot_truncation  # noqa: E402
@@ -100,12 +102,13 @@ def save_figure(fig, out_dir: str | Path, stem: str, formats=FORMATS, dpi: float
     """
     out_dir = Path(out_dir)
     paths = {}
-    for fmt in formats:
-        path = out_dir / f"{stem}.{fmt}"
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                fig.savefig(f, format=fmt, dpi=dpi)
-        paths[fmt] = path
+    with interrupts_as_keyboard_interrupt():
+        for fmt in formats:
+            path = out_dir / f"{stem}.{fmt}"
+            with atomic_path(path) as tmp:
+                with open(tmp, "wb") as f:
+                    fig.savefig(f, format=fmt, dpi=dpi)
+            paths[fmt] = path
     _close(fig)
     return paths
 
@@ -147,10 +150,11 @@ def write_figures(result: CalibrationResult, out_dir: str | Path, prefix: str = 
         progress(f"{result.name}: writing up to {len(FIGURES)} figures ({', '.join(formats)}) to {out_dir}")
     for k, (name, make) in enumerate(FIGURES.items()):
         t0 = time.perf_counter()
-        fig = make(result, truth=truth)
-        if fig is None:
-            continue
-        out[name] = save_figure(fig, out_dir, f"{prefix}{name}", formats)
+        with interrupts_as_keyboard_interrupt():
+            fig = make(result, truth=truth)
+            if fig is None:
+                continue
+            out[name] = save_figure(fig, out_dir, f"{prefix}{name}", formats)
         if progress:
             progress(f"{result.name}: figure {k + 1}/{len(FIGURES)} {name} ({time.perf_counter() - t0:.1f} s)")
     if progress:
