@@ -206,3 +206,13 @@ def test_write_figures_draws_the_truth_it_is_given(result, tmp_path, monkeypatch
 
     F.write_figures(result, tmp_path, truth=truth)
     assert seen == [truth]
+
+
+def test_report_states_the_counts_and_embeds_svg_when_no_png(result, tmp_path):
+    from calib.report.html import write_report
+
+    paths = F.write_figures(result, tmp_path, formats=("svg",))
+    text = write_report(tmp_path / "report.html", results={"twin": result}, figures={"twin": paths}).read_text()
+    assert text.count("data:image/svg+xml;base64,") == len(paths) and "data:image/png" not in text
+    assert f"All {result.n_retained} retained eigenshapes are drawn" in text
+    assert "Against wind speed (rotor speed varies between the points)" in text
