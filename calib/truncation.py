@@ -17,14 +17,17 @@ so K-fold cross-validation costs no refits. The criterion CV(k) is the mean squa
 held-out error per residual over K = 10 folds that interleave across the operating
 envelope (point j in fold j mod K); its expectation is about 1 + (prediction variance) for a
 model that is right, and grows with bias (too few θ) and variance (too many). The number
-retained is k* = argmin CV(k).
+retained is the fewest k whose CV is within one standard error (over the folds) of the
+minimum (the one-standard-error rule; ``one_se=False`` gives argmin CV).
 
 Leave-one-point-out (K = number of points) is available but not the default: a point at
 the edge of the envelope alone determines some directions (leverage near 1), its leave-out
 error explodes and the choice jumps with the linearization point. Measured on the shipped
 localization study with every third point held back: the 10-fold choice (33 of 61) came
 within 2 % of the best threshold's held-back χ²/dof, leave-one-point-out's (27) was 2.4×
-it. Generalized cross-validation was worse still on the wind-tunnel study.
+it. Generalized cross-validation was worse still on the wind-tunnel study. The argmin of the
+10-fold curve retained more θ than the one-standard-error rule and their NEES over 30 twin
+seeds was 918 for 552 degrees of freedom (overconfident); with the rule, 114 for 116 (8 seeds).
 
 References
 ----------
@@ -85,7 +88,8 @@ class TruncationCurve:
 
 
 def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | None = None,
-             n_folds: int | None = 10, max_k: int | None = None, rtol: float = 1e-10) -> TruncationCurve:
+             n_folds: int | None = 10, max_k: int | None = None, rtol: float = 1e-10,
+             one_se: bool = False) -> TruncationCurve:
     """K-fold (or leave-one-point-out) prediction error of the truncated-SVD fit for every k.
 
     Parameters
@@ -106,11 +110,15 @@ def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | Non
         Largest k considered (default: the numerical rank).
     rtol : float
         Singular values below ``rtol`` × s_max count as zero.
+    one_se : bool
+        Choose the fewest θ whose criterion is within one standard error (over the folds) of
+        the minimum instead of the minimum itself (Hastie et al. 2009, §7.10).
 
     Returns
     -------
     TruncationCurve
-        ``cv`` the mean squared whitened held-out error per residual, ``chosen`` its argmin.
+        ``cv`` the mean squared whitened held-out error per residual, ``chosen`` its argmin
+        (or the one-standard-error choice).
     """
     n_rows, n_params = M.shape
     n_points = n_rows // n_channels
@@ -142,6 +150,11 @@ def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | Non
         se.append(float(np.std(per_fold, ddof=1) / np.sqrt(K)) if finite else float("inf"))
         fit.append(float(np.mean(resid ** 2)))
         sv.append(float(s[k - 1]) if k > 0 else float("inf"))
-    cv = np.array(cv)
-    return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), int(np.argmin(cv)), np.array(se),
+    cv, se = np.array(cv), np.array(se)
+    best = int(np.argmin(cv))
+    chosen = best
+    if one_se:
+        within = np.flatnonzero(cv <= cv[best] + se[best])
+        chosen = int(within[0]) if within.size else best
+    return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), chosen, se,
                            None, "loo_points" if n_folds is None else f"{K}-fold")

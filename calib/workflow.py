@@ -81,7 +81,7 @@ SCHEMA = {
     "": {"name": (str, True), "description": (str, False), "rotor": (dict, True), "model": (dict, False),
          "fluid": (dict, False), "grid": (dict, True), "conditions": (dict, False), "measurements": (dict, False),
          "truth": (dict, False), "noise": (dict, False), "calibration": (dict, False),
-         "stages": (list, True)},
+         "executor": (dict, False), "stages": (list, True)},
     "rotor": None,  # validated by calib.rotor.sources.rotor_from_table (name | openfast | aerodyn | ... )
     "model": MODEL_KEYS,
     "fluid": {"density": (NUM, False), "kinematic_viscosity": (NUM, False)},
@@ -148,6 +148,8 @@ def load_workflow(path: str | Path) -> dict:
         raise InputError(f"not valid TOML: {exc}", src) from None
     _check_table(data, "", src)
     for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
+        if section == "model" and data.get("model", {}).get("kind") == "fmu":
+            continue  # an FMU's [model] table is validated by calib.models.from_config.model_from_workflow
         if section in data:
             _check_table(data[section], section, src)
     for k, bump in enumerate(data.get("truth", {}).get("bumps", [])):
@@ -292,6 +294,17 @@ class WorkflowSetup:
     grid_table: dict
     source: str
     notes: list
+    fmu_table: dict | None = None
+    executor_table: dict | None = None
+    base_dir: str = "."
+
+    def model(self, grid: CorrectionGrid, channels, executor=None):
+        """The forward model of a stage: the native BEM, or the FMU of ``[model] kind = "fmu"``."""
+        if self.fmu_table is None:
+            return BemModel(self.rotor, grid, channels, self.settings, self.nuisance, rotor_source=self.rotor_spec)
+        from calib.models.from_config import model_from_workflow
+        return model_from_workflow(self.fmu_table, self.rotor_spec, list(channels), self.source, self.base_dir,
+                                   grid=grid, executor=executor)
 
     def grid(self, conditions: OperatingConditions, progress: bool = False) -> CorrectionGrid:
         """The correction grid; ``alpha_nodes_deg = "auto"`` places the α nodes over the angles of
@@ -349,8 +362,13 @@ def prepare(cfg: dict) -> WorkflowSetup:
     rotor = rsrc.rotor
     mcfg = dict(cfg.get("model", {}))
     kind = mcfg.pop("kind", "bem")
-    if kind != "bem":
-        raise InputError(f"unknown model kind {kind!r}; valid: bem", src, field="model.kind")
+    if kind not in ("bem", "fmu"):
+        raise InputError(f"unknown model kind {kind!r}; valid: bem, fmu", src, field="model.kind")
+    fmu_table = None
+    if kind == "fmu":
+        fmu_table, mcfg = {"kind": "fmu", **mcfg}, {}
+        if "measurements" not in cfg:
+            notes.append("synthetic measurements come from the native BEM; the FMU is calibrated to them")
     overrides = {}
     for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
         if key in mcfg:
@@ -405,7 +423,8 @@ def prepare(cfg: dict) -> WorkflowSetup:
         raise InputError(f"must be an array of angles [deg] or \"auto\", got {g['alpha_nodes_deg']!r}", src,
                          field="grid.alpha_nodes_deg")
     setup = WorkflowSetup(rotor, _absolute_rotor_table(cfg["rotor"], cfg["_dir"]), settings, nuisance, density,
-                          channels, calib_cfg, cal, force, g, src, notes)
+                          channels, calib_cfg, cal, force, g, src, notes, fmu_table, cfg.get("executor"),
+                          cfg["_dir"])
     if not isinstance(g["alpha_nodes_deg"], str):
         setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
     return setup
@@ -429,15 +448,10 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     ``force`` (or ``[calibration] force = true``) calibrates even when the unit check
     (:func:`calib.unit_check.check_units`) suspects a unit mistake; the report says so.
     """
-    from calib.report.figures import plot_spectra, save_figure, write_figures
-    from calib.report.html import write_report
-
     cfg = load_workflow(path)
     src = cfg["_source"]
     # everything the settings can get wrong is found here, before any data is read
     setup = prepare(cfg)
-    rotor, settings, nuisance, rotor_spec = setup.rotor, setup.settings, setup.nuisance, setup.rotor_spec
-    all_channels, calib_cfg = setup.channels, setup.calibration
     force = setup.force or force
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -445,6 +459,21 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         for note in setup.notes:
             print(f"[calib run] set-up: {note}", flush=True)
 
+    from calib.models.from_config import executor_from_table
+    executor = executor_from_table(setup.executor_table, src)
+    try:
+        return _run(cfg, setup, out, executor, progress, force)
+    finally:
+        executor.close()
+
+
+def _run(cfg, setup, out, executor, progress, force):
+    from calib.report.figures import plot_spectra, save_figure, write_figures
+    from calib.report.html import write_report
+
+    src = cfg["_source"]
+    rotor, settings, nuisance = setup.rotor, setup.settings, setup.nuisance
+    all_channels, calib_cfg = setup.channels, setup.calibration
     t0 = time.perf_counter()
     unit_notes = {}
     if "measurements" in cfg:
@@ -459,7 +488,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
             for note in meas.notes:
                 print(f"[calib run] {file.name}: {note}", flush=True)
         grid = setup.grid(meas.conditions, progress)
-        check_model = BemModel(rotor, grid, all_channels, settings, nuisance, rotor_source=rotor_spec)
+        check_model = setup.model(grid, all_channels, executor)
         unit_report = check_units(check_model, nominal_vector(check_model.parameters), meas,
                                   sigma=calib_cfg.get("sigma"))
         if progress:
@@ -488,7 +517,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
-        model = BemModel(rotor, grid, stage["channels"], settings, nuisance, rotor_source=rotor_spec)
+        model = setup.model(grid, stage["channels"], executor)
         st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
                                                                             setup.calibration_settings.retain))
         st.validate(src, f"stages[{k}].")
