@@ -92,11 +92,12 @@ def test_invalid_conditions_give_failed_status_not_nan(field, bad):
 
 def test_negative_drag_correction_is_reported():
     from calib.corrections import CorrectionGrid
+    from calib.effects import CorrectionField
     rotor = synthetic_rotor()
     grid = CorrectionGrid([-10.0, 0.0, 10.0, 20.0], [0.0, 0.5, 1.0])
     p = np.zeros(grid.n_params)
     p[grid.n_lift:] = -0.5            # drives C_D negative everywhere
-    res = solve_bem(rotor, OperatingConditions([8.0], [15.0], [0.0]), grid=grid, p=p)
+    res = solve_bem(rotor, OperatingConditions([8.0], [15.0], [0.0]), effects=[CorrectionField(grid)], p=p)
     assert res.status[0] == Status.INVALID_INPUT
     assert "C_D <= 0" in res.messages[0]
 

@@ -86,6 +86,7 @@ def _unary(np_func, slope_func):
 sin = _unary(np.sin, np.cos)
 cos = _unary(np.cos, lambda v: -np.sin(v))
 exp = _unary(np.exp, np.exp)
+log = _unary(np.log, lambda v: 1.0 / v)
 sqrt = _unary(np.sqrt, lambda v: 0.5 / np.sqrt(v))
 arccos = _unary(np.arccos, lambda v: -1.0 / np.sqrt(1.0 - v * v))
 absolute = _unary(np.abs, np.sign)

@@ -93,10 +93,12 @@ class SlopeEnvelope:
     Attributes
     ----------
     cl_min, cl_max, cd_min, cd_max : ndarray, shape (n_stations, n_grid)
-        Smallest / largest dC_L/dα, dC_D/dα within the window [1/deg] (corrections included,
-        bounded by their extreme slope at the station's η over all α).
+        Smallest / largest dC_L/dα, dC_D/dα within the window [1/deg] (of the polars after
+        the effect chain's polar stage, corrections included).
     step_deg : float
         Node spacing of the polar grid [deg].
+    first_node : int
+        Grid node of the tables' first column (a sub-range of the -180..180 deg grid).
     """
 
     cl_min: np.ndarray
@@ -104,41 +106,44 @@ class SlopeEnvelope:
     cd_min: np.ndarray
     cd_max: np.ndarray
     step_deg: float
+    first_node: int = 0
 
     @classmethod
-    def build(cls, polars, half_width_deg: float = WINDOW_DEG, grid=None, p=None, eta=None) -> "SlopeEnvelope":
-        """From a :class:`~calib.bem.polar_grid.SectionPolars` (and a correction field).
+    def build(cls, cl_slopes, cd_slopes, step_deg: float, half_width_deg: float = WINDOW_DEG,
+              first_node: int | None = None) -> "SlopeEnvelope":
+        """From slope tables on a uniform α grid: the whole periodic grid, or a sub-range.
 
         Parameters
         ----------
-        polars : SectionPolars
+        cl_slopes, cd_slopes : ndarray, shape (n_stations, n_grid)
+            dC_L/dα, dC_D/dα at the grid nodes [1/deg] (e.g. ``SectionPolars.cl_slopes``, or
+            the polars after an effect chain's polar stage).
+        step_deg : float
+            Node spacing [deg].
         half_width_deg : float
             Half width of the window [deg].
-        grid : CorrectionGrid, optional
-        p : ndarray, optional
-            Nodal corrections of ``grid``.
-        eta : ndarray, shape (n_stations,), optional
-            r/R of the stations (needed with ``grid``).
+        first_node : int, optional
+            The tables cover nodes ``first_node ...`` of the -180..180 deg grid (not periodic:
+            the envelope holds on nodes at least a window inside the sub-range). None: the
+            whole periodic grid.
         """
-        h = polars.step_deg
-        size = 2 * int(np.ceil(half_width_deg / h)) + 1
-        env = [f(s, size, axis=1, mode="wrap") for s in (polars.cl_slopes, polars.cd_slopes)
+        size = 2 * int(np.ceil(half_width_deg / step_deg)) + 1
+        mode = "wrap" if first_node is None else "nearest"
+        env = [f(s, size, axis=1, mode=mode) for s in (cl_slopes, cd_slopes)
                for f in (minimum_filter1d, maximum_filter1d)]
-        if grid is not None:
-            nodes = grid.alpha_nodes_deg
-            edges = np.concatenate([[2 * nodes[0] - nodes[1]], nodes, [2 * nodes[-1] - nodes[-2]]])
-            mid = 0.5 * (edges[1:] + edges[:-1])
-            _, _, sl, sd = grid.evaluate(p, mid[None, :], np.asarray(eta, float)[:, None])
-            for k, s in ((0, sl), (2, sd)):                     # piecewise-constant slopes in α
-                env[k] = env[k] + np.minimum(s.min(axis=1), 0.0)[:, None]
-                env[k + 1] = env[k + 1] + np.maximum(s.max(axis=1), 0.0)[:, None]
-        return cls(*env, step_deg=h)
+        return cls(*env, step_deg=step_deg, first_node=int(first_node or 0))
+
+    def union(self, other: "SlopeEnvelope") -> "SlopeEnvelope":
+        """The envelope covering both (smallest minima, largest maxima)."""
+        return SlopeEnvelope(np.minimum(self.cl_min, other.cl_min), np.maximum(self.cl_max, other.cl_max),
+                             np.minimum(self.cd_min, other.cd_min), np.maximum(self.cd_max, other.cd_max),
+                             self.step_deg, self.first_node)
 
     def at(self, alpha_deg, station):
         """(cl_min, cl_max, cd_min, cd_max) [1/deg] at the nearest node of each (α, station)."""
         n_grid = self.cl_min.shape[1]
         node = np.rint(np.mod(np.asarray(alpha_deg, float) + 180.0, 360.0) / self.step_deg).astype(np.intp)
-        node = np.minimum(node, n_grid - 1)
+        node = np.clip(node - self.first_node, 0, n_grid - 1)
         return tuple(e[station, node] for e in (self.cl_min, self.cl_max, self.cd_min, self.cd_max))
 
 

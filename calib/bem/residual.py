@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.bem import dual as dl
+from calib.bem.stages import LossState
 
 HALF_PI = 0.5 * np.pi
 
@@ -67,22 +68,31 @@ class SectionGeometry:
                                self.tip_radius, self.n_blades)
 
 
-def loss_factor(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
-    """Prandtl tip and hub loss factor F [-] (DESIGN §3; Ning 2014 eq. 5)."""
+def prandtl_factors(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
+    """Prandtl's tip and hub loss factors (F_tip, F_hub) [-], 1.0 where switched off (DESIGN §3)."""
     s = dl.absolute(dl.sin(phi))
-    F = 1.0
     B = geo.n_blades
+    tip = hub = 1.0
     if tip_loss:
         f = B * (geo.tip_radius - geo.r) / (2.0 * geo.r) / s
-        F = (2.0 / np.pi) * dl.arccos(dl.exp(-f))
+        tip = (2.0 / np.pi) * dl.arccos(dl.exp(-f))
     if hub_loss:
         f = B * (geo.r - geo.hub_radius) / (2.0 * geo.hub_radius) / s
-        F = F * ((2.0 / np.pi) * dl.arccos(dl.exp(-f)))
-    return F
+        hub = (2.0 / np.pi) * dl.arccos(dl.exp(-f))
+    return tip, hub
+
+
+def loss_factor(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
+    """Prandtl tip and hub loss factor F = F_tip F_hub [-] (DESIGN §3; Ning 2014 eq. 5)."""
+    tip, hub = prandtl_factors(phi, geo, tip_loss, hub_loss)
+    if not tip_loss:
+        return hub
+    return tip * hub if hub_loss else tip
 
 
 def section_equations(phi, cl, cd, vx, vy, geo: SectionGeometry, *, tip_loss=True, hub_loss=True,
-                      drag_in_axial_induction=True, drag_in_tangential_induction=True, wake_rotation=True):
+                      drag_in_axial_induction=True, drag_in_tangential_induction=True, wake_rotation=True,
+                      losses=None):
     """Residual and induction of the BEM section equations.
 
     Parameters
@@ -102,12 +112,17 @@ def section_equations(phi, cl, cd, vx, vy, geo: SectionGeometry, *, tip_loss=Tru
         ``cn``, ``ct`` (and hence the loads) always contain the drag.
     wake_rotation : bool
         Tangential induction a' (else a' = 0).
+    losses : callable, optional
+        The induction stage of an effect chain: ``losses(LossState) -> LossState``
+        (:mod:`calib.bem.stages`). The momentum balance then uses F = tip · hub of the
+        returned state, and the force coefficients C_L, C_D are multiplied by its ``load``
+        factor (in the balance and in the loads alike).
 
     Returns
     -------
     dict
         ``residual`` [-], ``a``, ``ap`` (axial, tangential induction) [-], ``cn``, ``ct``
-        (rotor axes, with drag) [-], ``F`` [-].
+        (rotor axes, with drag) [-], ``F`` [-], ``load`` (factor on the force coefficients) [-].
 
     References
     ----------
@@ -116,11 +131,18 @@ def section_equations(phi, cl, cd, vx, vy, geo: SectionGeometry, *, tip_loss=Tru
     """
     s = dl.sin(phi)
     c = dl.cos(phi)
+    load = 1.0
+    if losses is None:
+        F = loss_factor(phi, geo, tip_loss, hub_loss)
+    else:
+        tip, hub = prandtl_factors(phi, geo, tip_loss, hub_loss)
+        state = losses(LossState(phi, tip, hub))
+        F, load = state.tip * state.hub, state.load
+        cl, cd = cl * load, cd * load
     cn = cl * c + cd * s
     ct = cl * s - cd * c
     cn_induction = cn if drag_in_axial_induction else cl * c
     ct_induction = ct if drag_in_tangential_induction else cl * s
-    F = loss_factor(phi, geo, tip_loss, hub_loss)
     k = geo.sigma * cn_induction / (4.0 * F * s * s)
     kp = geo.sigma * ct_induction / (4.0 * F * s * c)
     pos = dl.value(phi) > 0
@@ -143,7 +165,7 @@ def section_equations(phi, cl, cd, vx, vy, geo: SectionGeometry, *, tip_loss=Tru
         res_pos = s / (1.0 - a) - c / lam * (1.0 - kp)
         res_neg = s * (1.0 - k) - c / lam * (1.0 - kp)
         residual = dl.where(pos, res_pos, res_neg)
-    return {"residual": residual, "a": a, "ap": ap, "cn": cn, "ct": ct, "F": F}
+    return {"residual": residual, "a": a, "ap": ap, "cn": cn, "ct": ct, "F": F, "load": load}
 
 
 def section_loads(eq: dict, vx, vy, chord, rho):

@@ -9,24 +9,29 @@ with exact partials (forward-mode duals of the same equations).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from calib.bem import dual as dl
-from calib.bem.kinematics import curvature, wind_components
-from calib.bem.multiple_roots import (SCAN_STEP_DEG, WINDOW_DEG, SlopeEnvelope, lowest_roots,
-                                      needs_search)
-from calib.bem.polar_grid import SectionPolars
-from calib.bem.residual import SectionGeometry, section_equations, section_loads
-from calib.bem.rootfind import bracket, solve_brackets
-from calib.corrections import CorrectionGrid
+from calib.bem.chain import BoundChain, EffectChain
+from calib.bem.jacobian import Block, SectionSensitivities, project
+from calib.bem.kinematics import curvature
+from calib.bem.polar_grid import SectionPolars, station_reynolds
+from calib.bem.sections import RESIDUAL_TOL, build_sections, eliminate_phi, find_roots, section_pass
+from calib.bem.stages import Inflow, PointContext, ProbeMap, RotorData
 from calib.errors import InputError
 from calib.types import OperatingConditions, Status, StatusCounts
 from calib.rotor.geometry import Rotor
 
-RESIDUAL_TOL = 1e-8
-"""A section counts as converged when |R(φ*)| is below this [-]."""
+__all__ = ["BemResult", "BemSettings", "RESIDUAL_TOL", "SectionSensitivities", "integration_weights",
+           "interior_stations", "solve_bem"]
+
+FIXED_POINT_TOL = 1e-12
+"""Relative change of the inflow speed below which a thrust-dependent inflow has settled [-]."""
+
+FIXED_POINT_MAX_ITER = 30
+"""Most solves of a thrust-dependent inflow (the secant iteration takes about 5-7)."""
 
 INDUCTION_LIMIT = 2.0
 """Largest |a| accepted at a converged section [-] (see :func:`solve_bem`, Notes)."""
@@ -92,33 +97,6 @@ class BemSettings:
 
 
 @dataclass(frozen=True, eq=False)
-class SectionSensitivities:
-    """Total derivatives of section quantities at the BEM root.
-
-    Each entry is a dict quantity -> ndarray (n_points, n_sectors, n_stations), for the
-    quantities ``Np``, ``Tp`` [N/m], ``cn``, ``ct`` [-] (chord axes) and ``alpha_deg``.
-
-    Attributes
-    ----------
-    d_cl, d_cd : dict
-        Derivative with respect to an additive change of C_L / C_D at the section.
-    d_pitch : dict
-        Per degree of collective pitch offset.
-    d_wind_scale : dict
-        Per unit wind-speed scale factor.
-    basis_index, basis_value : ndarray, shape (n_points, n_sectors, n_stations, 4)
-        Correction shape functions active at each section (when a grid is used).
-    """
-
-    d_cl: dict
-    d_cd: dict
-    d_pitch: dict
-    d_wind_scale: dict
-    basis_index: np.ndarray | None = None
-    basis_value: np.ndarray | None = None
-
-
-@dataclass(frozen=True, eq=False)
 class BemResult(StatusCounts):
     """Outputs of :func:`solve_bem`.
 
@@ -151,6 +129,9 @@ class BemResult(StatusCounts):
     n_multiple_root_sections : ndarray of int, shape (n_points,)
         Number of such sections (over stations and sectors).
     sensitivities : SectionSensitivities or None
+    inflow_wind_speed, inflow_pitch : ndarray, shape (n_points,)
+        Inflow speed [m/s] and pitch [deg] after the effect chain's conditions stage (NaN at
+        invalid points).
     """
 
     power: np.ndarray
@@ -172,6 +153,8 @@ class BemResult(StatusCounts):
     n_multiple_root_sections: np.ndarray
     rotor: Rotor = field(repr=False)
     sensitivities: SectionSensitivities | None = None
+    inflow_wind_speed: np.ndarray | None = None
+    inflow_pitch: np.ndarray | None = None
 
 
 def interior_stations(rotor: Rotor) -> np.ndarray:
@@ -228,10 +211,9 @@ def _check_conditions(conditions: OperatingConditions):
 
 
 def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings | None = None,
-              grid: CorrectionGrid | None = None, p=None, pitch_offset: float = 0.0,
-              wind_scale: float = 1.0, sensitivities: bool = False,
+              effects=(), p=None, sensitivities: bool = False,
               polars: SectionPolars | None = None) -> BemResult:
-    """Solve the steady BEM for a batch of operating points.
+    """Solve the steady BEM for a batch of operating points, through a chain of effects.
 
     Parameters
     ----------
@@ -239,16 +221,13 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     conditions : OperatingConditions
         Wind speed [m/s], rotor speed [rpm], pitch [deg], air density [kg/m^3], yaw [deg].
     settings : BemSettings, optional
-    grid : CorrectionGrid, optional
-        Correction field applied to every section's C_L and C_D.
-    p : array_like, shape (grid.n_params,), optional
-        Nodal corrections ``[p^L; p^D]`` [-]; zeros if omitted.
-    pitch_offset : float
-        Collective pitch offset added to every point [deg] (nuisance parameter).
-    wind_scale : float
-        Factor on the wind speed [-] (nuisance parameter: anemometry, blockage).
+    effects : sequence of effects or EffectChain
+        The chain (:mod:`calib.bem.chain`; the library is :mod:`calib.effects`): e.g. the
+        correction field, a pitch offset, a wind-speed scale. Empty: the nominal BEM.
+    p : array_like, shape (n_params,), optional
+        Values of the chain's parameters, in its order; nominal values if omitted.
     sensitivities : bool
-        Also return exact section sensitivities (for :mod:`calib.bem.jacobian`).
+        Also return exact derivatives (:class:`calib.bem.jacobian.SectionSensitivities`).
     polars : SectionPolars, optional
         Pre-built look-up tables (re-used across calls by :class:`BemModel`).
 
@@ -259,6 +238,17 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
 
     Notes
     -----
+    The stages run in the order conditions → (polar, induction inside the root search) →
+    loads (:mod:`calib.bem.stages`). A conditions effect that reads the rotor thrust (e.g.
+    wind-tunnel blockage) makes the inflow depend on the solution: the solve is then repeated
+    with the thrust of the previous solve until the inflow speed changes by less than
+    :data:`FIXED_POINT_TOL` (relative) at every point, at most :data:`FIXED_POINT_MAX_ITER`
+    times (a point that does not settle is NOT_CONVERGED); the thrust is iterated by the secant
+    method per point (a fixed-point step first). Its derivatives follow from the
+    implicit function theorem at the fixed point, per point: with the thrust T(V, β, p) of
+    the BEM and the inflow (V, β) = C(T, p) of the conditions stage,
+    dT/dp = (∂T/∂p + ∂T/∂V ∂V/∂p + ∂T/∂β ∂β/∂p) / (1 − ∂T/∂V ∂V/∂T − ∂T/∂β ∂β/∂T).
+
     A point is NOT_CONVERGED when a section has no converged root, and also when a converged
     section's axial induction lies outside ±:data:`INDUCTION_LIMIT` (= 2). Buhl's relation is
     a fit to windmill-state data for a up to about 1 (C_T ≈ 2 there) and Ning's propeller-brake
@@ -280,142 +270,123 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     settings = settings or BemSettings()
     polars = polars or SectionPolars.from_rotor(rotor, smoothing=settings.polar_smoothing,
                                                 kinematic_viscosity=settings.kinematic_viscosity)
-    if grid is not None:
-        p = np.zeros(grid.n_params) if p is None else np.asarray(p, float)
-        if p.shape != (grid.n_params,) or not np.all(np.isfinite(p)):
-            raise InputError(f"expected {grid.n_params} finite correction values, got shape {p.shape}",
-                             "solve_bem", field="p")
-    for name, v in (("pitch_offset", pitch_offset), ("wind_scale", wind_scale)):
-        if not np.isfinite(v):
-            raise InputError(f"must be finite, got {v!r}", "solve_bem", field=name)
-    n_pts = len(conditions)
+    chain = (effects if isinstance(effects, EffectChain) else EffectChain(effects)).bind(p)
     n_sec = settings.sectors_for(rotor, conditions)
-    n_st = rotor.n_stations
     bad_pt, msgs = _check_conditions(conditions)
     if not np.isfinite(rotor.hub_height) and settings.shear_exponent != 0.0:
         raise InputError("wind shear needs a finite hub height", rotor.source, field="hub_height")
-
-    # ---- kinematics per (point, sector, station)
-    pc = np.radians(rotor.precone_deg)
-    x_az, y_az, z_az, cone, _ = curvature(rotor.r, rotor.precurve, rotor.presweep, pc)
-    omega = conditions.rotor_speed * np.pi / 30.0
-    wind = np.where(bad_pt, 1.0, conditions.wind_speed * wind_scale)
-    azimuth = np.linspace(0.0, 2 * np.pi, n_sec + 1)[:-1]
-    tilt = np.radians(rotor.tilt_deg) if settings.use_tilt else 0.0
-    vx, vy, vxw, vyw = wind_components(x_az, y_az, z_az, cone, azimuth, wind, np.where(bad_pt, 1.0, omega),
-                                       np.radians(np.where(bad_pt, 0.0, conditions.yaw)), tilt,
-                                       rotor.hub_height, settings.shear_exponent)
-    if wind_scale != 0.0:
-        vxw, vyw = vxw / wind_scale, vyw / wind_scale   # d v / d wind_scale
-
     interior = interior_stations(rotor)
-    shape = (n_pts, n_sec, n_st)
-    station = np.broadcast_to(np.arange(n_st), shape)
-    pitch = np.radians(np.where(bad_pt, 0.0, conditions.pitch) + pitch_offset)
-    theta = np.radians(rotor.twist_deg)[None, None, :] + pitch[:, None, None]
-    theta = np.broadcast_to(theta, shape)
-    eta = np.broadcast_to(rotor.eta, shape)
-    rho = np.broadcast_to(conditions.air_density[:, None, None], shape)
-    active = np.broadcast_to(interior, shape) & ~bad_pt[:, None, None] & (vx > 0)
-
-    sel = np.flatnonzero(active.reshape(-1))
-    f_station, f_theta, f_eta = station.reshape(-1)[sel], theta.reshape(-1)[sel], eta.reshape(-1)[sel]
-    f_vx, f_vy = vx.reshape(-1)[sel], vy.reshape(-1)[sel]
-    r_full = np.broadcast_to(rotor.r, shape).reshape(-1)[sel]
-    c_full = np.broadcast_to(rotor.chord, shape).reshape(-1)[sel]
-    geo = SectionGeometry(r_full, c_full, rotor.n_blades * c_full / (2 * np.pi * r_full),
-                          rotor.hub_radius, rotor.tip_radius, rotor.n_blades)
+    w = integration_weights(rotor, interior)
+    rotor_data = _rotor_data(rotor, polars, settings)
+    pctx = PointContext(conditions.wind_speed, conditions.rotor_speed, conditions.pitch, conditions.air_density,
+                        rotor.swept_area)
     opts = dict(tip_loss=settings.tip_loss, hub_loss=settings.hub_loss,
                 drag_in_axial_induction=settings.drag_in_axial_induction,
                 drag_in_tangential_induction=settings.drag_in_tangential_induction,
                 wake_rotation=settings.wake_rotation)
+    thrust_weights = rotor.n_blades * w["thrust"] / n_sec
+    solve = _Solve(rotor, conditions, settings, chain, polars, opts, n_sec, interior, rotor_data, thrust_weights)
+    inflow, bad_all, msgs, sec, roots, values, unsettled = solve.to_fixed_point(pctx, bad_pt, msgs, sensitivities)
 
-    def coefficients(idx, phi):
-        alpha_deg = np.degrees(phi - f_theta[idx])
-        cl, cd, dcl, dcd = polars.lookup(alpha_deg, f_station[idx])
-        if grid is not None:
-            dl_, dd_, sl_, sd_ = grid.evaluate(p, alpha_deg, f_eta[idx])
-            cl, cd, dcl, dcd = cl + dl_, cd + dd_, dcl + sl_, dcd + sd_
-        return alpha_deg, cl, cd, dcl, dcd
-
-    def residual(idx, phi):
-        _, cl, cd, _, _ = coefficients(idx, phi)
-        eq = section_equations(phi, cl, cd, f_vx[idx], f_vy[idx], geo.take(idx), **opts)
-        return eq["residual"]
-
-    lo, hi, flo, fhi, found = bracket(residual, sel.size)
-    phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
-    conv = found & np.isfinite(fphi) & (np.abs(fphi) <= RESIDUAL_TOL)
-    n_roots = conv.astype(int)
-    if settings.search_multiple_roots and conv.any():
-        # screen: a negative lift slope within the window (stall), then the exact slope budget
-        envelope = SlopeEnvelope.build(polars, WINDOW_DEG, grid, p, rotor.eta)
-        ci = np.flatnonzero(conv)
-        slopes = envelope.at(np.degrees(phi[ci] - f_theta[ci]), f_station[ci])
-        stalled = slopes[0] < 0.0
-        ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
-        _, cl_c, cd_c, _, _ = coefficients(ci, phi[ci])
-        d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, f_vx[ci], f_vy[ci], geo.take(ci), opts)
-        search = np.zeros(sel.size, bool)
-        search[ci] = needs_search(d0, d_cl, d_cd, slopes)
-        phi, fphi, n_found = lowest_roots(residual, phi, fphi, lo, hi, search, np.radians(SCAN_STEP_DEG),
-                                          np.radians(WINDOW_DEG), RESIDUAL_TOL, max_iter=settings.max_iter)
-        n_roots = np.where(conv, n_found, 0)
-
-    # ---- section quantities at the root (duals when sensitivities are wanted)
-    allidx = np.arange(sel.size)
-    phi_eval = np.where(conv, phi, 0.5 * np.pi)
-    alpha_deg, cl, cd, dcl, dcd = coefficients(allidx, phi_eval)
-    if sensitivities:
-        # seeds: 0 phi, 1 theta, 2 vx, 3 vy, 4 additive dCL, 5 additive dCD
-        k = 6
-        phi_d = dl.Dual.seed(phi_eval, k, 0)
-        theta_d = dl.Dual.seed(f_theta, k, 1)
-        vx_d, vy_d = dl.Dual.seed(f_vx, k, 2), dl.Dual.seed(f_vy, k, 3)
-        slope_cl, slope_cd = np.degrees(dcl), np.degrees(dcd)   # per rad
-        d_cl = np.zeros((sel.size, k)); d_cl[:, 0], d_cl[:, 1], d_cl[:, 4] = slope_cl, -slope_cl, 1.0
-        d_cd = np.zeros((sel.size, k)); d_cd[:, 0], d_cd[:, 1], d_cd[:, 5] = slope_cd, -slope_cd, 1.0
-        cl_in, cd_in = dl.Dual(cl, d_cl), dl.Dual(cd, d_cd)
-    else:
-        phi_d, theta_d, vx_d, vy_d, cl_in, cd_in = phi_eval, f_theta, f_vx, f_vy, cl, cd
-    eq = section_equations(phi_d, cl_in, cd_in, vx_d, vy_d, geo, **opts)
-    rho_f = rho.reshape(-1)[sel]
-    loads = section_loads(eq, vx_d, vy_d, geo.chord, rho_f)
-    alpha_rad = phi_d - theta_d
-    cn_chord = cl_in * dl.cos(alpha_rad) + cd_in * dl.sin(alpha_rad)
-    ct_chord = cl_in * dl.sin(alpha_rad) - cd_in * dl.cos(alpha_rad)
-    quantities = {"Np": loads["Np"], "Tp": loads["Tp"], "cn": cn_chord, "ct": ct_chord}
-
-    def scatter(values, fill=0.0):
-        out = np.full(n_pts * n_sec * n_st, fill)
-        out[sel] = np.where(conv, values, np.nan)
-        return out.reshape(shape)
-
-    sections = {"phi": scatter(phi_eval), "alpha_deg": scatter(alpha_deg), "cl": scatter(cl),
-                "cd": scatter(cd), "a": scatter(dl.value(eq["a"])), "ap": scatter(dl.value(eq["ap"])),
-                "W": scatter(dl.value(loads["W"])), "residual": scatter(fphi),
-                "iterations": scatter(iters.astype(float)), "n_roots": scatter(n_roots.astype(float))}
-    for name, q in quantities.items():
-        sections[name] = scatter(dl.value(q))
-
-    # ---- per-point status
-    def per_section(values):
-        full = np.zeros(n_pts * n_sec * n_st, bool)
-        full[sel] = values
-        return full.reshape(shape)
-
-    a_value = dl.value(eq["a"])
-    with np.errstate(invalid="ignore"):
-        wild = conv & ~(np.abs(a_value) <= INDUCTION_LIMIT)
-    flags = {"failed": per_section(~conv), "negative_drag": per_section(cd <= 0.0),
-             "reversed_flow": np.broadcast_to(interior, shape) & ~bad_pt[:, None, None] & ~(vx > 0),
-             "wild_induction": per_section(wild), "multiple_roots": per_section(n_roots > 1)}
-    status, msgs = _point_status(flags, sections["a"], bad_pt, msgs, rotor.eta)
-    multiple = flags["multiple_roots"].any(axis=(1, 2)) & ~bad_pt
+    sections = _section_fields(sec, roots, values)
+    flags = _section_flags(sec, roots, values)
+    status, msgs = _point_status(flags, sections["a"], bad_all, msgs, rotor.eta)
+    status[unsettled & (status == Status.CONVERGED)] = int(Status.NOT_CONVERGED)
+    multiple = flags["multiple_roots"].any(axis=(1, 2)) & ~bad_all
     n_multiple = flags["multiple_roots"].sum(axis=(1, 2))
+    outs = _rotor_quantities(rotor, conditions, sections, w, n_sec, status != Status.CONVERGED)
+    omega = conditions.rotor_speed * np.pi / 30.0
 
-    # ---- rotor quantities
-    w = integration_weights(rotor, interior)
+    sens = None
+    if sensitivities:
+        sens = _sensitivities(chain, values, roots, sec, pctx, thrust_weights)
+    return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
+                     omega=omega, n_sectors=n_sec, multiple_roots=multiple, n_multiple_root_sections=n_multiple,
+                     rotor=rotor, sensitivities=sens,
+                     inflow_wind_speed=np.where(bad_all, np.nan, inflow.wind_speed),
+                     inflow_pitch=np.where(bad_all, np.nan, inflow.pitch))
+
+
+class _Solve:
+    """One batch's solve at a given inflow, and its repetition to a fixed point when the inflow reads the thrust."""
+
+    def __init__(self, rotor, conditions, settings, chain, polars, opts, n_sec, interior, rotor_data, thrust_weights):
+        self.rotor, self.conditions, self.settings, self.chain = rotor, conditions, settings, chain
+        self.polars, self.opts, self.n_sec, self.interior = polars, opts, n_sec, interior
+        self.rotor_data, self.thrust_weights = rotor_data, thrust_weights
+
+    def at(self, inflow: Inflow, bad, k: int):
+        """Sections, roots and section values at ``inflow`` (duals over ``k`` columns when k > 0)."""
+        sec = build_sections(self.rotor, self.conditions, self.settings, self.n_sec, self.rotor_data, self.interior,
+                             inflow.wind_speed, inflow.pitch, bad)
+        roots = find_roots(sec, self.chain, self.polars, self.settings, self.opts, self.rotor)
+        return sec, roots, section_pass(sec, roots, self.chain, self.polars, self.opts, k)
+
+    def to_fixed_point(self, pctx: PointContext, bad_pt, msgs, sensitivities: bool):
+        """The conditions stage and the solve; repeated while the inflow reads the thrust (see :func:`solve_bem`).
+
+        Returns
+        -------
+        inflow, bad, msgs, sec, roots, values, unsettled
+        """
+        chain = self.chain
+        k = chain.n_section_columns if sensitivities else 0
+        if not chain.reads_thrust:
+            inflow = _inflow(chain, pctx)
+            bad, msgs = _check_inflow(inflow, bad_pt, msgs)
+            return (inflow, bad, msgs) + self.at(inflow, bad, k) + (np.zeros(bad.size, bool),)
+        thrust, previous = np.zeros(bad_pt.size), None          # first pass: no thrust yet
+        for iteration in range(FIXED_POINT_MAX_ITER + 1):
+            inflow = _inflow(chain, replace(pctx, thrust=thrust))
+            bad, point_msgs = _check_inflow(inflow, bad_pt, msgs)
+            sec, roots, values = self.at(inflow, bad, 0)
+            solved = _per_point(dl.value(values.quantities["Np"]), roots, sec, self.thrust_weights)
+            settled = _inflow(chain, replace(pctx, thrust=np.nan_to_num(solved)))
+            with np.errstate(invalid="ignore"):
+                change = np.abs(settled.wind_speed - inflow.wind_speed) / np.abs(inflow.wind_speed)
+            unsettled = np.isfinite(solved) & ~bad & ~(change <= FIXED_POINT_TOL)
+            if not unsettled.any() or iteration == FIXED_POINT_MAX_ITER:
+                break
+            thrust, previous = _next_thrust(thrust, solved, previous), (thrust, solved)
+        if k:
+            values = section_pass(sec, roots, chain, self.polars, self.opts, k)
+        for kpt in np.flatnonzero(unsettled):
+            point_msgs[kpt] = (f"BEM: the inflow of the effect chain did not settle in {FIXED_POINT_MAX_ITER} "
+                               f"solves (relative change of the inflow speed above {FIXED_POINT_TOL:g})")
+        return inflow, bad, point_msgs, sec, roots, values, unsettled
+
+
+def _scatter(sec, roots, v, fill=0.0, dtype=float):
+    """Section values of the active sections in a (n_points, n_sectors, n_stations) array (NaN where not converged)."""
+    out = np.full(int(np.prod(sec.shape)), fill, dtype=dtype)
+    out[sec.sel] = np.where(roots.converged, v, np.nan) if dtype is float else v
+    return out.reshape(sec.shape)
+
+
+def _section_fields(sec, roots, values) -> dict:
+    """The ``sections`` dict of :class:`BemResult`."""
+    eq = values.eq
+    fields = {"phi": roots.phi, "alpha_deg": values.alpha_deg, "cl": values.cl, "cd": values.cd,
+              "a": dl.value(eq["a"]), "ap": dl.value(eq["ap"]), "W": dl.value(values.W), "residual": roots.residual,
+              "iterations": roots.iterations.astype(float), "n_roots": roots.n_roots.astype(float)}
+    for name in ("Np", "Tp", "cn", "ct"):
+        fields[name] = dl.value(values.quantities[name])
+    return {k: _scatter(sec, roots, v) for k, v in fields.items()}
+
+
+def _section_flags(sec, roots, values) -> dict:
+    """Per-section trouble flags for :func:`_point_status`."""
+    conv = roots.converged
+    with np.errstate(invalid="ignore"):
+        wild = conv & ~(np.abs(dl.value(values.eq["a"])) <= INDUCTION_LIMIT)
+    return {"failed": _scatter(sec, roots, ~conv, False, bool),
+            "negative_drag": _scatter(sec, roots, values.cd <= 0.0, False, bool),
+            "reversed_flow": sec.reversed_flow, "wild_induction": _scatter(sec, roots, wild, False, bool),
+            "multiple_roots": _scatter(sec, roots, roots.n_roots > 1, False, bool)}
+
+
+def _rotor_quantities(rotor, conditions, sections, w, n_sec, failed) -> list:
+    """Power, thrust, torque, flap, edge and hub-flap moments, C_P, C_T, C_Q per point (NaN where failed)."""
     B = rotor.n_blades
     Np, Tp = sections["Np"], sections["Tp"]
     thrust = B * np.einsum("ksi,i->k", Np, w["thrust"]) / n_sec
@@ -423,47 +394,126 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     flap = np.einsum("ksi,i->k", Np, w["flap_root"]) / n_sec
     edge = np.einsum("ksi,i->k", Tp, w["flap_root"]) / n_sec
     flap_hub = np.einsum("ksi,i->k", Np, w["flap_hub"]) / n_sec
+    omega = conditions.rotor_speed * np.pi / 30.0
     with np.errstate(invalid="ignore"):
         power = torque * omega
-    failed = status != Status.CONVERGED
     q_dyn = 0.5 * conditions.air_density * conditions.wind_speed ** 2
     area, radius = rotor.swept_area, rotor.rotor_radius
     with np.errstate(all="ignore"):
         cp = power / (q_dyn * area * conditions.wind_speed)
-        ct_ = thrust / (q_dyn * area)
+        ct = thrust / (q_dyn * area)
         cq = torque / (q_dyn * area * radius)
-    outs = [power, thrust, torque, flap, edge, flap_hub, cp, ct_, cq]
+    outs = [power, thrust, torque, flap, edge, flap_hub, cp, ct, cq]
     for arr in outs:
         arr[failed] = np.nan
-
-    sens = None
-    if sensitivities:
-        sens = _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid,
-                                      sections, rotor)
-    return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
-                     omega=omega, n_sectors=n_sec, multiple_roots=multiple, n_multiple_root_sections=n_multiple,
-                     rotor=rotor, sensitivities=sens)
+    return outs
 
 
-def _residual_partials(phi, cl, cd, vx, vy, geo: SectionGeometry, opts: dict, rel_step: float = 1e-6):
-    """∂R/∂φ at fixed C_L, C_D [1/rad], ∂R/∂C_L and ∂R/∂C_D [-] at given sections.
+def _next_thrust(thrust, solved, previous) -> np.ndarray:
+    """Next thrust iterate of T = T_bem(C(T)) per point: secant on T_bem(C(T)) − T after the
+    first step (fixed-point steps where the secant is undefined)."""
+    step = np.nan_to_num(solved)
+    if previous is None:
+        return step
+    t0, s0 = previous
+    f1, f0 = np.nan_to_num(solved) - thrust, np.nan_to_num(s0) - t0
+    with np.errstate(all="ignore"):
+        secant = thrust - f1 * (thrust - t0) / (f1 - f0)
+    return np.where(np.isfinite(secant) & (f1 != f0), secant, step)
 
-    One-sided differences of step ``rel_step`` in one batched call (cheaper than dual numbers
-    here; they only screen sections for a search, see :mod:`calib.bem.multiple_roots`).
-    """
-    n = phi.size
-    h = rel_step * np.maximum(1.0, np.abs(phi))
-    hc = rel_step * np.maximum(1.0, np.abs(cl))
-    hd = rel_step * np.maximum(1e-2, np.abs(cd))
-    four = lambda x: np.concatenate([x, x, x, x])   # noqa: E731
-    idx = np.concatenate([np.arange(n)] * 4)
-    zero = np.zeros(n)
-    eq = section_equations(four(phi) + np.concatenate([zero, h, zero, zero]),
-                           four(cl) + np.concatenate([zero, zero, hc, zero]),
-                           four(cd) + np.concatenate([zero, zero, zero, hd]),
-                           four(vx), four(vy), geo.take(idx), **opts)
-    r = eq["residual"].reshape(4, n)
-    return (r[1] - r[0]) / h, (r[2] - r[0]) / hc, (r[3] - r[0]) / hd
+
+def _rotor_data(rotor: Rotor, polars: SectionPolars, settings: BemSettings) -> RotorData:
+    return RotorData(rotor.n_blades, rotor.tip_radius, rotor.hub_radius, rotor.rotor_radius, polars,
+                     station_reynolds(rotor, settings.kinematic_viscosity), settings.kinematic_viscosity)
+
+
+def _inflow(chain: BoundChain, pctx: PointContext, k: int = 0) -> Inflow:
+    """The conditions stage: inflow speed [m/s] and pitch [deg] per point (plain, or duals over ``k`` columns)."""
+    inflow = Inflow(pctx.wind_speed, pctx.pitch)
+    if not chain.has("conditions"):
+        return inflow
+    out = chain.run("conditions", inflow, pctx, k)
+    if k:
+        return out
+    return Inflow(np.broadcast_to(dl.value(out.wind_speed), pctx.wind_speed.shape).astype(float),
+                  np.broadcast_to(dl.value(out.pitch), pctx.pitch.shape).astype(float))
+
+
+def _check_inflow(inflow: Inflow, bad_pt, msgs):
+    """Points whose inflow after the conditions stage is unusable (speed not finite and > 0)."""
+    msgs = list(msgs)
+    with np.errstate(invalid="ignore"):
+        bad = ~bad_pt & ~(np.isfinite(inflow.wind_speed) & (inflow.wind_speed > 0) & np.isfinite(inflow.pitch))
+    for kpt in np.flatnonzero(bad):
+        msgs[kpt] = (f"invalid input: the effect chain's conditions stage gives wind speed "
+                     f"{inflow.wind_speed[kpt]!r} m/s and pitch {inflow.pitch[kpt]!r} deg; the wind speed must be > 0")
+    return bad_pt | bad, msgs
+
+
+def _per_point(section_values, roots, sec, weights) -> np.ndarray:
+    """Σ_sectors Σ_stations w_i Q per point, NaN where a section did not converge."""
+    full = np.zeros(int(np.prod(sec.shape)))
+    full[sec.sel] = np.where(roots.converged, section_values, np.nan)
+    return np.einsum("ksi,i->k", full.reshape(sec.shape), weights)
+
+
+def _sensitivities(chain: BoundChain, values, roots, sec, pctx, thrust_weights) -> SectionSensitivities:
+    """Section derivatives (implicit function at the root) and the inflow's derivatives per point."""
+    columns = eliminate_phi(values, roots, sec)
+    n_pts, n_par = sec.shape[0], chain.n_params
+    blocks = []
+    for entry in chain.entries:
+        if entry.effect.stage == "conditions":
+            continue
+        pm = None
+        if entry.probed:
+            pm = _scatter_probe_map(entry.effect.probe_map(chain.theta(entry), values.alpha_deg, sec.ctx),
+                                    roots, sec)
+        blocks.append(Block(entry.offset, entry.n_params, entry.column - 1, entry.n_columns, pm))
+    # conditions stage on duals: columns of its parameters, then the thrust
+    k_pt = chain.n_point_columns + int(chain.reads_thrust)
+    V_p, B_p = np.zeros((n_pts, n_par)), np.zeros((n_pts, n_par))
+    V_T = B_T = np.zeros(n_pts)
+    if k_pt:
+        thrust = None
+        if chain.reads_thrust:
+            t = _per_point(dl.value(values.quantities["Np"]), roots, sec, thrust_weights)
+            thrust = dl.Dual.seed(np.nan_to_num(t), k_pt, chain.n_point_columns)
+        inflow = _inflow(chain, replace(pctx, thrust=thrust), k_pt)
+        dV, dB = (_point_derivative(x, n_pts, k_pt) for x in (inflow.wind_speed, inflow.pitch))
+        for entry in chain.stage("conditions"):
+            sl = slice(entry.offset, entry.offset + entry.n_params)
+            V_p[:, sl] = dV[:, entry.column:entry.column + entry.n_params]
+            B_p[:, sl] = dB[:, entry.column:entry.column + entry.n_params]
+        if chain.reads_thrust:
+            V_T, B_T = dV[:, -1], dB[:, -1]
+    sens = SectionSensitivities(columns, B_p, V_p, tuple(blocks), n_par)
+    if chain.reads_thrust:
+        # fixed point T = T_bem(C(T, p), p): implicit function per point
+        dT_direct = project(sens, "Np", thrust_weights)
+        Dw = np.einsum("ksic,i->kc", columns["Np"][..., :2], thrust_weights)
+        with np.errstate(all="ignore"):
+            dT = dT_direct / (1.0 - Dw[:, 1] * V_T - Dw[:, 0] * B_T)[:, None]
+        sens = SectionSensitivities(columns, B_p + B_T[:, None] * dT, V_p + V_T[:, None] * dT, tuple(blocks), n_par)
+    return sens
+
+
+def _point_derivative(x, n_pts: int, k: int) -> np.ndarray:
+    """The (n_points, k) derivative array of a per-point value (zeros for a plain value)."""
+    if isinstance(x, dl.Dual):
+        return np.broadcast_to(x.d, (n_pts, k))
+    return np.zeros((n_pts, k))
+
+
+def _scatter_probe_map(pm: ProbeMap, roots, sec) -> ProbeMap:
+    """A probe map of the active sections, placed in (n_points, n_sectors, n_stations, m) arrays."""
+    size = int(np.prod(sec.shape))
+    m = pm.index.shape[-1]
+    index = np.zeros((size, m), int)
+    weight = np.zeros((size, m))
+    index[sec.sel] = np.where(roots.converged[:, None], pm.index, 0)
+    weight[sec.sel] = np.where(roots.converged[:, None], pm.weight, 0.0)
+    return ProbeMap(index.reshape(sec.shape + (m,)), weight.reshape(sec.shape + (m,)), np.asarray(pm.probe))
 
 
 def _point_status(flags: dict, a_sections, bad_pt, msgs: list, eta):
@@ -507,34 +557,3 @@ def _point_status(flags: dict, a_sections, bad_pt, msgs: list, eta):
     return status, msgs
 
 
-def _section_sensitivities(eq, quantities, alpha_rad, conv, sel, shape, vxw, vyw, grid, sections, rotor):
-    """Implicit-function total derivatives of section quantities (Ning 2014, §3)."""
-    R = eq["residual"]
-    r_phi = R.d[:, 0]
-    with np.errstate(all="ignore"):
-        dphi = -R.d / r_phi[:, None]          # dφ/d(seed) for seeds 1..5 (column 0 unused)
-    size = int(np.prod(shape))
-    f_vxw, f_vyw = vxw.reshape(-1)[sel], vyw.reshape(-1)[sel]
-
-    def total(q):
-        d = q.d[:, 1:] + q.d[:, [0]] * dphi[:, 1:]    # columns: theta, vx, vy, dcl, dcd
-        return d
-
-    out = {"d_cl": {}, "d_cd": {}, "d_pitch": {}, "d_wind_scale": {}}
-    qs = dict(quantities)
-    qs["alpha_deg"] = alpha_rad * (180.0 / np.pi)
-    for name, q in qs.items():
-        d = total(q)
-        per = {"d_pitch": d[:, 0] * (np.pi / 180.0),
-               "d_wind_scale": d[:, 1] * f_vxw + d[:, 2] * f_vyw,
-               "d_cl": d[:, 3], "d_cd": d[:, 4]}
-        for key, v in per.items():
-            full = np.zeros(size)
-            full[sel] = np.where(conv, v, 0.0)
-            out[key][name] = full.reshape(shape)
-    bi = bv = None
-    if grid is not None:
-        idx, val, _ = grid.basis(sections["alpha_deg"], np.broadcast_to(rotor.eta, shape))
-        mask = np.isfinite(sections["alpha_deg"])[..., None]
-        bi, bv = np.where(mask, idx, 0), np.where(mask, val, 0.0)
-    return SectionSensitivities(out["d_cl"], out["d_cd"], out["d_pitch"], out["d_wind_scale"], bi, bv)

@@ -7,27 +7,29 @@ from typing import Sequence
 
 import numpy as np
 
+from calib.bem.chain import EffectChain
+from calib.bem.jacobian import project
 from calib.bem.outputs import channel_specs, channel_values, multipliers
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemSettings, integration_weights, interior_stations, solve_bem
 from calib.corrections import CorrectionGrid
+from calib.effects import Effect, effect_from_spec, make_effect
+from calib.effects.correction_field import CorrectionField as CorrectionFieldEffect
 from calib.errors import InputError
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 from calib.rotor.geometry import Rotor
 
-NUISANCE = {
-    "pitch_offset": Parameter("pitch_offset", 0.0, -5.0, 5.0, 0.5, "deg", "nuisance",
-                              description="collective pitch offset added to the measured pitch",
-                              prior_std=2.0),
-    "wind_scale": Parameter("wind_scale", 1.0, 0.8, 1.2, 0.02, "-", "nuisance",
-                            description="factor on the measured wind speed (anemometry, blockage)",
-                            prior_std=0.05),
-}
+NUISANCE_EFFECTS = {"pitch_offset": "pitch_offset", "wind_scale": "wind_speed_scale"}
+"""Nuisance parameter name -> the effect that carries it."""
+
+NUISANCE: dict[str, Parameter] = {name: make_effect(effect).parameters()[0]
+                                  for name, effect in NUISANCE_EFFECTS.items()}
+"""The nuisance parameters a :class:`BemModel` accepts in ``nuisance``, by name."""
 
 
 class BemModel:
-    """Native steady BEM with an additive polar-correction field and nuisance parameters.
+    """Native steady BEM with a chain of effects: a polar-correction field, nuisance parameters and more.
 
     Parameters
     ----------
@@ -45,9 +47,20 @@ class BemModel:
     rotor_source : dict, optional
         How to rebuild the rotor (a workflow ``[rotor]`` table); default ``{"name": rotor.name}``
         for an embedded rotor. Needed by :meth:`spec` (saved results rebuild their model).
+    effects : sequence, optional
+        Further effects of :mod:`calib.effects`: instances (``make_effect("tip_loss")``),
+        registry names, or ``{"name": ..., "options": {...}}`` tables. Their parameters follow
+        the nuisance parameters in ``p``, in this order.
 
     Notes
     -----
+    The model evaluates the chain ``[correction_field(grid)] + nuisance effects + effects``
+    (:attr:`chain`); ``p`` is the concatenation of their parameters in that order: the
+    correction nodes (lift block, drag block), the nuisance parameters in the given order,
+    then each extra effect's parameters. The chain applies them stage by stage (conditions,
+    polar, induction, loads); the correction field comes last in the polar stage, on top of
+    the other polar effects.
+
     ``jacobian`` is exact: implicit-function sensitivities of every section (Ning 2014)
     pushed through the same linear output functionals as the values, at the cost of one
     extra dual-number pass, not one solve per parameter.
@@ -55,7 +68,8 @@ class BemModel:
 
     def __init__(self, rotor: Rotor, grid: CorrectionGrid | None = None,
                  channels: Sequence[str] = ("power", "thrust"), settings: BemSettings | None = None,
-                 nuisance: Sequence[str] = ("pitch_offset", "wind_scale"), rotor_source: dict | None = None):
+                 nuisance: Sequence[str] = ("pitch_offset", "wind_scale"), rotor_source: dict | None = None,
+                 effects: Sequence = ()):
         self.rotor = rotor
         if rotor_source is None:
             from calib.rotor.library import ROTORS
@@ -78,9 +92,11 @@ class BemModel:
         self._specs = channel_specs(list(channels), rotor, self._weights, self._interior)
         self._polars = SectionPolars.from_rotor(rotor, smoothing=self.settings.polar_smoothing,
                                                 kinematic_viscosity=self.settings.kinematic_viscosity)
-        params = list(grid.parameters()) if grid is not None else []
-        params += [NUISANCE[n] for n in self.nuisance]
-        self._parameters = tuple(params)
+        self.effects: tuple[Effect, ...] = tuple(effect_from_spec(e, "BemModel") for e in effects)
+        chain = [CorrectionFieldEffect(grid)] if grid is not None else []
+        chain += [make_effect(NUISANCE_EFFECTS[n]) for n in self.nuisance]
+        self.chain = EffectChain(chain + list(self.effects))
+        self._parameters = self.chain.parameters
 
     # -- contract ---------------------------------------------------------
     @property
@@ -95,18 +111,11 @@ class BemModel:
     def polars(self) -> SectionPolars:
         return self._polars
 
-    def _split(self, p):
-        p = check_parameter_vector(p, self._parameters, "BemModel parameter vector")
-        n = self.grid.n_params if self.grid is not None else 0
-        corr = p[:n] if self.grid is not None else None
-        extra = dict(zip(self.nuisance, p[n:]))
-        return corr, extra.get("pitch_offset", 0.0), extra.get("wind_scale", 1.0)
-
     def solve(self, p, conditions: OperatingConditions, sensitivities: bool = False):
         """The full :class:`calib.bem.solver.BemResult` at parameters ``p``."""
-        corr, pitch_offset, wind_scale = self._split(p)
-        return solve_bem(self.rotor, conditions, self.settings, self.grid, corr, pitch_offset, wind_scale,
-                         sensitivities=sensitivities, polars=self._polars)
+        p = check_parameter_vector(p, self._parameters, "BemModel parameter vector")
+        return solve_bem(self.rotor, conditions, self.settings, self.chain, p, sensitivities=sensitivities,
+                         polars=self._polars)
 
     def _evaluation(self, res) -> Evaluation:
         values = channel_values(self._specs, res.sections, self.rotor.n_blades, res.omega, res.n_sectors)
@@ -137,23 +146,10 @@ class BemModel:
         """
         res = self.solve(p, conditions, sensitivities=True)
         ev = self._evaluation(res)
-        sens = res.sensitivities
-        n_pts, n_par = len(conditions), len(self._parameters)
-        G = np.zeros((n_pts, len(self._specs), n_par))
-        n_corr = self.grid.n_params if self.grid is not None else 0
-        point = np.arange(n_pts)[:, None, None, None]
+        G = np.zeros((len(conditions), len(self._specs), len(self._parameters)))
         for c, spec in enumerate(self._specs):
             scale = multipliers(spec, self.rotor.n_blades, res.omega) / res.n_sectors
-            q, w = spec.quantity, spec.weights
-            if self.grid is not None:
-                for block, d in ((0, sens.d_cl[q]), (self.grid.n_lift, sens.d_cd[q])):
-                    contrib = (d * w)[..., None] * sens.basis_value
-                    flat = (point * n_par + block + sens.basis_index).reshape(-1)
-                    G[:, c, :] += np.bincount(flat, contrib.reshape(-1), n_pts * n_par).reshape(n_pts, n_par)
-            for j, name in enumerate(self.nuisance):
-                d = sens.d_pitch[q] if name == "pitch_offset" else sens.d_wind_scale[q]
-                G[:, c, n_corr + j] = np.einsum("ksi,i->k", d, w)
-            G[:, c, :] *= scale[:, None]
+            G[:, c, :] = project(res.sensitivities, spec.quantity, spec.weights) * scale[:, None]
         G[~res.ok] = np.nan
         return ev, G
 
@@ -181,7 +177,8 @@ class BemModel:
         return {"kind": "bem", "rotor": dict(self.rotor_source), "settings": asdict(self.settings),
                 "tilt_deg": float(self.rotor.tilt_deg), "precone_deg": float(self.rotor.precone_deg),
                 "grid": self.grid.to_dict() if self.grid is not None else None,
-                "channels": [c.name for c in self.channels], "nuisance": list(self.nuisance)}
+                "channels": [c.name for c in self.channels], "nuisance": list(self.nuisance),
+                "effects": [e.spec() for e in self.effects]}
 
     @classmethod
     def from_spec(cls, spec: dict, base_dir=None) -> "BemModel":
@@ -200,7 +197,7 @@ class BemModel:
             rotor = replace(rotor, **changes)
         grid = CorrectionGrid(**spec["grid"]) if spec.get("grid") else None
         return cls(rotor, grid, spec["channels"], BemSettings(**spec["settings"]), spec["nuisance"],
-                   rotor_source=rotor_table)
+                   rotor_source=rotor_table, effects=spec.get("effects") or ())
 
     def nominal_coefficients(self, alpha_deg, eta):
         """Nominal C_L, C_D [-] of the station nearest to each η, at ``alpha_deg`` [deg]."""

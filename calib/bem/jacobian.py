@@ -1,0 +1,96 @@
+"""Section sensitivities at the BEM root and their projection on the chain's parameters.
+
+At a converged section R(φ*, c) = 0, so for every derivative column c (pitch, inflow speed,
+effect parameters or probes) dφ*/dc = −(∂R/∂φ)⁻¹ ∂R/∂c (implicit function theorem, Ning
+2014), and a section quantity Q has the total derivative dQ/dc = ∂Q/∂c + ∂Q/∂φ dφ*/dc.
+Conditions-stage parameters act on the whole point through the inflow speed V and the
+pitch β: dQ/dp = dQ/dV dV/dp + dQ/dβ dβ/dp, with dV/dp and dβ/dp per point (which also
+carry the fixed-point feedback of effects that read the thrust, see
+:func:`calib.bem.solver.solve_bem`). Every rotor output is a linear functional of section
+quantities, so :func:`project` maps the section derivatives on the parameters with the
+same station weights as the values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.bem.stages import ProbeMap
+
+
+@dataclass(frozen=True, eq=False)
+class Block:
+    """The derivative columns of one section-stage effect.
+
+    Attributes
+    ----------
+    offset, n_params : int
+        Its parameters' slice of ``p``.
+    column, n_columns : int
+        Its columns in :attr:`SectionSensitivities.columns` (after the pitch and wind columns).
+    probe_map : ProbeMap or None
+        For a probed effect: arrays of shape (n_points, n_sectors, n_stations, m).
+    """
+
+    offset: int
+    n_params: int
+    column: int
+    n_columns: int
+    probe_map: ProbeMap | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class SectionSensitivities:
+    """Total derivatives of section quantities at the BEM root.
+
+    Attributes
+    ----------
+    columns : dict
+        Quantity (``Np``, ``Tp`` [N/m], ``cn``, ``ct`` [-] in chord axes, ``alpha_deg``) ->
+        ndarray (n_points, n_sectors, n_stations, n_columns): column 0 per degree of pitch,
+        column 1 per m/s of inflow speed, then the section-stage effects' columns (zero at
+        unloaded and failed sections).
+    pitch, wind_speed : ndarray, shape (n_points, n_params)
+        Total derivatives of each point's pitch [deg] and inflow speed [m/s] after the
+        conditions stage with respect to ``p``.
+    blocks : tuple of Block
+    n_params : int
+    """
+
+    columns: dict
+    pitch: np.ndarray
+    wind_speed: np.ndarray
+    blocks: tuple
+    n_params: int
+
+
+def project(sens: SectionSensitivities, quantity: str, weights: np.ndarray) -> np.ndarray:
+    """d/dp of Σ_sectors Σ_stations w_i Q[k, s, i] for every point.
+
+    Parameters
+    ----------
+    sens : SectionSensitivities
+    quantity : str
+        Key of ``sens.columns``.
+    weights : ndarray, shape (n_stations,)
+        Station weights of the functional (e.g. integration weights of the thrust).
+
+    Returns
+    -------
+    ndarray, shape (n_points, n_params)
+    """
+    D = sens.columns[quantity]
+    n_pts, n_par = D.shape[0], sens.n_params
+    Dw = np.einsum("ksic,i->kc", D, weights)
+    G = Dw[:, [0]] * sens.pitch + Dw[:, [1]] * sens.wind_speed
+    for b in sens.blocks:
+        if b.probe_map is None:
+            G[:, b.offset:b.offset + b.n_params] += Dw[:, b.column:b.column + b.n_columns]
+            continue
+        pm = b.probe_map
+        contrib = D[..., b.column + pm.probe] * weights[None, None, :, None] * pm.weight
+        flat = (np.arange(n_pts)[:, None, None, None] * n_par + b.offset + pm.index).reshape(-1)
+        G += np.bincount(flat, contrib.reshape(-1), n_pts * n_par).reshape(n_pts, n_par)
+    return G

@@ -1,0 +1,82 @@
+"""The additive polar-correction field ΔC_L(α, η), ΔC_D(α, η) as an effect of the chain."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib.bem import dual as dl
+from calib.bem.stages import ProbeMap
+from calib.corrections import CorrectionGrid
+from calib.effects.base import Effect
+from calib.errors import InputError
+
+
+class CorrectionField(Effect):
+    """Additive corrections of C_L and C_D on hat functions of (α, η) (polar stage).
+
+    Parameters
+    ----------
+    grid : CorrectionGrid, optional
+        The node grid; or the keyword options of :class:`calib.corrections.CorrectionGrid`
+        (``alpha_nodes_deg``, ``eta_nodes``, ``cl_scale``, ``cd_scale``, ``cl_bound``, ``cd_bound``).
+
+    Notes
+    -----
+    .. math::
+        C_L = C_{L} + Σ_{ij} N_i(α) H_j(η) p^L_{ij},\\qquad C_D = C_D + Σ_{ij} N_i(α) H_j(η) p^D_{ij}
+
+    (Bottasso, Cacciola & Iriarte 2014; :mod:`calib.corrections`). The field is added after
+    every other polar effect of the chain (``order``), so that on a model with named effects
+    it shows what they leave unexplained. Its many parameters each act on few sections: it
+    seeds two probes (an additive C_L and C_D) instead of one derivative column per node and
+    maps them on the nodes with the shape-function values (:meth:`probe_map`).
+
+    Fingerprint: none of its own; it localizes in (α, η) what the data ask of the polars.
+
+    References
+    ----------
+    C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
+    from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+    """
+
+    name = "correction_field"
+    stage = "polar"
+    order = 100
+    n_probes = 2
+    fingerprint = "none of its own: the (alpha, eta) pattern the data ask of the polars"
+    OPTIONS = {"alpha_nodes_deg": None, "eta_nodes": None, "cl_scale": 0.1, "cd_scale": 0.01,
+               "cl_bound": 1.0, "cd_bound": 0.2}
+
+    def __init__(self, grid: CorrectionGrid | None = None, **options):
+        if grid is not None:
+            options = {**grid.to_dict(), **options}
+        elif options.get("alpha_nodes_deg") is None or options.get("eta_nodes") is None:
+            raise InputError("the correction field needs its nodes: grid=CorrectionGrid(...) or the options "
+                             "alpha_nodes_deg and eta_nodes", f"effect {self.name!r}", field="alpha_nodes_deg")
+        super().__init__(**options)
+        o = self.options
+        self.grid = grid if grid is not None else CorrectionGrid(o["alpha_nodes_deg"], o["eta_nodes"], o["cl_scale"],
+                                                                 o["cd_scale"], o["cl_bound"], o["cd_bound"])
+        self.options = self.grid.to_dict()
+
+    def _parameters(self):
+        o = self.options
+        return CorrectionGrid(o["alpha_nodes_deg"], o["eta_nodes"], o["cl_scale"], o["cd_scale"], o["cl_bound"],
+                              o["cd_bound"]).parameters()
+
+    def apply(self, theta, state, ctx, probes=(0.0, 0.0)):
+        p = np.asarray(theta, float)
+        a = state.alpha_deg
+        dcl, dcd, scl, scd = self.grid.evaluate(p, dl.value(a), ctx.eta)
+        if isinstance(a, dl.Dual):
+            dcl, dcd = dl.Dual(dcl, scl[:, None] * a.d), dl.Dual(dcd, scd[:, None] * a.d)
+        cl, cd = state.cl + dcl, state.cd + dcd
+        if isinstance(probes[0], dl.Dual):
+            cl, cd = cl + probes[0], cd + probes[1]
+        return state.replace(cl=cl, cd=cd)
+
+    def probe_map(self, theta, alpha_deg, ctx) -> ProbeMap:
+        """Node weights at the sections' angles of attack: lift nodes on probe 0, drag nodes on probe 1."""
+        index, value, _ = self.grid.basis(alpha_deg, ctx.eta)
+        return ProbeMap(np.concatenate([index, index + self.grid.n_lift], axis=-1),
+                        np.concatenate([value, value], axis=-1), np.array([0, 0, 0, 0, 1, 1, 1, 1]))
