@@ -14,6 +14,7 @@ from __future__ import annotations
 from calib.effects.base import Effect
 from calib.effects.correction_field import CorrectionField
 from calib.effects.pitch_offset import PitchOffset
+from calib.effects.rotational_augmentation import RotationalAugmentation
 from calib.effects.wind_speed_scale import WindSpeedScale
 from calib.errors import InputError
 
@@ -22,6 +23,7 @@ EFFECTS = {
     "correction_field": CorrectionField,
     "pitch_offset": PitchOffset,
     "wind_speed_scale": WindSpeedScale,
+    "rotational_augmentation": RotationalAugmentation,
 }
 
 
