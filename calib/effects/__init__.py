@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from calib.effects.base import Effect
 from calib.effects.correction_field import CorrectionField
+from calib.effects.leading_edge_erosion import LeadingEdgeErosion
 from calib.effects.pitch_offset import PitchOffset
 from calib.effects.rotational_augmentation import RotationalAugmentation
 from calib.effects.wind_speed_scale import WindSpeedScale
@@ -24,6 +25,7 @@ EFFECTS = {
     "pitch_offset": PitchOffset,
     "wind_speed_scale": WindSpeedScale,
     "rotational_augmentation": RotationalAugmentation,
+    "leading_edge_erosion": LeadingEdgeErosion,
 }
 
 

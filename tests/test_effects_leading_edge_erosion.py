@@ -1,0 +1,34 @@
+"""``leading_edge_erosion``: derivatives, fingerprint (power down at every λ, drag not thrust, outboard only)."""
+
+import numpy as np
+
+from test_effects_chain import (FP_LAMBDA, check_effect_derivatives, check_nominal_is_no_effect, relative_change,
+                                tsr_sweep)
+
+
+def test_leading_edge_erosion_jacobian_matches_central_differences():
+    check_effect_derivatives("leading_edge_erosion", {}, [0.75, 0.01, 0.15])
+
+
+def test_leading_edge_erosion_without_damage_is_no_effect():
+    check_nominal_is_no_effect("leading_edge_erosion", {})
+
+
+def test_leading_edge_erosion_lowers_power_everywhere_not_the_thrust_near_optimum():
+    d = relative_change("leading_edge_erosion", [0.7, 0.01, 0.1], tsr_sweep(),
+                        channels=("power", "thrust", "fn@0.5", "fn@0.95"))
+    power, thrust, inboard, tip = d.T
+    assert np.all(power < -0.02), power                   # C_P low at every λ
+    attached = FP_LAMBDA >= 7.0                           # from the optimum up: attached flow, drag only
+    assert np.abs(thrust[attached]).max() < 0.05 * np.abs(power[attached]).min()   # drag, not thrust
+    assert np.all(np.diff(power[FP_LAMBDA >= 6.0]) < 0)  # the drag loss grows with λ past the optimum
+    assert np.all(inboard == 0.0)                         # nothing inboard of the onset span
+    assert np.all(tip[FP_LAMBDA <= 4.0] < -0.05)          # lift loss near stall at the eroded tip
+
+
+def test_leading_edge_erosion_onset_moves_the_damage():
+    cond = tsr_sweep(np.array([4.0, 8.0]))
+    early = relative_change("leading_edge_erosion", [0.5, 0.01, 0.0], cond, channels=("power", "fn@0.6"))
+    late = relative_change("leading_edge_erosion", [0.8, 0.01, 0.0], cond, channels=("power", "fn@0.6"))
+    assert np.all(early[:, 0] < late[:, 0])               # more eroded span, more loss
+    assert np.all(late[:, 1] == 0.0) and np.all(early[:, 1] != 0.0)
