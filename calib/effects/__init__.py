@@ -15,6 +15,7 @@ from calib.effects.base import Effect
 from calib.effects.correction_field import CorrectionField
 from calib.effects.leading_edge_erosion import LeadingEdgeErosion
 from calib.effects.pitch_offset import PitchOffset
+from calib.effects.reynolds_number import ReynoldsNumber
 from calib.effects.rotational_augmentation import RotationalAugmentation
 from calib.effects.wind_speed_scale import WindSpeedScale
 from calib.errors import InputError
@@ -26,6 +27,7 @@ EFFECTS = {
     "wind_speed_scale": WindSpeedScale,
     "rotational_augmentation": RotationalAugmentation,
     "leading_edge_erosion": LeadingEdgeErosion,
+    "reynolds_number": ReynoldsNumber,
 }
 
 
