@@ -17,6 +17,7 @@ from calib.effects.leading_edge_erosion import LeadingEdgeErosion
 from calib.effects.pitch_offset import PitchOffset
 from calib.effects.reynolds_number import ReynoldsNumber
 from calib.effects.rotational_augmentation import RotationalAugmentation
+from calib.effects.tip_loss import TipLoss
 from calib.effects.wind_speed_scale import WindSpeedScale
 from calib.errors import InputError
 
@@ -28,6 +29,7 @@ EFFECTS = {
     "rotational_augmentation": RotationalAugmentation,
     "leading_edge_erosion": LeadingEdgeErosion,
     "reynolds_number": ReynoldsNumber,
+    "tip_loss": TipLoss,
 }
 
 
