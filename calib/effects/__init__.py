@@ -19,6 +19,7 @@ from calib.effects.reynolds_number import ReynoldsNumber
 from calib.effects.rotational_augmentation import RotationalAugmentation
 from calib.effects.tip_loss import TipLoss
 from calib.effects.wind_speed_scale import WindSpeedScale
+from calib.effects.wind_tunnel_blockage import WindTunnelBlockage
 from calib.errors import InputError
 
 #: Registry name -> effect class.
@@ -30,6 +31,7 @@ EFFECTS = {
     "leading_edge_erosion": LeadingEdgeErosion,
     "reynolds_number": ReynoldsNumber,
     "tip_loss": TipLoss,
+    "wind_tunnel_blockage": WindTunnelBlockage,
 }
 
 
