@@ -9,8 +9,17 @@ from calib.errors import CalibError
 
 
 def _demo(args) -> int:
+    from pathlib import Path
+
     from calib.demo import run_demo
     run_demo(args.out, args.rotor)
+    if args.rotor == "nrel5mw" and not args.no_diagnosis:
+        from calib.diagnose import run_diagnose
+        campaign = Path(__file__).resolve().parent / "data" / "demo_campaign" / "nrel5mw_campaign.csv"
+        print(f"[calib demo] discrepancy workflow on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
+              f"effect in the data)")
+        run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
+                     printer=lambda s: print(s.replace("[calib diagnose]", "[calib demo]"), flush=True))
     return 0
 
 
@@ -22,6 +31,12 @@ def _run(args) -> int:
 def _predict(args) -> int:
     from calib.predict import run_predict
     run_predict(args.result_dir, args.data, args.out, args.confidence)
+    return 0
+
+
+def _diagnose(args) -> int:
+    from calib.diagnose import run_diagnose
+    run_diagnose(args.rotor, args.data, args.out, args.config)
     return 0
 
 
@@ -44,6 +59,7 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
   calib demo               the embedded default job
   calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
   calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
+  calib diagnose ...       find, name and add the effect the model misses
   calib fmu build          build the bundled turbine FMUs from their C sources
   calib rotors             list the embedded rotors
 
@@ -56,11 +72,14 @@ def build_parser() -> argparse.ArgumentParser:
     from calib import __version__
     parser.add_argument("--version", action="version", version=f"calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("demo", help="C_P surface and power curve of an embedded rotor",
+    p = sub.add_parser("demo", help="C_P surface, power curve and a diagnosis of an embedded campaign",
                        description="The embedded default job: C_P(lambda, beta) surface and power curve of an "
-                                   "embedded rotor, written as figures into the output folder.")
+                                   "embedded rotor, then (NREL 5-MW) the discrepancy workflow on an embedded test "
+                                   "campaign with a hidden effect; figures and report.html in the output folder.")
     p.add_argument("--out", default="demo_output", help="output folder (default: demo_output)")
     p.add_argument("--rotor", default="nrel5mw", help="embedded rotor name (default: nrel5mw)")
+    p.add_argument("--no-diagnosis", action="store_true", help="skip the discrepancy workflow on the embedded "
+                   "NREL 5-MW campaign (run by default with the nrel5mw rotor)")
     p.set_defaults(func=_demo)
     p = sub.add_parser("run", help="run a workflow TOML file",
                        description="Run a workflow TOML file (rotor, measurements or a synthetic truth, "
@@ -82,6 +101,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument("--confidence", type=float, default=0.95, help="two-sided interval level (default 0.95)")
     p.set_defaults(func=_predict)
+    p = sub.add_parser("diagnose", help="find, name and add the effect the model misses",
+                       description="The discrepancy workflow: find where the nominal model and the measurements "
+                                   "disagree, name the missing physical effect (rotational augmentation, erosion, "
+                                   "pitch offset, Reynolds number, tip loss, tunnel blockage, wind-speed scale) by "
+                                   "likelihood ratio and BIC, add it, recalibrate the polars on top and show the gap "
+                                   "shrink. Writes DIR/diagnosis.json and DIR/report.html; exits 0 whatever it finds.")
+    p.add_argument("--rotor", default=None, help="embedded rotor name (see 'calib rotors') or a rotor file: .fst "
+                   "(OpenFAST deck), .yaml (windIO), .dat (AeroDyn15 main file); or give [rotor] in --config")
+    p.add_argument("--data", required=True, help="measurement CSV (layout: workflows/README.md)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--config", default=None, help="TOML with [rotor], [model], [fluid], [grid], [calibration] "
+                   "tables of the workflow schema and a [diagnosis] table (candidates, max_effects, significance, "
+                   "ambiguity_bic, recalibrate)")
+    p.set_defaults(func=_diagnose)
     p = sub.add_parser("fmu", help="FMU tools (calib fmu build)",
                        description="FMU tools. 'calib fmu build --help' lists the build options.")
     fmu_sub = p.add_subparsers(dest="fmu_command", required=True)

@@ -20,7 +20,7 @@ from calib.result import load_result
 from calib.rotor.library import load_rotor
 from calib.truncation import cv_curve
 from calib.types import OperatingConditions, nominal_vector
-from twin_model import TwinModel, twin_conditions
+
 
 
 @pytest.mark.parametrize("n_folds", [None, 4])

@@ -1,0 +1,421 @@
+"""The discrepancy workflow: find where model and measurements disagree, name the missing
+effect, add it, show the gap shrink (DESIGN §6).
+
+Steps
+-----
+1. **Find**: the nominal model's whitened residuals r = (z − y)/σ; the χ² test (χ²/N and its
+   p-value) says whether the model is consistent with the noise; per channel and against
+   tip-speed ratio, pitch and wind speed the residuals say where it is not.
+2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.Calibrator`,
+   automatic truncation) says which (α, η) region of the polars would have to change; with
+   ``noise = "ml"`` it also gives the noise σ the later steps use.
+3. **Name**: every candidate effect of :data:`calib.effects.EFFECTS` (but the correction field)
+   is switched into the model on its own and fitted by maximum likelihood (all its few
+   parameters free); an effect with several model forms (rotational augmentation: Snel,
+   Du & Selig, Chaviaropoulos & Hansen) enters once per form, and its best form names it. Candidates are compared with the model without them by
+
+   - the likelihood-ratio statistic Λ = χ²_base − χ²_candidate, χ²(k)-distributed with k the
+     candidate's parameter count when the candidate adds nothing (Wilks 1938); significant
+     when its p-value is below ``significance`` divided by the number of candidates
+     (Bonferroni);
+   - the Bayesian information criterion BIC = χ² + k ln N and the weights
+     w ∝ exp(−½ BIC) over the candidates and "none" (Schwarz 1978; Burnham & Anderson 2002);
+   - the agreement of the candidate's change of the outputs with the localized correction's
+     change (correlation of the two whitened output changes): an effect that explains the data
+     moves the outputs the way the free correction field does.
+
+   The best significant candidate is named when no other significant candidate is within
+   ``ambiguity_bic`` of its BIC; otherwise the result is ``ambiguous`` and names both. With
+   nothing significant the result is ``none``. After naming one effect, it is added with its
+   fitted parameters and, while the model is still inconsistent with the noise (χ² test at
+   ``significance``), the remaining candidates are tried on top (up to ``max_effects``).
+4. **Add** the named effect(s) with their fitted parameters; **recalibrate** the correction
+   field on top for what remains.
+5. **Show** χ²/dof and per-channel RMS before (nominal), with the named effect(s), and after
+   the recalibration.
+
+References
+----------
+S.S. Wilks, The large-sample distribution of the likelihood ratio for testing composite
+hypotheses, Ann. Math. Stat. 9 (1938) 60-62.
+G. Schwarz, Estimating the dimension of a model, Ann. Stat. 6 (1978) 461-464.
+K.P. Burnham, D.R. Anderson, Model Selection and Multimodel Inference, 2nd ed., Springer (2002).
+C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models from
+rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy import stats
+
+from calib.bem import BemSettings
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.corrections import CorrectionGrid
+from calib.effects import EFFECTS, make_effect
+from calib.errors import InputError
+from calib.measurements import Measurements
+from calib.models.bem_model import BemModel
+
+#: Effects the native BEM can name (the correction field is the localizer, not a candidate).
+NAMEABLE = tuple(n for n in EFFECTS if n != "correction_field")
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """Settings of :func:`diagnose`.
+
+    Parameters
+    ----------
+    candidates : tuple of str or None
+        Effects to try (default: every effect of the registry but the correction field).
+    candidate_options : dict
+        Options per candidate, e.g. ``{"rotational_augmentation": {"variant": "snel"}}``.
+    max_effects : int
+        How many effects may be named in sequence.
+    significance : float
+        Family-wise level of the likelihood-ratio tests (Bonferroni over the candidates).
+    ambiguity_bic : float
+        Two significant candidates closer than this in BIC are not told apart ("ambiguous").
+    recalibrate : bool
+        Re-run the correction-field calibration on top of the named effects.
+    """
+
+    candidates: tuple | None = None
+    candidate_options: dict = field(default_factory=dict)
+    max_effects: int = 2
+    significance: float = 0.01
+    ambiguity_bic: float = 6.0
+    recalibrate: bool = True
+
+    def validate(self, source: str = "DiagnosisSettings", prefix: str = "") -> "DiagnosisSettings":
+        names = self.candidates if self.candidates is not None else NAMEABLE
+        unknown = [c for c in names if c not in NAMEABLE]
+        if unknown:
+            raise InputError(f"unknown candidate effect(s) {', '.join(unknown)}; valid: {', '.join(NAMEABLE)}",
+                             source, field=f"{prefix}candidates")
+        if not 0 < self.significance < 1:
+            raise InputError(f"must be in (0, 1), got {self.significance!r}", source, field=f"{prefix}significance")
+        if self.max_effects < 0:
+            raise InputError(f"must be >= 0, got {self.max_effects!r}", source, field=f"{prefix}max_effects")
+        if not self.ambiguity_bic >= 0:
+            raise InputError(f"must be >= 0, got {self.ambiguity_bic!r}", source, field=f"{prefix}ambiguity_bic")
+        return self
+
+
+@dataclass
+class CandidateFit:
+    """One candidate effect fitted by maximum likelihood on top of the current model."""
+
+    name: str
+    parameters: list          # [{name, value, std, unit, nominal}]
+    chi2: float
+    n_params: int
+    loglik: float
+    bic: float
+    lr_statistic: float
+    p_value: float
+    significant: bool
+    weight: float = 0.0
+    pattern_agreement: float = float("nan")
+    status: str = ""
+    spec: dict = field(default_factory=dict)
+    model_values: np.ndarray | None = None
+    effect: str = ""
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d.pop("model_values")
+        return d
+
+
+@dataclass
+class Diagnosis:
+    """What :func:`diagnose` found (``to_dict`` is ``diagnosis.json``)."""
+
+    effect: str
+    effects: list
+    rounds: list                       # per naming round: {"candidates": [CandidateFit], "verdict": ...}
+    before: dict
+    with_effects: dict
+    after: dict
+    find: dict
+    localization: object               # CalibrationResult of the correction field alone
+    recalibration: object              # CalibrationResult on top of the named effects (or None)
+    channels: list
+    measured: np.ndarray
+    sigma: np.ndarray
+    conditions: dict
+    model_before: np.ndarray
+    model_with_effects: np.ndarray
+    model_after: np.ndarray | None
+    rotor_radius: float
+    wall_time: float = 0.0
+    notes: list = field(default_factory=list)
+
+    @property
+    def candidates(self) -> list:
+        """The first round's candidates (the comparison against the nominal model)."""
+        return self.rounds[0]["candidates"] if self.rounds else []
+
+    def to_dict(self) -> dict:
+        return {"effect": self.effect, "effects": self.effects,
+                "candidates": [c.to_dict() for c in self.candidates],
+                "rounds": [{"base": r["base"], "verdict": r["verdict"], "reason": r["reason"],
+                            "candidates": [c.to_dict() for c in r["candidates"]]} for r in self.rounds],
+                "before": self.before, "with_effects": self.with_effects, "after": self.after,
+                "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,
+                "localization": {"n_retained": self.localization.n_retained,
+                                 "chi2_per_dof_after": self.localization.chi2_per_dof_after,
+                                 "status": self.localization.status},
+                "recalibration": None if self.recalibration is None else {
+                    "n_retained": self.recalibration.n_retained, "status": self.recalibration.status,
+                    "chi2_per_dof_after": self.recalibration.chi2_per_dof_after}}
+
+
+# ----------------------------------------------------------------------------- figures of merit
+def gap(measured: np.ndarray, model: np.ndarray, sigma: np.ndarray, channels: Sequence[str], n_fitted: int = 0) -> dict:
+    """χ², χ²/dof (dof = N − n_fitted), p-value and per-channel RMS of measured − model."""
+    ok = np.all(np.isfinite(model), axis=1)
+    w = (measured[ok] - model[ok]) / sigma[ok]
+    chi2 = float(np.sum(w ** 2))
+    dof = max(int(w.size) - int(n_fitted), 1)
+    rms = {c: float(np.sqrt(np.mean((measured[ok, j] - model[ok, j]) ** 2))) for j, c in enumerate(channels)}
+    chi2_ch = {c: float(np.mean(w[:, j] ** 2)) for j, c in enumerate(channels)}
+    return {"chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "p_value": float(stats.chi2.sf(chi2, dof)),
+            "rms": rms, "chi2_per_point": chi2_ch, "n_failed": int(np.count_nonzero(~ok))}
+
+
+def find(measured, model, sigma, conditions: dict, channels, rotor_radius: float) -> dict:
+    """Where the nominal model disagrees: whitened residuals and their trends.
+
+    Returns
+    -------
+    dict
+        ``whitened`` (n_points, n_channels) list, per channel the χ²/point and the correlation
+        of its whitened residual with tip-speed ratio, pitch, wind speed and load level, and the
+        worst points.
+    """
+    w = (measured - model) / sigma
+    lam = conditions["rotor_speed"] * np.pi / 30.0 * rotor_radius / conditions["wind_speed"]
+    drivers = {"tip_speed_ratio": lam, "pitch": conditions["pitch"], "wind_speed": conditions["wind_speed"]}
+    trends = {}
+    for j, c in enumerate(channels):
+        ok = np.isfinite(w[:, j])
+        row = {"chi2_per_point": float(np.mean(w[ok, j] ** 2)), "mean_whitened": float(np.mean(w[ok, j]))}
+        for name, x in {**drivers, "load_level": measured[:, j]}.items():
+            xs = x[ok]
+            row[f"corr_{name}"] = float(np.corrcoef(xs, w[ok, j])[0, 1]) if np.ptp(xs) > 0 and np.ptp(w[ok, j]) > 0 \
+                else 0.0
+        trends[c] = row
+    order = np.argsort(-np.abs(np.nan_to_num(w)), axis=None)[:5]
+    worst = [{"point": int(k // w.shape[1]), "channel": channels[int(k % w.shape[1])],
+              "whitened_residual": float(w.flat[k])} for k in order]
+    return {"trends": trends, "worst": worst, "tip_speed_ratio": lam.tolist()}
+
+
+# ----------------------------------------------------------------------------- candidate fits
+def _fit_task(task: dict) -> dict:
+    """Fit one candidate (module-level so executors can ship it to other processes)."""
+    model = task["model"]
+    meas = task["measurements"]
+    st = task["settings"]
+    res = Calibrator(model, meas, st, name=task["name"]).run()
+    ev = model.evaluate(res.p_hat, meas.conditions)
+    names = [c.name for c in model.channels]
+    values = ev.values[:, [names.index(c) for c in meas.channels]]
+    return {"result": res, "values": values}
+
+
+def _variants(name: str, options: dict) -> list:
+    """(label, effect) for every variant of effect ``name`` (one entry when it has none or the
+    options fix it): the model forms of one physical effect compete among themselves, and the
+    best one names the effect."""
+    cls = EFFECTS[name]
+    choices = getattr(cls, "CHOICES", {}).get("variant")
+    if not choices or "variant" in options:
+        return [(name, make_effect(name, **options))]
+    return [(f"{name}:{v}", make_effect(name, **{**options, "variant": v})) for v in choices]
+
+
+def _candidate_model(rotor, channels, settings, base_effects, effect):
+    return BemModel(rotor, None, channels, settings, (), effects=list(base_effects) + [effect])
+
+
+def _fixed_effect(effect_spec: dict, fitted: dict):
+    """The effect of ``effect_spec`` with its fitted values as nominal (frozen in later rounds)."""
+    options = dict(effect_spec.get("options", {}))
+    options["nominal"] = {**options.get("nominal", {}), **fitted}
+    return make_effect(effect_spec["name"], **options)
+
+
+def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: BemSettings | None = None,
+             calibration: CalibrationSettings | None = None, diagnosis: DiagnosisSettings | None = None,
+             executor=None, progress: Callable[[str], None] | None = None, rotor_source: dict | None = None) -> Diagnosis:
+    """Run the discrepancy workflow on the native BEM (see the module notes).
+
+    Parameters
+    ----------
+    rotor : Rotor
+    measurements : Measurements
+        Channels of the native BEM; σ from ``_sigma`` columns, ``calibration.sigma``, or
+        estimated (``calibration.noise = "ml"``) by the localization step.
+    grid : CorrectionGrid
+        Nodes of the correction field (localization and recalibration).
+    settings : BemSettings, optional
+    calibration : CalibrationSettings, optional
+        For the localization and the recalibration (the candidate fits retain every parameter).
+    diagnosis : DiagnosisSettings, optional
+    executor : Executor, optional
+        Runs the candidate fits (:mod:`calib.executors`; default serial).
+    progress : callable(str), optional
+        Receives one line per step.
+
+    Returns
+    -------
+    Diagnosis
+    """
+    t0 = time.perf_counter()
+    settings = settings or BemSettings()
+    cal = (calibration or CalibrationSettings()).validate()
+    dset = (diagnosis or DiagnosisSettings()).validate()
+    say = progress or (lambda s: None)
+    channels = list(measurements.channels)
+    candidates = tuple(dset.candidates) if dset.candidates is not None else NAMEABLE
+    if executor is None:
+        from calib.executors import SerialExecutor
+        executor = SerialExecutor()
+
+    # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
+    field_model = BemModel(rotor, grid, channels, settings, (), rotor_source=rotor_source)
+    say(f"localize: correction field, {field_model.grid.n_params} nodes")
+    loc = Calibrator(field_model, measurements, cal, name="localization").run()
+    sigma = loc.sigma
+    meas = dataclasses.replace(measurements, sigma=sigma)
+    known = dataclasses.replace(cal, noise="known", sigma=None, retain="all")
+    say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")
+
+    # 1. find
+    base_model = BemModel(rotor, None, channels, settings, (), rotor_source=rotor_source)
+    y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
+    before = gap(meas.values, y0, sigma, channels)
+    findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, rotor.rotor_radius)
+    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} (p = {before['p_value']:.2g})")
+    n_res = int(np.isfinite(y0).all(axis=1).sum() * len(channels))
+    field_change = (loc.model_after - y0) / sigma
+
+    # 3. name, up to max_effects rounds
+    base_effects, named, rounds = [], [], []
+    base_chi2, base_values = before["chi2"], y0
+    remaining = list(candidates)
+    for round_no in range(dset.max_effects):
+        if not remaining:
+            break
+        labels, effects = [], {}
+        for c in remaining:
+            for label, effect in _variants(c, dset.candidate_options.get(c, {})):
+                labels.append(label)
+                effects[label] = effect
+        tasks = [{"name": lab, "measurements": meas, "settings": known,
+                  "model": _candidate_model(rotor, channels, settings, base_effects, effects[lab])} for lab in labels]
+        say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
+        outs = executor.map(_fit_task, tasks)
+        fits = []
+        alpha = dset.significance / max(len(remaining), 1)
+        bic_base = base_chi2
+        for c, task, out in zip(labels, tasks, outs):
+            res, values = out["result"], out["values"]
+            n_base = sum(len(e.parameters()) for e in base_effects)
+            own = list(range(n_base, res.n_params))
+            chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
+            k = len(own)
+            lr = max(base_chi2 - chi2, 0.0)
+            p = float(stats.chi2.sf(lr, k)) if k else 1.0
+            change = (values - base_values) / sigma
+            a, b = change.reshape(-1), (field_change - (base_values - y0) / sigma).reshape(-1)
+            good = np.isfinite(a) & np.isfinite(b)
+            agree = float(np.corrcoef(a[good], b[good])[0, 1]) if good.sum() > 2 and np.std(a[good]) > 0 and \
+                np.std(b[good]) > 0 else float("nan")
+            params = [{"name": res.parameters[j]["name"], "value": float(res.p_hat[j]), "std": float(res.std_p[j]),
+                       "unit": res.parameters[j]["unit"], "nominal": float(res.p_nominal[j])} for j in own]
+            spec = effects[c].spec()
+            fits.append(CandidateFit(c, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(n_res), lr, p, p < alpha,
+                                     pattern_agreement=agree, status=res.status, spec=spec, model_values=values,
+                                     effect=c.split(":")[0]))
+        bics = np.array([f.bic for f in fits] + [bic_base])
+        wts = np.exp(-0.5 * (bics - bics.min()))
+        wts /= wts.sum()
+        for f, wgt in zip(fits, wts[:-1]):
+            f.weight = float(wgt)
+        fits.sort(key=lambda f: f.bic)
+        sig = [f for f in fits if f.significant]
+        if not sig:
+            verdict, reason = "none", (f"no candidate improves the fit significantly (likelihood ratio at family-wise "
+                                       f"level {dset.significance:g}); best {fits[0].name}: Λ = "
+                                       f"{fits[0].lr_statistic:.3g}, p = {fits[0].p_value:.2g}")
+            rounds.append({"base": [e.name for e in base_effects], "candidates": fits, "verdict": verdict,
+                           "reason": reason})
+            say(f"name: {reason}")
+            break
+        best = sig[0]
+        # variants of the same effect are not rivals: the best variant names the effect
+        rivals = [f for f in sig[1:] if f.bic - best.bic < dset.ambiguity_bic and f.effect != best.effect]
+        if rivals:
+            verdict = "ambiguous"
+            reason = (f"{best.effect} and {rivals[0].effect} fit about equally well (ΔBIC = "
+                      f"{rivals[0].bic - best.bic:.3g} < {dset.ambiguity_bic:g}); the data cannot tell them apart")
+            rounds.append({"base": [e.name for e in base_effects], "candidates": fits, "verdict": verdict,
+                           "reason": reason, "ambiguous": [best.effect, rivals[0].effect]})
+            say(f"name: {reason}")
+            if not named:
+                named.append("ambiguous:" + "+".join([best.effect, rivals[0].effect]))
+            break
+        reason = (f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), p = {best.p_value:.2g}; "
+                  f"BIC weight {best.weight:.3f}; next {fits[1].name if len(fits) > 1 else 'none'} "
+                  f"ΔBIC = {(fits[1].bic - best.bic) if len(fits) > 1 else float('inf'):.3g}; pattern agreement "
+                  f"with the localized correction {best.pattern_agreement:.2f}")
+        rounds.append({"base": [e.name for e in base_effects], "candidates": fits, "verdict": best.effect,
+                       "reason": reason})
+        say(f"name: {reason}")
+        named.append(best.effect)
+        base_effects.append(_fixed_effect(best.spec, {q["name"]: q["value"] for q in best.parameters}))
+        base_chi2, base_values = best.chi2, best.model_values
+        remaining = [c for c in remaining if c != best.effect]
+        # a further effect is looked for only while the model is still inconsistent with the noise
+        fit_now = gap(meas.values, base_values, sigma, channels, sum(len(e.parameters()) for e in base_effects))
+        if fit_now["p_value"] >= dset.significance:
+            say(f"name: with {', '.join(named)} the model is consistent with the noise (χ²/dof "
+                f"{fit_now['chi2_per_dof']:.3g}, p = {fit_now['p_value']:.2g}); no further effect is looked for")
+            break
+
+    effects_named = [n for n in named if not n.startswith("ambiguous:")]
+    if named and named[0].startswith("ambiguous:"):
+        effect = "ambiguous"
+    elif effects_named:
+        effect = effects_named[0]
+    else:
+        effect = "none"
+    n_fit = sum(len(e.parameters()) for e in base_effects)
+    with_effects = gap(meas.values, base_values, sigma, channels, n_fit)
+
+    # 4. add + recalibrate the field on top
+    recal, y_after = None, None
+    if dset.recalibrate:
+        model = BemModel(rotor, grid, channels, settings, (), effects=base_effects, rotor_source=rotor_source)
+        known_field = dataclasses.replace(cal, noise="known", sigma=None)
+        say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
+        recal = Calibrator(model, meas, known_field, name="recalibration").run()
+        y_after = recal.model_after
+        after = gap(meas.values, y_after, sigma, channels, n_fit + recal.n_retained)
+    else:
+        after = with_effects
+    say(f"show: χ²/dof {before['chi2_per_dof']:.3g} -> {with_effects['chi2_per_dof']:.3g} with "
+        f"{', '.join(effects_named) or 'no effect'} -> {after['chi2_per_dof']:.3g} after recalibration")
+    return Diagnosis(effect, effects_named, rounds, before, with_effects, after, findings, loc, recal, channels,
+                     meas.values, sigma, meas.conditions.as_dict(), y0, base_values, y_after, rotor.rotor_radius,
+                     time.perf_counter() - t0)

@@ -1,0 +1,159 @@
+"""Figures and the HTML report of a diagnosis (:func:`calib.discrepancy.diagnose`).
+
+- where the gap is: whitened residuals of each channel against tip-speed ratio (or wind
+  speed), nominal / with the named effect(s) / after the recalibration;
+- what was named on what evidence: ΔBIC and likelihood-ratio p-value of every candidate,
+  with the named one marked;
+- how much the gap shrank: χ²/dof and per-channel RMS before and after.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from calib.report.atomic import atomic_path, atomic_write_text  # noqa: E402
+
+
+def plot_gap(d) -> plt.Figure:
+    """Whitened residuals per channel against tip-speed ratio: nominal, with effects, after."""
+    lam = np.asarray(d.find["tip_speed_ratio"])
+    n = len(d.channels)
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.6), squeeze=False)
+    series = [("nominal", d.model_before, "C3", "x"),
+              (f"with {', '.join(d.effects) or 'no effect'}", d.model_with_effects, "C0", "o")]
+    if d.model_after is not None:
+        series.append(("after recalibration", d.model_after, "C2", "."))
+    for j, c in enumerate(d.channels):
+        ax = axes[0, j]
+        for label, model, color, marker in series:
+            w = (d.measured[:, j] - model[:, j]) / d.sigma[:, j]
+            ax.plot(lam, w, marker, color=color, ms=4, ls="none", label=label)
+        ax.axhspan(-2, 2, color="0.9", zorder=0)
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlabel("tip-speed ratio λ [-]")
+        ax.set_ylabel("(measured − model)/σ [-]")
+        ax.set_title(c, fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="best")
+    fig.suptitle("Where the gap is: whitened residuals (grey band ±2σ)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_candidates(d) -> plt.Figure:
+    """ΔBIC of every candidate against the model without it (first round), named one marked."""
+    fits = d.candidates
+    fig, ax = plt.subplots(figsize=(9.5, 0.45 * max(len(fits), 3) + 1.4))
+    if not fits:
+        ax.text(0.5, 0.5, "no candidates", ha="center")
+        return fig
+    base = min(f.bic for f in fits)
+    names = [f.name for f in fits]
+    dbic = np.array([f.bic - base for f in fits])
+    named = d.rounds[0]["verdict"] if d.rounds else ""
+    colors = ["C0" if (f.effect == named and f is fits[0]) else ("0.6" if f.significant else "0.85") for f in fits]
+    ax.barh(range(len(fits)), dbic + 0.5, color=colors)
+    for k, f in enumerate(fits):
+        ax.text(dbic[k] + 0.6, k, f"p = {f.p_value:.1g}, weight {f.weight:.2f}", va="center", fontsize=7)
+    ax.set_yticks(range(len(fits)), names, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xscale("symlog", linthresh=10)
+    ax.set_xlabel("ΔBIC to the best candidate (+0.5) [-]")
+    ax.set_title(f"Named: {d.effect}\n(blue: named; grey: significant by likelihood ratio; light: not)", fontsize=9)
+    ax.set_xlim(0, max(float(dbic.max()) * 8, 100))
+    ax.grid(True, axis="x", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def _table(header, rows) -> str:
+    th = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{th}</tr>{body}</table>"
+
+
+def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
+    """Write ``diagnosis.json``, the figures and ``report.html`` into ``out_dir`` (atomically)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    say = progress or (lambda s: None)
+    paths = {}
+    text = json.dumps(_jsonable(d.to_dict()), indent=1, allow_nan=True)
+    atomic_write_text(out / "diagnosis.json", text)
+    paths["json"] = out / "diagnosis.json"
+    figs = {}
+    for name, make in (("gap", plot_gap), ("candidates", plot_candidates)):
+        say(f"figure {name}")
+        fig = make(d)
+        with atomic_path(out / f"{name}.png") as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
+        figs[name] = out / f"{name}.png"
+        plt.close(fig)
+    import base64
+
+    def img(p):
+        return f'<img alt="{p.stem}" src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
+
+    rows = []
+    for r_no, rnd in enumerate(d.rounds):
+        for f in rnd["candidates"]:
+            rows.append((r_no + 1, html.escape(f.name), f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
+                         f"{f.lr_statistic:.4g}", f"{f.p_value:.2g}", "yes" if f.significant else "no",
+                         f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}",
+                         html.escape("; ".join(f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g} {q['unit']}"
+                                               for q in f.parameters))))
+    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{g['p_value']:.2g}",
+                 html.escape(", ".join(f"{c} {v:.4g}" for c, v in g["rms"].items())))
+                for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
+                                                         d.with_effects), ("after recalibration", d.after))]
+    reasons = "".join(f"<li>round {k + 1}: {html.escape(r['reason'])}</li>" for k, r in enumerate(d.rounds))
+    trend_rows = [(html.escape(c), f"{t['chi2_per_point']:.3g}", f"{t['mean_whitened']:+.2f}",
+                   f"{t['corr_tip_speed_ratio']:+.2f}", f"{t['corr_pitch']:+.2f}", f"{t['corr_wind_speed']:+.2f}",
+                   f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
+    body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>",
+            f"<p>Named effect(s): <b>{html.escape(', '.join(d.effects) or d.effect)}</b>. "
+            f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal) → {d.with_effects['chi2_per_dof']:.3g} (with the "
+            f"effect) → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field). "
+            f"Wall time {d.wall_time:.1f} s.</p>",
+            f"<h2>Evidence</h2><ul>{reasons}</ul>",
+            _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
+                    "pattern agreement", "fitted parameters (1σ)"], rows),
+            img(figs["candidates"]),
+            "<h2>Where the gap is</h2>",
+            _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
+                    "corr. with wind speed", "corr. with load level"], trend_rows),
+            img(figs["gap"]),
+            "<h2>How much it shrank</h2>",
+            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel"], gap_rows),
+            f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
+            f"{d.localization.chi2_per_dof_after:.3g}.</p>"]
+    if d.notes:
+        body.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in d.notes) + "</ul>")
+    css = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}"
+           "table{border-collapse:collapse;margin:.5em 0 1.2em}td,th{border:1px solid #ccc;padding:3px 7px}"
+           "th{background:#f0f0f0}img{max-width:100%}")
+    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>calib diagnose</title><style>{css}</style>"
+            f"</head><body>{''.join(body)}</body></html>")
+    atomic_write_text(out / "report.html", page)
+    paths["report"] = out / "report.html"
+    return paths
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    return x
