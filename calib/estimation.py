@@ -360,10 +360,13 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
     theta = np.zeros(n_theta) if theta0 is None else np.asarray(theta0, float).copy()
     lb = (problem.lower - problem.p0) / problem.scale
     ub = (problem.upper - problem.p0) / problem.scale
-    # keep the start feasible
+    # keep the start feasible: project into the box, and where the projection onto the subspace
+    # leaves it again, pull the start back toward nominal (θ = 0 is feasible) onto the boundary
     pt = np.clip(basis @ theta, lb, ub)
     if n_theta and not np.allclose(pt, basis @ theta):
         theta = np.linalg.lstsq(basis, pt, rcond=None)[0]
+    if n_theta and np.any((basis @ theta < lb) | (basis @ theta > ub)):
+        theta = _feasible_step(basis, np.zeros(n_theta), theta, lb, ub)
     lin = problem.linearize(problem.p_of(basis, theta))
     history = []
     if n_theta == 0:

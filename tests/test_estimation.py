@@ -137,3 +137,32 @@ def test_a_step_leaving_the_bounds_is_cut_back_to_them():
     np.testing.assert_allclose(step / np.linalg.norm(step), x / np.linalg.norm(x))
     inside = np.array([0.1, -0.1])
     np.testing.assert_array_equal(_feasible_step(B, theta, inside, -np.ones(2), np.ones(2)), inside)
+
+
+def test_an_infeasible_start_is_pulled_back_inside_the_bounds():
+    """A start θ₀ whose projection leaves the bounds (a new subspace after re-linearization)
+    is pulled back toward nominal; the model is never asked outside its bounds."""
+    calls = []
+
+    class Box:
+        parameters = (Parameter("a", 0.0, -1.0, 1.0, 1.0), Parameter("b", 0.0, -1.0, 1.0, 1.0))
+        channels = (Channel("y", "-"),)
+
+        def evaluate(self, p, cond):
+            calls.append(np.array(p))
+            return Evaluation(np.array([[p[0] + p[1]]] * len(cond)), np.zeros(len(cond), int), ("",) * len(cond),
+                              self.channels)
+
+        def jacobian(self, p, cond):
+            assert np.all(np.abs(p) <= 1.0 + 1e-12), p
+            calls.append(np.array(p))
+            return self.evaluate(p, cond), np.ones((len(cond), 1, 2))
+
+    cond = OperatingConditions([8.0], [10.0], [0.0])
+    model = Box()
+    problem = LeastSquaresProblem(model, cond, np.array([[0.5]]), np.array([[0.1]]), [0], np.zeros(2), np.ones(2),
+                                  -np.ones(2), np.ones(2))
+    basis = np.array([[2.0], [1.0]]) / np.sqrt(5)
+    # θ₀ = 3 gives (2.68, 1.34); clipped (1, 1) and projected back on the basis: (1.2, 0.6), still outside
+    out = estimate(problem, basis, np.array([3.0]))
+    assert np.all(np.abs(out.p) <= 1.0 + 1e-12) and all(np.all(np.abs(c) <= 1.0 + 1e-12) for c in calls)
