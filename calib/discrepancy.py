@@ -310,17 +310,33 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     field_change = (loc.model_after - y0) / sigma
 
     # 3. name, up to max_effects rounds
-    base_effects, named, rounds = [], [], []
+    base_effects, named, rounds, notes = [], [], [], []
     base_chi2, base_values = before["chi2"], y0
     remaining = list(candidates)
     for round_no in range(dset.max_effects):
         if not remaining:
             break
         labels, effects = [], {}
-        for c in remaining:
-            for label, effect in _variants(c, dset.candidate_options.get(c, {})):
+        for c in list(remaining):
+            try:
+                variants = _variants(c, dset.candidate_options.get(c, {}))
+                for label, effect in variants:
+                    # an effect that cannot act on this rotor (e.g. no reference Reynolds number) is
+                    # reported as not applicable, not fitted
+                    _candidate_model(rotor, channels, settings, base_effects, effect).evaluate(
+                        np.array([q.nominal for q in _candidate_model(rotor, channels, settings, base_effects,
+                                                                      effect).parameters]),
+                        meas.conditions.subset(slice(0, 1)))
+            except InputError as exc:
+                notes.append(f"candidate {c} not applicable: {exc}")
+                say(f"name: candidate {c} not applicable: {exc}")
+                remaining.remove(c)
+                continue
+            for label, effect in variants:
                 labels.append(label)
                 effects[label] = effect
+        if not labels:
+            break
         tasks = [{"name": lab, "measurements": meas, "settings": known,
                   "model": _candidate_model(rotor, channels, settings, base_effects, effects[lab])} for lab in labels]
         say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
@@ -418,4 +434,4 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         f"{', '.join(effects_named) or 'no effect'} -> {after['chi2_per_dof']:.3g} after recalibration")
     return Diagnosis(effect, effects_named, rounds, before, with_effects, after, findings, loc, recal, channels,
                      meas.values, sigma, meas.conditions.as_dict(), y0, base_values, y_after, rotor.rotor_radius,
-                     time.perf_counter() - t0)
+                     time.perf_counter() - t0, notes)

@@ -174,3 +174,18 @@ def test_hidden_effect_in_fmu_data_is_named(effect):
                       seed=9400)
     d = run(meas)
     assert d.effect == effect, d.rounds[0]["reason"]
+
+
+def test_a_candidate_that_cannot_act_on_the_rotor_is_reported_not_applicable():
+    """The Phase VI rotor has no operating schedule, so the Reynolds-number effect has no
+    reference Re: it is listed as not applicable and the diagnosis goes on."""
+    rotor = load_rotor("phase_vi")
+    T, P = np.meshgrid([3.0, 4.0, 5.0, 6.0], [0.0, 4.0], indexing="ij")
+    v = 72.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
+    cond = OperatingConditions(v, np.full(v.size, 72.0), P.ravel())
+    meas = hidden({"pitch_offset": {"pitch_offset": 1.0}}, cond, 9030, channels=("torque", "thrust"), rotor=rotor)
+    d = diagnose(rotor, meas, CorrectionGrid([0.0, 10.0, 20.0], [0.4, 0.8, 1.0]), SETTINGS,
+                 CalibrationSettings(cd_min=0.003),
+                 DiagnosisSettings(candidates=("reynolds_number", "pitch_offset"), recalibrate=False))
+    assert d.effect == "pitch_offset"
+    assert any("reynolds_number not applicable" in n for n in d.notes)
