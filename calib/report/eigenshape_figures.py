@@ -22,7 +22,7 @@ from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from calib.report.panels import DPI, Margins, settle_labels, title_height, wrap_title
+from calib.report.panels import DPI, Margins, title_height, wrap_title
 from calib.result import CalibrationResult
 
 MAX_COLUMNS = 6
@@ -96,9 +96,10 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     -----
     The maps are small multiples drawn as tiles of one axes (one image, a frame, node lines
     and the seen points per tile), not one axes each: matplotlib spends most of a figure's
-    time on axes and their ticks, and a 37-map grid of separate axes took seconds. Every
-    tile spans the node range: α along x, η = r/R along y, with the node values as ticks on
-    the left column and the bottom row.
+    time on axes and their ticks, and a 37-map grid of separate axes took seconds; for the
+    same reason the node values are plain text beside short tick marks, not axis ticks.
+    Every tile spans the node range: α along x, η = r/R along y, with the node values under
+    the lowest tile of each column and left of the first column.
     """
     if block not in ("lift", "drag"):
         raise ValueError(f"block must be 'lift' or 'drag', got {block!r}")
@@ -144,8 +145,8 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     us_a = (a_seen - a_nodes[0]) / (a_nodes[-1] - a_nodes[0])
     us_e = (e_seen - e_nodes[0]) / (e_nodes[-1] - e_nodes[0])
     da, de = 0.5 / (alpha.size - 1), 0.5 / (eta.size - 1)  # half a mesh cell in tile units
-    segments, frames, dots_x, dots_y = [], [], [], []
-    xticks, xlabels, yticks, ylabels = [], [], [], []
+    segments, frames, dots_x, dots_y, ticks = [], [], [], [], []
+    tick_x, tick_y = 0.03 / w, 0.03 / h                   # 0.03 in in tile units
     for k, i in enumerate(modes):
         row, col = divmod(k, ncol)
         x0, y1 = col * (1 + gx), -row * (1 + gy)
@@ -161,25 +162,26 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
         share = block_share(result.V, layout, i, block)
         ax.text(x0 + 0.5, y1 + 0.03, f"θ{i + 1}  σ={result.sigma_theta[i]:.2g}  {100 * share:.0f}% {block}",
                 ha="center", va="bottom", fontsize=7)
-        if row == nrow - 1:
-            xticks += list(x0 + ua)
-            xlabels += [f"{a:g}" for a in a_nodes]
-        if col == 0:
-            yticks += list(y0 + ue)
-            ylabels += [f"{e:g}" for e in e_nodes]
+        if k + ncol >= len(modes):             # lowest tile of its column: α node values under it
+            ticks += [[(x0 + u, y0), (x0 + u, y0 - tick_y)] for u in ua]
+            for u, a in zip(ua, a_nodes):
+                ax.text(x0 + u, y0 - 1.6 * tick_y, f"{a:g}", ha="center", va="top", fontsize=6)
+        if col == 0:                           # η node values left of the first column
+            ticks += [[(x0, y0 + u), (x0 - tick_x, y0 + u)] for u in ue]
+            for u, e in zip(ue, e_nodes):
+                ax.text(x0 - 1.6 * tick_x, y0 + u, f"{e:g}", ha="right", va="center", fontsize=6)
     ax.add_collection(LineCollection(segments, colors="0.55", linewidths=0.3))
+    ax.add_collection(LineCollection(ticks, colors="k", linewidths=0.6, clip_on=False))
     ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="0.2", linewidths=0.6))
     if a_seen.size:
         ax.plot(np.concatenate(dots_x), np.concatenate(dots_y), ",", color="k", alpha=0.35, rasterized=True)
-    ax.set_xticks(xticks, xlabels, fontsize=6)
-    ax.set_yticks(yticks, ylabels, fontsize=6)
-    ax.tick_params(length=2, pad=1)
-    ax.set_xlabel("α [deg] (every tile; bottom row labelled)", fontsize=7, labelpad=2)
-    ax.set_ylabel("η = r/R [-] (every tile; left column labelled)", fontsize=7, labelpad=2)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_xlabel("α [deg] (every tile; values of the α nodes under the lowest tiles)", fontsize=7, labelpad=16)
+    ax.set_ylabel("η = r/R [-] (every tile; values of the η nodes left)", fontsize=7, labelpad=22)
     cax = fig.add_axes(((width - m.right + 0.2) / width, m.bottom / height, 0.14 / width,
                         (height - m.bottom - m.top) / height))
     fig.colorbar(im, cax=cax)
     cax.tick_params(labelsize=6)
     cax.set_ylabel(f"ψ ({block}) [scale units per unit θ]", fontsize=7)
-    settle_labels(fig, ticklabel_size=6)
     return fig

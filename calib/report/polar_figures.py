@@ -94,7 +94,7 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
             lean_ticks(ax)
             if col == 0:
                 ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
-            ax.tick_params(labelsize=7, labelleft=col == 0)
+            ax.tick_params(labelsize=7, labelleft=col == 0, labelbottom=row == 1)
             ax.grid(True, alpha=0.3)
             if row == 0:
                 ax.set_title(f"η = {eta[j]:.2f}" + (f"; α seen {seen.min():.0f}…{seen.max():.0f}°" if seen.size
