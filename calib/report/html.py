@@ -74,7 +74,8 @@ def _sentences(r: CalibrationResult) -> list[str]:
     gof = r.goodness_of_fit()
     out = []
     if r.truncation:
-        out.append(f"The number of retained θ was chosen by leave-one-operating-point-out cross-validation: "
+        out.append(f"The number of retained θ was chosen by {r.truncation.get('criterion', 'K-fold')} cross-validation "
+                   f"over operating points (the fewest within one standard error of the minimum): "
                    f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {r.sigma_bar:.3g} scale units; criterion "
                    f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
                    f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained).")
@@ -140,7 +141,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
     counts = r.verdict_counts()
     key = [("operating points", r.n_points), ("channels", ", ".join(r.channels)),
            ("parameters", r.n_params), ("retained θ", r.n_retained),
-           ("truncation", "leave-one-point-out CV" if r.truncation else "threshold σ̄"),
+           ("truncation", f"{r.truncation.get('criterion', 'K-fold')} cross-validation" if r.truncation
+            else "threshold σ̄"),
            ("σ̄ [scale units]", r.sigma_bar),
            ("χ²/dof before (dof = N)", gof["chi2_per_dof_before"]), ("N", gof["dof_before"]),
            ("χ²/dof after (dof = N − retained)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),

@@ -85,7 +85,7 @@ def plot_spectra(results: Mapping[str, CalibrationResult], ax=None):
 
 
 def plot_truncation(result: CalibrationResult, ax=None):
-    """Leave-one-point-out criterion against the number of retained θ, with the choice.
+    """Cross-validation criterion against the number of retained θ, with the choice.
 
     Returns
     -------
@@ -99,7 +99,8 @@ def plot_truncation(result: CalibrationResult, ax=None):
     fig, ax = _fig_ax(ax)
     k, cv, fit = np.asarray(t["n_retained"]), np.asarray(t["cv"], float), np.asarray(t["fit"], float)
     finite = np.isfinite(cv)
-    ax.semilogy(k[finite], cv[finite], "o-", ms=3, color="C0", label="leave-one-point-out error (criterion)")
+    ax.semilogy(k[finite], cv[finite], "o-", ms=3, color="C0",
+                label=f"{t.get('criterion', 'K-fold')} cross-validated error (criterion)")
     ax.semilogy(k, np.maximum(fit, 1e-12), "s-", ms=2, color="0.5", lw=0.8, label="in-sample fit")
     chosen = int(t["chosen"])
     ax.axvline(chosen, color="C3", ls="--", lw=1, label=f"chosen: {chosen} retained")
