@@ -172,7 +172,7 @@ def test_write_figures_reports_progress_and_writes_png_only_by_default(result, t
         messages.append(text)
         existing.append(sorted(p.name for p in tmp_path.glob("*.png")))
 
-    paths = F.write_figures(result, tmp_path, progress=progress, workers=1)
+    paths = F.write_figures(result, tmp_path, progress=progress)
     assert existing[0] == []                                        # told before the first figure
     for name in paths:
         assert sum(f" {name} (" in m for m in messages) == 1       # one line per figure, with its time
@@ -204,7 +204,7 @@ def test_write_figures_draws_the_truth_it_is_given(result, tmp_path, monkeypatch
     def truth(alpha_deg, eta):
         return 0 * alpha_deg, 0 * alpha_deg
 
-    F.write_figures(result, tmp_path, truth=truth, workers=1)
+    F.write_figures(result, tmp_path, truth=truth)
     assert seen == [truth]
 
 
