@@ -540,7 +540,10 @@ def _run(cfg, setup, out, executor, progress, force):
         stage_dir.mkdir(exist_ok=True)
         t_rep = time.perf_counter()
         res.save(stage_dir)
-        figs = write_figures(res, stage_dir)
+        truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if truth_p is not None else None
+        figs = write_figures(res, stage_dir, truth=truth,
+                             progress=(lambda line: print(f"[calib run] {line}", flush=True))
+                             if progress else None)
         t_rep = time.perf_counter() - t_rep
         outcomes.append(StageOutcome(name, res, figs, stage_dir))
         if progress:
