@@ -73,17 +73,28 @@ def test_eigenshape_maps_stay_on_the_node_range(result):
     assert ax.get_xlim()[1] == pytest.approx(6 + 5 * gap)     # six tiles across, nothing beyond
 
 
+def _lines(fig, kind):
+    """{(row, col): Line2D} of the polar figure's lines of one kind (gid "kind:row:col")."""
+    return {tuple(int(v) for v in line.get_gid().split(":")[1:]): line for ax in fig.axes for line in ax.lines
+            if (line.get_gid() or "").startswith(kind + ":")}
+
+
 def test_polar_axes_cover_the_node_range_only(result):
     wide = dataclasses.replace(result, alpha_seen=np.concatenate([result.alpha_seen, [80.0]]),
                                eta_seen=np.concatenate([result.eta_seen, [0.6]]))
     fig = F.plot_polars(wide)
-    a = wide.layout.grid.alpha_nodes_deg
-    panels = fig.axes                                          # lift row, then drag row
-    assert len(panels) == 2 * min(5, wide.layout.grid.eta_nodes.size)
-    assert [ax.get_ylabel() for ax in panels[::len(panels) // 2]] == ["C_L [-]", "C_D [-]"]
-    for ax in panels:
-        assert ax.get_xlim() == pytest.approx((a[0], a[-1]))
-    assert any("α seen" in ax.get_title() and "80°" in ax.get_title() for ax in panels)
+    n = min(5, wide.layout.grid.eta_nodes.size)
+    gap = 0.15 / 2.6
+    assert [ax.get_ylabel() for ax in fig.axes] == ["C_L [-]", "C_D [-]"]
+    for ax in fig.axes:
+        assert ax.get_xlim() == pytest.approx((0, n + (n - 1) * gap))         # n tiles, nothing beyond
+    calibrated = _lines(fig, "calibrated")
+    assert sorted(calibrated) == [(r, c) for r in (0, 1) for c in range(n)]
+    for (row, col), line in calibrated.items():
+        # the node range [alpha_0, alpha_1] fills its tile exactly
+        assert (line.get_xdata().min(), line.get_xdata().max()) == pytest.approx((col * (1 + gap), col * (1 + gap) + 1))
+    titles = [t.get_text() for t in fig.axes[0].texts if t.get_text().startswith("η")]
+    assert len(titles) == n and any("α seen" in t and "80°" in t for t in titles)
 
 
 def test_each_fit_panel_has_a_residual_panel_under_it(result):
@@ -150,19 +161,17 @@ def test_known_truth_is_overlaid_on_the_polars(result):
 
     fig = F.plot_polars(result, truth=truth)
     pb = result.polar_bands
-    panels = fig.axes                                          # lift row, then drag row
-    eta_cols = station_columns(np.asarray(pb["eta"]), 5)
-    n_col = eta_cols.size
-    for k, ax in enumerate(panels):
-        row, col = divmod(k, n_col)
-        j = eta_cols[col]
-        [line] = [line for line in ax.lines if line.get_label() == "truth"]
+    cols = station_columns(np.asarray(pb["eta"]), 5)
+    lines = _lines(fig, "truth")
+    assert sorted(lines) == [(r, c) for r in (0, 1) for c in range(cols.size)]
+    for (row, col), line in lines.items():
+        j = cols[col]
         letter = ("cl", "cd")[row]
         dtrue = truth(np.asarray(pb["alpha_deg"]), pb["eta"][j])[row]
         np.testing.assert_allclose(line.get_ydata(), np.asarray(pb[f"{letter}0"])[j] + dtrue)
+        np.testing.assert_array_equal(line.get_xdata(), _lines(fig, "calibrated")[row, col].get_xdata())
     assert "truth" in _title(fig)
-    plain = F.plot_polars(result)
-    assert not [line for ax in plain.axes for line in ax.lines if line.get_label() == "truth"]
+    assert not _lines(F.plot_polars(result), "truth")
 
 
 def test_write_figures_reports_progress_and_writes_png_only_by_default(result, tmp_path):

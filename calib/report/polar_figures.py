@@ -1,10 +1,14 @@
 """Corrected polars C = C₀ + ΔC(α, η) with confidence bands at a few span stations.
 
-Lift on top, drag below (one scale per row), one column per η station, on the α range of
+Lift on top, drag below (one scale per row), one tile per η station, on the α range of
 the correction nodes (the corrections are defined there; the α the data reach at each
-station is stated in the panel title and shaded where it overlaps the node range). Where more than half of a band's
-variance comes from the prior (the data say little) the band is shaded in another colour.
-For a synthetic run a known truth ΔC(α, η) can be overlaid.
+station is stated in the tile title and shaded where it overlaps the node range). Where
+more than half of a band's variance comes from the prior (the data say little) the band
+is shaded in another colour. For a synthetic run a known truth ΔC(α, η) can be overlaid.
+
+Each row is one axes with the stations side by side as tiles (α mapped onto [0, 1] per
+tile, node-range ticks drawn as text): ten separate axes cost three quarters of this
+figure's time in matplotlib's tick machinery.
 """
 
 from __future__ import annotations
@@ -14,7 +18,11 @@ from typing import Callable
 
 import numpy as np
 
-from calib.report.panels import Margins, lean_ticks, panel_grid, settle_labels, title_height, wrap_title
+from matplotlib.collections import LineCollection, PatchCollection
+from matplotlib.patches import Rectangle
+from matplotlib.ticker import MaxNLocator
+
+from calib.report.panels import Margins, panel_grid, settle_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
 TruthField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -33,8 +41,14 @@ def _seen_near(result: CalibrationResult, eta: np.ndarray, j: int) -> np.ndarray
     return result.alpha_seen[np.abs(result.eta_seen - eta[j]) <= half]
 
 
+def alpha_ticks(a0: float, a1: float) -> np.ndarray:
+    """About five round α values inside [a0, a1] [deg]."""
+    t = MaxNLocator(5).tick_values(a0, a1)
+    return t[(t >= a0 - 1e-9) & (t <= a1 + 1e-9)]
+
+
 def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthField | None = None):
-    """Corrected polars with confidence bands, lift (top) and drag (bottom).
+    """Corrected polars with confidence bands, lift (top row) and drag (bottom row).
 
     Parameters
     ----------
@@ -48,66 +62,95 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
     Returns
     -------
     matplotlib.figure.Figure or None
-        None when the result has no polar bands.
+        None when the result has no polar bands. Its two axes (lift, drag) hold one tile
+        per station: station ``col`` spans x ∈ [col (1 + gap), col (1 + gap) + 1] with
+        x = (α − α₀)/(α₁ − α₀) inside; every drawn line carries the gid
+        ``"<kind>:<row>:<col>"`` (kind: nominal, calibrated, truth).
     """
     pb = result.polar_bands
     if not pb:
         return None
     alpha, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
     idx = station_columns(eta, max_stations)
-    margins = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, wgap=0.15, hgap=0.55)
-    size = (2.6, 2.1)
+    n = idx.size
+    tile_w, tile_h, gap = 2.6, 2.1, 0.15                 # [in]
+    gx = gap / tile_w                                     # gap in tile units
+    margins = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, hgap=0.55)
+    row_w = n * tile_w + (n - 1) * gap
     what = "corrected polars" + ("" if "cl0" in pb else " (corrections only)")
-    width = margins.left + idx.size * size[0] + (idx.size - 1) * margins.wgap + margins.right
+    width = margins.left + row_w + margins.right
     title = wrap_title(f"{result.name}: {what} on the α range of the correction nodes ({alpha[0]:g}…{alpha[-1]:g}°)"
                        + ("; dashed: known truth" if truth is not None else ""), width, 9)
-    fig, axes = panel_grid(2, idx.size, size, replace(margins, top=title_height(title, 9) + 0.3))
+    fig, axes = panel_grid(2, 1, (row_w, tile_h), replace(margins, top=title_height(title, 9) + 0.45))
     fig.suptitle(title, fontsize=9, y=1 - 0.08 / fig.get_size_inches()[1])
     conf = float(pb.get("confidence", 0.95))
     truth_d = None
     if truth is not None:
         A, E = np.meshgrid(alpha, eta[idx])
         truth_d = [np.broadcast_to(np.asarray(t, float), A.shape) for t in truth(A, E)]
-    for col, j in enumerate(idx):
-        seen = _seen_near(result, eta, j)
-        for row, letter in enumerate(("cl", "cd")):
-            ax = axes[row, col]
+    u = (alpha - alpha[0]) / (alpha[-1] - alpha[0])
+    a_ticks = alpha_ticks(alpha[0], alpha[-1])
+    ua_ticks = (a_ticks - alpha[0]) / (alpha[-1] - alpha[0])
+    seen = [_seen_near(result, eta, j) for j in idx]
+    for row, letter in enumerate(("cl", "cd")):
+        ax = axes[row, 0]
+        xt = ax.get_xaxis_transform()                    # x in data, y in axes fraction
+        frames, vgrid, marks = [], [], []
+        for col, j in enumerate(idx):
+            x0 = col * (1 + gx)
+            x = x0 + u
+            first = col == 0
             base = np.asarray(pb[f"{letter}0"])[j] if f"{letter}0" in pb else np.zeros_like(alpha)
             d, hw = np.asarray(pb[f"d{letter}"])[j], np.asarray(pb[f"d{letter}_half_width"])[j]
-            ax.plot(alpha, base, color="0.5", lw=1, label="nominal")
-            ax.fill_between(alpha, base + d - hw, base + d + hw, color="C0", alpha=0.25, lw=0,
-                            label=f"{100 * conf:.0f}% band")
+            ax.plot(x, base, color="0.5", lw=1, label="nominal" if first else "_nolegend_", gid=f"nominal:{row}:{col}")
+            ax.fill_between(x, base + d - hw, base + d + hw, color="C0", alpha=0.25, lw=0,
+                            label=f"{100 * conf:.0f}% band" if first else "_nolegend_")
             frac_key = f"d{letter}_prior_fraction"
             if frac_key in pb:
                 prior_dom = np.asarray(pb[frac_key])[j] > 0.5
                 if prior_dom.any():
-                    ax.fill_between(alpha, base + d - hw, base + d + hw, where=prior_dom, color="C1", alpha=0.25,
-                                    lw=0, label="band set by the prior (data say little)")
-            ax.plot(alpha, base + d, color="C0", lw=1.2, label="calibrated")
+                    ax.fill_between(x, base + d - hw, base + d + hw, where=prior_dom, color="C1", alpha=0.25, lw=0,
+                                    label="band set by the prior (data say little)" if first else "_nolegend_")
+            ax.plot(x, base + d, color="C0", lw=1.2, label="calibrated" if first else "_nolegend_",
+                    gid=f"calibrated:{row}:{col}")
             if truth_d is not None:
-                ax.plot(alpha, base + truth_d[row][col], "--", color="k", lw=1, label="truth")
-            if seen.size:
-                lo, hi = max(seen.min(), alpha[0]), min(seen.max(), alpha[-1])
+                ax.plot(x, base + truth_d[row][col], "--", color="k", lw=1, label="truth" if first else "_nolegend_",
+                        gid=f"truth:{row}:{col}")
+            s = seen[col]
+            if s.size:
+                lo, hi = max(s.min(), alpha[0]), min(s.max(), alpha[-1])
                 if lo < hi:
-                    ax.axvspan(lo, hi, color="C2", alpha=0.08, lw=0, label="α seen")
-            ax.set_xlim(alpha[0], alpha[-1])
-            lean_ticks(ax)
-            if col == 0:
-                ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
-            ax.tick_params(labelsize=7, labelleft=col == 0, labelbottom=row == 1)
-            ax.grid(True, alpha=0.3)
+                    ulo, uhi = (np.array([lo, hi]) - alpha[0]) / (alpha[-1] - alpha[0])
+                    ax.axvspan(x0 + ulo, x0 + uhi, color="C2", alpha=0.08, lw=0,
+                               label="α seen" if first else "_nolegend_")
+            frames.append(Rectangle((x0, 0), 1, 1))
+            vgrid += [[(x0 + t, 0), (x0 + t, 1)] for t in ua_ticks]
             if row == 0:
-                ax.set_title(f"η = {eta[j]:.2f}" + (f"; α seen {seen.min():.0f}…{seen.max():.0f}°" if seen.size
-                                                     else "; no α seen"), fontsize=8, pad=3, y=1.0)
+                ax.text(x0 + 0.5, 1.02, f"η = {eta[j]:.2f}" + (f"; α seen {s.min():.0f}…{s.max():.0f}°" if s.size
+                                                               else "; no α seen"),
+                        transform=xt, ha="center", va="bottom", fontsize=8)
             else:
-                ax.set_xlabel("α [deg]", fontsize=8)
-            if col == 0 and row == 0:
-                ax.legend(fontsize=6, loc="best")
-    for row in axes:                                     # one C_L and one C_D scale across the stations
-        lo = min(ax.dataLim.y0 for ax in row)
-        hi = max(ax.dataLim.y1 for ax in row)
-        pad = 0.05 * (hi - lo) if hi > lo else 0.05
-        for ax in row:
-            ax.set_ylim(lo - pad, hi + pad)
+                marks += [[(x0 + t, 0), (x0 + t, -0.02)] for t in ua_ticks]
+                for t, a in zip(ua_ticks, a_ticks):
+                    ax.text(x0 + t, -0.035, f"{a:g}", transform=xt, ha="center", va="top", fontsize=7)
+                ax.text(x0 + 0.5, -0.13, "α [deg]", transform=xt, ha="center", va="top", fontsize=8)
+        for k in range(n - 1):                           # white gaps between tiles, over the y grid
+            ax.axvspan(k * (1 + gx) + 1, (k + 1) * (1 + gx), color="white", lw=0, zorder=0.8)
+        ax.add_collection(LineCollection(vgrid, colors="0.85", linewidths=0.6, transform=xt, zorder=0.7))
+        ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="k", linewidths=0.8, transform=xt,
+                                          zorder=2.5))
+        if marks:
+            ax.add_collection(LineCollection(marks, colors="k", linewidths=0.8, transform=xt, clip_on=False))
+        for spine in ax.spines.values():
+            spine.set_visible(False)
+        ax.set_xlim(0, n + (n - 1) * gx)
+        ax.set_xticks([])
+        ax.yaxis.set_major_locator(MaxNLocator(5))
+        ax.yaxis.grid(True, color="0.85", lw=0.6)
+        ax.set_axisbelow(True)
+        ax.tick_params(axis="y", labelsize=7)
+        ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
+        if row == 0:
+            ax.legend(fontsize=6, loc="lower right", bbox_to_anchor=(1.0, 0.02), bbox_transform=xt)
     settle_labels(fig)
     return fig
