@@ -48,7 +48,8 @@ def plot_singular_values(result: CalibrationResult, ax=None):
                    label=f"cut 1/σ̄ = {1 / result.sigma_bar:.3g}")
     ax.set_xlabel("index i")
     ax.set_ylabel("s_i = 1/σ(θ_i) [1/scale]")
-    ax.set_title(f"{result.name}: singular-value spectrum ({result.n_retained} of {s.size} retained)", fontsize=10, y=1.0)
+    ax.set_title(f"{result.name}: singular-value spectrum ({result.n_retained} of {s.size} retained)", fontsize=10,
+                 y=1.0)
     lean_log_ticks(ax)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
