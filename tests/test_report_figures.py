@@ -213,7 +213,7 @@ def test_write_figures_draws_the_truth_it_is_given(result, tmp_path, monkeypatch
     def truth(alpha_deg, eta):
         return 0 * alpha_deg, 0 * alpha_deg
 
-    F.write_figures(result, tmp_path, truth=truth)
+    F.write_figures(result, tmp_path, truth=truth, workers=1)     # the spy lives in this process
     assert seen == [truth]
 
 

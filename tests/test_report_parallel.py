@@ -1,0 +1,140 @@
+"""Figures drawn in forked workers: the same files as in one process, errors and Ctrl-C handled."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.measurements import synthesize
+from calib.models.base import nominal_vector
+from calib.report import figures as F
+from calib.report.atomic import is_temporary
+from calib.report.parallel import fork_available, partition
+from test_report_atomic import broken_files
+from twin_model import TwinModel, twin_conditions
+
+ROOT = Path(__file__).resolve().parents[1]
+needs_fork = pytest.mark.skipif(not fork_available(), reason="no os.fork, or other threads running")
+
+
+@pytest.fixture(scope="module")
+def result():
+    model = TwinModel(channels=("power", "thrust", "root_flap_moment"))
+    p_true = nominal_vector(model.parameters)
+    p_true[:model.grid.n_lift] = 0.05 * np.sin(np.arange(model.grid.n_lift))
+    meas = synthesize(model, p_true, twin_conditions(),
+                      relative_sigma={"power": 0.005, "thrust": 0.005, "root_flap_moment": 0.005}, seed=5)
+    return Calibrator(model, meas, CalibrationSettings(sigma_bar=0.3), name="twin").run()
+
+
+def test_partition_balances_the_costs_and_keeps_the_order():
+    costs = {"a": 1.0, "b": 5.0, "c": 1.0, "d": 2.0, "e": 2.0, "f": 1.0}
+    groups = partition(costs, 2)
+    assert sorted(n for g in groups for n in g) == sorted(costs)
+    loads = [sum(costs[n] for n in g) for g in groups]
+    assert max(loads) == 6.0                                  # the best split of 12 is 6 + 6
+    for g in groups:
+        assert g == sorted(g, key=list(costs).index)
+    assert sorted(partition(costs, 10)) == [[n] for n in sorted(costs)]     # at most one group per task
+    assert partition(costs, 1) == [list(costs)]
+
+
+@needs_fork
+def test_workers_write_the_same_files_as_one_process(result, tmp_path):
+    def truth(alpha_deg, eta):
+        return 0.05 * np.cos(np.radians(alpha_deg)) + 0 * eta, 0.001 + 0 * alpha_deg
+
+    serial = F.write_figures(result, tmp_path / "one", truth=truth, workers=1)
+    messages = []
+    forked = F.write_figures(result, tmp_path / "two", truth=truth, workers=2, progress=messages.append)
+    assert list(forked) == list(serial)
+    for name in serial:
+        assert forked[name]["png"].parent == tmp_path / "two"
+        assert forked[name]["png"].read_bytes() == serial[name]["png"].read_bytes(), name
+    assert "2 processes" in messages[0]
+    assert sorted(m.split()[3] for m in messages[1:-1]) == sorted(serial)   # one line per figure
+    plain = F.write_figures(result, tmp_path / "plain", workers=2)
+    assert plain["polars"]["png"].read_bytes() != forked["polars"]["png"].read_bytes()   # the truth is drawn
+    assert not [p for p in (tmp_path / "two").iterdir() if is_temporary(p)]
+
+
+@needs_fork
+def test_a_figure_failing_in_a_worker_raises_its_own_error(result, tmp_path, monkeypatch):
+    def broken(res, truth=None):
+        raise ValueError("this figure cannot be drawn")
+
+    monkeypatch.setitem(F.FIGURES, "broken", broken)
+    with pytest.raises(ValueError, match="cannot be drawn"):
+        F.write_figures(result, tmp_path, workers=2)
+
+
+CHILD = textwrap.dedent('''
+    import signal
+    import sys
+    from pathlib import Path
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)   # even if started with SIGINT ignored
+    from calib.report import figures as F
+    from calib.result import load_result
+
+    res = load_result(sys.argv[1])
+    print("ready", flush=True)
+    try:
+        F.write_figures(res, Path(sys.argv[2]), formats=("svg", "png"), workers=2,
+                        progress=lambda text: print(text, flush=True))
+        print("finished", flush=True)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+        sys.exit(130)
+''')
+
+
+def _interrupt(tmp_path, saved: Path, whole_group: bool):
+    script = tmp_path / "writer.py"
+    script.write_text(CHILD)
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, str(script), str(saved), str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+    try:
+        lines = []
+        for line in proc.stdout:                          # the first figure is done: the rest are drawing
+            lines.append(line.strip())
+            if " figure 1/" in line:
+                break
+        assert lines and " figure 1/" in lines[-1], (lines, proc.stderr.read())
+        time.sleep(0.2)
+        if whole_group:
+            os.killpg(proc.pid, signal.SIGINT)            # what Ctrl-C in a terminal does
+        else:
+            proc.send_signal(signal.SIGINT)               # the parent alone
+        rest, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130 and rest.strip().endswith("interrupted"), (rest, err)
+    assert "Traceback" not in err, err                     # no worker printed a traceback
+    time.sleep(0.5)
+    with pytest.raises(ProcessLookupError):                # no worker left running
+        os.killpg(proc.pid, 0)
+    return out
+
+
+@needs_fork
+@pytest.mark.parametrize("whole_group", [True, False], ids=["ctrl-c", "sigint-to-parent"])
+def test_sigint_stops_the_workers_and_leaves_no_truncated_file(result, tmp_path, whole_group):
+    saved = tmp_path / "saved"
+    result.save(saved)
+    out = _interrupt(tmp_path, saved, whole_group)
+    assert broken_files(out) == []
+    written = {p.stem for p in out.iterdir()}
+    applicable = len(F.FIGURES) - (not result.truncation)  # the truncation curve needs sigma_bar = "auto"
+    assert 1 <= len(written) < applicable                  # stopped part-way, not finished
