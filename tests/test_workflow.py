@@ -88,7 +88,7 @@ def test_small_workflow_writes_results_figures_and_report(tmp_path):
     out = tmp_path / "out"
     outcomes = run_workflow(write(tmp_path, SMALL), out, progress=False)
     stage_dir = outcomes[0].out_dir
-    for name in ("result.json", "result.npz", "singular_values.png", "singular_values.svg",
+    for name in ("result.json", "result.npz", "singular_values.png",
                  "eigenshapes_lift.png", "fit.png", "polars.png", "correlation.png"):
         assert (stage_dir / name).is_file(), name
     html = (out / "report.html").read_text()
