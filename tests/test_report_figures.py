@@ -97,18 +97,27 @@ def test_polar_axes_cover_the_node_range_only(result):
     assert len(titles) == n and any("α seen" in t and "80°" in t for t in titles)
 
 
-def test_each_fit_panel_has_a_residual_panel_under_it(result):
+def _xlabel(fig) -> str:
+    return next(t.get_text() for t in fig.axes[0].texts if t.get_gid() == "xlabel")
+
+
+def test_each_fit_panel_has_a_residual_strip_under_it(result):
     fig = F.plot_fit(result)
-    mains = [ax for ax in fig.axes if ax.get_ylabel().endswith("]") and "σ" not in ax.get_ylabel()]
-    lowers = [ax for ax in fig.axes if ax.get_ylabel() == "(meas − after)/σ"]
-    assert len(mains) == len(lowers) == len(result.channels)
+    assert [ax.get_ylabel() for ax in fig.axes] == [f"{c} [{u}]" for c, u in zip(result.channels,
+                                                                                 result.channel_units)]
     r = whitened_residual(result)
-    for k, (main, low) in enumerate(zip(mains, lowers)):
-        assert low.get_position().y1 < main.get_position().y0                  # under it
-        assert low.get_shared_x_axes().joined(low, main)                       # same abscissa
-        drawn = [line.get_ydata() for line in low.lines if line.get_marker() == "o"]
-        np.testing.assert_allclose(drawn[0], r[:, k])
-        assert np.max(np.abs(r[:, k])) <= abs(low.get_ylim()[0])              # nothing clipped
+    for k, ax in enumerate(fig.axes):
+        [strip] = [line for line in ax.lines if line.get_gid() == f"residual:{k}"]
+        np.testing.assert_array_equal(strip.get_xdata(), fit_abscissa(result)[0])   # same abscissa
+        y = strip.get_ydata()                         # axes fraction: under the plotting area (y < 0)
+        assert y.max() < 0
+        # an increasing affine map of the whitened residual, nothing clipped or reordered
+        slope, offset = np.polyfit(r[:, k], y, 1)
+        assert slope > 0
+        np.testing.assert_allclose(y, offset + slope * r[:, k], atol=1e-12)
+        frame = [p for p in ax.patches if not p.get_fill()][0]
+        assert frame.get_y() <= y.min() and y.max() <= frame.get_y() + frame.get_height()
+        assert frame.get_y() + frame.get_height() < 0
 
 
 def test_fit_abscissa_follows_the_rotor_speed(result):
@@ -117,7 +126,7 @@ def test_fit_abscissa_follows_the_rotor_speed(result):
     assert np.ptp(result.conditions["rotor_speed"]) > 0
     np.testing.assert_array_equal(x, result.conditions["wind_speed"])
     assert label.startswith("wind speed") and "varies" in reason
-    assert F.plot_fit(result).axes[1].get_xlabel().startswith("wind speed")
+    assert _xlabel(F.plot_fit(result)).startswith("wind speed")
     # constant rotor speed and a known radius -> tip-speed ratio
     cond = dict(result.conditions)
     cond["rotor_speed"] = np.full_like(cond["wind_speed"], 20.0)
@@ -125,7 +134,7 @@ def test_fit_abscissa_follows_the_rotor_speed(result):
     x, label, _ = fit_abscissa(sweep)
     np.testing.assert_allclose(x, 20.0 * np.pi / 30 * RADIUS / cond["wind_speed"])
     assert label.startswith("tip-speed ratio")
-    assert F.plot_fit(sweep).axes[1].get_xlabel().startswith("tip-speed ratio")
+    assert _xlabel(F.plot_fit(sweep)).startswith("tip-speed ratio")
     # constant rotor speed, radius unknown -> wind speed, and the reason says why
     x, label, reason = fit_abscissa(dataclasses.replace(sweep, rotor_radius=None))
     assert label.startswith("wind speed") and "radius unknown" in reason

@@ -131,7 +131,8 @@ def figure_costs(result: CalibrationResult) -> dict[str, float]:
     costs = {name: 1.0 for name in FIGURES}
     per_block = 1.0 + result.n_retained / 8.0
     costs.update({"singular_values": 0.7, "truncation": 0.7, "correlation": 1.5, "polars": 2.0,
-                  "eigenshapes_lift": per_block, "eigenshapes_drag": per_block, "fit": 0.6 + 0.6 * len(result.channels)})
+                  "eigenshapes_lift": per_block, "eigenshapes_drag": per_block,
+                  "fit": 1.0 + 0.45 * len(result.channels)})
     return {name: costs[name] for name in FIGURES}
 
 

@@ -12,14 +12,16 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from matplotlib.ticker import MaxNLocator
+from matplotlib.collections import LineCollection
+from matplotlib.patches import Rectangle
 
-from calib.report.panels import Margins, lean_ticks, paired_grid, settle_labels, title_height, wrap_title
+from calib.report.panels import Margins, lean_ticks, panel_grid, settle_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
 ROTOR_SPEED_VARIATION = 0.01   # relative spread [-] above which the rotor speed "varies"
 MAX_PITCH_LINES = 8            # join model points of equal pitch when there are at most this many pitches
-PANEL_SIZE = (3.6, 2.2)        # main panel of a channel [in]; its residual panel is 0.45 of its height
+PANEL_SIZE = (3.6, 2.2)        # main panel of a channel [in]
+STRIP_HEIGHT = 1.0             # residual strip under it [in]
 
 
 def fit_abscissa(result: CalibrationResult) -> tuple[np.ndarray, str, str]:
@@ -74,11 +76,16 @@ def whitened_residual(result: CalibrationResult, which: str = "after") -> np.nda
 
 
 def plot_fit(result: CalibrationResult):
-    """Measured vs model before and after calibration per channel, each over its residual panel.
+    """Measured vs model before and after calibration per channel, each over its residual strip.
 
     Returns
     -------
     matplotlib.figure.Figure
+        One axes per channel (in channel order). The residual strip under each is drawn in
+        that axes' coordinates below its plotting area (x in data, y in axes fraction
+        ``[-(g + s), -g]``) instead of in an axes of its own, which would double the
+        figure's most expensive part; its points carry the gid ``"residual:<k>"`` and the
+        x-axis label the gid ``"xlabel"``.
     """
     x, xlabel, reason = fit_abscissa(result)
     nc = len(result.channels)
@@ -87,19 +94,24 @@ def plot_fit(result: CalibrationResult):
     pitch = np.asarray(result.conditions.get("pitch", np.zeros_like(x)), float)
     groups = _pitch_groups(x, pitch)
     lines = " (lines join points of equal pitch)" if groups else ""
-    margins = Margins(left=0.85, right=0.2, bottom=0.55, top=0.7, wgap=0.85, hgap=0.75)
-    width = margins.left + ncol * PANEL_SIZE[0] + (ncol - 1) * margins.wgap + margins.right
+    w, h = PANEL_SIZE
+    gap, strip, below = 0.08, STRIP_HEIGHT, 0.5           # [in]: under each main panel
+    margins = Margins(left=0.85, right=0.2, bottom=gap + strip + below, top=0.7, wgap=0.85,
+                      hgap=gap + strip + below + 0.3)
+    width = margins.left + ncol * w + (ncol - 1) * margins.wgap + margins.right
     title = wrap_title(f"{result.name}: measured vs model before and after calibration, against "
                        f"{xlabel.split(' [')[0]} ({reason}){lines}; under each channel: whitened residual after "
                        f"calibration, bands ±1 and ±2", width, 9)
-    fig, axes = paired_grid(nrow, ncol, PANEL_SIZE, 0.45, replace(margins, top=title_height(title, 9) + 0.3),
-                            n_panels=nc)
+    fig, axes = panel_grid(nrow, ncol, PANEL_SIZE, replace(margins, top=title_height(title, 9) + 0.3), n_panels=nc)
     fig.suptitle(title, fontsize=9, y=1 - 0.06 / fig.get_size_inches()[1])
     okb, oka = result.status_before == 0, result.status_after == 0
     res_after = whitened_residual(result, "after")
     gof = result.goodness_of_fit()["per_channel"]
+    span = float(np.ptp(x)) or 1.0
+    xlo, xhi = float(np.min(x)) - 0.04 * span, float(np.max(x)) + 0.04 * span
+    g, s = gap / h, strip / h                              # strip position in axes fraction
     for k, (ch, unit) in enumerate(zip(result.channels, result.channel_units)):
-        ax, rax = axes[k // ncol, k % ncol]
+        ax = axes[k // ncol, k % ncol]
         ax.errorbar(x, result.measured[:, k], yerr=result.sigma[:, k], fmt=".", color="k", ms=3, lw=0.6,
                     label="measured ±σ")
         ax.plot(x[okb], result.model_before[okb, k], "x", color="C3", ms=4, label="model before")
@@ -107,8 +119,8 @@ def plot_fit(result: CalibrationResult):
         for idx in groups:
             idx = idx[oka[idx]]
             ax.plot(x[idx], result.model_after[idx, k], "-", color="C0", lw=0.5, alpha=0.6)
+        ax.set_xlim(xlo, xhi)
         lean_ticks(ax)
-        rax.yaxis.set_major_locator(MaxNLocator(4, integer=True))
         ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
         ax.tick_params(labelsize=7, labelbottom=False)
         ax.grid(True, alpha=0.3)
@@ -116,19 +128,44 @@ def plot_fit(result: CalibrationResult):
                      f"{gof[ch]['chi2_per_point_after']:.3g}", fontsize=8, pad=3, y=1.0)
         if k == 0:
             ax.legend(fontsize=6, loc="best")
-        r = res_after[:, k]
-        lim = max(3.0, 1.15 * float(np.nanmax(np.abs(r)))) if np.isfinite(r).any() else 3.0
-        rax.axhspan(-2, 2, color="C0", alpha=0.08, lw=0)
-        rax.axhspan(-1, 1, color="C0", alpha=0.12, lw=0)
-        rax.axhline(0, color="k", lw=0.6)
-        rax.plot(x, r, "o", mfc="none", color="C0", ms=3)
-        if (~oka).any():
-            rax.plot(x[~oka], np.full((~oka).sum(), -0.9 * lim), "v", color="C3", ms=4, label="model failed")
-            rax.legend(fontsize=6, loc="lower right")
-        rax.set_ylim(-lim, lim)
-        rax.set_ylabel("(meas − after)/σ", fontsize=7)
-        rax.set_xlabel(xlabel, fontsize=8)
-        rax.tick_params(labelsize=7)
-        rax.grid(True, alpha=0.3)
+        _residual_strip(ax, x, res_after[:, k], ~oka, (xlo, xhi), g, s, k)
+        ax.text(0.5, -(g + s) - 0.13, xlabel, transform=ax.transAxes, ha="center", va="top", fontsize=8, gid="xlabel")
     settle_labels(fig)
     return fig
+
+
+def _residual_strip(ax, x, r, failed, xlim, g: float, s: float, k: int) -> None:
+    """Whitened residuals in a strip under ``ax`` (axes fraction y in [-(g + s), -g]), bands ±1 and ±2."""
+    lim = max(3.0, 1.15 * float(np.nanmax(np.abs(r)))) if np.isfinite(r).any() else 3.0
+    xt = ax.get_xaxis_transform()                          # x in data, y in axes fraction
+    y0 = -(g + s)
+
+    def to_strip(v):
+        return y0 + s * (np.asarray(v, float) + lim) / (2 * lim)
+
+    xlo, xhi = xlim
+    for level, alpha in ((2, 0.08), (1, 0.12)):
+        ax.add_patch(Rectangle((xlo, to_strip(-level)), xhi - xlo, to_strip(level) - to_strip(-level), transform=xt,
+                               color="C0", alpha=alpha, lw=0, clip_on=False))
+    ax.add_patch(Rectangle((xlo, y0), xhi - xlo, s, transform=xt, fill=False, lw=0.8, clip_on=False))
+    locs = [t for t in ax.xaxis.get_majorticklocs() if xlo <= t <= xhi]
+    labels = ax.xaxis.get_major_formatter().format_ticks(locs)
+    grid = [[(t, y0), (t, -g)] for t in locs] + [[(xlo, to_strip(0)), (xhi, to_strip(0))]]
+    ax.add_collection(LineCollection(grid, colors=["0.85"] * len(locs) + ["k"], linewidths=[0.6] * len(locs) + [0.6],
+                                     transform=xt, clip_on=False))
+    marks = [[(t, y0), (t, y0 - 0.02)] for t in locs]
+    levels = [v for v in (-2, 0, 2)]
+    marks_y = [[(0, to_strip(v)), (-0.012, to_strip(v))] for v in levels]
+    ax.add_collection(LineCollection(marks, colors="k", linewidths=0.8, transform=xt, clip_on=False))
+    ax.add_collection(LineCollection(marks_y, colors="k", linewidths=0.8, transform=ax.transAxes, clip_on=False))
+    for t, label in zip(locs, labels):
+        ax.text(t, y0 - 0.03, label, transform=xt, ha="center", va="top", fontsize=7)
+    for v in levels:
+        ax.text(-0.02, to_strip(v), f"{v:+d}" if v else "0", transform=ax.transAxes, ha="right", va="center",
+                fontsize=7)
+    ax.text(-0.1, y0 + s / 2, "(meas − after)/σ", transform=ax.transAxes, rotation=90, ha="center", va="center",
+            fontsize=7)
+    ax.plot(x, to_strip(r), "o", mfc="none", color="C0", ms=3, transform=xt, clip_on=False, gid=f"residual:{k}")
+    if failed.any():
+        ax.plot(x[failed], to_strip(np.full(failed.sum(), -0.9 * lim)), "v", color="C3", ms=4, transform=xt,
+                clip_on=False, label="model failed")
