@@ -88,52 +88,6 @@ def colorbar_axes(fig: Figure, axes, width: float = 0.14, pad: float = 0.15):
     return fig.add_axes((x1 + pad / fw, y0, width / fw, y1 - y0))
 
 
-def paired_grid(nrow: int, ncol: int, panel_size: tuple[float, float], lower_ratio: float = 0.4,
-                margins: Margins = Margins(), inner_gap: float = 0.08, n_panels: int | None = None):
-    """A grid of panel pairs: a main panel over a shorter one sharing its x axis.
-
-    Parameters
-    ----------
-    nrow, ncol : int
-        Pairs down and across.
-    panel_size : (float, float)
-        Width and height of the main panel [in].
-    lower_ratio : float
-        Height of the lower panel over the main panel's [-].
-    margins : Margins
-        Outer margins; ``hgap`` separates pairs [in].
-    inner_gap : float
-        Gap between the two panels of a pair [in].
-    n_panels : int, optional
-        Create only the first ``n_panels`` pairs in row order (the others are None).
-
-    Returns
-    -------
-    fig : matplotlib.figure.Figure
-    axes : ndarray of Axes or None, shape (nrow, ncol, 2)
-        ``[..., 0]`` main panels, ``[..., 1]`` lower panels.
-    """
-    w, h = panel_size
-    pair_h = h * (1 + lower_ratio) + inner_gap
-    width = margins.left + ncol * w + (ncol - 1) * margins.wgap + margins.right
-    height = margins.bottom + nrow * pair_h + (nrow - 1) * margins.hgap + margins.top
-    fig = Figure(figsize=(width, height), dpi=DPI)
-    n_panels = nrow * ncol if n_panels is None else n_panels
-    axes = np.empty((nrow, ncol, 2), dtype=object)
-    for i in range(nrow):
-        for j in range(ncol):
-            if i * ncol + j >= n_panels:
-                continue
-            x0 = margins.left + j * (w + margins.wgap)
-            y_top = height - margins.top - i * (pair_h + margins.hgap)
-            main = fig.add_axes((x0 / width, (y_top - h) / height, w / width, h / height))
-            low_h = h * lower_ratio
-            lower = fig.add_axes((x0 / width, (y_top - h - inner_gap - low_h) / height, w / width, low_h / height),
-                                 sharex=main)
-            axes[i, j, 0], axes[i, j, 1] = main, lower
-    return fig, axes
-
-
 def lean_ticks(ax, nbins: int = 5) -> None:
     """At most about ``nbins`` ticks per axis (each tick is several artists to build and draw)."""
     ax.xaxis.set_major_locator(MaxNLocator(nbins))
