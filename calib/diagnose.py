@@ -9,11 +9,11 @@ tables of a workflow-style TOML file; runs :func:`calib.discrepancy.diagnose`; w
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 from calib.discrepancy import DiagnosisSettings, diagnose
 from calib.errors import InputError
+from calib.tomlfile import read_toml
 from calib.measurements import read_measurements
 
 CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis")
@@ -42,12 +42,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     base_dir = Path.cwd()
     if config:
         path = Path(config)
-        if not path.is_file():
-            raise InputError("config file not found", config)
-        try:
-            cfg = tomllib.loads(path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"not valid TOML: {exc}", config) from None
+        cfg = read_toml(path, "config file")
         unknown = [k for k in cfg if k not in CONFIG_TABLES]
         if unknown:
             raise InputError(f"unknown table(s) {', '.join(unknown)}; valid: {', '.join(CONFIG_TABLES)}", config,

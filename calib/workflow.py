@@ -15,7 +15,6 @@ import argparse
 import dataclasses
 import sys
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from calib.models.base import FieldModel
 from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.sources import rotor_from_table
+from calib.tomlfile import read_toml
 from calib.unit_check import check_units
 
 NUM = (int, float)
@@ -140,12 +140,7 @@ def load_workflow(path: str | Path) -> dict:
     """
     path = Path(path)
     src = str(path)
-    if not path.is_file():
-        raise InputError("workflow file not found", src)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", src) from None
+    data = read_toml(path, "workflow file")
     _check_table(data, "", src)
     for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
         if section == "model" and data.get("model", {}).get("kind") == "fmu":

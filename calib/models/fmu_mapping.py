@@ -17,13 +17,13 @@ checked by :class:`calib.models.fmu_model.FmuModel` at load time (it has the FMU
 from __future__ import annotations
 
 import json
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from calib.errors import InputError
+from calib.tomlfile import read_toml
 from calib.types import CONDITION_FIELDS, ParameterKind
 
 SCHEMA = "calib.fmu.mapping/1"
@@ -357,14 +357,7 @@ def load_mapping(path) -> Mapping:
     """
     path = Path(path)
     src = str(path)
-    if not path.is_file():
-        raise InputError("mapping file not found", src)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", src) from None
-    except UnicodeDecodeError:
-        raise InputError("not a UTF-8 text file", src) from None
+    data = read_toml(path, "mapping file")
     for key in data:
         if key not in _TOP_KEYS:
             raise InputError(f"unknown key '{key}'; valid keys here: {', '.join(sorted(_TOP_KEYS))}", src,

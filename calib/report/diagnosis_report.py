@@ -20,6 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from calib.report.atomic import atomic_path, atomic_write_text  # noqa: E402
+from calib.result import _jsonable  # noqa: E402
 
 
 def plot_gap(d) -> plt.Figure:
@@ -146,14 +147,3 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     paths["report"] = out / "report.html"
     return paths
 
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, np.integer, np.bool_)):
-        return x.item()
-    return x
