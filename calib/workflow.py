@@ -69,7 +69,8 @@ def _schema_from(cls, exclude=(), overrides=None) -> dict:
 #: viscosity (in [fluid]), plus rotor overrides and the nuisance list.
 MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
                              overrides={"n_sectors": int, "polar_smoothing": list}),
-              "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "nuisance": (list, False)}
+              "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
+              "nuisance": (list, False)}
 #: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force``.
 CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
                                    overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "cd_min": NUM,
@@ -247,7 +248,7 @@ class StageOutcome:
     out_dir: Path
 
 
-def _conditions(cfg: dict, rotor, src: str, density: float = 1.225) -> OperatingConditions:
+def _conditions(cfg: dict, rotor, src: str, density: float = 1.225, yaw: float = 0.0) -> OperatingConditions:
     tsr = _numbers(cfg["tsr"], "conditions.tsr", src)
     pitch = _numbers(cfg["pitch"], "conditions.pitch", src)
     if np.any(tsr <= 0):
@@ -258,7 +259,7 @@ def _conditions(cfg: dict, rotor, src: str, density: float = 1.225) -> Operating
         raise InputError("rotor_speed must be > 0 rpm", src, field="conditions.rotor_speed")
     v = rpm * np.pi / 30 * rotor.rotor_radius / T.ravel()
     return OperatingConditions(v, np.full(v.size, rpm), P.ravel(), float(cfg.get("air_density", density)),
-                               float(cfg.get("yaw", 0.0)))
+                               float(cfg.get("yaw", yaw)))
 
 
 AIR = {"density": 1.225, "kinematic_viscosity": 1.81e-5 / 1.225}
@@ -292,6 +293,7 @@ class WorkflowSetup:
     fmu_table: dict | None = None
     executor_table: dict | None = None
     base_dir: str = "."
+    yaw: float = 0.0
 
     def model(self, grid: CorrectionGrid, channels, executor=None):
         """The forward model of a stage: the native BEM, or the FMU of ``[model] kind = "fmu"``."""
@@ -375,6 +377,9 @@ def prepare(cfg: dict) -> WorkflowSetup:
     if overrides:
         rotor = dataclasses.replace(rotor, **overrides)
     nuisance = tuple(mcfg.pop("nuisance", ["pitch_offset"]))
+    yaw = float(mcfg.pop("yaw", 0.0))
+    if not -90.0 < yaw < 90.0:
+        raise InputError(f"must be a yaw misalignment in degrees within ±90, got {yaw!r}", src, field="model.yaw")
     kwargs = {}
     for key, value in mcfg.items():
         kwargs[key] = tuple(value) if key == "polar_smoothing" else value
@@ -419,7 +424,7 @@ def prepare(cfg: dict) -> WorkflowSetup:
                          field="grid.alpha_nodes_deg")
     setup = WorkflowSetup(rotor, _absolute_rotor_table(cfg["rotor"], cfg["_dir"]), settings, nuisance, density,
                           channels, calib_cfg, cal, force, g, src, notes, fmu_table, cfg.get("executor"),
-                          cfg["_dir"])
+                          cfg["_dir"], yaw)
     if not isinstance(g["alpha_nodes_deg"], str):
         setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
     return setup
@@ -478,6 +483,9 @@ def _run(cfg, setup, out, executor, progress, force):
         if "air_density" not in meas.metadata.get("units", {}):
             meas = dataclasses.replace(meas, conditions=dataclasses.replace(
                 meas.conditions, air_density=np.full(meas.n_points, setup.density)))
+        if "yaw" not in meas.metadata.get("units", {}) and setup.yaw != 0.0:
+            meas = dataclasses.replace(meas, conditions=dataclasses.replace(
+                meas.conditions, yaw=np.full(meas.n_points, setup.yaw)))
         truth_p = None
         if progress:
             for note in meas.notes:
@@ -493,7 +501,7 @@ def _run(cfg, setup, out, executor, progress, force):
         elif not unit_report.ok:
             unit_notes = {"unit check (overridden by force)": "; ".join(f.message for f in unit_report.findings)}
     else:
-        cond = _conditions(cfg["conditions"], rotor, src, setup.density)
+        cond = _conditions(cfg["conditions"], rotor, src, setup.density, setup.yaw)
         grid = setup.grid(cond, progress)
         noise = cfg["noise"]
         rel = noise["relative"]

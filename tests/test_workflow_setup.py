@@ -57,6 +57,7 @@ def test_api_and_toml_defaults_are_the_same(tmp_path):
     ('[calibration]\nsigma_bar = "small"', "calibration.sigma_bar"),
     ('[calibration]\nband_confidence = 1.5', "calibration.band_confidence"),
     ("[model]\ntilt = 95.0", "model.tilt"),
+    ("[model]\nyaw = 120.0", "model.yaw"),
     ("[model]\nn_sectors = 0", "model.n_sectors"),
     ('[model]\nnuisance = ["yaw_offset"]', "model.nuisance"),
     ("[fluid]\ndensity = -1.0", "fluid.density"),
@@ -162,3 +163,18 @@ def test_shipped_own_turbine_workflow_runs(tmp_path, capsys):
     assert res.status == "converged" and res.n_retained >= 1
     assert res.chi2_per_dof_before > 5 and res.chi2_per_dof_after < 1.5
     assert (tmp_path / "report.html").is_file()
+
+
+def test_model_yaw_applies_to_points_without_a_yaw_column(tmp_path):
+    rotor = load_rotor("nrel5mw")
+    _nrel_csv(tmp_path, rotor, BemSettings())
+    text = (tmp_path / "data.csv").read_text().splitlines()
+    k = [i for i, t in enumerate(text) if not t.startswith("#")][0]
+    header = text[k].split(",")
+    j = [i for i, h in enumerate(header) if h.startswith("yaw")][0]
+    rows = [t if t.startswith("#") else ",".join(c for i, c in enumerate(t.split(",")) if i != j) for t in text]
+    (tmp_path / "data.csv").write_text("\n".join(rows) + "\n")
+    run_workflow(workflow(tmp_path, extra='[model]\nyaw = 15.0\n[calibration]\nnoise = "ml"\nforce = true'),
+                 tmp_path / "out", progress=False)
+    res = load_result(tmp_path / "out" / "stage1_hub")
+    assert np.allclose(res.conditions["yaw"], 15.0)
