@@ -21,7 +21,16 @@ from test_report_atomic import broken_files
 from twin_model import TwinModel, twin_conditions
 
 ROOT = Path(__file__).resolve().parents[1]
-needs_fork = pytest.mark.skipif(not fork_available(), reason="no os.fork, or other threads running")
+@pytest.fixture
+def needs_fork_now():
+    """Skip at run time (not collection time) when forking is off: an earlier test in the same
+    session (a Dask or process-pool executor) may have left threads running, and then the
+    figures are drawn in one process by design."""
+    if not fork_available():
+        pytest.skip("no os.fork, or other threads running in this process")
+
+
+needs_fork = pytest.mark.usefixtures("needs_fork_now")
 
 
 @pytest.fixture(scope="module")
