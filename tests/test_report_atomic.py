@@ -145,10 +145,24 @@ def python_sigint_handler():
     signal.signal(signal.SIGINT, previous)
 
 
-def test_an_error_after_sigint_arrives_as_keyboard_interrupt(python_sigint_handler):
+def test_a_sigint_is_deferred_to_the_end_of_the_block(python_sigint_handler):
+    finished = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_as_keyboard_interrupt():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.2)                              # the default handler would raise here
+            finished.append(True)
+    assert finished == [True]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_second_sigint_interrupts_and_an_error_after_it_arrives_as_keyboard_interrupt(
+        python_sigint_handler):
     # matplotlib can report a Ctrl-C inside a transform as its own ValueError
     with pytest.raises(KeyboardInterrupt) as info:
         with interrupts_as_keyboard_interrupt():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.2)
             try:
                 os.kill(os.getpid(), signal.SIGINT)
                 time.sleep(1.0)                          # the handler raises here
