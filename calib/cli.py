@@ -24,8 +24,8 @@ def _demo(args) -> int:
 
 
 def _run(args) -> int:
-    from calib.workflow import main as workflow_main
-    return int(workflow_main([args.file, "--out", args.out] + (["--force"] if args.force else [])) or 0)
+    from calib.workflow import run_from_args
+    return run_from_args(args)
 
 
 def _predict(args) -> int:
@@ -35,9 +35,8 @@ def _predict(args) -> int:
 
 
 def _diagnose(args) -> int:
-    from calib.diagnose import run_diagnose
-    run_diagnose(args.rotor, args.data, args.out, args.config)
-    return 0
+    from calib.diagnose import diagnose_from_args
+    return diagnose_from_args(args)
 
 
 def _fmu_build(args) -> int:
@@ -85,10 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Run a workflow TOML file (rotor, measurements or a synthetic truth, "
                                    "calibration stages); writes results, figures and report.html. Every key "
                                    "is documented in workflows/README.md.")
-    p.add_argument("file", help="workflow TOML file")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--force", action="store_true", help="calibrate even when the unit check suspects a unit "
-                   "mistake in the measurements (the report says so)")
+    from calib.workflow import add_run_arguments
+    add_run_arguments(p)
     p.set_defaults(func=_run)
     p = sub.add_parser("predict", help="a calibrated model at new conditions, with intervals",
                        description="Evaluate the model a calibration produced (rebuilt from its result folder) at "
@@ -109,11 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "shrink. Writes DIR/diagnosis.json and DIR/report.html; exits 0 whatever it finds.")
     p.add_argument("--rotor", default=None, help="embedded rotor name (see 'calib rotors') or a rotor file: .fst "
                    "(OpenFAST deck), .yaml (windIO), .dat (AeroDyn15 main file); or give [rotor] in --config")
-    p.add_argument("--data", required=True, help="measurement CSV (layout: workflows/README.md)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--config", default=None, help="TOML with [rotor], [model], [fluid], [grid], [calibration] "
-                   "tables of the workflow schema and a [diagnosis] table (candidates, max_effects, significance, "
-                   "ambiguity_bic, recalibrate)")
+    from calib.diagnose import add_diagnose_arguments
+    add_diagnose_arguments(p)
     p.set_defaults(func=_diagnose)
     p = sub.add_parser("fmu", help="FMU tools (calib fmu build)",
                        description="FMU tools. 'calib fmu build --help' lists the build options.")

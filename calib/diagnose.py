@@ -9,16 +9,21 @@ tables of a workflow-style TOML file; runs :func:`calib.discrepancy.diagnose`; w
 
 from __future__ import annotations
 
+import json
+import logging
 from pathlib import Path
 
 from calib.discrepancy import DiagnosisSettings, diagnose
-from calib.errors import InputError
+from calib.errors import CalibError, InputError
+from calib.logs import say
 from calib.tomlfile import read_toml
 from calib.measurements import read_measurements
 
 CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis")
 DEFAULT_GRID = {"alpha_nodes_deg": "auto", "eta_nodes": [0.25, 0.5, 0.75, 1.0]}
 DIAGNOSIS_KEYS = {f for f in DiagnosisSettings.__dataclass_fields__}
+
+log = logging.getLogger("calib.diagnose")
 
 
 def _rotor_table(rotor: str) -> dict:
@@ -32,10 +37,43 @@ def _rotor_table(rotor: str) -> dict:
     return {"name": rotor}
 
 
-def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=print):
-    """Run the discrepancy workflow from the command line's arguments; returns the Diagnosis."""
+def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
+    """What a diagnosis depends on, for its history manifest: {label: SHA-256 or value}."""
+    from calib.history import file_sha256
+
+    inputs = {"data file": file_sha256(data) if Path(data).is_file() else None,
+              "config file": file_sha256(config) if config and Path(config).is_file() else None,
+              "rotor": rotor}
+    if rotor is not None and Path(rotor).is_file():
+        inputs["rotor file"] = file_sha256(rotor)
+    return inputs
+
+
+def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
+                 resume: bool = False, history: bool = True):
+    """Run the discrepancy workflow from the command line's arguments; returns the Diagnosis.
+
+    Parameters
+    ----------
+    rotor, data, out, config : str
+        As ``calib diagnose --rotor --data --out --config``.
+    printer : callable(str), optional
+        Receives the progress lines (default: logged under ``calib.diagnose`` and printed
+        unless a command console is active, :func:`calib.logs.say`).
+    resume : bool
+        Continue the killed diagnosis whose history is in ``out`` (:mod:`calib.history`);
+        refused when the data, config or rotor changed.
+    history : bool
+        Keep ``out/history`` (every model call and iteration as it happens).
+    """
+    from calib.history import open_history, recorded
+    from calib.logs import progress_line
     from calib.report.diagnosis_report import write_diagnosis
     from calib.workflow import prepare
+
+    if printer is None:
+        def printer(line):
+            say(log, line)
 
     cfg = {}
     src = "calib diagnose"
@@ -74,9 +112,74 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
             _check_table(wf[key], key, src)
     setup = prepare(wf)
     grid = setup.grid(meas.conditions)
+    hist = None
+    if history or resume:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        hist = open_history(out, {"command": "diagnose", "arguments": {
+            "rotor": rotor, "data": str(Path(data).resolve()), "config": str(Path(config).resolve()) if config else None},
+            "inputs": diagnose_inputs(rotor, data, config)}, resume)
+        hist.event("start", resumed=resume, records=hist.n_records)
+        if resume:
+            printer(f"[calib diagnose] resuming from {hist.folder}: {hist.n_records} model calls on record")
+
+    def wrap(model, label):
+        return recorded(model, hist, label, progress=progress_line)
+
     diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
-                    progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec)
+                    progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
+                    wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"))
     paths = write_diagnosis(diag, out)
+    if hist is not None:
+        hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
+        printer(f"[calib diagnose] model calls: {hist.computed} computed, {hist.replayed} read back from "
+                f"{hist.folder}")
     printer(f"[calib diagnose] named: {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else ""))
     printer(f"[calib diagnose] report: {paths['report']}")
     return diag
+
+
+def add_diagnose_arguments(parser) -> None:
+    """The arguments of ``calib diagnose`` but ``--rotor`` (defined by :mod:`calib.cli`)."""
+    parser.add_argument("--data", default=None, help="measurement CSV (layout: workflows/README.md); required "
+                        "unless --resume")
+    parser.add_argument("--out", default=None, help="output folder (required unless --resume DIR)")
+    parser.add_argument("--config", default=None, help="TOML with [rotor], [model], [fluid], [grid], [calibration] "
+                        "tables of the workflow schema and a [diagnosis] table (candidates, max_effects, "
+                        "significance, ambiguity_bic, recalibrate)")
+    parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed diagnosis whose output "
+                        "folder is DIR with the arguments it started with: model calls on record in DIR/history are "
+                        "read back, not computed again; refused if the data, config or rotor changed")
+    parser.add_argument("--no-history", action="store_true", help="do not keep DIR/history (no resume possible)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-v", "--verbose", action="store_true", help="also print every model call (the log file "
+                       "DIR/calib.log always has them)")
+    group.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+
+
+def diagnose_from_args(args) -> int:
+    """``calib diagnose`` from parsed arguments; returns the exit code."""
+    from calib.logs import command_logging
+
+    rotor, data, config, out = args.rotor, args.data, args.config, args.out
+    if args.resume is not None:
+        if out is not None and Path(out).resolve() != Path(args.resume).resolve():
+            raise InputError(f"--out {out} and --resume {args.resume} name different folders; give one",
+                             "calib diagnose", field="--out")
+        out = args.resume
+        manifest = Path(out) / "history" / "manifest.json"
+        if not manifest.is_file():
+            raise InputError(f"nothing to resume: no history/manifest.json in {out}", str(out), field="--resume")
+        recorded_args = json.loads(manifest.read_text()).get("arguments", {})
+        rotor = rotor if rotor is not None else recorded_args.get("rotor")
+        data = data if data is not None else recorded_args.get("data")
+        config = config if config is not None else recorded_args.get("config")
+    if data is None or out is None:
+        raise InputError("give --data FILE and --out DIR (or --resume DIR)", "calib diagnose",
+                         field="--data" if data is None else "--out")
+    with command_logging(out, args.verbose, args.quiet):
+        try:
+            run_diagnose(rotor, data, out, config, resume=args.resume is not None, history=not args.no_history)
+        except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
+            log.debug(f"calib: error: {exc}", exc_info=True)
+            raise
+    return 0

@@ -256,7 +256,8 @@ def _fixed_effect(effect_spec: dict, fitted: dict):
 
 def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: BemSettings | None = None,
              calibration: CalibrationSettings | None = None, diagnosis: DiagnosisSettings | None = None,
-             executor=None, progress: Callable[[str], None] | None = None, rotor_source: dict | None = None) -> Diagnosis:
+             executor=None, progress: Callable[[str], None] | None = None, rotor_source: dict | None = None,
+             wrap: Callable | None = None, fit_progress: Callable[[int, int], None] | None = None) -> Diagnosis:
     """Run the discrepancy workflow on the native BEM (see the module notes).
 
     Parameters
@@ -275,6 +276,11 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         Runs the candidate fits (:mod:`calib.executors`; default serial).
     progress : callable(str), optional
         Receives one line per step.
+    wrap : callable(model, label) -> model, optional
+        Applied to every model the diagnosis calibrates or evaluates (e.g.
+        :func:`calib.history.recorded`, which records each call and answers it on resume).
+    fit_progress : callable(done, total), optional
+        Called as the candidate fits of a round finish.
 
     Returns
     -------
@@ -290,9 +296,10 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     if executor is None:
         from calib.executors import SerialExecutor
         executor = SerialExecutor()
+    wrap = wrap or (lambda model, label: model)
 
     # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
-    field_model = BemModel(rotor, grid, channels, settings, (), rotor_source=rotor_source)
+    field_model = wrap(BemModel(rotor, grid, channels, settings, (), rotor_source=rotor_source), "localization")
     say(f"localize: correction field, {field_model.grid.n_params} nodes")
     loc = Calibrator(field_model, measurements, cal, name="localization").run()
     sigma = loc.sigma
@@ -301,7 +308,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")
 
     # 1. find
-    base_model = BemModel(rotor, None, channels, settings, (), rotor_source=rotor_source)
+    base_model = wrap(BemModel(rotor, None, channels, settings, (), rotor_source=rotor_source), "nominal")
     y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
     before = gap(meas.values, y0, sigma, channels)
     findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, rotor.rotor_radius)
@@ -338,9 +345,10 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         if not labels:
             break
         tasks = [{"name": lab, "measurements": meas, "settings": known,
-                  "model": _candidate_model(rotor, channels, settings, base_effects, effects[lab])} for lab in labels]
+                  "model": wrap(_candidate_model(rotor, channels, settings, base_effects, effects[lab]),
+                                f"round {round_no + 1}: {lab}")} for lab in labels]
         say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
-        outs = executor.map(_fit_task, tasks)
+        outs = executor.map(_fit_task, tasks, fit_progress)
         fits = []
         alpha = dset.significance / max(len(remaining), 1)
         bic_base = base_chi2
@@ -422,7 +430,8 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     # 4. add + recalibrate the field on top
     recal, y_after = None, None
     if dset.recalibrate:
-        model = BemModel(rotor, grid, channels, settings, (), effects=base_effects, rotor_source=rotor_source)
+        model = wrap(BemModel(rotor, grid, channels, settings, (), effects=base_effects, rotor_source=rotor_source),
+                     "recalibration")
         known_field = dataclasses.replace(cal, noise="known", sigma=None)
         say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
         recal = Calibrator(model, meas, known_field, name="recalibration").run()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import sys
 import time
 from dataclasses import dataclass
@@ -31,6 +32,9 @@ from calib.models.bem_model import BemModel
 from calib.rotor.sources import rotor_from_table
 from calib.tomlfile import read_toml
 from calib.unit_check import check_units
+from calib.logs import say
+
+log = logging.getLogger("calib.workflow")
 
 NUM = (int, float)
 AUTO_OR_NUM = (int, float, str)
@@ -441,12 +445,40 @@ def _absolute_rotor_table(table: dict, base_dir) -> dict:
     return out
 
 
+def run_inputs(cfg: dict) -> dict:
+    """What a run's results depend on, for its history manifest: {label: SHA-256 or value}.
+
+    The workflow file's bytes, and the measurement file's when there is one (files named
+    by the rotor table are covered by the model identities of the history's records).
+    """
+    inputs = {"workflow file": sha256_of(cfg["_source"])}
+    if "measurements" in cfg:
+        file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
+        inputs["measurement file"] = sha256_of(str(file)) if file.is_file() else None
+    return inputs
+
+
 def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
-                 force: bool = False) -> list[StageOutcome]:
+                 force: bool = False, resume: bool = False, history: bool = True) -> list[StageOutcome]:
     """Run a workflow file; writes results, figures and ``report.html`` into ``out_dir``.
 
-    ``force`` (or ``[calibration] force = true``) calibrates even when the unit check
-    (:func:`calib.unit_check.check_units`) suspects a unit mistake; the report says so.
+    Parameters
+    ----------
+    path : str or Path
+        The workflow TOML file.
+    out_dir : str or Path
+        Output folder.
+    progress : bool
+        Print progress lines (logged under ``calib.workflow`` either way).
+    force : bool
+        Calibrate even when the unit check (:func:`calib.unit_check.check_units`) suspects a
+        unit mistake (also ``[calibration] force = true``); the report says so.
+    resume : bool
+        Continue the killed run whose history is in ``out_dir`` (:mod:`calib.history`): every
+        model call it completed is read back instead of computed; refused when the workflow
+        or the measurement file changed since.
+    history : bool
+        Keep the history in ``out_dir/history`` (model calls and iterations as they happen).
     """
     cfg = load_workflow(path)
     src = cfg["_source"]
@@ -455,21 +487,41 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     force = setup.force or force
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if progress:
-        for note in setup.notes:
-            print(f"[calib run] set-up: {note}", flush=True)
+    for note in setup.notes:
+        say(log, f"[calib run] set-up: {note}", progress)
+    hist = None
+    if history or resume:
+        from calib.history import open_history
+        hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "inputs": run_inputs(cfg)},
+                            resume)
+        hist.event("start", resumed=resume, records=hist.n_records)
+        if resume:
+            say(log, f"[calib run] resuming from {hist.folder}: {hist.n_records} model calls on record", progress)
 
     from calib.models.from_config import executor_from_table
     executor = executor_from_table(setup.executor_table, src)
     try:
-        return _run(cfg, setup, out, executor, progress, force)
+        outcomes = _run(cfg, setup, out, executor, progress, force, hist)
     finally:
         executor.close()
+    if hist is not None:
+        hist.event("finished", computed=hist.computed, replayed=hist.replayed)
+        say(log, f"[calib run] model calls: {hist.computed} computed, {hist.replayed} read back from "
+                 f"{hist.folder}", progress)
+    return outcomes
 
 
-def _run(cfg, setup, out, executor, progress, force):
+def _run(cfg, setup, out, executor, progress, force, hist=None):
+    from calib.history import recorded
+    from calib.logs import progress_line
     from calib.report.figures import plot_spectra, save_figure, write_figures
     from calib.report.html import write_report
+
+    def echo(line):
+        say(log, line, progress)
+
+    # an FMU's calls are recorded in chunks of points (a kill loses at most one chunk of simulations)
+    chunk = max(int(getattr(executor, "workers", 1) or 1), 1) if setup.fmu_table is not None else None
 
     src = cfg["_source"]
     rotor, settings, nuisance = setup.rotor, setup.settings, setup.nuisance
@@ -487,15 +539,13 @@ def _run(cfg, setup, out, executor, progress, force):
             meas = dataclasses.replace(meas, conditions=dataclasses.replace(
                 meas.conditions, yaw=np.full(meas.n_points, setup.yaw)))
         truth_p = None
-        if progress:
-            for note in meas.notes:
-                print(f"[calib run] {file.name}: {note}", flush=True)
+        for note in meas.notes:
+            echo(f"[calib run] {file.name}: {note}")
         grid = setup.grid(meas.conditions, progress)
-        check_model = setup.model(grid, all_channels, executor)
+        check_model = recorded(setup.model(grid, all_channels, executor), hist, "unit check", chunk, progress_line)
         unit_report = check_units(check_model, nominal_vector(check_model.parameters), meas,
                                   sigma=calib_cfg.get("sigma"))
-        if progress:
-            print("[calib run] " + unit_report.summary().replace("\n", "\n[calib run] "), flush=True)
+        echo("[calib run] " + unit_report.summary().replace("\n", "\n[calib run] "))
         if not force:
             unit_report.raise_if_failed(str(file))
         elif not unit_report.ok:
@@ -513,23 +563,26 @@ def _run(cfg, setup, out, executor, progress, force):
         meas = synthesize(tmodel, truth_p, cond, relative_sigma={c: float(rel[c]) for c in all_channels},
                           channels=all_channels, seed=int(noise.get("seed", 0)), source=f"synthetic ({src})")
         meas.write_csv(out / "measurements.csv")
-    if progress:
-        print(f"[calib run] {cfg['name']}: rotor {rotor.name}, {meas.n_points} operating points, "
-              f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)", flush=True)
+    echo(f"[calib run] {cfg['name']}: rotor {rotor.name}, {meas.n_points} operating points, "
+         f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
 
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
-        model = setup.model(grid, stage["channels"], executor)
+        model = recorded(setup.model(grid, stage["channels"], executor), hist, f"stage {k + 1}: {name}", chunk,
+                         progress_line)
         st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
                                                                             setup.calibration_settings.retain))
         st.validate(src, f"stages[{k}].")
-        callback = None
-        if progress:
-            def callback(rec, _name=name):
-                if rec.get("stage") == "relinearize":
-                    print(f"[calib run] {_name}: re-linearization {rec.get('iteration')}: "
-                          f"{rec.get('n_retained')} retained, cost {rec.get('cost', float('nan')):.4g}", flush=True)
+        def callback(rec, _name=name):
+            if hist is not None:
+                hist.event("iteration", run=_name, **rec)
+            if rec.get("stage") == "relinearize":
+                echo(f"[calib run] {_name}: re-linearization {rec.get('iteration')}: "
+                     f"{rec.get('n_retained')} retained, cost {rec.get('cost', float('nan')):.4g}")
+            else:
+                log.debug("%s: %s", _name, ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else f"{k} = {v}"
+                                                       for k, v in rec.items() if k != "qp"))
         cal = Calibrator(model, meas.select_channels(stage["channels"]), st, callback, name=name)
         t_cal = time.perf_counter()
         res = cal.run()
@@ -544,17 +597,18 @@ def _run(cfg, setup, out, executor, progress, force):
         t_rep = time.perf_counter()
         res.save(stage_dir)
         truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if truth_p is not None else None
-        figs = write_figures(res, stage_dir, truth=truth,
-                             progress=(lambda line: print(f"[calib run] {line}", flush=True))
-                             if progress else None)
+        figs = write_figures(res, stage_dir, truth=truth, progress=lambda line: echo(f"[calib run] {line}"))
         t_rep = time.perf_counter() - t_rep
         outcomes.append(StageOutcome(name, res, figs, stage_dir))
-        if progress:
-            print(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {res.n_retained} of "
-                  f"{res.n_params} retained; chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g}; "
-                  f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}", flush=True)
-            for label, text in res.checks.items():
-                print(f"[calib run] {name}: {label}: {text}", flush=True)
+        if hist is not None:
+            hist.event("stage_done", run=name, folder=stage_dir.name, status=res.status,
+                       model_evaluations=res.failures.get("model_evaluations"),
+                       model_jacobians=res.failures.get("model_jacobians"))
+        echo(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {res.n_retained} of "
+             f"{res.n_params} retained; chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g}; "
+             f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}")
+        for label, text in res.checks.items():
+            echo(f"[calib run] {name}: {label}: {text}")
     extra = {}
     if len(outcomes) > 1:
         fig = plot_spectra({o.name: o.result for o in outcomes})
@@ -567,23 +621,64 @@ def _run(cfg, setup, out, executor, progress, force):
                           results={o.name: o.result for o in outcomes},
                           figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra,
                           checks={o.name: o.result.checks for o in outcomes})
-    if progress:
-        print(f"[calib run] report: {report}", flush=True)
+    echo(f"[calib run] report: {report}")
     return outcomes
+
+
+def add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of ``calib run`` (shared by ``python -m calib.workflow`` and the ``calib`` command)."""
+    parser.add_argument("file", nargs="?", default=None, help="workflow TOML file (with --resume: optional, "
+                        "default the one the run started with; if given, it must be unchanged)")
+    parser.add_argument("--out", default=None, help="output folder (required unless --resume DIR)")
+    parser.add_argument("--force", action="store_true", help="calibrate even when the unit check suspects a unit "
+                        "mistake in the measurements (the report says so)")
+    parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed run whose output "
+                        "folder is DIR: model calls on record in DIR/history are read back, not computed again; "
+                        "refused if the workflow or measurement file changed")
+    parser.add_argument("--no-history", action="store_true", help="do not keep DIR/history (no resume possible)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-v", "--verbose", action="store_true", help="also print every optimizer iteration and "
+                       "model call (the log file DIR/calib.log always has them)")
+    group.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+
+
+def run_from_args(args) -> int:
+    """``calib run`` from parsed arguments (see :func:`add_run_arguments`); returns the exit code."""
+    from calib.logs import command_logging
+
+    out, file = args.out, args.file
+    if args.resume is not None:
+        if out is not None and Path(out).resolve() != Path(args.resume).resolve():
+            raise InputError(f"--out {out} and --resume {args.resume} name different folders; give one", "calib run",
+                             field="--out")
+        out = args.resume
+        if file is None:
+            manifest = Path(out) / "history" / "manifest.json"
+            if not manifest.is_file():
+                raise InputError(f"nothing to resume: no history/manifest.json in {out}", str(out), field="--resume")
+            import json
+            file = json.loads(manifest.read_text()).get("workflow")
+    if file is None or out is None:
+        raise InputError("give a workflow file and --out DIR (or --resume DIR)", "calib run",
+                         field="file" if file is None else "--out")
+    with command_logging(out, args.verbose, args.quiet):
+        try:
+            run_workflow(file, out, force=args.force, resume=args.resume is not None, history=not args.no_history)
+        except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
+            log.debug(f"calib: error: {exc}", exc_info=True)
+            raise
+    return 0
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="calib run", description="run a workflow TOML file")
-    parser.add_argument("file")
-    parser.add_argument("--out", required=True)
-    parser.add_argument("--force", action="store_true")
+    add_run_arguments(parser)
     args = parser.parse_args(argv)
     try:
-        run_workflow(args.file, args.out, force=args.force)
+        return run_from_args(args)
     except CalibError as exc:
         print(f"calib: error: {exc}", file=sys.stderr)
         return 2
-    return 0
 
 
 __all__ = ["Measurements", "SCHEMA", "load_workflow", "main", "run_workflow", "smooth_field", "truth_model"]

@@ -1,0 +1,213 @@
+"""History and resume (calib.history): a run killed with SIGKILL part-way and resumed with
+``--resume`` reaches the uninterrupted run's result without computing again what it had
+computed; no file under a final name is ever half-written; a changed input is refused."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.errors import InputError
+from calib.history import count_model_calls, open_history, read_events
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKFLOW = ROOT / "workflows" / "wind_tunnel_hub_loads.toml"
+
+
+def small_workflow(tmp_path: Path) -> Path:
+    """The wind-tunnel workflow on 24 operating points (one stage, ~15 Jacobians of 0.1 s)."""
+    text = WORKFLOW.read_text()
+    lines = []
+    for line in text.splitlines():
+        if line.startswith("tsr = "):
+            line = "tsr = [2.0, 3.0, 4.0, 5.0, 6.0, 7.0]"
+        elif line.startswith("pitch = "):
+            line = "pitch = [-2.0, 1.0, 4.0, 7.0]"
+        lines.append(line)
+    path = tmp_path / "small.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def calib_cmd(*args) -> list[str]:
+    return [sys.executable, "-m", "calib.cli", *map(str, args)]
+
+
+def start(args, cwd) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.Popen(calib_cmd(*args), cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def finish(proc: subprocess.Popen, timeout: float = 300) -> str:
+    out, err = proc.communicate(timeout=timeout)
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{out[-2000:]}\n{err[-4000:]}"
+    return out
+
+
+def kill_after(proc: subprocess.Popen, out_dir: Path, n_records: int, timeout: float = 240) -> int:
+    """SIGKILL ``proc`` as soon as its history holds ``n_records`` computed model calls."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended (exit {proc.returncode}) before it had {n_records} records:\n"
+                        f"{proc.stderr.read()[-3000:]}")
+        if count_model_calls(read_events(out_dir))["computed"] >= n_records:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=30)
+            return count_model_calls(read_events(out_dir))["computed"]
+        time.sleep(0.005)
+    proc.kill()
+    pytest.fail(f"no {n_records} records within {timeout} s")
+
+
+def assert_complete_files(folder: Path) -> int:
+    """Every file under a final name in ``folder`` parses completely; returns how many were checked.
+
+    Temporary files (hidden, ``.tmp``) may remain after a SIGKILL: they are not final names.
+    """
+    from PIL import Image
+
+    checked = 0
+    for path in sorted(folder.rglob("*")):
+        if not path.is_file() or path.name.startswith(".") or path.name.endswith(".tmp"):
+            continue
+        suffix = path.suffix
+        if suffix == ".json":
+            json.loads(path.read_text())
+        elif suffix == ".npz":
+            with np.load(path) as z:
+                for key in z.files:
+                    z[key]
+            with zipfile.ZipFile(path) as zf:
+                assert zf.testzip() is None, path
+        elif suffix == ".jsonl":
+            raw = path.read_text()
+            assert raw == "" or raw.endswith("\n"), f"{path}: last line incomplete"
+            for line in raw.splitlines():
+                json.loads(line)
+        elif suffix == ".png":
+            with Image.open(path) as im:
+                im.load()
+        elif suffix == ".svg":
+            import xml.etree.ElementTree as ET
+            ET.parse(path)
+        elif suffix == ".html":
+            assert path.read_text().rstrip().endswith("</html>"), path
+        elif suffix == ".csv":
+            from calib.measurements import read_measurements
+            read_measurements(path)
+        elif suffix == ".log":
+            continue        # appended text, no structure to complete
+        else:
+            pytest.fail(f"unexpected file {path}")
+        checked += 1
+    return checked
+
+
+def test_killed_calibration_resumes_to_the_uninterrupted_result(tmp_path):
+    """``calib run`` killed (SIGKILL) after 6 model calls, then ``calib run --resume DIR``."""
+    from calib.cli import main
+    from calib.workflow import run_workflow
+
+    wf = small_workflow(tmp_path)
+    full_dir, cut_dir = tmp_path / "full", tmp_path / "cut"
+    cut = start(["run", wf, "--out", cut_dir, "--quiet"], tmp_path)
+    killed = {}
+    killer = threading.Thread(target=lambda: killed.update(at=kill_after(cut, cut_dir, 6)))
+    killer.start()
+    run_workflow(wf, full_dir, progress=False)      # the uninterrupted run, meanwhile
+    killer.join()
+    events = read_events(cut_dir)
+    assert not any(e["event"] == "finished" for e in events), "the run finished before the kill"
+    assert not (cut_dir / "report.html").exists()
+    assert assert_complete_files(cut_dir) >= 3
+
+    assert main(["run", "--resume", str(cut_dir), "--quiet"]) == 0
+    stage = "stage1_hub_loads"
+    full_res = json.loads((full_dir / stage / "result.json").read_text())
+    resumed = json.loads((cut_dir / stage / "result.json").read_text())
+    with np.load(full_dir / stage / "result.npz") as a, np.load(cut_dir / stage / "result.npz") as b:
+        p_full, p_res = a["p_hat"], b["p_hat"]
+        scale = a["scale"]
+        np.testing.assert_array_equal(b["retained"], a["retained"])
+        np.testing.assert_allclose(b["cov_p"], a["cov_p"], rtol=1e-6, atol=0)
+    # the optimizer stops at a relative cost decrease of `tolerance`; the replay is exact, so far inside it
+    assert np.max(np.abs(p_res - p_full) / scale) <= 1e-6
+    assert resumed["status"] == full_res["status"] == "converged"
+    assert resumed["chi2_after"] == pytest.approx(full_res["chi2_after"], rel=1e-9)
+
+    n_full = count_model_calls(read_events(full_dir))
+    resumed_calls = count_model_calls(read_events(cut_dir), since_last_start=True)
+    assert n_full["replayed"] == 0 and n_full["computed"] >= 10
+    # what the killed run computed is read back, not computed again
+    assert resumed_calls["replayed"] >= killed["at"] - 1
+    assert resumed_calls["computed"] < n_full["computed"]
+    assert resumed_calls["computed"] + resumed_calls["replayed"] == n_full["computed"]
+    assert (cut_dir / "report.html").is_file()
+    assert assert_complete_files(cut_dir) >= 10
+
+
+def test_kill_while_results_and_figures_are_written_leaves_no_partial_file(tmp_path):
+    """SIGKILL while the result, the figures and the report are being written."""
+    wf = small_workflow(tmp_path)
+    out = tmp_path / "o"
+    proc = start(["run", wf, "--out", out, "--quiet"], tmp_path)
+    deadline = time.monotonic() + 240
+    while not (out / "stage1_hub_loads" / "result.json").exists():
+        assert proc.poll() is None, proc.stderr.read()[-3000:]
+        assert time.monotonic() < deadline
+        time.sleep(0.002)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert not (out / "report.html").exists(), "the run ended before the kill"
+    assert assert_complete_files(out) >= 3
+
+
+def test_resume_refuses_changed_inputs(tmp_path):
+    out = tmp_path / "o"
+    open_history(out, {"command": "run", "inputs": {"workflow file": "a" * 64, "measurement file": "b" * 64}},
+                 resume=False)
+    with pytest.raises(InputError, match="measurement file") as exc:
+        open_history(out, {"command": "run", "inputs": {"workflow file": "a" * 64, "measurement file": "c" * 64}},
+                     resume=True)
+    assert "workflow file" not in str(exc.value)
+    with pytest.raises(InputError, match="calib run"):
+        open_history(out, {"command": "diagnose", "inputs": {}}, resume=True)
+    with pytest.raises(InputError, match="nothing to resume"):
+        open_history(tmp_path / "empty", {"command": "run", "inputs": {}}, resume=True)
+
+
+def test_resume_of_an_edited_workflow_is_refused_by_the_command(tmp_path, capsys):
+    from calib.cli import main
+
+    wf = small_workflow(tmp_path)
+    out = tmp_path / "o"
+    open_history(out, {"command": "run", "workflow": str(wf), "inputs": {"workflow file": "0" * 64}}, resume=False)
+    assert main(["run", "--resume", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "workflow file" in err and "changed" in err
+
+
+def test_incomplete_last_line_is_dropped_on_resume(tmp_path):
+    from calib.history import History
+
+    h = open_history(tmp_path, {"command": "run", "inputs": {}}, resume=False)
+    h.append({"event": "evaluate", "key": "k1"}, {"values": np.ones(3)})
+    with open(h.events_path, "ab") as fh:
+        fh.write(b'{"event": "evaluate", "key": "k2", "rec')      # a kill in the middle of an append
+    h2 = open_history(tmp_path, {"command": "run", "inputs": {}}, resume=True)
+    assert isinstance(h2, History) and h2.lookup("k1") is not None and h2.lookup("k2") is None
+    h2.event("start")
+    assert [e["event"] for e in read_events(tmp_path)] == ["evaluate", "start"]
