@@ -13,7 +13,9 @@ Ratios printed (and stored):
   second (target >= 30);
 - Jacobian time / one evaluation time (target <= 3);
 - max |ΔC_P| between the native and CCBlade surfaces over the points where both
-  converged (native mask: ``converged`` if returned, else finite ``cp``).
+  converged (native mask: ``converged`` if returned, else finite ``cp``);
+- soak (``bench_soak``): the largest resident-memory growth after warm-up over the
+  processes of 2000 FMU evaluations, in one worker and through Dask (target < 10 %).
 
 Writes ``bench_output/results.json``. Exit status 1 when a module failed.
 """
@@ -40,6 +42,7 @@ ORDER = ["bench_bem", "bench_ccblade", "bench_calibration", "bench_fmu"]
 
 TARGET_THROUGHPUT_RATIO = 30.0
 TARGET_JACOBIAN_RATIO = 3.0
+TARGET_SOAK_GROWTH_PERCENT = 10.0
 
 
 def discover() -> list[str]:
@@ -160,6 +163,21 @@ def compute_ratios(results: dict) -> list[dict]:
             detail = "no point converged in both"
     rows.append({"name": "max |ΔC_P| native vs CCBlade", "value": value, "detail": detail,
                  "target": "", "met": None})
+
+    soak = results.get("bench_soak", {})
+    growth = [_num(soak.get(f"{k}_max_rss_growth_percent")) for k in ("one_worker", "dask")]
+    growth = [g for g in growth if g is not None]
+    rows.append({
+        "name": "soak: largest RSS growth after warm-up (%)",
+        "value": max(growth) if growth else None,
+        "detail": (f"one worker {soak.get('one_worker_evaluations')} evaluations, "
+                   f"{_fmt(soak.get('one_worker_evaluations_per_s'))}/s; Dask "
+                   f"{soak.get('dask_evaluations')}, {_fmt(soak.get('dask_evaluations_per_s'))}/s; "
+                   f"non-OK {soak.get('one_worker_non_ok_statuses')} + {soak.get('dask_non_ok_statuses')}"
+                   if growth else "needs bench_soak"),
+        "target": f"< {TARGET_SOAK_GROWTH_PERCENT:g}",
+        "met": (max(growth) < TARGET_SOAK_GROWTH_PERCENT) if growth else None,
+    })
     return rows
 
 
