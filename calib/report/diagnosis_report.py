@@ -75,10 +75,12 @@ def plot_candidates(d) -> plt.Figure:
     return fig
 
 
-def _table(header, rows) -> str:
+def _table(header, rows, wrap=()) -> str:
+    """An HTML table; the columns in ``wrap`` (long text) may break inside words to fit the page."""
     th = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><tr>{th}</tr>{body}</table>"
+    body = "".join("<tr>" + "".join(f'<td class="w">{c}</td>' if j in wrap else f"<td>{c}</td>"
+                                    for j, c in enumerate(row)) + "</tr>" for row in rows)
+    return f'<div class="table"><table><tr>{th}</tr>{body}</table></div>'
 
 
 def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
@@ -106,7 +108,8 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     rows = []
     for r_no, rnd in enumerate(d.rounds):
         for f in rnd["candidates"]:
-            rows.append((r_no + 1, html.escape(f.name), f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
+            name = html.escape(f.name).replace(":", ":<wbr>")        # may break after "effect:"
+            rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
                          f"{f.lr_statistic:.4g}", f"{f.p_value:.2g}", "yes" if f.significant else "no",
                          f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}",
                          html.escape("; ".join(f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g} {q['unit']}"
@@ -126,21 +129,25 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
             f"Wall time {d.wall_time:.1f} s.</p>",
             f"<h2>Evidence</h2><ul>{reasons}</ul>",
             _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
-                    "pattern agreement", "fitted parameters (1σ)"], rows),
+                    "pattern agreement", "fitted parameters (1σ)"], rows, wrap=(10,)),
             img(figs["candidates"]),
             "<h2>Where the gap is</h2>",
             _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
                     "corr. with wind speed", "corr. with load level"], trend_rows),
             img(figs["gap"]),
             "<h2>How much it shrank</h2>",
-            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel"], gap_rows),
+            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel"], gap_rows, wrap=(4,)),
             f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
             f"{d.localization.chi2_per_dof_after:.3g}.</p>"]
     if d.notes:
         body.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in d.notes) + "</ul>")
-    css = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}"
-           "table{border-collapse:collapse;margin:.5em 0 1.2em}td,th{border:1px solid #ccc;padding:3px 7px}"
-           "th{background:#f0f0f0}img{max-width:100%}")
+    # long text cells (fitted parameters) may break inside words, a candidate after its ":"
+    # (<wbr>); a table still too wide scrolls inside its own box, never the page (checked at
+    # 1280 px in tests/test_browser_report.py)
+    css = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
+           ".table{overflow-x:auto;max-width:100%;margin:.5em 0 1.2em}table{border-collapse:collapse}"
+           "td,th{border:1px solid #ccc;padding:3px 7px}td.w{overflow-wrap:anywhere}"
+           "th{background:#f0f0f0}img{max-width:100%;height:auto}")
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>calib diagnose</title><style>{css}</style>"
             f"</head><body>{''.join(body)}</body></html>")
     atomic_write_text(out / "report.html", page)

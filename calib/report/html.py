@@ -19,11 +19,15 @@ from calib.result import CalibrationResult
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}
 
 _CSS = """
-body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222;line-height:1.4}
-table{border-collapse:collapse;margin:0.5em 0 1.2em}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
-th{background:#f0f0f0}td.l,th.l{text-align:left}img{max-width:100%;margin:0.4em 0}
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}
+.table{overflow-x:auto;max-width:100%;margin:0.5em 0 1.2em}table{border-collapse:collapse}
+td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
+th{background:#f0f0f0}td.l,th.l{text-align:left}img{max-width:100%;height:auto;margin:0.4em 0}
+pre{white-space:pre-wrap;overflow-wrap:anywhere}
 .bad{color:#b00}.ok{color:#070}h2{border-bottom:2px solid #ddd;padding-bottom:2px}
 """
+# Layout at any window width: a table too wide for the page scrolls inside its own box
+# (.table), never the page; preformatted text wraps (checked in tests/test_browser_report.py).
 
 
 def _img(path: Path) -> str:
@@ -60,7 +64,7 @@ def _table(header, rows, left=1) -> str:
     body = ""
     for row in rows:
         body += "<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{c}</td>' for i, c in enumerate(row)) + "</tr>"
-    return f"<table><tr>{th}</tr>{body}</table>"
+    return f'<div class="table"><table><tr>{th}</tr>{body}</table></div>'
 
 
 def _fmt(x, digits=4) -> str:
