@@ -41,7 +41,7 @@ from calib.result import CalibrationResult
 from calib.truncation import cv_curve
 from calib.types import nominal_vector
 
-NOISE_MODES = ("known", "ml", "repeats")
+NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
 AUTO_CHOICES = 4
 """Most linearizations at which ``sigma_bar = "auto"`` chooses the retained count (see ``_svd``)."""
 RETAIN_MODES = ("threshold", "all")
@@ -75,8 +75,17 @@ class CalibrationSettings:
         Cap on the number of retained parameters.
     optimizer : str
         ``sqpmethod``, ``ipopt``, ``slsqp`` or ``trust-constr``.
-    noise : {"known", "ml", "repeats"}
-        Where R comes from.
+    noise : {"known", "ml", "repeats", "relative", "relative_ml"}
+        Where R comes from: the table's ``_sigma`` columns or ``sigma`` (known), the residuals
+        (ml, per channel), repeated records (repeats), a stated fraction of each channel's
+        RMS (relative, :mod:`calib.noise`), or that with one common factor estimated by
+        maximum likelihood from the calibrated fit's residuals with N − k degrees of
+        freedom (relative_ml: the stated fractions fix the channels' relative weights, the
+        data their overall level). With ``ml``, ``relative_sigma`` (if given) is the start
+        of the iteration instead of the nominal residual.
+    relative_sigma : dict channel-or-group -> float, optional
+        The fractions of ``noise = "relative"`` [-], e.g. ``{"torque": 0.03, "cn": 0.05}``
+        (``cn`` covers every ``cn@<r/R>`` channel).
     sigma : dict channel -> float, optional
         Absolute 1-σ noise per channel [channel unit]; overrides the table's σ.
     cd_min : float or None
@@ -110,6 +119,7 @@ class CalibrationSettings:
     optimizer: str = "sqpmethod"
     noise: str = "known"
     sigma: dict | None = None
+    relative_sigma: dict | None = None
     cd_min: float | None = 0.0
     max_relinearizations: int = 6
     max_iterations: int = 30
@@ -151,6 +161,12 @@ class CalibrationSettings:
             for c, v in self.sigma.items():
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
                     bad(f"must be a number > 0 (absolute 1-σ in SI units), got {v!r}", f"sigma.{c}")
+        if self.noise in ("relative", "relative_ml") and not self.relative_sigma:
+            bad(f"noise = \"{self.noise}\" needs relative_sigma = {{channel or group = fraction, ...}} "
+                "(e.g. {torque = 0.03, thrust = 0.03, cn = 0.05})", "relative_sigma")
+        for c, v in (self.relative_sigma or {}).items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 10:
+                bad(f"must be a fraction > 0 (of the channel's RMS), got {v!r}", f"relative_sigma.{c}")
         try:
             get_optimizer(self.optimizer)
         except InputError as exc:
@@ -226,6 +242,10 @@ class Calibrator:
         s = self.settings
         if s.noise == "repeats":
             return np.broadcast_to(noise_from_repeats(m), shape).copy()
+        if s.noise in ("relative", "relative_ml") or (s.noise == "ml" and s.relative_sigma):
+            # ml: the stated model is the start of the iteration (instead of the nominal residual)
+            from calib.noise import relative_noise
+            return relative_noise(m.values, m.channels, s.relative_sigma, m.source)
         if s.sigma:
             unknown = [c for c in s.sigma if c not in m.channels]
             if unknown:
@@ -269,14 +289,21 @@ class Calibrator:
             resid = m.values - nominal.evaluation.values[:, self.channel_index]
             sigma = np.broadcast_to(ml_noise(resid, nominal.ok), m.values.shape).copy()
             problem = problem.with_sigma(sigma)
-        noise_iters = st.max_noise_iterations if st.noise == "ml" else 1
+        noise_iters = st.max_noise_iterations if st.noise in ("ml", "relative_ml") else 1
         p = self.p0.copy()
         for k_noise in range(noise_iters):
             p, svd, lin, status, message = self._relinearize_loop(problem, p)
-            if st.noise != "ml":
+            if st.noise not in ("ml", "relative_ml"):
                 break
-            resid = m.values - lin.evaluation.values[:, self.channel_index]
-            new_sigma = np.broadcast_to(ml_noise(resid, lin.ok), m.values.shape).copy()
+            if st.noise == "relative_ml":
+                # one ML factor on the stated σ of every channel, with N − k degrees of freedom
+                from calib.noise import ml_scale
+                n_res = int(lin.ok.sum()) * len(self.channel_index)
+                k_hat = ml_scale(float(np.sum(lin.residual[lin.ok] ** 2)), n_res, svd.n_retained)
+                new_sigma = problem.sigma * k_hat
+            else:
+                resid = m.values - lin.evaluation.values[:, self.channel_index]
+                new_sigma = np.broadcast_to(ml_noise(resid, lin.ok), m.values.shape).copy()
             change = float(np.max(np.abs(new_sigma[0] / problem.sigma[0] - 1.0)))
             self._emit({"stage": "noise", "iteration": k_noise + 1, "sigma": new_sigma[0].tolist(),
                         "change": change})

@@ -77,7 +77,7 @@ MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
               "nuisance": (list, False)}
 #: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force``.
 CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
-                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "cd_min": NUM,
+                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict, "cd_min": NUM,
                                               "max_retained": int, "band_eta": list}),
                     "force": (bool, False)}
 
@@ -86,7 +86,8 @@ SCHEMA = {
     "": {"name": (str, True), "description": (str, False), "rotor": (dict, True), "model": (dict, False),
          "fluid": (dict, False), "grid": (dict, True), "conditions": (dict, False), "measurements": (dict, False),
          "truth": (dict, False), "noise": (dict, False), "calibration": (dict, False),
-         "executor": (dict, False), "stages": (list, True)},
+         "executor": (dict, False), "diagnosis": (dict, False), "validation": (dict, False),
+         "stages": (list, True)},
     "rotor": None,  # validated by calib.rotor.sources.rotor_from_table (name | openfast | aerodyn | ... )
     "model": MODEL_KEYS,
     "fluid": {"density": (NUM, False), "kinematic_viscosity": (NUM, False)},
@@ -112,6 +113,8 @@ TYPE_NAMES = {str: "a string", dict: "a table", list: "an array", bool: "true/fa
 def _check_table(table: dict, section: str, source: str) -> None:
     spec = SCHEMA[section]
     where = (section + ".") if section else ""
+    if not isinstance(table, dict):
+        raise InputError(f"'{section}' must be a table, got {table!r:.60}", source, field=section or None)
     for key, value in table.items():
         if key not in spec:
             raise InputError(f"unknown key '{where}{key}'; valid keys here: {', '.join(sorted(spec))}",
@@ -130,9 +133,25 @@ def _check_table(table: dict, section: str, source: str) -> None:
 
 def _numbers(value, key: str, source: str) -> np.ndarray:
     """An array of numbers, or ``{start, stop, num}`` written as [start, stop, "num"]-free lists only."""
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value) or not value:
+    if (not isinstance(value, (list, tuple)) or not value
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
         raise InputError(f"'{key}' must be a non-empty array of numbers, got {value!r}", source, field=key)
-    return np.asarray(value, float)
+    out = np.asarray(value, float)
+    if not np.all(np.isfinite(out)):
+        raise InputError(f"'{key}' must be finite numbers, got {value!r}", source, field=key)
+    return out
+
+
+def _non_finite(node, key: str = ""):
+    """(key, value) of the first NaN or infinite number in a parsed TOML tree, or None."""
+    if isinstance(node, float) and not np.isfinite(node):
+        return key, node
+    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for k, v in items:
+        found = _non_finite(v, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
+        if found:
+            return found
+    return None
 
 
 def load_workflow(path: str | Path) -> dict:
@@ -146,6 +165,9 @@ def load_workflow(path: str | Path) -> dict:
     path = Path(path)
     src = str(path)
     data = read_toml(path, "workflow file")
+    bad = _non_finite(data)
+    if bad:  # TOML has nan and inf literals; no workflow setting is one
+        raise InputError(f"'{bad[0]}' must be a finite number, got {bad[1]!r}", src, field=bad[0])
     _check_table(data, "", src)
     for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
         if section == "model" and data.get("model", {}).get("kind") == "fmu":
@@ -298,11 +320,15 @@ class WorkflowSetup:
     executor_table: dict | None = None
     base_dir: str = "."
     yaw: float = 0.0
+    diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
+    validation: object = None             # calib.campaign.ValidationSettings of [validation]
 
-    def model(self, grid: CorrectionGrid, channels, executor=None):
-        """The forward model of a stage: the native BEM, or the FMU of ``[model] kind = "fmu"``."""
+    def model(self, grid: CorrectionGrid, channels, executor=None, effects=()):
+        """The forward model of a stage: the native BEM (with ``effects``, e.g. those a
+        ``[diagnosis]`` named), or the FMU of ``[model] kind = "fmu"``."""
         if self.fmu_table is None:
-            return BemModel(self.rotor, grid, channels, self.settings, self.nuisance, rotor_source=self.rotor_spec)
+            return BemModel(self.rotor, grid, channels, self.settings, self.nuisance, rotor_source=self.rotor_spec,
+                            effects=effects)
         from calib.models.from_config import model_from_workflow
         return model_from_workflow(self.fmu_table, self.rotor_spec, list(channels), self.source, self.base_dir,
                                    grid=grid, executor=executor)
@@ -431,6 +457,16 @@ def prepare(cfg: dict) -> WorkflowSetup:
                           cfg["_dir"], yaw)
     if not isinstance(g["alpha_nodes_deg"], str):
         setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
+    from calib.campaign import ValidationSettings, diagnosis_settings
+    if "diagnosis" in cfg:
+        if fmu_table is not None:
+            raise InputError("the discrepancy workflow runs on the native BEM only; remove [diagnosis] or use "
+                             "[model] kind = \"bem\"", src, field="diagnosis")
+        if "measurements" not in cfg:
+            raise InputError("[diagnosis] needs measured data ([measurements] file = ...)", src, field="diagnosis")
+        setup.diagnosis = diagnosis_settings(cfg["diagnosis"], src)
+    if "validation" in cfg:
+        setup.validation = ValidationSettings.from_table(cfg["validation"], src)
     return setup
 
 
@@ -546,6 +582,13 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
         unit_report = check_units(check_model, nominal_vector(check_model.parameters), meas,
                                   sigma=calib_cfg.get("sigma"))
         echo("[calib run] " + unit_report.summary().replace("\n", "\n[calib run] "))
+        misfits = [f for f in unit_report.findings if np.isnan(f.factor)]
+        if setup.diagnosis is not None and misfits:
+            # a gross misfit that no unit factor explains is what the discrepancy workflow is for;
+            # a finding that a unit factor explains still stops the run
+            unit_notes = {"unit check (misfit left to the discrepancy workflow)": "; ".join(f.message for f in misfits)}
+            unit_report = dataclasses.replace(unit_report, findings=tuple(
+                f for f in unit_report.findings if not np.isnan(f.factor)))
         if not force:
             unit_report.raise_if_failed(str(file))
         elif not unit_report.ok:
@@ -566,10 +609,15 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
     echo(f"[calib run] {cfg['name']}: rotor {rotor.name}, {meas.n_points} operating points, "
          f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
 
+    from calib import campaign
+
+    effects, diag, validations = [], None, {}
+    if setup.diagnosis is not None:   # the discrepancy workflow first; its named effects join every stage
+        effects, diag = campaign.run_diagnosis(setup, meas, grid, out, executor, echo)
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
-        model = recorded(setup.model(grid, stage["channels"], executor), hist, f"stage {k + 1}: {name}", chunk,
+        model = recorded(setup.model(grid, stage["channels"], executor, effects), hist, f"stage {k + 1}: {name}", chunk,
                          progress_line)
         st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
                                                                             setup.calibration_settings.retain))
@@ -592,10 +640,21 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
         res.checks.update(unit_notes)
         if truth_p is not None:
             res.checks.update(truth_checks(model, res, cfg["truth"]))
+        if diag is not None:
+            res.checks["discrepancy workflow"] = campaign.diagnosis_sentence(diag)
+        if setup.validation is not None:
+            val = campaign.leave_one_out(
+                lambda _c=tuple(stage["channels"]): setup.model(grid, list(_c), executor, effects),
+                meas.select_channels(stage["channels"]), st, setup.validation,
+                progress=lambda line, _n=name: echo(f"[calib run] {_n}: leave-one-out: {line}"))
+            validations[name] = val
+            res.checks.update({f"leave-one-out ({c})": val.sentence(c) for c in val.channels()})
         stage_dir = out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
         stage_dir.mkdir(exist_ok=True)
         t_rep = time.perf_counter()
         res.save(stage_dir)
+        if name in validations:
+            campaign.write_validation(validations[name], stage_dir)
         truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if truth_p is not None else None
         figs = write_figures(res, stage_dir, truth=truth, progress=lambda line: echo(f"[calib run] {line}"))
         t_rep = time.perf_counter() - t_rep
@@ -613,11 +672,21 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
     if len(outcomes) > 1:
         fig = plot_spectra({o.name: o.result for o in outcomes})
         extra["singular_value_spectra"] = save_figure(fig, out, "singular_value_spectra")
+    if "measurements" in cfg and (diag is not None or validations):
+        rotor_ch = [c for c in all_channels if "@" not in c]
+        span_ch = [c for c in all_channels if c.startswith("cn@")]
+        for key, chans, what in (("loads_vs_wind_speed", rotor_ch, "rotor loads"),
+                                 ("cn_vs_wind_speed", span_ch, "normal-force coefficient at the pressure taps")):
+            if chans:
+                fig = campaign.campaign_figure(setup, meas, grid, outcomes, diag, validations, effects, chans,
+                                               f"{cfg['name']}: {what}, measured and modelled", executor)
+                extra[key] = save_figure(fig, out, key)
     intro = cfg.get("description", "")
     if truth_p is not None:
         intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
                  "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
     report = write_report(out / "report.html", title=f"calib: {cfg['name']}",
+                          sections=[campaign.section_html(diag, validations)] if (diag or validations) else None,
                           results={o.name: o.result for o in outcomes},
                           figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra,
                           checks={o.name: o.result.checks for o in outcomes})

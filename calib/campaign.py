@@ -1,0 +1,370 @@
+"""Measured-data studies around a workflow's stages: the discrepancy workflow first, and
+leave-one-condition-out validation after.
+
+A workflow with a ``[diagnosis]`` table runs :func:`calib.discrepancy.diagnose` on the
+measurements before its stages; every effect it names joins each stage's model with its
+*default* nominal value and prior (the stage re-estimates it with the correction field, so
+a validation fold never sees a value fitted on its held-out point). A ``[validation]``
+table makes each stage repeat its calibration with the points of one operating condition
+left out (e.g. one wind speed at a time) and predict them with 95 % prediction intervals:
+the model output's interval (:meth:`calib.result.CalibrationResult.predict`, frozen
+directions included) combined with the noise σ of a new measurement.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy import stats
+
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.discrepancy import DiagnosisSettings
+from calib.errors import CalibError, InputError
+from calib.measurements import Measurements
+
+#: [diagnosis] keys of a workflow: the DiagnosisSettings fields, plus the channels it uses.
+DIAGNOSIS_KEYS = tuple(f.name for f in dataclasses.fields(DiagnosisSettings)) + ("channels",)
+#: [validation] keys of a workflow.
+VALIDATION_KEYS = ("leave_out", "channels", "confidence")
+#: Operating conditions a validation may leave out one value of at a time ("point": each point).
+LEAVE_OUT = ("wind_speed", "rotor_speed", "pitch", "point")
+
+
+def diagnosis_settings(table: dict, source: str) -> tuple[DiagnosisSettings, list | None]:
+    """The :class:`DiagnosisSettings` and channel list of a workflow's ``[diagnosis]`` table."""
+    bad = [k for k in table if k not in DIAGNOSIS_KEYS]
+    if bad:
+        raise InputError(f"unknown key 'diagnosis.{bad[0]}'; valid keys here: {', '.join(sorted(DIAGNOSIS_KEYS))}",
+                         source, field=f"diagnosis.{bad[0]}")
+    kw = {k: v for k, v in table.items() if k != "channels"}
+    if "candidates" in kw:
+        if not isinstance(kw["candidates"], list) or not all(isinstance(c, str) for c in kw["candidates"]):
+            raise InputError(f"must be an array of effect names, got {kw['candidates']!r}", source,
+                             field="diagnosis.candidates")
+        kw["candidates"] = tuple(kw["candidates"])
+    try:
+        dset = DiagnosisSettings(**kw)
+    except TypeError as exc:
+        raise InputError(f"invalid [diagnosis] table: {exc}", source, field="diagnosis") from None
+    channels = table.get("channels")
+    if channels is not None and (not isinstance(channels, list) or not channels
+                                 or not all(isinstance(c, str) for c in channels)):
+        raise InputError(f"must be a non-empty array of channel names, got {channels!r}", source,
+                         field="diagnosis.channels")
+    return dset.validate(source, "diagnosis."), channels
+
+
+@dataclass(frozen=True)
+class ValidationSettings:
+    """Settings of :func:`leave_one_out` (a workflow's ``[validation]`` table).
+
+    Parameters
+    ----------
+    leave_out : {"wind_speed", "rotor_speed", "pitch", "point"}
+        The condition whose values are left out one at a time.
+    channels : tuple of str, optional
+        Channels scored (default: every channel of the stage).
+    confidence : float
+        Level of the prediction intervals.
+    """
+
+    leave_out: str = "wind_speed"
+    channels: tuple | None = None
+    confidence: float = 0.95
+
+    @classmethod
+    def from_table(cls, table: dict, source: str) -> "ValidationSettings":
+        bad = [k for k in table if k not in VALIDATION_KEYS]
+        if bad:
+            raise InputError(f"unknown key 'validation.{bad[0]}'; valid keys here: {', '.join(VALIDATION_KEYS)}",
+                             source, field=f"validation.{bad[0]}")
+        leave = table.get("leave_out", "wind_speed")
+        if leave not in LEAVE_OUT:
+            raise InputError(f"must be one of {', '.join(LEAVE_OUT)}, got {leave!r}", source,
+                             field="validation.leave_out")
+        conf = table.get("confidence", 0.95)
+        if isinstance(conf, bool) or not isinstance(conf, (int, float)) or not 0 < conf < 1:
+            raise InputError(f"must be a number in (0, 1), got {conf!r}", source, field="validation.confidence")
+        chans = table.get("channels")
+        if chans is not None and (not isinstance(chans, list) or not all(isinstance(c, str) for c in chans)):
+            raise InputError(f"must be an array of channel names, got {chans!r}", source, field="validation.channels")
+        return cls(leave, tuple(chans) if chans else None, float(conf))
+
+
+def named_effect_specs(diag, skip=()) -> list[dict]:
+    """Specs of the effects a diagnosis named, with their default (not fitted) nominal values.
+
+    Parameters
+    ----------
+    diag : calib.discrepancy.Diagnosis
+    skip : sequence of str
+        Effects the stage models already carry (the workflow's nuisance parameters, e.g.
+        ``pitch_offset``): a named one is free in every stage already and is not added twice.
+
+    Returns
+    -------
+    list of dict
+        ``{"name": ..., "options": {...}}`` per named effect, in naming order (the variant
+        the diagnosis preferred is kept).
+    """
+    specs = []
+    for rnd in diag.rounds:
+        verdict = rnd["verdict"]
+        if verdict in ("none", "ambiguous"):
+            break
+        best = next(f for f in rnd["candidates"] if f.effect == verdict and f.significant)
+        if best.effect not in skip:
+            specs.append(dict(best.spec))
+    return specs
+
+
+@dataclass
+class FoldRow:
+    """One held-out point of one channel."""
+
+    group: float
+    channel: str
+    measured: float
+    nominal: float
+    predicted: float
+    lower: float
+    upper: float
+    model_std: float
+    noise_std: float
+    n_retained: int
+    status: str
+
+    @property
+    def inside(self) -> bool:
+        return bool(self.lower <= self.measured <= self.upper)
+
+
+@dataclass
+class Validation:
+    """What :func:`leave_one_out` found (``to_dict`` is ``validation.json``)."""
+
+    leave_out: str
+    confidence: float
+    rows: list = field(default_factory=list)
+    units: dict = field(default_factory=dict)
+
+    def channels(self) -> list[str]:
+        return list(dict.fromkeys(r.channel for r in self.rows))
+
+    def summary(self, channel: str) -> dict:
+        """Mean absolute error of the nominal and the calibrated model at the held-out points,
+        and how many held-out measurements fall inside the prediction intervals."""
+        rows = [r for r in self.rows if r.channel == channel and np.isfinite(r.predicted)]
+        err_nom = [abs(r.measured - r.nominal) for r in rows if np.isfinite(r.nominal)]
+        return {"channel": channel, "unit": self.units.get(channel, ""), "folds": len(rows),
+                "mean_abs_error_nominal": float(np.mean(err_nom)) if err_nom else float("nan"),
+                "mean_abs_error_calibrated": float(np.mean([abs(r.measured - r.predicted) for r in rows]))
+                if rows else float("nan"),
+                "inside": int(sum(r.inside for r in rows)),
+                "failed": int(sum(1 for r in self.rows if r.channel == channel and not np.isfinite(r.predicted)))}
+
+    def sentence(self, channel: str) -> str:
+        s = self.summary(channel)
+        better = s["mean_abs_error_calibrated"] < s["mean_abs_error_nominal"]
+        return (f"{channel}, one {self.leave_out.replace('_', ' ')} left out at a time ({s['folds']} folds"
+                + (f", {s['failed']} failed" if s["failed"] else "") + "): mean |error| at the held-out points "
+                f"{s['mean_abs_error_calibrated']:.4g} {s['unit']} calibrated vs {s['mean_abs_error_nominal']:.4g} "
+                f"{s['unit']} nominal ({'better' if better else 'NOT better'}); {s['inside']} of {s['folds']} "
+                f"held-out measurements inside the {100 * self.confidence:g} % prediction intervals")
+
+    def to_dict(self) -> dict:
+        return {"leave_out": self.leave_out, "confidence": self.confidence,
+                "summary": [self.summary(c) for c in self.channels()],
+                "rows": [{**dataclasses.asdict(r), "inside": r.inside} for r in self.rows]}
+
+    def write_csv(self, path) -> None:
+        from calib.report.atomic import atomic_path
+
+        head = [self.leave_out, "channel", "measured", "nominal", "predicted", "lower", "upper", "model_std",
+                "noise_std", "inside", "n_retained", "status"]
+        with atomic_path(path) as tmp:
+            with open(tmp, "w") as f:
+                f.write(",".join(head) + "\n")
+                for r in self.rows:
+                    f.write(",".join([f"{r.group:.6g}", r.channel] + [f"{v:.8g}" for v in (
+                        r.measured, r.nominal, r.predicted, r.lower, r.upper, r.model_std, r.noise_std)]
+                        + [str(r.inside).lower(), str(r.n_retained), r.status]) + "\n")
+
+
+def _groups(measurements: Measurements, leave_out: str) -> np.ndarray:
+    if leave_out == "point":
+        return np.arange(measurements.n_points, dtype=float)
+    return np.round(np.asarray(getattr(measurements.conditions, leave_out), float), 6)
+
+
+def leave_one_out(make_model: Callable, measurements: Measurements, settings: CalibrationSettings,
+                  validation: ValidationSettings = ValidationSettings(),
+                  progress: Callable[[str], None] | None = None) -> Validation:
+    """Calibrate with each value of one condition left out and predict the points left out.
+
+    Parameters
+    ----------
+    make_model : callable() -> ForwardModel
+        A fresh model of the stage (same channels as ``measurements``).
+    measurements : Measurements
+    settings : CalibrationSettings
+        As for the full calibration (noise model, truncation).
+    validation : ValidationSettings
+    progress : callable(str), optional
+
+    Returns
+    -------
+    Validation
+        Per held-out point and channel: the measurement, the nominal model, the prediction
+        and its interval. The interval combines the model output's variance with the noise
+        variance of a new measurement: the ``_sigma`` of the held-out row when the table has
+        one, else the σ the fold's calibration used for that channel (constant per channel
+        for ``noise = "ml"``, ``"relative"`` and ``"relative_ml"``).
+    """
+    say = progress or (lambda s: None)
+    groups = _groups(measurements, validation.leave_out)
+    values = np.unique(groups)
+    if values.size < 3:
+        raise InputError(f"leave-one-out over {validation.leave_out} needs at least 3 distinct values, found "
+                         f"{values.size}", measurements.source, field="validation.leave_out")
+    channels = list(validation.channels or measurements.channels)
+    missing = [c for c in channels if c not in measurements.channels]
+    if missing:
+        raise InputError(f"channel(s) {', '.join(missing)} not in this stage ({', '.join(measurements.channels)})",
+                         measurements.source, field="validation.channels")
+    z = float(stats.norm.ppf(0.5 * (1 + validation.confidence)))
+    model = make_model()
+    names = [c.name for c in model.channels]
+    units = {c.name: c.unit for c in model.channels}
+    p0 = np.array([q.nominal for q in model.parameters])
+    nominal = model.evaluate(p0, measurements.conditions)
+    y_nom = nominal.values[:, [names.index(c) for c in measurements.channels]]
+    out = Validation(validation.leave_out, validation.confidence, units={c: units.get(c, "") for c in channels})
+    for i, g in enumerate(values):
+        test = groups == g
+        train = dataclasses.replace(
+            measurements, conditions=measurements.conditions.subset(~test), values=measurements.values[~test],
+            sigma=None if measurements.sigma is None else measurements.sigma[~test])
+        try:
+            res = Calibrator(make_model(), train, settings, name=f"fold {i + 1}").run()
+            pred = res.predict(measurements.conditions.subset(test), model=make_model(),
+                               confidence=validation.confidence)
+            status = res.status
+        except CalibError as exc:   # a failed fold is counted and shown, the others go on
+            say(f"fold {i + 1}/{values.size} ({validation.leave_out} = {g:g}) failed: {exc}")
+            res, pred, status = None, None, f"failed: {type(exc).__name__}"
+        for c in channels:
+            j = list(measurements.channels).index(c)
+            for k in np.flatnonzero(test):
+                kk = int(np.flatnonzero(np.flatnonzero(test) == k)[0])
+                if pred is None or not np.isfinite(pred.values[kk, j]):
+                    out.rows.append(FoldRow(float(g), c, float(measurements.values[k, j]), float(y_nom[k, j]),
+                                            np.nan, np.nan, np.nan, np.nan, np.nan,
+                                            -1 if res is None else res.n_retained, status))
+                    continue
+                noise = float(measurements.sigma[k, j]) if measurements.sigma is not None else float(
+                    np.median(res.sigma[:, j]))
+                sd = float(pred.std[kk, j])
+                half = z * float(np.hypot(sd, noise))
+                yk = float(pred.values[kk, j])
+                out.rows.append(FoldRow(float(g), c, float(measurements.values[k, j]), float(y_nom[k, j]), yk,
+                                        yk - half, yk + half, sd, noise, res.n_retained, status))
+        if res is not None:
+            say(f"fold {i + 1}/{values.size} ({validation.leave_out} = {g:g}): {res.n_retained} θ retained, "
+                f"{res.status}")
+    return out
+
+
+# ----------------------------------------------------------------------------- workflow steps
+def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=None,
+                  echo: Callable[[str], None] = print):
+    """The ``[diagnosis]`` step of a workflow: diagnose, write ``DIR/diagnosis/``, return the
+    named effects' specs (default nominal values) and the :class:`~calib.discrepancy.Diagnosis`."""
+    from pathlib import Path
+
+    from calib.discrepancy import diagnose
+    from calib.report.diagnosis_report import write_diagnosis
+
+    dset, channels = setup.diagnosis
+    meas = measurements.select_channels(channels) if channels else measurements
+    diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset, executor=None,
+                    progress=lambda line: echo(f"[calib run] diagnosis: {line}"), rotor_source=setup.rotor_spec)
+    paths = write_diagnosis(diag, Path(out_dir) / "diagnosis")
+    specs = named_effect_specs(diag, skip=setup.nuisance)
+    echo(f"[calib run] diagnosis: named {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else "")
+         + f"; report {paths['report']}")
+    return specs, diag
+
+
+def diagnosis_sentence(diag) -> str:
+    """One line for a result's checks: what the discrepancy workflow named, with its evidence."""
+    if not diag.rounds:
+        return f"no candidate could be fitted; named {diag.effect}"
+    reasons = "; ".join(r["reason"] for r in diag.rounds)
+    added = ", ".join(diag.effects) if diag.effects else "nothing"
+    return (f"named {diag.effect} (free parameters of this model: {added}); {reasons}; χ²/dof "
+            f"{diag.before['chi2_per_dof']:.3g} nominal -> {diag.with_effects['chi2_per_dof']:.3g} with the effect(s) "
+            f"at their fitted values (see diagnosis/report.html)")
+
+
+def write_validation(validation: Validation, stage_dir) -> None:
+    """``validation.csv`` and ``validation.json`` in a stage folder (atomically)."""
+    import json
+    from pathlib import Path
+
+    from calib.report.atomic import atomic_path
+
+    stage_dir = Path(stage_dir)
+    validation.write_csv(stage_dir / "validation.csv")
+    with atomic_path(stage_dir / "validation.json") as tmp:
+        Path(tmp).write_text(json.dumps(validation.to_dict(), indent=1, default=float))
+
+
+def campaign_figure(setup, measurements: Measurements, grid, outcomes, diag, validations: dict, effects,
+                    channels, title: str, executor=None):
+    """:func:`calib.report.campaign_figures.plot_campaign` for ``channels`` of a workflow's stages."""
+    from calib.report.campaign_figures import plot_campaign, predict_channels
+
+    meas = measurements.select_channels(channels)
+    model = setup.model(grid, channels, executor, effects)
+    nominal_model = setup.model(None, channels, executor)
+    nominal = nominal_model.evaluate(np.array([q.nominal for q in nominal_model.parameters], float),
+                                     meas.conditions).values
+    with_effects = None
+    if diag is not None and diag.effects and all(c in diag.channels for c in channels):
+        with_effects = diag.model_with_effects[:, [diag.channels.index(c) for c in channels]]
+    stages = {}
+    for o in outcomes:
+        names, vals, half = predict_channels(o.result, model, meas.conditions)
+        stages[o.name] = (vals[:, [names.index(c) for c in channels]], half[:, [names.index(c) for c in channels]])
+    units = {c.name: c.unit for c in model.channels}
+    return plot_campaign(channels, meas.values, np.asarray(meas.conditions.wind_speed, float), nominal,
+                         with_effects, " + ".join(diag.effects) if diag is not None and diag.effects else "",
+                         stages, validations, title=title, units=units)
+
+
+def section_html(diag, validations: dict) -> str:
+    """HTML of the discrepancy workflow's verdict and the leave-one-out tables."""
+    import html
+
+    parts = []
+    if diag is not None:
+        parts.append("<h2>Discrepancy workflow</h2><p>" + html.escape(diagnosis_sentence(diag))
+                     + ' <a href="diagnosis/report.html">Full diagnosis report</a>.</p>')
+    for name, val in validations.items():
+        parts.append(f"<h2>Leave-one-out validation: {html.escape(name)}</h2>")
+        for c in val.channels():
+            parts.append("<p>" + html.escape(val.sentence(c)) + "</p>")
+        head = [val.leave_out.replace("_", " "), "channel", "measured", "nominal", "predicted", "95 % PI",
+                "inside", "θ retained"]
+        rows = "".join(
+            "<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in (
+                f"{r.group:g}", r.channel, f"{r.measured:.4g}", f"{r.nominal:.4g}", f"{r.predicted:.4g}",
+                f"{r.lower:.4g} … {r.upper:.4g}", "yes" if r.inside else "NO", r.n_retained)) + "</tr>"
+            for r in val.rows)
+        parts.append('<div style="overflow-x:auto"><table><tr>' + "".join(f"<th>{h}</th>" for h in head)
+                     + "</tr>" + rows + "</table></div>")
+    return "\n".join(parts)
