@@ -19,7 +19,7 @@ from calib.logs import say
 from calib.tomlfile import read_toml
 from calib.measurements import read_measurements
 
-CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis")
+CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis", "executor")
 DEFAULT_GRID = {"alpha_nodes_deg": "auto", "eta_nodes": [0.25, 0.5, 0.75, 1.0]}
 DIAGNOSIS_KEYS = {f for f in DiagnosisSettings.__dataclass_fields__}
 
@@ -97,18 +97,21 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
                          src, field=f"diagnosis.{bad[0]}")
     if "candidates" in dcfg:
         dcfg["candidates"] = tuple(dcfg["candidates"])
-    dset = DiagnosisSettings(**dcfg).validate(src, "diagnosis.")
+    is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
+    dset = DiagnosisSettings(**dcfg)
+    if not is_fmu:         # an FMU's candidates are its mapped parameters: checked with the model below
+        dset.validate(src, "diagnosis.")
     meas = read_measurements(data)
     for note in meas.notes:
         printer(f"[calib diagnose] {Path(data).name}: {note}")
     wf = {"name": "diagnose", "rotor": cfg["rotor"], "grid": cfg.get("grid", DEFAULT_GRID),
           "stages": [{"name": "diagnose", "channels": list(meas.channels)}], "_source": src, "_dir": str(base_dir)}
-    for key in ("model", "fluid", "calibration"):
+    for key in ("model", "fluid", "calibration", "executor"):
         if key in cfg:
             wf[key] = cfg[key]
     from calib.workflow import _check_table
     for key in ("model", "fluid", "grid", "calibration"):
-        if key in wf:
+        if key in wf and not (key == "model" and is_fmu):   # an FMU's [model]: checked by calib.models.from_config
             _check_table(wf[key], key, src)
     setup = prepare(wf)
     grid = setup.grid(meas.conditions)
@@ -122,12 +125,22 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         if resume:
             printer(f"[calib diagnose] resuming from {hist.folder}: {hist.n_records} model calls on record")
 
-    def wrap(model, label):
-        return recorded(model, hist, label, progress=progress_line)
+    family, executor, chunk = None, None, None
+    if is_fmu:
+        family, executor = _fmu_family(setup, grid, list(meas.channels), dset, src)
+        chunk = max(int(getattr(executor, "workers", 1) or 1), 1)   # a kill loses at most one chunk of simulations
 
-    diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
-                    progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
-                    wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"))
+    def wrap(model, label):
+        return recorded(model, hist, label, chunk, progress=progress_line)
+
+    try:
+        diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
+                        progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
+                        wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
+                        family=family)
+    finally:
+        if executor is not None:
+            executor.close()
     paths = write_diagnosis(diag, out)
     if hist is not None:
         hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
@@ -136,6 +149,27 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     printer(f"[calib diagnose] named: {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else ""))
     printer(f"[calib diagnose] report: {paths['report']}")
     return diag
+
+
+def _fmu_family(setup, grid, channels: list, dset: DiagnosisSettings, src: str):
+    """The FMU family of a ``[model] kind = "fmu"`` config and the executor its simulations run on."""
+    from calib.fmu_diagnosis import FmuFamily
+    from calib.models.from_config import executor_from_table, model_from_workflow
+
+    executor = executor_from_table(setup.executor_table, src)
+
+    def build(parameters, corrections):
+        table = {**setup.fmu_table, "parameters": list(parameters), "corrections": bool(corrections)}
+        return model_from_workflow(table, setup.rotor_spec, channels, src, setup.base_dir, grid=grid,
+                                   executor=executor)
+
+    try:
+        family = FmuFamily(build, dset.candidates)
+        dset.validate(src, "diagnosis.", valid=family.names)
+    except BaseException:
+        executor.close()
+        raise
+    return family, executor
 
 
 def add_diagnose_arguments(parser) -> None:

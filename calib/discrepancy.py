@@ -93,11 +93,13 @@ class DiagnosisSettings:
     ambiguity_bic: float = 6.0
     recalibrate: bool = True
 
-    def validate(self, source: str = "DiagnosisSettings", prefix: str = "") -> "DiagnosisSettings":
-        names = self.candidates if self.candidates is not None else NAMEABLE
-        unknown = [c for c in names if c not in NAMEABLE]
+    def validate(self, source: str = "DiagnosisSettings", prefix: str = "",
+                 valid: Sequence[str] = NAMEABLE) -> "DiagnosisSettings":
+        """Check every setting (``valid``: the candidate names of the model family)."""
+        names = self.candidates if self.candidates is not None else valid
+        unknown = [c for c in names if c not in valid]
         if unknown:
-            raise InputError(f"unknown candidate effect(s) {', '.join(unknown)}; valid: {', '.join(NAMEABLE)}",
+            raise InputError(f"unknown candidate effect(s) {', '.join(unknown)}; valid: {', '.join(valid)}",
                              source, field=f"{prefix}candidates")
         if not 0 < self.significance < 1:
             raise InputError(f"must be in (0, 1), got {self.significance!r}", source, field=f"{prefix}significance")
@@ -254,10 +256,58 @@ def _fixed_effect(effect_spec: dict, fitted: dict):
     return make_effect(effect_spec["name"], **options)
 
 
+class BemFamily:
+    """The models a diagnosis on the native BEM calibrates: candidates are the effects of
+    :data:`calib.effects.EFFECTS` switched into a :class:`~calib.models.bem_model.BemModel`.
+
+    Every family offers the same few calls, so :func:`diagnose` runs unchanged on another
+    kind of model (:class:`calib.fmu_diagnosis.FmuFamily`).
+    """
+
+    def __init__(self, rotor, channels, grid, settings, rotor_source=None):
+        self.rotor, self.channels, self.grid, self.settings = rotor, list(channels), grid, settings
+        self.rotor_source = rotor_source
+        self.rotor_radius = rotor.rotor_radius
+        self.names = NAMEABLE
+
+    def field_model(self, base=()):
+        """The correction field on top of the fixed ``base`` effects (localize, recalibrate)."""
+        return BemModel(self.rotor, self.grid, self.channels, self.settings, (), effects=list(base),
+                        rotor_source=self.rotor_source)
+
+    def nominal_model(self):
+        return BemModel(self.rotor, None, self.channels, self.settings, (), rotor_source=self.rotor_source)
+
+    def variants(self, name: str, options: dict) -> list:
+        return _variants(name, options)
+
+    def candidate_model(self, base, effect):
+        return _candidate_model(self.rotor, self.channels, self.settings, base, effect)
+
+    def check(self, base, effect, conditions) -> None:
+        """Raise InputError when ``effect`` cannot act on this rotor (reported not applicable)."""
+        model = self.candidate_model(base, effect)
+        model.evaluate(np.array([q.nominal for q in model.parameters]), conditions.subset(slice(0, 1)))
+
+    def n_parameters(self, base) -> int:
+        return sum(len(e.parameters()) for e in base)
+
+    def spec(self, effect) -> dict:
+        return effect.spec()
+
+    def add(self, base, best: "CandidateFit") -> list:
+        """``base`` with the named candidate added at its fitted values."""
+        return list(base) + [_fixed_effect(best.spec, {q["name"]: q["value"] for q in best.parameters})]
+
+    def names_of(self, base) -> list:
+        return [e.name for e in base]
+
+
 def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: BemSettings | None = None,
              calibration: CalibrationSettings | None = None, diagnosis: DiagnosisSettings | None = None,
              executor=None, progress: Callable[[str], None] | None = None, rotor_source: dict | None = None,
-             wrap: Callable | None = None, fit_progress: Callable[[int, int], None] | None = None) -> Diagnosis:
+             wrap: Callable | None = None, fit_progress: Callable[[int, int], None] | None = None,
+             family=None) -> Diagnosis:
     """Run the discrepancy workflow on the native BEM (see the module notes).
 
     Parameters
@@ -281,6 +331,9 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         :func:`calib.history.recorded`, which records each call and answers it on resume).
     fit_progress : callable(done, total), optional
         Called as the candidate fits of a round finish.
+    family : optional
+        The models to calibrate (default :class:`BemFamily` of ``rotor``, ``grid``,
+        ``settings``); e.g. :class:`calib.fmu_diagnosis.FmuFamily` for an FMU.
 
     Returns
     -------
@@ -288,19 +341,20 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     """
     t0 = time.perf_counter()
     settings = settings or BemSettings()
-    cal = (calibration or CalibrationSettings()).validate()
-    dset = (diagnosis or DiagnosisSettings()).validate()
-    say = progress or (lambda s: None)
     channels = list(measurements.channels)
-    candidates = tuple(dset.candidates) if dset.candidates is not None else NAMEABLE
+    family = family or BemFamily(rotor, channels, grid, settings, rotor_source)
+    cal = (calibration or CalibrationSettings()).validate()
+    dset = (diagnosis or DiagnosisSettings()).validate(valid=family.names)
+    say = progress or (lambda s: None)
+    candidates = tuple(dset.candidates) if dset.candidates is not None else tuple(family.names)
     if executor is None:
         from calib.executors import SerialExecutor
         executor = SerialExecutor()
     wrap = wrap or (lambda model, label: model)
 
     # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
-    field_model = wrap(BemModel(rotor, grid, channels, settings, (), rotor_source=rotor_source), "localization")
-    say(f"localize: correction field, {field_model.grid.n_params} nodes")
+    field_model = wrap(family.field_model(), "localization")
+    say(f"localize: correction field, {len(field_model.parameters)} parameters")
     loc = Calibrator(field_model, measurements, cal, name="localization").run()
     sigma = loc.sigma
     meas = dataclasses.replace(measurements, sigma=sigma)
@@ -308,10 +362,10 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")
 
     # 1. find
-    base_model = wrap(BemModel(rotor, None, channels, settings, (), rotor_source=rotor_source), "nominal")
+    base_model = wrap(family.nominal_model(), "nominal")
     y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
     before = gap(meas.values, y0, sigma, channels)
-    findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, rotor.rotor_radius)
+    findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
     say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} (p = {before['p_value']:.2g})")
     n_res = int(np.isfinite(y0).all(axis=1).sum() * len(channels))
     field_change = (loc.model_after - y0) / sigma
@@ -326,14 +380,11 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         labels, effects = [], {}
         for c in list(remaining):
             try:
-                variants = _variants(c, dset.candidate_options.get(c, {}))
+                variants = family.variants(c, dset.candidate_options.get(c, {}))
                 for label, effect in variants:
                     # an effect that cannot act on this rotor (e.g. no reference Reynolds number) is
                     # reported as not applicable, not fitted
-                    _candidate_model(rotor, channels, settings, base_effects, effect).evaluate(
-                        np.array([q.nominal for q in _candidate_model(rotor, channels, settings, base_effects,
-                                                                      effect).parameters]),
-                        meas.conditions.subset(slice(0, 1)))
+                    family.check(base_effects, effect, meas.conditions)
             except InputError as exc:
                 notes.append(f"candidate {c} not applicable: {exc}")
                 say(f"name: candidate {c} not applicable: {exc}")
@@ -345,7 +396,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         if not labels:
             break
         tasks = [{"name": lab, "measurements": meas, "settings": known,
-                  "model": wrap(_candidate_model(rotor, channels, settings, base_effects, effects[lab]),
+                  "model": wrap(family.candidate_model(base_effects, effects[lab]),
                                 f"round {round_no + 1}: {lab}")} for lab in labels]
         say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
         outs = executor.map(_fit_task, tasks, fit_progress)
@@ -354,7 +405,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         bic_base = base_chi2
         for c, task, out in zip(labels, tasks, outs):
             res, values = out["result"], out["values"]
-            n_base = sum(len(e.parameters()) for e in base_effects)
+            n_base = family.n_parameters(base_effects)
             own = list(range(n_base, res.n_params))
             chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
             k = len(own)
@@ -367,7 +418,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
                 np.std(b[good]) > 0 else float("nan")
             params = [{"name": res.parameters[j]["name"], "value": float(res.p_hat[j]), "std": float(res.std_p[j]),
                        "unit": res.parameters[j]["unit"], "nominal": float(res.p_nominal[j])} for j in own]
-            spec = effects[c].spec()
+            spec = family.spec(effects[c])
             fits.append(CandidateFit(c, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(n_res), lr, p, p < alpha,
                                      pattern_agreement=agree, status=res.status, spec=spec, model_values=values,
                                      effect=c.split(":")[0]))
@@ -382,7 +433,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
             verdict, reason = "none", (f"no candidate improves the fit significantly (likelihood ratio at family-wise "
                                        f"level {dset.significance:g}); best {fits[0].name}: Λ = "
                                        f"{fits[0].lr_statistic:.3g}, p = {fits[0].p_value:.2g}")
-            rounds.append({"base": [e.name for e in base_effects], "candidates": fits, "verdict": verdict,
+            rounds.append({"base": family.names_of(base_effects), "candidates": fits, "verdict": verdict,
                            "reason": reason})
             say(f"name: {reason}")
             break
@@ -393,7 +444,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
             verdict = "ambiguous"
             reason = (f"{best.effect} and {rivals[0].effect} fit about equally well (ΔBIC = "
                       f"{rivals[0].bic - best.bic:.3g} < {dset.ambiguity_bic:g}); the data cannot tell them apart")
-            rounds.append({"base": [e.name for e in base_effects], "candidates": fits, "verdict": verdict,
+            rounds.append({"base": family.names_of(base_effects), "candidates": fits, "verdict": verdict,
                            "reason": reason, "ambiguous": [best.effect, rivals[0].effect]})
             say(f"name: {reason}")
             if not named:
@@ -403,15 +454,15 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
                   f"BIC weight {best.weight:.3f}; next {fits[1].name if len(fits) > 1 else 'none'} "
                   f"ΔBIC = {(fits[1].bic - best.bic) if len(fits) > 1 else float('inf'):.3g}; pattern agreement "
                   f"with the localized correction {best.pattern_agreement:.2f}")
-        rounds.append({"base": [e.name for e in base_effects], "candidates": fits, "verdict": best.effect,
+        rounds.append({"base": family.names_of(base_effects), "candidates": fits, "verdict": best.effect,
                        "reason": reason})
         say(f"name: {reason}")
         named.append(best.effect)
-        base_effects.append(_fixed_effect(best.spec, {q["name"]: q["value"] for q in best.parameters}))
+        base_effects = family.add(base_effects, best)
         base_chi2, base_values = best.chi2, best.model_values
         remaining = [c for c in remaining if c != best.effect]
         # a further effect is looked for only while the model is still inconsistent with the noise
-        fit_now = gap(meas.values, base_values, sigma, channels, sum(len(e.parameters()) for e in base_effects))
+        fit_now = gap(meas.values, base_values, sigma, channels, family.n_parameters(base_effects))
         if fit_now["p_value"] >= dset.significance:
             say(f"name: with {', '.join(named)} the model is consistent with the noise (χ²/dof "
                 f"{fit_now['chi2_per_dof']:.3g}, p = {fit_now['p_value']:.2g}); no further effect is looked for")
@@ -424,14 +475,13 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         effect = effects_named[0]
     else:
         effect = "none"
-    n_fit = sum(len(e.parameters()) for e in base_effects)
+    n_fit = family.n_parameters(base_effects)
     with_effects = gap(meas.values, base_values, sigma, channels, n_fit)
 
     # 4. add + recalibrate the field on top
     recal, y_after = None, None
     if dset.recalibrate:
-        model = wrap(BemModel(rotor, grid, channels, settings, (), effects=base_effects, rotor_source=rotor_source),
-                     "recalibration")
+        model = wrap(family.field_model(base_effects), "recalibration")
         known_field = dataclasses.replace(cal, noise="known", sigma=None)
         say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
         recal = Calibrator(model, meas, known_field, name="recalibration").run()
@@ -442,5 +492,5 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     say(f"show: χ²/dof {before['chi2_per_dof']:.3g} -> {with_effects['chi2_per_dof']:.3g} with "
         f"{', '.join(effects_named) or 'no effect'} -> {after['chi2_per_dof']:.3g} after recalibration")
     return Diagnosis(effect, effects_named, rounds, before, with_effects, after, findings, loc, recal, channels,
-                     meas.values, sigma, meas.conditions.as_dict(), y0, base_values, y_after, rotor.rotor_radius,
+                     meas.values, sigma, meas.conditions.as_dict(), y0, base_values, y_after, family.rotor_radius,
                      time.perf_counter() - t0, notes)

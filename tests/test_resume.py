@@ -211,3 +211,107 @@ def test_incomplete_last_line_is_dropped_on_resume(tmp_path):
     assert isinstance(h2, History) and h2.lookup("k1") is not None and h2.lookup("k2") is None
     h2.event("start")
     assert [e["event"] for e in read_events(tmp_path)] == ["evaluate", "start"]
+
+
+# ----------------------------------------------------------------------------- FMU diagnosis
+FMU_CONFIG = """
+[rotor]
+name = "nrel5mw"
+
+[model]
+kind = "fmu"
+variant = "A"
+switches = { tower_shadow = false, shear = false, yaw = false, flexible_blades = false, gravity = false, skewed_wake = false, dynamic_inflow = false, tip_loss = true, hub_loss = true }
+settings = { shaft_tilt = 0.0, max_internal_step = 0.1, max_azimuth_step = 10.0 }
+steady = { steps_per_revolution = 8, settle_revolutions = 0, average_revolutions = 2, perturbation_settle_revolutions = 0, perturbation_average_revolutions = 1 }
+jacobian = { warm_start = true }
+
+[grid]
+alpha_nodes_deg = [0.0, 10.0]
+eta_nodes = [0.6, 1.0]
+
+[calibration]
+noise = "known"
+max_iterations = 3
+max_relinearizations = 2
+tolerance = 1e-6
+
+[diagnosis]
+candidates = ["pitch_offset_blade1", "stall_delay_strength"]
+max_effects = 1
+recalibrate = false
+
+[executor]
+kind = "process"
+workers = 2
+"""
+FMU_CHANNELS = ["power", "thrust", "root_flap_moment"]
+
+
+def fmu_campaign(tmp_path: Path) -> tuple[Path, Path]:
+    """A config of the bundled FMU (variant A, 8 correction nodes, quasi-steady and short windows)
+    and four operating points of that FMU with blade 1 pitched by 1 deg, 1 % noise."""
+    from calib.corrections import CorrectionGrid
+    from calib.measurements import synthesize
+    from calib.models.from_config import model_from_workflow
+    from calib.rotor.library import load_rotor
+    from calib.tomlfile import read_toml
+    from calib.types import OperatingConditions
+
+    config = tmp_path / "diagnose.toml"
+    config.write_text(FMU_CONFIG)
+    cfg = read_toml(config, "config")
+    grid = CorrectionGrid(cfg["grid"]["alpha_nodes_deg"], cfg["grid"]["eta_nodes"])
+    truth = model_from_workflow({**cfg["model"], "parameters": ["pitch_offset_blade1"], "corrections": False},
+                                {"name": "nrel5mw"}, FMU_CHANNELS, str(config), tmp_path, grid=grid)
+    rotor = load_rotor("nrel5mw")
+    T, P = np.meshgrid([6.0, 9.0], [0.0, 4.0], indexing="ij")
+    v = 10.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
+    meas = synthesize(truth, np.array([1.0]), OperatingConditions(v, np.full(v.size, 10.0), P.ravel()),
+                      relative_sigma={c: 0.01 for c in FMU_CHANNELS}, seed=5)
+    truth.close()
+    data = tmp_path / "campaign.csv"
+    meas.write_csv(data)
+    return config, data
+
+
+def test_killed_fmu_diagnosis_resumes_to_the_uninterrupted_result(tmp_path):
+    """``calib diagnose`` of an FMU (process executor, 2 workers) killed with SIGKILL during the
+    localization, then ``calib diagnose --resume DIR``: the same diagnosis, and no chunk of
+    simulations the killed run completed is simulated again."""
+    from calib.cli import main
+    from calib.diagnose import run_diagnose
+
+    config, data = fmu_campaign(tmp_path)
+    full_dir, cut_dir = tmp_path / "full", tmp_path / "cut"
+    cut = start(["diagnose", "--data", data, "--config", config, "--out", cut_dir, "--quiet"], tmp_path)
+    killed = {}
+    killer = threading.Thread(target=lambda: killed.update(at=kill_after(cut, cut_dir, 6)))
+    killer.start()
+    full = run_diagnose(None, str(data), str(full_dir), str(config), printer=lambda line: None)
+    killer.join()
+    assert full.effect == "pitch_offset_blade1"
+    assert not any(e["event"] == "finished" for e in read_events(cut_dir))
+    assert not (cut_dir / "diagnosis.json").exists()
+    assert assert_complete_files(cut_dir) >= 3
+
+    assert main(["diagnose", "--resume", str(cut_dir), "--quiet"]) == 0
+    a = json.loads((full_dir / "diagnosis.json").read_text())
+    b = json.loads((cut_dir / "diagnosis.json").read_text())
+    assert b["effect"] == a["effect"] == "pitch_offset_blade1"
+    fit_a, fit_b = (next(c for c in d["candidates"] if c["name"] == "pitch_offset_blade1") for d in (a, b))
+    value, std = fit_a["parameters"][0]["value"], fit_a["parameters"][0]["std"]
+    assert abs(value - 1.0) <= 3 * std
+    # the replay is exact: the estimate agrees far inside the optimizer's tolerance
+    assert fit_b["parameters"][0]["value"] == pytest.approx(value, rel=1e-9, abs=1e-12)
+    assert b["before"]["chi2"] == pytest.approx(a["before"]["chi2"], rel=1e-12)
+    assert b["with_effects"]["chi2"] == pytest.approx(a["with_effects"]["chi2"], rel=1e-9)
+    assert b["localization"]["n_retained"] == a["localization"]["n_retained"]
+    assert b["localization"]["chi2_per_dof_after"] == pytest.approx(a["localization"]["chi2_per_dof_after"], rel=1e-9)
+
+    n_full = count_model_calls(read_events(full_dir))
+    resumed = count_model_calls(read_events(cut_dir), since_last_start=True)
+    assert resumed["replayed"] >= killed["at"] - 1
+    assert resumed["computed"] < n_full["computed"]
+    assert resumed["computed_points"] < n_full["computed_points"]
+    assert assert_complete_files(cut_dir) >= 10
