@@ -9,17 +9,22 @@ from calib.errors import CalibError
 
 
 def _demo(args) -> int:
+    import logging
     from pathlib import Path
 
     from calib.demo import run_demo
-    run_demo(args.out, args.rotor)
-    if args.rotor == "nrel5mw" and not args.no_diagnosis:
-        from calib.diagnose import run_diagnose
-        campaign = Path(__file__).resolve().parent / "data" / "demo_campaign" / "nrel5mw_campaign.csv"
-        print(f"[calib demo] discrepancy workflow on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
-              f"effect in the data)")
-        run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
-                     printer=lambda s: print(s.replace("[calib diagnose]", "[calib demo]"), flush=True))
+    from calib.logs import command_logging
+
+    log = logging.getLogger("calib.demo")
+    with command_logging(args.out, args.verbose, args.quiet):
+        run_demo(args.out, args.rotor)
+        if args.rotor == "nrel5mw" and not args.no_diagnosis:
+            from calib.diagnose import run_diagnose
+            campaign = Path(__file__).resolve().parent / "data" / "demo_campaign" / "nrel5mw_campaign.csv"
+            log.info(f"[calib demo] discrepancy workflow on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
+                     f"effect in the data)")
+            run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
+                         printer=lambda s: log.info(s.replace("[calib diagnose]", "[calib demo]")))
     return 0
 
 
@@ -79,6 +84,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotor", default="nrel5mw", help="embedded rotor name (default: nrel5mw)")
     p.add_argument("--no-diagnosis", action="store_true", help="skip the discrepancy workflow on the embedded "
                    "NREL 5-MW campaign (run by default with the nrel5mw rotor)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("-v", "--verbose", action="store_true", help="also print debug lines (the log file "
+                       "OUT/calib.log always has them)")
+    group.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
     p.set_defaults(func=_demo)
     p = sub.add_parser("run", help="run a workflow TOML file",
                        description="Run a workflow TOML file (rotor, measurements or a synthetic truth, "

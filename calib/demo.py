@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import time
 from pathlib import Path
 
@@ -11,7 +12,11 @@ import numpy as np
 
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.steady_control import cp_surface, steady_power_curve
+from calib.logs import say
+from calib.report.atomic import atomic_path, atomic_write_text
 from calib.rotor.library import load_rotor, reference_path
+
+log = logging.getLogger("calib.demo")
 
 
 def _openfast_reference():
@@ -40,19 +45,19 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
     out.mkdir(parents=True, exist_ok=True)
     rotor = load_rotor(rotor_name)
     polars = SectionPolars.from_rotor(rotor)
-    print(f"[calib demo] rotor {rotor.name}: R = {rotor.tip_radius:.2f} m, {rotor.n_blades} blades, "
+    say(log, f"[calib demo] rotor {rotor.name}: R = {rotor.tip_radius:.2f} m, {rotor.n_blades} blades, "
           f"{rotor.n_stations} stations")
     tsr = np.linspace(2.0, 14.0, 61)
     pitch = np.linspace(-2.0, 20.0, 45)
     t0 = time.perf_counter()
     cp, ct, res = cp_surface(rotor, tsr, pitch, polars=polars)
     t_surface = time.perf_counter() - t0
-    print(f"[calib demo] C_P surface: {cp.size} points in {t_surface:.2f} s; {res.n_failed} failed")
+    say(log, f"[calib demo] C_P surface: {cp.size} points in {t_surface:.2f} s; {res.n_failed} failed")
     k = np.nanargmax(cp)
     i, j = np.unravel_index(k, cp.shape)
     v = np.arange(3.0, 25.01, 0.5)
     curve = steady_power_curve(rotor, v, polars=polars)
-    print(f"[calib demo] power curve: {v.size} wind speeds, {curve.result.n_failed} failed")
+    say(log, f"[calib demo] power curve: {v.size} wind speeds, {curve.result.n_failed} failed")
 
     fig, ax = plt.subplots(figsize=(7, 5))
     levels = np.linspace(0, np.nanmax(cp), 25)
@@ -64,7 +69,8 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
     ax.set(xlabel="tip-speed ratio λ [-]", ylabel="pitch β [deg]", title=f"{rotor.name}: C_P(λ, β), native BEM")
     ax.legend(loc="upper right")
     fig.tight_layout()
-    fig.savefig(out / "cp_surface.png", dpi=130)
+    with atomic_path(out / "cp_surface.png") as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
     plt.close(fig)
 
     ref = _openfast_reference() if rotor_name == "nrel5mw" else None
@@ -80,7 +86,8 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
         a.grid(alpha=0.3)
         a.legend()
     fig.tight_layout()
-    fig.savefig(out / "power_curve.png", dpi=130)
+    with atomic_path(out / "power_curve.png") as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
     plt.close(fig)
 
     summary = {"rotor": rotor.name, "cp_max": float(cp[i, j]), "tsr_at_cp_max": float(tsr[j]),
@@ -88,9 +95,7 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
                "surface_failed": int(res.n_failed), "surface_seconds": t_surface,
                "power_curve_failed": int(curve.result.n_failed),
                "rated_wind_speed": float(v[np.argmax(curve.pitch > rotor.schedule.fine_pitch + 1e-6)])}
-    tmp = out / "summary.json.tmp"
-    tmp.write_text(json.dumps(summary, indent=2))
-    tmp.replace(out / "summary.json")
-    print(f"[calib demo] max C_P = {summary['cp_max']:.4f} at λ = {summary['tsr_at_cp_max']:.2f}, "
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2))
+    say(log, f"[calib demo] max C_P = {summary['cp_max']:.4f} at λ = {summary['tsr_at_cp_max']:.2f}, "
           f"β = {summary['pitch_at_cp_max']:.1f} deg; figures in {out}/")
     return summary

@@ -342,7 +342,14 @@ class CalibrationResult:
         out_dir = Path(out_dir)
         jpath, npath = out_dir / f"{stem}.json", out_dir / f"{stem}.npz"
         text = json.dumps(self.to_json_dict(), indent=1, allow_nan=True)
-        _atomic_write(jpath, lambda tmp: Path(tmp).write_text(text))
+
+        def write_json(tmp):
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())    # the blocks are on disk before the rename makes the name final
+
+        _atomic_write(jpath, write_json)
         arrays = {k: np.asarray(getattr(self, k)) for k in _ARRAY_FIELDS}
         arrays.update({f"conditions__{k}": np.asarray(v) for k, v in self.conditions.items()})
         arrays.update({f"polar__{k}": np.asarray(v) for k, v in self.polar_bands.items()})
@@ -351,6 +358,8 @@ class CalibrationResult:
         def write_npz(tmp):
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, **arrays)
+                f.flush()
+                os.fsync(f.fileno())
 
         _atomic_write(npath, write_npz)
         return jpath, npath
