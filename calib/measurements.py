@@ -342,8 +342,20 @@ def _decode(raw: bytes, src: str) -> tuple[str, list[str]]:
     return text, [note] if note else []
 
 
-def _split(text: str, delimiter: str) -> list[str]:
-    return next(csv.reader([text], delimiter=delimiter))
+def _split(text: str, delimiter: str, src: str | None = None, line: int | None = None) -> list[str]:
+    """The cells of one line; a line the csv module refuses (a cell over its size limit) is an InputError."""
+    try:
+        return next(csv.reader([text], delimiter=delimiter))
+    except csv.Error as exc:
+        raise InputError(f"cannot split the line into cells ({exc}); expected a CSV row of numbers", src,
+                         line) from None
+
+
+def _n_cells(text: str, delimiter: str) -> int:
+    try:
+        return len(_split(text, delimiter))
+    except InputError:
+        return -1
 
 
 def _detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
@@ -351,10 +363,10 @@ def _detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
     preferring one that splits the sample rows into as many (``None``: a single column)."""
     best = None
     for d in _DELIMITERS:
-        n = len(_split(header, d))
+        n = _n_cells(header, d)
         if n < 2:
             continue
-        score = (all(len(_split(s, d)) == n for s in sample), n)
+        score = (all(_n_cells(s, d) == n for s in sample), n)
         if best is None or score > best[0]:
             best = (score, d)
     return None if best is None else best[1]
@@ -438,9 +450,13 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     """
     path = Path(path)
     src = str(path)
-    if not path.is_file():
-        raise InputError("file not found", src)
-    text, notes = _decode(path.read_bytes(), src)
+    try:
+        raw = path.read_bytes()
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+        raise InputError("file not found", src) from None
+    except OSError as exc:  # e.g. a name longer than the file system allows
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", src) from None
+    text, notes = _decode(raw, src)
     lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
              if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
@@ -451,7 +467,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         raise InputError(f"found a single column {header.strip()!r}; expected columns separated by a comma, "
                          "a semicolon or a tab", src, header_line)
     notes.append(f"delimiter: {_DELIMITERS[delimiter]} (detected)")
-    raw_names = [h.strip() for h in _split(header, delimiter)]
+    raw_names = [h.strip() for h in _split(header, delimiter, src, header_line)]
     parsed = [_parse_header(h, i + 1) for i, h in enumerate(raw_names)]
     raw_names = [h or n for h, (n, _) in zip(raw_names, parsed)]
     names = [n for n, _ in parsed]
@@ -476,7 +492,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
 
     rows = []
     for line_no, t in lines[1:]:
-        cells = _split(t, delimiter)
+        cells = _split(t, delimiter, src, line_no)
         if len(cells) > len(names):
             raise cells_error(len(cells), line_no)
         rows.append((line_no, [c.strip() for c in cells]))
@@ -582,7 +598,15 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         data = data[keep]
         line_of = [line_of[k] for k in keep]
     factors = np.array([UNITS[quantity_of(n)][declared[n]] if declared.get(n) else 1.0 for n in needed])
-    data = data * factors
+    with np.errstate(over="ignore"):
+        data = data * factors
+    bad = np.argwhere(~np.isfinite(data))
+    if bad.size:
+        k, j = bad[0]
+        i = col_of[needed[j]]
+        raise InputError(f"value {rows[keep[k] if incomplete else k][1][i]!r} in column {i + 1} '{raw_names[i]}' "
+                         f"is too large: not a finite number in {si_unit(quantity_of(needed[j]))}", src, line_of[k],
+                         field=needed[j])
     col = {n: data[:, j] for j, n in enumerate(needed)}
     cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
     values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(rows), 0))
@@ -596,6 +620,15 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     bad = np.flatnonzero(~(col["wind_speed"] > 0))
     if bad.size:
         raise InputError("wind speed must be > 0", src, line_of[bad[0]], field="wind_speed")
+    bad = np.flatnonzero(~(col["rotor_speed"] >= 0))
+    if bad.size:
+        raise InputError(f"rotor speed must be >= 0, got {col['rotor_speed'][bad[0]]:g}", src, line_of[bad[0]],
+                         field="rotor_speed")
+    if "air_density" in col:
+        bad = np.flatnonzero(~(col["air_density"] > 0))
+        if bad.size:
+            raise InputError(f"air density must be > 0, got {col['air_density'][bad[0]]:g}", src, line_of[bad[0]],
+                             field="air_density")
     metadata = {"units": declared, "delimiter": delimiter, "decimal_comma": decimal_comma,
                 "lines": tuple(line_of)}
     return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256_of(path),

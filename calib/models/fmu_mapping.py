@@ -66,6 +66,28 @@ _TYPE_NAMES = {str: "a string", int: "an integer", _NUM: "a number", list: "an a
                bool: "true/false", (int, float, bool): "a number or true/false"}
 
 
+def _non_finite(node, key: str = ""):
+    """(key, value) of the first NaN or infinite number in a parsed TOML tree, or None."""
+    if isinstance(node, float) and not np.isfinite(node):
+        return key, node
+    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for k, v in items:
+        found = _non_finite(v, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
+        if found:
+            return found
+    return None
+
+
+def _check_list(values, kind, where: str, source: str) -> None:
+    """Every element of the array ``values`` is of ``kind`` (str, or numbers)."""
+    numbers = kind is not str
+    ok = all((isinstance(v, (int, float)) and not isinstance(v, bool)) if numbers else isinstance(v, str)
+             for v in values)
+    if not ok or not values:
+        raise InputError(f"'{where}' must be a non-empty array of {'numbers' if numbers else 'names'}, got "
+                         f"{values!r:.80}", source, field=where)
+
+
 def _check(table, allowed: dict, where: str, source: str) -> None:
     if not isinstance(table, dict):
         raise InputError(f"'{where}' must be a table, got {table!r}", source, field=where)
@@ -138,8 +160,8 @@ class OutputEntry(Entry):
 class ParameterEntry(Entry):
     """A mapped scalar parameter with what the calibrator needs (package units).
 
-    ``nominal``, ``lower``, ``upper`` may be NaN in the file; the adapter then takes the
-    FMU's start value, min and max (converted).
+    ``nominal``, ``lower``, ``upper`` are NaN when the file leaves them out; the adapter then
+    takes the FMU's start value, min and max (converted). The file itself holds finite numbers.
     """
 
     kind: str = "tuning"
@@ -358,6 +380,9 @@ def load_mapping(path) -> Mapping:
     path = Path(path)
     src = str(path)
     data = read_toml(path, "mapping file")
+    bad = _non_finite(data)
+    if bad:  # TOML has nan and inf literals; no mapping value is one (leave a key out for "the FMU's")
+        raise InputError(f"'{bad[0]}' must be a finite number, got {bad[1]!r}", src, field=bad[0])
     for key in data:
         if key not in _TOP_KEYS:
             raise InputError(f"unknown key '{key}'; valid keys here: {', '.join(sorted(_TOP_KEYS))}", src,
@@ -373,6 +398,10 @@ def load_mapping(path) -> Mapping:
     for table in ("inputs", "outputs", "steady"):
         if table not in data:
             raise InputError(f"missing required table [{table}]", src, field=table)
+    for table in ("inputs", "outputs", "corrections", "parameters", "switches", "settings", "steady", "jacobian",
+                  "rotor"):
+        if table in data and not isinstance(data[table], dict):
+            raise InputError(f"[{table}] must be a table, got {data[table]!r:.60}", src, field=table)
 
     inputs = {}
     _check(data["inputs"], {f: (dict, False) for f in CONDITION_FIELDS}, "inputs", src)
@@ -393,6 +422,8 @@ def load_mapping(path) -> Mapping:
                                  field=where)
             if "variables" in e and not all(isinstance(v, str) for v in e["variables"]):
                 raise InputError(f"'{where}.variables' must be an array of names", src, field=f"{where}.variables")
+            if "radius_variables" in e:
+                _check_list(e["radius_variables"], str, f"{where}.radius_variables", src)
             spanwise[name] = SpanwiseOutput(name, tuple(e.get("variables", ())), e.get("variable"),
                                             tuple(e.get("radius_variables", ())), e.get("radius_variable"),
                                             float(e.get("scale", 1.0)), float(e.get("offset", 0.0)),
@@ -419,6 +450,9 @@ def load_mapping(path) -> Mapping:
                     raise InputError(f"'corrections.{block}' must be a name template with {{i}} (alpha node) and "
                                      f"{{j}} (eta node) for layout \"scalar\", got {c[block]!r}", src,
                                      field=f"corrections.{block}")
+        for key in ("alpha_nodes_deg", "eta_nodes"):
+            if key in c:
+                _check_list(c[key], float, f"corrections.{key}", src)
         options = {k: float(c[k]) for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in c}
         corrections = Corrections(c["layout"], c["lift"], c["drag"], float(c.get("scale", 1.0)), c.get("grid"),
                                   tuple(c["alpha_nodes_deg"]) if "alpha_nodes_deg" in c else None,

@@ -45,6 +45,7 @@ _BLADE_KEYS = {"BlSpn": "span", "BlCrvAC": "curve_ac", "BlSwpAC": "sweep_ac", "B
 # keywords that start a new block of an airfoil file: a data table ends before them
 _TABLE_KEYWORDS = {"re", "userprop", "ctrl", "incluadata", "numalf", "numtabs"}
 _TOKEN = re.compile(r'"([^"]*)"|(\S+)')
+_MAX_AFID = 2 ** 31 - 1  # BlAFID indexes AFNames; larger values do not fit an integer index
 
 
 # ---------------------------------------------------------------- low-level helpers
@@ -207,10 +208,10 @@ def read_aerodyn_blade(path) -> dict:
                                       "NumBlNds", i_n + 1)
     out = {_BLADE_KEYS[c]: values[:, header.index(c)] for c in BLADE_COLUMNS}
     ids = out["af_id"]
-    bad = np.flatnonzero((ids != np.round(ids)) | (ids < 1))
+    bad = np.flatnonzero((ids != np.round(ids)) | (ids < 1) | (ids > _MAX_AFID))
     if bad.size:
-        raise InputError(f"airfoil id must be a positive integer, got {ids[bad[0]]:g}",
-                         src, int(row_lines[bad[0]]), "BlAFID")
+        raise InputError(f"airfoil id must be a positive integer (an index into AFNames, at most {_MAX_AFID}), "
+                         f"got {ids[bad[0]]:g}", src, int(row_lines[bad[0]]), "BlAFID")
     bad = np.flatnonzero(out["chord"] <= 0)
     if bad.size:
         raise InputError(f"chord must be > 0, got {out['chord'][bad[0]]:g} m",
@@ -269,6 +270,9 @@ def read_aerodyn_polar(path, name: str | None = None) -> Airfoil:
         if i_re is None:
             raise InputError(f"table {k + 1}: no Re line before its NumAlf line", src, pos + 1, "Re")
         reynolds = _number(_tokens(lines[i_re])[0], src, i_re + 1, "Re") * 1e6
+        if not (np.isfinite(reynolds) and reynolds > 0):
+            raise InputError(f"expected a positive Reynolds number in millions, got {_tokens(lines[i_re])[0]!r}",
+                             src, i_re + 1, "Re")
         i_alf = _find_keyword(lines, "NumAlf", i_re + 1, stop_keys=("Re",))
         if i_alf is None:
             raise InputError(f"table {k + 1}: no NumAlf line after Re", src, i_re + 1, "NumAlf")
@@ -488,7 +492,12 @@ def resolve_input_file(name: str, referrer: InputFileValues, line: int, key: str
     path = Path(text)
     if not path.is_absolute() and not PureWindowsPath(name).is_absolute():
         path = referrer.path.parent / PurePosixPath(text)
-    if not path.is_file():
+    try:
+        exists = path.is_file()
+    except OSError as exc:  # e.g. a name longer than the file system allows
+        raise InputError(f"cannot use the file name it gives: {name[:80]!r}{'...' if len(name) > 80 else ''} "
+                         f"({exc.strerror or exc})", referrer.source, line, key) from None
+    if not exists:
         raise InputError(f"the file it names does not exist: {name!r} (looked for {path})",
                          referrer.source, line, key)
     return path

@@ -152,8 +152,8 @@ def read_elastodyn(path) -> ElastoDynRotor:
                       ("TowerHt", "tower height [m]")):
         values[key] = v.number(key, f"a {what}")
     lines = {key: v.get(key).line for key in values}
-    if values["NumBl"] < 1:
-        raise InputError(f"must be >= 1, got {values['NumBl']}", src, lines["NumBl"], "NumBl")
+    if not 1 <= values["NumBl"] <= 3:
+        raise InputError(f"expected 1 to 3 blades, got {values['NumBl']}", src, lines["NumBl"], "NumBl")
     if values["HubRad"] <= 0:
         raise InputError(f"must be > 0, got {values['HubRad']:g} m", src, lines["HubRad"], "HubRad")
     if values["TipRad"] <= values["HubRad"]:
@@ -163,10 +163,14 @@ def read_elastodyn(path) -> ElastoDynRotor:
         raise InputError(f"OverHang = {values['OverHang']:g} m > 0 is a downwind rotor; calib's Rotor "
                          "describes upwind rotors (signs of precone and tilt)", src, lines["OverHang"],
                          "OverHang")
-    return ElastoDynRotor(n_blades=values["NumBl"], tip_radius=values["TipRad"], hub_radius=values["HubRad"],
-                          precone_openfast=values[precone_key], shaft_tilt_openfast=values["ShftTilt"],
-                          overhang=values["OverHang"], tower_to_shaft=values["Twr2Shft"],
-                          tower_height=values["TowerHt"], source=src, lines=lines)
+    rotor = ElastoDynRotor(n_blades=values["NumBl"], tip_radius=values["TipRad"], hub_radius=values["HubRad"],
+                           precone_openfast=values[precone_key], shaft_tilt_openfast=values["ShftTilt"],
+                           overhang=values["OverHang"], tower_to_shaft=values["Twr2Shft"],
+                           tower_height=values["TowerHt"], source=src, lines=lines)
+    if not np.isfinite(rotor.hub_height):
+        raise InputError(f"the hub height TowerHt + Twr2Shft + OverHang sin(ShftTilt) is not a finite number "
+                         f"(TowerHt = {values['TowerHt']:g} m)", src, lines["TowerHt"], "TowerHt")
+    return rotor
 
 
 # ---------------------------------------------------------------- InflowWind

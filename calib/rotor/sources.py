@@ -254,6 +254,8 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
     path = _path(table, "windio", src, base)
     rotor = read_windio(path)
     env = load_windio(path).get("environment") or {}
+    if not isinstance(env, dict):
+        raise InputError(f"expected a mapping, got {env!r:.60}", str(path), None, "environment")
     rho = env.get("air_density")
     mu = env.get("air_dyn_viscosity")
     shear = env.get("shear_exp")

@@ -50,16 +50,31 @@ def load_windio(path) -> dict:
     """Parse a windIO yaml file into a dict (errors name the file and line)."""
     src = str(path)
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.load(fh, Loader=_Loader)
+        raw = Path(path).read_bytes()
     except FileNotFoundError:
         raise InputError("file not found", src) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", src) from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        start = exc.start + (3 if raw.startswith(b"\xef\xbb\xbf") else 0)
+        line = raw[:start].count(b"\n") + 1
+        column = start - raw.rfind(b"\n", 0, start)
+        raise InputError(f"not UTF-8 text: byte 0x{raw[start]:02x} at column {column} cannot be decoded; "
+                         "expected a windIO YAML file in UTF-8", src, line) from None
+    try:
+        data = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise InputError(f"invalid YAML: {getattr(exc, 'problem', exc)}", src,
-                         None if mark is None else mark.line + 1) from None
+        line = None if mark is None else mark.line + 1
+        if line is None and isinstance(getattr(exc, "position", None), int):  # yaml.reader.ReaderError
+            line = text.count("\n", 0, exc.position) + 1
+        raise InputError(f"invalid YAML: {getattr(exc, 'problem', None) or exc}", src, line) from None
+    except RecursionError:
+        raise InputError("invalid YAML: nesting too deep", src) from None
     if not isinstance(data, dict):
-        raise InputError("expected a mapping at the top level", src)
+        raise InputError(f"expected a mapping at the top level, got {type(data).__name__}", src)
     return data
 
 
@@ -72,18 +87,52 @@ def _get(data, keys: str, src: str):
     return node
 
 
+def _table(data, keys: str, src: str, default=None) -> dict:
+    """The mapping at ``keys`` (``default`` when a key on the way is absent or null)."""
+    node = data
+    for k, key in enumerate(keys.split(".")):
+        if not isinstance(node, dict):
+            raise InputError(f"expected a mapping, got {node!r:.60}", src, field=".".join(keys.split(".")[:k]))
+        node = node.get(key)
+        if node is None:
+            if default is None:
+                raise InputError(f"missing key {key!r}", src, field=keys)
+            return default
+    if not isinstance(node, dict):
+        raise InputError(f"expected a mapping, got {node!r:.60}", src, field=keys)
+    return node
+
+
+def _float(value, key: str, src: str, positive: bool = False) -> float:
+    """A finite number (> 0 when ``positive``); errors name the key."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"expected a number, got {value!r:.60}", src, field=key)
+    try:
+        out = float(value)
+    except OverflowError:
+        out = float("inf")
+    if not np.isfinite(out) or (positive and out <= 0):
+        raise InputError(f"expected a finite {'positive ' if positive else ''}number, got {value!r:.60}", src,
+                         field=key)
+    return out
+
+
 def _curve(data, keys: str, src: str):
     node = _get(data, keys, src)
+    if not isinstance(node, dict) or not all(isinstance(node.get(k), list) for k in ("grid", "values")):
+        raise InputError(f"expected a mapping with 'grid' and 'values' lists, got {node!r:.60}", src, field=keys)
     try:
         grid = np.asarray(node["grid"], dtype=float)
         values = np.asarray(node["values"], dtype=float)
-    except (KeyError, TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(f"expected numeric 'grid' and 'values' lists ({exc})", src, field=keys) from None
     if grid.shape != values.shape or grid.ndim != 1 or grid.size < 2:
         raise InputError(f"'grid' and 'values' must be 1-D of equal length >= 2, got {grid.shape} and "
                          f"{values.shape}", src, field=keys)
-    if np.any(np.diff(grid) <= 0) or not np.all(np.isfinite(values)):
-        raise InputError("grid must be strictly increasing and values finite", src, field=keys)
+    if not (np.all(np.isfinite(grid)) and np.all(np.isfinite(values))):
+        raise InputError("grid and values must be finite numbers", src, field=keys)
+    if np.any(np.diff(grid) <= 0):
+        raise InputError("grid must be strictly increasing", src, field=keys)
     return grid, values
 
 
@@ -92,7 +141,10 @@ def _sample(data, keys, src, s):
     if grid[0] > s[0] + 1e-9 or grid[-1] < s[-1] - 1e-9:
         raise InputError(f"grid covers [{grid[0]:g}, {grid[-1]:g}], stations need [{s[0]:g}, {s[-1]:g}]",
                          src, field=keys)
-    return PchipInterpolator(grid, values)(s)
+    out = PchipInterpolator(grid, values)(s)
+    if not np.all(np.isfinite(out)):
+        raise InputError("values too large: the interpolated curve is not finite", src, field=keys)
+    return out
 
 
 def nearest_airfoil_labels(positions, labels, s) -> list[str]:
@@ -124,11 +176,18 @@ def windio_airfoil(entry: dict, src: str) -> Airfoil:
     several polars share one Reynolds number (different ``configuration``), the
     first is kept.
     """
+    if not isinstance(entry, dict):
+        raise InputError(f"expected a mapping (name, polars ...), got {entry!r:.60}", src, field="airfoils")
     name = entry.get("name", "?")
+    polars = entry.get("polars") or []
+    if not isinstance(polars, list):
+        raise InputError(f"expected a list of polars, got {polars!r:.60}", src, field=f"airfoils[{name}].polars")
     tables, seen = [], set()
-    for k, polar in enumerate(entry.get("polars") or []):
+    for k, polar in enumerate(polars):
         where = f"airfoils[{name}].polars[{k}]"
-        re_ = float(polar.get("re", float("nan")))
+        if not isinstance(polar, dict):
+            raise InputError(f"expected a mapping (re, c_l, c_d ...), got {polar!r:.60}", src, field=where)
+        re_ = float("nan") if polar.get("re") is None else _float(polar["re"], f"{where}.re", src, positive=True)
         if re_ in seen:
             continue
         seen.add(re_)
@@ -144,7 +203,10 @@ def windio_airfoil(entry: dict, src: str) -> Airfoil:
         tables.append(PolarTable(alpha, cl, cd, cm, re_, source=f"{src}: {where}"))
     if not tables:
         raise InputError("airfoil has no polars", src, field=f"airfoils[{name}].polars")
-    return Airfoil(name, tuple(tables), float(entry.get("relative_thickness", float("nan"))))
+    thickness = entry.get("relative_thickness")
+    thickness = float("nan") if thickness is None else _float(thickness, f"airfoils[{name}].relative_thickness",
+                                                                src, positive=True)
+    return Airfoil(str(name), tuple(tables), thickness)
 
 
 def windio_schedule(data: dict, source: str = "<windIO>",
@@ -169,20 +231,35 @@ def windio_schedule(data: dict, source: str = "<windIO>",
         [rad -> deg], cut-in/out ``Vin``/``Vout`` [m/s]. None when a value is missing.
     """
     src = source
-    control = data.get("control") or {}
-    sup, torque, pitch = control.get("supervisory", {}), control.get("torque", {}), control.get("pitch", {})
-    rated = data.get("assembly", {}).get("rated_power", sup.get("rated_power"))
+    sup = _table(data, "control.supervisory", src, {})
+    torque = _table(data, "control.torque", src, {})
+    pitch = _table(data, "control.pitch", src, {})
+    assembly = _table(data, "assembly", src, {})
+    rated = assembly.get("rated_power", sup.get("rated_power"))
     w_min = sup.get("minOmega", torque.get("VS_minspd"))
     w_max = sup.get("maxOmega", torque.get("VS_maxspd"))
     tsr = torque.get("tsr")
     if None in (rated, w_min, w_max, tsr):
         return None
+    rated_key = "assembly.rated_power" if "rated_power" in assembly else "control.supervisory.rated_power"
+    w_min_key = "control.supervisory.minOmega" if "minOmega" in sup else "control.torque.VS_minspd"
+    w_max_key = "control.supervisory.maxOmega" if "maxOmega" in sup else "control.torque.VS_maxspd"
+    rated = _float(rated, rated_key, src, positive=True)
+    w_min, w_max = _float(w_min, w_min_key, src), _float(w_max, w_max_key, src)
+    if not 0 <= w_min <= w_max:
+        raise InputError(f"rotor-speed limits must satisfy 0 <= min <= max, got {w_min:g} and {w_max:g} rad/s",
+                         src, field=w_min_key)
     eff = 1.0 if generator_efficiency is None else float(generator_efficiency)
-    return OperatingSchedule(rated_power=float(rated) / eff, min_rotor_speed=float(w_min) * _RPM_PER_RAD_S,
-                             max_rotor_speed=float(w_max) * _RPM_PER_RAD_S, design_tsr=float(tsr),
-                             fine_pitch=float(np.degrees(pitch.get("min_pitch", 0.0))),
-                             cut_in=float(sup.get("Vin", 3.0)), cut_out=float(sup.get("Vout", 25.0)),
-                             generator_efficiency=eff)
+    if not 0 < eff <= 1:
+        raise InputError(f"must be in (0, 1], got {generator_efficiency!r}", src, field="generator_efficiency")
+    cut_in = _float(sup.get("Vin", 3.0), "control.supervisory.Vin", src)
+    cut_out = _float(sup.get("Vout", 25.0), "control.supervisory.Vout", src)
+    return OperatingSchedule(rated_power=rated / eff, min_rotor_speed=w_min * _RPM_PER_RAD_S,
+                             max_rotor_speed=w_max * _RPM_PER_RAD_S,
+                             design_tsr=_float(tsr, "control.torque.tsr", src, positive=True),
+                             fine_pitch=float(np.degrees(_float(pitch.get("min_pitch", 0.0),
+                                                                "control.pitch.min_pitch", src))),
+                             cut_in=cut_in, cut_out=cut_out, generator_efficiency=eff)
 
 
 def windio_rotor_setup(data: dict, source: str = "<windIO>") -> dict:
@@ -196,15 +273,22 @@ def windio_rotor_setup(data: dict, source: str = "<windIO>") -> dict:
         ``uptilt_angle``) [rad -> deg], ``hub_height`` [m].
     """
     src = source
-    drivetrain = data.get("components", {}).get("nacelle", {}).get("drivetrain", {})
-    tilt = drivetrain.get("uptilt", drivetrain.get("uptilt_angle"))
+    drivetrain = _table(data, "components.nacelle.drivetrain", src, {})
+    tilt_key = "uptilt" if "uptilt" in drivetrain else "uptilt_angle"
+    tilt = drivetrain.get(tilt_key)
     if tilt is None:
         raise InputError("missing key 'uptilt'", src, field="components.nacelle.drivetrain.uptilt")
-    return {"hub_radius": 0.5 * float(_get(data, "components.hub.diameter", src)),
-            "n_blades": int(_get(data, "assembly.number_of_blades", src)),
-            "precone_deg": float(np.degrees(float(_get(data, "components.hub.cone_angle", src)))),
-            "tilt_deg": float(np.degrees(float(tilt))),
-            "hub_height": float(_get(data, "assembly.hub_height", src))}
+    n_key = "assembly.number_of_blades"
+    n_blades = _float(_get(data, n_key, src), n_key, src, positive=True)
+    if n_blades != int(n_blades):
+        raise InputError(f"expected an integer number of blades, got {n_blades:g}", src, field=n_key)
+    return {"hub_radius": 0.5 * _float(_get(data, "components.hub.diameter", src), "components.hub.diameter", src,
+                                       positive=True),
+            "n_blades": int(n_blades),
+            "precone_deg": float(np.degrees(_float(_get(data, "components.hub.cone_angle", src),
+                                                   "components.hub.cone_angle", src))),
+            "tilt_deg": float(np.degrees(_float(tilt, f"components.nacelle.drivetrain.{tilt_key}", src))),
+            "hub_height": _float(_get(data, "assembly.hub_height", src), "assembly.hub_height", src, positive=True)}
 
 
 def read_windio(path, n_stations: int = DEFAULT_N_STATIONS, *, name: str | None = None,
@@ -245,9 +329,29 @@ def read_windio(path, n_stations: int = DEFAULT_N_STATIONS, *, name: str | None 
     x = _sample(data, f"{bem}.reference_axis.x", src, s)
     y = _sample(data, f"{bem}.reference_axis.y", src, s)
     setup = windio_rotor_setup(data, src)
-    position = _get(data, f"{bem}.airfoil_position", src)
-    labels = nearest_airfoil_labels(position["grid"], position["labels"], s)
-    entries = {a.get("name"): a for a in _get(data, "airfoils", src)}
+    key = f"{bem}.airfoil_position"
+    position = _table(data, key, src)
+    grid, names = position.get("grid"), position.get("labels")
+    if not (isinstance(grid, list) and isinstance(names, list) and len(grid) == len(names) >= 1
+            and all(isinstance(x, str) for x in names)):
+        raise InputError(f"expected 'grid' (numbers) and 'labels' (airfoil names) lists of equal length, got "
+                         f"{position!r:.80}", src, field=key)
+    try:
+        grid = np.asarray(grid, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"'grid' must be numbers, got {grid!r:.60}", src, field=f"{key}.grid") from None
+    if not np.all(np.isfinite(grid)):
+        raise InputError("'grid' must be finite numbers", src, field=f"{key}.grid")
+    labels = nearest_airfoil_labels(grid, names, s)
+    listed = _get(data, "airfoils", src)
+    if not isinstance(listed, list) or not all(isinstance(a, dict) for a in listed):
+        raise InputError(f"expected a list of airfoils (mappings with name and polars), got {listed!r:.60}", src,
+                         field="airfoils")
+    for k, a in enumerate(listed):
+        if not isinstance(a.get("name"), str):
+            raise InputError(f"expected an airfoil name (a string), got {a.get('name')!r:.60}", src,
+                             field=f"airfoils[{k}].name")
+    entries = {a.get("name"): a for a in listed}
     used = list(dict.fromkeys(labels))
     missing = [lab for lab in used if lab not in entries]
     if missing:
