@@ -107,3 +107,13 @@ def test_the_report_shows_the_figures(run):
     for name in ("loads_vs_wind_speed.png", "cn_vs_wind_speed.png", "diagnosis/report.html",
                  f"{HUB}/eigenshapes_lift.png", f"{TAPS}/eigenshapes_lift.png", f"{TAPS}/polars.png"):
         assert (out / name).is_file() and (out / name).stat().st_size > 1000, name
+
+
+def test_the_diagnose_config_matches_the_workflow():
+    """``calib diagnose --config workflows/phase_vi_diagnose.toml`` diagnoses the same problem."""
+    from calib.tomlfile import read_toml
+
+    wf = read_toml(WORKFLOW, "workflow")
+    dg = read_toml(ROOT / "workflows" / "phase_vi_diagnose.toml", "config")
+    for table in ("rotor", "grid", "calibration"):
+        assert dg[table] == wf[table], table
