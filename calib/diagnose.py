@@ -66,7 +66,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     history : bool
         Keep ``out/history`` (every model call and iteration as it happens).
     """
-    from calib.history import open_history, recorded
+    from calib.history import content_digest, open_history, recorded
     from calib.logs import progress_line
     from calib.report.diagnosis_report import write_diagnosis
     from calib.workflow import prepare
@@ -120,7 +120,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         Path(out).mkdir(parents=True, exist_ok=True)
         hist = open_history(out, {"command": "diagnose", "arguments": {
             "rotor": rotor, "data": str(Path(data).resolve()), "config": str(Path(config).resolve()) if config else None},
-            "inputs": diagnose_inputs(rotor, data, config)}, resume)
+            "inputs": {**diagnose_inputs(rotor, data, config),
+                       "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
         hist.event("start", resumed=resume, records=hist.n_records)
         if resume:
             printer(f"[calib diagnose] resuming from {hist.folder}: {hist.n_records} model calls on record")
@@ -137,7 +138,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
                         progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
                         wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
-                        family=family)
+                        family=family,
+                        on_iteration=None if hist is None else (lambda rec: hist.event("iteration", **rec)))
     finally:
         if executor is not None:
             executor.close()

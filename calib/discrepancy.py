@@ -256,6 +256,11 @@ def _fixed_effect(effect_spec: dict, fitted: dict):
     return make_effect(effect_spec["name"], **options)
 
 
+def _tagged(callback, run: str):
+    """``callback`` receiving Calibrator records with ``run`` added (None stays None)."""
+    return None if callback is None else (lambda rec: callback({"run": run, **rec}))
+
+
 class BemFamily:
     """The models a diagnosis on the native BEM calibrates: candidates are the effects of
     :data:`calib.effects.EFFECTS` switched into a :class:`~calib.models.bem_model.BemModel`.
@@ -307,7 +312,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
              calibration: CalibrationSettings | None = None, diagnosis: DiagnosisSettings | None = None,
              executor=None, progress: Callable[[str], None] | None = None, rotor_source: dict | None = None,
              wrap: Callable | None = None, fit_progress: Callable[[int, int], None] | None = None,
-             family=None) -> Diagnosis:
+             family=None, on_iteration: Callable[[dict], None] | None = None) -> Diagnosis:
     """Run the discrepancy workflow on the native BEM (see the module notes).
 
     Parameters
@@ -334,6 +339,9 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     family : optional
         The models to calibrate (default :class:`BemFamily` of ``rotor``, ``grid``,
         ``settings``); e.g. :class:`calib.fmu_diagnosis.FmuFamily` for an FMU.
+    on_iteration : callable(dict), optional
+        Receives every optimizer iteration record of the localization and the recalibration
+        (:class:`~calib.calibration.Calibrator` records with ``run`` added).
 
     Returns
     -------
@@ -355,7 +363,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
     field_model = wrap(family.field_model(), "localization")
     say(f"localize: correction field, {len(field_model.parameters)} parameters")
-    loc = Calibrator(field_model, measurements, cal, name="localization").run()
+    loc = Calibrator(field_model, measurements, cal, _tagged(on_iteration, "localization"), name="localization").run()
     sigma = loc.sigma
     meas = dataclasses.replace(measurements, sigma=sigma)
     known = dataclasses.replace(cal, noise="known", sigma=None, retain="all")
@@ -484,7 +492,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         model = wrap(family.field_model(base_effects), "recalibration")
         known_field = dataclasses.replace(cal, noise="known", sigma=None)
         say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
-        recal = Calibrator(model, meas, known_field, name="recalibration").run()
+        recal = Calibrator(model, meas, known_field, _tagged(on_iteration, "recalibration"), name="recalibration").run()
         y_after = recal.model_after
         after = gap(meas.values, y_after, sigma, channels, n_fit + recal.n_retained)
     else:

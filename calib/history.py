@@ -77,6 +77,45 @@ def file_sha256(path: str | Path) -> str:
     return h.hexdigest()
 
 
+def content_digest(obj) -> str:
+    """SHA-256 of the content of numbers, arrays, strings and (nested) dataclasses.
+
+    Dataclass fields declared with ``compare=False`` (e.g. a rotor's ``source`` path) are left
+    out, so the digest says whether two objects hold the same data, wherever they came from.
+    Used to record a rotor's geometry and polars in the manifest: a rotor file edited between
+    a kill and ``--resume`` is then refused, even one reached indirectly (an OpenFAST deck's
+    airfoil tables).
+    """
+    import dataclasses
+
+    h = hashlib.sha256()
+
+    def walk(x):
+        if dataclasses.is_dataclass(x) and not isinstance(x, type):
+            h.update(f"<{type(x).__name__}>".encode())
+            for f in dataclasses.fields(x):
+                if f.compare:
+                    h.update(f.name.encode())
+                    walk(getattr(x, f.name))
+        elif isinstance(x, np.ndarray):
+            h.update(f"{x.dtype.str}{x.shape}".encode())
+            h.update(np.ascontiguousarray(x).tobytes() if x.dtype != object else repr(x.tolist()).encode())
+        elif isinstance(x, dict):
+            for k in sorted(x, key=str):
+                h.update(str(k).encode())
+                walk(x[k])
+        elif isinstance(x, (list, tuple)):
+            h.update(f"[{len(x)}".encode())
+            for v in x:
+                walk(v)
+        else:
+            h.update(repr(x).encode())
+        h.update(b";")
+
+    walk(obj)
+    return h.hexdigest()
+
+
 def _fsync_dir(path: Path) -> None:
     try:
         fd = os.open(path, os.O_RDONLY)

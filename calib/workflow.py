@@ -528,8 +528,9 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     hist = None
     if history or resume:
         from calib.history import open_history
-        hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "inputs": run_inputs(cfg)},
-                            resume)
+        from calib.history import content_digest
+        inputs = {**run_inputs(cfg), "rotor (geometry and polars)": content_digest(setup.rotor)}
+        hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "inputs": inputs}, resume)
         hist.event("start", resumed=resume, records=hist.n_records)
         if resume:
             say(log, f"[calib run] resuming from {hist.folder}: {hist.n_records} model calls on record", progress)

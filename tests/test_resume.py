@@ -315,3 +315,23 @@ def test_killed_fmu_diagnosis_resumes_to_the_uninterrupted_result(tmp_path):
     assert resumed["computed"] < n_full["computed"]
     assert resumed["computed_points"] < n_full["computed_points"]
     assert assert_complete_files(cut_dir) >= 10
+
+
+def test_rotor_digest_sees_an_edited_polar_and_not_its_path():
+    """The manifest's rotor digest: a changed polar value (e.g. an airfoil file edited between the
+    kill and --resume) changes it; the same data loaded from elsewhere (``source``) does not."""
+    import dataclasses
+
+    from calib.history import content_digest
+    from calib.rotor.library import load_rotor
+
+    rotor = load_rotor("phase_vi")
+    table = rotor.airfoils[0].tables[0]
+    cl = table.cl.copy()
+    cl[len(cl) // 2] += 1e-6
+    edited_airfoil = dataclasses.replace(rotor.airfoils[0], tables=(dataclasses.replace(table, cl=cl),)
+                                         + rotor.airfoils[0].tables[1:])
+    edited = dataclasses.replace(rotor, airfoils=(edited_airfoil,) + rotor.airfoils[1:])
+    moved = dataclasses.replace(rotor, source="/elsewhere/phase_vi.fst")
+    assert content_digest(edited) != content_digest(rotor)
+    assert content_digest(moved) == content_digest(rotor) == content_digest(load_rotor("phase_vi"))
