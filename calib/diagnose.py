@@ -118,9 +118,12 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     hist = None
     if history or resume:
         Path(out).mkdir(parents=True, exist_ok=True)
+        # a rotor file by its absolute path, so that --resume works from any folder
+        rotor_arg = str(Path(rotor).resolve()) if rotor is not None and Path(rotor).is_file() else rotor
         hist = open_history(out, {"command": "diagnose", "arguments": {
-            "rotor": rotor, "data": str(Path(data).resolve()), "config": str(Path(config).resolve()) if config else None},
-            "inputs": {**diagnose_inputs(rotor, data, config),
+            "rotor": rotor_arg, "data": str(Path(data).resolve()),
+            "config": str(Path(config).resolve()) if config else None},
+            "inputs": {**diagnose_inputs(rotor_arg, data, config),
                        "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
         hist.event("start", resumed=resume, records=hist.n_records)
         if resume:

@@ -324,7 +324,7 @@ def open_history(out_dir: str | Path, manifest: dict, resume: bool) -> History:
             raise InputError("cannot resume: the inputs changed since the run started: " + "; ".join(changed)
                              + "; start a new run with another --out folder", str(mpath), field="inputs")
         history = History(folder, old, resumed=True)
-        log.info("history: resuming %s (%d records)", folder, history.n_records)
+        log.debug("history: resuming %s (%d records)", folder, history.n_records)
         return history
     if folder.exists():
         log.info("history: a new run replaces the history in %s", folder)
