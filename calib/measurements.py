@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import codecs
 import csv
+from collections import Counter
 import difflib
 import hashlib
 import os
@@ -95,8 +96,6 @@ _FIXED_QUANTITY = {
     "root_flap_moment": "moment", "root_edge_moment": "moment", "hub_flap_moment": "moment",
 }
 _SPANWISE = re.compile(r"^(cn|ct|fn|ft)@([0-9]*\.?[0-9]+)$")
-# name, then optionally "_" and a unit in [] or (): "power [kW]", "Power_[kW]", "power (kW)"
-_HEADER = re.compile(r"^\s*(?P<name>.+?)\s*_?\s*(?:\[\s*(?P<u1>[^\[\]]*?)\s*\]|\(\s*(?P<u2>[^()]*?)\s*\))\s*$")
 _DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 _DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
 _MAGIC = (  # leading bytes of files people pick by mistake -> what they are
@@ -151,17 +150,27 @@ def quantity_of(column: str) -> str | None:
     ``root_flap_moment_1p_phase`` is an angle), and ``<name>_sigma`` of each.
     """
     base = column[:-6] if column.endswith("_sigma") else column
-    if base in _FIXED_QUANTITY:
-        return _FIXED_QUANTITY[base]
-    if _PER_BLADE.match(base):
+    quantity = _channel_quantity(base)
+    if quantity is not None:
+        return quantity
+    h = _HARMONIC.match(base)
+    if h and h.group("base") not in CONDITION_FIELDS:
+        # a harmonic of a channel, not of a harmonic: no recursion on names like power_1p_1p_1p...
+        quantity = _channel_quantity(h.group("base"))
+        if quantity is not None:
+            return "angle" if h.group("phase") else quantity
+    return None
+
+
+def _channel_quantity(name: str) -> str | None:
+    """Quantity of a condition, hub channel, per-blade moment or spanwise channel (no harmonics, no σ)."""
+    if name in _FIXED_QUANTITY:
+        return _FIXED_QUANTITY[name]
+    if _PER_BLADE.match(name):
         return "moment"
-    m = _SPANWISE.match(base)
+    m = _SPANWISE.match(name)
     if m:
         return "coefficient" if m.group(1) in ("cn", "ct") else "force_per_length"
-    h = _HARMONIC.match(base)
-    if h and h.group("base") not in CONDITION_FIELDS and quantity_of(h.group("base")) is not None \
-            and not h.group("base").endswith("_sigma"):
-        return "angle" if h.group("phase") else quantity_of(h.group("base"))
     return None
 
 
@@ -378,13 +387,31 @@ def _parse_header(text: str, column: int) -> tuple[str, str | None]:
     A cell that does not read as ``name [unit]`` keeps its whole text as the name (an unknown
     column, ignored with a note); an empty cell (a trailing delimiter) is named ``<column N>``.
     """
-    m = _HEADER.match(text)
-    if m:
-        name, unit = m.group("name"), m.group("u1") if m.group("u1") is not None else m.group("u2")
-    else:
-        name, unit = text, None
+    name, unit = _split_unit(text)
     name = normalize_name(name)
     return (name, unit) if name else (f"<column {column}>", None)
+
+
+def _split_unit(text: str) -> tuple[str, str | None]:
+    """(name, unit) of a header cell ``name [unit]``, ``name_[unit]`` or ``name (unit)``; (text, None) otherwise.
+
+    The unit is the last bracketed group, which must end the cell and hold no bracket itself;
+    the name before it keeps at least one character. (A string scan: the regular expression
+    this replaces took minutes on a cell with a few thousand blanks.)
+    """
+    t = text.strip()
+    for open_, close in (("[", "]"), ("(", ")")):
+        if not t.endswith(close):
+            continue
+        i = t.rfind(open_)
+        unit = t[i + 1:-1]
+        if i < 0 or open_ in unit or close in unit:
+            return text, None
+        name = t[:i].rstrip()
+        if name.endswith("_") and len(name) > 1:
+            name = name[:-1].rstrip()
+        return (name, unit.strip()) if name else (text, None)
+    return text, None
 
 
 def _declared_unit(column: str, unit: str | None, src: str, line: int) -> str | None:
@@ -471,16 +498,19 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     parsed = [_parse_header(h, i + 1) for i, h in enumerate(raw_names)]
     raw_names = [h or n for h, (n, _) in zip(raw_names, parsed)]
     names = [n for n, _ in parsed]
-    dupes = sorted({n for n in names if names.count(n) > 1})
+    # sets and counts, not list scans: a table exported transposed has tens of thousands of columns
+    counts = Counter(names)
+    name_set = set(counts)
+    dupes = sorted(n for n, k in counts.items() if k > 1)
     if dupes:
         same = [r for r, n in zip(raw_names, names) if n == dupes[0]]
-        raise InputError(f"duplicate column(s) {', '.join(dupes)} (headers {', '.join(map(repr, same))})",
+        raise InputError(f"duplicate column(s) {_short_list(dupes)} (headers {_short_list(list(map(repr, same)))})",
                          src, header_line, field=dupes[0])
     unknown_cols = [n for n in names if quantity_of(n) is None]
     for req in REQUIRED_CONDITIONS:
-        if req not in names:
+        if req not in name_set:
             raise InputError(f"missing required column '{req}'{_did_you_mean(req, unknown_cols)}; columns "
-                             f"present: {', '.join(raw_names)}", src, header_line, field=req)
+                             f"present: {_short_list(raw_names, 30)}", src, header_line, field=req)
     if len(lines) < 2:
         raise InputError("no data rows after the header", src, header_line)
     declared = {n: _declared_unit(n, u, src, header_line) for n, u in parsed if quantity_of(n) is not None}
@@ -498,29 +528,31 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         rows.append((line_no, [c.strip() for c in cells]))
 
     present = [n for n in names if is_channel_name(n)]
+    present_set = set(present)
     channels = present if channels is None else list(channels)
     for c in channels:
-        if c not in present:
+        if c not in present_set:
             raise InputError(f"channel '{c}' is not in the file{_did_you_mean(c, unknown_cols)}; channel "
-                             f"columns present: {', '.join(present) or '(none)'}", src, header_line, field=c)
+                             f"columns present: {_short_list(present, 30) or '(none)'}", src, header_line, field=c)
     if not channels and not allow_no_channels:
-        guesses = [f"'{raw_names[names.index(n)]}'{_did_you_mean(n, list(_FIXED_QUANTITY))}"
-                   for n in unknown_cols]
+        guesses = [f"'{r}'{_did_you_mean(n, list(_FIXED_QUANTITY))}" for r, n in zip(raw_names, names)
+                   if quantity_of(n) is None][:30]
         raise InputError("no channel columns (e.g. power, thrust, cn@0.30; a unit goes in brackets: "
-                         f"'power [kW]'); unrecognised columns: {', '.join(guesses) or '(none)'}",
+                         f"'power [kW]'); unrecognised columns: {_short_list(guesses, 30) or '(none)'}",
                          src, header_line)
     sig_cols = [f"{c}_sigma" for c in channels]
-    has_sigma = any(s in names for s in sig_cols)
+    has_sigma = any(s in name_set for s in sig_cols)
     if has_sigma:
-        missing = [s for s in sig_cols if s not in names]
+        missing = [s for s in sig_cols if s not in name_set]
         if missing:
-            given = [s for s in sig_cols if s in names]
+            given = [s for s in sig_cols if s in name_set]
             raise InputError(f"sigma given for some channels ({', '.join(given)}) but not for "
                              f"{', '.join(missing)}; give a _sigma column for every kept channel or none",
                              src, header_line, field=missing[0])
     needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in names] + channels
     needed += sig_cols if has_sigma else []
-    col_of = {n: names.index(n) for n in needed}
+    index_of = {n: i for i, n in enumerate(names)}
+    col_of = {n: index_of[n] for n in needed}
 
     decimal_comma = delimiter in (";", "\t") and any(
         _DECIMAL_COMMA.match(cells[i]) for _, cells in rows for i in col_of.values() if i < len(cells))
@@ -541,9 +573,10 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         column = [cells[i] for _, cells in rows if i < len(cells) and cells[i].lower() not in MISSING_CELLS]
         (ignored_numeric if column and all(map(is_number, column)) else ignored_text).append(i)
     if ignored_text:
-        notes.append(f"ignored non-numeric column(s): {', '.join(raw_names[i] for i in ignored_text)}")
+        notes.append(f"ignored non-numeric column(s): {_short_list([raw_names[i] for i in ignored_text], 30)}")
     if ignored_numeric:
-        named = ", ".join(raw_names[i] + _did_you_mean(names[i], list(_FIXED_QUANTITY)) for i in ignored_numeric)
+        named = _short_list([raw_names[i] + _did_you_mean(names[i], list(_FIXED_QUANTITY))
+                             for i in ignored_numeric[:30]] + [raw_names[i] for i in ignored_numeric[30:]], 30)
         notes.append(f"ignored unrecognised numeric column(s): {named}; known names: {_known_names_text()}")
     no_unit = [n for n in needed if declared.get(n) is None]
     if no_unit:

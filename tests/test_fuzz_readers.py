@@ -19,6 +19,7 @@ import dataclasses
 import difflib
 import json
 import math
+import os
 import re
 import shutil
 import signal
@@ -47,13 +48,15 @@ from calib.workflow import load_workflow
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "calib" / "data"
 DECK = ROOT / "tests" / "data" / "openfast"
-N_EXAMPLES = 200
+#: examples per reader; CALIB_FUZZ_EXAMPLES=5000 CALIB_FUZZ_RANDOM=1 runs a longer, non-repeating campaign
+N_EXAMPLES = int(os.environ.get("CALIB_FUZZ_EXAMPLES", 200))
 #: a reader must finish one example well under a second (hypothesis deadline) ...
 DEADLINE_MS = 1000
 #: ... and is stopped (the example fails as a hang) after this many seconds
 HANG_SECONDS = 5.0
 
-FUZZ = settings(max_examples=N_EXAMPLES, deadline=DEADLINE_MS, derandomize=True, database=None,
+FUZZ = settings(max_examples=N_EXAMPLES, deadline=DEADLINE_MS, derandomize=not os.environ.get("CALIB_FUZZ_RANDOM"),
+                database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                        HealthCheck.function_scoped_fixture])
 
@@ -997,3 +1000,51 @@ def test_windio_airfoil_without_name_is_named(tmp_path):
     with pytest.raises(InputError, match="airfoil name") as exc:
         read_windio(_windio(tmp_path, edit))
     assert exc.value.field == "airfoils[2].name"
+
+
+def test_measurement_header_with_long_blank_run_reads_at_once(tmp_path):
+    # the header-unit regular expression backtracked cubically: 1600 blanks inside a cell took
+    # 30 s, 3000 minutes
+    path = tmp_path / "m.csv"
+    path.write_text("wind_speed,rotor_speed,pitch,power,note" + " " * 3000 + "x\n8,9,0,1,a\n")
+    with time_limit(2.0):
+        m = read_measurements(path)
+    assert m.channels == ("power",)
+
+
+def test_measurement_column_of_nested_harmonics_is_an_unknown_column(tmp_path):
+    # quantity_of recursed once per '_1p': a 3000-fold name raised RecursionError
+    path = tmp_path / "m.csv"
+    path.write_text("wind_speed,rotor_speed,pitch,power,power" + "_1p" * 3000 + "\n8,9,0,1,2\n")
+    m = read_measurements(path)
+    assert m.channels == ("power",)
+    assert any("ignored unrecognised numeric" in n for n in m.notes)
+
+
+def test_measurement_table_with_many_columns_reads_in_linear_time(tmp_path):
+    # duplicate detection (names.count), the channel and sigma look-ups (list scans) and the
+    # notes (a did-you-mean per ignored column) were quadratic in the number of columns: a table
+    # exported transposed, 20000 columns, took about a minute
+    n = 20000
+    path = tmp_path / "m.csv"
+    path.write_text("wind_speed,rotor_speed,pitch,power" + "".join(f",c{i}" for i in range(n)) + "\n8,9,0,1"
+                    + ",1" * n + "\n")
+    with time_limit(10.0):
+        m = read_measurements(path)
+    assert m.channels == ("power",)
+    assert any(f"({n} in all)" in note for note in m.notes)
+
+
+def test_windio_alias_bomb_is_refused_at_once(tmp_path):
+    # nine lines of YAML aliases nest 10^9 numbers under 'chord.grid': numpy tried to build the
+    # array and the error message the full repr (never finished)
+    bomb = ["bomb0: &b0 [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]"]
+    bomb += [f"bomb{k}: &b{k} [" + ", ".join([f"*b{k - 1}"] * 10) + "]" for k in range(1, 9)]
+    text = WINDIO_BYTES[0].decode()
+    start, stop = text.index("      chord:\n"), text.index("      twist:\n")
+    path = tmp_path / "turbine.yaml"
+    path.write_text("\n".join(bomb) + "\n" + text[:start] + "      chord:\n        grid: *b8\n        values: *b8\n"
+                    + text[stop:])
+    with time_limit(5.0), pytest.raises(InputError, match="lists of numbers") as exc:
+        read_windio(path)
+    assert exc.value.field == "components.blade.outer_shape_bem.chord"

@@ -29,6 +29,7 @@ is an :class:`~calib.errors.InputError` naming the workflow file and the key
 
 from __future__ import annotations
 
+import reprlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -255,7 +256,7 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
     rotor = read_windio(path)
     env = load_windio(path).get("environment") or {}
     if not isinstance(env, dict):
-        raise InputError(f"expected a mapping, got {env!r:.60}", str(path), None, "environment")
+        raise InputError(f"expected a mapping, got {type(env).__name__}", str(path), None, "environment")
     rho = env.get("air_density")
     mu = env.get("air_dyn_viscosity")
     shear = env.get("shear_exp")
@@ -264,7 +265,7 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
         if value is None:
             return None
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
-            raise InputError(f"expected a non-negative number, got {value!r}", str(path), None,
+            raise InputError(f"expected a non-negative number, got {reprlib.repr(value)}", str(path), None,
                              f"environment.{key}")
         return float(value)
 

@@ -26,6 +26,7 @@ WP2.1 Reference wind turbines, NREL/TP-5000-73492 (2019).
 
 from __future__ import annotations
 
+import reprlib
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +79,15 @@ def load_windio(path) -> dict:
     return data
 
 
+_BRIEF = reprlib.Repr()
+_BRIEF.maxstring = _BRIEF.maxother = 60
+
+
+def _brief(value) -> str:
+    """A short repr for messages (reprlib: bounded even for YAML aliases nested into billions of items)."""
+    return _BRIEF.repr(value)
+
+
 def _get(data, keys: str, src: str):
     node = data
     for key in keys.split("."):
@@ -92,40 +102,44 @@ def _table(data, keys: str, src: str, default=None) -> dict:
     node = data
     for k, key in enumerate(keys.split(".")):
         if not isinstance(node, dict):
-            raise InputError(f"expected a mapping, got {node!r:.60}", src, field=".".join(keys.split(".")[:k]))
+            raise InputError(f"expected a mapping, got {_brief(node)}", src, field=".".join(keys.split(".")[:k]))
         node = node.get(key)
         if node is None:
             if default is None:
                 raise InputError(f"missing key {key!r}", src, field=keys)
             return default
     if not isinstance(node, dict):
-        raise InputError(f"expected a mapping, got {node!r:.60}", src, field=keys)
+        raise InputError(f"expected a mapping, got {_brief(node)}", src, field=keys)
     return node
 
 
 def _float(value, key: str, src: str, positive: bool = False) -> float:
     """A finite number (> 0 when ``positive``); errors name the key."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"expected a number, got {value!r:.60}", src, field=key)
+        raise InputError(f"expected a number, got {_brief(value)}", src, field=key)
     try:
         out = float(value)
     except OverflowError:
         out = float("inf")
     if not np.isfinite(out) or (positive and out <= 0):
-        raise InputError(f"expected a finite {'positive ' if positive else ''}number, got {value!r:.60}", src,
+        raise InputError(f"expected a finite {'positive ' if positive else ''}number, got {_brief(value)}", src,
                          field=key)
     return out
 
 
+def _is_number_list(value) -> bool:
+    """A flat list of numbers (checked before numpy sees it: YAML aliases can nest a list
+    of lists into billions of elements in a few lines)."""
+    return isinstance(value, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)
+
+
 def _curve(data, keys: str, src: str):
     node = _get(data, keys, src)
-    if not isinstance(node, dict) or not all(isinstance(node.get(k), list) for k in ("grid", "values")):
-        raise InputError(f"expected a mapping with 'grid' and 'values' lists, got {node!r:.60}", src, field=keys)
-    try:
-        grid = np.asarray(node["grid"], dtype=float)
-        values = np.asarray(node["values"], dtype=float)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise InputError(f"expected numeric 'grid' and 'values' lists ({exc})", src, field=keys) from None
+    if not isinstance(node, dict) or not all(_is_number_list(node.get(k)) for k in ("grid", "values")):
+        raise InputError(f"expected a mapping with 'grid' and 'values' lists of numbers, got {_brief(node)}", src,
+                         field=keys)
+    grid = np.asarray(node["grid"], dtype=float)
+    values = np.asarray(node["values"], dtype=float)
     if grid.shape != values.shape or grid.ndim != 1 or grid.size < 2:
         raise InputError(f"'grid' and 'values' must be 1-D of equal length >= 2, got {grid.shape} and "
                          f"{values.shape}", src, field=keys)
@@ -177,16 +191,16 @@ def windio_airfoil(entry: dict, src: str) -> Airfoil:
     first is kept.
     """
     if not isinstance(entry, dict):
-        raise InputError(f"expected a mapping (name, polars ...), got {entry!r:.60}", src, field="airfoils")
+        raise InputError(f"expected a mapping (name, polars ...), got {_brief(entry)}", src, field="airfoils")
     name = entry.get("name", "?")
     polars = entry.get("polars") or []
     if not isinstance(polars, list):
-        raise InputError(f"expected a list of polars, got {polars!r:.60}", src, field=f"airfoils[{name}].polars")
+        raise InputError(f"expected a list of polars, got {_brief(polars)}", src, field=f"airfoils[{name}].polars")
     tables, seen = [], set()
     for k, polar in enumerate(polars):
         where = f"airfoils[{name}].polars[{k}]"
         if not isinstance(polar, dict):
-            raise InputError(f"expected a mapping (re, c_l, c_d ...), got {polar!r:.60}", src, field=where)
+            raise InputError(f"expected a mapping (re, c_l, c_d ...), got {_brief(polar)}", src, field=where)
         re_ = float("nan") if polar.get("re") is None else _float(polar["re"], f"{where}.re", src, positive=True)
         if re_ in seen:
             continue
@@ -332,24 +346,21 @@ def read_windio(path, n_stations: int = DEFAULT_N_STATIONS, *, name: str | None 
     key = f"{bem}.airfoil_position"
     position = _table(data, key, src)
     grid, names = position.get("grid"), position.get("labels")
-    if not (isinstance(grid, list) and isinstance(names, list) and len(grid) == len(names) >= 1
+    if not (_is_number_list(grid) and isinstance(names, list) and len(grid) == len(names) >= 1
             and all(isinstance(x, str) for x in names)):
         raise InputError(f"expected 'grid' (numbers) and 'labels' (airfoil names) lists of equal length, got "
-                         f"{position!r:.80}", src, field=key)
-    try:
-        grid = np.asarray(grid, dtype=float)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"'grid' must be numbers, got {grid!r:.60}", src, field=f"{key}.grid") from None
+                         f"{_brief(position)}", src, field=key)
+    grid = np.asarray(grid, dtype=float)
     if not np.all(np.isfinite(grid)):
         raise InputError("'grid' must be finite numbers", src, field=f"{key}.grid")
     labels = nearest_airfoil_labels(grid, names, s)
     listed = _get(data, "airfoils", src)
     if not isinstance(listed, list) or not all(isinstance(a, dict) for a in listed):
-        raise InputError(f"expected a list of airfoils (mappings with name and polars), got {listed!r:.60}", src,
+        raise InputError(f"expected a list of airfoils (mappings with name and polars), got {_brief(listed)}", src,
                          field="airfoils")
     for k, a in enumerate(listed):
         if not isinstance(a.get("name"), str):
-            raise InputError(f"expected an airfoil name (a string), got {a.get('name')!r:.60}", src,
+            raise InputError(f"expected an airfoil name (a string), got {_brief(a.get('name'))}", src,
                              field=f"airfoils[{k}].name")
     entries = {a.get("name"): a for a in listed}
     used = list(dict.fromkeys(labels))
