@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test bench venv clean phase_vi
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -17,6 +17,10 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/calib demo --out demo_output
 
+# real data: the NREL Phase VI, measured sequence H (README "Real data")
+phase_vi: $(STAMP)
+	$(VENV)/bin/calib run workflows/phase_vi.toml --out phase_vi_output
+
 test: $(STAMP)
 	$(PY) -m pytest -q
 
@@ -24,4 +28,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) .bench-venv demo_output bench_output .calib_cache
+	rm -rf $(VENV) .bench-venv demo_output bench_output phase_vi_output .calib_cache

@@ -14,6 +14,7 @@ from __future__ import annotations
 from calib.effects.base import Effect
 from calib.effects.correction_field import CorrectionField
 from calib.effects.leading_edge_erosion import LeadingEdgeErosion
+from calib.effects.lift_offset import LiftOffset
 from calib.effects.pitch_offset import PitchOffset
 from calib.effects.reynolds_number import ReynoldsNumber
 from calib.effects.rotational_augmentation import RotationalAugmentation
@@ -32,6 +33,7 @@ EFFECTS = {
     "reynolds_number": ReynoldsNumber,
     "tip_loss": TipLoss,
     "wind_tunnel_blockage": WindTunnelBlockage,
+    "lift_offset": LiftOffset,
 }
 
 
