@@ -35,7 +35,8 @@ TRUTH = {"rotational_augmentation": {"stall_delay_strength": 1.0},
          "reynolds_number": {"reynolds_drag_exponent": 0.5, "reynolds_lift_loss": 0.3},
          "tip_loss": {"tip_loss_strength": 1.0},
          "wind_tunnel_blockage": {"blockage_area_ratio": 0.2},
-         "wind_speed_scale": {"wind_scale": 1.04}}
+         "wind_speed_scale": {"wind_scale": 1.04},
+         "lift_offset": {"lift_offset": -0.08}}
 
 
 def campaign(rotor, tsr=np.linspace(3.0, 11.0, 9), pitch=(-1.0, 2.0, 5.0, 8.0), rpm=10.0):
