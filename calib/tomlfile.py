@@ -18,7 +18,7 @@ def read_toml(path: str | Path, what: str = "settings file") -> dict:
     ------
     InputError
         ``what`` not found or unreadable, not UTF-8 text (line and column of the first bad byte),
-        or not valid TOML (line and column of the syntax error).
+        not valid TOML (line and column of the syntax error), or an integer beyond 64 bits (key).
     """
     path = Path(path)
     src = str(path)
@@ -37,7 +37,7 @@ def read_toml(path: str | Path, what: str = "settings file") -> dict:
         raise InputError(f"not a UTF-8 text file: byte 0x{raw[start]:02x} at column {column} cannot be decoded; "
                          f"expected a TOML {what} in UTF-8", src, line) from None
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         message = str(exc)  # "... (at line 3, column 7)" or "... (at end of document)"
         m = _WHERE.search(message)
@@ -49,3 +49,20 @@ def read_toml(path: str | Path, what: str = "settings file") -> dict:
         raise InputError(f"not valid TOML: {message}", src, line) from None
     except RecursionError:
         raise InputError("not valid TOML: nesting too deep", src) from None
+    bad = _wide_integer(data)
+    if bad:  # TOML 1.0: integers are 64-bit, a larger one "must" be an error (tomllib accepts it)
+        raise InputError(f"not valid TOML: integer {bad[1]} is outside the 64-bit range TOML allows", src,
+                         field=bad[0])
+    return data
+
+
+def _wide_integer(node, key: str = ""):
+    """(key, value) of the first integer outside [-2**63, 2**63 - 1] in a parsed TOML tree, or None."""
+    if isinstance(node, int) and not isinstance(node, bool) and not -2 ** 63 <= node < 2 ** 63:
+        return key, node
+    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for k, v in items:
+        found = _wide_integer(v, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
+        if found:
+            return found
+    return None

@@ -17,6 +17,7 @@ checked by :class:`calib.models.fmu_model.FmuModel` at load time (it has the FMU
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,6 +62,9 @@ _STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int,
                 "average_revolutions": (int, True), "standstill_step_size": (_NUM, False),
                 "convergence_rtol": (_NUM, False), "perturbation_settle_revolutions": (int, False),
                 "perturbation_average_revolutions": (int, False)}
+#: upper bounds of the step counts: a larger one is a typo, and would run the FMU for days
+_STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
+               "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
 _JACOBIAN_KEYS = {"relative_step": (_NUM, False), "warm_start": (bool, False)}
 _TYPE_NAMES = {str: "a string", int: "an integer", _NUM: "a number", list: "an array", dict: "a table",
                bool: "true/false", (int, float, bool): "a number or true/false"}
@@ -343,8 +347,10 @@ def _steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
     for key in _STEADY_KEYS:
         value = getattr(rule, key)
         low = positive.get(key, 0)
-        if not (np.isfinite(value) and value >= low):
-            raise InputError(f"'{where}.{key}' must be >= {low}, got {value!r}", source, field=f"{where}.{key}")
+        high = _STEADY_MAX.get(key, float("inf"))
+        if not (math.isfinite(value) and low <= value <= high):
+            raise InputError(f"'{where}.{key}' must be in [{low}, {high:g}], got {value!r}", source,
+                             field=f"{where}.{key}")
     if not rule.standstill_step_size > 0 or not rule.convergence_rtol > 0:
         raise InputError(f"'{where}.standstill_step_size' and '{where}.convergence_rtol' must be > 0", source,
                          field=where)
