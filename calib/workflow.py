@@ -181,6 +181,21 @@ def load_workflow(path: str | Path) -> dict:
         if bump["block"] not in ("lift", "drag"):
             raise InputError(f"block must be 'lift' or 'drag', got {bump['block']!r}", src,
                              field=f"truth.bumps[{k}].block")
+        for key in ("alpha_width", "eta_width", "edge_width"):
+            if key in bump and not bump[key] > 0:
+                raise InputError(f"must be > 0, got {bump[key]!r}", src, field=f"truth.bumps[{k}].{key}")
+        if "eta_range" in bump:
+            lo_hi = _numbers(bump["eta_range"], f"truth.bumps[{k}].eta_range", src)
+            if lo_hi.size != 2 or not lo_hi[0] < lo_hi[1]:
+                raise InputError(f"must be [lo, hi] with lo < hi (r/R), got {bump['eta_range']!r}", src,
+                                 field=f"truth.bumps[{k}].eta_range")
+    if "conditions" in data:  # the synthetic operating points: checked here, before any set-up
+        for key in ("tsr", "pitch"):
+            _numbers(data["conditions"][key], f"conditions.{key}", src)
+    for channel, fraction in data.get("noise", {}).get("relative", {}).items():
+        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not fraction >= 0:
+            raise InputError(f"must be a noise fraction >= 0 of the channel's RMS, got {fraction!r}", src,
+                             field=f"noise.relative.{channel}")
     if not data["stages"]:
         raise InputError("at least one stage is needed", src, field="stages")
     for k, stage in enumerate(data["stages"]):
