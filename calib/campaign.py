@@ -368,3 +368,18 @@ def section_html(diag, validations: dict) -> str:
         parts.append('<div style="overflow-x:auto"><table><tr>' + "".join(f"<th>{h}</th>" for h in head)
                      + "</tr>" + rows + "</table></div>")
     return "\n".join(parts)
+
+
+#: s_i at or above which a direction counts as informed by the data (σ_θ <= 2 prior units).
+INFORMED_LEVEL = 0.5
+
+
+def informed_eigenshapes(result, block: str = "lift", level: float = INFORMED_LEVEL, max_modes: int = 12):
+    """Lift (or drag) eigenshapes of every direction with s_i >= ``level``, retained or not:
+    what the data could tell apart, which the retained set alone (chosen for prediction) may
+    not show. None when the result has no correction field."""
+    from calib.report.eigenshape_figures import plot_eigenshapes
+
+    modes = np.flatnonzero(np.asarray(result.singular_values) >= level)[:max_modes]
+    return plot_eigenshapes(result, block, modes=modes,
+                            which=f"directions the data inform (s_i ≥ {level:g}, retained or not)")

@@ -697,6 +697,10 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
                 fig = campaign.campaign_figure(setup, meas, grid, outcomes, diag, validations, effects, chans,
                                                f"{cfg['name']}: {what}, measured and modelled", executor)
                 extra[key] = save_figure(fig, out, key)
+        for k, o in enumerate(outcomes):
+            fig = campaign.informed_eigenshapes(o.result)
+            if fig is not None:
+                extra[f"informed_eigenshapes_stage{k + 1}"] = save_figure(fig, out, f"informed_eigenshapes_stage{k + 1}")
     intro = cfg.get("description", "")
     if truth_p is not None:
         intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \

@@ -18,13 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calib.campaign import INFORMED_LEVEL as INFORMED   # s_i >= this: informed by the data (σ_θ <= 2 prior units)
 from calib.result import load_result
 from calib.workflow import run_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "phase_vi.toml"
 HUB, TAPS = "stage1_hub_loads", "stage2_hub_loads_and_pressure_taps"
-INFORMED = 0.5      # a direction counts as informed by the data when s_i >= this (σ_θ <= 2 prior units)
 INBOARD_ETA = 0.45  # r/R of the inboard correction nodes
 
 
@@ -105,6 +105,7 @@ def test_pressure_taps_inform_more_directions_and_localize_the_inboard_correctio
 def test_the_report_shows_the_figures(run):
     out, _ = run
     for name in ("loads_vs_wind_speed.png", "cn_vs_wind_speed.png", "diagnosis/report.html",
+                 "informed_eigenshapes_stage1.png", "informed_eigenshapes_stage2.png",
                  f"{HUB}/eigenshapes_lift.png", f"{TAPS}/eigenshapes_lift.png", f"{TAPS}/polars.png"):
         assert (out / name).is_file() and (out / name).stat().st_size > 1000, name
 

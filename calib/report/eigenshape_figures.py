@@ -26,6 +26,7 @@ from calib.report.panels import DPI, Margins, title_height, wrap_title
 from calib.result import CalibrationResult
 
 MAX_COLUMNS = 6
+MIN_WIDTH = 5.0           # narrowest figure [in] (title and axis labels fit)
 PANEL_SIZE = (1.9, 1.35)   # one map [in]
 MARGINS = Margins(left=0.6, right=1.05, bottom=0.5, top=0.8, wgap=0.22, hgap=0.3)
 N_ALPHA, N_ETA = 97, 49    # mesh of the maps
@@ -77,7 +78,8 @@ def block_share(V: np.ndarray, layout, mode: int, block: str) -> float:
     return float(np.sum(v[idx[idx >= 0]] ** 2) / total) if total > 0 else 0.0
 
 
-def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: int | None = None):
+def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: int | None = None,
+                     modes=None, which: str | None = None):
     """Eigenshape maps ψ_i(α, η) of the retained θ for one block, all in one grid.
 
     Parameters
@@ -86,6 +88,10 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     block : {"lift", "drag"}
     max_modes : int, optional
         Draw at most this many (default: every retained θ); the title states the count.
+    modes : sequence of int, optional
+        Draw these θ (0-based, e.g. every direction with s_i above a level) instead of the
+        retained ones; ``which`` then says in the title what they are.
+    which : str, optional
 
     Returns
     -------
@@ -106,7 +112,7 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     layout = result.layout
     if not layout.has_field:
         return None
-    retained = np.flatnonzero(result.retained)
+    retained = np.flatnonzero(result.retained) if modes is None else np.asarray(modes, int)
     modes = retained if max_modes is None else retained[:max_modes]
     a_nodes, e_nodes = layout.grid.alpha_nodes_deg, layout.grid.eta_nodes
     n = max(len(modes), 1)
@@ -114,13 +120,17 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     nrow = int(np.ceil(n / ncol))
     w, h = PANEL_SIZE
     a_seen, e_seen, n_out = seen_inside(result, layout)
-    how_many = (f"all {len(retained)} retained θ" if len(modes) == len(retained)
-                else f"the first {len(modes)} of {len(retained)} retained θ")
-    width = MARGINS.left + ncol * w + (ncol - 1) * MARGINS.wgap + MARGINS.right
+    kind = which or "retained θ"
+    how_many = (f"all {len(retained)} {kind}" if len(modes) == len(retained)
+                else f"the first {len(modes)} of {len(retained)} {kind}")
+    grid_width = ncol * w + (ncol - 1) * MARGINS.wgap
+    # at least MIN_WIDTH wide (a grid of one or two maps centred), so title and labels fit
+    pad = max(MIN_WIDTH - (MARGINS.left + grid_width + MARGINS.right), 0.0) / 2
+    width = MARGINS.left + grid_width + MARGINS.right + 2 * pad
     title = wrap_title(f"{result.name}: {block} eigenshapes ψ_i(α, η) of {how_many} ({result.n_params} "
                        f"parameters)\ndots: {a_seen.size} (α, η) seen by the data inside the node range; {n_out} "
                        f"outside it (not drawn); grid lines: correction nodes", width, 9)
-    m = replace(MARGINS, top=title_height(title, 9) + 0.3)
+    m = replace(MARGINS, top=title_height(title, 9) + 0.3, left=MARGINS.left + pad, right=MARGINS.right + pad)
     gx, gy = m.wgap / w, m.hgap / h                        # gaps in tile units
     height = m.bottom + nrow * h + (nrow - 1) * m.hgap + m.top
     fig = Figure(figsize=(width, height), dpi=DPI)
@@ -178,7 +188,8 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     ax.set_xticks([])
     ax.set_yticks([])
     ax.set_xlabel("α [deg] (every tile; values of the α nodes under the lowest tiles)", fontsize=7, labelpad=16)
-    ax.set_ylabel("η = r/R [-] (every tile; values of the η nodes left)", fontsize=7, labelpad=22)
+    ax.set_ylabel("η = r/R [-] (every tile; values of the η nodes left)" if nrow > 1 else "η = r/R [-]",
+                  fontsize=7, labelpad=22)
     cax = fig.add_axes(((width - m.right + 0.2) / width, m.bottom / height, 0.14 / width,
                         (height - m.bottom - m.top) / height))
     fig.colorbar(im, cax=cax)
