@@ -94,3 +94,36 @@ def test_validation_and_diagnosis_tables_name_the_bad_key():
     with pytest.raises(InputError) as info:
         diagnosis_settings({"significance": 2.0}, "wf.toml")
     assert info.value.field == "diagnosis.significance"
+
+
+def _workflow(tmp_path, extra: str) -> dict:
+    from pathlib import Path
+
+    from calib.workflow import load_workflow
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "workflows" / "phase_vi.toml").read_text().replace(
+        'file = "data/phase_vi_sequence_H.csv"', f'file = "{root / "workflows" / "data" / "phase_vi_sequence_H.csv"}"')
+    path = tmp_path / "wf.toml"
+    path.write_text(text + extra)
+    return load_workflow(path)
+
+
+def test_workflow_diagnosis_and_validation_errors_name_the_key(tmp_path):
+    from calib.workflow import prepare
+
+    cfg = _workflow(tmp_path, "")
+    cfg["validation"] = {"leave_out": "wind_speed", "fold": 2}
+    with pytest.raises(InputError) as info:
+        prepare(cfg)
+    assert info.value.field == "validation.fold" and "wf.toml" in str(info.value)
+    cfg = _workflow(tmp_path, "")
+    cfg["diagnosis"] = {"max_effects": -1}
+    with pytest.raises(InputError) as info:
+        prepare(cfg)
+    assert info.value.field == "diagnosis.max_effects"
+    cfg = _workflow(tmp_path, "")
+    cfg["model"] = {"kind": "fmu", "variant": "A"}
+    with pytest.raises(InputError, match="native BEM only") as info:
+        prepare(cfg)
+    assert info.value.field == "diagnosis"
