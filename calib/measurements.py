@@ -98,6 +98,7 @@ _FIXED_QUANTITY = {
 _SPANWISE = re.compile(r"^(cn|ct|fn|ft)@([0-9]*\.?[0-9]+)$")
 _DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 _DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _MAGIC = (  # leading bytes of files people pick by mistake -> what they are
     (b"PK\x03\x04", "a zip archive (an .xlsx/.ods workbook is one: export the sheet as CSV)"),
     (b"\xd0\xcf\x11\xe0", "an OLE2 document (an .xls workbook: export the sheet as CSV)"),
@@ -484,7 +485,9 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     except OSError as exc:  # e.g. a name longer than the file system allows
         raise InputError(f"cannot read the file ({exc.strerror or exc})", src) from None
     text, notes = _decode(raw, src)
-    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
+    # lines end at \n, \r\n or \r only: str.splitlines also splits at form feeds, \x85 and U+2028,
+    # which editors do not, and every later line number would be off
+    lines = [(i + 1, ln) for i, ln in enumerate(_LINE_BREAK.split(text))
              if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise InputError("empty file: expected a header line and at least one data row", src)

@@ -1097,3 +1097,30 @@ def test_workflow_synthetic_tables_are_checked_on_load(tmp_path, edit, field):
     with pytest.raises(InputError) as exc:
         load_workflow(_synthetic_workflow(tmp_path, edit))
     assert exc.value.field == field
+
+
+def test_line_numbers_count_only_line_breaks(tmp_path):
+    # str.splitlines also splits at a form feed (old Fortran-era page breaks), \x85 and U+2028:
+    # every line number after one was off by one
+    path = tmp_path / "m.csv"
+    path.write_text("wind_speed,rotor_speed,pitch,power\n8,9,0,1\x0c\n8,9,0,x\n")
+    with pytest.raises(InputError, match="not a number") as exc:
+        read_measurements(path)
+    assert exc.value.line == 3
+    blade = tmp_path / "blade.dat"
+    text = BLADE_SEEDS[0].read_text()
+    lines = text.split("\n")
+    lines[1] += "\x0c"          # a page break in the title line
+    lines[8] = lines[8].replace("1.3308000E+01", "oops", 1)
+    blade.write_text("\n".join(lines))
+    with pytest.raises(InputError, match="expected a number") as exc:
+        read_aerodyn_blade(blade)
+    assert exc.value.line == 9
+
+
+def test_mapping_switch_model_values_are_numbers(tmp_path):
+    # values = { snel = "x" } was accepted and written to the FMU at run time
+    path = _mapping(tmp_path, "values = { snel = 1, du_selig = 2 }", 'values = { snel = "x", du_selig = 2 }')
+    with pytest.raises(InputError, match="must be a number or true/false") as exc:
+        load_mapping(path)
+    assert exc.value.field == "switches.stall_delay.values.snel"

@@ -486,6 +486,10 @@ def load_mapping(path) -> Mapping:
     for name, e in data.get("switches", {}).items():
         where = f"switches.{name}"
         _check(e, _SWITCH_KEYS, where, src)
+        for model, value in e.get("values", {}).items():
+            if not isinstance(value, (int, float, bool)):
+                raise InputError(f"'{where}.values.{model}' must be a number or true/false (the FMU value of that "
+                                 f"model), got {value!r}", src, field=f"{where}.values.{model}")
         switches[name] = Switch(name, e["variable"], e["on"], e["off"], dict(e.get("values", {})))
 
     settings = {}

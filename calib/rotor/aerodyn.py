@@ -45,6 +45,7 @@ _BLADE_KEYS = {"BlSpn": "span", "BlCrvAC": "curve_ac", "BlSwpAC": "sweep_ac", "B
 # keywords that start a new block of an airfoil file: a data table ends before them
 _TABLE_KEYWORDS = {"re", "userprop", "ctrl", "incluadata", "numalf", "numtabs"}
 _TOKEN = re.compile(r'"([^"]*)"|(\S+)')
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _MAX_AFID = 2 ** 31 - 1  # BlAFID indexes AFNames; larger values do not fit an integer index
 
 
@@ -58,7 +59,12 @@ def _read_lines(path) -> tuple[list[str], str]:
         raise InputError("file not found", src) from None
     except OSError as exc:
         raise InputError(f"cannot read file ({exc})", src) from None
-    return text.splitlines(), src
+    # lines end at \n, \r\n or \r only, as OpenFAST reads them: str.splitlines also splits at form
+    # feeds, \x85 and U+2028, and every later line number in a message would be off
+    lines = _LINE_BREAK.split(text)
+    if lines and lines[-1] == "":
+        lines.pop()
+    return lines, src
 
 
 def _is_comment(line: str) -> bool:
