@@ -7,9 +7,12 @@ r-test deck, ``calib/data``, ``workflows/*.toml``, ``fmu_models/variant_*/mappin
 windIO files) and mutates them: truncation, deleted / duplicated / swapped lines, garbled,
 swapped or deleted tokens, NaN / inf / huge numbers, random bytes, other encodings, empty and
 binary files; TOML and YAML files also get structural mutations (missing keys, wrong types,
-unknown keys, non-finite numbers). Examples are derandomized, so CI runs the same cases.
+unknown keys, non-finite numbers). Examples are derandomized, so CI runs the same cases;
+``CALIB_FUZZ_EXAMPLES=4000 CALIB_FUZZ_RANDOM=1`` runs a longer campaign with fresh examples.
 
-The plain tests at the end are regressions for the defects the fuzzing found.
+The plain tests at the end are regressions for the defects the fuzzing found, and for those
+found by probes written while fixing them (pathological sizes: long names, many columns,
+YAML alias bombs, regular-expression backtracking), each failing on the code before its fix.
 """
 
 from __future__ import annotations

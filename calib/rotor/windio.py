@@ -155,7 +155,8 @@ def _sample(data, keys, src, s):
     if grid[0] > s[0] + 1e-9 or grid[-1] < s[-1] - 1e-9:
         raise InputError(f"grid covers [{grid[0]:g}, {grid[-1]:g}], stations need [{s[0]:g}, {s[-1]:g}]",
                          src, field=keys)
-    out = PchipInterpolator(grid, values)(s)
+    with np.errstate(all="ignore"):  # huge values overflow: refused just below, without warnings
+        out = PchipInterpolator(grid, values)(s)
     if not np.all(np.isfinite(out)):
         raise InputError("values too large: the interpolated curve is not finite", src, field=keys)
     return out
