@@ -1,23 +1,43 @@
-"""Coverage of the 95 % polar bands and NEES in twin experiments (statistics, not speed).
+"""Coverage of the 95 % polar bands, NEES, and the held-back error of the automatic truncation
+(statistics, not speed).
 
-Set-up of ``workflows/wind_tunnel_hub_loads.toml`` (NREL Phase VI rotor at 72 rpm, 72
-tip-speed-ratio × pitch points, power and thrust with 1 % noise, 6 × 5 correction nodes
-and a pitch offset; truth pitch offset 0.2 deg), two truths:
+Coverage twins: the set-up of ``workflows/wind_tunnel_hub_loads.toml`` (NREL Phase VI rotor at
+72 rpm, 72 tip-speed-ratio × pitch points, power and thrust with 1 % noise, 6 × 5 correction
+nodes and a pitch offset; truth pitch offset 0.2 deg), two truths:
 
 (a) inside the span of the shape functions: the workflow's smooth correction sampled at the
     calibration nodes (the calibrated model can represent it exactly);
-(b) outside it: the same smooth field sampled on a 1 deg × 0.025 grid (as the workflow).
+(b) outside it: the same smooth field sampled on a 1 deg × 0.025 grid (as the workflow);
+(c) a check of the bands themselves: a truth drawn, for each seed, from the stated prior
+    (the smooth-field prior of ``calib.calibration.CalibrationSettings``: 1 scale unit per
+    node, correlation length one node spacing) at the calibration nodes, pitch offset 0.2 deg.
+    Draws that make C_D <= 0 at a reached section are drawn again (the prior conditioned on
+    physical polars).
+    For truths typical of the prior the 95 % bands should cover about 95 %; (a) and (b) are
+    two particular truths, zero where the operating points say little.
 
-For ``n_seeds`` noise seeds (5000 + k; the test suite uses none of them) each calibration
-runs with the default settings (``sigma_bar = "auto"``, prior 1 scale unit). Figures: the
-fraction of the (α, η) points the operating points reach where the 95 % band contains the
-true ΔC_L and ΔC_D (mean, 10th and 90th percentile over seeds), the summed NEES of the
-retained θ against its two-sided 95 % χ² band, the retained count, failures and time.
-Run: ``python benchmarks/bench_coverage.py [n_seeds]`` (about 10 s per calibration here).
+For ``n_seeds`` noise seeds (5000 + k; the test suite uses none of them, and none was used to
+choose the method) each calibration runs with the default settings (``sigma_bar = "auto"``,
+prior 1 scale unit per node, smooth-field prior correlation of one node spacing). Figures: the
+fraction of the (α, η) points the operating points reach where the 95 % band contains the true
+ΔC_L and ΔC_D (mean over seeds, 10th and 90th percentile, and the pooled fraction), the same
+inside the node range only, the summed NEES of the retained θ in (a) against its two-sided
+95 % χ² band, the retained count, failures and time.
+
+Held-back truncation check: every third operating point held back, calibrate on the rest with
+``sigma_bar = "auto"`` and with σ̄ = 0.1 … 5, predict the held-back points and compare χ²/dof
+(mean squared whitened residual) of the automatic choice with the best of the sweep; on both
+shipped workflows (with their own noise seeds; the localization study's stage 2) and on the
+analytic twin of ``tests/twin_model.py`` (56 points, truth of ``tests/test_calibration.py``).
+
+Run: ``python benchmarks/bench_coverage.py [n_seeds] [--no-held-back]`` (a few seconds per
+calibration here; 30 seeds about 5–10 min, the held-back part about as long).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import sys
 import time
 
@@ -27,19 +47,19 @@ from scipy import stats
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
-from calib.measurements import synthesize
+from calib.measurements import Measurements, synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.workflow import _conditions, load_workflow, smooth_field, truth_model
+from calib.workflow import _conditions, load_workflow, prepare, smooth_field, truth_model
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 WORKFLOW = "workflows/wind_tunnel_hub_loads.toml"
 SEED0 = 5000
+SWEEP = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0)
 
 
 def _setup():
-    import os
-
-    cfg = load_workflow(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), WORKFLOW))
+    cfg = load_workflow(os.path.join(ROOT, WORKFLOW))
     rotor = load_rotor(cfg["rotor"]["name"])
     settings = BemSettings(use_tilt=False)
     channels = list(cfg["stages"][0]["channels"])
@@ -50,7 +70,25 @@ def _setup():
     return cfg, rotor, settings, channels, cond, grid, model
 
 
-def run(n_seeds: int = 30) -> dict:
+def _prior_draw(model, grid, cond, seed: int) -> np.ndarray:
+    """Node values drawn from the default smooth-field prior, pitch offset 0.2 deg; draws that
+    make C_D <= 0 somewhere at the operating points (the BEM refuses them) are drawn again."""
+    st = CalibrationSettings()
+    std = np.array([q.scale * st.prior_sigma for q in model.parameters])
+    P = model.correction_field().node_correlation(st.prior_correlation) * np.outer(std, std)
+    n = grid.n_params
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        p = np.zeros(len(model.parameters))
+        p[:n] = rng.multivariate_normal(np.zeros(n), P[:n, :n], method="eigh")
+        p[-1] = 0.2
+        if np.all(model.evaluate(p, cond).ok):
+            return p
+    raise RuntimeError(f"no physical prior draw in 200 tries (seed {seed})")
+
+
+def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abc") -> dict:
+    """Coverage of the polar bands and NEES over ``n_seeds`` noise seeds, twins (a), (b), (c)."""
     cfg, rotor, settings, channels, cond, grid, model = _setup()
     bumps = cfg["truth"]["bumps"]
     rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
@@ -63,12 +101,19 @@ def run(n_seeds: int = 30) -> dict:
     p_a = np.zeros(len(model.parameters))
     p_a[:grid.n_lift], p_a[grid.n_lift:grid.n_params] = dl.ravel(), dd.ravel()
     p_a[-1] = float(cfg["truth"].get("pitch_offset", 0.0))
+    a_lo, a_hi = grid.alpha_nodes_deg[[0, -1]]
+    e_lo, e_hi = grid.eta_nodes[[0, -1]]
     out = {}
-    for label, tmodel, p_true in (("a_inside_span", model, p_a), ("b_outside_span", tmodel_b, p_b)):
-        lift, drag, nees, dims, kept, failed = [], [], [], [], [], 0
+    cases = {"a": ("a_inside_span", model, p_a), "b": ("b_outside_span", tmodel_b, p_b),
+             "c": ("c_prior_draws", model, None)}
+    for label, tmodel, p_fixed in (cases[t] for t in twins):
+        cov = {"lift": [], "drag": [], "lift_in_grid": [], "drag_in_grid": []}
+        hits = {"lift": [0, 0], "drag": [0, 0]}
+        nees, dims, kept, failed = [], [], [], 0
         t0 = time.perf_counter()
         for k in range(n_seeds):
-            meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=SEED0 + k)
+            p_true = _prior_draw(model, grid, cond, seed0 + k) if p_fixed is None else p_fixed
+            meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=seed0 + k)
             res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
             if res.status != "converged":
                 failed += 1
@@ -81,17 +126,28 @@ def run(n_seeds: int = 30) -> dict:
                 dims.append(err.size)
             else:
                 tl, td = smooth_field(bumps, a, e)
-            cov = field.coverage(res.p_hat, res.cov_p, a, e, tl, td, prior_std=res.prior_std)
-            lift.append(cov["lift"])
-            drag.append(cov["drag"])
+            rep = res.prior_std if res.settings.get("representation_error", True) else None
+            length = res.settings.get("prior_correlation", 0.0)
+            c = field.coverage(res.p_hat, res.cov_p, a, e, tl, td, prior_std=rep, correlation_length=length)
+            inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
+            ci = field.coverage(res.p_hat, res.cov_p, a[inside], e[inside], tl[inside], td[inside], prior_std=rep,
+                                correlation_length=length)
+            for block in ("lift", "drag"):
+                cov[block].append(c[block])
+                cov[f"{block}_in_grid"].append(ci[block])
+                hits[block][0] += round(c[block] * c["n_points"])
+                hits[block][1] += c["n_points"]
             kept.append(res.n_retained)
-            print(f"[coverage {label}] seed {SEED0 + k}: lift {cov['lift']:.3f} drag {cov['drag']:.3f} "
-                  f"retained {res.n_retained} {res.status}", flush=True)
-        fig = {"coverage_lift_mean": float(np.mean(lift)), "coverage_drag_mean": float(np.mean(drag)),
-               "coverage_lift_p10_p90": np.percentile(lift, [10, 90]).tolist(),
-               "coverage_drag_p10_p90": np.percentile(drag, [10, 90]).tolist(),
-               "retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
-               "seconds_per_calibration": (time.perf_counter() - t0) / n_seeds}
+            print(f"[coverage {label}] seed {seed0 + k}: lift {c['lift']:.3f} drag {c['drag']:.3f} (inside the node "
+                  f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} {res.status}", flush=True)
+        fig = {"n_seeds": n_seeds, "seeds": [seed0, seed0 + n_seeds - 1]}
+        for key, v in cov.items():
+            fig[f"coverage_{key}_mean"] = float(np.mean(v))
+            fig[f"coverage_{key}_p10_p90"] = np.percentile(v, [10, 90]).tolist()
+        for block in ("lift", "drag"):
+            fig[f"coverage_{block}_pooled"] = hits[block][0] / hits[block][1]
+        fig.update({"retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
+                    "seconds_per_calibration": (time.perf_counter() - t0) / n_seeds})
         if dims:
             lo, hi = stats.chi2.ppf([0.025, 0.975], int(np.sum(dims)))
             fig.update({"nees_sum": float(np.sum(nees)), "nees_band": [float(lo), float(hi)],
@@ -100,7 +156,64 @@ def run(n_seeds: int = 30) -> dict:
     return out
 
 
+def _held_back_case(name: str, seed: int | None = None):
+    """(model, conditions, measurements, settings) of one held-back case; ``seed`` of the noise
+    (default: the workflow's own, 5500 for the twin)."""
+    if name == "twin":
+        sys.path.insert(0, os.path.join(ROOT, "tests"))
+        from test_calibration import CHANNELS, twin_truth
+        from twin_model import TwinModel, twin_conditions
+
+        model = TwinModel(channels=CHANNELS)
+        cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 7))
+        meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS},
+                          seed=5500 if seed is None else seed)
+        return model, cond, meas, CalibrationSettings(cd_min=None)
+    workflow, stage = {"wind_tunnel": ("wind_tunnel_hub_loads.toml", 0),
+                       "localization": ("blade_loads_localization.toml", 1)}[name]
+    cfg = load_workflow(os.path.join(ROOT, "workflows", workflow))
+    setup = prepare(cfg)
+    cond = _conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
+    channels = cfg["stages"][stage]["channels"]
+    tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, cfg["truth"], setup.nuisance)
+    rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
+    meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels,
+                      seed=int(cfg["noise"]["seed"]) if seed is None else seed)
+    model = BemModel(setup.rotor, setup.grid(cond), channels, setup.settings, setup.nuisance)
+    return model, cond, meas, setup.calibration_settings
+
+
+def held_back(name: str, sweep=SWEEP, seed: int | None = None) -> dict:
+    """Held-back χ²/dof of ``sigma_bar = "auto"`` against a sweep of σ̄ (every third point held
+    back); ``name`` one of ``wind_tunnel``, ``localization``, ``twin``."""
+    model, cond, meas, settings = _held_back_case(name, seed)
+    test = np.arange(len(cond)) % 3 == 1
+    train = Measurements(cond.subset(~test), meas.channels, meas.values[~test], meas.sigma[~test], "train")
+    scores, kept = {}, {}
+    for sb in ("auto",) + tuple(sweep):
+        res = Calibrator(model, train, dataclasses.replace(settings, sigma_bar=sb)).run()
+        pred = res.predict(cond.subset(test), model=model)
+        scores[sb] = float(np.mean(((meas.values[test] - pred.values) / meas.sigma[test]) ** 2))
+        kept[sb] = res.n_retained
+    best = min(scores[sb] for sb in sweep)
+    best_sb = min(sweep, key=lambda sb: scores[sb])
+    fig = {"auto": scores["auto"], "auto_retained": kept["auto"], "best": best, "best_sigma_bar": best_sb,
+           "best_retained": kept[best_sb], "ratio": scores["auto"] / best,
+           "sweep": {str(sb): [round(scores[sb], 4), kept[sb]] for sb in sweep}}
+    print(f"[held back {name}] auto {scores['auto']:.3f} ({kept['auto']} θ), best {best:.3f} (σ̄ {best_sb}, "
+          f"{kept[best_sb]} θ): ratio {fig['ratio']:.3f}", flush=True)
+    return fig
+
+
+def run(n_seeds: int = 30, with_held_back: bool = True) -> dict:
+    out = coverage(n_seeds)
+    if with_held_back:
+        out["held_back"] = {name: held_back(name) for name in ("wind_tunnel", "localization", "twin")}
+    return out
+
+
 if __name__ == "__main__":
     import json
 
-    print(json.dumps(run(int(sys.argv[1]) if len(sys.argv) > 1 else 30), indent=1))
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    print(json.dumps(run(int(args[0]) if args else 30, "--no-held-back" not in sys.argv), indent=1))

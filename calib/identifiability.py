@@ -198,11 +198,12 @@ def observability(V: np.ndarray, retained: np.ndarray) -> np.ndarray:
 
 
 def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np.ndarray,
-                            prior_std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                            prior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     r"""Covariance of the truncated estimate that accounts for the frozen directions.
 
     The truncated-SVD estimate sets θ_NID = V_NIDᵀ p̃ to 0 (nominal); the truth has
-    components there too. With a Gaussian prior p̃ ~ N(0, P), P = diag(prior_std²), the
+    components there too. With a Gaussian prior p̃ ~ N(0, P) (P = diag(prior_std²) for
+    independent parameters, or a full matrix such as the smooth-field prior), the
     frozen coordinates have prior covariance V_NIDᵀ P V_NID, so the error of p̃̂ has
 
     .. math::  Cov(p̃̂) = V_{ID}\,diag(σ(θ_{ID})^2)\,V_{ID}^T
@@ -219,8 +220,9 @@ def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np
     sigma_theta : ndarray, shape (n,)
         σ(θ_i) = 1/s_i [scale units].
     retained : ndarray of bool, shape (n,)
-    prior_std : ndarray, shape (n,)
-        Prior 1-σ of each scaled parameter [scale units].
+    prior : ndarray, shape (n,) or (n, n)
+        Prior 1-σ of each scaled parameter [scale units], or the prior covariance P of the
+        scaled parameters [scale units²].
 
     Returns
     -------
@@ -229,7 +231,8 @@ def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np
     """
     Vr, Vn = V[:, retained], V[:, ~retained]
     cov_retained = (Vr * sigma_theta[retained] ** 2) @ Vr.T
-    prior_theta = (Vn.T * prior_std ** 2) @ Vn
+    prior = np.asarray(prior, float)
+    prior_theta = Vn.T @ prior @ Vn if prior.ndim == 2 else (Vn.T * prior ** 2) @ Vn
     cov_frozen = Vn @ prior_theta @ Vn.T
     return cov_retained, cov_frozen
 

@@ -60,6 +60,70 @@ def test_frozen_directions_carry_prior_variance():
     np.testing.assert_allclose(frozen_aware_covariance(V, sig, np.zeros(4, bool), prior)[1], np.eye(4), atol=1e-12)
 
 
+def test_frozen_directions_with_a_full_prior_covariance():
+    """A full prior matrix: the frozen part is Π_N P Π_N; a diagonal one gives the 1-σ form."""
+    rng = np.random.default_rng(7003)
+    V = np.linalg.qr(rng.standard_normal((5, 5)))[0]
+    sig = np.array([0.1, 0.3, 2.0, 9.0, 40.0])
+    keep = np.array([True, True, False, False, False])
+    std = np.array([1.0, 2.0, 0.5, 1.0, 3.0])
+    np.testing.assert_allclose(frozen_aware_covariance(V, sig, keep, np.diag(std ** 2))[1],
+                               frozen_aware_covariance(V, sig, keep, std)[1], atol=1e-12)
+    L = rng.standard_normal((5, 5))
+    P = L @ L.T
+    Pn = V[:, ~keep] @ V[:, ~keep].T
+    np.testing.assert_allclose(frozen_aware_covariance(V, sig, keep, P)[1], Pn @ P @ Pn, atol=1e-12)
+
+
+def _field(alpha_nodes=(-4.0, 2.0, 8.0, 14.0), eta_nodes=(0.2, 0.5, 0.8, 1.0)):
+    from calib.parametrizations import CorrectionField
+
+    grid = CorrectionGrid(alpha_nodes, eta_nodes)
+    return CorrectionField(grid.parameters()), grid
+
+
+def test_node_correlation_of_the_smooth_field_prior():
+    field, grid = _field()
+    R = field.node_correlation(1.0)
+    n = grid.n_lift
+    np.testing.assert_allclose(np.diag(R), 1.0)
+    np.testing.assert_allclose(R, R.T)
+    assert np.linalg.eigvalsh(R).min() > -1e-10
+    assert np.all(R[:n, n:] == 0.0)                       # lift and drag independent
+    # neighbours one α spacing apart (uniform α nodes) at the same η: exp(-1/2)
+    i, j = 0 * grid.n_eta + 1, 1 * grid.n_eta + 1
+    assert R[i, j] == pytest.approx(np.exp(-0.5))
+    np.testing.assert_allclose(field.node_correlation(0.0), np.eye(field.n_params))
+
+
+@pytest.mark.parametrize("length", [0.7, 1.0, 2.0])
+def test_representation_variance_is_the_interpolation_error_of_a_smooth_field(length):
+    """Monte Carlo: draw the field of the smooth-field prior jointly at the nodes and at test
+    points, interpolate the nodes with the hat functions, and compare the variance of the
+    interpolation error with the closed form (zero at a node, the prior far from the grid)."""
+    field, grid = _field()
+    la, le = field._lengths(length)
+    a_test = np.array([5.0, 3.5, 8.0, 11.0, 17.0, 40.0])     # cell centre, inside, node, ..., ramp, far
+    e_test = np.array([0.65, 0.3, 0.5, 0.95, 0.6, 0.6])
+    An, En = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
+    a_all = np.concatenate([An.ravel(), a_test])
+    e_all = np.concatenate([En.ravel(), e_test])
+    K = np.exp(-0.5 * ((a_all[:, None] - a_all[None]) / la) ** 2 - 0.5 * ((e_all[:, None] - e_all[None]) / le) ** 2)
+    sigma = 0.1
+    draws = sigma * np.random.default_rng(7004).multivariate_normal(np.zeros(a_all.size), K, 40000,
+                                                                      method="eigh")
+    B = field.basis(a_test, e_test, "lift")[:, :grid.n_lift]
+    err = draws[:, grid.n_lift:] - draws[:, :grid.n_lift] @ B.T
+    empirical = err.var(axis=0)
+    prior_std = np.full(field.n_params, sigma)
+    formula = field.representation_variance(a_test, e_test, "lift", prior_std, length)
+    np.testing.assert_allclose(formula, empirical, rtol=0.05, atol=1e-4 * sigma ** 2)
+    assert formula[2] == pytest.approx(0.0, abs=1e-12) and formula[-1] == pytest.approx(sigma ** 2)
+    # the smooth field is far better carried between the nodes than independent nodes claim
+    rough = field.representation_variance(a_test, e_test, "lift", prior_std, 0.0)
+    assert formula[0] < 0.5 * rough[0] and rough[0] == pytest.approx(0.75 * sigma ** 2)
+
+
 def _held_back_chi2(res, model, cond, measured, sigma):
     pred = res.predict(cond, model=model)
     return float(np.mean(((measured - pred.values) / sigma) ** 2))
@@ -188,3 +252,66 @@ def test_auto_truncation_on_the_shipped_workflows_held_back(workflow, stage):
         scores[sb] = _held_back_chi2(res, model, cond.subset(test), meas.values[test], meas.sigma[test])
     best = min(v for k, v in scores.items() if k != "auto")
     assert scores["auto"] <= 1.2 * best, scores
+
+
+def _bench():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import bench_coverage
+
+    return bench_coverage
+
+
+def test_auto_truncation_on_a_held_back_split_of_the_analytic_twin():
+    """The analytic twin (56 points, every third held back): the automatic truncation predicts
+    the held-back measurements within 20 % of the best σ̄ of a sweep 0.1 … 5."""
+    fig = _bench().held_back("twin", seed=7110)
+    assert fig["ratio"] <= 1.2, fig
+
+
+@pytest.fixture(scope="module")
+def coverage_twins():
+    """benchmarks/bench_coverage.py twins (a) inside the span, (b) outside it, (c) truths drawn
+    from the prior; noise seeds 7300–7309, used nowhere else and not used to choose the method."""
+    return _bench().coverage(10, seed0=7300)
+
+
+@pytest.mark.statistics
+def test_polar_bands_cover_the_truth_in_the_coverage_twins(coverage_twins):
+    """Honest bands: at least 90 % of the reached (α, η) points inside the 95 % bands in every
+    twin; for truths drawn from the prior (twin c) also at most 99 %."""
+    for name, fig in coverage_twins.items():
+        assert fig["coverage_lift_mean"] >= 0.90 and fig["coverage_drag_mean"] >= 0.90, (name, fig)
+    c = coverage_twins["c_prior_draws"]
+    assert c["coverage_lift_mean"] <= 0.99 and c["coverage_drag_mean"] <= 0.99, c
+
+
+@pytest.mark.statistics
+@pytest.mark.xfail(reason="issue 7 target not met: with the workflow's truths the bands cover 99.98-100 % of the "
+                          "reached points in twins (a) and (b) (bench_coverage, seeds 5000-5029); see README",
+                   strict=False)
+def test_polar_bands_are_not_wider_than_needed(coverage_twins):
+    for name in ("a_inside_span", "b_outside_span"):
+        fig = coverage_twins[name]
+        assert fig["coverage_lift_mean"] <= 0.99 and fig["coverage_drag_mean"] <= 0.99, (name, fig)
+
+
+@pytest.mark.statistics
+@pytest.mark.xfail(reason="issue 7 target not met: summed NEES of the retained θ 660.6 for 443 dof (95 % band "
+                          "387-503) in twin (a), seeds 5000-5029; a few seeds carry errors of tens of σ in the best "
+                          "determined direction (pitch offset with tip lift near stall)", strict=False)
+@pytest.mark.parametrize("name", ["a_inside_span", "c_prior_draws"])
+def test_nees_of_the_retained_theta_in_its_chi2_band(coverage_twins, name):
+    fig = coverage_twins[name]
+    assert fig["nees_band"][0] <= fig["nees_sum"] <= fig["nees_band"][1], fig
+
+
+@pytest.mark.statistics
+@pytest.mark.parametrize("name", ["wind_tunnel", "twin"])
+def test_auto_truncation_held_back_on_the_shipped_data(name):
+    """As the localization test above, on the wind-tunnel study's own noise seed and on another
+    noise draw of the analytic twin."""
+    fig = _bench().held_back(name)
+    assert fig["ratio"] <= 1.2, fig
