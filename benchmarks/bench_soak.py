@@ -11,9 +11,10 @@ Two runs of variant A (NREL 5-MW, the mapping's default physics and steady windo
   :class:`~calib.executors.DaskExecutor` (a ``LocalCluster`` of ``dask_workers`` worker
   processes, each with its own FMU worker process), in batches of ``batch`` points.
 
-The operating points cycle through 10 points of the operating range (5-13 m/s on the
-mapping's rotor-speed schedule, pitch 0-4 deg) and the parameter vector changes at every
-evaluation (seeded, within half a scale of nominal), so every evaluation sets new values.
+The operating points cycle through 10 points of the operating range (5-13 m/s, rotor speed
+7 rpm at 5 m/s rising to 12.1 rpm at 11.4 m/s, pitch 0-4 deg above it) and the parameter
+vector changes at every evaluation (one-worker run) or batch (Dask run), seeded, within half
+a scale of nominal, so every evaluation sets new values.
 
 Resident memory (RSS, through ``psutil``, which ``dask.distributed`` already depends on)
 is read after ``warmup`` evaluations and at the end, in every process that takes part:
@@ -62,17 +63,11 @@ MIB = 1024.0 * 1024.0
 
 
 # ----------------------------------------------------------------------------- memory
-def rss_bytes(pid: int | None = None) -> int:
-    """Resident set size of a process [bytes] (this one by default)."""
-    import psutil
-    return int(psutil.Process(pid).memory_info().rss)
-
-
 def process_memory() -> dict:
     """RSS [bytes] of this process and of each of its child processes, by pid.
 
     Module-level and free of benchmark globals so that ``client.run`` can call it on a
-    Dask worker (it is shipped by value, see :func:`run_dask`).
+    Dask worker (it is shipped by value, see :func:`soak_dask`).
     """
     import os as _os
 
@@ -119,12 +114,11 @@ def _model(path, fast: bool, executor=None):
 
 
 def _schedule(model, n_evaluations: int, seed: int = 1):
-    """Operating points (10 of the range, cycled) and parameter vectors (one per evaluation)."""
+    """Operating conditions (10 points of the range, cycled) and parameter vectors, one per evaluation."""
     from calib.types import OperatingConditions
     wind = np.array([5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 11.4, 12.0, 13.0])
     rpm = np.clip(7.0 + (12.1 - 7.0) * (wind - 5.0) / (11.4 - 5.0), 7.0, 12.1)
     pitch = np.where(wind > 11.4, 4.0 * (wind - 11.4) / 1.6, 0.0)
-    points = OperatingConditions(wind, rpm, pitch)
     k = np.arange(n_evaluations) % len(wind)
     conditions = OperatingConditions(wind[k], rpm[k], pitch[k])
     q = model.parameters
@@ -133,7 +127,7 @@ def _schedule(model, n_evaluations: int, seed: int = 1):
     rng = np.random.default_rng(seed)
     p = nominal + 0.5 * scale * rng.uniform(-1.0, 1.0, (n_evaluations, len(q)))
     p = np.clip(p, [x.lower for x in q], [x.upper for x in q])
-    return points, conditions, p
+    return conditions, p
 
 
 def _check(out: dict, rows: list[dict], prefix: str) -> list[str]:
@@ -157,7 +151,7 @@ def soak_one_worker(path, n_evaluations: int, warmup: int, fast: bool, leak_kib:
                     trace_every: int = 100) -> tuple[dict, list[str]]:
     """Consecutive one-point evaluations: this process and its one FMU worker process."""
     model = _model(path, fast)
-    _, conditions, p = _schedule(model, n_evaluations)
+    conditions, p = _schedule(model, n_evaluations)
     earlier = set(process_memory()["children"])      # processes started before this run are not its worker
     ballast = []
     failed = restarts = 0
@@ -177,6 +171,8 @@ def soak_one_worker(path, n_evaluations: int, warmup: int, fast: bool, leak_kib:
                 mem = process_memory()
                 trace.append([k + 1, mem["rss"] / MIB] + [mem["children"][c] / MIB for c in sorted(mem["children"])
                                                           if c not in earlier])
+                print(f"[soak] one worker: {k + 1}/{n_evaluations} evaluations, RSS (MiB) calling process, "
+                      f"FMU worker: {', '.join(f'{x:.1f}' for x in trace[-1][1:])}", file=sys.stderr, flush=True)
         t_end = time.perf_counter()
         end = process_memory()
     finally:
@@ -197,7 +193,7 @@ def soak_one_worker(path, n_evaluations: int, warmup: int, fast: bool, leak_kib:
 
 
 def soak_dask(path, n_evaluations: int, warmup: int, fast: bool, workers: int = 2,
-              batch: int = 20) -> tuple[dict, list[str]]:
+              batch: int = 20, trace_every: int = 100) -> tuple[dict, list[str]]:
     """The same evaluations through the Dask executor, in batches of ``batch`` points."""
     import cloudpickle
 
@@ -207,9 +203,10 @@ def soak_dask(path, n_evaluations: int, warmup: int, fast: bool, workers: int = 
         raise ValueError(f"warmup ({warmup}) and evaluations ({n_evaluations}) must be multiples of batch ({batch})")
     cloudpickle.register_pickle_by_value(sys.modules[process_memory.__module__])   # workers cannot import this file
     failed = restarts = 0
+    trace = []
     with DaskExecutor(workers=workers) as dask:
         model = _model(path, fast, executor=dask)
-        _, conditions, p = _schedule(model, n_evaluations)
+        conditions, p = _schedule(model, n_evaluations)
         warm = None
         t0 = t_warm = time.perf_counter()
         for start in range(0, n_evaluations, batch):
@@ -219,6 +216,11 @@ def soak_dask(path, n_evaluations: int, warmup: int, fast: bool, workers: int = 
             restarts += int(np.sum(ev.extras["restarts"]))
             if start + batch == warmup:
                 warm, t_warm = dask.client.run(process_memory), time.perf_counter()
+            if (start + batch) % trace_every == 0:
+                mem = dask.client.run(process_memory)
+                trace.append([start + batch] + [mem[a]["rss"] / MIB for a in sorted(mem)])
+                print(f"[soak] dask: {start + batch}/{n_evaluations} evaluations, RSS (MiB) of the workers: "
+                      f"{', '.join(f'{x:.1f}' for x in trace[-1][1:])}", file=sys.stderr, flush=True)
         t_end = time.perf_counter()
         end = dask.client.run(process_memory)
         model.close()
@@ -230,7 +232,7 @@ def soak_dask(path, n_evaluations: int, warmup: int, fast: bool, workers: int = 
            "dask_evaluations_per_s": (n_evaluations - warmup) / (t_end - t_warm),
            "dask_startup_and_warmup_s": t_warm - t0,
            "dask_fmu_worker_processes": sum(len(end[a]["children"]) for a in end),
-           "dask_non_ok_statuses": failed, "dask_worker_restarts": restarts}
+           "dask_non_ok_statuses": failed, "dask_worker_restarts": restarts, "dask_rss_trace_mib": trace}
     broken = _check(out, rows, "dask_")
     if failed or restarts:
         broken.append(f"dask: {failed} non-OK statuses, {restarts} worker restarts")
