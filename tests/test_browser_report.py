@@ -128,9 +128,9 @@ IMAGES_JS = "return Array.from(document.images).map(i => [i.alt, i.complete, i.n
 OVERFLOW_JS = """
 const root = document.documentElement, limit = root.clientWidth;
 const wide = Array.from(document.body.querySelectorAll('*'))
-    .filter(e => e.getBoundingClientRect().right > limit + 0.5)
+    .filter(e => e.getBoundingClientRect().right > limit + 0.5 || e.scrollWidth > limit)
     .slice(0, 5).map(e => e.tagName.toLowerCase() + (e.className ? '.' + e.className : '') + ' right='
-                          + Math.round(e.getBoundingClientRect().right));
+                          + Math.round(e.getBoundingClientRect().right) + ' scrollWidth=' + e.scrollWidth);
 const boxes = Array.from(document.querySelectorAll('.table'))
     .filter(b => b.scrollWidth > b.clientWidth).map(b => b.scrollWidth + ' > ' + b.clientWidth);
 return [root.scrollWidth, root.clientWidth, window.innerWidth, wide, boxes];
