@@ -1127,3 +1127,15 @@ def test_mapping_switch_model_values_are_numbers(tmp_path):
     with pytest.raises(InputError, match="must be a number or true/false") as exc:
         load_mapping(path)
     assert exc.value.field == "switches.stall_delay.values.snel"
+
+
+def test_mapping_setting_that_is_not_a_table_is_named(tmp_path):
+    # a [settings] entry given as a number raised AttributeError ('float' object has no attribute 'get')
+    tree = tomllib.loads(MAPPING_SEEDS[0].read_text())
+    name = next(iter(tree["settings"]))
+    tree["settings"][name] = 0.2
+    path = tmp_path / "mapping.toml"
+    path.write_bytes(to_toml(tree))
+    with pytest.raises(InputError, match="must be a table") as exc:
+        load_mapping(path)
+    assert exc.value.field == f"settings.{name}"

@@ -494,6 +494,7 @@ def load_mapping(path) -> Mapping:
 
     settings = {}
     for name, e in data.get("settings", {}).items():
+        _check(e, _SETTING_KEYS, f"settings.{name}", src)
         settings[name] = _entry(SettingEntry, name, e, f"settings.{name}", src, _SETTING_KEYS, value=e.get("value"))
 
     steady = _steady_rule(data["steady"], src)
