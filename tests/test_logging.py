@@ -64,23 +64,8 @@ def test_progress_line_only_on_a_terminal(monkeypatch, tmp_path, tty):
     assert term2.getvalue() == ""
 
 
-def test_run_verbose_prints_iterations_and_the_log_keeps_every_model_call(tmp_path, capsys):
-    from calib.cli import main
-    from calib.history import count_model_calls, read_events
-
-    wf = small_workflow(tmp_path)
-    out = tmp_path / "o"
-    assert main(["run", str(wf), "--out", str(out), "--verbose"]) == 0
-    printed = capsys.readouterr().out
-    assert "[calib run] hub loads: re-linearization 1" in printed
-    assert "stage = estimate[1], iteration = 1" in printed             # DEBUG: every optimizer iteration
-    log_text = (out / LOG_FILE).read_text()
-    calls = count_model_calls(read_events(out))["computed"]
-    assert log_text.count("calib.history: stage 1: hub loads: jacobian of 24 points") + \
-        log_text.count("calib.history: stage 1: hub loads: evaluate of 24 points") == calls
-    assert "INFO    calib.workflow: [calib run] report:" in log_text
-    iterations = [e for e in read_events(out) if e["event"] == "iteration"]
-    assert iterations and {"stage", "iteration", "cost"} <= set(iterations[0])
+# `calib run --verbose` (iterations printed, every model call in calib.log) and `--quiet` (nothing
+# printed) are checked on the runs of tests/test_resume.py::test_killed_calibration_resumes_to_...
 
 
 def test_run_errors_reach_the_log_file(tmp_path, capsys):

@@ -115,10 +115,13 @@ def assert_complete_files(folder: Path) -> int:
     return checked
 
 
-def test_killed_calibration_resumes_to_the_uninterrupted_result(tmp_path):
-    """``calib run`` killed (SIGKILL) after 6 model calls, then ``calib run --resume DIR``."""
+def test_killed_calibration_resumes_to_the_uninterrupted_result(tmp_path, capsys):
+    """``calib run`` killed (SIGKILL) after 6 model calls, then ``calib run --resume DIR``.
+
+    The uninterrupted reference run is ``calib run --verbose``: it also checks (to save a run)
+    what ``--verbose`` prints and what ``calib.log`` keeps (tests/test_logging.py has the rest).
+    """
     from calib.cli import main
-    from calib.workflow import run_workflow
 
     wf = small_workflow(tmp_path)
     full_dir, cut_dir = tmp_path / "full", tmp_path / "cut"
@@ -126,14 +129,25 @@ def test_killed_calibration_resumes_to_the_uninterrupted_result(tmp_path):
     killed = {}
     killer = threading.Thread(target=lambda: killed.update(at=kill_after(cut, cut_dir, 6)))
     killer.start()
-    run_workflow(wf, full_dir, progress=False)      # the uninterrupted run, meanwhile
+    assert main(["run", str(wf), "--out", str(full_dir), "--verbose"]) == 0     # the uninterrupted run, meanwhile
     killer.join()
+    printed = capsys.readouterr().out
+    assert "[calib run] hub loads: re-linearization 1" in printed
+    assert "stage = estimate[1], iteration = 1" in printed              # --verbose: every optimizer iteration
+    log_text = (full_dir / "calib.log").read_text()
+    n_calls = count_model_calls(read_events(full_dir))["computed"]
+    assert sum(log_text.count(f"calib.history: stage 1: hub loads: {kind} of 24 points")
+               for kind in ("evaluate", "jacobian")) == n_calls            # the log file has every model call
+    assert "INFO    calib.workflow: [calib run] report:" in log_text
+    iterations = [e for e in read_events(full_dir) if e["event"] == "iteration"]
+    assert iterations and {"stage", "iteration", "cost"} <= set(iterations[0])
     events = read_events(cut_dir)
     assert not any(e["event"] == "finished" for e in events), "the run finished before the kill"
     assert not (cut_dir / "report.html").exists()
     assert assert_complete_files(cut_dir) >= 3
 
     assert main(["run", "--resume", str(cut_dir), "--quiet"]) == 0
+    assert capsys.readouterr().out == ""                                # --quiet
     stage = "stage1_hub_loads"
     full_res = json.loads((full_dir / stage / "result.json").read_text())
     resumed = json.loads((cut_dir / stage / "result.json").read_text())
@@ -233,7 +247,7 @@ eta_nodes = [0.6, 1.0]
 [calibration]
 noise = "known"
 max_iterations = 3
-max_relinearizations = 2
+max_relinearizations = 1
 tolerance = 1e-6
 
 [diagnosis]
