@@ -526,8 +526,8 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         unit mistake (also ``[calibration] force = true``); the report says so.
     resume : bool
         Continue the killed run whose history is in ``out_dir`` (:mod:`calib.history`): every
-        model call it completed is read back instead of computed; refused when the workflow
-        or the measurement file changed since.
+        model call it completed is read back instead of computed; refused when the workflow,
+        the measurement file or the rotor's geometry and polars changed since.
     history : bool
         Keep the history in ``out_dir/history`` (model calls and iterations as they happen).
     """
@@ -723,7 +723,7 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
                         "mistake in the measurements (the report says so)")
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed run whose output "
                         "folder is DIR: model calls on record in DIR/history are read back, not computed again; "
-                        "refused if the workflow or measurement file changed")
+                        "refused if the workflow, the measurement file or the rotor's data changed")
     parser.add_argument("--no-history", action="store_true", help="do not keep DIR/history (no resume possible)")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("-v", "--verbose", action="store_true", help="also print every optimizer iteration and "
