@@ -111,10 +111,10 @@ def test_the_report_shows_the_figures(run):
 
 
 def test_the_diagnose_config_matches_the_workflow():
-    """``calib diagnose --config workflows/phase_vi_diagnose.toml`` diagnoses the same problem."""
+    """``calib diagnose --config workflows/diagnose/phase_vi.toml`` diagnoses the same problem."""
     from calib.tomlfile import read_toml
 
     wf = read_toml(WORKFLOW, "workflow")
-    dg = read_toml(ROOT / "workflows" / "phase_vi_diagnose.toml", "config")
+    dg = read_toml(ROOT / "workflows" / "diagnose" / "phase_vi.toml", "config")
     for table in ("rotor", "grid", "calibration"):
         assert dg[table] == wf[table], table
