@@ -280,9 +280,13 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
 
 # ----------------------------------------------------------------------------- workflow steps
 def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=None,
-                  echo: Callable[[str], None] = print):
+                  echo: Callable[[str], None] = print, history=None):
     """The ``[diagnosis]`` step of a workflow: diagnose, write ``DIR/diagnosis/``, return the
-    named effects' specs (default nominal values) and the :class:`~calib.discrepancy.Diagnosis`."""
+    named effects' specs (default nominal values) and the :class:`~calib.discrepancy.Diagnosis`.
+
+    With ``history`` (:mod:`calib.history`), every model call and optimizer iteration of the
+    diagnosis is recorded, so ``calib run --resume`` replays it instead of computing it again.
+    """
     from pathlib import Path
 
     from calib.discrepancy import diagnose
@@ -290,8 +294,18 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
 
     dset, channels = setup.diagnosis
     meas = measurements.select_channels(channels) if channels else measurements
+    wrap, on_iteration = None, None
+    if history is not None:
+        from calib.history import recorded
+
+        def wrap(model, label):
+            return recorded(model, history, f"diagnosis: {label}")
+
+        def on_iteration(rec):
+            history.event("iteration", **{"run": "diagnosis", **rec})
     diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset, executor=None,
-                    progress=lambda line: echo(f"[calib run] diagnosis: {line}"), rotor_source=setup.rotor_spec)
+                    progress=lambda line: echo(f"[calib run] diagnosis: {line}"), rotor_source=setup.rotor_spec,
+                    wrap=wrap, on_iteration=on_iteration)
     paths = write_diagnosis(diag, Path(out_dir) / "diagnosis")
     specs = named_effect_specs(diag, skip=setup.nuisance)
     echo(f"[calib run] diagnosis: named {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else "")

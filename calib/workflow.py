@@ -475,8 +475,9 @@ def prepare(cfg: dict) -> WorkflowSetup:
     from calib.campaign import ValidationSettings, diagnosis_settings
     if "diagnosis" in cfg:
         if fmu_table is not None:
-            raise InputError("the discrepancy workflow runs on the native BEM only; remove [diagnosis] or use "
-                             "[model] kind = \"bem\"", src, field="diagnosis")
+            raise InputError("a workflow's [diagnosis] runs on the native BEM only; remove [diagnosis], use "
+                             "[model] kind = \"bem\", or diagnose the FMU with calib diagnose --config (its "
+                             "[model] kind = \"fmu\")", src, field="diagnosis")
         if "measurements" not in cfg:
             raise InputError("[diagnosis] needs measured data ([measurements] file = ...)", src, field="diagnosis")
         setup.diagnosis = diagnosis_settings(cfg["diagnosis"], src)
@@ -629,7 +630,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
 
     effects, diag, validations = [], None, {}
     if setup.diagnosis is not None:   # the discrepancy workflow first; its named effects join every stage
-        effects, diag = campaign.run_diagnosis(setup, meas, grid, out, executor, echo)
+        effects, diag = campaign.run_diagnosis(setup, meas, grid, out, executor, echo, hist)
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
