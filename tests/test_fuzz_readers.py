@@ -698,7 +698,8 @@ def test_fuzz_load_mapping(work_dir, case):
 
 # ---------------------------------------------------------------- diagnose --config
 def _diagnose_seeds() -> list[bytes]:
-    """``calib diagnose --config`` files: the tables a diagnosis reads, from each workflow, plus [diagnosis]."""
+    """``calib diagnose --config`` files: the shipped ones (workflows/diagnose), and the tables a
+    diagnosis reads from each workflow plus a [diagnosis] table."""
     seeds = [b'[model]\nuse_tilt = false\n[diagnosis]\ncandidates = ["pitch_offset", "wind_speed_scale", "tip_loss"]\n'
              b'[grid]\nalpha_nodes_deg = "auto"\neta_nodes = [0.3, 0.6, 1.0]\n']
     for path in WORKFLOW_SEEDS:
@@ -707,7 +708,7 @@ def _diagnose_seeds() -> list[bytes]:
         cfg["diagnosis"] = {"candidates": ["pitch_offset", "tip_loss"], "max_effects": 1, "significance": 0.01,
                             "ambiguity_bic": 6.0, "recalibrate": True}
         seeds.append(to_toml(cfg))
-    return seeds
+    return seeds + [p.read_bytes() for p in sorted((ROOT / "workflows" / "diagnose").glob("*.toml"))]
 
 
 DIAGNOSE_BYTES = _diagnose_seeds()
