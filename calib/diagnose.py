@@ -90,17 +90,22 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         cfg["rotor"] = _rotor_table(rotor)
     if "rotor" not in cfg:
         raise InputError("no rotor: give --rotor NAME_OR_FILE or a [rotor] table in --config", src, field="rotor")
-    dcfg = dict(cfg.pop("diagnosis", {}))
+    dcfg = cfg.pop("diagnosis", {})
+    if not isinstance(dcfg, dict):
+        raise InputError(f"'diagnosis' must be a table, got {dcfg!r:.60}", src, field="diagnosis")
+    dcfg = dict(dcfg)
     bad = [k for k in dcfg if k not in DIAGNOSIS_KEYS]
     if bad:
         raise InputError(f"unknown key 'diagnosis.{bad[0]}'; valid keys here: {', '.join(sorted(DIAGNOSIS_KEYS))}",
                          src, field=f"diagnosis.{bad[0]}")
-    if "candidates" in dcfg:
+    if isinstance(dcfg.get("candidates"), list):
         dcfg["candidates"] = tuple(dcfg["candidates"])
     is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
     dset = DiagnosisSettings(**dcfg)
-    if not is_fmu:         # an FMU's candidates are its mapped parameters: checked with the model below
+    if not is_fmu:
         dset.validate(src, "diagnosis.")
+    else:                  # an FMU's candidates are its mapped parameters: their names are checked with the model
+        dset.validate(src, "diagnosis.", valid=dset.candidates if isinstance(dset.candidates, tuple) else ())
     meas = read_measurements(data)
     for note in meas.notes:
         printer(f"[calib diagnose] {Path(data).name}: {note}")

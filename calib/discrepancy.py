@@ -96,6 +96,24 @@ class DiagnosisSettings:
     def validate(self, source: str = "DiagnosisSettings", prefix: str = "",
                  valid: Sequence[str] = NAMEABLE) -> "DiagnosisSettings":
         """Check every setting (``valid``: the candidate names of the model family)."""
+        def need(ok: bool, key: str, what: str):
+            if not ok:
+                raise InputError(f"must be {what}, got {getattr(self, key)!r}", source, field=f"{prefix}{key}")
+
+        def number(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+        need(self.candidates is None or (isinstance(self.candidates, (tuple, list))
+                                         and all(isinstance(c, str) for c in self.candidates)),
+             "candidates", "an array of effect names")
+        need(isinstance(self.candidate_options, dict) and all(isinstance(v, dict)
+                                                               for v in self.candidate_options.values()),
+             "candidate_options", "a table of tables (effect -> options)")
+        need(isinstance(self.max_effects, int) and not isinstance(self.max_effects, bool), "max_effects",
+             "an integer")
+        need(number(self.significance), "significance", "a number")
+        need(number(self.ambiguity_bic), "ambiguity_bic", "a number")
+        need(isinstance(self.recalibrate, bool), "recalibrate", "true or false")
         names = self.candidates if self.candidates is not None else valid
         unknown = [c for c in names if c not in valid]
         if unknown:

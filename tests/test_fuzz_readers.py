@@ -751,13 +751,10 @@ def test_fuzz_diagnose_config(diagnose_ready, case):
     _run_diagnose_checks(diagnose_ready, case[1])
 
 
-@pytest.mark.xfail(strict=True, raises=(TypeError, ValueError, AttributeError),
-                   reason="calib/diagnose.py (not changed here) passes [diagnosis] to dict() and DiagnosisSettings "
-                          "without type checks: 'diagnosis = 1.5' or 'significance = [1]' raise TypeError")
-@settings(FUZZ, report_multiple_bugs=False)
+@FUZZ
 @given(case=mutated_toml(DIAGNOSE_BYTES))
 def test_fuzz_diagnose_config_diagnosis_table(diagnose_ready, case):
-    """The [diagnosis] table itself (known defect, see the xfail reason)."""
+    """The [diagnosis] table itself ('diagnosis = 1.5' and 'significance = [1]' raised TypeError)."""
     _run_diagnose_checks(diagnose_ready, case[1])
 
 
@@ -1140,3 +1137,18 @@ def test_mapping_setting_that_is_not_a_table_is_named(tmp_path):
     with pytest.raises(InputError, match="must be a table") as exc:
         load_mapping(path)
     assert exc.value.field == f"settings.{name}"
+
+
+def test_diagnosis_table_of_the_wrong_type_is_named(tmp_path):
+    from calib.campaign import diagnosis_settings
+    from calib.discrepancy import DiagnosisSettings
+
+    with pytest.raises(InputError) as exc:
+        DiagnosisSettings(significance=[1]).validate("c.toml", "diagnosis.")
+    assert exc.value.field == "diagnosis.significance"
+    with pytest.raises(InputError) as exc:
+        diagnosis_settings({"max_effects": 1.5}, "wf.toml")
+    assert exc.value.field == "diagnosis.max_effects"
+    with pytest.raises(InputError) as exc:
+        diagnosis_settings({"candidates": 3}, "wf.toml")
+    assert exc.value.field == "diagnosis.candidates"
