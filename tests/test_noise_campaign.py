@@ -72,11 +72,14 @@ def test_relative_ml_finds_the_noise_level_the_stated_model_got_wrong(twin):
 
 def test_leave_one_out_counts_and_predicts_every_fold(twin):
     model, meas, _ = twin
+    keep = np.arange(0, meas.n_points, 2)           # 5 wind speeds, 5 folds
+    meas = dataclasses.replace(meas, conditions=meas.conditions.subset(keep), values=meas.values[keep])
     st = CalibrationSettings(noise="relative_ml", relative_sigma={"torque": 0.01, "thrust": 0.01}, cd_min=None)
     val = leave_one_out(lambda: model, meas, st, ValidationSettings("wind_speed", ("torque",)))
     s = val.summary("torque")
-    assert s["folds"] == 10 and s["failed"] == 0
-    assert s["inside"] >= 8           # truth = nominal model: intervals of model + noise cover the data
+    assert s["folds"] == 5 and s["failed"] == 0
+    assert s["inside"] >= 4           # truth = nominal model: intervals of model + noise cover the data
+    assert all(r.lower < r.predicted < r.upper and r.noise_std > 0 for r in val.rows)
     with pytest.raises(InputError, match="at least 3 distinct values"):
         leave_one_out(lambda: model, meas, st, ValidationSettings("pitch"))
 
