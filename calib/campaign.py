@@ -258,8 +258,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
             res, pred, status = None, None, f"failed: {type(exc).__name__}"
         for c in channels:
             j = list(measurements.channels).index(c)
-            for k in np.flatnonzero(test):
-                kk = int(np.flatnonzero(np.flatnonzero(test) == k)[0])
+            for kk, k in enumerate(np.flatnonzero(test)):     # kk: row of the prediction, k: of the table
                 if pred is None or not np.isfinite(pred.values[kk, j]):
                     out.rows.append(FoldRow(float(g), c, float(measurements.values[k, j]), float(y_nom[k, j]),
                                             np.nan, np.nan, np.nan, np.nan, np.nan,
@@ -294,15 +293,12 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
 
     dset, channels = setup.diagnosis
     meas = measurements.select_channels(channels) if channels else measurements
-    wrap, on_iteration = None, None
+    wrap = on_iteration = None
     if history is not None:
         from calib.history import recorded
 
-        def wrap(model, label):
-            return recorded(model, history, f"diagnosis: {label}")
-
-        def on_iteration(rec):
-            history.event("iteration", **{"run": "diagnosis", **rec})
+        wrap = lambda model, label: recorded(model, history, f"diagnosis: {label}")  # noqa: E731
+        on_iteration = lambda rec: history.event("iteration", **{"run": "diagnosis", **rec})  # noqa: E731
     diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset, executor=None,
                     progress=lambda line: echo(f"[calib run] diagnosis: {line}"), rotor_source=setup.rotor_spec,
                     wrap=wrap, on_iteration=on_iteration)

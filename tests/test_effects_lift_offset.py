@@ -3,7 +3,6 @@ discrepancy workflow, a pitch offset and a uniform lift shift are ``ambiguous`` 
 stay in attached flow and told apart on data that reach stall."""
 
 import numpy as np
-import pytest
 
 from test_discrepancy import hidden, run
 from test_effects_chain import check_effect_derivatives, check_nominal_is_no_effect, relative_change, tsr_sweep

@@ -12,7 +12,7 @@ from calib.calibration import CalibrationSettings, Calibrator
 from calib.campaign import ValidationSettings, diagnosis_settings, leave_one_out
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.measurements import Measurements, synthesize
+from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
 from calib.noise import ml_scale, relative_noise
 from calib.rotor.library import load_rotor
