@@ -137,6 +137,18 @@ def test_stall_delay_named_when_the_truth_uses_another_form():
 
 
 @pytest.mark.statistics
+def test_tip_loss_named_when_the_truth_uses_another_form():
+    """Truth: the tip factor with g = 1 on the element forces (Prandtl's own factor applied to
+    the forces, no λ dependence of g); the library fits Shen's g(λ) = exp(−0.125 (Bλ − 21)) + 0.1."""
+    rotor = load_rotor("nrel5mw")
+    meas = hidden({"tip_loss": {"tip_loss_strength": 1.0}}, campaign(rotor), 9102,
+                  options={"tip_loss": {"c1": 0.0, "c2": 0.0, "c3": 0.0}})
+    d = run(meas, recalibrate=False)
+    assert d.effect == "tip_loss", d.rounds[0]["reason"]
+    assert d.with_effects["chi2_per_dof"] < 0.2 * d.before["chi2_per_dof"], (d.before, d.with_effects)
+
+
+@pytest.mark.statistics
 def test_two_hidden_effects_are_both_named():
     rotor = load_rotor("nrel5mw")
     meas = hidden({"rotational_augmentation": {"stall_delay_strength": 1.0}, "pitch_offset": {"pitch_offset": 1.0}},
