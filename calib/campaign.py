@@ -40,15 +40,9 @@ def diagnosis_settings(table: dict, source: str) -> tuple[DiagnosisSettings, lis
         raise InputError(f"unknown key 'diagnosis.{bad[0]}'; valid keys here: {', '.join(sorted(DIAGNOSIS_KEYS))}",
                          source, field=f"diagnosis.{bad[0]}")
     kw = {k: v for k, v in table.items() if k != "channels"}
-    if "candidates" in kw:
-        if not isinstance(kw["candidates"], list) or not all(isinstance(c, str) for c in kw["candidates"]):
-            raise InputError(f"must be an array of effect names, got {kw['candidates']!r}", source,
-                             field="diagnosis.candidates")
+    if isinstance(kw.get("candidates"), list):
         kw["candidates"] = tuple(kw["candidates"])
-    try:
-        dset = DiagnosisSettings(**kw)
-    except TypeError as exc:
-        raise InputError(f"invalid [diagnosis] table: {exc}", source, field="diagnosis") from None
+    dset = DiagnosisSettings(**kw)      # the keys are checked above, the types by validate()
     channels = table.get("channels")
     if channels is not None and (not isinstance(channels, list) or not channels
                                  or not all(isinstance(c, str) for c in channels)):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from calib.discrepancy import DiagnosisSettings, diagnose
 from calib.errors import CalibError, InputError
-from calib.logs import say
+from calib.logs import add_output_arguments, say
 from calib.tomlfile import read_toml
 from calib.measurements import read_measurements
 
@@ -39,13 +39,13 @@ def _rotor_table(rotor: str) -> dict:
 
 def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
     """What a diagnosis depends on, for its history manifest: {label: SHA-256 or value}."""
-    from calib.history import file_sha256
+    from calib.measurements import sha256_of
 
-    inputs = {"data file": file_sha256(data) if Path(data).is_file() else None,
-              "config file": file_sha256(config) if config and Path(config).is_file() else None,
+    inputs = {"data file": sha256_of(data) if Path(data).is_file() else None,
+              "config file": sha256_of(config) if config and Path(config).is_file() else None,
               "rotor": rotor}
     if rotor is not None and Path(rotor).is_file():
-        inputs["rotor file"] = file_sha256(rotor)
+        inputs["rotor file"] = sha256_of(rotor)
     return inputs
 
 
@@ -193,11 +193,7 @@ def add_diagnose_arguments(parser) -> None:
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed diagnosis whose output "
                         "folder is DIR with the arguments it started with: model calls on record in DIR/history are "
                         "read back, not computed again; refused if the data, config or rotor changed")
-    parser.add_argument("--no-history", action="store_true", help="do not keep DIR/history (no resume possible)")
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument("-v", "--verbose", action="store_true", help="also print every model call (the log file "
-                       "DIR/calib.log always has them)")
-    group.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+    add_output_arguments(parser, "also print every model call (the log file DIR/calib.log always has them)")
 
 
 def diagnose_from_args(args) -> int:

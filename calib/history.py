@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 
 from calib.errors import InputError
+from calib.result import _jsonable as result_jsonable
 from calib.types import CONDITION_FIELDS, Evaluation, OperatingConditions
 
 FORMAT = "calib.history/1"
@@ -51,30 +52,8 @@ log = logging.getLogger("calib.history")
 
 
 def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating):
-        return float(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, (str, int, float, bool)) or x is None:
-        return x
-    return str(x)
-
-
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (hex)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+    """JSON types for events and manifests; any other object as its ``str``."""
+    return result_jsonable(x, fallback=str)
 
 
 def content_digest(obj) -> str:

@@ -45,6 +45,14 @@ class _StdoutHandler(logging.StreamHandler):
         pass
 
 
+def add_output_arguments(parser, verbose_help: str) -> None:
+    """``--no-history`` and the exclusive ``-v/--verbose``, ``-q/--quiet`` of the long-running commands."""
+    parser.add_argument("--no-history", action="store_true", help="do not keep DIR/history (no resume possible)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-v", "--verbose", action="store_true", help=verbose_help)
+    group.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+
+
 def level_of(verbose: bool = False, quiet: bool = False) -> int:
     """The console level of the ``--verbose`` / ``--quiet`` flags."""
     return logging.DEBUG if verbose else logging.WARNING if quiet else logging.INFO

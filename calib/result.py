@@ -391,13 +391,15 @@ class Prediction:
     confidence: float
 
 
-def _jsonable(x):
+def _jsonable(x, fallback=None):
+    """``x`` with numpy scalars and arrays, paths and enums turned into JSON types, recursively;
+    any other object is kept, or passed through ``fallback`` (e.g. ``str``) when given."""
     if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
+        return {str(k): _jsonable(v, fallback) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
+        return [_jsonable(v, fallback) for v in x]
     if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
+        return _jsonable(x.tolist(), fallback)
     if isinstance(x, (np.integer,)):
         return int(x)
     if isinstance(x, (np.floating,)):
@@ -408,6 +410,8 @@ def _jsonable(x):
         return str(x)
     if isinstance(x, enum.Enum):
         return x.value
+    if fallback is not None and not (isinstance(x, (str, int, float, bool)) or x is None):
+        return fallback(x)
     return x
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 from pathlib import Path
@@ -11,14 +12,21 @@ from calib.errors import InputError
 _WHERE = re.compile(r"\s*\(at (?:line (?P<line>\d+), column (?P<column>\d+)|end of document)\)\s*$")
 
 
-def read_toml(path: str | Path, what: str = "settings file") -> dict:
+def read_toml(path: str | Path, what: str = "settings file", finite: bool = False) -> dict:
     """The parsed TOML file at ``path``.
+
+    Parameters
+    ----------
+    finite : bool
+        Refuse TOML's ``nan`` and ``inf`` literals anywhere in the file (for files none of
+        whose settings is one), naming the key.
 
     Raises
     ------
     InputError
         ``what`` not found or unreadable, not UTF-8 text (line and column of the first bad byte),
-        not valid TOML (line and column of the syntax error), or an integer beyond 64 bits (key).
+        not valid TOML (line and column of the syntax error), an integer beyond 64 bits (key),
+        or with ``finite`` a NaN or infinite number (key).
     """
     path = Path(path)
     src = str(path)
@@ -49,20 +57,32 @@ def read_toml(path: str | Path, what: str = "settings file") -> dict:
         raise InputError(f"not valid TOML: {message}", src, line) from None
     except RecursionError:
         raise InputError("not valid TOML: nesting too deep", src) from None
-    bad = _wide_integer(data)
+    bad = find_in_tree(data, _wide_integer)
     if bad:  # TOML 1.0: integers are 64-bit, a larger one "must" be an error (tomllib accepts it)
         raise InputError(f"not valid TOML: integer {bad[1]} is outside the 64-bit range TOML allows", src,
                          field=bad[0])
+    bad = find_in_tree(data, _non_finite) if finite else None
+    if bad:
+        raise InputError(f"'{bad[0]}' must be a finite number, got {bad[1]!r}", src, field=bad[0])
     return data
 
 
-def _wide_integer(node, key: str = ""):
-    """(key, value) of the first integer outside [-2**63, 2**63 - 1] in a parsed TOML tree, or None."""
-    if isinstance(node, int) and not isinstance(node, bool) and not -2 ** 63 <= node < 2 ** 63:
+def find_in_tree(node, predicate, key: str = ""):
+    """(key, value) of the first leaf of a parsed TOML tree for which ``predicate`` is true, or
+    None; keys are dotted, array items indexed (``stages[1].channels``)."""
+    if not isinstance(node, (dict, list)) and predicate(node):
         return key, node
     items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
     for k, v in items:
-        found = _wide_integer(v, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
+        found = find_in_tree(v, predicate, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
         if found:
             return found
     return None
+
+
+def _wide_integer(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and not -2 ** 63 <= v < 2 ** 63
+
+
+def _non_finite(v) -> bool:
+    return isinstance(v, float) and not math.isfinite(v)

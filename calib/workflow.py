@@ -32,7 +32,7 @@ from calib.models.bem_model import BemModel
 from calib.rotor.sources import rotor_from_table
 from calib.tomlfile import read_toml
 from calib.unit_check import check_units
-from calib.logs import say
+from calib.logs import add_output_arguments, say
 
 log = logging.getLogger("calib.workflow")
 
@@ -142,18 +142,6 @@ def _numbers(value, key: str, source: str) -> np.ndarray:
     return out
 
 
-def _non_finite(node, key: str = ""):
-    """(key, value) of the first NaN or infinite number in a parsed TOML tree, or None."""
-    if isinstance(node, float) and not np.isfinite(node):
-        return key, node
-    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
-    for k, v in items:
-        found = _non_finite(v, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
-        if found:
-            return found
-    return None
-
-
 def load_workflow(path: str | Path) -> dict:
     """Read and validate a workflow TOML file.
 
@@ -164,10 +152,7 @@ def load_workflow(path: str | Path) -> dict:
     """
     path = Path(path)
     src = str(path)
-    data = read_toml(path, "workflow file")
-    bad = _non_finite(data)
-    if bad:  # TOML has nan and inf literals; no workflow setting is one
-        raise InputError(f"'{bad[0]}' must be a finite number, got {bad[1]!r}", src, field=bad[0])
+    data = read_toml(path, "workflow file", finite=True)  # no workflow setting is NaN or inf
     _check_table(data, "", src)
     for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
         if section == "model" and data.get("model", {}).get("kind") == "fmu":
@@ -726,11 +711,8 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed run whose output "
                         "folder is DIR: model calls on record in DIR/history are read back, not computed again; "
                         "refused if the workflow, the measurement file or the rotor's data changed")
-    parser.add_argument("--no-history", action="store_true", help="do not keep DIR/history (no resume possible)")
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument("-v", "--verbose", action="store_true", help="also print every optimizer iteration and "
-                       "model call (the log file DIR/calib.log always has them)")
-    group.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+    add_output_arguments(parser, "also print every optimizer iteration and model call (the log file "
+                         "DIR/calib.log always has them)")
 
 
 def run_from_args(args) -> int:

@@ -70,18 +70,6 @@ _TYPE_NAMES = {str: "a string", int: "an integer", _NUM: "a number", list: "an a
                bool: "true/false", (int, float, bool): "a number or true/false"}
 
 
-def _non_finite(node, key: str = ""):
-    """(key, value) of the first NaN or infinite number in a parsed TOML tree, or None."""
-    if isinstance(node, float) and not np.isfinite(node):
-        return key, node
-    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
-    for k, v in items:
-        found = _non_finite(v, f"{key}[{k}]" if isinstance(k, int) else (f"{key}.{k}" if key else str(k)))
-        if found:
-            return found
-    return None
-
-
 def _check_list(values, kind, where: str, source: str) -> None:
     """Every element of the array ``values`` is of ``kind`` (str, or numbers)."""
     numbers = kind is not str
@@ -385,10 +373,7 @@ def load_mapping(path) -> Mapping:
     """
     path = Path(path)
     src = str(path)
-    data = read_toml(path, "mapping file")
-    bad = _non_finite(data)
-    if bad:  # TOML has nan and inf literals; no mapping value is one (leave a key out for "the FMU's")
-        raise InputError(f"'{bad[0]}' must be a finite number, got {bad[1]!r}", src, field=bad[0])
+    data = read_toml(path, "mapping file", finite=True)  # no value is NaN/inf (leave a key out for "the FMU's")
     for key in data:
         if key not in _TOP_KEYS:
             raise InputError(f"unknown key '{key}'; valid keys here: {', '.join(sorted(_TOP_KEYS))}", src,
