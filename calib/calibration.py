@@ -358,7 +358,11 @@ class Calibrator:
     def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
         st = self.settings
         prev_basis = None
-        status, message = "not_stable", f"retained set not stable after {st.max_relinearizations} re-linearizations"
+        status, message = "not_stable", (
+            f"retained set not stable after {st.max_relinearizations} re-linearizations: the standard deviations, "
+            "bands and intervals are those of the last linearization and can be too narrow (the model is far from "
+            "linear over the estimate's uncertainty, e.g. a point near a fold of the BEM residual where a root "
+            "appears or vanishes); check the fit, or set an explicit sigma_bar")
         lin = problem.linearize(p)
         svd = self._svd(problem, lin)
         for k in range(st.max_relinearizations):

@@ -315,3 +315,17 @@ def test_auto_truncation_held_back_on_the_shipped_data(name):
     noise draw of the analytic twin."""
     fig = _bench().held_back(name)
     assert fig["ratio"] <= 1.2, fig
+
+
+def test_a_result_whose_retained_set_did_not_settle_says_its_bands_can_be_too_narrow():
+    """With one re-linearization allowed the retained set cannot be checked for stability:
+    the status is not_stable and the message tells the user not to trust the stated σ."""
+    from test_calibration import CHANNELS, twin_truth
+    from twin_model import TwinModel, twin_conditions
+
+    model = TwinModel(channels=CHANNELS)
+    cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 4))
+    meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=1)).run()
+    assert res.status == "not_stable"
+    assert "can be too narrow" in res.message and "sigma_bar" in res.message
