@@ -37,7 +37,7 @@ from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
 from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, frozen_aware_covariance,
                                    observability, parameter_verdicts, subspace_cosines, svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
-from calib.models.base import FieldModel, RebuildableModel
+from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
 from calib.result import CalibrationResult
 from calib.truncation import cv_curve
 from calib.types import nominal_vector
@@ -388,6 +388,25 @@ class Calibrator:
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> np.ndarray | None:
+        """Cov of the retained θ from the field between the nodes (scale units²), or ``None``
+        when it does not apply (no refinable field, ``representation_error`` off, nothing
+        retained, no reached point); :mod:`calib.parametrizations.aliasing`."""
+        st = self.settings
+        if not (st.representation_error and isinstance(self.model, RefinableFieldModel) and self.field is not None
+                and self.field.grid is not None and svd.retained.any() and alpha_seen.size
+                and st.prior_correlation > 0):
+            return None
+        lay = self.field.layout
+        if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
+            return None
+        from calib.parametrizations.aliasing import aliasing_covariance
+
+        r = svd.retained
+        return aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+                                   lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
+                                   st.prior_correlation, alpha_seen, eta_seen)
+
     def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
         st = self.settings
         m = self.measurements
@@ -401,6 +420,12 @@ class Calibrator:
         if self.field is not None:  # the smooth-field prior correlates neighbouring nodes
             prior_cov = prior_cov * self.field.node_correlation(st.prior_correlation)
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
+        ev = lin.evaluation
+        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
+        alias = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        if alias is not None:  # the field between the nodes, taken up by the retained θ
+            Vr = svd.V[:, svd.retained]
+            cov_ret = cov_ret + Vr @ alias @ Vr.T
         D = np.outer(self.scale, self.scale)
         cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
@@ -409,8 +434,6 @@ class Calibrator:
         conf = confounding(F, prior_scaled, self.parameters)
         verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
                                       conf, st.identified_ratio, st.confounded_share)
-        ev = lin.evaluation
-        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
         spec, radius = None, None
         if isinstance(self.model, RebuildableModel):
             radius = self.model.rotor_radius

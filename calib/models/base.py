@@ -50,6 +50,20 @@ class FieldModel(Protocol):
 
 
 @runtime_checkable
+class RefinableFieldModel(Protocol):
+    """Optional: a field model that can be rebuilt on another correction grid.
+
+    The calibrator uses it for the part of the field between the nodes that the data see
+    (:mod:`calib.parametrizations.aliasing`); a field model without it gets bands without
+    that term.
+    """
+
+    def correction_field(self) -> "CorrectionField": ...
+
+    def with_grid(self, grid) -> "RefinableFieldModel": ...
+
+
+@runtime_checkable
 class RebuildableModel(Protocol):
     """Optional: a model that can describe itself so a saved result can rebuild it.
 

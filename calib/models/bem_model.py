@@ -158,6 +158,12 @@ class BemModel:
         """The correction field of this model's parameters (empty layout without a grid)."""
         return CorrectionField(self._parameters, self.nominal_coefficients, seen_from_extras)
 
+    def with_grid(self, grid: CorrectionGrid) -> "BemModel":
+        """The same model (rotor, channels, settings, nuisance, effects) on another correction
+        grid (:class:`calib.models.base.RefinableFieldModel`)."""
+        return BemModel(self.rotor, grid, [c.name for c in self.channels], self.settings, self.nuisance,
+                        self.rotor_source, self.effects)
+
     @property
     def rotor_radius(self) -> float:
         """Rotor radius [m] (for tip-speed ratios)."""
