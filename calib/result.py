@@ -101,6 +101,9 @@ class CalibrationResult:
         What :func:`calib.models.registry.build_model` needs to rebuild the model (predictions).
     checks : dict
         Named statements added after the run (e.g. coverage of a known truth in a synthetic run).
+    fit_scale : float
+        Factor on the covariance of the retained θ from the misfit, max(1, χ²/dof) with
+        ``scale_by_fit`` and a stated noise (1: not scaled) [-].
     """
 
     parameters: list[dict]
@@ -155,6 +158,7 @@ class CalibrationResult:
     confounding: dict = field(default_factory=dict)
     model_spec: dict | None = None
     checks: dict = field(default_factory=dict)
+    fit_scale: float = 1.0
 
     # ------------------------------------------------------------------ derived
     @property

@@ -350,3 +350,26 @@ def test_a_result_whose_retained_set_did_not_settle_says_its_bands_can_be_too_na
     res = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=1)).run()
     assert res.status == "not_stable"
     assert "can be too narrow" in res.message and "sigma_bar" in res.message
+
+
+def test_misfit_beyond_the_stated_noise_scales_the_retained_covariance():
+    """Data with twice the stated noise: χ²/dof after near 4 and the covariance of the retained
+    θ multiplied by it (the frozen prior part not); off with scale_by_fit = false."""
+    from test_calibration import CHANNELS, twin_truth
+    from twin_model import TwinModel, twin_conditions
+
+    model = TwinModel(channels=CHANNELS)
+    cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 7))
+    meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.02 for c in CHANNELS}, seed=7130)
+    stated = type(meas)(meas.conditions, meas.channels, meas.values, 0.5 * meas.sigma, "stated half")
+    base = CalibrationSettings(cd_min=None, sigma_bar=1.0)
+    res = Calibrator(model, stated, base).run()
+    off = Calibrator(model, stated, dataclasses.replace(base, scale_by_fit=False)).run()
+    ratio = res.chi2_after / res.dof
+    assert 2.5 < ratio < 6.0
+    assert res.fit_scale == pytest.approx(ratio) and off.fit_scale == 1.0
+    np.testing.assert_allclose(res.cov_theta, ratio * off.cov_theta, rtol=1e-9)
+    np.testing.assert_allclose(res.cov_frozen, off.cov_frozen, rtol=1e-9, atol=1e-15)
+    # a fit consistent with its noise is left alone
+    fine = Calibrator(model, meas, base).run()
+    assert fine.fit_scale == max(1.0, fine.chi2_after / fine.dof) and fine.fit_scale < 1.5

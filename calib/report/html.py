@@ -92,6 +92,10 @@ def _sentences(r: CalibrationResult) -> list[str]:
                f"(p = {gof['p_value_after']:.2g}" + ("; the model is consistent with the noise)." if
                                                       gof["p_value_after"] > 0.01 else
                                                       "; the fit is worse than the stated noise explains)."))
+    if r.fit_scale > 1.0:
+        out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
+                   f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
+                   f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
     counts = r.verdict_counts()
     field = [v for v in r.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
     if field:
