@@ -110,14 +110,13 @@ class CalibrationSettings:
         hat functions cannot carry
         (:meth:`calib.parametrizations.CorrectionField.representation_variance`).
     scale_by_fit : bool
-        When χ² after exceeds its degrees of freedom (with noise ``known``, ``relative`` or
-        ``repeats``), multiply the covariance of the retained θ (noise and the field between
-        the nodes) by χ²/(N − n_retained): the misfit the model leaves is evidence that the
-        stated noise undercounts what the data carry (the Birge ratio; Particle Data Group's
-        scale factor). The frozen directions' prior part is not scaled. With the ML noise
-        models χ²/dof is 1 by construction. Default true: in twins whose truth varies between
-        the nodes more than the prior's typical draw, the noise-and-aliasing covariance alone
-        was overconfident (``benchmarks/bench_coverage.py``, README).
+        When χ² after exceeds what the noise and the field between the nodes explain (with
+        noise ``known``, ``relative`` or ``repeats``), multiply the covariance of the retained
+        θ (noise and aliasing) by χ²/(N − n_retained + the aliasing's expected χ²): the misfit
+        left is evidence that the stated noise undercounts what the data carry (the Birge
+        ratio; Particle Data Group's scale factor). The frozen directions' prior part is not
+        scaled. With the ML noise models χ²/dof is 1 by construction. Default true (measured
+        in ``benchmarks/bench_coverage.py``, README).
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float
@@ -398,18 +397,19 @@ class Calibrator:
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> np.ndarray | None:
-        """Cov of the retained θ from the field between the nodes (scale units²), or ``None``
-        when it does not apply (no refinable field, ``representation_error`` off, nothing
-        retained, no reached point); :mod:`calib.parametrizations.aliasing`."""
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float]:
+        """Cov of the retained θ from the field between the nodes (scale units²) and the χ² it
+        adds to the residuals on average, or ``(None, 0)`` when it does not apply (no refinable
+        field, ``representation_error`` off, nothing retained, no reached point);
+        :mod:`calib.parametrizations.aliasing`."""
         st = self.settings
         if not (st.representation_error and isinstance(self.model, RefinableFieldModel) and self.field is not None
                 and self.field.grid is not None and svd.retained.any() and alpha_seen.size
                 and st.prior_correlation > 0):
-            return None
+            return None, 0.0
         lay = self.field.layout
         if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
-            return None
+            return None, 0.0
         from calib.parametrizations.aliasing import aliasing_covariance
 
         r = svd.retained
@@ -417,14 +417,15 @@ class Calibrator:
                                    lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
                                    st.prior_correlation, alpha_seen, eta_seen)
 
-    def _fit_scale(self, lin, svd) -> float:
-        """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1."""
+    def _fit_scale(self, lin, svd, alias_misfit: float = 0.0) -> float:
+        """max(1, χ²/(N − n_retained + the aliasing's expected χ²)) with ``scale_by_fit`` and a
+        stated noise, else 1."""
         st = self.settings
         if not st.scale_by_fit or st.noise in ("ml", "relative_ml"):
             return 1.0
         dof = int(lin.ok.sum()) * len(self.channel_index) - svd.n_retained
         chi2 = float(np.sum(lin.residual[lin.ok] ** 2))
-        return max(1.0, chi2 / dof) if dof > 0 else 1.0
+        return max(1.0, chi2 / (dof + alias_misfit)) if dof > 0 else 1.0
 
     def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
         st = self.settings
@@ -441,11 +442,11 @@ class Calibrator:
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        alias = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        alias, alias_misfit = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
         if alias is not None:  # the field between the nodes, taken up by the retained θ
             Vr = svd.V[:, svd.retained]
             cov_ret = cov_ret + Vr @ alias @ Vr.T
-        fit_scale = self._fit_scale(lin, svd)
+        fit_scale = self._fit_scale(lin, svd, alias_misfit)
         cov_ret, cov_theta = cov_ret * fit_scale, cov_theta * fit_scale
         D = np.outer(self.scale, self.scale)
         cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D

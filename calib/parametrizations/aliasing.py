@@ -139,13 +139,16 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
 
     Returns
     -------
-    ndarray, shape (k, k)
+    cov : ndarray, shape (k, k)
+    misfit : float
+        The χ² the field between the nodes adds to the residuals of the truncated fit on
+        average, tr(P⊥ W Σ_δ Wᵀ P⊥) with P⊥ = I − U_ID U_IDᵀ [-].
     """
     field = model.correction_field()
     coarse = field.grid
     k = V_retained.shape[1]
     if k == 0 or not correlation_length > 0:
-        return np.zeros((k, k))
+        return np.zeros((k, k)), 0.0
     fine = refined_grid(coarse, alpha_deg, eta, factor)
     fmodel = model.with_grid(fine)
     flay, clay = fmodel.correction_field().layout, field.layout
@@ -165,13 +168,16 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
     W = np.concatenate([G[:, channel_index, :][..., c] for c in cols], axis=-1) / sigma[:, :, None]
     W = np.where(use[:, None, None], W, 0.0).reshape(-1, sum(c.size for c in cols))
     B = (V_retained.T @ (M.T @ W)) / s_retained[:, None] ** 2
+    U = (M @ V_retained) / s_retained                  # retained left singular vectors
+    P_W = W - U @ (U.T @ W)                            # the part of W δ the fit leaves in the residuals
     la = correlation_length * float(np.mean(np.diff(coarse.alpha_nodes_deg)))
     le = correlation_length * float(np.mean(np.diff(coarse.eta_nodes)))
     D = discrepancy_correlation(coarse, fine, (la, le))
     n = D.shape[0]
-    out = np.zeros((k, k))
+    out, misfit = np.zeros((k, k)), 0.0
     for block, c_idx in enumerate((clay.lift_index, clay.drag_index)):
         var = float(np.mean(np.asarray(prior_std, float)[c_idx.ravel()] ** 2))
-        Bb = B[:, block * n:(block + 1) * n]
+        Bb, Pb = B[:, block * n:(block + 1) * n], P_W[:, block * n:(block + 1) * n]
         out += var * (Bb @ D @ Bb.T)
-    return 0.5 * (out + out.T)
+        misfit += var * float(np.sum((Pb @ D) * Pb))
+    return 0.5 * (out + out.T), misfit
