@@ -89,3 +89,49 @@ def test_the_fine_model_jacobian_carries_the_coarse_one():
         gf = Gf[..., block * fine.n_lift:(block + 1) * fine.n_lift] @ T
         np.testing.assert_allclose(gf, gc, rtol=1e-8, atol=1e-8 * np.abs(gc).max())
     np.testing.assert_allclose(Gf[..., -1], G[..., -1], rtol=1e-10)
+
+
+def test_aliasing_covariance_and_misfit_against_monte_carlo():
+    """Draws of the field between the nodes (fine nodal values minus their coarse interpolant,
+    from the closed-form covariance) pushed through the fine model's whitened sensitivities:
+    the retained θ's one-step error S⁻²V_IDᵀMᵀWδ and the residual χ² it leaves match the
+    function's covariance and expected misfit."""
+    from calib.identifiability import whitened_sensitivities
+    from calib.parametrizations.aliasing import aliasing_covariance
+
+    rotor = load_rotor("phase_vi")
+    model = BemModel(rotor, COARSE, ("power", "thrust"), BemSettings(use_tilt=False), ("pitch_offset",))
+    tsr, pitch = np.meshgrid([3.0, 4.5, 6.0], [0.0, 4.0], indexing="ij")
+    v = 72.0 * np.pi / 30 * rotor.rotor_radius / tsr.ravel()
+    cond = OperatingConditions(v, np.full(v.size, 72.0), pitch.ravel())
+    p = nominal_vector(model.parameters)
+    ev, G = model.jacobian(p, cond)
+    sigma = 0.01 * np.abs(ev.values)
+    scale = np.array([q.scale for q in model.parameters])
+    M = whitened_sensitivities(G, sigma, scale, ev.ok)
+    _, s, Vt = np.linalg.svd(M, full_matrices=False)
+    k = 5
+    alpha = ev.extras["alpha_deg"][:, ev.extras["interior"]]
+    eta = np.broadcast_to(rotor.eta[ev.extras["interior"]], alpha.shape)
+    prior_std = 1.0 * scale
+    cov, misfit = aliasing_covariance(model, p, cond, sigma, [0, 1], ev.ok, M, Vt[:k].T, s[:k], prior_std, 1.0,
+                                      alpha.ravel(), eta.ravel())
+    # Monte Carlo with the same pieces
+    fine = refined_grid(COARSE, alpha.ravel(), eta.ravel())
+    fmodel = model.with_grid(fine)
+    pf = nominal_vector(fmodel.parameters)
+    _, Gf = fmodel.jacobian(pf, cond)
+    W = (Gf[..., :fine.n_params] / sigma[:, :, None]).reshape(-1, fine.n_params)
+    D = discrepancy_correlation(COARSE, fine, (6.0, 0.1875))
+    w, Q = np.linalg.eigh(D)
+    L = Q * np.sqrt(np.clip(w, 0, None))
+    rng = np.random.default_rng(7403)
+    n = fine.n_lift
+    sd = np.array([COARSE.cl_scale, COARSE.cd_scale])
+    draws = np.concatenate([sd[b] * (L @ rng.standard_normal((n, 4000))) for b in range(2)])
+    y = W @ draws
+    U = (M @ Vt[:k].T) / s[:k]
+    theta = (Vt[:k] @ (M.T @ y)) / s[:k, None] ** 2
+    resid = y - U @ (U.T @ y)
+    assert np.mean(np.sum(resid ** 2, axis=0)) == pytest.approx(misfit, rel=0.1)
+    np.testing.assert_allclose(np.cov(theta), cov, rtol=0.15, atol=0.05 * np.abs(np.diag(cov)).max())
