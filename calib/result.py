@@ -104,6 +104,9 @@ class CalibrationResult:
     fit_scale : float
         Factor on the covariance of the retained θ from the misfit, max(1, χ²/dof) with
         ``scale_by_fit`` and a stated noise (1: not scaled) [-].
+    aliasing_chi2 : float
+        The χ² after that the field between the nodes is expected to add on average (prior
+        average, :mod:`calib.parametrizations.aliasing`; 0 where that term does not apply) [-].
     """
 
     parameters: list[dict]
@@ -159,6 +162,7 @@ class CalibrationResult:
     model_spec: dict | None = None
     checks: dict = field(default_factory=dict)
     fit_scale: float = 1.0
+    aliasing_chi2: float = 0.0
 
     # ------------------------------------------------------------------ derived
     @property

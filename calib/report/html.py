@@ -92,6 +92,10 @@ def _sentences(r: CalibrationResult) -> list[str]:
                f"(p = {gof['p_value_after']:.2g}" + ("; the model is consistent with the noise)." if
                                                       gof["p_value_after"] > 0.01 else
                                                       "; the fit is worse than the stated noise explains)."))
+    if r.aliasing_chi2 > 0:
+        out.append(f"A field between the correction nodes of the prior's typical size would add about "
+                   f"{r.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.chi2_after:.3g}); the bands include "
+                   f"its effect on the estimate.")
     if r.fit_scale > 1.0:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
