@@ -29,9 +29,9 @@ it. Generalized cross-validation was worse still on the wind-tunnel study. The a
 10-fold curve retained more θ than the one-standard-error rule and their NEES over 30 twin
 seeds was 918 for 552 degrees of freedom (overconfident); with the rule, 114 for 116 (8 seeds),
 but over 30 seeds (``benchmarks/bench_coverage.py``, seeds 5000–5029) 660.6 for 443 (95 % band
-387–503), of which the 27 calibrations that ended "converged" 421.4 for 386 (band 333–442): one
-of the three ``not_stable`` ones carries 198 for 19, pulled by a point with several BEM roots
-at a section (README). Held-back χ²/dof there (every
+387–503), of which the 27 calibrations that ended "converged" 421.4 for 386 (band 333–442;
+368.6 with ``scale_by_fit``): one of the three ``not_stable`` ones carries 198 for 19, pulled by
+a point with several BEM roots at a section (README). Held-back χ²/dof there (every
 third point held back, which interleaves over the envelope as the folds do), the rule against
 the best σ̄ of a sweep 0.1–5: wind tunnel (workflow seed) 2.23 against 1.86 (ratio 1.20),
 localization stage 2 1.08 against 1.07 (1.015), analytic twin 1.06 against 0.93 (1.13). A

@@ -291,7 +291,7 @@ def test_polar_bands_cover_the_truth_in_the_coverage_twins(coverage_twins):
 @pytest.mark.parametrize("name", [
     pytest.param("c_prior_draws", marks=pytest.mark.xfail(
         reason="issue 7: on these seeds (c) covers ΔC_D at 99.87 % (ΔC_L 97.3 %); drag draws conditioned on "
-               "C_D > 0 at the reached sections are smaller than the prior (seeds 5000-5029: 98.6 %, 97.7 %)",
+               "C_D > 0 at the reached sections are smaller than the prior (seeds 5000-5029: 98.7 %, 97.8 %)",
         strict=False)),
     "d_prior_draws_outside_span"])
 def test_polar_bands_are_not_wider_than_needed_for_truths_drawn_from_the_prior(coverage_twins, name):
@@ -310,16 +310,7 @@ def test_polar_bands_are_not_wider_than_needed_for_the_workflow_truth(coverage_t
 
 
 @pytest.mark.statistics
-@pytest.mark.parametrize("name", [
-    "a_inside_span",
-    pytest.param("c_prior_draws", marks=pytest.mark.xfail(
-        reason="issue 7 not met: NEES over the converged runs 218.9 for 109 dof on these seeds (band 82-140), "
-               "593.5 for 426 on seeds 5000-5029: the truncation's bias (the truth's frozen components act "
-               "through the model's nonlinearity; noise-free NEES 3.2-21.9 for 17-19 dof on tuning seeds 8425-8429)",
-        strict=False)),
-    pytest.param("d_prior_draws_outside_span", marks=pytest.mark.xfail(
-        reason="issue 7 not met: NEES against the truth's nodal values with the stated covariance 478.6 for "
-               "171 dof over the converged runs on these seeds (band 137-209)", strict=False))])
+@pytest.mark.parametrize("name", ["a_inside_span", "c_prior_draws", "d_prior_draws_outside_span"])
 def test_nees_of_the_retained_theta_in_its_chi2_band(coverage_twins, name):
     """Summed NEES of the retained θ over the calibrations that ended "converged" (a result
     that did not says in its message that its σ can be too narrow) inside the two-sided 95 %
