@@ -108,8 +108,7 @@ def _fine_prior_draw(tmodel, model, grid, cond, seed: int) -> np.ndarray:
     points are drawn again, as in (c)."""
     st = CalibrationSettings()
     fine = tmodel.correction_field().grid
-    la, le = (st.prior_correlation * float(np.mean(np.diff(grid.alpha_nodes_deg))),
-              st.prior_correlation * float(np.mean(np.diff(grid.eta_nodes))))
+    la, le = model.correction_field().correlation_lengths(st.prior_correlation)
 
     def root(x, length):
         K = np.exp(-0.5 * ((x[:, None] - x[None]) / length) ** 2)

@@ -102,7 +102,7 @@ def test_representation_variance_is_the_interpolation_error_of_a_smooth_field(le
     points, interpolate the nodes with the hat functions, and compare the variance of the
     interpolation error with the closed form (zero at a node, the prior far from the grid)."""
     field, grid = _field()
-    la, le = field._lengths(length)
+    la, le = field.correlation_lengths(length)
     a_test = np.array([5.0, 3.5, 8.0, 11.0, 17.0, 40.0])     # cell centre, inside, node, ..., ramp, far
     e_test = np.array([0.65, 0.3, 0.5, 0.95, 0.6, 0.6])
     An, En = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")

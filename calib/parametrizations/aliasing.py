@@ -170,9 +170,7 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
     B = (V_retained.T @ (M.T @ W)) / s_retained[:, None] ** 2
     U = (M @ V_retained) / s_retained                  # retained left singular vectors
     P_W = W - U @ (U.T @ W)                            # the part of W δ the fit leaves in the residuals
-    la = correlation_length * float(np.mean(np.diff(coarse.alpha_nodes_deg)))
-    le = correlation_length * float(np.mean(np.diff(coarse.eta_nodes)))
-    D = discrepancy_correlation(coarse, fine, (la, le))
+    D = discrepancy_correlation(coarse, fine, field.correlation_lengths(correlation_length))
     n = D.shape[0]
     out, misfit = np.zeros((k, k)), 0.0
     for block, c_idx in enumerate((clay.lift_index, clay.drag_index)):

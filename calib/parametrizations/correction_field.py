@@ -243,7 +243,7 @@ class CorrectionField:
         R = np.eye(self.n_params)
         if self.grid is None or not length > 0:
             return R
-        la, le = self._lengths(length)
+        la, le = self.correlation_lengths(length)
         for idx in (self._layout.lift_index, self._layout.drag_index):
             ia, ie = np.nonzero(idx >= 0)
             j = idx[ia, ie]
@@ -252,7 +252,9 @@ class CorrectionField:
                                      - 0.5 * ((e[:, None] - e[None]) / le) ** 2)
         return R
 
-    def _lengths(self, length: float) -> tuple[float, float]:
+    def correlation_lengths(self, length: float) -> tuple[float, float]:
+        """ℓ_α [deg] and ℓ_η [-] of the smooth-field prior for ``length`` node spacings (the
+        grid's mean spacings; :meth:`node_correlation`)."""
         return (length * float(np.mean(np.diff(self.grid.alpha_nodes_deg))),
                 length * float(np.mean(np.diff(self.grid.eta_nodes))))
 
@@ -303,7 +305,7 @@ class CorrectionField:
         value = value.reshape(-1, 4)
         if not correlation_length > 0:
             return var_node * np.clip(1.0 - (value ** 2).sum(-1), 0.0, 1.0)
-        la, le = self._lengths(correlation_length)
+        la, le = self.correlation_lengths(correlation_length)
         node = node.reshape(-1, 4)
         an = self.grid.alpha_nodes_deg[node // self.grid.n_eta]
         en = self.grid.eta_nodes[node % self.grid.n_eta]
