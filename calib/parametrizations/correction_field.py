@@ -275,7 +275,8 @@ class CorrectionField:
         nodes is taken as uncertain as at a node and independent of the nodes beyond the
         interpolation, σ_rep² = σ_p²(1 − Σ_i N_i²): 0.75 σ_p² at a cell centre, the roughest
         field compatible with the node spacing. With the default correlation length of one
-        node spacing it is 0.098 σ_p² at a cell centre of the wind-tunnel study's grid: a field that the chosen grid resolves.
+        node spacing it is 0.098 σ_p² at a cell centre of the wind-tunnel study's grid: a
+        field that the chosen grid resolves.
 
         Parameters
         ----------
