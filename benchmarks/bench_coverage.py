@@ -26,11 +26,11 @@ prior 1 scale unit per node, smooth-field prior correlation of one node spacing)
 fraction of the (α, η) points the operating points reach where the 95 % band contains the true
 ΔC_L and ΔC_D (mean over seeds, 10th and 90th percentile, and the pooled fraction), the same
 inside the node range only, the summed NEES of the retained θ against its two-sided 95 % χ²
-band (in (a) and (c) against the truth's θ with the noise-only Cov(θ̂), the truth having no
-part between the nodes; in (d) against the truth's values at the calibration nodes with the
-covariance the result states, which includes the field between the nodes), the same over
-the calibrations that ended "converged" (the others listed), the retained count, failures
-and time.
+band (against the truth's values at the calibration nodes, with the covariance the result
+states: noise, the field between the nodes at the size the residuals give it, fit scale;
+also with the noise part alone), the same over the calibrations that ended "converged" (the
+others listed), the spread of E[τ²] (the estimated size of the field between the nodes),
+the retained count, failures and time.
 
 Held-back truncation check: every third operating point held back, calibrate on the rest with
 ``sigma_bar = "auto"`` and with σ̄ = 0.1 … 5, predict the held-back points and compare χ²/dof
@@ -152,7 +152,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd") -> dict
     for label, tmodel, p_fixed in (cases[t] for t in twins):
         cov = {"lift": [], "drag": [], "lift_in_grid": [], "drag_in_grid": []}
         hits = {"lift": [0, 0], "drag": [0, 0]}
-        nees, dims, stable, kept, failed = [], [], [], [], 0
+        nees, nees_noise, tau2, dims, stable, kept, failed = [], [], [], [], [], [], 0
         t0 = time.perf_counter()
         for k in range(n_seeds):
             if p_fixed is not None:
@@ -168,29 +168,29 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd") -> dict
             a, e = res.alpha_seen, res.eta_seen
             if tmodel is model:
                 tl, td = field.basis(a, e, "lift") @ p_true, field.basis(a, e, "drag") @ p_true
-                theta_true = res.V[:, res.retained].T @ ((p_true - res.p_nominal) / res.scale)
-                err = res.theta_hat - theta_true
-                nees.append(float(err @ np.linalg.solve(res.cov_theta, err)) if err.size else 0.0)
-                dims.append(err.size)
-                stable.append(res.status == "converged")
+                p_nodes = p_true
             elif p_fixed is None:
                 tfield = tmodel.correction_field()
                 tl, td = tfield.basis(a, e, "lift") @ p_true, tfield.basis(a, e, "drag") @ p_true
-                # the retained θ against the truth's values at the calibration nodes, with the
-                # covariance the result states (noise and the field between the nodes)
                 p_nodes = res.p_nominal.copy()
                 p_nodes[:grid.n_lift] = tfield.basis(A.ravel(), E.ravel(), "lift") @ p_true
                 p_nodes[grid.n_lift:grid.n_params] = tfield.basis(A.ravel(), E.ravel(), "drag") @ p_true
                 p_nodes[grid.n_params:] = p_true[-(len(p_nodes) - grid.n_params):]
-                Vr = res.V[:, res.retained]
-                err = Vr.T @ ((res.p_hat - p_nodes) / res.scale)
-                C = Vr.T @ (res.cov_p / np.outer(res.scale, res.scale)) @ Vr
-                nees.append(float(err @ np.linalg.solve(C, err)) if err.size else 0.0)
-                dims.append(err.size)
-                stable.append(res.status == "converged")
-            else:
+            else:  # (b): the workflow's field, whose values at the nodes are (a)'s truth
                 tl, td = smooth_field(bumps, a, e)
-            rep = res.prior_std if res.settings.get("representation_error", True) else None
+                p_nodes = p_a
+            # the retained θ against the truth's values at the calibration nodes, with the
+            # covariance the result states (noise, the field between the nodes at its
+            # estimated size, fit scale) and with the noise part alone
+            Vr = res.V[:, res.retained]
+            err = Vr.T @ ((res.p_hat - p_nodes) / res.scale)
+            C = Vr.T @ (res.cov_p / np.outer(res.scale, res.scale)) @ Vr
+            nees.append(float(err @ np.linalg.solve(C, err)) if err.size else 0.0)
+            nees_noise.append(float(np.sum((err / res.sigma_theta[res.retained]) ** 2)))
+            dims.append(err.size)
+            stable.append(res.status == "converged")
+            tau2.append(res.aliasing_scale)
+            rep = res.representation_std()
             length = res.settings.get("prior_correlation", 0.0)
             c = field.coverage(res.p_hat, res.cov_p, a, e, tl, td, prior_std=rep, correlation_length=length)
             inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
@@ -203,7 +203,8 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd") -> dict
                 hits[block][1] += c["n_points"]
             kept.append(res.n_retained)
             print(f"[coverage {label}] seed {seed0 + k}: lift {c['lift']:.3f} drag {c['drag']:.3f} (inside the node "
-                  f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} {res.status}", flush=True)
+                  f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} NEES {nees[-1]:.1f} "
+                  f"E[τ²] {res.aliasing_scale:.2f} fit scale {res.fit_scale:.2f} {res.status}", flush=True)
         fig = {"n_seeds": n_seeds, "seeds": [seed0, seed0 + n_seeds - 1]}
         for key, v in cov.items():
             fig[f"coverage_{key}_mean"] = float(np.mean(v))
@@ -215,13 +216,15 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd") -> dict
         if dims:
             lo, hi = stats.chi2.ppf([0.025, 0.975], int(np.sum(dims)))
             fig.update({"nees_sum": float(np.sum(nees)), "nees_band": [float(lo), float(hi)],
-                        "nees_dof": int(np.sum(dims))})
+                        "nees_dof": int(np.sum(dims)), "nees_noise_only_sum": float(np.sum(nees_noise)),
+                        "aliasing_scale_median_p10_p90": np.percentile(tau2, [50, 10, 90]).tolist()})
             # the same over the calibrations that report "converged" (a result whose retained set
             # did not settle says so in its status and its report)
             ok = np.array(stable, bool)
             if ok.any():
                 lo, hi = stats.chi2.ppf([0.025, 0.975], int(np.sum(np.array(dims)[ok])))
                 fig.update({"nees_converged_sum": float(np.sum(np.array(nees)[ok])),
+                            "nees_noise_only_converged_sum": float(np.sum(np.array(nees_noise)[ok])),
                             "nees_converged_band": [float(lo), float(hi)],
                             "nees_converged_dof": int(np.sum(np.array(dims)[ok])),
                             "nees_not_converged": [[int(seed0 + k), round(float(nees[k]), 1), int(dims[k])]
