@@ -109,21 +109,13 @@ class CalibrationSettings:
         Add to the polar bands the variance of the true field between the nodes that the
         hat functions cannot carry
         (:meth:`calib.parametrizations.CorrectionField.representation_variance`).
-    aliasing_scale_sd : float
-        1-σ of the log-normal prior on τ², the variance of the field between the nodes
-        relative to the smooth-field prior's (median 1) [-]. The residuals update it
-        (:func:`calib.parametrizations.aliasing.aliasing_scale`) and its posterior mean scales
-        the aliasing covariance of the retained θ and the representation variance of the
-        bands. 0 keeps τ² = 1 (the prior's size whatever the residuals say).
     scale_by_fit : bool
-        When χ² after exceeds what the error model expects, N − n_retained plus the χ² of
-        the field between the nodes at its estimated size (with noise ``known``,
-        ``relative`` or ``repeats``), multiply the covariance of the retained θ (noise and
-        aliasing) by the ratio: the misfit left is evidence that the stated noise
-        undercounts what the data carry (the Birge ratio; Particle Data Group's scale
-        factor). The frozen directions' prior part is not scaled. With the ML noise models
-        χ²/dof is 1 by construction. Default true (measured in
-        ``benchmarks/bench_coverage.py``, README).
+        When χ² after exceeds its degrees of freedom (with noise ``known``, ``relative`` or
+        ``repeats``), multiply the covariance of the retained θ (noise and aliasing) by
+        χ²/(N − n_retained): the misfit left is evidence that the stated noise undercounts what
+        the data carry (the Birge ratio; Particle Data Group's scale factor). The frozen
+        directions' prior part is not scaled. With the ML noise models χ²/dof is 1 by
+        construction. Default true (measured in ``benchmarks/bench_coverage.py``, README).
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float
@@ -153,7 +145,6 @@ class CalibrationSettings:
     tolerance: float = 1e-9
     stability_cosine: float = 0.98
     representation_error: bool = True
-    aliasing_scale_sd: float = 1.0
     scale_by_fit: bool = True
     identified_ratio: float = 0.5
     confounded_share: float = 0.75
@@ -182,9 +173,6 @@ class CalibrationSettings:
                 bad(f"must be in (0, 1], got {getattr(self, key)!r}", key)
         if not self.prior_correlation >= 0:
             bad(f"must be >= 0 (node spacings), got {self.prior_correlation!r}", "prior_correlation")
-        if not 0 <= self.aliasing_scale_sd < np.inf:
-            bad(f"must be a finite number >= 0 (log-σ of the prior on τ²), got {self.aliasing_scale_sd!r}",
-                "aliasing_scale_sd")
         for key in ("max_relinearizations", "max_iterations", "max_noise_iterations", "cv_folds"):
             if not getattr(self, key) >= 1:
                 bad(f"must be >= 1, got {getattr(self, key)!r}", key)
@@ -408,42 +396,38 @@ class Calibrator:
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen, frozen_signal) -> tuple[np.ndarray | None, float, float]:
-        """The field between the nodes: its Cov of the retained θ (scale units²) and the χ² it
-        adds to the residuals on average, both at the prior's size, and E[τ²], the residuals'
-        posterior mean of its variance relative to the prior's; ``(None, 0, 1)`` when it does
-        not apply (no refinable field, ``representation_error`` off, nothing retained, no
-        reached point); ``frozen_signal`` is M Cov_frozen Mᵀ, the residuals' covariance from
-        the frozen directions under their prior; :mod:`calib.parametrizations.aliasing`."""
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float]:
+        """Cov of the retained θ from the field between the nodes (scale units²) and the χ² it
+        adds to the residuals on average, or ``(None, 0)`` when it does not apply (no refinable
+        field, ``representation_error`` off, nothing retained, no reached point);
+        :mod:`calib.parametrizations.aliasing`."""
         st = self.settings
         if not (st.representation_error and isinstance(self.model, RefinableFieldModel) and self.field is not None
                 and self.field.grid is not None and svd.retained.any() and alpha_seen.size
                 and st.prior_correlation > 0):
-            return None, 0.0, 1.0
+            return None, 0.0
         lay = self.field.layout
         if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
-            return None, 0.0, 1.0
-        from calib.parametrizations.aliasing import aliasing_covariance, aliasing_scale
+            return None, 0.0
+        from calib.parametrizations.aliasing import aliasing_covariance
 
         r = svd.retained
-        term = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+        return aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
                                    lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
                                    st.prior_correlation, alpha_seen, eta_seen)
-        resid = np.where(lin.ok[:, None], lin.residual, 0.0).reshape(-1)
-        return term.cov, term.misfit, aliasing_scale(term.residual_cov, resid, st.aliasing_scale_sd, frozen_signal)
 
-    def _fit_scale(self, lin, svd, explained: float = 0.0) -> float:
-        """max(1, χ²/(N − n_retained + ``explained``)) with ``scale_by_fit`` and a stated noise,
-        else 1; ``explained`` is the χ² that the error model expects beyond the noise: the
-        frozen directions' signal under their prior, tr(M Cov_frozen Mᵀ) (the truncation leaves
-        it in the residuals, and in the linearized model it does not bias the retained θ), and
-        the field between the nodes at its estimated size (E[τ²] × its prior average)."""
+    def _fit_scale(self, lin, svd) -> float:
+        """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
+
+        The χ² that the field between the nodes adds on average (``aliasing_chi2``) is not
+        subtracted: measured on the coverage twins (README), subtracting it left the prior-draw
+        twin (c) overconfident (NEES 573.8 for 426) where the plain factor gave 444.9."""
         st = self.settings
         if not st.scale_by_fit or st.noise in ("ml", "relative_ml"):
             return 1.0
         dof = int(lin.ok.sum()) * len(self.channel_index) - svd.n_retained
         chi2 = float(np.sum(lin.residual[lin.ok] ** 2))
-        return max(1.0, chi2 / (dof + explained)) if dof > 0 else 1.0
+        return max(1.0, chi2 / dof) if dof > 0 else 1.0
 
     def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
         st = self.settings
@@ -460,13 +444,11 @@ class Calibrator:
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        frozen_signal = lin.M @ cov_frz @ lin.M.T   # the residuals' covariance from the frozen directions
-        alias, alias_misfit, tau2 = self._aliasing(problem, lin, svd, alpha_seen, eta_seen, frozen_signal)
-        if alias is not None:  # the field between the nodes, taken up by the retained θ, at its estimated size
+        alias, alias_misfit = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        if alias is not None:  # the field between the nodes, taken up by the retained θ
             Vr = svd.V[:, svd.retained]
-            cov_ret = cov_ret + tau2 * (Vr @ alias @ Vr.T)
-        frozen_chi2 = float(np.trace(frozen_signal))
-        fit_scale = self._fit_scale(lin, svd, frozen_chi2 + tau2 * alias_misfit)
+            cov_ret = cov_ret + Vr @ alias @ Vr.T
+        fit_scale = self._fit_scale(lin, svd)
         cov_ret, cov_theta = cov_ret * fit_scale, cov_theta * fit_scale
         D = np.outer(self.scale, self.scale)
         cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
@@ -509,12 +491,12 @@ class Calibrator:
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
-            aliasing_chi2=alias_misfit, aliasing_scale=tau2, frozen_chi2=frozen_chi2,
+            aliasing_chi2=alias_misfit,
             multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
                                                confidence=st.band_confidence,
-                                               prior_std=res.representation_std(),
+                                               prior_std=self.prior_std if st.representation_error else None,
                                                correlation_length=st.prior_correlation)
         return res
 

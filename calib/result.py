@@ -105,16 +105,8 @@ class CalibrationResult:
         Factor on the covariance of the retained θ from the misfit, max(1, χ²/dof) with
         ``scale_by_fit`` and a stated noise (1: not scaled) [-].
     aliasing_chi2 : float
-        The χ² after that the field between the nodes of the prior's size is expected to add
-        on average (:mod:`calib.parametrizations.aliasing`; 0 where that term does not
-        apply) [-].
-    aliasing_scale : float
-        E[τ²], the residuals' posterior mean of the variance of the field between the nodes
-        relative to the prior's; it scales the aliasing term and the bands' representation
-        variance (1 where the term does not apply) [-].
-    frozen_chi2 : float
-        The χ² after that the frozen directions' signal adds on average under their prior,
-        tr(M Cov_frozen Mᵀ) [-].
+        The χ² after that the field between the nodes is expected to add on average (prior
+        average, :mod:`calib.parametrizations.aliasing`; 0 where that term does not apply) [-].
     """
 
     parameters: list[dict]
@@ -171,8 +163,6 @@ class CalibrationResult:
     checks: dict = field(default_factory=dict)
     fit_scale: float = 1.0
     aliasing_chi2: float = 0.0
-    aliasing_scale: float = 1.0
-    frozen_chi2: float = 0.0
 
     # ------------------------------------------------------------------ derived
     @property
@@ -182,13 +172,6 @@ class CalibrationResult:
     @property
     def n_retained(self) -> int:
         return int(np.count_nonzero(self.retained))
-
-    def representation_std(self) -> np.ndarray | None:
-        """Prior 1-σ per parameter for the bands' representation variance, scaled by
-        √E[τ²] (``aliasing_scale``), or None with ``representation_error`` off [parameter unit]."""
-        if not self.settings.get("representation_error", True):
-            return None
-        return np.asarray(self.prior_std, float) * np.sqrt(self.aliasing_scale)
 
     @property
     def n_points(self) -> int:

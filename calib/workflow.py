@@ -251,7 +251,7 @@ def truth_checks(model, result, truth: dict) -> dict[str, str]:
         field = model.correction_field()
         a, e = result.alpha_seen, result.eta_seen
         tl, td = smooth_field(truth["bumps"], a, e)
-        prior = result.representation_std()
+        prior = result.prior_std if result.settings.get("representation_error", True) else None
         # a result saved before the smooth-field prior had independent nodes (correlation length 0)
         cov = field.coverage(result.p_hat, result.cov_p, a, e, tl, td, result.settings.get("band_confidence", 0.95),
                              prior, correlation_length=float(result.settings.get("prior_correlation", 0.0)))

@@ -33,41 +33,15 @@ values minus their coarse interpolant,
 the fine nodes; Rasmussen & Williams 2006, §2.2). The term is the prior average: for a
 truth exactly in the span of the hat functions it is conservative.
 
-How large the field between the nodes is, the residuals tell: the part of W δ the fit
-leaves, P⊥ W δ (P⊥ = I − U_ID U_IDᵀ), has covariance K = P⊥ W Σ_δ Wᵀ P⊥ in whitened units.
-Writing the variance of δ as τ² times the prior's, the residual of the truncated fit is
-r ~ N(0, C₀ + τ² K) (restricted likelihood: the fitted directions removed), where C₀ = P⊥ +
-M Cov_frozen Mᵀ holds the noise and the signal of the frozen directions under their prior
-(the truncation leaves that signal in the residuals; in the linearized model it does not
-bias the retained θ, U_ID ⟂ U_NID). With K q_i = λ_i C₀ q_i (q_iᵀ C₀ q_i = 1) and z_i = q_iᵀ r,
-
-.. math::  \log L(τ^2) = −\tfrac12 \sum_i \Big[\log(1 + τ^2 λ_i) + \frac{z_i^2}{1 + τ^2 λ_i}\Big],
-
-and with a log-normal prior on τ² centred on the stated prior (log-σ ``log_sd``, a factor
-e by default) the posterior mean E[τ²] is the factor on the aliasing covariance, on its
-χ² and on the representation variance of the bands (:func:`aliasing_scale`). Using the
-mean of the variance, not its most likely value, is what the predictive covariance of the
-hierarchical model needs (Gelman et al. 2013, §5): a residual that happens to look clean
-does not collapse the term to zero. Measured on twins (``benchmarks/bench_coverage.py``,
-README): a truth in the span of the hats gives E[τ²] well below 1 and the retained θ's
-NEES near its degrees of freedom instead of a third of them; a truth drawn from the
-prior on a fine grid gives E[τ²] near 1.
-
 References
 ----------
 C.E. Rasmussen, C.K.I. Williams, Gaussian Processes for Machine Learning, MIT Press
 (2006), §2.2 and §4.2.
 M.C. Kennedy, A. O'Hagan, Bayesian calibration of computer models, J. R. Stat. Soc. B 63
 (2001) 425-464 (model discrepancy in calibration).
-A. Gelman, J.B. Carlin, H.S. Stern, D.B. Dunson, A. Vehtari, D.B. Rubin, Bayesian Data
-Analysis, 3rd ed., CRC Press (2013), §5 (hierarchical models, hyperparameters integrated out).
-D.A. Harville, Maximum likelihood approaches to variance component estimation, J. Am. Stat.
-Assoc. 72 (1977) 320-338 (restricted likelihood).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -75,71 +49,6 @@ from calib.corrections import CorrectionGrid
 
 #: Each calibration interval is split in this many parts for the aliasing term.
 REFINEMENT = 3
-
-#: Grid of log τ² for the posterior of the aliasing scale (τ² from 1.2e-4 to 150).
-LOG_TAU2_GRID = np.linspace(-9.0, 5.0, 561)
-
-
-@dataclass(frozen=True, eq=False)
-class AliasingTerm:
-    """The field between the nodes at the prior's size (τ² = 1).
-
-    Attributes
-    ----------
-    cov : ndarray, shape (k, k)
-        Its covariance of the retained θ [scale units²].
-    misfit : float
-        The χ² it adds to the residuals of the truncated fit on average,
-        tr(P⊥ W Σ_δ Wᵀ P⊥) [-].
-    residual_cov : ndarray, shape (n_residuals, n_residuals)
-        K = P⊥ W Σ_δ Wᵀ P⊥, its covariance of the whitened residuals (rows point-major,
-        channels inner; zero rows for points outside the fit) [-].
-    """
-
-    cov: np.ndarray
-    misfit: float
-    residual_cov: np.ndarray
-
-
-def aliasing_scale(residual_cov: np.ndarray, residual: np.ndarray, log_sd: float = 1.0,
-                   base_cov: np.ndarray | None = None) -> float:
-    """Posterior mean of τ², the variance of the field between the nodes relative to the prior's.
-
-    Parameters
-    ----------
-    residual_cov : ndarray, shape (n, n)
-        K of :class:`AliasingTerm` (whitened, τ² = 1) [-].
-    residual : ndarray, shape (n,)
-        Whitened residuals of the truncated fit, same order, 0 outside the fit [-].
-    log_sd : float
-        1-σ of the log-normal prior on τ² (median 1) [-]; 0 keeps τ² = 1.
-    base_cov : ndarray, shape (n, n), optional
-        Covariance of the residuals without the field between the nodes (default the
-        identity, the whitened noise); the calibrator adds the frozen directions' prior
-        signal M Cov_frozen Mᵀ, so that the signal the truncation leaves in the residuals
-        is not taken for the field between the nodes [-].
-
-    Returns
-    -------
-    float
-        E[τ²] under the restricted likelihood of the module notes and the prior [-].
-    """
-    if not log_sd > 0:
-        return 1.0
-    from scipy.linalg import eigh
-
-    K = 0.5 * (residual_cov + residual_cov.T)
-    C0 = np.eye(K.shape[0]) if base_cov is None else 0.5 * (base_cov + base_cov.T) + np.eye(K.shape[0])
-    lam, Q = eigh(K, C0)                     # K q = λ C0 q, Qᵀ C0 Q = I
-    keep = lam > 1e-10 * max(float(lam.max(initial=0.0)), 1e-300)
-    if not keep.any():
-        return 1.0
-    lam, z2 = lam[keep], (Q[:, keep].T @ np.nan_to_num(np.asarray(residual, float))) ** 2
-    t = LOG_TAU2_GRID
-    v = 1.0 + np.exp(t)[:, None] * lam[None, :]
-    log_post = -0.5 * np.sum(np.log(v) + z2[None, :] / v, axis=1) - 0.5 * (t / log_sd) ** 2
-    w = np.exp(log_post - log_post.max())
-    return float(np.sum(w * np.exp(t)) / np.sum(w))
 
 
 def refined_nodes(nodes: np.ndarray, factor: int, lo: float, hi: float, clip=(-np.inf, np.inf)) -> np.ndarray:
@@ -198,9 +107,8 @@ def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, length
 
 def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, channel_index, ok: np.ndarray,
                         M: np.ndarray, V_retained: np.ndarray, s_retained: np.ndarray, prior_std: np.ndarray,
-                        correlation_length: float, alpha_deg, eta, factor: int = REFINEMENT) -> AliasingTerm:
-    """The field between the nodes at the prior's size: Cov(δθ_ID) of the retained θ, its
-    expected misfit and its residual covariance.
+                        correlation_length: float, alpha_deg, eta, factor: int = REFINEMENT) -> np.ndarray:
+    """Cov(δθ_ID) [scale units²] of the retained θ from the field between the nodes.
 
     Parameters
     ----------
@@ -231,14 +139,16 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
 
     Returns
     -------
-    AliasingTerm
+    cov : ndarray, shape (k, k)
+    misfit : float
+        The χ² the field between the nodes adds to the residuals of the truncated fit on
+        average, tr(P⊥ W Σ_δ Wᵀ P⊥) with P⊥ = I − U_ID U_IDᵀ [-].
     """
     field = model.correction_field()
     coarse = field.grid
     k = V_retained.shape[1]
     if k == 0 or not correlation_length > 0:
-        n_res = np.asarray(sigma).size
-        return AliasingTerm(np.zeros((k, k)), 0.0, np.zeros((n_res, n_res)))
+        return np.zeros((k, k)), 0.0
     fine = refined_grid(coarse, alpha_deg, eta, factor)
     fmodel = model.with_grid(fine)
     flay, clay = fmodel.correction_field().layout, field.layout
@@ -262,11 +172,10 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
     P_W = W - U @ (U.T @ W)                            # the part of W δ the fit leaves in the residuals
     D = discrepancy_correlation(coarse, fine, field.correlation_lengths(correlation_length))
     n = D.shape[0]
-    out, K = np.zeros((k, k)), np.zeros((P_W.shape[0], P_W.shape[0]))
+    out, misfit = np.zeros((k, k)), 0.0
     for block, c_idx in enumerate((clay.lift_index, clay.drag_index)):
         var = float(np.mean(np.asarray(prior_std, float)[c_idx.ravel()] ** 2))
         Bb, Pb = B[:, block * n:(block + 1) * n], P_W[:, block * n:(block + 1) * n]
         out += var * (Bb @ D @ Bb.T)
-        K += var * (Pb @ D @ Pb.T)
-    K = 0.5 * (K + K.T)
-    return AliasingTerm(0.5 * (out + out.T), float(np.trace(K)), K)
+        misfit += var * float(np.sum((Pb @ D) * Pb))
+    return 0.5 * (out + out.T), misfit

@@ -94,14 +94,12 @@ def _sentences(r: CalibrationResult) -> list[str]:
                                                       "; the fit is worse than the stated noise explains)."))
     if r.aliasing_chi2 > 0:
         out.append(f"A field between the correction nodes of the prior's typical size would add about "
-                   f"{r.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.chi2_after:.3g}); the residuals put "
-                   f"its variance at {r.aliasing_scale:.2g} × the prior's (posterior mean), and the σ of the "
-                   f"retained θ and the bands include it at that size.")
+                   f"{r.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.chi2_after:.3g}); the bands include "
+                   f"its effect on the estimate.")
     if r.fit_scale > 1.0:
-        out.append(f"The covariance of the retained θ is multiplied by {r.fit_scale:.3g}, χ² after over what the noise, "
-                   f"the frozen directions under their prior ({r.frozen_chi2:.3g}) and the field between the nodes "
-                   f"explain (the misfit counts as noise; setting scale_by_fit), so their σ and the data part of every "
-                   f"band are {np.sqrt(r.fit_scale):.3g}× what they would be without it.")
+        out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
+                   f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
+                   f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
     counts = r.verdict_counts()
     field = [v for v in r.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
     if field:
