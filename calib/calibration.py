@@ -373,12 +373,18 @@ class Calibrator:
             "appears or vanishes); check the fit, or set an explicit sigma_bar")
         lin = problem.linearize(p)
         svd = self._svd(problem, lin)
+        last_estimate = None
         for k in range(st.max_relinearizations):
             basis = svd.basis
             if prev_basis is not None and prev_basis.shape == basis.shape:
                 cos = subspace_cosines(prev_basis, basis)
                 if cos.size == 0 or cos.min() >= st.stability_cosine:
                     status, message = "converged", f"retained set stable after {k} re-linearization(s)"
+                    if last_estimate == "stalled":  # stable only because the estimate did not move
+                        status, message = "stalled", (
+                            f"the estimator stopped where no step decreased the cost (χ² {2 * lin.cost:.4g}, "
+                            f"{svd.n_retained} θ): the estimate, its σ and the bands are those of where it stopped, "
+                            "not of a minimum; check the fit, or set an explicit sigma_bar")
                     break
             theta0 = basis.T @ problem.scaled(p)
             out = estimate(problem, basis, theta0, st.optimizer, st.max_iterations, st.tolerance,
@@ -389,6 +395,7 @@ class Calibrator:
                 status, message = "failed", out.message
                 p = out.p
                 break
+            last_estimate = out.status
             p = out.p
             prev_basis = basis
             lin = problem.linearize(p)

@@ -139,6 +139,27 @@ def test_a_step_leaving_the_bounds_is_cut_back_to_them():
     np.testing.assert_array_equal(_feasible_step(B, theta, inside, -np.ones(2), np.ones(2)), inside)
 
 
+def test_a_round_off_step_across_an_active_bound_does_not_stop_the_step():
+    """A start exactly on a bound and a QP step that crosses it by round-off (1e-17, as a QP
+    solver returns along an active constraint): the step is kept, not cut to zero (which
+    stopped the estimator at nominal on the coverage benchmark's twin (d))."""
+    from calib.estimation import _feasible_step
+    B = np.linalg.qr(np.random.default_rng(7).standard_normal((3, 2)))[0]
+    lb, ub = -np.ones(3), np.ones(3)
+    theta = np.linalg.lstsq(B, np.array([-1.0, 0.2, 0.1]), rcond=None)[0]
+    lb[0] = (B @ theta)[0]                                # the start is on the lower bound of p̃₀
+    x = np.array([0.3, -0.2])
+    x = x - B[0] * (B[0] @ x) / (B[0] @ B[0])             # a step along the bound ...
+    x = x + B[0] * (-3e-17 / (B[0] @ B[0]))               # ... crossing it by round-off
+    assert (B @ x)[0] < 0
+    step = _feasible_step(B, theta, x, lb, ub)
+    np.testing.assert_allclose(step, x)
+    assert np.all(B @ (theta + step) >= lb - 1e-12)
+    # a real step across the bound is still cut at it
+    out = _feasible_step(B, theta, x - 0.1 * B[0], lb, ub)
+    assert np.all(B @ (theta + out) >= lb - 1e-15)
+
+
 def test_an_infeasible_start_is_pulled_back_inside_the_bounds():
     """A start θ₀ whose projection leaves the bounds (a new subspace after re-linearization)
     is pulled back toward nominal; the model is never asked outside its bounds."""
@@ -166,3 +187,18 @@ def test_an_infeasible_start_is_pulled_back_inside_the_bounds():
     # θ₀ = 3 gives (2.68, 1.34); clipped (1, 1) and projected back on the basis: (1.2, 0.6), still outside
     out = estimate(problem, basis, np.array([3.0]))
     assert np.all(np.abs(out.p) <= 1.0 + 1e-12) and all(np.all(np.abs(c) <= 1.0 + 1e-12) for c in calls)
+
+
+def test_an_iteration_damps_until_a_step_is_accepted_and_says_stalled_when_it_cannot(monkeypatch):
+    """The full Gauss–Newton step lands where a point fails: more damping finds a step that
+    does not (converged, inside the working region); with a single damping level the
+    estimator stops where it started and says "stalled", not "converged"."""
+    import calib.estimation as est
+
+    model = LinearModel(fail_if_p0_above=0.05)
+    prob = _problem(model, np.array([0.8, -0.2, 0.5, 0.1]))
+    out = estimate(prob, np.eye(model.n))
+    assert out.status == "converged" and out.linearization.n_failed == 0 and out.cost < prob.linearize(prob.p0).cost
+    monkeypatch.setattr(est, "DAMPING_TRIES", 1)
+    stuck = estimate(_problem(model, np.array([0.8, -0.2, 0.5, 0.1])), np.eye(model.n))
+    assert stuck.status == "stalled" and not stuck.history and np.array_equal(stuck.p, np.zeros(model.n))

@@ -364,3 +364,28 @@ def test_misfit_beyond_the_stated_noise_scales_the_retained_covariance():
     # a fit consistent with its noise is left alone
     fine = Calibrator(model, meas, base).run()
     assert fine.fit_scale == max(1.0, fine.chi2_after / fine.dof) and fine.fit_scale < 1.5
+
+
+def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monkeypatch):
+    """An estimator that stops where no step decreases the cost leaves the retained set
+    unchanged, which the re-linearization loop would read as stable: the status is
+    "stalled" and the message says the σ are not those of a minimum."""
+    import calib.calibration as cal
+    from test_calibration import CHANNELS, twin_truth
+    from twin_model import TwinModel, twin_conditions
+
+    from calib.estimation import EstimationOutcome
+
+    def no_step(problem, basis, theta0, *args, **kwargs):
+        start = problem.linearize(problem.p_of(basis, theta0))
+        return EstimationOutcome(np.asarray(theta0, float), start.p, start.cost, 0, "stalled",
+                                 "no step decreased the cost (damping exhausted)", start)
+
+    monkeypatch.setattr(cal, "estimate", no_step)
+    model = TwinModel(channels=CHANNELS)
+    cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 5))
+    meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7121)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, sigma_bar=1.0)).run()
+    assert res.status == "stalled", res.message
+    assert "not of a minimum" in res.message
+    np.testing.assert_allclose(res.p_hat, res.p_nominal)
