@@ -5,7 +5,8 @@ control without effect: NREL 5-MW, 36 operating points (λ 3–11 × pitch −1�
 thrust, root flap moment and the normal force per length at r/R = 0.95, 1 % noise; seeds
 9500 + k (none used by the tests). Figures: the fraction named right (``none`` for the
 control), what else was named, and the time per diagnosis. ``python benchmarks/bench_discrepancy.py
-[seeds]`` (4-7 s per diagnosis on the idle 2-core machine, up to 28 s with blockage; 20 seeds: 180 diagnoses); ``make bench`` runs it with 3 seeds.
+[seeds]`` (2.7-16 s per diagnosis on the idle 2-core machine, one seed: tip loss, wind-speed scale and
+blockage 11-16 s, the others under 4 s; 20 seeds: 180 diagnoses); ``make bench`` runs it with 3 seeds.
 """
 
 from __future__ import annotations
