@@ -304,6 +304,8 @@ class Measurements:
                 w.writerow([header(c) for c in cols])
                 for row in np.column_stack(data):
                     w.writerow([repr(float(x)) for x in row])
+                f.flush()
+                os.fsync(f.fileno())  # on disk before the rename makes it the file (a crash keeps the old one)
             os.replace(tmp, path)
         finally:
             if tmp.exists():

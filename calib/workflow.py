@@ -360,8 +360,7 @@ class WorkflowSetup:
             alpha = np.round(np.linspace(lo, hi, n), 2)
             self.notes.append(f"alpha nodes from the data ({lo_q:g}th-{hi_q:g}th percentile of the nominal "
                               f"model's angles of attack): {', '.join(f'{x:g}' for x in alpha)} deg")
-            if progress:
-                print(f"[calib run] set-up: {self.notes[-1]}", flush=True)
+            say(log, f"[calib run] set-up: {self.notes[-1]}", progress)
         else:
             alpha = _numbers(alpha, "grid.alpha_nodes_deg", src)
         eta = _numbers(g["eta_nodes"], "grid.eta_nodes", src)

@@ -1,5 +1,6 @@
 """Measurement tables: units, noise models and every bad-input path (file, row, column named)."""
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,30 @@ def test_round_trip_through_write_csv(tmp_path):
     back = read_measurements(m.write_csv(tmp_path / "again.csv"))
     np.testing.assert_allclose(back.values, m.values)
     np.testing.assert_allclose(back.sigma, m.sigma)
+
+
+def test_write_csv_puts_the_bytes_on_disk_before_the_rename(tmp_path, monkeypatch):
+    """The temporary file is fsynced, complete, before ``os.replace`` makes it the file: a crash
+    after the rename cannot leave an empty or half-written table."""
+    import calib.measurements as mm
+
+    m = read_measurements(write(tmp_path, GOOD), ["power", "thrust"])
+    events = []
+    real_fsync, real_replace = mm.os.fsync, mm.os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.fstat(fd).st_size))
+        real_fsync(fd)
+
+    def replace(src, dst):
+        events.append(("replace", Path(src).stat().st_size))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(mm.os, "fsync", fsync)
+    monkeypatch.setattr(mm.os, "replace", replace)
+    out = m.write_csv(tmp_path / "again.csv")
+    assert [e[0] for e in events] == ["fsync", "replace"]
+    assert events[0][1] == events[1][1] == out.stat().st_size > 0
 
 
 @pytest.mark.parametrize("text, line, field, words", [

@@ -178,3 +178,18 @@ def test_model_yaw_applies_to_points_without_a_yaw_column(tmp_path):
                  tmp_path / "out", progress=False)
     res = load_result(tmp_path / "out" / "stage1_hub")
     assert np.allclose(res.conditions["yaw"], 15.0)
+
+
+def test_alpha_nodes_placed_from_the_data_are_logged_not_printed_under_quiet(tmp_path, capsys):
+    """`calib run --quiet` prints warnings and errors only: the set-up line that says where the
+    α nodes went goes to the log file, not to the console."""
+    from calib.logs import command_logging
+
+    wf = Path(__file__).resolve().parents[1] / "workflows" / "own_turbine.toml"
+    setup = prepare(load_workflow(wf))
+    cond = OperatingConditions(np.array([6.0, 8.0, 10.0]), np.array([8.0, 9.5, 11.0]), np.zeros(3))
+    with command_logging(tmp_path, quiet=True) as log_file:
+        grid = setup.grid(cond, progress=True)
+    assert grid.alpha_nodes_deg.size >= 2
+    assert "alpha nodes from the data" not in capsys.readouterr().out
+    assert "alpha nodes from the data" in Path(log_file).read_text()

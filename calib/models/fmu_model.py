@@ -56,6 +56,7 @@ import numpy as np
 
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError, ModelError
+from calib.measurements import sha256_of
 from calib.models import fmu_worker as fw
 from calib.models.fmu_mapping import Mapping, load_mapping
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
@@ -73,14 +74,6 @@ class FmuInputError(InputError):
 
 
 # ----------------------------------------------------------------------------- archive
-def file_sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def check_archive(path: Path) -> list[str]:
     """Entry names of an FMU archive, refusing anything that is not a safe zip.
 
@@ -301,7 +294,7 @@ class FmuModel:
         if m.model_identifier and m.model_identifier != ident:
             raise FmuInputError(f"the mapping is for model identifier {m.model_identifier!r}, the FMU "
                                 f"{self.fmu_path.name} is {ident!r}", msrc, field="model_identifier")
-        self.sha256 = file_sha256(self.fmu_path)
+        self.sha256 = sha256_of(self.fmu_path)
         self.unzip_dir = extract_once(self.fmu_path, self.sha256)
         self._vars = {v.name: v for v in md.modelVariables}
         self.guid = md.guid if md.fmiVersion.startswith("2") else md.instantiationToken
