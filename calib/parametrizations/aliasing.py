@@ -46,6 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 from calib.corrections import CorrectionGrid
+from calib.parametrizations.correction_field import se_correlation
 
 #: Each calibration interval is split in this many parts for the aliasing term.
 REFINEMENT = 3
@@ -94,8 +95,7 @@ def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, length
         return A.ravel(), E.ravel()
 
     def rho(x, y):
-        return np.exp(-0.5 * ((x[0][:, None] - y[0][None]) / lengths[0]) ** 2
-                      - 0.5 * ((x[1][:, None] - y[1][None]) / lengths[1]) ** 2)
+        return se_correlation(x[0][:, None] - y[0][None], x[1][:, None] - y[1][None], lengths)
 
     f, c = nodes(fine), nodes(coarse)
     T = interpolation_matrix(coarse, fine)
@@ -107,7 +107,8 @@ def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, length
 
 def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, channel_index, ok: np.ndarray,
                         M: np.ndarray, V_retained: np.ndarray, s_retained: np.ndarray, prior_std: np.ndarray,
-                        correlation_length: float, alpha_deg, eta, factor: int = REFINEMENT) -> np.ndarray:
+                        correlation_length: float, alpha_deg, eta,
+                        factor: int = REFINEMENT) -> tuple[np.ndarray, float]:
     """Cov(δθ_ID) [scale units²] of the retained θ from the field between the nodes.
 
     Parameters

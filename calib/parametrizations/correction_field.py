@@ -137,6 +137,13 @@ def eigenshapes(V: np.ndarray, layout: NodeLayout, alpha_deg, eta, modes=None):
     return out[0], out[1]
 
 
+def se_correlation(d_alpha, d_eta, lengths: tuple[float, float]) -> np.ndarray:
+    """Correlation of the smooth-field prior between points Δα [deg] and Δη [-] apart: the
+    squared exponential exp(−Δα²/2ℓ_α² − Δη²/2ℓ_η²) with ``lengths`` = (ℓ_α, ℓ_η)
+    (Rasmussen & Williams 2006, §4.2) [-]."""
+    return np.exp(-0.5 * (np.asarray(d_alpha) / lengths[0]) ** 2 - 0.5 * (np.asarray(d_eta) / lengths[1]) ** 2)
+
+
 def seen_from_extras(evaluation: Evaluation) -> tuple[np.ndarray, np.ndarray]:
     """(α [deg], η [-]) of the loaded stations of converged points, from an evaluation whose
     ``extras`` carry ``alpha_deg`` (n_points, n_stations) and ``eta`` (n_stations,); NaN α
@@ -243,13 +250,12 @@ class CorrectionField:
         R = np.eye(self.n_params)
         if self.grid is None or not length > 0:
             return R
-        la, le = self.correlation_lengths(length)
+        lengths = self.correlation_lengths(length)
         for idx in (self._layout.lift_index, self._layout.drag_index):
             ia, ie = np.nonzero(idx >= 0)
             j = idx[ia, ie]
             a, e = self.grid.alpha_nodes_deg[ia], self.grid.eta_nodes[ie]
-            R[np.ix_(j, j)] = np.exp(-0.5 * ((a[:, None] - a[None]) / la) ** 2
-                                     - 0.5 * ((e[:, None] - e[None]) / le) ** 2)
+            R[np.ix_(j, j)] = se_correlation(a[:, None] - a[None], e[:, None] - e[None], lengths)
         return R
 
     def correlation_lengths(self, length: float) -> tuple[float, float]:
@@ -306,14 +312,13 @@ class CorrectionField:
         value = value.reshape(-1, 4)
         if not correlation_length > 0:
             return var_node * np.clip(1.0 - (value ** 2).sum(-1), 0.0, 1.0)
-        la, le = self.correlation_lengths(correlation_length)
+        lengths = self.correlation_lengths(correlation_length)
         node = node.reshape(-1, 4)
         an = self.grid.alpha_nodes_deg[node // self.grid.n_eta]
         en = self.grid.eta_nodes[node % self.grid.n_eta]
         a, e = alpha_deg.reshape(-1, 1), eta.reshape(-1, 1)
-        rho_x = np.exp(-0.5 * ((a - an) / la) ** 2 - 0.5 * ((e - en) / le) ** 2)
-        rho_nn = np.exp(-0.5 * ((an[:, :, None] - an[:, None, :]) / la) ** 2
-                        - 0.5 * ((en[:, :, None] - en[:, None, :]) / le) ** 2)
+        rho_x = se_correlation(a - an, e - en, lengths)
+        rho_nn = se_correlation(an[:, :, None] - an[:, None, :], en[:, :, None] - en[:, None, :], lengths)
         rel = 1.0 - 2.0 * (value * rho_x).sum(-1) + np.einsum("ki,kij,kj->k", value, rho_nn, value)
         return var_node * np.clip(rel, 0.0, 1.0)
 
