@@ -184,7 +184,15 @@ CHILD = textwrap.dedent('''
     from pathlib import Path
 
     faulthandler.register(signal.SIGUSR1)        # the parent asks for the stack if the child stalls
-    signal.signal(signal.SIGINT, signal.default_int_handler)   # even if started with SIGINT ignored
+    SIGINTS = []
+
+
+    def on_sigint(signum, frame):                # Python's default, counted (even if started with SIGINT ignored)
+        SIGINTS.append(signum)
+        raise KeyboardInterrupt
+
+
+    signal.signal(signal.SIGINT, on_sigint)
 
     import matplotlib
     matplotlib.use("Agg")
@@ -224,11 +232,17 @@ CHILD = textwrap.dedent('''
         try:
             one_pass()
             print("pass", flush=True)
-        except KeyboardInterrupt:                # also when matplotlib turned it into another error
+        except BaseException as exc:
+            # a Ctrl-C raised inside matplotlib's drawing can come out as another error (seen: the
+            # control writer's ValueError "Invalid affine transformation matrix"); after a SIGINT it
+            # is that Ctrl-C
+            if not (isinstance(exc, KeyboardInterrupt) or SIGINTS):
+                raise
+            SIGINTS.clear()
             caught += 1
             if caught >= rounds:
                 print("interrupted, exiting", flush=True)
-                raise                           # the last Ctrl-C ends the process, as a user's would
+                raise KeyboardInterrupt from exc   # the last Ctrl-C ends the process, as a user's would
             print("interrupted", flush=True)
             sys.stdin.readline()                # wait until the parent has checked the folder
 ''')
