@@ -39,7 +39,7 @@ from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
 from calib.result import CalibrationResult
-from calib.truncation import cv_curve
+from calib.truncation import cv_curve, prior_limit
 from calib.types import nominal_vector
 
 NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
@@ -55,8 +55,10 @@ class CalibrationSettings:
     Parameters
     ----------
     sigma_bar : float or "auto"
-        ``"auto"`` (default): retain the number of θ that minimizes the K-fold cross-validated
-        prediction error over operating points (:func:`calib.truncation.cv_curve`). A number: retain θ_i with
+        ``"auto"`` (default): retain the number of θ chosen by the K-fold cross-validated
+        prediction error over operating points (:func:`calib.truncation.cv_curve`), among the
+        leading directions the data determine better than the prior
+        (:func:`calib.truncation.prior_limit`). A number: retain θ_i with
         σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
         (see :func:`calib.identifiability.sigma_bar_for`).
     cv_folds : int
@@ -344,7 +346,12 @@ class Calibrator:
             return svd_analysis(lin.M, float(st.sigma_bar), st.max_retained)
         n_ch = len(self.channel_index)
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
-        curve = cv_curve(lin.M, pseudo, n_ch, lin.ok, st.cv_folds, st.max_retained, one_se=st.cv_one_se)
+        # never more θ than the data determine better than the prior: beyond that the CV curve of
+        # a rough truth can dip again at 50+ θ with σ(θ) of 25–50 prior units, where the estimate
+        # leaves the range over which the linearization holds (README, coverage twin (d))
+        limit = prior_limit(lin.M, self._prior_cov_scaled(), np.repeat(lin.ok, n_ch))
+        curve = cv_curve(lin.M, pseudo, n_ch, lin.ok, st.cv_folds, st.max_retained, one_se=st.cv_one_se,
+                         max_choice=limit)
         # the count is chosen afresh at each linearization until two consecutive choices agree
         # or AUTO_CHOICES were made; then the choice with the smallest criterion (each on its own
         # linearization's curve) is kept, so that the re-linearization loop converges on a
@@ -354,14 +361,23 @@ class Calibrator:
             agree = len(self._auto_choices) >= 2 and self._auto_choices[-1][1] == self._auto_choices[-2][1]
             if agree or len(self._auto_choices) >= AUTO_CHOICES:
                 self._auto_frozen = min(self._auto_choices)[1]
-                curve = replace(curve, chosen=min(self._auto_frozen, int(curve.n_retained[-1])))
+                curve = replace(curve, chosen=min(self._auto_frozen, limit, int(curve.n_retained[-1])))
         else:
-            curve = replace(curve, chosen=min(self._auto_frozen, int(curve.n_retained[-1])))
+            curve = replace(curve, chosen=min(self._auto_frozen, limit, int(curve.n_retained[-1])))
         self._curve = curve
         svd = svd_analysis(lin.M, np.inf)
         retained = np.zeros_like(svd.retained)
         retained[:curve.chosen] = svd.retained[:curve.chosen]
         return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, curve.sigma_bar, retained)
+
+    def _prior_cov_scaled(self) -> np.ndarray:
+        """The stated prior covariance of the scaled parameters [scale units²]: ``prior_std``
+        per parameter, neighbouring field nodes correlated by the smooth-field prior."""
+        prior_scaled = self.prior_std / self.scale
+        prior_cov = np.outer(prior_scaled, prior_scaled)
+        if self.field is not None:
+            prior_cov = prior_cov * self.field.node_correlation(self.settings.prior_correlation)
+        return prior_cov
 
     def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
         st = self.settings
@@ -445,9 +461,7 @@ class Calibrator:
         # Cov(θ̂) = diag(σ(θ)²) exactly, without inverting a possibly ill-conditioned matrix
         cov_theta = np.diag(svd.sigma_theta[svd.retained] ** 2)
         prior_scaled = self.prior_std / self.scale
-        prior_cov = np.outer(prior_scaled, prior_scaled)
-        if self.field is not None:  # the smooth-field prior correlates neighbouring nodes
-            prior_cov = prior_cov * self.field.node_correlation(st.prior_correlation)
+        prior_cov = self._prior_cov_scaled()
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))

@@ -78,6 +78,9 @@ class TruncationCurve:
         Unused (kept for results that carry it).
     criterion : str
         ``"10-fold"`` (K-fold over operating points) or ``"loo_points"``.
+    prior_limit : int, optional
+        Most θ the choice may take: the leading directions that the data determine better
+        than the stated prior (:func:`prior_limit`); ``None``: no limit.
     """
 
     n_retained: np.ndarray
@@ -89,6 +92,7 @@ class TruncationCurve:
     gcv: np.ndarray | None = None
     criterion: str = "10-fold"
     per_fold: np.ndarray | None = None
+    prior_limit: int | None = None
 
     @property
     def sigma_bar(self) -> float:
@@ -97,13 +101,47 @@ class TruncationCurve:
         return float(1.0 / s) if np.isfinite(s) and s > 0 else float("inf")
 
     def to_dict(self) -> dict:
-        return {"n_retained": self.n_retained, "cv": self.cv, "cv_se": self.cv_se, "fit": self.fit,
-                "singular_values": self.singular_values, "chosen": self.chosen, "criterion": self.criterion}
+        out = {"n_retained": self.n_retained, "cv": self.cv, "cv_se": self.cv_se, "fit": self.fit,
+               "singular_values": self.singular_values, "chosen": self.chosen, "criterion": self.criterion}
+        if self.prior_limit is not None:
+            out["prior_limit"] = int(self.prior_limit)
+        return out
+
+
+def prior_limit(M: np.ndarray, prior_cov: np.ndarray, ok_rows: np.ndarray | None = None) -> int:
+    """Number of leading singular directions the data determine better than the prior.
+
+    Freezing direction v_i at nominal costs the truth's prior variance along it, v_iᵀ P v_i;
+    estimating it costs σ(θ_i)² = 1/s_i². A direction with 1/s_i² > v_iᵀ P v_i is better left
+    to the prior (its frozen-direction variance is in the bands either way), so the automatic
+    choice stops before the first such direction.
+
+    Parameters
+    ----------
+    M : ndarray, shape (n_rows, n_params)
+        Whitened scaled sensitivities.
+    prior_cov : ndarray, shape (n_params, n_params)
+        Stated prior covariance of the scaled parameters [scale units²].
+    ok_rows : ndarray of bool, shape (n_rows,), optional
+        Rows that take part (default: all).
+
+    Returns
+    -------
+    int
+        k such that 1/s_i² <= v_iᵀ P v_i for i = 1 … k and not for i = k + 1.
+    """
+    Mo = M if ok_rows is None else M[np.asarray(ok_rows, bool)]
+    _, s, Vt = np.linalg.svd(Mo, full_matrices=False)
+    with np.errstate(divide="ignore"):
+        data_var = np.where(s > 0, 1.0 / s ** 2, np.inf)
+    prior_var = np.einsum("ij,jk,ik->i", Vt, np.asarray(prior_cov, float), Vt)
+    worse = np.flatnonzero(data_var > prior_var)
+    return int(worse[0]) if worse.size else int(s.size)
 
 
 def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | None = None,
              n_folds: int | None = 10, max_k: int | None = None, rtol: float = 1e-10,
-             one_se: bool = False) -> TruncationCurve:
+             one_se: bool = False, max_choice: int | None = None) -> TruncationCurve:
     """K-fold (or leave-one-point-out) prediction error of the truncated-SVD fit for every k.
 
     Parameters
@@ -127,6 +165,9 @@ def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | Non
     one_se : bool
         Choose the fewest θ whose criterion is within one standard error (over the folds) of
         the minimum instead of the minimum itself (Hastie et al. 2009, §7.10).
+    max_choice : int, optional
+        Choose among k <= ``max_choice`` only (the curve still covers every k), e.g.
+        :func:`prior_limit`.
 
     Returns
     -------
@@ -166,10 +207,12 @@ def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | Non
         fit.append(float(np.mean(resid ** 2)))
         sv.append(float(s[k - 1]) if k > 0 else float("inf"))
     cv, se = np.array(cv), np.array(se)
-    best = int(np.argmin(cv))
+    limit = k_max if max_choice is None else max(0, min(int(max_choice), k_max))
+    best = int(np.argmin(cv[:limit + 1]))
     chosen = best
     if one_se:
-        within = np.flatnonzero(cv <= cv[best] + se[best])
+        within = np.flatnonzero(cv[:limit + 1] <= cv[best] + se[best])
         chosen = int(within[0]) if within.size else best
     return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), chosen, se,
-                           None, "loo_points" if n_folds is None else f"{K}-fold", np.array(folds))
+                           None, "loo_points" if n_folds is None else f"{K}-fold", np.array(folds),
+                           None if max_choice is None else limit)

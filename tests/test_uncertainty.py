@@ -18,7 +18,7 @@ from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
 from calib.result import load_result
 from calib.rotor.library import load_rotor
-from calib.truncation import cv_curve
+from calib.truncation import cv_curve, prior_limit
 from calib.types import OperatingConditions, nominal_vector
 
 
@@ -45,6 +45,70 @@ def test_cv_curve_equals_refitting_without_each_fold(n_folds):
             per_fold.append(np.mean((z[rows] - X[rows] @ coef) ** 2))
         np.testing.assert_allclose(curve.cv[k], np.mean(per_fold), rtol=1e-9)
     assert curve.n_retained[0] == 0 and curve.chosen == int(np.argmin(curve.cv))
+
+
+def _svd_matrix(rng, s, n_rows=40):
+    """A matrix with singular values ``s`` and random orthonormal singular vectors, and V."""
+    n = len(s)
+    U = np.linalg.qr(rng.standard_normal((n_rows, n)))[0]
+    V = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    return U @ np.diag(s) @ V.T, V
+
+
+def test_prior_limit_stops_before_the_first_direction_the_prior_knows_better():
+    """Freezing v_i costs its prior variance v_iᵀPv_i, estimating it costs 1/s_i²: the limit is
+    the number of leading directions where the data win, for an isotropic and a correlated P."""
+    rng = np.random.default_rng(7004)
+    s = np.array([10.0, 3.0, 1.2, 0.9, 0.1])
+    M, V = _svd_matrix(rng, s)
+    assert prior_limit(M, np.eye(5)) == 3               # 1/s² = 0.01, 0.11, 0.69 | 1.23, 100
+    assert prior_limit(M, 4.0 * np.eye(5)) == 4         # prior 2 units: 1.23 <= 4 < 100
+    # a prior that says the second direction is almost surely small: stop before it
+    P = V @ np.diag([1.0, 0.05, 1.0, 1.0, 1.0]) @ V.T
+    assert prior_limit(M, P) == 1
+    # rows that take no part (failed points) are left out
+    M_failed = np.vstack([M, 1e3 * rng.standard_normal((3, 5))])
+    assert prior_limit(M_failed, np.eye(5), np.r_[np.ones(40, bool), np.zeros(3, bool)]) == 3
+
+
+def test_the_automatic_choice_stays_within_the_prior_limit():
+    """Data whose cross-validated error keeps falling into the weak directions: without a limit
+    the choice goes there; with one it stops at the limit, and the curve still covers every k."""
+    rng = np.random.default_rng(7005)
+    n_pts, n_ch = 30, 2
+    s = np.logspace(1, -2, 8)
+    M, V = _svd_matrix(rng, s, n_pts * n_ch)
+    z = M @ (V @ (20.0 / s)) + rng.standard_normal(n_pts * n_ch)   # large signal on every direction
+    free = cv_curve(M, z, n_ch, n_folds=5)
+    assert free.chosen > 3 and free.prior_limit is None
+    limited = cv_curve(M, z, n_ch, n_folds=5, max_choice=3)
+    assert limited.chosen <= 3 and limited.prior_limit == 3
+    np.testing.assert_array_equal(limited.cv, free.cv)
+    assert limited.to_dict()["prior_limit"] == 3 and "prior_limit" not in free.to_dict()
+
+
+def test_a_calibration_retains_no_direction_the_prior_knows_better():
+    """The recorded limit is the prior limit of the final linearization (recomputed here from
+    the result's singular values and vectors and its stated prior), the choice is within it, and
+    the report says so."""
+    from test_calibration import CHANNELS, twin_truth
+    from twin_model import TwinModel, twin_conditions
+
+    from calib.report.html import _sentences
+
+    model = TwinModel(channels=CHANNELS)
+    cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 9))
+    meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7122)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=None)).run()
+    field = model.correction_field()
+    std = res.prior_std / res.scale
+    P = np.outer(std, std) * field.node_correlation(res.settings["prior_correlation"])
+    data_var = 1.0 / res.singular_values ** 2
+    prior_var = np.einsum("ji,jk,ki->i", res.V, P, res.V)
+    expected = int(np.argmax(data_var > prior_var)) if np.any(data_var > prior_var) else data_var.size
+    assert res.truncation["prior_limit"] == expected
+    assert res.n_retained <= expected
+    assert any("better than the prior" in t for t in _sentences(res))
 
 
 def test_frozen_directions_carry_prior_variance():

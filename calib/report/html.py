@@ -73,6 +73,19 @@ def _fmt(x, digits=4) -> str:
     return html.escape(str(x))
 
 
+def _prior_limit_clause(r: CalibrationResult) -> str:
+    """How the prior limited the automatic choice, from the recorded curve ('' when not recorded)."""
+    limit = r.truncation.get("prior_limit")
+    if limit is None:
+        return ""
+    limit = int(limit)
+    cv = np.asarray(r.truncation["cv"], float)
+    if limit + 1 < cv.size and np.nanmin(cv[limit + 1:]) < np.nanmin(cv[:limit + 1]):
+        return (f"; only the first {limit} directions are determined better by the data than by the prior, "
+                f"and the criterion's lower values beyond them ({np.nanmin(cv[limit + 1:]):.3g}) were not taken")
+    return f"; the data determine the first {limit} directions better than the prior"
+
+
 def _sentences(r: CalibrationResult) -> list[str]:
     """Plain statements generated from the numbers they describe."""
     gof = r.goodness_of_fit()
@@ -82,7 +95,8 @@ def _sentences(r: CalibrationResult) -> list[str]:
                    f"over operating points (the fewest within one standard error of the minimum): "
                    f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {r.sigma_bar:.3g} scale units; criterion "
                    f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
-                   f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained).")
+                   f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained)"
+                   + _prior_limit_clause(r) + ".")
     else:
         out.append(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
                    f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")

@@ -105,6 +105,9 @@ def plot_truncation(result: CalibrationResult, ax=None):
     ax.semilogy(k, np.maximum(fit, 1e-12), "s-", ms=2, color="0.5", lw=0.8, label="in-sample fit")
     chosen = int(t["chosen"])
     ax.axvline(chosen, color="C3", ls="--", lw=1, label=f"chosen: {chosen} retained")
+    if t.get("prior_limit") is not None and int(t["prior_limit"]) < int(k[-1]):
+        ax.axvspan(int(t["prior_limit"]) + 0.5, int(k[-1]) + 0.5, color="0.85", zorder=0,
+                   label="data determine θ worse than the prior (not chosen)")
     ax.axhline(1.0, color="k", lw=0.6, ls=":")
     ax.set_xlabel("number of retained θ")
     ax.set_ylabel("mean squared whitened error [-]")
