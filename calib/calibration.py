@@ -419,25 +419,33 @@ class Calibrator:
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float]:
-        """Cov of the retained θ from the field between the nodes (scale units²) and the χ² it
-        adds to the residuals on average, or ``(None, 0)`` when it does not apply (no refinable
-        field, ``representation_error`` off, nothing retained, no reached point);
-        :mod:`calib.parametrizations.aliasing`."""
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float, str]:
+        """Cov of the retained θ from the field between the nodes (scale units²), the χ² it adds
+        to the residuals on average, and why it is left out ('' when it is in, or when there is
+        no correction field or nothing for it to act on); :mod:`calib.parametrizations.aliasing`."""
         st = self.settings
-        if not (st.representation_error and isinstance(self.model, RefinableFieldModel) and self.field is not None
-                and self.field.grid is not None and svd.retained.any() and alpha_seen.size
-                and st.prior_correlation > 0):
-            return None, 0.0
+        if self.field is None or self.field.grid is None or not svd.retained.any() or not alpha_seen.size:
+            return None, 0.0, ""
+        left_out = ("the bands leave out how a field varying between the correction nodes biases the retained θ, "
+                    "so they can be too narrow for polars that vary between the nodes")
+        if not st.representation_error:
+            return None, 0.0, f"representation_error = false: {left_out}."
+        if st.prior_correlation <= 0:
+            return None, 0.0, (f"prior_correlation = 0 (independent nodes) defines no field between the nodes to "
+                               f"propagate: {left_out}; the field's variance at each reached point is in the bands.")
+        if not isinstance(self.model, RefinableFieldModel):
+            return None, 0.0, (f"the model ({type(self.model).__name__}) cannot be rebuilt on a finer correction "
+                               f"grid (no with_grid, e.g. an FMU): {left_out}.")
         lay = self.field.layout
         if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
-            return None, 0.0
+            return None, 0.0, f"the correction field does not carry both lift and drag at every node: {left_out}."
         from calib.parametrizations.aliasing import aliasing_covariance
 
         r = svd.retained
-        return aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
-                                   lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
-                                   st.prior_correlation, alpha_seen, eta_seen)
+        cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+                                        lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
+                                        st.prior_correlation, alpha_seen, eta_seen)
+        return cov, chi2, ""
 
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
@@ -465,7 +473,7 @@ class Calibrator:
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        alias, alias_misfit = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        alias, alias_misfit, alias_note = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
         if alias is not None:  # the field between the nodes, taken up by the retained θ
             Vr = svd.V[:, svd.retained]
             cov_ret = cov_ret + Vr @ alias @ Vr.T
@@ -512,7 +520,7 @@ class Calibrator:
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
-            aliasing_chi2=alias_misfit,
+            aliasing_chi2=alias_misfit, aliasing_note=alias_note,
             multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,

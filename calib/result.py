@@ -107,6 +107,9 @@ class CalibrationResult:
     aliasing_chi2 : float
         The χ² after that the field between the nodes is expected to add on average (prior
         average, :mod:`calib.parametrizations.aliasing`; 0 where that term does not apply) [-].
+    aliasing_note : str
+        Why the bands leave that term out ('' when it is in, or when there is no correction
+        field or nothing retained for it to act on).
     """
 
     parameters: list[dict]
@@ -163,6 +166,7 @@ class CalibrationResult:
     checks: dict = field(default_factory=dict)
     fit_scale: float = 1.0
     aliasing_chi2: float = 0.0
+    aliasing_note: str = ""
 
     # ------------------------------------------------------------------ derived
     @property

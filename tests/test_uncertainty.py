@@ -470,3 +470,32 @@ def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monk
     assert res.status == "stalled", res.message
     assert "not of a minimum" in res.message
     np.testing.assert_allclose(res.p_hat, res.p_nominal)
+
+
+def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_path):
+    """A field model that cannot be rebuilt on a finer grid (the analytic twin, as an FMU) and a
+    BEM run with representation_error = false carry a note on what their bands leave out, the
+    report states it and it survives saving; the default BEM run includes the term and has none."""
+    from test_calibration import CHANNELS, twin_truth
+    from twin_model import TwinModel, twin_conditions
+
+    from calib.report.html import _sentences
+
+    model = TwinModel(channels=CHANNELS)
+    meas = synthesize(model, twin_truth(model), twin_conditions(tsr=np.linspace(4.0, 10.0, 5)),
+                      relative_sigma={c: 0.01 for c in CHANNELS}, seed=7123)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, sigma_bar=1.0)).run()
+    assert res.aliasing_chi2 == 0.0 and "cannot be rebuilt on a finer correction grid" in res.aliasing_note
+    assert any(t.startswith("Not in the bands: ") and "TwinModel" in t for t in _sentences(res))
+    res.save(tmp_path)
+    assert load_result(tmp_path).aliasing_note == res.aliasing_note
+
+    bem, cond, grid = bem_twin
+    p = nominal_vector(bem.parameters)
+    p[:grid.n_lift] = -0.05
+    meas = synthesize(bem, p, cond, relative_sigma={c.name: 0.01 for c in bem.channels}, seed=7124)
+    on = Calibrator(bem, meas, CalibrationSettings(cd_min=0.003, sigma_bar=1.0)).run()
+    assert on.aliasing_note == "" and on.aliasing_chi2 > 0.0
+    assert not any(t.startswith("Not in the bands") for t in _sentences(on))
+    off = Calibrator(bem, meas, CalibrationSettings(cd_min=0.003, sigma_bar=1.0, representation_error=False)).run()
+    assert "representation_error = false" in off.aliasing_note and off.aliasing_chi2 == 0.0

@@ -110,6 +110,8 @@ def _sentences(r: CalibrationResult) -> list[str]:
         out.append(f"A field between the correction nodes of the prior's typical size would add about "
                    f"{r.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.chi2_after:.3g}); the bands include "
                    f"its effect on the estimate.")
+    if r.aliasing_note:
+        out.append(f"Not in the bands: {r.aliasing_note}")
     if r.fit_scale > 1.0:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
