@@ -202,3 +202,38 @@ def test_an_iteration_damps_until_a_step_is_accepted_and_says_stalled_when_it_ca
     monkeypatch.setattr(est, "DAMPING_TRIES", 1)
     stuck = estimate(_problem(model, np.array([0.8, -0.2, 0.5, 0.1])), np.eye(model.n))
     assert stuck.status == "stalled" and not stuck.history and np.array_equal(stuck.p, np.zeros(model.n))
+
+
+def test_sqpmethod_vanishing_search_direction_is_accepted_only_at_an_improving_point(monkeypatch):
+    """CasADi's sqpmethod can end a strictly convex QP with "Search_Direction_Becomes_Too_Small"
+    (a failure to CasADi) at the QP's solution: that iterate is accepted. The same status at an
+    iterate worse than the start x = 0, or any other failure, is not (a coverage twin run had
+    ended "failed" on it with the cost converged)."""
+    from calib.estimation import CasadiQp
+
+    H = np.diag([2.0, 1.0])
+    g = np.array([-2.0, 1.0])
+    A, lb, ub = np.eye(2), np.array([-5.0, 0.0]), np.array([5.0, 5.0])
+    exact = np.array([1.0, 0.0])                # the minimizer: x1 = 1, x2 at its bound 0
+
+    class FakeSolver:
+        def __init__(self, x, status):
+            self.x, self.status = x, status
+
+        def __call__(self, **kwargs):
+            return {"x": self.x}
+
+        def stats(self):
+            return {"success": False, "return_status": self.status}
+
+    qp = CasadiQp("sqpmethod")
+    for x, status, accepted in ((exact, "Search_Direction_Becomes_Too_Small", True),
+                                (np.array([3.0, 1.0]), "Search_Direction_Becomes_Too_Small", False),
+                                (exact, "Maximum_Iterations_Exceeded", False)):
+        monkeypatch.setattr(qp, "_solver", lambda n, m, x=x, status=status: FakeSolver(x, status))
+        sol = qp(H, g, A, lb, ub)
+        assert sol.success is accepted and sol.message == status
+    # and the real solver on this QP
+    monkeypatch.undo()
+    sol = CasadiQp("sqpmethod")(H, g, A, lb, ub)
+    assert sol.success and np.allclose(sol.x, exact, atol=1e-8)
