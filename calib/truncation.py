@@ -23,8 +23,9 @@ minimum (the one-standard-error rule; ``one_se=False`` gives argmin CV).
 The choice is made among the leading directions that the data determine better than the
 stated prior, 1/s_i² <= v_iᵀ P v_i (:func:`prior_limit`): freezing such a direction costs its
 prior variance, estimating it costs more. Without that limit the curve of a truth that varies
-between the nodes (coverage twin (d), tuning seeds 8300–8329) dipped again at 41–58 θ with
-σ(θ) of 25–50 prior units on 7 of 30 draws, and those fits ended at χ²/dof 1.1–96 (three
+between the nodes (coverage twin (d), tuning seeds 8300–8329) dipped again at 41–58 θ on 7
+of 30 draws (σ(θ) of the last one chosen 26 and 40–53 prior units in the two traced, seeds
+8313 and 8312), and those fits ended at χ²/dof 1.1–96 (three
 above 20: the estimate left the range where the linearization holds). With the limit the
 same seven retain 7–21 θ at χ²/dof 1.5–9.1, and the summed NEES of all 30 is 549 for 507
 (band 447–571) instead of 563 for 819 (conservative, 742–900).
