@@ -347,7 +347,7 @@ class Calibrator:
         n_ch = len(self.channel_index)
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
         # never more θ than the data determine better than the prior: beyond that the CV curve of
-        # a rough truth can dip again at 50+ θ with σ(θ) of 25–50 prior units, where the estimate
+        # a rough truth can dip again at 50+ θ with σ(θ) of tens of prior units, where the estimate
         # leaves the range over which the linearization holds (README, coverage twin (d))
         limit = prior_limit(lin.M, self._prior_cov_scaled(), np.repeat(lin.ok, n_ch))
         curve = cv_curve(lin.M, pseudo, n_ch, lin.ok, st.cv_folds, st.max_retained, one_se=st.cv_one_se,
