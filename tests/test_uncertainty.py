@@ -401,7 +401,8 @@ def test_nees_of_the_retained_theta_is_not_overconfident_for_truths_in_the_span(
     pytest.param("wind_tunnel", marks=pytest.mark.xfail(
         reason="issue 7: ratio 1.209 since the estimator no longer stops on a round-off step across a C_D bound: "
                "the sweep's σ̄ = 5 (40 θ) now reaches held-back χ²/dof 1.845 (its best was 1.858 at σ̄ = 0.5); the "
-               "automatic choice is unchanged (12 θ, 2.229)", strict=False)),
+               "automatic choice is unchanged (12 θ, 2.229); on six tuning draws (8240-8245) the ratio is 1.07-1.79, "
+               "so the target is not met in general (README)", strict=False)),
     "twin"])
 def test_auto_truncation_held_back_on_the_shipped_data(name):
     """As the localization test above, on the wind-tunnel study's own noise seed and on another
