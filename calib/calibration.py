@@ -382,18 +382,18 @@ class Calibrator:
     def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
         st = self.settings
         prev_basis = None
-        status, message = "not_stable", (
-            f"retained set not stable after {st.max_relinearizations} re-linearizations: the standard deviations, "
-            "bands and intervals are those of the last linearization and can be too narrow (the model is far from "
-            "linear over the estimate's uncertainty, e.g. a point near a fold of the BEM residual where a root "
-            "appears or vanishes); check the fit, or set an explicit sigma_bar")
+        status, message = "not_stable", ""
         lin = problem.linearize(p)
         svd = self._svd(problem, lin)
         last_estimate = None
-        for k in range(st.max_relinearizations):
+        worst_cos = None
+        # the last pass only checks the re-linearization of the last estimate, so that an
+        # estimate whose retained set settled on the last allowed pass is not called unstable
+        for k in range(st.max_relinearizations + 1):
             basis = svd.basis
             if prev_basis is not None and prev_basis.shape == basis.shape:
                 cos = subspace_cosines(prev_basis, basis)
+                worst_cos = float(cos.min()) if cos.size else 1.0
                 if cos.size == 0 or cos.min() >= st.stability_cosine:
                     status, message = "converged", f"retained set stable after {k} re-linearization(s)"
                     if last_estimate == "stalled":  # stable only because the estimate did not move
@@ -402,6 +402,10 @@ class Calibrator:
                             f"{svd.n_retained} θ): the estimate, its σ and the bands are those of where it stopped, "
                             "not of a minimum; check the fit, or set an explicit sigma_bar")
                     break
+            elif prev_basis is not None:
+                worst_cos = None        # the count changed: no angle to compare
+            if k == st.max_relinearizations:
+                break
             theta0 = basis.T @ problem.scaled(p)
             out = estimate(problem, basis, theta0, st.optimizer, st.max_iterations, st.tolerance,
                            callback=self._emit, stage=f"estimate[{k + 1}]")
@@ -416,6 +420,16 @@ class Calibrator:
             prev_basis = basis
             lin = problem.linearize(p)
             svd = self._svd(problem, lin)
+        if status == "not_stable":
+            turned = "" if worst_cos is None else (
+                f"; between the last two re-linearizations the least aligned retained direction turned by "
+                f"{np.degrees(np.arccos(np.clip(worst_cos, -1.0, 1.0))):.0f}° (stable: within "
+                f"{np.degrees(np.arccos(st.stability_cosine)):.0f}°)")
+            message = (f"retained set not stable after {st.max_relinearizations} re-linearizations{turned}: the "
+                       "standard deviations, bands and intervals are those of the last linearization and can be too "
+                       "narrow (the model is far from linear over the estimate's uncertainty, e.g. a point near a fold "
+                       "of the BEM residual where a root appears or vanishes); check the fit, or set an explicit "
+                       "sigma_bar")
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs

@@ -412,17 +412,38 @@ def test_auto_truncation_held_back_on_the_shipped_data(name):
 
 
 def test_a_result_whose_retained_set_did_not_settle_says_its_bands_can_be_too_narrow():
-    """With one re-linearization allowed the retained set cannot be checked for stability:
-    the status is not_stable and the message tells the user not to trust the stated σ."""
+    """A stability test no re-linearization can pass (cosine 1 - 1e-12): the status is
+    not_stable, and the message gives the angle the retained set still turns by and tells the
+    user not to trust the stated σ."""
     from test_calibration import CHANNELS, twin_truth
     from twin_model import TwinModel, twin_conditions
 
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 4))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=1)).run()
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=2,
+                                                      stability_cosine=1.0 - 1e-12)).run()
     assert res.status == "not_stable"
     assert "can be too narrow" in res.message and "sigma_bar" in res.message
+    assert "after 2 re-linearizations; between the last two re-linearizations" in res.message
+    assert "turned by" in res.message
+
+
+def test_the_last_allowed_re_linearization_is_checked_for_stability():
+    """The re-linearization of the last estimate allowed is compared with the set it was
+    estimated on: with one re-linearization, a retained set that settled is "converged" (it was
+    reported not_stable without being checked)."""
+    from test_calibration import CHANNELS, twin_truth
+    from twin_model import TwinModel, twin_conditions
+
+    model = TwinModel(channels=CHANNELS)
+    cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 4))
+    meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
+    one = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=1)).run()
+    more = Calibrator(model, meas, CalibrationSettings(cd_min=None)).run()
+    assert more.status == "converged" and "stable after 1 re-linearization(s)" in more.message
+    assert one.status == "converged" and "stable after 1 re-linearization(s)" in one.message
+    np.testing.assert_allclose(one.p_hat, more.p_hat)
 
 
 def test_misfit_beyond_the_stated_noise_scales_the_retained_covariance():
