@@ -35,7 +35,8 @@ import numpy as np
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
 from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, frozen_aware_covariance,
-                                   observability, parameter_verdicts, subspace_cosines, svd_analysis)
+                                   frozen_curvature_covariance, observability, parameter_verdicts, subspace_cosines,
+                                   svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
 from calib.result import CalibrationResult
@@ -118,6 +119,12 @@ class CalibrationSettings:
         the data carry (the Birge ratio; Particle Data Group's scale factor). The frozen
         directions' prior part is not scaled. With the ML noise models χ²/dof is 1 by
         construction. Default true (measured in ``benchmarks/bench_coverage.py``, README).
+    curvature_samples : int
+        Prior draws of the frozen directions propagated through the model to the retained θ
+        (:func:`calib.identifiability.frozen_curvature_covariance`): where the model is not
+        linear over the prior's range, the frozen part of the truth biases the retained θ, and
+        this adds that bias's second moment to their covariance (not scaled by the fit). Costs
+        that many model evaluations per calibration; 0 leaves the term out (the report says so).
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float
@@ -148,6 +155,7 @@ class CalibrationSettings:
     stability_cosine: float = 0.98
     representation_error: bool = True
     scale_by_fit: bool = True
+    curvature_samples: int = 32
     identified_ratio: float = 0.5
     confounded_share: float = 0.75
     band_confidence: float = 0.95
@@ -175,6 +183,10 @@ class CalibrationSettings:
                 bad(f"must be in (0, 1], got {getattr(self, key)!r}", key)
         if not self.prior_correlation >= 0:
             bad(f"must be >= 0 (node spacings), got {self.prior_correlation!r}", "prior_correlation")
+        if isinstance(self.curvature_samples, bool) or not isinstance(self.curvature_samples, int) \
+                or self.curvature_samples < 0:
+            bad(f"must be an integer >= 0 (prior draws; 0 leaves the term out), got {self.curvature_samples!r}",
+                "curvature_samples")
         for key in ("max_relinearizations", "max_iterations", "max_noise_iterations", "cv_folds"):
             if not getattr(self, key) >= 1:
                 bad(f"must be >= 1, got {getattr(self, key)!r}", key)
@@ -461,6 +473,32 @@ class Calibrator:
                                         st.prior_correlation, alpha_seen, eta_seen)
         return cov, chi2, ""
 
+    def _curvature(self, problem, lin, svd, prior_cov) -> dict | None:
+        """The retained θ's covariance from the frozen directions' prior through the model's
+        curvature (:func:`calib.identifiability.frozen_curvature_covariance`), with what it
+        adds relative to the noise part; None when there is nothing to propagate."""
+        st = self.settings
+        r = svd.retained
+        if not r.any() or r.all():
+            return None
+        if st.curvature_samples == 0:
+            return {"samples": 0}
+        n_ch = len(self.channel_index)
+
+        def residual_at(step):
+            p = np.clip(lin.p + self.scale * step, self.lower, self.upper)
+            out = problem.evaluate(p)
+            return out.residual.reshape(-1), np.repeat(out.ok, n_ch), (p - lin.p) / self.scale
+
+        failed_before = problem.n_failed_points_total   # prior draws are not the fit's failures
+        cov, info = frozen_curvature_covariance(residual_at, lin.residual.reshape(-1), np.repeat(lin.ok, n_ch),
+                                                lin.M, svd.V, svd.sigma_theta, r, prior_cov, st.curvature_samples)
+        problem.n_failed_points_total = failed_before
+        # its size against the noise part, per retained θ: tr(S² C)/k and the largest ratio
+        ratio = np.diag(cov) / svd.sigma_theta[r] ** 2
+        return {**info, "cov": cov, "variance_ratio_mean": float(np.mean(ratio)),
+                "variance_ratio_max": float(np.max(ratio))}
+
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
 
@@ -493,6 +531,10 @@ class Calibrator:
             cov_ret = cov_ret + Vr @ alias @ Vr.T
         fit_scale = self._fit_scale(lin, svd)
         cov_ret, cov_theta = cov_ret * fit_scale, cov_theta * fit_scale
+        curvature = self._curvature(problem, lin, svd, prior_cov)
+        if curvature is not None and "cov" in curvature:  # the frozen part of the truth, through the curvature
+            Vr = svd.V[:, svd.retained]
+            cov_ret = cov_ret + Vr @ curvature.pop("cov") @ Vr.T
         D = np.outer(self.scale, self.scale)
         cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
@@ -534,7 +576,7 @@ class Calibrator:
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
-            aliasing_chi2=alias_misfit, aliasing_note=alias_note,
+            aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature or {},
             multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,

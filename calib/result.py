@@ -110,6 +110,12 @@ class CalibrationResult:
     aliasing_note : str
         Why the bands leave that term out ('' when it is in, or when there is no correction
         field or nothing retained for it to act on).
+    curvature : dict
+        The frozen directions' prior propagated through the model's curvature to the retained
+        θ (:func:`calib.identifiability.frozen_curvature_covariance`): ``samples`` drawn (0: the
+        term is left out), ``used``, ``samples_with_failed_points``, and its variance against
+        the noise part per retained θ, ``variance_ratio_mean`` and ``variance_ratio_max`` [-];
+        empty when nothing was frozen or nothing retained.
     """
 
     parameters: list[dict]
@@ -167,6 +173,7 @@ class CalibrationResult:
     fit_scale: float = 1.0
     aliasing_chi2: float = 0.0
     aliasing_note: str = ""
+    curvature: dict = field(default_factory=dict)
 
     # ------------------------------------------------------------------ derived
     @property

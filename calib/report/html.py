@@ -116,6 +116,15 @@ def _sentences(r: CalibrationResult) -> list[str]:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
                    f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
+    cur = r.curvature
+    if cur.get("samples", 0) > 0 and "variance_ratio_mean" in cur:
+        out.append(f"The frozen directions' prior, propagated through the model's curvature ({cur['used']} of "
+                   f"{cur['samples']} draws), adds to the variance of each retained θ on average "
+                   f"{cur['variance_ratio_mean']:.2g}× (at most {cur['variance_ratio_max']:.2g}×) its noise part "
+                   f"1/s²: the bias a frozen part of the truth gives the estimate where the model is not linear.")
+    elif cur.get("samples", None) == 0:
+        out.append("Not in the bands: curvature_samples = 0, so how the frozen part of the truth biases the retained θ "
+                   "where the model is not linear over the prior's range is left out.")
     counts = r.verdict_counts()
     field = [v for v in r.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
     if field:
