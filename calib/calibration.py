@@ -15,7 +15,10 @@ Procedure (Bottasso, Cacciola & Iriarte 2014; DESIGN §5)
 5. Covariance of the estimate including the frozen directions: Cov(p̃̂) = V_ID S_ID⁻² V_IDᵀ
    + V_NID (V_NIDᵀ P V_NID) V_NIDᵀ with the prior P (prior σ² per parameter; neighbouring
    correction nodes correlated, ``prior_correlation``)
-   (:func:`calib.identifiability.frozen_aware_covariance`); confidence bands on the corrected
+   (:func:`calib.identifiability.frozen_aware_covariance`), plus, for the retained θ, the
+   aliasing of the field between the nodes (:mod:`calib.parametrizations.aliasing`), the fit
+   scale (``scale_by_fit``) and the frozen part's bias through the model's curvature
+   (:func:`calib.identifiability.frozen_curvature_covariance`); confidence bands on the corrected
    polars; confounding of the non-field parameters with the field; a verdict per parameter
    from posterior vs prior; goodness of fit (χ² before over N, after over N − n_retained,
    p-value, per channel, worst points).

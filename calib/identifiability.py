@@ -211,7 +211,8 @@ def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np
 
     (DESIGN §5, option b). In a linear model the two parts are exact and uncorrelated:
     the retained θ̂ are unbiased whatever the frozen components are, because U_ID ⟂ U_NID.
-    Where the data say nothing the band is as wide as the prior.
+    Where the data say nothing the band is as wide as the prior. A model that is not linear
+    over the prior's range adds :func:`frozen_curvature_covariance`.
 
     Parameters
     ----------
