@@ -264,8 +264,10 @@ def frozen_curvature_covariance(residual_at, r0: np.ndarray, ok0: np.ndarray, M:
     here by Monte Carlo. Quadratic in δ to leading order, n is uncorrelated with δ for a
     Gaussian prior, so this term adds to the two of :func:`frozen_aware_covariance` without
     a cross term. The term is largest where few θ are retained and the frozen part of the
-    truth carries signal the linearization does not see (DESIGN §5; Seber & Wild 2003,
-    *Nonlinear Regression*, §4.7 on the bias of nonlinear least squares).
+    truth carries signal the linearization does not see (DESIGN §5; on the bias that a
+    model's curvature gives least-squares estimates: M.J. Box, Bias in nonlinear estimation,
+    J. R. Stat. Soc. B 33 (1971) 171-201; Seber & Wild, *Nonlinear Regression*, Wiley 1989,
+    ch. 4).
 
     Parameters
     ----------
