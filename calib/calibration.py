@@ -476,16 +476,17 @@ class Calibrator:
                                         st.prior_correlation, alpha_seen, eta_seen)
         return cov, chi2, ""
 
-    def _curvature(self, problem, lin, svd, prior_cov) -> dict | None:
+    def _curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:
         """The retained θ's covariance from the frozen directions' prior through the model's
-        curvature (:func:`calib.identifiability.frozen_curvature_covariance`), with what it
-        adds relative to the noise part; None when there is nothing to propagate."""
+        curvature (:func:`calib.identifiability.frozen_curvature_covariance`) [scale units²],
+        and what it adds relative to the noise part (``result.curvature``); (None, {}) when
+        there is nothing to propagate, (None, {"samples": 0}) when the term is switched off."""
         st = self.settings
         r = svd.retained
         if not r.any() or r.all():
-            return None
+            return None, {}
         if st.curvature_samples == 0:
-            return {"samples": 0}
+            return None, {"samples": 0}
         n_ch = len(self.channel_index)
 
         def residual_at(step):
@@ -499,8 +500,7 @@ class Calibrator:
         problem.n_failed_points_total = failed_before
         # its size against the noise part, per retained θ: tr(S² C)/k and the largest ratio
         ratio = np.diag(cov) / svd.sigma_theta[r] ** 2
-        return {**info, "cov": cov, "variance_ratio_mean": float(np.mean(ratio)),
-                "variance_ratio_max": float(np.max(ratio))}
+        return cov, {**info, "variance_ratio_mean": float(np.mean(ratio)), "variance_ratio_max": float(np.max(ratio))}
 
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
@@ -534,10 +534,10 @@ class Calibrator:
             cov_ret = cov_ret + Vr @ alias @ Vr.T
         fit_scale = self._fit_scale(lin, svd)
         cov_ret, cov_theta = cov_ret * fit_scale, cov_theta * fit_scale
-        curvature = self._curvature(problem, lin, svd, prior_cov)
-        if curvature is not None and "cov" in curvature:  # the frozen part of the truth, through the curvature
+        curvature_cov, curvature = self._curvature(problem, lin, svd, prior_cov)
+        if curvature_cov is not None:  # the frozen part of the truth, through the model's curvature
             Vr = svd.V[:, svd.retained]
-            cov_ret = cov_ret + Vr @ curvature.pop("cov") @ Vr.T
+            cov_ret = cov_ret + Vr @ curvature_cov @ Vr.T
         D = np.outer(self.scale, self.scale)
         cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
@@ -579,7 +579,7 @@ class Calibrator:
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
-            aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature or {},
+            aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature,
             multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,

@@ -232,10 +232,15 @@ def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np
     """
     Vr, Vn = V[:, retained], V[:, ~retained]
     cov_retained = (Vr * sigma_theta[retained] ** 2) @ Vr.T
-    prior = np.asarray(prior, float)
-    prior_theta = Vn.T @ prior @ Vn if prior.ndim == 2 else (Vn.T * prior ** 2) @ Vn
-    cov_frozen = Vn @ prior_theta @ Vn.T
+    cov_frozen = Vn @ _prior_in(Vn, prior) @ Vn.T
     return cov_retained, cov_frozen
+
+
+def _prior_in(Vn: np.ndarray, prior: np.ndarray) -> np.ndarray:
+    """Prior covariance of the coordinates along the columns of ``Vn``: Vnᵀ P Vn, with P a
+    matrix [scale units²] or the 1-σ of independent parameters [scale units]."""
+    prior = np.asarray(prior, float)
+    return Vn.T @ prior @ Vn if prior.ndim == 2 else (Vn.T * prior ** 2) @ Vn
 
 
 CURVATURE_SEED = 2014
@@ -305,8 +310,7 @@ def frozen_curvature_covariance(residual_at, r0: np.ndarray, ok0: np.ndarray, M:
     Vn = V[:, ~retained]
     if k == 0 or n_samples <= 0 or Vn.shape[1] == 0:
         return np.zeros((k, k)), info
-    prior = np.asarray(prior, float)
-    prior_theta = Vn.T @ prior @ Vn if prior.ndim == 2 else (Vn.T * prior ** 2) @ Vn
+    prior_theta = _prior_in(Vn, prior)
     w, Q = np.linalg.eigh(0.5 * (prior_theta + prior_theta.T))
     root = Vn @ (Q * np.sqrt(np.clip(w, 0.0, None)))
     # Δθ = −S⁻² V_IDᵀ Mᵀ n: the rows of A = S⁻² V_IDᵀ Mᵀ map a whitened misfit to the retained θ
