@@ -42,6 +42,7 @@ from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_
                                    svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
+from calib.parametrizations.aliasing import FineSensitivities
 from calib.result import CalibrationResult
 from calib.truncation import cv_curve, prior_limit
 from calib.types import nominal_vector
@@ -448,33 +449,63 @@ class Calibrator:
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float, str]:
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:
         """Cov of the retained θ from the field between the nodes (scale units²), the χ² it adds
-        to the residuals on average, and why it is left out ('' when it is in, or when there is
-        no correction field or nothing for it to act on); :mod:`calib.parametrizations.aliasing`."""
+        to the residuals on average, why it is left out ('' when it is in, or when there is
+        no correction field or nothing for it to act on; :mod:`calib.parametrizations.aliasing`),
+        and the fine-grid sensitivities it used (None when left out)."""
         st = self.settings
         if self.field is None or self.field.grid is None or not svd.retained.any() or not alpha_seen.size:
-            return None, 0.0, ""
+            return None, 0.0, "", None
         left_out = ("the bands leave out how a field varying between the correction nodes biases the retained θ, "
                     "so they can be too narrow for polars that vary between the nodes")
         if not st.representation_error:
-            return None, 0.0, f"representation_error = false: {left_out}."
+            return None, 0.0, f"representation_error = false: {left_out}.", None
         if st.prior_correlation <= 0:
             return None, 0.0, (f"prior_correlation = 0 (independent nodes) defines no field between the nodes to "
-                               f"propagate: {left_out}; the field's variance at each reached point is in the bands.")
+                               f"propagate: {left_out}; the field's variance at each reached point is in the bands."), None
         if not isinstance(self.model, RefinableFieldModel):
             return None, 0.0, (f"the model ({type(self.model).__name__}) cannot be rebuilt on a finer correction "
-                               f"grid (no with_grid, e.g. an FMU): {left_out}.")
+                               f"grid (no with_grid, e.g. an FMU): {left_out}."), None
         lay = self.field.layout
         if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
-            return None, 0.0, f"the correction field does not carry both lift and drag at every node: {left_out}."
-        from calib.parametrizations.aliasing import aliasing_covariance
+            return None, 0.0, f"the correction field does not carry both lift and drag at every node: {left_out}.", None
+        from calib.parametrizations.aliasing import aliasing_covariance, fine_sensitivities
 
         r = svd.retained
+        fine = fine_sensitivities(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+                                  lin.ok, alpha_seen, eta_seen)
         cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
                                         lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
-                                        st.prior_correlation, alpha_seen, eta_seen)
-        return cov, chi2, ""
+                                        st.prior_correlation, alpha_seen, eta_seen, sensitivities=fine)
+        return cov, chi2, "", fine
+
+    def _prior_check(self, problem, lin, fine) -> dict:
+        """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`)
+        at the final linearization: on the fine grid of the aliasing term when it was computed
+        (``fine``), else on the calibration nodes; {} without a correction field."""
+        if self.field is None or self.field.grid is None:
+            return {}
+        from calib.parametrizations.aliasing import grid_correlation
+        from calib.prior_check import prior_amplitude
+
+        lay = self.field.layout
+        blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
+        field_cols = np.concatenate(blocks)
+        other = np.setdiff1d(np.arange(len(self.parameters)), field_cols)
+        rows = np.repeat(lin.ok, len(self.channel_index))
+        M = lin.M[rows]
+        z = lin.residual.reshape(-1)[rows] + M @ problem.scaled(lin.p)
+        P = self._prior_cov_scaled()
+        if fine is not None:
+            K = grid_correlation(fine.fine, fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
+            var = [float(np.mean(self.prior_std[b] ** 2)) for b in blocks]
+            Z_f = fine.W[rows]
+            K_f = np.block([[var[0] * K, np.zeros_like(K)], [np.zeros_like(K), var[1] * K]])
+        else:
+            Z_f, K_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)]
+        check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None)
+        return check.to_dict()
 
     def _curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:
         """The retained θ's covariance from the frozen directions' prior through the model's
@@ -528,7 +559,8 @@ class Calibrator:
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        alias, alias_misfit, alias_note = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        alias, alias_misfit, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        prior_check = self._prior_check(problem, lin, fine)
         if alias is not None:  # the field between the nodes, taken up by the retained θ
             Vr = svd.V[:, svd.retained]
             cov_ret = cov_ret + Vr @ alias @ Vr.T
@@ -579,7 +611,7 @@ class Calibrator:
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
-            aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature,
+            aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature, prior_check=prior_check,
             multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,

@@ -116,6 +116,11 @@ class CalibrationResult:
         term is left out), ``used``, ``samples_with_failed_points``, and its variance against
         the noise part per retained θ, ``variance_ratio_mean`` and ``variance_ratio_max`` [-];
         empty when nothing was frozen or nothing retained.
+    prior_check : dict
+        The data's estimate of the correction field's prior amplitude
+        (:class:`calib.prior_check.PriorCheck` as a dict: ``amplitude``, ``lower``, ``upper``,
+        ``confidence``, ``verdict``, ``between_nodes``, ``log_lr_at_stated``); empty without a
+        correction field.
     """
 
     parameters: list[dict]
@@ -174,6 +179,7 @@ class CalibrationResult:
     aliasing_chi2: float = 0.0
     aliasing_note: str = ""
     curvature: dict = field(default_factory=dict)
+    prior_check: dict = field(default_factory=dict)
 
     # ------------------------------------------------------------------ derived
     @property
@@ -334,6 +340,11 @@ class CalibrationResult:
                  f"{self.chi2_per_dof_after:.3g} (dof {self.dof})",
                  "  verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
                  "  failed model points: " + ", ".join(f"{k} {v}" for k, v in self.failures.items())]
+        if self.prior_check:
+            pc = self.prior_check
+            lines.append(f"  prior check: field amplitude {pc['amplitude']:.2g} x stated "
+                         f"({100 * pc['confidence']:.0f} % interval {pc['lower']:.2g}-{pc['upper']:.2g}), "
+                         f"{pc['verdict']}")
         rb, ra = self.rms("before"), self.rms("after")
         for c in self.channels:
             lines.append(f"  rms {c}: {rb[c]:.4g} -> {ra[c]:.4g}")

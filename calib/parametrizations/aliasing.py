@@ -43,6 +43,8 @@ M.C. Kennedy, A. O'Hagan, Bayesian calibration of computer models, J. R. Stat. S
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from calib.corrections import CorrectionGrid
@@ -86,29 +88,81 @@ def interpolation_matrix(coarse: CorrectionGrid, fine: CorrectionGrid) -> np.nda
     return T
 
 
-def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
-    """K_ff − T K_cf − K_fc Tᵀ + T K_cc Tᵀ: the correlation of the fine nodal values minus their
-    coarse interpolant under the smooth-field prior (unit variance) [-]."""
+def grid_correlation(a: CorrectionGrid, b: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
+    """Smooth-field prior correlation between the nodes of ``a`` and of ``b`` (one block,
+    node order α-major as in the grids' layout) [-]."""
 
     def nodes(g):
         A, E = np.meshgrid(g.alpha_nodes_deg, g.eta_nodes, indexing="ij")
         return A.ravel(), E.ravel()
 
-    def rho(x, y):
-        return se_correlation(x[0][:, None] - y[0][None], x[1][:, None] - y[1][None], lengths)
+    x, y = nodes(a), nodes(b)
+    return se_correlation(x[0][:, None] - y[0][None], x[1][:, None] - y[1][None], lengths)
 
-    f, c = nodes(fine), nodes(coarse)
+
+def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
+    """K_ff − T K_cf − K_fc Tᵀ + T K_cc Tᵀ: the correlation of the fine nodal values minus their
+    coarse interpolant under the smooth-field prior (unit variance) [-]."""
     T = interpolation_matrix(coarse, fine)
-    K_fc = rho(f, c)
-    TK = T @ K_fc.T
-    D = rho(f, f) - TK - TK.T + T @ rho(c, c) @ T.T
+    TK = T @ grid_correlation(fine, coarse, lengths).T
+    D = grid_correlation(fine, fine, lengths) - TK - TK.T + T @ grid_correlation(coarse, coarse, lengths) @ T.T
     return 0.5 * (D + D.T)
+
+
+@dataclass(frozen=True, eq=False)
+class FineSensitivities:
+    """The whitened sensitivities of the outputs to a correction field on a finer grid.
+
+    Attributes
+    ----------
+    fine : CorrectionGrid
+        The refined grid (:func:`refined_grid`).
+    W : ndarray, shape (n_points * n_channels, 2 * n_fine)
+        ∂(y/σ)/∂(fine nodal values), lift block then drag block, zero rows at the points
+        that do not enter the fit [1/parameter unit].
+    n_fine : int
+        Nodes of one block of the fine grid.
+    """
+
+    fine: CorrectionGrid
+    W: np.ndarray
+    n_fine: int
+
+
+def fine_sensitivities(model, p: np.ndarray, conditions, sigma: np.ndarray, channel_index, ok: np.ndarray,
+                       alpha_deg, eta, factor: int = REFINEMENT) -> FineSensitivities:
+    """W of :class:`FineSensitivities` at the fine-grid vector that reproduces the estimate ``p``.
+
+    Parameters are those of :func:`aliasing_covariance`.
+    """
+    field = model.correction_field()
+    coarse = field.grid
+    fine = refined_grid(coarse, alpha_deg, eta, factor)
+    fmodel = model.with_grid(fine)
+    flay, clay = fmodel.correction_field().layout, field.layout
+    T = interpolation_matrix(coarse, fine)
+    p_fine = np.array([q.nominal for q in fmodel.parameters], float)
+    by_name = {q.name: j for j, q in enumerate(model.parameters)}
+    field_cols = set(clay.lift_index.ravel()) | set(clay.drag_index.ravel())
+    for j, q in enumerate(fmodel.parameters):
+        if q.name in by_name and by_name[q.name] not in field_cols:
+            p_fine[j] = p[by_name[q.name]]
+    cols = []
+    for f_idx, c_idx in ((flay.lift_index, clay.lift_index), (flay.drag_index, clay.drag_index)):
+        p_fine[f_idx.ravel()] = T @ p[c_idx.ravel()]
+        cols.append(f_idx.ravel())
+    ev, G = fmodel.jacobian(p_fine, conditions)
+    use = np.asarray(ok, bool) & ev.ok
+    W = np.concatenate([G[:, channel_index, :][..., c] for c in cols], axis=-1) / sigma[:, :, None]
+    W = np.where(use[:, None, None], W, 0.0).reshape(-1, sum(c.size for c in cols))
+    return FineSensitivities(fine, W, int(cols[0].size))
 
 
 def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, channel_index, ok: np.ndarray,
                         M: np.ndarray, V_retained: np.ndarray, s_retained: np.ndarray, prior_std: np.ndarray,
                         correlation_length: float, alpha_deg, eta,
-                        factor: int = REFINEMENT) -> tuple[np.ndarray, float]:
+                        factor: int = REFINEMENT, sensitivities: FineSensitivities | None = None
+                        ) -> tuple[np.ndarray, float]:
     """Cov(δθ_ID) [scale units²] of the retained θ from the field between the nodes.
 
     Parameters
@@ -137,6 +191,8 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
         The (α, η) the operating points reach (the fine grid covers them).
     factor : int
         Refinement of the calibration grid.
+    sensitivities : FineSensitivities, optional
+        :func:`fine_sensitivities` already computed at ``p`` (else computed here).
 
     Returns
     -------
@@ -146,28 +202,12 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
         average, tr(P⊥ W Σ_δ Wᵀ P⊥) with P⊥ = I − U_ID U_IDᵀ [-].
     """
     field = model.correction_field()
-    coarse = field.grid
+    coarse, clay = field.grid, field.layout
     k = V_retained.shape[1]
     if k == 0 or not correlation_length > 0:
         return np.zeros((k, k)), 0.0
-    fine = refined_grid(coarse, alpha_deg, eta, factor)
-    fmodel = model.with_grid(fine)
-    flay, clay = fmodel.correction_field().layout, field.layout
-    T = interpolation_matrix(coarse, fine)
-    p_fine = np.array([q.nominal for q in fmodel.parameters], float)
-    by_name = {q.name: j for j, q in enumerate(model.parameters)}
-    field_cols = set(clay.lift_index.ravel()) | set(clay.drag_index.ravel())
-    for j, q in enumerate(fmodel.parameters):
-        if q.name in by_name and by_name[q.name] not in field_cols:
-            p_fine[j] = p[by_name[q.name]]
-    cols = []
-    for f_idx, c_idx in ((flay.lift_index, clay.lift_index), (flay.drag_index, clay.drag_index)):
-        p_fine[f_idx.ravel()] = T @ p[c_idx.ravel()]
-        cols.append(f_idx.ravel())
-    ev, G = fmodel.jacobian(p_fine, conditions)
-    use = np.asarray(ok, bool) & ev.ok
-    W = np.concatenate([G[:, channel_index, :][..., c] for c in cols], axis=-1) / sigma[:, :, None]
-    W = np.where(use[:, None, None], W, 0.0).reshape(-1, sum(c.size for c in cols))
+    fs = sensitivities or fine_sensitivities(model, p, conditions, sigma, channel_index, ok, alpha_deg, eta, factor)
+    fine, W = fs.fine, fs.W
     B = (V_retained.T @ (M.T @ W)) / s_retained[:, None] ** 2
     U = (M @ V_retained) / s_retained                  # retained left singular vectors
     P_W = W - U @ (U.T @ W)                            # the part of W δ the fit leaves in the residuals

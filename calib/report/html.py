@@ -14,6 +14,7 @@ from typing import Mapping
 import numpy as np
 
 from calib.report.atomic import atomic_write_text
+from calib.prior_check import PriorCheck
 from calib.result import CalibrationResult
 
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}
@@ -116,6 +117,8 @@ def _sentences(r: CalibrationResult) -> list[str]:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
                    f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
+    if r.prior_check:
+        out.append(PriorCheck(**r.prior_check).sentence())
     cur = r.curvature
     if cur.get("samples", 0) > 0 and "variance_ratio_mean" in cur:
         out.append(f"The frozen directions' prior, propagated through the model's curvature ({cur['used']} of "
