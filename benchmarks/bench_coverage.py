@@ -28,8 +28,10 @@ fraction of the (α, η) points the operating points reach where the 95 % band c
 inside the node range only, the summed NEES of the retained θ against its two-sided 95 % χ²
 band (against the truth's values at the calibration nodes, with the covariance the result
 states: noise, the field between the nodes, fit scale; also with the noise part alone), the
-same over the calibrations that ended "converged" (the others listed), the retained count,
-failures and time.
+same over the calibrations that ended "converged" (the others listed), the prior check's
+verdicts and how often its 95 % interval holds the stated amplitude 1 (:mod:`calib.prior_check`;
+in (d) the truth is drawn from the very prior the check assumes), the retained count, failures
+and time.
 
 Held-back truncation check: every third operating point held back, calibrate on the rest with
 ``sigma_bar = "auto"`` and with σ̄ = 0.1 … 5, predict the held-back points and compare χ²/dof
@@ -154,6 +156,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
         cov = {"lift": [], "drag": [], "lift_in_grid": [], "drag_in_grid": []}
         hits = {"lift": [0, 0], "drag": [0, 0]}
         nees, nees_noise, dims, stable, kept, failed = [], [], [], [], [], 0
+        prior_checks = []
         t0 = time.perf_counter()
         for k in range(n_seeds):
             if p_fixed is not None:
@@ -202,15 +205,25 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                 hits[block][0] += round(c[block] * c["n_points"])
                 hits[block][1] += c["n_points"]
             kept.append(res.n_retained)
+            prior_checks.append(res.prior_check)
             print(f"[coverage {label}] seed {seed0 + k}: lift {c['lift']:.3f} drag {c['drag']:.3f} (inside the node "
                   f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} NEES {nees[-1]:.1f} "
-                  f"fit scale {res.fit_scale:.2f} {res.status}", flush=True)
+                  f"fit scale {res.fit_scale:.2f} prior amplitude {res.prior_check['amplitude']:.2f} "
+                  f"({res.prior_check['lower']:.2f}-{res.prior_check['upper']:.2f}) {res.status}", flush=True)
         fig = {"n_seeds": n_seeds, "seeds": [seed0, seed0 + n_seeds - 1]}
         for key, v in cov.items():
             fig[f"coverage_{key}_mean"] = float(np.mean(v))
             fig[f"coverage_{key}_p10_p90"] = np.percentile(v, [10, 90]).tolist()
         for block in ("lift", "drag"):
             fig[f"coverage_{block}_pooled"] = hits[block][0] / hits[block][1]
+        # the prior check (calib.prior_check): how often its interval holds the stated amplitude 1
+        amp = np.array([pc["amplitude"] for pc in prior_checks])
+        fig.update({"prior_check_contains_stated": float(np.mean([pc["lower"] <= 1.0 <= pc["upper"]
+                                                                   for pc in prior_checks])),
+                    "prior_check_verdicts": {v: sum(pc["verdict"] == v for pc in prior_checks)
+                                             for v in ("consistent", "larger", "smaller")},
+                    "prior_check_amplitude_median_p10_p90": [float(np.median(amp)),
+                                                             *np.percentile(amp, [10, 90]).tolist()]})
         fig.update({"retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
                     "seconds_per_calibration": (time.perf_counter() - t0) / n_seeds})
         if dims:

@@ -488,6 +488,15 @@ def test_nees_of_the_retained_theta_is_not_overconfident_for_truths_in_the_span(
     assert fig["nees_converged_sum"] <= fig["nees_converged_band"][1], fig
 
 
+@pytest.mark.statistics
+def test_prior_check_holds_the_stated_amplitude_for_truths_drawn_from_that_prior(coverage_twins):
+    """Twin (d) draws its truth from the very prior the check assumes (a smooth field on a fine
+    grid): the 95 % interval of the field's amplitude must contain the stated 1 in at least 8 of
+    the 10 draws (7 or fewer has probability 1.2 % for an interval that is right)."""
+    fig = coverage_twins["d_prior_draws_outside_span"]
+    assert fig["prior_check_contains_stated"] >= 0.8, fig
+
+
 @pytest.fixture(scope="module")
 def coverage_twins_stated_in_span():
     """Twins (a) and (c), whose truths lie in the span of the hat functions, calibrated with the
