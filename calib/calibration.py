@@ -481,23 +481,39 @@ class Calibrator:
         return cov, chi2, "", fine
 
     def _prior_check(self, problem, lin, fine) -> dict:
-        """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`)
-        at the final linearization: on the fine grid of the aliasing term when it was computed
-        (``fine``), else on the calibration nodes; {} without a correction field."""
+        """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`),
+        linearized at the MAP under the stated prior (:func:`calib.prior_check.map_point`, from the
+        estimate): on the fine grid of the aliasing term when it was computed (``fine`` given),
+        else on the calibration nodes; {} without a correction field."""
         if self.field is None or self.field.grid is None:
             return {}
-        from calib.parametrizations.aliasing import grid_correlation
-        from calib.prior_check import prior_amplitude
+        from dataclasses import replace as _replace
 
+        from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation
+        from calib.prior_check import map_point, prior_amplitude
+
+        n_ch = len(self.channel_index)
+        P = self._prior_cov_scaled()
+
+        def linearize_at(x):
+            p = np.clip(self.p0 + self.scale * x, self.lower, self.upper)
+            at = problem.linearize(p)
+            return (p - self.p0) / self.scale, at.residual.reshape(-1), np.repeat(at.ok, n_ch), at.M
+
+        failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
+        mp = map_point(linearize_at, problem.scaled(lin.p), P)
+        problem.n_failed_points_total = failed_before
         lay = self.field.layout
         blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
         field_cols = np.concatenate(blocks)
         other = np.setdiff1d(np.arange(len(self.parameters)), field_cols)
-        rows = np.repeat(lin.ok, len(self.channel_index))
-        M = lin.M[rows]
-        z = lin.residual.reshape(-1)[rows] + M @ problem.scaled(lin.p)
-        P = self._prior_cov_scaled()
+        rows = mp.ok_rows
+        M = mp.M[rows]
+        z = mp.residual[rows] + M @ mp.x
         if fine is not None:
+            at_map = problem.linearize(self.p0 + self.scale * mp.x)     # cached unless the last trial was refused
+            fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma, problem.channel_index,
+                                      at_map.ok, *self.field.seen(at_map.evaluation))
             K = grid_correlation(fine.fine, fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
             var = [float(np.mean(self.prior_std[b] ** 2)) for b in blocks]
             Z_f = fine.W[rows]
@@ -505,6 +521,8 @@ class Calibrator:
         else:
             Z_f, K_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)]
         check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None)
+        check = _replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
+                         map_iterations=mp.iterations, map_converged=mp.converged)
         return check.to_dict()
 
     def _curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:

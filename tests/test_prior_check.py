@@ -114,3 +114,38 @@ def test_calibration_reports_the_prior_check_on_the_fine_grid_and_it_survives_sa
     meas = synthesize(model, p_big, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7613)
     big = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
     assert big.prior_check["verdict"] == "larger", big.prior_check
+
+
+def test_map_point_against_the_closed_form_and_a_general_minimizer():
+    """Linear model: the MAP is P Mᵀ(M P Mᵀ + I)⁻¹ z. A model with a quadratic term: the
+    Gauss–Newton point minimizes ½|r|² + ½xᵀP⁻¹x as a general minimizer finds it."""
+    from scipy import optimize
+
+    from calib.prior_check import map_point
+
+    rng = np.random.default_rng(7620)
+    n, m = 40, 6
+    M = rng.standard_normal((n, m))
+    x_true = rng.standard_normal(m)
+    x = np.linspace(0.0, 1.0, m)
+    P = np.exp(-0.5 * (x[:, None] - x[None]) ** 2 / 0.3 ** 2) + 0.05 * np.eye(m)
+    z = M @ x_true + 0.3 * rng.standard_normal(n)
+
+    def linear(x):
+        return x, z - M @ x, np.ones(n, bool), M
+
+    mp = map_point(linear, np.zeros(m), P)
+    np.testing.assert_allclose(mp.x, P @ M.T @ np.linalg.solve(M @ P @ M.T + np.eye(n), z), atol=1e-8)
+    assert mp.converged
+
+    c = 0.3 * rng.standard_normal((n, m))
+    zq = M @ x_true + c @ x_true ** 2 + 0.3 * rng.standard_normal(n)
+
+    def quadratic(x):
+        return x, zq - M @ x - c @ x ** 2, np.ones(n, bool), M + 2.0 * c * x[None, :]
+
+    mp = map_point(quadratic, np.zeros(m), P, max_iterations=50, rtol=1e-12)
+    Pinv = np.linalg.inv(P)
+    ref = optimize.minimize(lambda x: 0.5 * np.sum((zq - M @ x - c @ x ** 2) ** 2) + 0.5 * x @ Pinv @ x,
+                            np.zeros(m), method="BFGS", options={"gtol": 1e-10})
+    np.testing.assert_allclose(mp.x, ref.x, atol=1e-5)
