@@ -489,7 +489,7 @@ class Calibrator:
             return {}
         from dataclasses import replace as _replace
 
-        from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation
+        from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
         from calib.prior_check import map_point, prior_amplitude
 
         n_ch = len(self.channel_index)
@@ -514,13 +514,14 @@ class Calibrator:
             at_map = problem.linearize(self.p0 + self.scale * mp.x)     # cached unless the last trial was refused
             fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma, problem.channel_index,
                                       at_map.ok, *self.field.seen(at_map.evaluation))
-            K = grid_correlation(fine.fine, fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
-            var = [float(np.mean(self.prior_std[b] ** 2)) for b in blocks]
-            Z_f = fine.W[rows]
-            K_f = np.block([[var[0] * K, np.zeros_like(K)], [np.zeros_like(K), var[1] * K]])
+            L = grid_correlation_sqrt(fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
+            sd = [float(np.sqrt(np.mean(self.prior_std[b] ** 2))) for b in blocks]
+            Z_f, K_f = fine.W[rows], None
+            L_f = np.block([[sd[0] * L, np.zeros_like(L)], [np.zeros_like(L), sd[1] * L]])
         else:
-            Z_f, K_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)]
-        check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None)
+            Z_f, K_f, L_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)], None
+        check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None,
+                                field_sqrt=L_f)
         check = _replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
                          map_iterations=mp.iterations, map_converged=mp.converged)
         return check.to_dict()

@@ -129,9 +129,9 @@ def _psd_sqrt(K: np.ndarray) -> np.ndarray:
     return Q * np.sqrt(np.clip(w, 0.0, None))
 
 
-def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray, Z_other: np.ndarray | None = None,
+def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | None, Z_other: np.ndarray | None = None,
                     K_other: np.ndarray | None = None, confidence: float = 0.95,
-                    between_nodes: bool = False) -> PriorCheck:
+                    between_nodes: bool = False, field_sqrt: np.ndarray | None = None) -> PriorCheck:
     """Type-II maximum-likelihood amplitude of the field's prior and its profile interval.
 
     Parameters
@@ -140,8 +140,9 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray, Z_o
         Whitened pseudo-data z̃ (unit noise variance) [-].
     Z_field : ndarray, shape (n_rows, n_f)
         Whitened sensitivities to the field's values [1/parameter unit].
-    K_field : ndarray, shape (n_f, n_f)
-        Stated prior covariance of the field's values [parameter unit²].
+    K_field : ndarray, shape (n_f, n_f), or None
+        Stated prior covariance of the field's values [parameter unit²] (None: ``field_sqrt``
+        is given).
     Z_other, K_other : ndarray, optional
         The same for the other parameters (prior kept as stated).
     confidence : float
@@ -149,6 +150,8 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray, Z_o
     between_nodes : bool
         Recorded in the result: ``Z_field`` are the sensitivities to a field finer than the
         calibration grid.
+    field_sqrt : ndarray, shape (n_f, n_r), optional
+        L with L Lᵀ = ``K_field``, when the caller has it cheaper than an eigen-decomposition.
 
     Returns
     -------
@@ -169,7 +172,8 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray, Z_o
 
         def b_half_inv(X):
             return X
-    G = b_half_inv(np.asarray(Z_field, float) @ _psd_sqrt(np.asarray(K_field, float)))
+    L_f = _psd_sqrt(np.asarray(K_field, float)) if field_sqrt is None else np.asarray(field_sqrt, float)
+    G = b_half_inv(np.asarray(Z_field, float) @ L_f)
     w = b_half_inv(z)
     U, s, _ = np.linalg.svd(G, full_matrices=False) if G.size else (np.zeros((n, 0)), np.zeros(0), None)
     lam, c2, w2 = s ** 2, (U.T @ w) ** 2, float(w @ w)

@@ -135,3 +135,13 @@ def test_aliasing_covariance_and_misfit_against_monte_carlo():
     resid = y - U @ (U.T @ y)
     assert np.mean(np.sum(resid ** 2, axis=0)) == pytest.approx(misfit, rel=0.1)
     np.testing.assert_allclose(np.cov(theta), cov, rtol=0.15, atol=0.05 * np.abs(np.diag(cov)).max())
+
+
+def test_kronecker_square_root_of_the_grid_correlation():
+    """L_α ⊗ L_η reproduces the squared-exponential correlation of every pair of grid nodes."""
+    from calib.corrections import CorrectionGrid
+    from calib.parametrizations.aliasing import grid_correlation, grid_correlation_sqrt
+
+    g = CorrectionGrid(np.linspace(-6.0, 20.0, 9), [0.2, 0.35, 0.5, 0.8, 1.0])
+    L = grid_correlation_sqrt(g, (4.0, 0.2))
+    np.testing.assert_allclose(L @ L.T, grid_correlation(g, g, (4.0, 0.2)), atol=1e-12)

@@ -100,6 +100,18 @@ def grid_correlation(a: CorrectionGrid, b: CorrectionGrid, lengths: tuple[float,
     return se_correlation(x[0][:, None] - y[0][None], x[1][:, None] - y[1][None], lengths)
 
 
+def grid_correlation_sqrt(g: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
+    """L with L Lᵀ = :func:`grid_correlation` (g, g): the squared-exponential correlation on a
+    tensor grid is the Kronecker product of its α and η factors, so L = L_α ⊗ L_η from two small
+    eigen-decompositions [-]."""
+
+    def factor(x, length):
+        w, Q = np.linalg.eigh(se_correlation(x[:, None] - x[None], 0.0, (length, 1.0)))
+        return Q * np.sqrt(np.clip(w, 0.0, None))
+
+    return np.kron(factor(g.alpha_nodes_deg, lengths[0]), factor(g.eta_nodes, lengths[1]))
+
+
 def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
     """K_ff − T K_cf − K_fc Tᵀ + T K_cc Tᵀ: the correlation of the fine nodal values minus their
     coarse interpolant under the smooth-field prior (unit variance) [-]."""
