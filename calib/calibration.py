@@ -129,6 +129,12 @@ class CalibrationSettings:
         linear over the prior's range, the frozen part of the truth biases the retained θ, and
         this adds that bias's second moment to their covariance (not scaled by the fit). Costs
         that many model evaluations per calibration; 0 leaves the term out (the report says so).
+    prior_check : bool
+        Estimate the correction field's prior amplitude from the data and say whether the stated
+        prior is consistent with it (:mod:`calib.prior_check`; about six model Jacobians to the MAP
+        under the stated prior, and one on the fine grid). False skips it (the report says so);
+        the refits of a leave-out validation and the candidate fits of the discrepancy workflow
+        skip it, as their results serve predictions and comparisons only.
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float
@@ -160,6 +166,7 @@ class CalibrationSettings:
     representation_error: bool = True
     scale_by_fit: bool = True
     curvature_samples: int = 32
+    prior_check: bool = True
     identified_ratio: float = 0.5
     confounded_share: float = 0.75
     band_confidence: float = 0.95
@@ -191,6 +198,9 @@ class CalibrationSettings:
                 or self.curvature_samples < 0:
             bad(f"must be an integer >= 0 (prior draws; 0 leaves the term out), got {self.curvature_samples!r}",
                 "curvature_samples")
+        for key in ("representation_error", "scale_by_fit", "cv_one_se", "prior_check"):
+            if not isinstance(getattr(self, key), bool):
+                bad(f"must be true or false, got {getattr(self, key)!r}", key)
         for key in ("max_relinearizations", "max_iterations", "max_noise_iterations", "cv_folds"):
             if not getattr(self, key) >= 1:
                 bad(f"must be >= 1, got {getattr(self, key)!r}", key)
@@ -484,8 +494,8 @@ class Calibrator:
         """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`),
         linearized at the MAP under the stated prior (:func:`calib.prior_check.map_point`, from the
         estimate): on the fine grid of the aliasing term when it was computed (``fine`` given),
-        else on the calibration nodes; {} without a correction field."""
-        if self.field is None or self.field.grid is None:
+        else on the calibration nodes; {} without a correction field or with ``prior_check`` off."""
+        if self.field is None or self.field.grid is None or not self.settings.prior_check:
             return {}
         from dataclasses import replace as _replace
 
@@ -495,13 +505,20 @@ class Calibrator:
         n_ch = len(self.channel_index)
         P = self._prior_cov_scaled()
 
+        last = {}
+
         def linearize_at(x):
             p = np.clip(self.p0 + self.scale * x, self.lower, self.upper)
-            at = problem.linearize(p)
+            last["at"] = at = problem.linearize(p)
             return (p - self.p0) / self.scale, at.residual.reshape(-1), np.repeat(at.ok, n_ch), at.M
 
+        def evaluate_at(x):
+            p = np.clip(self.p0 + self.scale * x, self.lower, self.upper)
+            out = problem.evaluate(p)
+            return (p - self.p0) / self.scale, out.residual.reshape(-1), np.repeat(out.ok, n_ch)
+
         failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
-        mp = map_point(linearize_at, problem.scaled(lin.p), P)
+        mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at)
         problem.n_failed_points_total = failed_before
         lay = self.field.layout
         blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
@@ -511,7 +528,7 @@ class Calibrator:
         M = mp.M[rows]
         z = mp.residual[rows] + M @ mp.x
         if fine is not None:
-            at_map = problem.linearize(self.p0 + self.scale * mp.x)     # cached unless the last trial was refused
+            at_map = last["at"]                 # map_point ends on the point it linearized last
             fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma, problem.channel_index,
                                       at_map.ok, *self.field.seen(at_map.evaluation))
             L = grid_correlation_sqrt(fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))

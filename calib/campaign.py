@@ -243,7 +243,9 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
             measurements, conditions=measurements.conditions.subset(~test), values=measurements.values[~test],
             sigma=None if measurements.sigma is None else measurements.sigma[~test])
         try:
-            res = Calibrator(make_model(), train, settings, name=f"fold {i + 1}").run()
+            # a fold's result serves its prediction only: no prior check
+            res = Calibrator(make_model(), train, dataclasses.replace(settings, prior_check=False),
+                             name=f"fold {i + 1}").run()
             pred = res.predict(measurements.conditions.subset(test), model=make_model(),
                                confidence=validation.confidence)
             status = res.status

@@ -149,3 +149,17 @@ def test_map_point_against_the_closed_form_and_a_general_minimizer():
     ref = optimize.minimize(lambda x: 0.5 * np.sum((zq - M @ x - c @ x ** 2) ** 2) + 0.5 * x @ Pinv @ x,
                             np.zeros(m), method="BFGS", options={"gtol": 1e-10})
     np.testing.assert_allclose(mp.x, ref.x, atol=1e-5)
+
+
+def test_prior_check_off_is_said_and_a_non_boolean_is_refused(bem_twin):
+    from calib.errors import InputError
+
+    model, cond, grid = bem_twin
+    p = nominal_vector(model.parameters)
+    p[:grid.n_lift] = 0.05
+    meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7614)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0, prior_check=False)).run()
+    assert res.prior_check == {}
+    assert any(t.startswith("Prior check: not run (prior_check = false)") for t in _sentences(res))
+    with pytest.raises(InputError, match="prior_check"):
+        CalibrationSettings(prior_check="yes").validate()

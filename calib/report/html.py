@@ -119,6 +119,9 @@ def _sentences(r: CalibrationResult) -> list[str]:
                    f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
     if r.prior_check:
         out.append(PriorCheck(**r.prior_check).sentence())
+    elif r.settings.get("prior_check") is False and r.polar_bands:
+        out.append("Prior check: not run (prior_check = false): whether the data support the stated prior, which "
+                   "sets the width of the bands in the directions the data leave to it, was not tested.")
     cur = r.curvature
     if cur.get("samples", 0) > 0 and "variance_ratio_mean" in cur:
         out.append(f"The frozen directions' prior, propagated through the model's curvature ({cur['used']} of "
