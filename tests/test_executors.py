@@ -66,3 +66,47 @@ def test_process_pool_and_dask_give_the_serial_jacobian(small_model):
             np.testing.assert_allclose(G, G0, rtol=1e-12, atol=1e-12 * np.abs(G0).max())
             ev2 = model.evaluate(p, cond)           # workers kept their instances: same again
             np.testing.assert_array_equal(ev2.values, ev0.values)
+
+
+def test_pool_workers_end_when_the_run_is_killed(tmp_path):
+    """A run killed with SIGKILL never shuts its pool down: its workers must not outlive it
+    (they used to wait for their next task for ever, with the FMU processes they started)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    (tmp_path / "pidtask.py").write_text("import os, time\n\ndef pid(_):\n    time.sleep(0.2)\n    return os.getpid()\n")
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import sys, time\n"
+        f"sys.path.insert(0, {str(tmp_path)!r})\n"
+        "from pidtask import pid\n"
+        "from calib.executors import ProcessExecutor\n"
+        "if __name__ == '__main__':\n"
+        "    ex = ProcessExecutor(workers=2)\n"
+        "    print(' '.join(map(str, sorted(set(ex.map(pid, range(6)))))), flush=True)\n"
+        "    time.sleep(600)\n")
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    workers = [int(w) for w in proc.stdout.readline().split()]
+    assert workers and all(Path(f"/proc/{w}").exists() for w in workers)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+
+    def alive():
+        out = []
+        for w in workers:
+            try:
+                state = Path(f"/proc/{w}/stat").read_text().rsplit(")", 1)[1].split()[0]
+            except FileNotFoundError:
+                continue
+            if state != "Z":
+                out.append(w)
+        return out
+
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and alive():
+        time.sleep(0.2)
+    assert not alive(), f"pool workers {alive()} outlived the killed run"

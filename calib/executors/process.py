@@ -4,11 +4,29 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterable
 
 from calib.errors import InputError
 from calib.executors.base import Progress
+
+
+def _exit_with_parent(parent_pid: int, period: float = 1.0) -> None:
+    """Pool initializer: end this worker once the process that started the pool is gone.
+
+    A run killed with SIGKILL never shuts its pool down, and a worker waiting for its next task
+    would wait for ever (with the FMU processes it started); a daemon thread polls the parent
+    and leaves with ``os._exit``, which closes the worker's pipes so its FMU processes end too.
+    """
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(period)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="calib-exit-with-parent", daemon=True).start()
 
 
 class ProcessExecutor:
@@ -17,6 +35,7 @@ class ProcessExecutor:
     The pool starts on the first ``map`` and is kept for later calls, so a worker that set
     something up for a task (an FMU instance) reuses it for the next one. Processes are
     started with *spawn*: no state of this process (open libraries, threads) is inherited.
+    Workers end by themselves when this process is killed (:func:`_exit_with_parent`).
 
     Parameters
     ----------
@@ -38,7 +57,8 @@ class ProcessExecutor:
     def _get_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(max_workers=self.workers,
-                                             mp_context=multiprocessing.get_context("spawn"))
+                                             mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_exit_with_parent, initargs=(os.getpid(),))
         return self._pool
 
     def map(self, fn: Callable, tasks: Iterable, progress: Progress | None = None) -> list:
