@@ -459,7 +459,8 @@ class Calibrator:
         return p, svd, lin, status, message
 
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen
+                  ) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:
         """Cov of the retained θ from the field between the nodes (scale units²), the χ² it adds
         to the residuals on average, why it is left out ('' when it is in, or when there is
         no correction field or nothing for it to act on; :mod:`calib.parametrizations.aliasing`),
@@ -596,7 +597,10 @@ class Calibrator:
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
         alias, alias_misfit, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
-        prior_check = self._prior_check(problem, lin, fine)
+        try:
+            prior_check = self._prior_check(problem, lin, fine)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a check, not the result
+            prior_check = {"failed": f"{type(exc).__name__}: {exc}"}
         if alias is not None:  # the field between the nodes, taken up by the retained θ
             Vr = svd.V[:, svd.retained]
             cov_ret = cov_ret + Vr @ alias @ Vr.T

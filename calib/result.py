@@ -119,8 +119,9 @@ class CalibrationResult:
     prior_check : dict
         The data's estimate of the correction field's prior amplitude
         (:class:`calib.prior_check.PriorCheck` as a dict: ``amplitude``, ``lower``, ``upper``,
-        ``confidence``, ``verdict``, ``between_nodes``, ``log_lr_at_stated``); empty without a
-        correction field.
+        ``confidence``, ``verdict``, ``between_nodes``, ``log_lr_at_stated``, ...); empty without a
+        correction field or with the check off; ``{"failed": message}`` when it could not be
+        computed (the calibration's result stands).
     """
 
     parameters: list[dict]
@@ -340,7 +341,9 @@ class CalibrationResult:
                  f"{self.chi2_per_dof_after:.3g} (dof {self.dof})",
                  "  verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
                  "  failed model points: " + ", ".join(f"{k} {v}" for k, v in self.failures.items())]
-        if self.prior_check:
+        if self.prior_check.get("failed"):
+            lines.append(f"  prior check: failed ({self.prior_check['failed']})")
+        elif self.prior_check:
             pc = self.prior_check
             lines.append(f"  prior check: field amplitude {pc['amplitude']:.2g} x stated "
                          f"({100 * pc['confidence']:.0f} % interval {pc['lower']:.2g}-{pc['upper']:.2g}), "

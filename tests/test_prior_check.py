@@ -163,3 +163,22 @@ def test_prior_check_off_is_said_and_a_non_boolean_is_refused(bem_twin):
     assert any(t.startswith("Prior check: not run (prior_check = false)") for t in _sentences(res))
     with pytest.raises(InputError, match="prior_check"):
         CalibrationSettings(prior_check="yes").validate()
+
+
+def test_a_prior_check_that_cannot_be_computed_keeps_the_result(bem_twin, monkeypatch):
+    """A linear-algebra failure inside the check is recorded and said; the calibration's result stands."""
+    import calib.prior_check as pc_module
+
+    def broken(*args, **kwargs):
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(pc_module, "prior_amplitude", broken)
+    model, cond, grid = bem_twin
+    p = nominal_vector(model.parameters)
+    p[:grid.n_lift] = 0.05
+    meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7615)
+    res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
+    assert res.status == "converged" and res.n_retained > 0
+    assert res.prior_check == {"failed": "LinAlgError: SVD did not converge"}
+    assert any(t.startswith("Prior check: could not be computed (LinAlgError") for t in _sentences(res))
+    assert "prior check: failed (LinAlgError: SVD did not converge)" in res.summary()

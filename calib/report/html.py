@@ -117,7 +117,10 @@ def _sentences(r: CalibrationResult) -> list[str]:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
                    f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
-    if r.prior_check:
+    if r.prior_check.get("failed"):
+        out.append(f"Prior check: could not be computed ({r.prior_check['failed']}); whether the data support the "
+                   f"stated prior was not tested.")
+    elif r.prior_check:
         out.append(PriorCheck(**r.prior_check).sentence())
     elif r.settings.get("prior_check") is False and r.polar_bands:
         out.append("Prior check: not run (prior_check = false): whether the data support the stated prior, which "
