@@ -184,25 +184,26 @@ CHILD = textwrap.dedent('''
     from pathlib import Path
 
     faulthandler.register(signal.SIGUSR1)        # the parent asks for the stack if the child stalls
-    SIGINTS = []
-
-
-    def on_sigint(signum, frame):                # Python's default, counted (even if started with SIGINT ignored)
-        SIGINTS.append(signum)
-        raise KeyboardInterrupt
 
 
     if sys.argv[3] == "atomic":
-        signal.signal(signal.SIGINT, on_sigint)
+        # Python's own handler, as in a user's `calib` process (set explicitly: a child started from
+        # a background job inherits SIGINT ignored). The figure writer defers a Ctrl-C only under
+        # this handler; a handler of the test's own (it used to count SIGINTs) made it leave the
+        # Ctrl-C alone, and one raised inside a matplotlib weakref callback stalled drawing (CI).
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     else:
         # the control writer dies by the signal where it stands, as a process without a handler does:
         # a KeyboardInterrupt raised inside one of matplotlib's weakref callbacks is swallowed and can
         # leave its transform tree half-updated, after which drawing hung (seen once in CI)
         signal.signal(signal.SIGINT, signal.SIG_DFL)
 
+    import contextlib
+
     import matplotlib
     matplotlib.use("Agg")
     from calib.report import figures as F
+    from calib.report.interrupts import interrupts_as_keyboard_interrupt
     from calib.report.html import write_report
     from calib.result import load_result
 
@@ -223,7 +224,9 @@ CHILD = textwrap.dedent('''
     def one_pass():
         figs = {}
         for name in NAMES:
-            fig = F.FIGURES[name](res)
+            # drawn under the same deferral as calib.report.figures.write_figures draws them
+            with interrupts_as_keyboard_interrupt() if mode == "atomic" else contextlib.nullcontext():
+                fig = F.FIGURES[name](res)
             for fmt in ("svg", "png"):
                 save(fig, name, fmt)
             figs[name] = {"png": out / f"{name}.png"}
@@ -238,13 +241,9 @@ CHILD = textwrap.dedent('''
         try:
             one_pass()
             print("pass", flush=True)
-        except BaseException as exc:
-            # a Ctrl-C raised inside matplotlib's drawing can come out as another error (seen: the
-            # control writer's ValueError "Invalid affine transformation matrix"); after a SIGINT it
-            # is that Ctrl-C
-            if not (isinstance(exc, KeyboardInterrupt) or SIGINTS):
-                raise
-            SIGINTS.clear()
+        except KeyboardInterrupt as exc:
+            # inside the deferral, a Ctrl-C that surfaced inside matplotlib as another error (seen:
+            # ValueError "Invalid affine transformation matrix") arrives as KeyboardInterrupt too
             caught += 1
             if caught >= rounds:
                 print("interrupted, exiting", flush=True)
