@@ -474,7 +474,8 @@ class Calibrator:
             return None, 0.0, f"representation_error = false: {left_out}.", None
         if st.prior_correlation <= 0:
             return None, 0.0, (f"prior_correlation = 0 (independent nodes) defines no field between the nodes to "
-                               f"propagate: {left_out}; the field's variance at each reached point is in the bands."), None
+                               f"propagate: {left_out}; the field's variance at each reached point is in the "
+                               f"bands."), None
         if not isinstance(self.model, RefinableFieldModel):
             return None, 0.0, (f"the model ({type(self.model).__name__}) cannot be rebuilt on a finer correction "
                                f"grid (no with_grid, e.g. an FMU): {left_out}."), None

@@ -4,9 +4,9 @@ Notes
 -----
 The bands of the directions the truncation froze are the stated prior's (DESIGN §5), so the
 prior's amplitude sets their width. The data carry a check of it. Linearized at a point
-p̃ (the MAP under the stated prior, see below), the whitened pseudo-data (:mod:`calib.truncation`) are z̃ = Z_f f + Z_n n + ε with
-ε ~ N(0, I) (the stated noise), f the correction field and n the other parameters. With
-the prior f ~ N(0, τ² K_f) (τ = 1 is the stated prior) and n ~ N(0, K_n), z̃ is Gaussian
+p̃ (the MAP under the stated prior, see below), the whitened pseudo-data
+(:mod:`calib.truncation`) are z̃ = Z_f f + Z_n n + ε with ε ~ N(0, I) (the stated noise),
+f the correction field and n the other parameters. With the prior f ~ N(0, τ² K_f) (τ = 1 is the stated prior) and n ~ N(0, K_n), z̃ is Gaussian
 with covariance
 
 .. math::  C(τ) = I + Z_n K_n Z_nᵀ + τ² Z_f K_f Z_fᵀ,
@@ -18,8 +18,8 @@ G = B^(−½) Z_f K_f^(½) (left vectors u_i), w = B^(−½) z̃:
 .. math::  −2ℓ(τ) = \log\det B + Σ_i \log(1 + τ²λ_i) + |w|² − Σ_i (u_iᵀw)² τ²λ_i / (1 + τ²λ_i),
 
 exact for every τ after one SVD. τ̂ maximizes ℓ; the 95 % interval is the profile-
-likelihood set 2(ℓ(τ̂) − ℓ(τ)) <= χ²₁(0.95) (Pawitan 2001, §2.6), with lower end 0 when
-τ = 0 is inside it and upper end ∞ when the data do not bound it.
+likelihood set 2(ℓ(τ̂) − ℓ(τ)) <= χ²₁(0.95) (Pawitan 2001, likelihood intervals), with lower
+end 0 when τ = 0 is inside it and upper end ∞ when the data do not bound it.
 
 When the model can be refined, Z_f are the sensitivities to a field on a grid finer than the
 calibration's (:mod:`calib.parametrizations.aliasing`) with the smooth-field prior's
@@ -41,7 +41,8 @@ References
 ----------
 C.E. Rasmussen, C.K.I. Williams, Gaussian Processes for Machine Learning, MIT Press (2006),
 §5.4.
-Y. Pawitan, In All Likelihood, Oxford University Press (2001), §2.6.
+Y. Pawitan, In All Likelihood: Statistical Modelling and Inference Using Likelihood, Oxford
+University Press (2001).
 """
 
 from __future__ import annotations
@@ -260,8 +261,9 @@ def map_point(linearize_at, x0: np.ndarray, prior_cov: np.ndarray, max_iteration
     model's curvature, which the check would read as field amplitude (twin d, tuning seed 8319:
     7 θ retained, χ²/dof after 9.1, τ̂ = 6.3; with σ̄ = 1, 26 θ, τ̂ = 0.90). The MAP under the
     stated prior is the point of the Laplace approximation of the marginal likelihood at τ = 1
-    (Rasmussen & Williams 2006, §3.4). Steps are in u = L⁺x (P = L Lᵀ), (AᵀA + I)Δu = Aᵀr − u with
-    A = M L, halved (at most 6 times) until the cost falls without losing converged rows.
+    (Rasmussen & Williams 2006, ch. 3, on the Laplace approximation). Steps are in u = L⁺x
+    (P = L Lᵀ), (AᵀA + I)Δu = Aᵀr − u with A = M L, halved (at most 6 times) until the cost
+    falls without losing converged rows.
 
     Parameters
     ----------
@@ -300,7 +302,7 @@ def map_point(linearize_at, x0: np.ndarray, prior_cov: np.ndarray, max_iteration
         step, accepted = 1.0, None
         for _ in range(7):
             xt, rt, okt = evaluate_at(x + step * (L @ du))
-            ut, ct = cost_of(xt, rt, okt)
+            _, ct = cost_of(xt, rt, okt)
             if ct < cost and okt.sum() >= ok.sum():
                 accepted = (xt, ct)
                 break

@@ -78,7 +78,8 @@ def test_pool_workers_end_when_the_run_is_killed(tmp_path):
     import time
     from pathlib import Path
 
-    (tmp_path / "pidtask.py").write_text("import os, time\n\ndef pid(_):\n    time.sleep(0.2)\n    return os.getpid()\n")
+    (tmp_path / "pidtask.py").write_text(
+        "import os, time\n\ndef pid(_):\n    time.sleep(0.2)\n    return os.getpid()\n")
     script = tmp_path / "run.py"
     script.write_text(
         "import sys, time\n"
