@@ -499,8 +499,6 @@ class Calibrator:
         else on the calibration nodes; {} without a correction field or with ``prior_check`` off."""
         if self.field is None or self.field.grid is None or not self.settings.prior_check:
             return {}
-        from dataclasses import replace as _replace
-
         from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
         from calib.prior_check import map_point, prior_amplitude
 
@@ -541,7 +539,7 @@ class Calibrator:
             Z_f, K_f, L_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)], None
         check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None,
                                 field_sqrt=L_f)
-        check = _replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
+        check = replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
                          map_iterations=mp.iterations, map_converged=mp.converged)
         return check.to_dict()
 

@@ -47,7 +47,7 @@ University Press (2001).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import optimize, stats
@@ -95,11 +95,7 @@ class PriorCheck:
     map_converged: bool | None = None
 
     def to_dict(self) -> dict:
-        return {"amplitude": self.amplitude, "lower": self.lower, "upper": self.upper,
-                "confidence": self.confidence, "verdict": self.verdict, "between_nodes": self.between_nodes,
-                "log_lr_at_stated": self.log_lr_at_stated, "chi2_map": self.chi2_map,
-                "chi2_estimate": self.chi2_estimate, "map_iterations": self.map_iterations,
-                "map_converged": self.map_converged}
+        return asdict(self)
 
     def sentence(self) -> str:
         """One sentence for the report, generated from the numbers."""
@@ -168,7 +164,7 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
         logdet_b = float(np.sum(np.log1p(s_n ** 2)))
 
         def b_half_inv(X):
-            return X - U_n @ (shrink[:, None] * (U_n.T @ X)) if X.ndim == 2 else X - U_n @ (shrink * (U_n.T @ X))
+            return X - U_n @ (shrink[:, None] * (U_n.T @ X))
     else:
         logdet_b = 0.0
 
@@ -176,7 +172,7 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
             return X
     L_f = _psd_sqrt(np.asarray(K_field, float)) if field_sqrt is None else np.asarray(field_sqrt, float)
     G = b_half_inv(np.asarray(Z_field, float) @ L_f)
-    w = b_half_inv(z)
+    w = b_half_inv(z[:, None])[:, 0]
     U, s, _ = np.linalg.svd(G, full_matrices=False) if G.size else (np.zeros((n, 0)), np.zeros(0), None)
     lam, c2, w2 = s ** 2, (U.T @ w) ** 2, float(w @ w)
 
