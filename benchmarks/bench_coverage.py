@@ -33,11 +33,13 @@ verdicts and how often its 95 % interval holds the stated amplitude 1 (:mod:`cal
 in (d) the truth is drawn from the very prior the check assumes), the retained count, failures
 and time.
 
-Held-back truncation check: every third operating point held back, calibrate on the rest with
-``sigma_bar = "auto"`` and with σ̄ = 0.1 … 5, predict the held-back points and compare χ²/dof
-(mean squared whitened residual) of the automatic choice with the best of the sweep; on both
-shipped workflows (with their own noise seeds; the localization study's stage 2) and on the
-analytic twin of ``tests/twin_model.py`` (56 points, truth of ``tests/test_calibration.py``).
+Held-back truncation check: every third operating point held back (on the workflows' grids of
+six pitch settings per tip-speed ratio, two whole pitch lines; on the twin, interleaved),
+calibrate on the rest with ``sigma_bar = "auto"`` and with σ̄ = 0.1 … 5, predict the held-back
+points and compare χ²/dof (mean squared whitened residual) of the automatic choice with the
+best of the sweep; on both shipped workflows (with their own noise seeds; the localization
+study's stage 2) and on the analytic twin of ``tests/twin_model.py`` (56 points, truth of
+``tests/test_calibration.py``).
 
 Run: ``python benchmarks/bench_coverage.py [n_seeds] [--no-held-back]`` (a few seconds per
 calibration here; 30 seeds about 5–10 min, the held-back part about as long).

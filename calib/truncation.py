@@ -42,7 +42,8 @@ but over 30 seeds (``benchmarks/bench_coverage.py``, seeds 5000–5029) 660.6 fo
 387–503), of which the 27 calibrations that ended "converged" 421.4 for 386 (band 333–442;
 368.6 with ``scale_by_fit``): one of the three ``not_stable`` ones carries 198 for 19, pulled by
 a point with several BEM roots at a section (README). Held-back χ²/dof there (every
-third point held back, which interleaves over the envelope as the folds do), the rule against
+third point held back: on the workflows' grids two whole pitch lines, a harder test than the
+interleaved folds; on the twin interleaved), the rule against
 the best σ̄ of a sweep 0.1–5: wind tunnel (workflow seed) 2.23 against 1.84 (ratio 1.21),
 localization stage 2 1.08 against 1.07 (1.015), analytic twin 1.06 against 0.93 (1.13). A
 paired standard error (of the difference to the minimum over the folds) and the argmin did
