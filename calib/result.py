@@ -57,6 +57,19 @@ _ARRAY_FIELDS = ("p_nominal", "p_hat", "lower", "upper", "scale", "cov_p", "std_
                  "multiple_roots")
 
 
+def second_start_sentence(truncation: dict) -> str:
+    """One sentence on the automatic choice's second start (``CalibrationSettings.second_start``),
+    from the numbers it recorded in ``truncation``."""
+    t = truncation
+    k1, k2 = int(t["first_retained"]), int(t["second_retained"])
+    kept = "second" if int(t["second_kept"]) else "first"
+    return (f"The first fit's χ² rejected the stated noise (p = {float(t['first_p_value']):.2g}), so the "
+            f"choice was started again from the prior limit's count: from nominal it settled on {k1} θ (criterion "
+            f"{float(t['first_cv']):.3g} ± {float(t['first_cv_se']):.2g}), from the limit on {k2} θ "
+            f"({float(t['second_cv']):.3g} ± {float(t['second_cv_se']):.2g}); the {kept} was kept (the fewer θ "
+            f"unless the other's criterion is lower by more than its standard error).")
+
+
 @dataclass(eq=False)
 class CalibrationResult:
     """Everything a calibration produced.
@@ -341,6 +354,8 @@ class CalibrationResult:
                  f"{self.chi2_per_dof_after:.3g} (dof {self.dof})",
                  "  verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
                  "  failed model points: " + ", ".join(f"{k} {v}" for k, v in self.failures.items())]
+        if "second_retained" in self.truncation:
+            lines.append("  " + second_start_sentence(self.truncation))
         if self.prior_check.get("failed"):
             lines.append(f"  prior check: failed ({self.prior_check['failed']})")
         elif self.prior_check:

@@ -15,7 +15,7 @@ import numpy as np
 
 from calib.report.atomic import atomic_write_text
 from calib.prior_check import PriorCheck
-from calib.result import CalibrationResult
+from calib.result import CalibrationResult, second_start_sentence
 
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -98,6 +98,8 @@ def _sentences(r: CalibrationResult) -> list[str]:
                    f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
                    f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained)"
                    + _prior_limit_clause(r) + ".")
+        if "second_retained" in r.truncation:
+            out.append(second_start_sentence(r.truncation))
     else:
         out.append(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
                    f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")
