@@ -30,8 +30,9 @@ band (against the truth's values at the calibration nodes, with the covariance t
 states: noise, the field between the nodes, fit scale; also with the noise part alone), the
 same over the calibrations that ended "converged" (the others listed), the prior check's
 verdicts and how often its 95 % interval holds the stated amplitude 1 (:mod:`calib.prior_check`;
-in (d) the truth is drawn from the very prior the check assumes), the retained count, failures
-and time.
+in (d) the truth is drawn from the very prior the check assumes), the retained count, how often
+the automatic choice started again and kept the second start (``second_start``), failures and
+time.
 
 Held-back truncation check: every third operating point held back (on the workflows' grids of
 six pitch settings per tip-speed ratio, two whole pitch lines; on the twin, interleaved),
@@ -158,7 +159,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
         cov = {"lift": [], "drag": [], "lift_in_grid": [], "drag_in_grid": []}
         hits = {"lift": [0, 0], "drag": [0, 0]}
         nees, nees_noise, dims, stable, kept, failed = [], [], [], [], [], 0
-        prior_checks = []
+        prior_checks, second = [], [0, 0]
         t0 = time.perf_counter()
         for k in range(n_seeds):
             if p_fixed is not None:
@@ -208,6 +209,9 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                 hits[block][1] += c["n_points"]
             kept.append(res.n_retained)
             prior_checks.append(res.prior_check)
+            if "second_retained" in res.truncation:      # the automatic choice's second start
+                second[0] += 1
+                second[1] += int(res.truncation["second_kept"])
             print(f"[coverage {label}] seed {seed0 + k}: lift {c['lift']:.3f} drag {c['drag']:.3f} (inside the node "
                   f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} NEES {nees[-1]:.1f} "
                   f"fit scale {res.fit_scale:.2f} prior amplitude {res.prior_check['amplitude']:.2f} "
@@ -227,6 +231,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                     "prior_check_amplitude_median_p10_p90": [float(np.median(amp)),
                                                              *np.percentile(amp, [10, 90]).tolist()]})
         fig.update({"retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
+                    "second_start_run_kept": second,
                     "seconds_per_calibration": (time.perf_counter() - t0) / n_seeds})
         if dims:
             lo, hi = stats.chi2.ppf([0.025, 0.975], int(np.sum(dims)))

@@ -11,8 +11,8 @@ Procedure (Bottasso, Cacciola & Iriarte 2014; DESIGN §5)
 3. Estimate the retained θ under bounds (corrections and C_D >= C_D,min at the nodes) by
    constrained Gauss–Newton (:func:`calib.estimation.estimate`); the others stay at 0.
 4. Re-linearize at the estimate and redo the SVD; stop when the retained set is stable
-   (same count, principal-angle cosines >= ``stability_cosine``). With ``second_start``,
-   ``sigma_bar = "auto"`` and a stated noise, a fit whose χ² rejects that noise is started
+   (same count, principal-angle cosines >= ``stability_cosine``). With ``second_start``
+   (default), ``sigma_bar = "auto"`` and a stated noise, a fit whose χ² rejects that noise is started
    again from the prior limit's count, and the better-predicting of the two is kept
    (``Calibrator._second_start``).
 5. Covariance of the estimate including the frozen directions: Cov(p̃̂) = V_ID S_ID⁻² V_IDᵀ
@@ -144,7 +144,6 @@ class CalibrationSettings:
         (the fewer θ otherwise). The choice made from the nominal linearization can settle on few
         θ because that linearization understates what a re-linearized fit with more θ achieves
         (README). Costs a second loop only for such fits; the report says which start was kept.
-        Off by default until the coverage benchmark's table (README seeds) is re-run with it.
     prior_check : bool
         Estimate the correction field's prior amplitude from the data and say whether the stated
         prior is consistent with it (:mod:`calib.prior_check`; about six model Jacobians to the MAP
@@ -182,7 +181,7 @@ class CalibrationSettings:
     representation_error: bool = True
     scale_by_fit: bool = True
     curvature_samples: int = 32
-    second_start: bool = False
+    second_start: bool = True
     prior_check: bool = True
     identified_ratio: float = 0.5
     confounded_share: float = 0.75
