@@ -449,7 +449,7 @@ class Calibrator:
         criterion is lower by more than that criterion's standard error (the one-standard-error
         rule of :func:`calib.truncation.cv_curve` across the two starts).
         """
-        _, svd1, lin1, status1, _ = first
+        _, svd1, lin1, _, _ = first
         n_res = int(lin1.ok.sum()) * len(self.channel_index)
         dof = n_res - svd1.n_retained
         chi2 = float(np.sum(lin1.residual[lin1.ok] ** 2))
