@@ -431,12 +431,13 @@ class Calibrator:
         followed by :meth:`_second_start` when the fit's χ² rejects the stated noise."""
         st = self.settings
         first = st.sigma_bar == "auto" and st.retain != "all" and self._auto_frozen is None
-        out = self._relinearize_loop(problem, p)
+        lin0 = problem.linearize(p)
+        out = self._relinearize_loop(problem, p, lin0)
         if not (first and st.second_start and st.noise not in ("ml", "relative_ml")) or out[3] == "failed":
             return out
-        return self._second_start(problem, p, out)
+        return self._second_start(problem, p, lin0, out)
 
-    def _second_start(self, problem: LeastSquaresProblem, p0: np.ndarray, first: tuple):
+    def _second_start(self, problem: LeastSquaresProblem, p0: np.ndarray, lin0, first: tuple):
         """Start the automatic choice again from the prior limit's count when the first fit's χ²
         rejects the stated noise (p < ``SECOND_START_P``), and keep the better of the two.
 
@@ -460,8 +461,9 @@ class Calibrator:
         self._auto_choices, self._auto_frozen, self._start_at_limit = [], None, True
         self._emit({"stage": "second_start", "chi2": chi2, "dof": dof, "p_value": p_value,
                     "first_n_retained": svd1.n_retained})
+        problem.remember(lin0)        # the same first linearization, no model call repeated
         try:
-            second = self._relinearize_loop(problem, p0.copy())
+            second = self._relinearize_loop(problem, p0.copy(), lin0)
         finally:
             self._start_at_limit = False
         state2 = (self._curve, self._auto_choices, self._auto_frozen)
@@ -478,13 +480,16 @@ class Calibrator:
         if keep_second:
             return second
         self._curve, self._auto_choices, self._auto_frozen = state1
+        problem.remember(lin1)
         return first
 
-    def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray):
+    def _relinearize_loop(self, problem: LeastSquaresProblem, p: np.ndarray, lin=None):
+        """Estimate and re-linearize until the retained set is stable; ``lin`` the linearization
+        at ``p`` when already computed."""
         st = self.settings
         prev_basis = None
         status, message = "not_stable", ""
-        lin = problem.linearize(p)
+        lin = problem.linearize(p) if lin is None else lin
         svd = self._svd(problem, lin)
         last_estimate = None
         worst_cos = None

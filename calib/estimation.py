@@ -139,6 +139,13 @@ class LeastSquaresProblem:
         self.n_failed_points_total += int(np.count_nonzero(~ok))
         return r, ok
 
+    def remember(self, lin: Linearization) -> None:
+        """Make ``lin``, a linearization of this problem computed earlier, the cached one, so that
+        going back to its point costs no model call (the cache holds one point)."""
+        if lin.M is None:
+            raise ValueError("remember() takes a linearization with sensitivities")
+        self._cache = lin
+
     def evaluate(self, p: np.ndarray) -> Linearization:
         """Outputs and residuals at ``p`` (no sensitivities)."""
         p = np.asarray(p, float)
