@@ -29,9 +29,21 @@ class TrappedAtOne(Calibrator):
         return super()._svd(problem, lin)
 
 
+class CountingTwin(TwinModel):
+    """The analytic twin, recording the parameter vector of every Jacobian."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.jacobian_points = []
+
+    def jacobian(self, p, conditions):
+        self.jacobian_points.append(np.asarray(p, float).tobytes())
+        return super().jacobian(p, conditions)
+
+
 @pytest.fixture(scope="module")
 def twin():
-    model = TwinModel(channels=CHANNELS)
+    model = CountingTwin(channels=CHANNELS)
     cond = twin_conditions()
     p_true = twin_truth(model)
     meas = synthesize(model, p_true, cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=4711)
@@ -47,9 +59,13 @@ def test_a_first_start_trapped_at_few_theta_is_replaced_by_the_start_from_the_pr
     model, meas = twin
     trapped = TrappedAtOne(model, meas, _settings(second_start=False)).run()
     assert trapped.n_retained == 1 and "second_retained" not in trapped.truncation
+    model.jacobian_points.clear()
     cal = TrappedAtOne(model, meas, _settings())
     res = cal.run()
     t = res.truncation
+    # the second start begins from the first's linearization at the start point, and the kept
+    # start's last linearization is reused: no Jacobian is computed twice at the same point
+    assert len(set(model.jacobian_points)) == len(model.jacobian_points)
     assert t["first_retained"] == 1 and t["first_p_value"] < 0.01
     assert t["second_kept"] == 1 and res.n_retained == t["second_retained"] > 1
     # kept because its criterion is lower by more than its standard error, each on its own curve
