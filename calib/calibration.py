@@ -451,9 +451,7 @@ class Calibrator:
         rule of :func:`calib.truncation.cv_curve` across the two starts).
         """
         _, svd1, lin1, _, _ = first
-        n_res = int(lin1.ok.sum()) * len(self.channel_index)
-        dof = n_res - svd1.n_retained
-        chi2 = float(np.sum(lin1.residual[lin1.ok] ** 2))
+        chi2, dof = self._chi2_dof(lin1, svd1)
         p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
         if p_value >= SECOND_START_P:
             return first
@@ -466,8 +464,7 @@ class Calibrator:
             second = self._relinearize_loop(problem, p0.copy(), lin0)
         finally:
             self._start_at_limit = False
-        state2 = (self._curve, self._auto_choices, self._auto_frozen)
-        c1, c2 = state1[0], state2[0]
+        c1, c2 = state1[0], self._curve
         k1, k2 = svd1.n_retained, second[1].n_retained
         cv1, cv2 = float(c1.cv[k1]), float(c2.cv[k2])
         se1, se2 = float(c1.cv_se[k1]), float(c2.cv_se[k2])
@@ -658,9 +655,13 @@ class Calibrator:
         st = self.settings
         if not st.scale_by_fit or st.noise in ("ml", "relative_ml"):
             return 1.0
-        dof = int(lin.ok.sum()) * len(self.channel_index) - svd.n_retained
-        chi2 = float(np.sum(lin.residual[lin.ok] ** 2))
+        chi2, dof = self._chi2_dof(lin, svd)
         return max(1.0, chi2 / dof) if dof > 0 else 1.0
+
+    def _chi2_dof(self, lin, svd) -> tuple[float, int]:
+        """χ² of the whitened residuals at the points that converged, and N − n_retained."""
+        dof = int(lin.ok.sum()) * len(self.channel_index) - svd.n_retained
+        return float(np.sum(lin.residual[lin.ok] ** 2)), dof
 
     def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
         st = self.settings
