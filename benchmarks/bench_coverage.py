@@ -11,8 +11,9 @@ nodes and a pitch offset; truth pitch offset 0.2 deg), two truths:
 (c) a check of the bands themselves: a truth drawn, for each seed, from the stated prior
     (the smooth-field prior of ``calib.calibration.CalibrationSettings``: 1 scale unit per
     node, correlation length one node spacing) at the calibration nodes, pitch offset 0.2 deg.
-    Draws that make C_D <= 0 at a reached section are drawn again (the prior conditioned on
-    physical polars).
+    Draws that make C_D < C_D,min (the calibration's bound, 0.003) at a reached section are
+    drawn again (the prior conditioned on the polars the calibration states possible; its drag
+    bands are bounded there too).
     For truths typical of the prior the 95 % bands should cover about 95 %; (a) and (b) are
     two particular truths, zero where the operating points say little.
 (d) a truth outside the span drawn from the same prior: a stationary field on the truth
@@ -82,9 +83,23 @@ def _setup():
     return cfg, rotor, settings, channels, cond, grid, model
 
 
-def _prior_draw(model, grid, cond, seed: int) -> np.ndarray:
+def _physical(tmodel, p: np.ndarray, cond, cd_min: float | None) -> bool:
+    """Whether a drawn truth is one the calibration's statements allow: every operating point
+    converges (the BEM refuses C_D <= 0) and C_D >= ``cd_min`` (or the nominal C_D, where that
+    is lower: :meth:`calib.parametrizations.CorrectionField.drag_floor`) at every section the
+    operating points reach."""
+    ev = tmodel.evaluate(p, cond)
+    if not np.all(ev.ok):
+        return False
+    field = tmodel.correction_field()
+    a, e = field.seen(ev)
+    return bool(np.all(field.basis(a, e, "drag") @ p >= field.drag_floor(a, e, cd_min) - 1e-12))
+
+
+def _prior_draw(model, grid, cond, seed: int, cd_min: float | None) -> np.ndarray:
     """Node values drawn from the default smooth-field prior, pitch offset 0.2 deg; draws that
-    make C_D <= 0 somewhere at the operating points (the BEM refuses them) are drawn again."""
+    make C_D < ``cd_min`` somewhere at the operating points (:func:`_physical`) are drawn
+    again: the prior conditioned on the bound the calibration states."""
     st = CalibrationSettings()
     std = np.array([q.scale * st.prior_sigma for q in model.parameters])
     P = model.correction_field().node_correlation(st.prior_correlation) * np.outer(std, std)
@@ -94,12 +109,12 @@ def _prior_draw(model, grid, cond, seed: int) -> np.ndarray:
         p = np.zeros(len(model.parameters))
         p[:n] = rng.multivariate_normal(np.zeros(n), P[:n, :n], method="eigh")
         p[-1] = 0.2
-        if np.all(model.evaluate(p, cond).ok):
+        if _physical(model, p, cond, cd_min):
             return p
     raise RuntimeError(f"no physical prior draw in 200 tries (seed {seed})")
 
 
-def _fine_prior_draw(tmodel, model, grid, cond, seed: int) -> np.ndarray:
+def _fine_prior_draw(tmodel, model, grid, cond, seed: int, cd_min: float | None) -> np.ndarray:
     """Twin (d): a truth outside the span of the calibration's shape functions, drawn from the
     smooth-field prior itself (the stationary field whose samples at the calibration nodes are
     the prior of twin (c)) on the truth model's fine grid (1 deg × 0.025), pitch offset 0.2 deg.
@@ -108,8 +123,8 @@ def _fine_prior_draw(tmodel, model, grid, cond, seed: int) -> np.ndarray:
     correlation of :meth:`calib.parametrizations.CorrectionField.node_correlation` with the
     calibration grid's lengths (one mean node spacing: 6 deg in α, 0.1875 in η), so it varies
     between the calibration nodes as the representation variance assumes. The kernel is
-    separable, so a draw is L_α Z L_ηᵀ. Draws that make C_D <= 0 somewhere at the operating
-    points are drawn again, as in (c)."""
+    separable, so a draw is L_α Z L_ηᵀ. Draws that make C_D < ``cd_min`` somewhere at the
+    operating points are drawn again, as in (c)."""
     st = CalibrationSettings()
     fine = tmodel.correction_field().grid
     la, le = model.correction_field().correlation_lengths(st.prior_correlation)
@@ -129,7 +144,7 @@ def _fine_prior_draw(tmodel, model, grid, cond, seed: int) -> np.ndarray:
         for k in range(2):
             p[k * fine.n_lift:(k + 1) * fine.n_lift] = sd[k] * (La @ rng.standard_normal(shape) @ Le.T).reshape(-1)
         p[-1] = 0.2
-        if np.all(tmodel.evaluate(p, cond).ok):
+        if _physical(tmodel, p, cond, cd_min):
             return p
     raise RuntimeError(f"no physical prior draw in 200 tries (seed {seed})")
 
@@ -142,6 +157,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
     bumps = cfg["truth"]["bumps"]
     rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
     field = model.correction_field()
+    settings_cd_min = {"cd_min": 0.003, **calibration}["cd_min"]
     # (b) outside the span: the workflow's fine-grid truth model
     tmodel_b, p_b = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
     # (a) inside the span: the smooth field at the calibration nodes
@@ -165,11 +181,11 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             if p_fixed is not None:
                 p_true = p_fixed
             elif tmodel is model:
-                p_true = _prior_draw(model, grid, cond, seed0 + k)
+                p_true = _prior_draw(model, grid, cond, seed0 + k, settings_cd_min)
             else:
-                p_true = _fine_prior_draw(tmodel, model, grid, cond, seed0 + k)
+                p_true = _fine_prior_draw(tmodel, model, grid, cond, seed0 + k, settings_cd_min)
             meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=seed0 + k)
-            res = Calibrator(model, meas, CalibrationSettings(**{"cd_min": 0.003, **calibration})).run()
+            res = Calibrator(model, meas, CalibrationSettings(**{"cd_min": settings_cd_min, **calibration})).run()
             if res.status != "converged":
                 failed += 1
             a, e = res.alpha_seen, res.eta_seen
@@ -198,10 +214,11 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             stable.append(res.status == "converged")
             rep = res.prior_std if res.settings.get("representation_error", True) else None
             length = res.settings.get("prior_correlation", 0.0)
-            c = field.coverage(res.p_hat, res.cov_p, a, e, tl, td, prior_std=rep, correlation_length=length)
+            c = field.coverage(res.p_hat, res.cov_p, a, e, tl, td, prior_std=rep, correlation_length=length,
+                               cd_min=res.settings.get("cd_min"))
             inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
             ci = field.coverage(res.p_hat, res.cov_p, a[inside], e[inside], tl[inside], td[inside], prior_std=rep,
-                                correlation_length=length)
+                                correlation_length=length, cd_min=res.settings.get("cd_min"))
             for block in ("lift", "drag"):
                 cov[block].append(c[block])
                 cov[f"{block}_in_grid"].append(ci[block])

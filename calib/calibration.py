@@ -739,7 +739,7 @@ class Calibrator:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
                                                confidence=st.band_confidence,
                                                prior_std=self.prior_std if st.representation_error else None,
-                                               correlation_length=st.prior_correlation)
+                                               correlation_length=st.prior_correlation, cd_min=st.cd_min)
         return res
 
 

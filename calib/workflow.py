@@ -254,7 +254,8 @@ def truth_checks(model, result, truth: dict) -> dict[str, str]:
         prior = result.prior_std if result.settings.get("representation_error", True) else None
         # a result saved before the smooth-field prior had independent nodes (correlation length 0)
         cov = field.coverage(result.p_hat, result.cov_p, a, e, tl, td, result.settings.get("band_confidence", 0.95),
-                             prior, correlation_length=float(result.settings.get("prior_correlation", 0.0)))
+                             prior, correlation_length=float(result.settings.get("prior_correlation", 0.0)),
+                             cd_min=result.settings.get("cd_min"))
         out["coverage of the known truth"] = (
             f"the {100 * cov['confidence']:.0f} % bands contain the true ΔC_L at {100 * cov['lift']:.1f} % and the "
             f"true ΔC_D at {100 * cov['drag']:.1f} % of the {cov['n_points']} (α, η) points the operating points reach")

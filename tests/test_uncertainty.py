@@ -280,6 +280,73 @@ def test_representation_variance_is_the_interpolation_error_of_a_smooth_field(le
     assert formula[0] < 0.5 * rough[0] and rough[0] == pytest.approx(0.75 * sigma ** 2)
 
 
+@pytest.mark.parametrize("mu, s, lower", [(0.0, 1.0, -np.inf), (0.0, 1.0, -3.0), (0.0, 1.0, -1.0),
+                                           (0.02, 0.01, 0.015), (-0.004, 0.01, -0.003), (0.0, 1.0, 4.0)])
+def test_bounded_interval_is_the_shortest_interval_of_the_truncated_gaussian(mu, s, lower):
+    """The band under a bound: probability 0.95 under the Gaussian truncated at the bound
+    (exact and by sampling scipy's truncnorm), no point below the bound, and no shorter
+    interval of that probability (a search over the lower end)."""
+    from scipy import stats
+
+    from calib.parametrizations.correction_field import bounded_interval
+
+    lo, hi = (float(v) for v in bounded_interval(mu, s, lower, 0.95))
+    mass = stats.norm.sf((lower - mu) / s)
+
+    def prob(a, b):
+        return (stats.norm.cdf((b - mu) / s) - stats.norm.cdf((max(a, lower) - mu) / s)) / mass
+
+    assert prob(lo, hi) == pytest.approx(0.95, abs=1e-9)
+    assert lo >= lower
+    if lower == -np.inf:
+        assert (lo, hi) == pytest.approx((mu - 1.959964 * s, mu + 1.959964 * s), rel=1e-6)
+    draws = stats.truncnorm.rvs((lower - mu) / s, np.inf, loc=mu, scale=s, size=200_000,
+                                random_state=np.random.default_rng(7005))
+    assert np.mean((draws >= lo) & (draws <= hi)) == pytest.approx(0.95, abs=0.003)
+    # every other interval of the same probability is longer
+    start = max(lower, mu - 6 * s)
+    for a in np.linspace(start, lo + 2 * s, 401):
+        target = stats.norm.cdf((max(a, lower) - mu) / s) + 0.95 * mass
+        if target < 1:
+            b = mu + s * stats.norm.ppf(target)
+            assert b - a >= hi - lo - 1e-9 * s
+
+
+def test_the_drag_band_never_reaches_below_cd_min_and_coverage_counts_the_same_band():
+    """With a nominal C_D of 0.006 and a prior-sized ΔC_D band (σ 0.01) the Gaussian band
+    would reach C_D −0.014; bounded by C_D,min = 0.003 it starts there, its upper end is that
+    of the truncated Gaussian, the lift band is unchanged, and the coverage count uses the
+    same band (a truth below the bound is outside, one just under the upper end inside)."""
+    from calib.parametrizations import CorrectionField
+    from calib.parametrizations.correction_field import bounded_interval
+
+    grid = CorrectionGrid([0.0, 6.0, 12.0], [0.3, 0.7])
+    field = CorrectionField(grid.parameters(), nominal_coefficients=lambda a, e: (0.5 + 0 * np.asarray(a),
+                                                                                  0.006 + 0 * np.asarray(a)))
+    n = field.n_params
+    std = np.r_[np.full(grid.n_lift, 0.1), np.full(grid.n_params - grid.n_lift, 0.01)]
+    cov = np.diag(std ** 2)
+    p = np.zeros(n)
+    pb = field.bands(p, cov, cd_min=0.003)
+    free = field.bands(p, cov, cd_min=None)
+    np.testing.assert_allclose(pb["dcd_lower"], 0.003 - 0.006)                       # C_D band starts at 0.003
+    assert np.all(pb["cd0"] + pb["dcd_lower"] >= 0.003 - 1e-15)
+    assert np.all(free["cd0"] + free["dcd_lower"] < 0.0)                              # the Gaussian's is negative
+    _, hi = bounded_interval(0.0, np.sqrt(np.einsum("ij,jk,ik->i", field.basis(6.0, 0.3, "drag"), cov,
+                                                     field.basis(6.0, 0.3, "drag")))[0], -0.003)
+    j = int(np.argmin(np.abs(pb["alpha_deg"] - 6.0)))
+    assert pb["dcd_upper"][0, j] == pytest.approx(float(hi))
+    assert np.all(pb["dcd_upper"] < free["dcd_upper"])                                # narrower, not shifted up
+    np.testing.assert_allclose(pb["dcl_upper"] - pb["dcl"], pb["dcl_half_width"])     # lift: the Gaussian band
+    np.testing.assert_allclose(pb["dcl"] - pb["dcl_lower"], pb["dcl_half_width"])
+    a, e = np.array([6.0, 6.0, 6.0]), np.array([0.3, 0.3, 0.3])
+    truth_dcd = np.array([-0.0035, 0.99 * float(hi), 1.01 * float(hi)])
+    cover = [field.coverage(p, cov, a[[k]], e[[k]], np.zeros(1), truth_dcd[[k]], cd_min=0.003)["drag"]
+             for k in range(3)]
+    assert cover == [0.0, 1.0, 0.0]
+    assert field.coverage(p, cov, a[:1], e[:1], np.zeros(1), truth_dcd[:1], cd_min=None)["drag"] == 1.0
+
+
 def _held_back_chi2(res, model, cond, measured, sigma):
     pred = res.predict(cond, model=model)
     return float(np.mean(((measured - pred.values) / sigma) ** 2))

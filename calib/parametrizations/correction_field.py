@@ -144,6 +144,51 @@ def se_correlation(d_alpha, d_eta, lengths: tuple[float, float]) -> np.ndarray:
     return np.exp(-0.5 * (np.asarray(d_alpha) / lengths[0]) ** 2 - 0.5 * (np.asarray(d_eta) / lengths[1]) ** 2)
 
 
+def bounded_interval(estimate, std, lower, confidence: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest interval of probability ``confidence`` of a Gaussian N(estimate, std²)
+    truncated below at ``lower`` (the highest-density interval of the truncated density).
+
+    Where the bound lies far below the estimate this is the usual estimate ± z·std; where it
+    cuts into the Gaussian the interval starts at the bound and its upper end follows from
+    the renormalized mass, so no value the bound excludes is stated possible (e.g. C_D below
+    C_D,min) and the band is no wider than the truncated density needs.
+
+    Parameters
+    ----------
+    estimate, std : array_like
+        Mean and standard deviation of the untruncated Gaussian (broadcast).
+    lower : array_like
+        Lower bound; ``-inf`` for none.
+    confidence : float
+        Probability of the interval under the truncated density [-].
+
+    Returns
+    -------
+    lo, hi : ndarray
+        Interval ends (std = 0 gives the estimate raised to the bound).
+
+    References
+    ----------
+    N.L. Johnson, S. Kotz, N. Balakrishnan, Continuous Univariate Distributions, vol. 1,
+    2nd ed., Wiley 1994, §10.1 (the truncated normal).
+    """
+    mu, s, L = np.broadcast_arrays(np.asarray(estimate, float), np.asarray(std, float), np.asarray(lower, float))
+    lo, hi = np.empty(mu.shape), np.empty(mu.shape)
+    flat = s <= 0
+    lo[flat] = hi[flat] = np.maximum(mu[flat], L[flat])
+    k = ~flat
+    mu, s, L = mu[k], s[k], L[k]
+    a = (L - mu) / s                                   # the bound in standard units
+    mass = stats.norm.sf(a)                            # Gaussian mass above the bound
+    c = stats.norm.ppf(0.5 + 0.5 * confidence * mass)  # symmetric half-width holding `confidence` of it
+    symmetric = -c >= a
+    # otherwise the interval starts at the bound: P(a < Z < u) = confidence · mass
+    u = stats.norm.isf((1 - confidence) * mass)
+    lo[k] = np.where(symmetric, mu - c * s, L)
+    hi[k] = np.where(symmetric, mu + c * s, mu + u * s)
+    return lo, hi
+
+
 def seen_from_extras(evaluation: Evaluation) -> tuple[np.ndarray, np.ndarray]:
     """(α [deg], η [-]) of the loaded stations of converged points, from an evaluation whose
     ``extras`` carry ``alpha_deg`` (n_points, n_stations) and ``eta`` (n_stations,); NaN α
@@ -324,8 +369,12 @@ class CorrectionField:
 
     def bands(self, p_hat: np.ndarray, cov_p: np.ndarray, cov_frozen: np.ndarray | None = None,
               alpha_deg=None, eta=None, confidence: float = 0.95, prior_std: np.ndarray | None = None,
-              correlation_length: float = DEFAULT_PRIOR_CORRELATION) -> dict:
+              correlation_length: float = DEFAULT_PRIOR_CORRELATION, cd_min: float | None = None) -> dict:
         """Corrected polars C = C₀ + ΔC(α, η; p̂) with two-sided confidence bands.
+
+        The band of ΔC_D respects the bound C_D ≥ ``cd_min`` the estimate obeys: where the
+        Gaussian band would reach below it, the band is the shortest interval of the Gaussian
+        truncated there (:func:`bounded_interval`, :meth:`drag_floor`).
 
         Parameters
         ----------
@@ -345,13 +394,17 @@ class CorrectionField:
             to the bands and counted as prior.
         correlation_length : float
             Of the smooth-field prior, in node spacings (:meth:`node_correlation`).
+        cd_min : float, optional
+            Lower bound on C_D [-] (``CalibrationSettings.cd_min``); ``None``: no bound.
 
         Returns
         -------
         dict
             ``alpha_deg`` (n_a,), ``eta`` (n_e,), ``confidence``; per block ``dcl``/``dcd``,
-            ``dcl_half_width``/``dcd_half_width``, ``dcl_prior_fraction``/``dcd_prior_fraction``
-            (n_e, n_a); ``cl0``, ``cd0`` where nominal polars are known.
+            ``dcl_lower``/``dcl_upper``, ``dcd_lower``/``dcd_upper`` (the band's ends, ΔC [-]),
+            ``dcl_half_width``/``dcd_half_width`` (z·σ of the untruncated Gaussian),
+            ``dcl_prior_fraction``/``dcd_prior_fraction`` (n_e, n_a); ``cl0``, ``cd0`` where
+            nominal polars are known.
         """
         grid = self.grid
         if grid is None:
@@ -369,6 +422,9 @@ class CorrectionField:
                 self.representation_variance(A, E, block, prior_std, correlation_length).reshape(A.shape)
             var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0).reshape(A.shape) + rep
             out[f"d{letter}_half_width"] = z * np.sqrt(var)
+            floor = self.drag_floor(A, E, cd_min) if block == "drag" else -np.inf
+            out[f"d{letter}_lower"], out[f"d{letter}_upper"] = bounded_interval(out[f"d{letter}"], np.sqrt(var),
+                                                                                floor, confidence)
             if cov_frozen is not None:
                 vf = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_frozen, Bf), 0.0).reshape(A.shape) + rep
                 out[f"d{letter}_prior_fraction"] = np.where(var > 0, vf / np.where(var > 0, var, 1.0), 1.0)
@@ -377,10 +433,21 @@ class CorrectionField:
             out["cl0"], out["cd0"] = np.asarray(cl0, float), np.asarray(cd0, float)
         return out
 
+    def drag_floor(self, alpha_deg, eta, cd_min: float | None) -> np.ndarray:
+        """Least ΔC_D [-] the bound C_D ≥ ``cd_min`` allows at (α [deg], η [-]):
+        min(C_D,min − C_D,0, 0), so the nominal polar always lies inside, as in
+        :meth:`lower_bounds`; ``-inf`` without a bound or without nominal polars."""
+        a, e = np.broadcast_arrays(np.asarray(alpha_deg, float), np.asarray(eta, float))
+        if cd_min is None or self.nominal_coefficients is None:
+            return np.full(a.shape, -np.inf)
+        _, cd0 = self.nominal_coefficients(a, e)
+        return np.minimum(cd_min - np.broadcast_to(np.asarray(cd0, float), a.shape), 0.0)
+
     def coverage(self, p_hat: np.ndarray, cov_p: np.ndarray, alpha_deg, eta, truth_dcl, truth_dcd,
                  confidence: float = 0.95, prior_std: np.ndarray | None = None,
-                 correlation_length: float = DEFAULT_PRIOR_CORRELATION) -> dict:
-        """Fraction of points (α, η) where the band contains a known true correction.
+                 correlation_length: float = DEFAULT_PRIOR_CORRELATION, cd_min: float | None = None) -> dict:
+        """Fraction of points (α, η) where the band contains a known true correction (the
+        bands of :meth:`bands`, the drag band bounded by ``cd_min``).
 
         Parameters
         ----------
@@ -392,13 +459,14 @@ class CorrectionField:
             Adds the representation variance, as :meth:`bands` does.
         correlation_length : float
             Of the smooth-field prior, in node spacings (:meth:`node_correlation`).
+        cd_min : float, optional
+            Lower bound on C_D [-]; ``None``: no bound.
 
         Returns
         -------
         dict
             ``lift``, ``drag``: covered fraction [-]; ``n_points``.
         """
-        z = stats.norm.ppf(0.5 * (1 + confidence))
         out = {"n_points": int(np.size(alpha_deg)), "confidence": confidence}
         for block, truth in (("lift", truth_dcl), ("drag", truth_dcd)):
             Bf = self.basis(alpha_deg, eta, block)
@@ -406,7 +474,8 @@ class CorrectionField:
             var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0)
             if prior_std is not None:
                 var = var + self.representation_variance(alpha_deg, eta, block, prior_std, correlation_length)
-            sd = np.sqrt(var)
-            out[block] = float(np.mean(np.abs(est - np.asarray(truth).reshape(-1)) <= z * sd)) if sd.size else \
-                float("nan")
+            floor = self.drag_floor(alpha_deg, eta, cd_min).reshape(-1) if block == "drag" else -np.inf
+            lo, hi = bounded_interval(est, np.sqrt(var), floor, confidence)
+            t = np.asarray(truth, float).reshape(-1)
+            out[block] = float(np.mean((t >= lo) & (t <= hi))) if est.size else float("nan")
         return out

@@ -101,15 +101,20 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
             x = x0 + u
             first = col == 0
             base = np.asarray(pb[f"{letter}0"])[j] if f"{letter}0" in pb else np.zeros_like(alpha)
-            d, hw = np.asarray(pb[f"d{letter}"])[j], np.asarray(pb[f"d{letter}_half_width"])[j]
+            d = np.asarray(pb[f"d{letter}"])[j]
+            if f"d{letter}_lower" in pb:                 # the drag band bounded by C_D,min
+                lo, hi = np.asarray(pb[f"d{letter}_lower"])[j], np.asarray(pb[f"d{letter}_upper"])[j]
+            else:                                        # a result saved before the bounded bands
+                hw = np.asarray(pb[f"d{letter}_half_width"])[j]
+                lo, hi = d - hw, d + hw
             ax.plot(x, base, color="0.5", lw=1, label="nominal" if first else "_nolegend_", gid=f"nominal:{row}:{col}")
-            ax.fill_between(x, base + d - hw, base + d + hw, color="C0", alpha=0.25, lw=0,
+            ax.fill_between(x, base + lo, base + hi, color="C0", alpha=0.25, lw=0,
                             label=f"{100 * conf:.0f}% band" if first else "_nolegend_")
             frac_key = f"d{letter}_prior_fraction"
             if frac_key in pb:
                 prior_dom = np.asarray(pb[frac_key])[j] > 0.5
                 if prior_dom.any():
-                    ax.fill_between(x, base + d - hw, base + d + hw, where=prior_dom, color="C1", alpha=0.25, lw=0,
+                    ax.fill_between(x, base + lo, base + hi, where=prior_dom, color="C1", alpha=0.25, lw=0,
                                     label="band set by the prior (data say little)" if first else "_nolegend_")
             ax.plot(x, base + d, color="C0", lw=1.2, label="calibrated" if first else "_nolegend_",
                     gid=f"calibrated:{row}:{col}")
