@@ -36,7 +36,8 @@ the automatic choice started again and kept the second start (``second_start``),
 time.
 
 Held-back truncation check: every third operating point held back (on the workflows' grids of
-six pitch settings per tip-speed ratio, two whole pitch lines; on the twin, interleaved),
+six pitch settings per tip-speed ratio, two whole pitch lines; on the twin, interleaved; for the
+wind tunnel also an interleaved split, a third of every pitch line and tip-speed ratio),
 calibrate on the rest with ``sigma_bar = "auto"`` and with σ̄ = 0.1 … 5, predict the held-back
 points and compare χ²/dof (mean squared whitened residual) of the automatic choice with the
 best of the sweep; on both shipped workflows (with their own noise seeds; the localization
@@ -296,11 +297,26 @@ def _held_back_case(name: str, seed: int | None = None):
     return model, cond, meas, setup.calibration_settings
 
 
-def held_back(name: str, sweep=SWEEP, seed: int | None = None) -> dict:
-    """Held-back χ²/dof of ``sigma_bar = "auto"`` against a sweep of σ̄ (every third point held
-    back); ``name`` one of ``wind_tunnel``, ``localization``, ``twin``."""
+def held_back_mask(n_points: int, split: str = "rows", n_pitch: int = 6) -> np.ndarray:
+    """Which of ``n_points`` operating points are held back: ``rows``, every third point in
+    file order (on the workflows' grids, pitch the inner loop with ``n_pitch`` settings per
+    tip-speed ratio, that is two whole pitch lines); ``interleaved``, the points whose
+    tip-speed-ratio and pitch indices sum to 1 modulo 3 (a third of every pitch line and of
+    every tip-speed ratio)."""
+    k = np.arange(n_points)
+    if split == "rows":
+        return k % 3 == 1
+    if split == "interleaved":
+        return (k // n_pitch + k % n_pitch) % 3 == 1
+    raise ValueError(f"split: expected 'rows' or 'interleaved', got {split!r}")
+
+
+def held_back(name: str, sweep=SWEEP, seed: int | None = None, split: str = "rows") -> dict:
+    """Held-back χ²/dof of ``sigma_bar = "auto"`` against a sweep of σ̄ (the points of
+    :func:`held_back_mask` held back); ``name`` one of ``wind_tunnel``, ``localization``,
+    ``twin`` (``interleaved`` only for the workflows' 6-pitch grids)."""
     model, cond, meas, settings = _held_back_case(name, seed)
-    test = np.arange(len(cond)) % 3 == 1
+    test = held_back_mask(len(cond), split)
     train = Measurements(cond.subset(~test), meas.channels, meas.values[~test], meas.sigma[~test], "train")
     scores, kept = {}, {}
     for sb in ("auto",) + tuple(sweep):
@@ -313,7 +329,7 @@ def held_back(name: str, sweep=SWEEP, seed: int | None = None) -> dict:
     fig = {"auto": scores["auto"], "auto_retained": kept["auto"], "best": best, "best_sigma_bar": best_sb,
            "best_retained": kept[best_sb], "ratio": scores["auto"] / best,
            "sweep": {str(sb): [round(scores[sb], 4), kept[sb]] for sb in sweep}}
-    print(f"[held back {name}] auto {scores['auto']:.3f} ({kept['auto']} θ), best {best:.3f} (σ̄ {best_sb}, "
+    print(f"[held back {name}, {split}] auto {scores['auto']:.3f} ({kept['auto']} θ), best {best:.3f} (σ̄ {best_sb}, "
           f"{kept[best_sb]} θ): ratio {fig['ratio']:.3f}", flush=True)
     return fig
 
@@ -322,6 +338,7 @@ def run(n_seeds: int = 30, with_held_back: bool = True) -> dict:
     out = coverage(n_seeds)
     if with_held_back:
         out["held_back"] = {name: held_back(name) for name in ("wind_tunnel", "localization", "twin")}
+        out["held_back"]["wind_tunnel_interleaved"] = held_back("wind_tunnel", split="interleaved")
     return out
 
 

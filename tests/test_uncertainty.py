@@ -494,6 +494,21 @@ def test_auto_truncation_on_a_held_back_split_of_the_analytic_twin():
     assert fig["ratio"] <= 1.2, fig
 
 
+def test_held_back_splits_of_the_workflow_grid():
+    """On the workflows' grid (12 tip-speed ratios × 6 pitches, pitch the inner loop): ``rows``
+    holds back the whole pitch lines 2 and 5 (0° and 6° in the wind tunnel), ``interleaved`` a
+    third of every pitch line and of every tip-speed ratio."""
+    mask = _bench().held_back_mask
+    rows, inter = mask(72, "rows").reshape(12, 6), mask(72, "interleaved").reshape(12, 6)
+    assert rows.sum() == inter.sum() == 24
+    np.testing.assert_array_equal(rows.all(axis=0), [False, True, False, False, True, False])
+    assert not rows[:, [0, 2, 3, 5]].any()
+    np.testing.assert_array_equal(inter.sum(axis=0), 4)
+    np.testing.assert_array_equal(inter.sum(axis=1), 2)
+    with pytest.raises(ValueError, match="split"):
+        mask(72, "random")
+
+
 @pytest.fixture(scope="module")
 def coverage_twins():
     """benchmarks/bench_coverage.py twins (a) inside the span, (b) outside it, (c) truths drawn
