@@ -528,8 +528,9 @@ def test_polar_bands_cover_the_truth_in_the_coverage_twins(coverage_twins):
 @pytest.mark.statistics
 @pytest.mark.parametrize("name", [
     pytest.param("c_prior_draws", marks=pytest.mark.xfail(
-        reason="issue 7: on these seeds (c) covers ΔC_D at 99.87 % (ΔC_L 97.9 %); drag draws conditioned on "
-               "C_D > 0 at the reached sections are smaller than the prior (seeds 5000-5029: 98.7 %, 98.0 %)",
+        reason="issue 7: on these seeds (c) covers ΔC_L at 99.7 % and ΔC_D at 99.6 % (seeds 5000-5029: 98.8 %, "
+               "97.7 %; tuning seeds 8300-8329: 98.7 %, 96.8 %): the default bands budget a field between the nodes "
+               "that truths in the span lack (NEES 50.0 for 170, README)",
         strict=False)),
     "d_prior_draws_outside_span"])
 def test_polar_bands_are_not_wider_than_needed_for_truths_drawn_from_the_prior(coverage_twins, name):
