@@ -164,6 +164,42 @@ def test_correlation_axes_are_labelled_by_parameter(result):
     assert g.label == "ΔC_L α=8°"
 
 
+def _bands(fig):
+    """{(row, col): (lowest, highest) y of the drawn 95 % band} of the polar figure."""
+    out = {}
+    for ax in fig.axes:
+        for coll in ax.collections:
+            gid = coll.get_gid() or ""
+            if gid.startswith("band:"):
+                y = np.concatenate([path.vertices[:, 1] for path in coll.get_paths()])
+                out[tuple(int(v) for v in gid.split(":")[1:])] = (y.min(), y.max())
+    return out
+
+
+def test_polar_bands_drawn_are_the_bounded_bands_and_older_results_fall_back_to_the_half_width(result):
+    """The figure draws the band's stated ends (the drag band bounded by C_D,min); a result saved
+    before the bounded bands (no ``d*_lower``/``d*_upper``) gets ± the half width."""
+    pb = dict(result.polar_bands)
+    # ends that are not ± the half width (as where C_D,min cuts the drag band)
+    pb["dcd_lower"] = np.asarray(pb["dcd"]) - 0.3 * np.asarray(pb["dcd_half_width"])
+    result = dataclasses.replace(result, polar_bands=pb)
+    cols = station_columns(np.asarray(pb["eta"]), 5)
+    drawn = _bands(F.plot_polars(result))
+    assert sorted(drawn) == [(r, c) for r in (0, 1) for c in range(cols.size)]
+    for (row, col), (lo, hi) in drawn.items():
+        j, letter = cols[col], ("cl", "cd")[row]
+        base = np.asarray(pb[f"{letter}0"])[j]
+        assert lo == pytest.approx(np.min(base + np.asarray(pb[f"d{letter}_lower"])[j]))
+        assert hi == pytest.approx(np.max(base + np.asarray(pb[f"d{letter}_upper"])[j]))
+    old = dataclasses.replace(result, polar_bands={k: v for k, v in pb.items()
+                                                   if not k.endswith(("_lower", "_upper"))})
+    for (row, col), (lo, hi) in _bands(F.plot_polars(old)).items():
+        j, letter = cols[col], ("cl", "cd")[row]
+        base, d = np.asarray(pb[f"{letter}0"])[j], np.asarray(pb[f"d{letter}"])[j]
+        hw = np.asarray(pb[f"d{letter}_half_width"])[j]
+        assert (lo, hi) == pytest.approx((np.min(base + d - hw), np.max(base + d + hw)))
+
+
 def test_known_truth_is_overlaid_on_the_polars(result):
     def truth(alpha_deg, eta):
         return 0.1 * np.sin(np.radians(alpha_deg)) * eta, 0.002 + 0 * alpha_deg

@@ -108,7 +108,7 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
                 hw = np.asarray(pb[f"d{letter}_half_width"])[j]
                 lo, hi = d - hw, d + hw
             ax.plot(x, base, color="0.5", lw=1, label="nominal" if first else "_nolegend_", gid=f"nominal:{row}:{col}")
-            ax.fill_between(x, base + lo, base + hi, color="C0", alpha=0.25, lw=0,
+            ax.fill_between(x, base + lo, base + hi, color="C0", alpha=0.25, lw=0, gid=f"band:{row}:{col}",
                             label=f"{100 * conf:.0f}% band" if first else "_nolegend_")
             frac_key = f"d{letter}_prior_fraction"
             if frac_key in pb:
