@@ -87,6 +87,18 @@ def _prior_limit_clause(r: CalibrationResult) -> str:
     return f"; the data determine the first {limit} directions better than the prior"
 
 
+
+def _bounded_drag_points(pb: dict, cd_min: float | None) -> tuple[int, int] | None:
+    """(points of the polar figure where the ΔC_D band starts at the bound C_D,min, all its
+    points), or None when there are none (or no bound, no nominal C_D, or a result saved
+    before the bounded bands)."""
+    if cd_min is None or not {"dcd_lower", "cd0"} <= set(pb):
+        return None
+    floor = np.minimum(cd_min - np.asarray(pb["cd0"], float), 0.0)     # CorrectionField.drag_floor
+    cut = np.isclose(np.asarray(pb["dcd_lower"], float), floor, rtol=0.0, atol=1e-12)
+    return (int(cut.sum()), int(cut.size)) if cut.any() else None
+
+
 def _sentences(r: CalibrationResult) -> list[str]:
     """Plain statements generated from the numbers they describe."""
     gof = r.goodness_of_fit()
@@ -115,6 +127,12 @@ def _sentences(r: CalibrationResult) -> list[str]:
                    f"its effect on the estimate.")
     if r.aliasing_note:
         out.append(f"Not in the bands: {r.aliasing_note}")
+    bounded = _bounded_drag_points(r.polar_bands, r.settings.get("cd_min"))
+    if bounded:
+        out.append(f"The ΔC_D band starts at C_D,min = {r.settings['cd_min']:.3g} at {bounded[0]} of the "
+                   f"{bounded[1]} points of the polar figure, where the Gaussian band would reach below it: the band "
+                   f"is the shortest {100 * float(r.polar_bands.get('confidence', 0.95)):.0f} % interval of the "
+                   f"Gaussian truncated at that bound.")
     if r.fit_scale > 1.0:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
