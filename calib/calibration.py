@@ -245,6 +245,23 @@ def _progress_printer(rec: dict) -> None:
     print(f"[calib {rec.get('stage', '')}] {keys}", flush=True)
 
 
+def keep_second_start(first: tuple, second: tuple) -> bool:
+    """Whether the automatic choice keeps its second start (:meth:`Calibrator._second_start`).
+
+    Each start is (retained count, criterion at it, its standard error, status). The default
+    is the start whose retained set settled (status ``converged``) when only one did, else the
+    one with fewer θ, else (equal counts) the first; the other is kept only if its criterion is
+    lower than the default's by more than its own standard error. A failed second start, or
+    one without a finite criterion, is never kept.
+    """
+    (k1, cv1, se1, s1), (k2, cv2, se2, s2) = first, second
+    if s2 == "failed" or not np.isfinite(cv2):
+        return False
+    settled1, settled2 = s1 == "converged", s2 == "converged"
+    default_second = settled2 if settled1 != settled2 else k2 < k1
+    return not cv1 < cv2 - se1 if default_second else cv2 < cv1 - se2
+
+
 class Calibrator:
     """Calibrate a ForwardModel from measurements (see the module docstring).
 
@@ -448,7 +465,11 @@ class Calibrator:
         limit's 22 θ it settled on 22 θ at χ²/dof 1.26 (criterion 1.73). Each result is judged
         by its own final curve at its own count; the one with fewer θ is kept unless the other's
         criterion is lower by more than that criterion's standard error (the one-standard-error
-        rule of :func:`calib.truncation.cv_curve` across the two starts).
+        rule of :func:`calib.truncation.cv_curve` across the two starts). When only one of the
+        two ended with a settled retained set (status ``converged``), that one takes the place of
+        the one with fewer θ in this rule: on coverage twin (d), tuning seed 8302, both starts
+        kept 17 θ, and the first, whose last direction still turned by 53°, had been kept over
+        the second, which had settled.
         """
         _, svd1, lin1, _, _ = first
         chi2, dof = self._chi2_dof(lin1, svd1)
@@ -468,11 +489,11 @@ class Calibrator:
         k1, k2 = svd1.n_retained, second[1].n_retained
         cv1, cv2 = float(c1.cv[k1]), float(c2.cv[k2])
         se1, se2 = float(c1.cv_se[k1]), float(c2.cv_se[k2])
-        keep_second = second[3] != "failed" and np.isfinite(cv2) and (
-            cv2 < cv1 - se2 if k2 > k1 else cv2 <= cv1 + se1 if k2 < k1 else False)
+        keep_second = keep_second_start((k1, cv1, se1, first[3]), (k2, cv2, se2, second[3]))
         self._second_start_record = {"first_retained": k1, "first_cv": cv1, "first_cv_se": se1,
-                                     "first_p_value": p_value, "second_retained": k2, "second_cv": cv2,
-                                     "second_cv_se": se2, "second_kept": int(keep_second)}
+                                     "first_p_value": p_value, "first_status": first[3],
+                                     "second_retained": k2, "second_cv": cv2, "second_cv_se": se2,
+                                     "second_status": second[3], "second_kept": int(keep_second)}
         self._emit({"stage": "second_start_done", **self._second_start_record})
         if keep_second:
             return second

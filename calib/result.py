@@ -63,11 +63,17 @@ def second_start_sentence(truncation: dict) -> str:
     t = truncation
     k1, k2 = int(t["first_retained"]), int(t["second_retained"])
     kept = "second" if int(t["second_kept"]) else "first"
+    # results saved before the statuses were recorded have neither
+    statuses = [str(t.get(f"{which}_status", "")) for which in ("first", "second")]
+    differ = all(statuses) and (statuses[0] == "converged") != (statuses[1] == "converged")
+    ends = [f", {s.replace('_', ' ')}" if differ else "" for s in statuses]
+    rule = ("the one whose retained set settled" if differ else
+            "the fewer θ" if k1 != k2 else "the first, at the same count")
     return (f"The first fit's χ² rejected the stated noise (p = {float(t['first_p_value']):.2g}), so the "
-            f"choice was started again from the prior limit's count: from nominal it settled on {k1} θ (criterion "
-            f"{float(t['first_cv']):.3g} ± {float(t['first_cv_se']):.2g}), from the limit on {k2} θ "
-            f"({float(t['second_cv']):.3g} ± {float(t['second_cv_se']):.2g}); the {kept} was kept (the fewer θ "
-            f"unless the other's criterion is lower by more than its standard error).")
+            f"choice was started again from the prior limit's count: from nominal it ended at {k1} θ (criterion "
+            f"{float(t['first_cv']):.3g} ± {float(t['first_cv_se']):.2g}{ends[0]}), from the limit at {k2} θ "
+            f"({float(t['second_cv']):.3g} ± {float(t['second_cv_se']):.2g}{ends[1]}); the {kept} was kept "
+            f"({rule}, unless the other's criterion is lower by more than its standard error).")
 
 
 @dataclass(eq=False)

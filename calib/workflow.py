@@ -635,8 +635,9 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
                 echo(f"[calib run] {_name}: χ² {rec['chi2']:.4g} over {rec['dof']} rejects the stated noise "
                      f"(p = {rec['p_value']:.2g}): the automatic choice starts again from the prior limit's count")
             elif rec.get("stage") == "second_start_done":
-                echo(f"[calib run] {_name}: {rec['first_retained']} θ from nominal, {rec['second_retained']} θ from "
-                     f"the limit; kept the {'second' if rec['second_kept'] else 'first'}")
+                echo(f"[calib run] {_name}: {rec['first_retained']} θ from nominal ({rec['first_status']}), "
+                     f"{rec['second_retained']} θ from the limit ({rec['second_status']}); kept the "
+                     f"{'second' if rec['second_kept'] else 'first'}")
             else:
                 log.debug("%s: %s", _name, ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else f"{k} = {v}"
                                                        for k, v in rec.items() if k != "qp"))

@@ -5,10 +5,10 @@ two starts is kept by the one-standard-error rule across them."""
 import numpy as np
 import pytest
 
-from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration import CalibrationSettings, Calibrator, keep_second_start
 from calib.measurements import synthesize
 from calib.report.html import _sentences
-from calib.result import load_result
+from calib.result import load_result, second_start_sentence
 from test_calibration import CHANNELS, twin_truth
 from twin_model import TwinModel, twin_conditions
 
@@ -74,7 +74,7 @@ def test_a_first_start_trapped_at_few_theta_is_replaced_by_the_start_from_the_pr
     assert res.chi2_per_dof_after < 0.5 * trapped.chi2_per_dof_after
     assert any(r.get("stage") == "second_start" for r in cal.history)
     sentence = next(s for s in _sentences(res) if "started again" in s)
-    assert "settled on 1 θ" in sentence and f"on {res.n_retained} θ" in sentence and "the second was kept" in sentence
+    assert "ended at 1 θ" in sentence and f"at {res.n_retained} θ" in sentence and "the second was kept" in sentence
     assert "started again" in res.summary()
     res.save(tmp_path)
     back = load_result(tmp_path)
@@ -102,3 +102,40 @@ def test_no_second_start_with_noise_from_the_residuals(twin):
 def test_second_start_must_be_a_boolean():
     with pytest.raises(Exception, match="second_start"):
         CalibrationSettings(second_start="yes").validate()
+
+
+@pytest.mark.parametrize("first, second, kept", [
+    # both settled: the fewer θ unless the other's criterion is lower by more than its SE
+    ((12, 1.53, 0.16, "converged"), (20, 1.40, 0.15, "converged"), False),
+    ((12, 1.53, 0.16, "converged"), (20, 1.30, 0.15, "converged"), True),
+    ((20, 1.40, 0.15, "converged"), (12, 1.53, 0.16, "converged"), True),
+    ((20, 1.30, 0.15, "converged"), (12, 1.53, 0.16, "converged"), False),
+    # equal counts and statuses: the first
+    ((17, 1.60, 0.20, "not_stable"), (17, 1.50, 0.20, "not_stable"), False),
+    # only one settled: that one is the default, whatever the counts
+    ((17, 1.60, 0.20, "not_stable"), (17, 1.62, 0.20, "converged"), True),      # coverage twin (d), seed 8302
+    ((17, 1.50, 0.20, "converged"), (22, 1.45, 0.20, "not_stable"), False),
+    ((17, 1.50, 0.20, "converged"), (22, 1.20, 0.20, "not_stable"), True),      # clearly better: kept anyway
+    ((22, 1.45, 0.20, "not_stable"), (17, 1.50, 0.20, "converged"), True),
+    ((22, 1.20, 0.20, "not_stable"), (17, 1.50, 0.20, "converged"), False),
+    # a failed second start, or one without a criterion, never
+    ((17, 9.0, 2.0, "converged"), (22, 1.2, 0.2, "failed"), False),
+    ((17, 9.0, 2.0, "converged"), (22, float("nan"), 0.2, "converged"), False),
+])
+def test_which_start_is_kept(first, second, kept):
+    assert keep_second_start(first, second) is kept
+
+
+def test_the_sentence_says_which_start_settled_when_only_one_did():
+    t = {"first_retained": 17, "first_cv": 1.6, "first_cv_se": 0.2, "first_p_value": 1e-4, "first_status": "not_stable",
+         "second_retained": 17, "second_cv": 1.62, "second_cv_se": 0.2, "second_status": "converged",
+         "second_kept": 1}
+    text = second_start_sentence(t)
+    assert "ended at 17 θ (criterion 1.6 ± 0.2, not stable)" in text and "(1.62 ± 0.2, converged)" in text
+    assert "the second was kept (the one whose retained set settled" in text
+    same = {**t, "first_status": "converged"}
+    assert "not stable" not in second_start_sentence(same) and "(the first, at the same count" in \
+        second_start_sentence({**same, "second_kept": 0})
+    # a result saved before the statuses were recorded
+    old = {k: v for k, v in t.items() if not k.endswith("_status")}
+    assert "converged" not in second_start_sentence(old)
