@@ -312,6 +312,16 @@ def test_bounded_interval_is_the_shortest_interval_of_the_truncated_gaussian(mu,
             assert b - a >= hi - lo - 1e-9 * s
 
 
+def test_bounded_interval_far_in_the_tail_stays_finite():
+    """An estimate 50σ below the bound (the Gaussian's mass above it underflows): the interval
+    is the exponential tail's, [bound, bound + σ·ln 20 / 50], not infinite."""
+    from calib.parametrizations.correction_field import bounded_interval
+
+    lo, hi = bounded_interval(np.array([0.0, 0.0]), np.array([1.0, 1.0]), np.array([50.0, 30.0]))
+    assert lo[0] == 50.0 and hi[0] == pytest.approx(50.0 + np.log(20.0) / 50.0, rel=1e-12)
+    assert hi[1] == pytest.approx(30.0 + np.log(20.0) / 30.0, rel=2e-3)     # the exact quantile, near the limit
+
+
 def test_the_drag_band_never_reaches_below_cd_min_and_coverage_counts_the_same_band():
     """With a nominal C_D of 0.006 and a prior-sized ΔC_D band (σ 0.01) the Gaussian band
     would reach C_D −0.014; bounded by C_D,min = 0.003 it starts there, its upper end is that

@@ -183,9 +183,13 @@ def bounded_interval(estimate, std, lower, confidence: float = 0.95) -> tuple[np
     c = stats.norm.ppf(0.5 + 0.5 * confidence * mass)  # symmetric half-width holding `confidence` of it
     symmetric = -c >= a
     # otherwise the interval starts at the bound: P(a < Z < u) = confidence · mass
-    u = stats.norm.isf((1 - confidence) * mass)
+    with np.errstate(divide="ignore"):
+        u = stats.norm.isf((1 - confidence) * mass)
+        # far in the tail (mass below the smallest double) the truncated density is the
+        # exponential of rate a/std beyond the bound (Mills' ratio)
+        tail = L + s * -np.log1p(-confidence) / np.maximum(a, 1.0)
     lo[k] = np.where(symmetric, mu - c * s, L)
-    hi[k] = np.where(symmetric, mu + c * s, mu + u * s)
+    hi[k] = np.where(symmetric, mu + c * s, np.where(np.isfinite(u), mu + u * s, tail))
     return lo, hi
 
 
