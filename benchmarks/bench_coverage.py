@@ -158,7 +158,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
     bumps = cfg["truth"]["bumps"]
     rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
     field = model.correction_field()
-    settings_cd_min = {"cd_min": 0.003, **calibration}["cd_min"]
+    settings_cd_min = calibration.pop("cd_min", 0.003)
     # (b) outside the span: the workflow's fine-grid truth model
     tmodel_b, p_b = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
     # (a) inside the span: the smooth field at the calibration nodes
@@ -186,7 +186,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             else:
                 p_true = _fine_prior_draw(tmodel, model, grid, cond, seed0 + k, settings_cd_min)
             meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=seed0 + k)
-            res = Calibrator(model, meas, CalibrationSettings(**{"cd_min": settings_cd_min, **calibration})).run()
+            res = Calibrator(model, meas, CalibrationSettings(cd_min=settings_cd_min, **calibration)).run()
             if res.status != "converged":
                 failed += 1
             a, e = res.alpha_seen, res.eta_seen

@@ -193,6 +193,16 @@ def bounded_interval(estimate, std, lower, confidence: float = 0.95) -> tuple[np
     return lo, hi
 
 
+def drag_floor_values(cd0, cd_min: float | None) -> np.ndarray:
+    """Least ΔC_D [-] the bound C_D ≥ ``cd_min`` allows where the nominal C_D is ``cd0`` [-]:
+    min(C_D,min − C_D,0, 0), so the nominal polar always lies inside, as in
+    :meth:`CorrectionField.lower_bounds`; ``-inf`` without a bound."""
+    cd0 = np.asarray(cd0, float)
+    if cd_min is None:
+        return np.full(cd0.shape, -np.inf)
+    return np.minimum(cd_min - cd0, 0.0)
+
+
 def seen_from_extras(evaluation: Evaluation) -> tuple[np.ndarray, np.ndarray]:
     """(α [deg], η [-]) of the loaded stations of converged points, from an evaluation whose
     ``extras`` carry ``alpha_deg`` (n_points, n_stations) and ``eta`` (n_stations,); NaN α
@@ -438,14 +448,13 @@ class CorrectionField:
         return out
 
     def drag_floor(self, alpha_deg, eta, cd_min: float | None) -> np.ndarray:
-        """Least ΔC_D [-] the bound C_D ≥ ``cd_min`` allows at (α [deg], η [-]):
-        min(C_D,min − C_D,0, 0), so the nominal polar always lies inside, as in
-        :meth:`lower_bounds`; ``-inf`` without a bound or without nominal polars."""
+        """Least ΔC_D [-] the bound C_D ≥ ``cd_min`` allows at (α [deg], η [-])
+        (:func:`drag_floor_values`); ``-inf`` without a bound or without nominal polars."""
         a, e = np.broadcast_arrays(np.asarray(alpha_deg, float), np.asarray(eta, float))
         if cd_min is None or self.nominal_coefficients is None:
             return np.full(a.shape, -np.inf)
         _, cd0 = self.nominal_coefficients(a, e)
-        return np.minimum(cd_min - np.broadcast_to(np.asarray(cd0, float), a.shape), 0.0)
+        return drag_floor_values(np.broadcast_to(np.asarray(cd0, float), a.shape), cd_min)
 
     def coverage(self, p_hat: np.ndarray, cov_p: np.ndarray, alpha_deg, eta, truth_dcl, truth_dcd,
                  confidence: float = 0.95, prior_std: np.ndarray | None = None,

@@ -14,6 +14,7 @@ from typing import Mapping
 import numpy as np
 
 from calib.report.atomic import atomic_write_text
+from calib.parametrizations.correction_field import drag_floor_values
 from calib.prior_check import PriorCheck
 from calib.result import CalibrationResult, second_start_sentence
 
@@ -87,14 +88,13 @@ def _prior_limit_clause(r: CalibrationResult) -> str:
     return f"; the data determine the first {limit} directions better than the prior"
 
 
-
 def _bounded_drag_points(pb: dict, cd_min: float | None) -> tuple[int, int] | None:
     """(points of the polar figure where the ΔC_D band starts at the bound C_D,min, all its
     points), or None when there are none (or no bound, no nominal C_D, or a result saved
     before the bounded bands)."""
     if cd_min is None or not {"dcd_lower", "cd0"} <= set(pb):
         return None
-    floor = np.minimum(cd_min - np.asarray(pb["cd0"], float), 0.0)     # CorrectionField.drag_floor
+    floor = drag_floor_values(pb["cd0"], cd_min)
     cut = np.isclose(np.asarray(pb["dcd_lower"], float), floor, rtol=0.0, atol=1e-12)
     return (int(cut.sum()), int(cut.size)) if cut.any() else None
 
