@@ -176,7 +176,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
         cov = {"lift": [], "drag": [], "lift_in_grid": [], "drag_in_grid": []}
         hits = {"lift": [0, 0], "drag": [0, 0]}
         nees, nees_noise, dims, stable, kept, failed = [], [], [], [], [], 0
-        prior_checks, second = [], [0, 0]
+        prior_checks, second, fold_runs = [], [0, 0], 0
         t0 = time.perf_counter()
         for k in range(n_seeds):
             if p_fixed is not None:
@@ -233,7 +233,10 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             print(f"[coverage {label}] seed {seed0 + k}: lift {c['lift']:.3f} drag {c['drag']:.3f} (inside the node "
                   f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} NEES {nees[-1]:.1f} "
                   f"fit scale {res.fit_scale:.2f} prior amplitude {res.prior_check['amplitude']:.2f} "
-                  f"({res.prior_check['lower']:.2f}-{res.prior_check['upper']:.2f}) {res.status}", flush=True)
+                  f"({res.prior_check['lower']:.2f}-{res.prior_check['upper']:.2f}) {res.status}"
+                  + (f" fold θ {sorted({d['theta'] for d in res.fold_directions})}" if res.fold_directions else ""),
+                  flush=True)
+            fold_runs += bool(res.fold_directions)
         fig = {"n_seeds": n_seeds, "seeds": [seed0, seed0 + n_seeds - 1]}
         for key, v in cov.items():
             fig[f"coverage_{key}_mean"] = float(np.mean(v))
@@ -249,6 +252,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                     "prior_check_amplitude_median_p10_p90": [float(np.median(amp)),
                                                              *np.percentile(amp, [10, 90]).tolist()]})
         fig.update({"retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
+                    "runs_with_fold_directions": fold_runs,
                     "second_start_run_kept": second,
                     "seconds_per_calibration": (time.perf_counter() - t0) / n_seeds})
         if dims:

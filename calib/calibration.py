@@ -41,9 +41,9 @@ from scipy import stats
 
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
-from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, frozen_aware_covariance,
-                                   frozen_curvature_covariance, observability, parameter_verdicts, subspace_cosines,
-                                   svd_analysis)
+from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, fold_dominated_directions,
+                                   frozen_aware_covariance, frozen_curvature_covariance, observability,
+                                   parameter_verdicts, subspace_cosines, svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
 from calib.parametrizations.aliasing import FineSensitivities
@@ -667,6 +667,25 @@ class Calibrator:
         ratio = np.diag(cov) / svd.sigma_theta[r] ** 2
         return cov, {**info, "variance_ratio_mean": float(np.mean(ratio)), "variance_ratio_max": float(np.max(ratio))}
 
+    def _fold_directions(self, lin, svd, multiple_roots, cov_ret, prior_cov):
+        """Retained directions that points with several roots of the BEM equations determine
+        (:func:`calib.identifiability.fold_dominated_directions`): their stated covariance gets
+        the prior variance along them added, so their σ is at least the prior's. Returns the
+        covariance and one record per (point, direction) with the σ along it before and after
+        [scale units]."""
+        Vr = svd.V[:, svd.retained]
+        fold = fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
+                                         multiple_roots, lin.ok)
+        for i in sorted({d["theta"] - 1 for d in fold}):
+            v = Vr[:, i]
+            before = float(np.sqrt(max(v @ cov_ret @ v, 0.0)))
+            cov_ret = cov_ret + float(v @ prior_cov @ v) * np.outer(v, v)
+            after = float(np.sqrt(max(v @ cov_ret @ v, 0.0)))
+            for d in fold:
+                if d["theta"] == i + 1:
+                    d.update(sigma_before=before, sigma_after=after)
+        return cov_ret, fold
+
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
 
@@ -711,6 +730,8 @@ class Calibrator:
         if curvature_cov is not None:  # the frozen part of the truth, through the model's curvature
             Vr = svd.V[:, svd.retained]
             cov_ret = cov_ret + Vr @ curvature_cov @ Vr.T
+        multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
+        cov_ret, fold = self._fold_directions(lin, svd, multiple_roots, cov_ret, prior_cov)
         D = np.outer(self.scale, self.scale)
         cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
@@ -755,7 +776,7 @@ class Calibrator:
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
             truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
             aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature, prior_check=prior_check,
-            multiple_roots=np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool))
+            multiple_roots=multiple_roots, fold_directions=fold)
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
                                                confidence=st.band_confidence,

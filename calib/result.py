@@ -57,6 +57,29 @@ _ARRAY_FIELDS = ("p_nominal", "p_hat", "lower", "upper", "scale", "cov_p", "std_
                  "multiple_roots")
 
 
+def fold_sentence(fold_directions: list, conditions: dict | None = None, tsr=None) -> str:
+    """One sentence on the retained θ that points with several roots of the BEM equations
+    determine (``CalibrationResult.fold_directions``), from the numbers recorded there;
+    ``conditions`` (``CalibrationResult.conditions``) and ``tsr`` name the operating point."""
+    cond = dict(conditions or {})
+    if tsr is not None:
+        cond["tsr"] = tsr
+    parts = []
+    for d in fold_directions:
+        where = f"point {d['point'] + 1}"
+        labels = [(k, u) for k, u in (("wind_speed", "{:.3g} m/s"), ("tsr", "λ {:.3g}"), ("pitch", "pitch {:.3g}°"))
+                  if k in cond and np.ndim(cond[k]) == 1 and d["point"] < len(cond[k])]
+        if labels:
+            where += " (" + ", ".join(u.format(float(cond[k][d["point"]])) for k, u in labels) + ")"
+        sig = (f"; σ along it {d['sigma_before']:.2g} → {d['sigma_after']:.2g} scale units"
+               if "sigma_after" in d else "")
+        parts.append(f"θ{d['theta']} takes {100 * d['share']:.0f} % of its information from {where}, whose "
+                     f"sensitivity is {d['sensitivity_ratio']:.3g}× the median point's{sig}")
+    return ("Near a fold of the BEM residual (several roots at a section) the linearization holds only on a "
+            "narrow ridge: " + "; ".join(parts) + ". Such a θ is stated with its prior variance added, so its "
+            "band is at least the prior's.")
+
+
 def second_start_sentence(truncation: dict) -> str:
     """One sentence on the automatic choice's second start (``CalibrationSettings.second_start``),
     from the numbers it recorded in ``truncation``."""
@@ -141,6 +164,12 @@ class CalibrationResult:
         ``confidence``, ``verdict``, ``between_nodes``, ``log_lr_at_stated``, ...); empty without a
         correction field or with the check off; ``{"failed": message}`` when it could not be
         computed (the calibration's result stands).
+    fold_directions : list of dict
+        Retained θ that a point with several roots of the BEM equations determines (more than
+        half of the θ's information, :func:`calib.identifiability.fold_dominated_directions`):
+        ``point``, ``theta`` (1-based), ``share``, ``sensitivity_ratio`` and the σ along the
+        direction before and after its prior variance was added, ``sigma_before``,
+        ``sigma_after`` [scale units]. Empty when there is none.
     """
 
     parameters: list[dict]
@@ -200,6 +229,7 @@ class CalibrationResult:
     aliasing_note: str = ""
     curvature: dict = field(default_factory=dict)
     prior_check: dict = field(default_factory=dict)
+    fold_directions: list = field(default_factory=list)
 
     # ------------------------------------------------------------------ derived
     @property
@@ -369,6 +399,8 @@ class CalibrationResult:
             lines.append(f"  prior check: field amplitude {pc['amplitude']:.2g} x stated "
                          f"({100 * pc['confidence']:.0f} % interval {pc['lower']:.2g}-{pc['upper']:.2g}), "
                          f"{pc['verdict']}")
+        if self.fold_directions:
+            lines.append("  " + fold_sentence(self.fold_directions, self.conditions, self.tip_speed_ratio()))
         rb, ra = self.rms("before"), self.rms("after")
         for c in self.channels:
             lines.append(f"  rms {c}: {rb[c]:.4g} -> {ra[c]:.4g}")

@@ -16,7 +16,7 @@ import numpy as np
 from calib.report.atomic import atomic_write_text
 from calib.parametrizations.correction_field import drag_floor_values
 from calib.prior_check import PriorCheck
-from calib.result import CalibrationResult, second_start_sentence
+from calib.result import CalibrationResult, fold_sentence, second_start_sentence
 
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -184,6 +184,8 @@ def _sentences(r: CalibrationResult) -> list[str]:
     if n_multi:
         out.append(f"At {n_multi} operating points the BEM residual has several roots at some station; the "
                    f"root was chosen by the solver's documented rule and those points are flagged.")
+    if r.fold_directions:
+        out.append(fold_sentence(r.fold_directions, r.conditions, r.tip_speed_ratio()))
     if counts.get("confounded"):
         out.append("A confounded parameter's estimate trades off against the correction field: read it with "
                    "its σ, not as a measurement of that quantity alone.")
