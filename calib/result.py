@@ -75,9 +75,10 @@ def fold_sentence(fold_directions: list, conditions: dict | None = None, tsr=Non
                if "sigma_after" in d else "")
         parts.append(f"θ{d['theta']} takes {100 * d['share']:.0f} % of its information from {where}, whose "
                      f"sensitivity is {d['sensitivity_ratio']:.3g}× the median point's{sig}")
-    return ("Near a fold of the BEM residual (several roots at a section) the linearization holds only on a "
+    return ("Near a fold of the BEM residual (several roots at a section) the linearization can hold only on a "
             "narrow ridge: " + "; ".join(parts) + ". Such a θ is stated with its prior variance added, so its "
-            "band is at least the prior's.")
+            "band is at least the prior's; the point can pull the rest of the fit too, which that does not "
+            "correct: compare with a calibration without it.")
 
 
 def second_start_sentence(truncation: dict) -> str:

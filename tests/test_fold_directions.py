@@ -131,4 +131,5 @@ def test_the_sentence_names_the_point_its_share_and_the_sigma_it_was_stated_with
     text = fold_sentence(rec, cond, tsr=np.full(6, 2.0))
     assert "θ2 takes 100 % of its information from point 5 (4 m/s, λ 2, pitch -2°)" in text
     assert "83.8× the median point's" in text and "0.21 → 2.3 scale units" in text
+    assert "pull the rest of the fit" in text
     assert "point 5" in fold_sentence([{k: v for k, v in rec[0].items() if not k.startswith("sigma")}])
