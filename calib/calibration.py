@@ -676,15 +676,13 @@ class Calibrator:
         Vr = svd.V[:, svd.retained]
         fold = fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
                                          multiple_roots, lin.ok)
-        for i in sorted({d["theta"] - 1 for d in fold}):
-            v = Vr[:, i]
+        sigmas = {}
+        for theta in sorted({d["theta"] for d in fold}):
+            v = Vr[:, theta - 1]
             before = float(np.sqrt(max(v @ cov_ret @ v, 0.0)))
             cov_ret = cov_ret + float(v @ prior_cov @ v) * np.outer(v, v)
-            after = float(np.sqrt(max(v @ cov_ret @ v, 0.0)))
-            for d in fold:
-                if d["theta"] == i + 1:
-                    d.update(sigma_before=before, sigma_after=after)
-        return cov_ret, fold
+            sigmas[theta] = {"sigma_before": before, "sigma_after": float(np.sqrt(max(v @ cov_ret @ v, 0.0)))}
+        return cov_ret, [{**d, **sigmas[d["theta"]]} for d in fold]
 
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
