@@ -4,6 +4,7 @@ import numpy as np
 
 from calib.models.base import OperatingConditions
 from calib.models.bem_model import BemModel
+from floats import assert_same_numbers
 from test_effects_chain import (FP_RPM, FP_SETTINGS, check_effect_derivatives, nrel5mw, tsr_sweep)
 
 
@@ -20,7 +21,7 @@ def test_pitch_offset_shifts_cp_along_pitch():
     beta = np.tile([0.0, 2.0, 4.0], 3)
     model = BemModel(nrel5mw(), None, ("power",), FP_SETTINGS, ("pitch_offset",))
     cp_offset = model.solve([1.5], tsr_sweep(lam, beta)).cp
-    np.testing.assert_array_equal(cp_offset, model.solve([0.0], tsr_sweep(lam, beta + 1.5)).cp)
+    assert_same_numbers(cp_offset, model.solve([0.0], tsr_sweep(lam, beta + 1.5)).cp)
     assert np.all(np.abs(cp_offset / model.solve([0.0], tsr_sweep(lam, beta)).cp - 1) > 1e-3)
 
 
@@ -29,5 +30,5 @@ def test_wind_speed_scale_stretches_the_power_curve():
     model = BemModel(nrel5mw(), None, ("power",), FP_SETTINGS, ("wind_scale",))
     scaled = model.solve([1.05], cond)
     moved = OperatingConditions(cond.wind_speed * 1.05, FP_RPM, 0.0)
-    np.testing.assert_array_equal(scaled.power, model.solve([1.0], moved).power)
+    assert_same_numbers(scaled.power, model.solve([1.0], moved).power)
     np.testing.assert_allclose(scaled.cp, model.solve([1.0], moved).cp * 1.05 ** 3, rtol=1e-14)
