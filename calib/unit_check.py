@@ -24,11 +24,16 @@ points and names the channel or the condition that looks wrong, and by which fac
 4. A condition hypothesis explains the data when the misfit as read exceeds 1, and the
    hypothesis brings it to at most ``chi2_threshold`` and at least ten times lower.
 
-Findings (each stops the run through :meth:`UnitCheckReport.raise_if_failed`):
+Findings. Those a unit factor (or a sign) explains stop the run through
+:meth:`UnitCheckReport.raise_if_failed` unless forced:
 
 - ``condition``: a condition off by a unit factor (wind speed ×3.6: km/h read as m/s);
 - ``channel``: a channel off by a unit factor (power ×10⁻³: kW read as W);
-- ``sign``: a channel with the opposite sign of the model's (measured/model ≈ −1);
+- ``sign``: a channel with the opposite sign of the model's (measured/model ≈ −1).
+
+Those no unit factor explains are warnings: a misfit is what calibration is for, so the run
+goes on and says so loudly (stopped only with ``strict``):
+
 - ``misfit``: a channel whose χ²/dof, after any correction above, still exceeds
   ``chi2_threshold`` (no unit factor explains it);
 - ``failures``: the model fails at more than half of the measured points.
@@ -67,6 +72,9 @@ CONDITION_FACTORS = {
 
 #: How to override a stopped run (wired by the command line and the workflow).
 OVERRIDE_HINT = "to calibrate anyway, pass --force (workflow: [calibration] force = true)"
+
+#: Finding kinds a unit factor or a sign explains: they stop the run unless forced.
+STOPPING_KINDS = ("condition", "channel", "sign")
 
 _FACTOR_WORDS = ((1e3, "10³", "10⁻³", "a k prefix"), (1e6, "10⁶", "10⁻⁶", "an M prefix"),
                  (3.6, "3.6", "1/3.6", "km/h ↔ m/s"), (_RPM, "30/π", "π/30", "rpm ↔ rad/s"),
@@ -141,6 +149,16 @@ class UnitCheckReport:
         """True when nothing suggests a unit mistake or a gross misfit."""
         return not self.findings
 
+    @property
+    def unit_findings(self) -> tuple[UnitFinding, ...]:
+        """Findings a unit factor or a sign explains (:data:`STOPPING_KINDS`)."""
+        return tuple(f for f in self.findings if f.kind in STOPPING_KINDS)
+
+    @property
+    def misfit_findings(self) -> tuple[UnitFinding, ...]:
+        """Findings no unit factor explains (gross misfit, failures): warnings, not stops."""
+        return tuple(f for f in self.findings if f.kind not in STOPPING_KINDS)
+
     def summary(self) -> str:
         """Lines a user reads: verdict, per-channel ratio and χ²/dof, findings, notes."""
         head = "unit check: " + ("passed" if self.ok else f"{len(self.findings)} finding(s)")
@@ -150,19 +168,34 @@ class UnitCheckReport:
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
 
-    def raise_if_failed(self, source: str | None = None) -> None:
-        """Raise :class:`~calib.errors.InputError` listing the findings, if there are any.
+    def raise_if_failed(self, source: str | None = None, strict: bool = False) -> None:
+        """Raise :class:`~calib.errors.InputError` listing the findings a unit factor explains.
 
         Parameters
         ----------
         source : str, optional
             File named in the error (default: the measurements' source).
+        strict : bool
+            Also stop on the findings no unit factor explains (misfit, failures).
         """
-        if self.ok:
+        stop = self.findings if strict else self.unit_findings
+        if not stop:
             return
-        body = "; ".join(f.message for f in self.findings)
-        raise InputError(f"unit check failed before calibrating: {body}. Fix the header or the data; "
-                         f"{OVERRIDE_HINT}", source or self.source, field=self.findings[0].name or None)
+        body = "; ".join(f.message for f in stop)
+        what = "Fix the header or the data" if any(f.kind in STOPPING_KINDS for f in stop) else \
+            "Strict unit check (--strict-units): no unit factor explains this misfit"
+        raise InputError(f"unit check failed before calibrating: {body}. {what}; {OVERRIDE_HINT}",
+                         source or self.source, field=stop[0].name or None)
+
+    def warning_lines(self) -> list[str]:
+        """The loud lines for misfits no unit factor explains (empty when there are none)."""
+        if not self.misfit_findings:
+            return []
+        ratios = ", ".join(f"{c} {r:.3g}" for c, r in self.ratios.items())
+        return [f"WARNING: the nominal model misses the data beyond noise and model error, and no unit factor "
+                f"explains it (measured/model per channel: {ratios}); calibrating anyway, since such a misfit is "
+                f"what calibration is for. Check the findings below if this is unexpected:"] + \
+               [f"WARNING:   {f.message}" for f in self.misfit_findings]
 
     def as_dict(self) -> dict:
         """JSON-able form for results and reports."""
@@ -285,6 +318,13 @@ def _describe(name: str, quantity: str | None, unit_read: str | None, known_by: 
     return head, fix
 
 
+def _model_side(name: str, model_units: str | None) -> str:
+    """The model-side cause of a channel ratio, where the user sets the model's units."""
+    if model_units is None:
+        return ""
+    return f"; or the model side: the scale/unit mapped to {name!r} in {model_units}"
+
+
 def _hypothesis_label(name: str, factor: float) -> str:
     return f"{name} / {factor:.4g}" if factor > 1 else f"{name} x {1 / factor:.4g}"
 
@@ -299,7 +339,8 @@ def _corrected(conditions: OperatingConditions, name: str, factor: float) -> Ope
 def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, float] | None = None,
                 chi2_threshold: float = 25.0, model_error: float = 0.10, relative_sigma: float = 0.05,
                 factor_tolerance: float = 0.25,
-                conditions: Sequence[str] = ("wind_speed", "rotor_speed", "pitch")) -> UnitCheckReport:
+                conditions: Sequence[str] = ("wind_speed", "rotor_speed", "pitch"),
+                model_units: str | None = None) -> UnitCheckReport:
     """Compare measurements with the nominal model to catch unit mistakes before calibrating.
 
     Parameters
@@ -325,6 +366,10 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
         A ratio r is "near" a factor f when r/f is within [1/(1+tol), 1+tol] [-].
     conditions : sequence of str
         Conditions whose unit factors (:data:`CONDITION_FACTORS`) are tried.
+    model_units : str, optional
+        Where the user set the model's output units, when they are set outside the model
+        (an FMU's mapping file); channel findings then name its ``scale``/``unit`` as a
+        possible cause beside the measurement header.
 
     Returns
     -------
@@ -419,8 +464,8 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
             continue
         quantity = quantity_of(name)
         head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, units.get(name)), f)
-        findings.append(UnitFinding("channel", name, f,
-                                    f"{head}: {ratio}, suspected factor {_factor_words(f)}{fix}"))
+        findings.append(UnitFinding("channel", name, f, f"{head}: {ratio}, suspected factor {_factor_words(f)}{fix}"
+                                                        f"{_model_side(name, model_units)}"))
     for c, name in enumerate(measurements.channels):
         if chosen.chi2_per_dof[c] > chi2_threshold:
             after = " after the correction above" if chosen is not base or chosen.factors[c] != 1.0 else ""
@@ -429,7 +474,8 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
                 f"{name} disagrees with the nominal model beyond what noise and a {model_error:.0%} model error "
                 f"explain: χ²/dof = {chosen.chi2_per_dof[c]:.3g}{after} (threshold {chi2_threshold:g}), "
                 f"measured/model ≈ {chosen.ratios[c]:.3g}, and no unit factor explains it; check the unit in "
-                f"the header, what the channel measures (e.g. electrical or aerodynamic power) and the rotor"))
+                f"the header, what the channel measures (e.g. electrical or aerodynamic power) and the rotor"
+                f"{_model_side(name, model_units)}"))
     if chosen.n_failed > 0.5 * measurements.n_points:
         findings.append(UnitFinding("failures", "", float("nan"),
                                     f"the nominal model fails at {chosen.n_failed} of {measurements.n_points} "
@@ -441,3 +487,59 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
         chi2_threshold=float(chi2_threshold), hypotheses=tuple((f.label, float(f.misfit)) for f in fits),
         notes=tuple(notes), source=measurements.source, n_points=measurements.n_points,
         n_failed=base.n_failed)
+
+
+# ----------------------------------------------------------------------------- the gate before a run
+def apply_unit_check(model, p, measurements: Measurements, *, sigma: Mapping[str, float] | None = None,
+                     force: bool = False, strict: bool = False, source: str | None = None,
+                     printer=print, prefix: str = "[calib run]", model_units: str | None = None,
+                     ) -> tuple[UnitCheckReport, dict]:
+    """Run :func:`check_units` before a calibration or diagnosis, print it, stop or go on.
+
+    A finding that a unit factor or a sign explains stops the run (unless ``force``); a misfit
+    that no unit factor explains is printed as a warning and the run goes on (unless
+    ``strict``). ``calib run`` and ``calib diagnose`` both call this, so their messages agree.
+
+    Parameters
+    ----------
+    model, p, measurements, sigma, model_units
+        As :func:`check_units`.
+    force : bool
+        Go on whatever the check finds (``--force``); the notes say what was overridden.
+    strict : bool
+        Also stop on a misfit no unit factor explains (``--strict-units``).
+    source : str, optional
+        File named in the error (default: the measurements' source).
+    printer : callable(str)
+        Receives each line (the summary, then any warning).
+    prefix : str
+        Put before each printed line (the command's name).
+
+    Returns
+    -------
+    report : UnitCheckReport
+    notes : dict
+        Lines for the result's checks and the report: the misfit warning, or what ``force``
+        overrode; empty when the check passed.
+
+    Raises
+    ------
+    InputError
+        When a unit factor explains a finding (or, with ``strict``, on any finding) and not
+        ``force``; it names the file, the channel or condition and the suspected factor.
+    """
+    report = check_units(model, p, measurements, sigma=sigma, model_units=model_units)
+    for line in report.summary().splitlines():
+        printer(f"{prefix} {line}")
+    if not force:
+        report.raise_if_failed(source, strict=strict)
+    notes = {}
+    if force and (report.unit_findings or (strict and report.misfit_findings)):
+        notes["unit check (overridden by force)"] = "; ".join(f.message for f in report.findings)
+    elif report.misfit_findings:
+        for line in report.warning_lines():
+            printer(f"{prefix} {line}")
+        ratios = ", ".join(f"{c} {r:.3g}" for c, r in report.ratios.items())
+        notes["unit check: misfit no unit factor explains (calibrated anyway)"] = (
+            f"measured/model per channel {ratios}; " + "; ".join(f.message for f in report.misfit_findings))
+    return report, notes

@@ -207,3 +207,57 @@ def test_a_condition_zero_everywhere_is_said_to_be_unchecked(nrel):
     assert report.ok
     assert "pitch is 0 at every point: a unit mistake in it cannot be seen" in report.notes
     assert not any(h.startswith("pitch") for h, _ in report.hypotheses)
+
+
+# ----------------------------------------------------------------------------- the gate before a run
+def pitch_offset_data(nrel, offset_deg: float = 3.0) -> Measurements:
+    """The truth with a collective pitch offset: every load off by a ratio no unit factor explains."""
+    model, p0, truth = nrel
+    moved = OperatingConditions(truth.conditions.wind_speed, truth.conditions.rotor_speed,
+                                truth.conditions.pitch + offset_deg)
+    data = synthesize(model, p0, moved, relative_sigma={c: 0.01 for c in CHANNELS}, seed=5)
+    return Measurements(truth.conditions, data.channels, data.values, data.sigma, source="offset.csv")
+
+
+def test_misfit_no_unit_factor_explains_warns_and_goes_on(nrel):
+    """A 3 deg pitch offset misfits beyond the threshold, but no unit factor explains it: the gate
+    prints the ratio per channel and that no unit factor explains it, and does not stop."""
+    from calib.unit_check import apply_unit_check
+
+    model, p0, _ = nrel
+    meas = pitch_offset_data(nrel)
+    lines = []
+    report, notes = apply_unit_check(model, p0, meas, printer=lines.append, prefix="[test]")
+    assert report.misfit_findings and not report.unit_findings, report.summary()
+    warning = "\n".join(line for line in lines if "WARNING" in line)
+    assert "no unit factor explains it" in warning and "calibrating anyway" in warning
+    for c in CHANNELS:
+        assert f"{c} {report.ratios[c]:.3g}" in warning
+    assert all(line.startswith("[test] ") for line in lines)
+    (key, text), = notes.items()
+    assert "no unit factor explains" in key and "measured/model per channel" in text
+    with pytest.raises(InputError, match="--strict-units"):              # unless the user asks for strictness
+        apply_unit_check(model, p0, meas, printer=lines.append, strict=True)
+
+
+def test_unit_factor_still_stops_and_force_overrides(nrel, tmp_path):
+    from calib.unit_check import apply_unit_check
+
+    model, p0, truth = nrel
+    path = write_table(tmp_path / "kw.csv", truth, numbers={"power": lambda x: x / 1e3,
+                                                            "power_sigma": lambda x: x / 1e3})
+    meas = read_measurements(path)
+    with pytest.raises(InputError, match="suspected factor 0.001") as err:
+        apply_unit_check(model, p0, meas, printer=lambda s: None, source=str(path))
+    assert str(path) in str(err.value) and err.value.field == "power"
+    _, notes = apply_unit_check(model, p0, meas, printer=lambda s: None, force=True)
+    assert list(notes) == ["unit check (overridden by force)"]
+
+
+def test_fmu_units_name_the_mapping_as_a_cause(nrel, tmp_path):
+    model, p0, truth = nrel
+    path = write_table(tmp_path / "kw.csv", truth, numbers={"power": lambda x: x / 1e3,
+                                                            "power_sigma": lambda x: x / 1e3})
+    report = check_units(model, p0, read_measurements(path), model_units="the mapping file turbine.toml")
+    assert "scale/unit mapped to 'power' in the mapping file turbine.toml" in report.findings[0].message
+    assert "mapping" not in check_units(model, p0, read_measurements(path)).findings[0].message
