@@ -31,7 +31,7 @@ from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.sources import rotor_from_table
 from calib.tomlfile import read_toml
-from calib.unit_check import check_units
+from calib.unit_check import apply_unit_check
 from calib.logs import add_output_arguments, say
 
 log = logging.getLogger("calib.workflow")
@@ -75,11 +75,12 @@ MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
                              overrides={"n_sectors": int, "polar_smoothing": list}),
               "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
               "nuisance": (list, False)}
-#: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force``.
+#: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force`` and
+#: ``strict_units``.
 CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
                                    overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict, "cd_min": NUM,
                                               "max_retained": int, "band_eta": list}),
-                    "force": (bool, False)}
+                    "force": (bool, False), "strict_units": (bool, False)}
 
 # schema: section -> key -> (accepted types, required)
 SCHEMA = {
@@ -324,6 +325,7 @@ class WorkflowSetup:
     yaw: float = 0.0
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
     validation: object = None             # calib.campaign.ValidationSettings of [validation]
+    strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
 
     def model(self, grid: CorrectionGrid, channels, executor=None, effects=()):
         """The forward model of a stage: the native BEM (with ``effects``, e.g. those a
@@ -334,6 +336,14 @@ class WorkflowSetup:
         from calib.models.from_config import model_from_workflow
         return model_from_workflow(self.fmu_table, self.rotor_spec, list(channels), self.source, self.base_dir,
                                    grid=grid, executor=executor)
+
+    def model_units(self) -> str | None:
+        """Where the user set the model's output units: an FMU's mapping file (None for the BEM)."""
+        if self.fmu_table is None:
+            return None
+        if "mapping" in self.fmu_table:
+            return f"the mapping file {Path(self.base_dir) / self.fmu_table['mapping']}"
+        return f"the bundled variant {self.fmu_table.get('variant', '?')}'s mapping file"
 
     def grid(self, conditions: OperatingConditions, progress: bool = False) -> CorrectionGrid:
         """The correction grid; ``alpha_nodes_deg = "auto"`` places the α nodes over the angles of
@@ -446,6 +456,7 @@ def prepare(cfg: dict) -> WorkflowSetup:
         raise InputError(exc.message, src, field="stages.channels") from None
     calib_cfg = dict(cfg.get("calibration", {}))
     force = bool(calib_cfg.pop("force", False))
+    strict_units = bool(calib_cfg.pop("strict_units", False))
     if "band_eta" in calib_cfg:
         calib_cfg["band_eta"] = tuple(calib_cfg["band_eta"])
     cal = CalibrationSettings(**calib_cfg).validate(src, "calibration.")
@@ -469,6 +480,7 @@ def prepare(cfg: dict) -> WorkflowSetup:
         setup.diagnosis = diagnosis_settings(cfg["diagnosis"], src)
     if "validation" in cfg:
         setup.validation = ValidationSettings.from_table(cfg["validation"], src)
+    setup.strict_units = strict_units
     return setup
 
 
@@ -497,7 +509,8 @@ def run_inputs(cfg: dict) -> dict:
 
 
 def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
-                 force: bool = False, resume: bool = False, history: bool = True) -> list[StageOutcome]:
+                 force: bool = False, resume: bool = False, history: bool = True,
+                 strict_units: bool = False) -> list[StageOutcome]:
     """Run a workflow file; writes results, figures and ``report.html`` into ``out_dir``.
 
     Parameters
@@ -509,8 +522,13 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     progress : bool
         Print progress lines (logged under ``calib.workflow`` either way).
     force : bool
-        Calibrate even when the unit check (:func:`calib.unit_check.check_units`) suspects a
-        unit mistake (also ``[calibration] force = true``); the report says so.
+        Calibrate even when the unit check (:func:`calib.unit_check.apply_unit_check`) finds
+        a unit factor that explains the data (also ``[calibration] force = true``); the report
+        says so.
+    strict_units : bool
+        Also stop when the nominal model misses the data and no unit factor explains it (also
+        ``[calibration] strict_units = true``); by default such a misfit is printed as a
+        warning and calibrated.
     resume : bool
         Continue the killed run whose history is in ``out_dir`` (:mod:`calib.history`): every
         model call it completed is read back instead of computed; refused when the workflow,
@@ -540,7 +558,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     from calib.models.from_config import executor_from_table
     executor = executor_from_table(setup.executor_table, src)
     try:
-        outcomes = _run(cfg, setup, out, executor, progress, force, hist)
+        outcomes = _run(cfg, setup, out, executor, progress, force, hist, strict_units)
     finally:
         executor.close()
     if hist is not None:
@@ -550,7 +568,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     return outcomes
 
 
-def _run(cfg, setup, out, executor, progress, force, hist=None):
+def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
     from calib.history import recorded
     from calib.logs import progress_line
     from calib.report.figures import plot_spectra, save_figure, write_figures
@@ -582,20 +600,10 @@ def _run(cfg, setup, out, executor, progress, force, hist=None):
             echo(f"[calib run] {file.name}: {note}")
         grid = setup.grid(meas.conditions, progress)
         check_model = recorded(setup.model(grid, all_channels, executor), hist, "unit check", chunk, progress_line)
-        unit_report = check_units(check_model, nominal_vector(check_model.parameters), meas,
-                                  sigma=calib_cfg.get("sigma"))
-        echo("[calib run] " + unit_report.summary().replace("\n", "\n[calib run] "))
-        misfits = [f for f in unit_report.findings if np.isnan(f.factor)]
-        if setup.diagnosis is not None and misfits:
-            # a gross misfit that no unit factor explains is what the discrepancy workflow is for;
-            # a finding that a unit factor explains still stops the run
-            unit_notes = {"unit check (misfit left to the discrepancy workflow)": "; ".join(f.message for f in misfits)}
-            unit_report = dataclasses.replace(unit_report, findings=tuple(
-                f for f in unit_report.findings if not np.isnan(f.factor)))
-        if not force:
-            unit_report.raise_if_failed(str(file))
-        elif not unit_report.ok:
-            unit_notes = {"unit check (overridden by force)": "; ".join(f.message for f in unit_report.findings)}
+        _, unit_notes = apply_unit_check(check_model, nominal_vector(check_model.parameters), meas,
+                                         sigma=calib_cfg.get("sigma"), force=force,
+                                         strict=strict or setup.strict_units, source=str(file),
+                                         printer=echo, model_units=setup.model_units())
     else:
         cond = _conditions(cfg["conditions"], rotor, src, setup.density, setup.yaw)
         grid = setup.grid(cond, progress)
@@ -715,6 +723,8 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="output folder (required unless --resume DIR)")
     parser.add_argument("--force", action="store_true", help="calibrate even when the unit check suspects a unit "
                         "mistake in the measurements (the report says so)")
+    parser.add_argument("--strict-units", action="store_true", help="also stop when the nominal model misses the "
+                        "data and no unit factor explains it (default: a loud warning, then calibrate)")
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed run whose output "
                         "folder is DIR: model calls on record in DIR/history are read back, not computed again; "
                         "refused if the workflow, the measurement file or the rotor's data changed")
@@ -743,7 +753,8 @@ def run_from_args(args) -> int:
                          field="file" if file is None else "--out")
     with command_logging(out, args.verbose, args.quiet):
         try:
-            run_workflow(file, out, force=args.force, resume=args.resume is not None, history=not args.no_history)
+            run_workflow(file, out, force=args.force, resume=args.resume is not None, history=not args.no_history,
+                         strict_units=getattr(args, "strict_units", False))
         except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
             log.debug(f"calib: error: {exc}", exc_info=True)
             raise
