@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench venv clean phase_vi
+.PHONY: demo test test-browser bench validate venv clean phase_vi
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,11 +21,21 @@ demo: $(STAMP)
 phase_vi: $(STAMP)
 	$(VENV)/bin/calib run workflows/phase_vi.toml --out phase_vi_output
 
-test: $(STAMP)
+# the browser the report tests drive (Debian's chromium + chromedriver); quick when present
+test-browser:
+	bash tests/install_browser.sh
+
+test: $(STAMP) test-browser
 	$(PY) -m pytest -q
 
+# speed figures, as ratios against baselines measured in the same run (a few minutes)
 bench: $(STAMP)
-	$(PY) benchmarks/run_all.py
+	$(PY) benchmarks/run_all.py --suite speed
+
+# the statistical and soak studies (coverage twins, discrepancy over seeds, Phase VI noise models,
+# FMU soak): an hour or more; figures in bench_output/validation.json
+validate: $(STAMP)
+	$(PY) benchmarks/run_all.py --suite validate
 
 clean:
 	rm -rf $(VENV) .bench-venv demo_output bench_output phase_vi_output .calib_cache

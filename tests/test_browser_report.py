@@ -10,9 +10,10 @@ horizontal overflow (``scrollWidth <= clientWidth`` of the document element, wit
 screenshot of each is kept in ``test_artifacts/`` (git-ignored) and its path printed.
 
 Chromium and its WebDriver come from the Debian packages ``chromium`` and
-``chromium-driver``; where ``chromium`` or ``chromedriver`` is not on PATH the fixture
-installs them with ``apt-get`` (as root, or through passwordless ``sudo``; else the tests
-are skipped with the command to run). Why WebDriver (``selenium``): the console log at a
+``chromium-driver``, installed by the set-up of ``make test`` (``make test-browser``, i.e.
+``tests/install_browser.sh``), never by the tests: a test run does not change the machine.
+Where either is missing the tests are skipped with the command to run, except under
+``CI=true``, where a missing browser is a failure. Why WebDriver (``selenium``): the console log at a
 level, the window size and screenshots are one call each, and ``chromedriver`` comes from
 the same Debian release as ``chromium``, so the two always match; the DevTools protocol
 would need a WebSocket client and event bookkeeping written here.
@@ -38,32 +39,24 @@ pytestmark = pytest.mark.slow
 
 
 # ----------------------------------------------------------------------------- the browser
-def _apt_prefix() -> list[str] | None:
-    """How to run apt-get with root rights here, or None when that is impossible."""
-    if os.geteuid() == 0:
-        return []
-    if shutil.which("sudo") and subprocess.run(["sudo", "-n", "true"], capture_output=True).returncode == 0:
-        return ["sudo", "-n"]
-    return None
+def require_browser(ci: bool) -> None:
+    """Skip (or, on CI, fail) when chromium or chromedriver is not on PATH."""
+    missing = [name for name in ("chromium", "chromedriver") if shutil.which(name) is None]
+    if not missing:
+        return
+    message = (f"{' and '.join(missing)} not on PATH: run 'make test-browser' (installs the Debian packages "
+               f"{' '.join(APT_PACKAGES)})")
+    if ci:
+        pytest.fail(f"CI=true and {message}")
+    pytest.skip(message)
 
 
-def _install_chromium() -> None:
-    """``apt-get install chromium chromium-driver`` (after ``apt-get update``); fails the test set-up on error."""
-    prefix = _apt_prefix()
-    command = "apt-get install -y --no-install-recommends " + " ".join(APT_PACKAGES)
-    if prefix is None:
-        pytest.skip(f"chromium / chromedriver not on PATH and no root or passwordless sudo to install them: "
-                    f"run 'sudo {command}'")
-    env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-    lock = ["-o", "DPkg::Lock::Timeout=300"]
-    t0 = time.perf_counter()
-    for step in (["apt-get", *lock, "update", "-q"],
-                 ["apt-get", *lock, "install", "-y", "-q", "--no-install-recommends", *APT_PACKAGES]):
-        done = subprocess.run(prefix + step, capture_output=True, text=True, env=env, timeout=1200)
-        if done.returncode:
-            pytest.fail(f"{' '.join(prefix + step)} failed (exit {done.returncode}):\n{done.stdout[-1500:]}\n"
-                        f"{done.stderr[-1500:]}")
-    print(f"\ninstalled {', '.join(APT_PACKAGES)} in {time.perf_counter() - t0:.0f} s")
+def test_missing_browser_fails_on_ci_and_skips_elsewhere(monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(pytest.fail.Exception, match="make test-browser"):
+        require_browser(ci=True)
+    with pytest.raises(pytest.skip.Exception, match="make test-browser"):
+        require_browser(ci=False)
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +65,7 @@ def browser(tmp_path_factory):
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
-    if not (shutil.which("chromium") and shutil.which("chromedriver")):
-        _install_chromium()
+    require_browser(os.environ.get("CI", "").lower() == "true")
     options = webdriver.ChromeOptions()
     options.binary_location = shutil.which("chromium")
     for flag in CHROMIUM_FLAGS + [f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}",
