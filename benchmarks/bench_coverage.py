@@ -50,6 +50,9 @@ calibration here; 30 seeds about 5–10 min, the held-back part about as long).
 
 from __future__ import annotations
 
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
 import dataclasses
 import os
 import sys

@@ -11,6 +11,9 @@ blockage 11-16 s, the others under 4 s; 20 seeds: 180 diagnoses); ``make bench``
 
 from __future__ import annotations
 
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
 import os
 import sys
 import time

@@ -17,6 +17,9 @@ models:
 
 from __future__ import annotations
 
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
 import dataclasses
 import os
 import sys

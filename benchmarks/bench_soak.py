@@ -41,6 +41,9 @@ Usage: ``python benchmarks/bench_soak.py [--evaluations 2000] [--warmup 200] [--
 
 from __future__ import annotations
 
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
 import argparse
 import json
 import os

@@ -1,4 +1,11 @@
-"""`make bench`: run every ``benchmarks/bench_*.py`` and print one table of figures.
+"""`make bench` and `make validate`: run the ``benchmarks/bench_*.py`` of a suite, print one table.
+
+Two suites. ``speed`` (``make bench``, the default; a few minutes): the speed figures, each
+a ratio against a baseline measured in the same run. ``validate`` (``make validate``; an
+hour or more): the statistical and soak studies, the modules that declare
+``SUITE = "validate"`` (coverage of the calibration twins over 30 seeds, the discrepancy
+workflow over noise seeds, Phase VI's sensitivity to the noise model, the 2000-evaluation
+FMU soak). ``--suite all`` runs both.
 
 Order: ``bench_bem``, ``bench_ccblade``, ``bench_calibration``, ``bench_fmu`` (those that
 exist), then any other ``bench_*.py`` alphabetically. Each module's ``run()`` returns a
@@ -17,7 +24,8 @@ Ratios printed (and stored):
 - soak (``bench_soak``): the largest resident-memory growth after warm-up over the
   processes of 2000 FMU evaluations, in one worker and through Dask (target < 10 %).
 
-Writes ``bench_output/results.json``. Exit status 1 when a module failed.
+Writes ``bench_output/results.json`` (speed), ``bench_output/validation.json`` (validate) or
+``bench_output/all.json``. Exit status 1 when a module failed.
 """
 
 from __future__ import annotations
@@ -45,8 +53,22 @@ TARGET_JACOBIAN_RATIO = 3.0
 TARGET_SOAK_GROWTH_PERCENT = 10.0
 
 
-def discover() -> list[str]:
+SUITES = ("speed", "validate", "all")
+OUT_FILES = {"speed": "results.json", "validate": "validation.json", "all": "all.json"}
+
+
+def suite_of(name: str) -> str:
+    """The suite a benchmark module declares (``SUITE = "validate"``), read without importing it."""
+    with open(os.path.join(HERE, f"{name}.py")) as fh:
+        for line in fh:
+            if line.startswith("SUITE ="):
+                return line.split("=", 1)[1].strip().strip("\"'")
+    return "speed"
+
+
+def discover(suite: str = "speed") -> list[str]:
     found = {os.path.basename(p)[:-3] for p in glob.glob(os.path.join(HERE, "bench_*.py"))}
+    found = {m for m in found if suite == "all" or suite_of(m) == suite}
     return [m for m in ORDER if m in found] + sorted(found - set(ORDER))
 
 
@@ -231,10 +253,17 @@ def _jsonable(v):
     return str(v)
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--suite", choices=SUITES, default="speed", help="speed (make bench, default), validate "
+                        "(make validate: statistical and soak studies) or all")
+    suite = parser.parse_args(argv).suite
     sys.path.insert(0, HERE)
     sys.path.insert(0, ROOT)
-    order = discover()
+    order = discover(suite)
+    print(f"{suite} suite: {', '.join(order)}", flush=True)
     results, seconds = {}, {}
     for name in order:
         kwargs = {}
@@ -245,12 +274,16 @@ def main() -> int:
                               bem.get("rotor_speed_rpm", surface_grid()[2]))
         print(f"running {name} ...", flush=True)
         results[name], seconds[name] = run_module(name, kwargs)
-    ratios = compute_ratios(results)
+    # a suite states only the ratios of its own modules
+    needs = {"soak": "bench_soak"}
+    ratios = [r for r in compute_ratios(results)
+              if needs.get(r["name"].split(":")[0], "bench_bem") in order]
     print_report(order, results, seconds, ratios)
 
     os.makedirs(OUT_DIR, exist_ok=True)
     failed = [n for n in order if "error" in results[n]]
     doc = {
+        "suite": suite,
         "machine": {"python": platform.python_version(), "platform": platform.platform(),
                     "processor": platform.processor(), "cpu_count": os.cpu_count()},
         "modules": order,
@@ -259,7 +292,7 @@ def main() -> int:
         "ratios": ratios,
         "results": results,
     }
-    path = os.path.join(OUT_DIR, "results.json")
+    path = os.path.join(OUT_DIR, OUT_FILES[suite])
     with open(path, "w") as fh:
         json.dump(_jsonable(doc), fh, indent=1)
     print(f"wrote {os.path.relpath(path, os.getcwd())}")
