@@ -84,8 +84,8 @@ CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
 
 # schema: section -> key -> (accepted types, required)
 SCHEMA = {
-    "": {"name": (str, True), "description": (str, False), "rotor": (dict, True), "model": (dict, False),
-         "fluid": (dict, False), "grid": (dict, True), "conditions": (dict, False), "measurements": (dict, False),
+    "": {"name": (str, True), "description": (str, False), "rotor": (dict, False), "model": (dict, False),
+         "fluid": (dict, False), "grid": (dict, False), "conditions": (dict, False), "measurements": (dict, False),
          "truth": (dict, False), "noise": (dict, False), "calibration": (dict, False),
          "executor": (dict, False), "diagnosis": (dict, False), "validation": (dict, False),
          "stages": (list, True)},
@@ -197,9 +197,33 @@ def load_workflow(path: str | Path) -> dict:
         for section in ("conditions", "truth", "noise"):
             if section not in data:
                 raise InputError(f"synthetic measurements need a [{section}] table", src, field=section)
+    for section in tables_required(data):
+        if section not in data:
+            raise InputError(f"missing required key '{section}' ({tables_required(data)[section]})", src,
+                             field=section)
     data["_source"] = src
     data["_dir"] = str(path.parent)
     return data
+
+
+def tables_required(data: dict) -> dict[str, str]:
+    """The tables a workflow needs beyond the schema's, by model kind: {table: why}.
+
+    The native BEM needs ``[rotor]`` and ``[grid]``. An FMU given as a file needs neither: its
+    parameters, channels and any correction nodes come from its mapping file. A bundled FMU
+    variant is built from ``[rotor]`` and ``[grid]``; synthetic measurements come from the
+    native BEM of ``[rotor]``.
+    """
+    model = data.get("model") if isinstance(data.get("model"), dict) else {}
+    if model.get("kind", "bem") != "fmu":
+        return {"rotor": "the native BEM's rotor", "grid": "the native BEM's correction grid"}
+    need = {}
+    if "variant" in model:
+        need = {"rotor": "a bundled FMU variant is built for the workflow's rotor",
+                "grid": "a bundled FMU variant is built with the workflow's correction grid"}
+    if "measurements" not in data:
+        need.setdefault("rotor", "synthetic measurements come from the native BEM of [rotor]")
+    return need
 
 
 # ----------------------------------------------------------------------------- truth fields
@@ -337,6 +361,19 @@ class WorkflowSetup:
         return model_from_workflow(self.fmu_table, self.rotor_spec, list(channels), self.source, self.base_dir,
                                    grid=grid, executor=executor)
 
+    @property
+    def uses_grid(self) -> bool:
+        """Whether ``[grid]`` defines the model's correction field (the BEM, a bundled FMU variant)."""
+        return self.fmu_table is None or "variant" in self.fmu_table
+
+    def model_name(self) -> str:
+        """The model in words: 'rotor NAME' (native BEM) or 'FMU FILE' / 'FMU variant A'."""
+        if self.fmu_table is None:
+            return f"rotor {self.rotor.name}"
+        if "variant" in self.fmu_table:
+            return f"FMU variant {self.fmu_table['variant']} (rotor {self.rotor.name})"
+        return f"FMU {Path(self.fmu_table['fmu']).name}"
+
     def model_units(self) -> str | None:
         """Where the user set the model's output units: an FMU's mapping file (None for the BEM)."""
         if self.fmu_table is None:
@@ -347,7 +384,10 @@ class WorkflowSetup:
 
     def grid(self, conditions: OperatingConditions, progress: bool = False) -> CorrectionGrid:
         """The correction grid; ``alpha_nodes_deg = "auto"`` places the α nodes over the angles of
-        attack the nominal model reaches at ``conditions`` (loaded stations, converged points)."""
+        attack the nominal model reaches at ``conditions`` (loaded stations, converged points).
+        None for an FMU given as a file: its correction nodes, if any, come from its mapping."""
+        if not self.uses_grid:
+            return None
         g, src = self.grid_table, self.source
         alpha = g["alpha_nodes_deg"]
         if isinstance(alpha, str):
@@ -396,8 +436,8 @@ def prepare(cfg: dict) -> WorkflowSetup:
     """
     src = cfg["_source"]
     notes = []
-    rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"])
-    rotor = rsrc.rotor
+    rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"]) if "rotor" in cfg else None
+    rotor = rsrc.rotor if rsrc is not None else None
     mcfg = dict(cfg.get("model", {}))
     kind = mcfg.pop("kind", "bem")
     if kind not in ("bem", "fmu"):
@@ -424,20 +464,22 @@ def prepare(cfg: dict) -> WorkflowSetup:
     kwargs = {}
     for key, value in mcfg.items():
         kwargs[key] = tuple(value) if key == "polar_smoothing" else value
-    for key, attr in FILE_SETUP.items():
+    for key, attr in FILE_SETUP.items() if rsrc is not None else ():
         file_value = getattr(rsrc, attr, None)
         if key not in kwargs and file_value is not None:
             kwargs[key] = file_value
             notes.append(f"{key} = {file_value} from the rotor files")
     fluid = dict(cfg.get("fluid", {}))
-    density = float(fluid.get("density", rsrc.air_density or AIR["density"]))
-    viscosity = float(fluid.get("kinematic_viscosity", rsrc.kinematic_viscosity or AIR["kinematic_viscosity"]))
+    density = float(fluid.get("density", getattr(rsrc, "air_density", None) or AIR["density"]))
+    viscosity = float(fluid.get("kinematic_viscosity", getattr(rsrc, "kinematic_viscosity", None)
+                                or AIR["kinematic_viscosity"]))
     for key, value in (("density", density), ("kinematic_viscosity", viscosity)):
         if not value > 0:
             raise InputError(f"must be > 0, got {value!r}", src, field=f"fluid.{key}")
     try:
         settings = BemSettings(kinematic_viscosity=viscosity, **kwargs)
-        settings.sectors_for(rotor, OperatingConditions([1.0], [1.0], [0.0]))
+        if rotor is not None:
+            settings.sectors_for(rotor, OperatingConditions([1.0], [1.0], [0.0]))
     except InputError as exc:
         raise InputError(exc.message, src, field=f"model.{exc.field}") from None
     from calib.models.bem_model import NUISANCE
@@ -450,24 +492,27 @@ def prepare(cfg: dict) -> WorkflowSetup:
         if not s["channels"] or not all(isinstance(c, str) for c in s["channels"]):
             raise InputError("channels must be a non-empty array of names", src, field=f"stages[{k}].channels")
         channels += [c for c in s["channels"] if c not in channels]
-    try:
-        BemModel(rotor, None, channels, settings, ())
-    except InputError as exc:
-        raise InputError(exc.message, src, field="stages.channels") from None
+    _check_channels(fmu_table, rotor, settings, channels, src, cfg["_dir"])
     calib_cfg = dict(cfg.get("calibration", {}))
     force = bool(calib_cfg.pop("force", False))
     strict_units = bool(calib_cfg.pop("strict_units", False))
     if "band_eta" in calib_cfg:
         calib_cfg["band_eta"] = tuple(calib_cfg["band_eta"])
     cal = CalibrationSettings(**calib_cfg).validate(src, "calibration.")
-    g = cfg["grid"]
-    if isinstance(g["alpha_nodes_deg"], str) and g["alpha_nodes_deg"] != "auto":
+    g = cfg.get("grid")
+    if g is not None and isinstance(g["alpha_nodes_deg"], str) and g["alpha_nodes_deg"] != "auto":
         raise InputError(f"must be an array of angles [deg] or \"auto\", got {g['alpha_nodes_deg']!r}", src,
                          field="grid.alpha_nodes_deg")
-    setup = WorkflowSetup(rotor, _absolute_rotor_table(cfg["rotor"], cfg["_dir"]), settings, nuisance, density,
+    rotor_spec = _absolute_rotor_table(cfg["rotor"], cfg["_dir"]) if "rotor" in cfg else None
+    setup = WorkflowSetup(rotor, rotor_spec, settings, nuisance, density,
                           channels, calib_cfg, cal, force, g, src, notes, fmu_table, cfg.get("executor"),
                           cfg["_dir"], yaw)
-    if not isinstance(g["alpha_nodes_deg"], str):
+    if fmu_table is not None and not setup.uses_grid:
+        if g is not None:
+            notes.append("[grid] is not used: the FMU's correction nodes, if any, come from its mapping file")
+        if rotor is not None and "measurements" in cfg:
+            notes.append("[rotor] is not used by the FMU (it carries its own rotor); only stated")
+    elif not isinstance(g["alpha_nodes_deg"], str):
         setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
     from calib.campaign import ValidationSettings, diagnosis_settings
     if "diagnosis" in cfg:
@@ -482,6 +527,25 @@ def prepare(cfg: dict) -> WorkflowSetup:
         setup.validation = ValidationSettings.from_table(cfg["validation"], src)
     setup.strict_units = strict_units
     return setup
+
+
+def _check_channels(fmu_table: dict | None, rotor, settings: BemSettings, channels: list, src: str,
+                    base_dir) -> None:
+    """Refuse a stage channel the configured model does not provide, before any data is read.
+
+    The native BEM is asked directly; an FMU given as a file is opened through its mapping (a
+    bundled variant is checked when it is built).
+    """
+    try:
+        if fmu_table is None:
+            BemModel(rotor, None, channels, settings, ())
+        elif "variant" not in fmu_table:
+            from calib.models.from_config import model_from_workflow
+            model_from_workflow(fmu_table, None, channels, src, base_dir).close()
+    except InputError as exc:
+        if exc.field not in ("channels", "outputs"):     # not about a channel: the error as the model gave it
+            raise
+        raise InputError(exc.message, src, field="stages.channels") from None
 
 
 def _absolute_rotor_table(table: dict, base_dir) -> dict:
@@ -549,7 +613,8 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     if history or resume:
         from calib.history import open_history
         from calib.history import content_digest
-        inputs = {**run_inputs(cfg), "rotor (geometry and polars)": content_digest(setup.rotor)}
+        inputs = {**run_inputs(cfg), "rotor (geometry and polars)": content_digest(setup.rotor)
+                  if setup.rotor is not None else None}
         hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "inputs": inputs}, resume)
         hist.event("start", resumed=resume, records=hist.n_records)
         if resume:
@@ -617,7 +682,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         meas = synthesize(tmodel, truth_p, cond, relative_sigma={c: float(rel[c]) for c in all_channels},
                           channels=all_channels, seed=int(noise.get("seed", 0)), source=f"synthetic ({src})")
         meas.write_csv(out / "measurements.csv")
-    echo(f"[calib run] {cfg['name']}: rotor {rotor.name}, {meas.n_points} operating points, "
+    echo(f"[calib run] {cfg['name']}: {setup.model_name()}, {meas.n_points} operating points, "
          f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
 
     from calib import campaign

@@ -53,12 +53,19 @@ def _captions(r: CalibrationResult) -> dict[str, str]:
     from calib.report.fit_figures import fit_abscissa
 
     _, xlabel, reason = fit_abscissa(r)
+    grouping = "Correction nodes grouped by block and α node; other parameters by name." if _has_field(r) else \
+        "Parameters by name."
     every = f"All {r.n_retained} retained eigenshapes are drawn, on the α and η range of the correction nodes."
     return {"singular_values": f"{r.n_retained} of {r.n_params} directions retained.",
             "eigenshapes_lift": every, "eigenshapes_drag": every,
             "fit": f"Against {xlabel.split(' [')[0]} ({reason}); under each channel the whitened residual after "
                    f"calibration.",
-            "correlation": "Correction nodes grouped by block and α node; other parameters by name."}
+            "correlation": grouping}
+
+
+def _has_field(r: CalibrationResult) -> bool:
+    """Whether the calibrated model has a correction field (an FMU may offer scalar parameters only)."""
+    return any(v["kind"] in ("lift_correction", "drag_correction") for v in r.verdicts)
 
 
 def _table(header, rows, left=1) -> str:
@@ -216,7 +223,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
            ("χ²/dof after (dof = N − retained)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
            ("p-value after", gof["p_value_after"]),
            ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise")),
-           ("prior σ of correction nodes [scale units]", r.settings.get("prior_sigma"))]
+           ("prior σ of correction nodes [scale units]" if _has_field(r) else "prior σ [scale units]",
+            r.settings.get("prior_sigma"))]
     key += [(f"verdict: {k}", v) for k, v in counts.items()]
     parts.append(_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]))
     fail = r.failures
@@ -245,9 +253,10 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
                      _fmt(v["std"]), _fmt(v["prior_std"]), _fmt(v["std_ratio"], 2),
                      html.escape(v.get("note", "")), html.escape(v.get("confounded_with", ""))))
     n_hidden = len(r.verdicts) - len(rows)
-    parts.append(f"<h3>Verdicts</h3><p>Every non-field parameter, and every correction node that is identified, "
-                 f"at a bound, or moved more than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are "
-                 f"not listed (their bands are as wide as the prior).</p>" +
+    which = (f"Every non-field parameter, and every correction node that is identified, at a bound, or moved more "
+             f"than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are not listed (their bands are as "
+             f"wide as the prior)." if _has_field(r) else "Every parameter of the model.")
+    parts.append(f"<h3>Verdicts</h3><p>{which}</p>" +
                  _table(["parameter", "verdict", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
                          "note", "confounded with"], rows, left=2))
     if figures:
