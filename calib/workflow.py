@@ -31,6 +31,7 @@ from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.sources import rotor_from_table
 from calib.tomlfile import read_toml
+from calib.setup_statement import statement, statement_html, statement_lines
 from calib.unit_check import apply_unit_check
 from calib.logs import add_output_arguments, say
 
@@ -350,6 +351,7 @@ class WorkflowSetup:
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
     validation: object = None             # calib.campaign.ValidationSettings of [validation]
     strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
+    origins: dict = dataclasses.field(default_factory=dict)   # set-up key -> where its value came from
 
     def model(self, grid: CorrectionGrid, channels, executor=None, effects=()):
         """The forward model of a stage: the native BEM (with ``effects``, e.g. those a
@@ -464,11 +466,17 @@ def prepare(cfg: dict) -> WorkflowSetup:
     kwargs = {}
     for key, value in mcfg.items():
         kwargs[key] = tuple(value) if key == "polar_smoothing" else value
+    origins = {}
     for key, attr in FILE_SETUP.items() if rsrc is not None else ():
         file_value = getattr(rsrc, attr, None)
         if key not in kwargs and file_value is not None:
             kwargs[key] = file_value
+            origins[key] = "rotor files"
             notes.append(f"{key} = {file_value} from the rotor files")
+    fluid_table = dict(cfg.get("fluid", {}))
+    for key, attr in (("density", "air_density"), ("kinematic_viscosity", "kinematic_viscosity")):
+        origins[key] = f"[fluid] {key}" if key in fluid_table else "rotor files" \
+            if getattr(rsrc, attr, None) else "default (air at 15 °C)"
     fluid = dict(cfg.get("fluid", {}))
     density = float(fluid.get("density", getattr(rsrc, "air_density", None) or AIR["density"]))
     viscosity = float(fluid.get("kinematic_viscosity", getattr(rsrc, "kinematic_viscosity", None)
@@ -526,6 +534,7 @@ def prepare(cfg: dict) -> WorkflowSetup:
     if "validation" in cfg:
         setup.validation = ValidationSettings.from_table(cfg["validation"], src)
     setup.strict_units = strict_units
+    setup.origins = origins
     return setup
 
 
@@ -663,6 +672,9 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         truth_p = None
         for note in meas.notes:
             echo(f"[calib run] {file.name}: {note}")
+        set_up = statement(setup, cfg, meas)
+        for line in statement_lines(set_up):
+            echo(f"[calib run] set-up in force: {line}")
         grid = setup.grid(meas.conditions, progress)
         check_model = recorded(setup.model(grid, all_channels, executor), hist, "unit check", chunk, progress_line)
         _, unit_notes = apply_unit_check(check_model, nominal_vector(check_model.parameters), meas,
@@ -678,6 +690,9 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         if missing:
             raise InputError(f"no noise level for channel(s) {', '.join(missing)}", src,
                              field=f"noise.relative.{missing[0]}")
+        set_up = statement(setup, cfg)
+        for line in statement_lines(set_up):
+            echo(f"[calib run] set-up in force: {line}")
         tmodel, truth_p = truth_model(rotor, all_channels, settings, cfg["truth"], nuisance)
         meas = synthesize(tmodel, truth_p, cond, relative_sigma={c: float(rel[c]) for c in all_channels},
                           channels=all_channels, seed=int(noise.get("seed", 0)), source=f"synthetic ({src})")
@@ -773,7 +788,8 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
                  "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
     report = write_report(out / "report.html", title=f"calib: {cfg['name']}",
-                          sections=[campaign.section_html(diag, validations)] if (diag or validations) else None,
+                          sections=[statement_html(set_up)] + ([campaign.section_html(diag, validations)]
+                                                               if (diag or validations) else []),
                           results={o.name: o.result for o in outcomes},
                           figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra,
                           checks={o.name: o.result.checks for o in outcomes})
