@@ -55,7 +55,8 @@ def _column(meas, name: str) -> tuple[str, str] | None:
         return None
     values = np.asarray(getattr(meas.conditions, name), float)
     lo, hi = float(values.min()), float(values.max())
-    return (f"{lo:g}" if lo == hi else f"{lo:g} to {hi:g}"), f"measurement column '{name}'"
+    unit = {"yaw": "deg", "air_density": "kg/m^3"}[name]
+    return (f"{lo:g} {unit}" if lo == hi else f"{lo:g} to {hi:g} {unit}"), f"measurement column '{name}'"
 
 
 def rotor_origin(rotor_spec: dict | None) -> str:

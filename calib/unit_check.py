@@ -188,14 +188,18 @@ class UnitCheckReport:
                          source or self.source, field=stop[0].name or None)
 
     def warning_lines(self) -> list[str]:
-        """The loud lines for misfits no unit factor explains (empty when there are none)."""
+        """The loud line for misfits no unit factor explains (empty when there are none)."""
         if not self.misfit_findings:
             return []
-        ratios = ", ".join(f"{c} {r:.3g}" for c, r in self.ratios.items())
-        return [f"WARNING: the nominal model misses the data beyond noise and model error, and no unit factor "
-                f"explains it (measured/model per channel: {ratios}); calibrating anyway, since such a misfit is "
-                f"what calibration is for. Check the findings below if this is unexpected:"] + \
-               [f"WARNING:   {f.message}" for f in self.misfit_findings]
+        names = ", ".join(f.name or "points failing" for f in self.misfit_findings)
+        return [f"WARNING: the nominal model misses {names} beyond noise and model error, and no unit factor "
+                f"explains it ({self.ratio_words()}); calibrating anyway, since such a misfit is what calibration "
+                f"is for (--strict-units stops here instead)"]
+
+    def ratio_words(self) -> str:
+        """'measured/model per channel: power 0.521 (χ²/dof 33.9), ...'."""
+        return "measured/model per channel: " + ", ".join(
+            f"{c} {self.ratios[c]:.3g} (χ²/dof {self.chi2_per_dof[c]:.3g})" for c in self.ratios)
 
     def as_dict(self) -> dict:
         """JSON-able form for results and reports."""
@@ -539,7 +543,5 @@ def apply_unit_check(model, p, measurements: Measurements, *, sigma: Mapping[str
     elif report.misfit_findings:
         for line in report.warning_lines():
             printer(f"{prefix} {line}")
-        ratios = ", ".join(f"{c} {r:.3g}" for c, r in report.ratios.items())
-        notes["unit check: misfit no unit factor explains (calibrated anyway)"] = (
-            f"measured/model per channel {ratios}; " + "; ".join(f.message for f in report.misfit_findings))
+        notes["unit check: misfit no unit factor explains (calibrated anyway)"] = report.ratio_words()
     return report, notes

@@ -37,8 +37,8 @@ def test_rotor_files_and_measurement_columns_are_named(tmp_path):
     got = items_of(cfg, meas)
     files = f"rotor files ({DECK.name})"
     assert got["tilt"] == ("5 deg", files) and got["shear exponent"] == ("0.2", files)
-    assert got["air density"] == ("1.18 to 1.2", "measurement column 'air_density'")
-    assert got["yaw"] == ("0 to 10", "measurement column 'yaw'")
+    assert got["air density"] == ("1.18 to 1.2 kg/m^3", "measurement column 'air_density'")
+    assert got["yaw"] == ("0 to 10 deg", "measurement column 'yaw'")
     assert got["azimuth sectors"][0] == "4"                                 # tilted, sheared: not axisymmetric
 
 
