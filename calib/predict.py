@@ -52,6 +52,82 @@ def write_prediction_csv(path: str | Path, conditions: dict, prediction: Predict
     return path
 
 
+def _span(values, fmt: str) -> str:
+    """``fmt`` of the one value, or of the range of several [same unit]."""
+    a = np.asarray(values, float).ravel()
+    if a.size == 0:
+        return "none"
+    lo, hi = float(np.min(a)), float(np.max(a))
+    return fmt.format(lo) if lo == hi else f"{fmt.format(lo)}-{fmt.format(hi)}"
+
+
+def setup_lines(spec: dict | None, recorded: dict | None, conditions: dict, data: str) -> list[str]:
+    """The recorded set-up a prediction runs with, in two lines.
+
+    Parameters
+    ----------
+    spec : dict or None
+        The result's ``model_spec``.
+    recorded : dict or None
+        The calibration's conditions (``CalibrationResult.conditions``): the air density and
+        yaw it was calibrated at.
+    conditions : dict
+        The prediction's conditions (``OperatingConditions.as_dict()``).
+    data : str
+        The prediction's conditions file (named).
+
+    Returns
+    -------
+    list of str
+        Model line: rotor name and source (and whether it is the result's recorded rotor
+        data or rebuilt from files), tilt [deg] (and whether the BEM applies it), precone
+        [deg], shear exponent [-], azimuth sectors, kinematic viscosity [m^2/s], nuisance
+        parameters and effects; or the FMU and mapping files. Conditions line: air density
+        [kg/m^3] and yaw [deg] of the prediction, with the calibration's.
+    """
+    spec = spec or {}
+    lines = []
+    if spec.get("kind") == "bem":
+        data_ = spec.get("rotor_data") or {}
+        table = spec.get("rotor") or {}
+        name = data_.get("name") or table.get("name") or "?"
+        origin = ("the result's recorded rotor data" if data_ else
+                  "the embedded rotor of this calib version" if set(table) == {"name"} else
+                  "the rotor files (the result records no rotor data)")
+        where = data_.get("source") or ", ".join(f"{k} {v}" for k, v in table.items() if k in ("openfast", "aerodyn",
+                                                                                                 "aerodyn_blade",
+                                                                                                 "windio"))
+        st = spec.get("settings") or {}
+        sectors = st.get("n_sectors")
+        model = [f"rotor {name} ({where}; from {origin})"]
+        if "tilt_deg" in spec:
+            model.append(f"tilt {spec['tilt_deg']:g} deg" + ("" if st.get("use_tilt", True) else " (not applied, "
+                                                                                                 "use_tilt = false)"))
+        if "precone_deg" in spec:
+            model.append(f"precone {spec['precone_deg']:g} deg")
+        if "shear_exponent" in st:
+            model.append(f"shear exponent {st['shear_exponent']:g}")
+        model.append(f"sectors {'automatic' if sectors is None else sectors}")
+        if "kinematic_viscosity" in st:
+            model.append(f"kinematic viscosity {st['kinematic_viscosity']:.4g} m^2/s")
+        model.append(f"nuisance {', '.join(spec.get('nuisance') or []) or 'none'}")
+        effects = [e.get("name", "?") if isinstance(e, dict) else str(e) for e in spec.get("effects") or []]
+        if effects:
+            model.append(f"effects {', '.join(effects)}")
+        lines.append("calib predict: set-up recorded by the result: " + ", ".join(model))
+    elif spec.get("kind") == "fmu":
+        lines.append(f"calib predict: set-up recorded by the result: FMU {spec.get('fmu')}, mapping "
+                     f"{spec.get('mapping')}")
+    cond = [f"air density {_span(conditions['air_density'], '{:.4g}')} kg/m^3",
+            f"yaw {_span(conditions['yaw'], '{:g}')} deg"]
+    line = f"  conditions of {data}: " + ", ".join(cond)
+    if recorded and "air_density" in recorded and "yaw" in recorded:
+        line += (f" (calibrated at air density {_span(recorded['air_density'], '{:.4g}')} kg/m^3, yaw "
+                 f"{_span(recorded['yaw'], '{:g}')} deg)")
+    lines.append(line)
+    return lines
+
+
 def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confidence: float = 0.95,
                 printer=print) -> dict:
     """Predict the result's channels at the conditions of ``data``; returns the χ² figures (if measured).
@@ -64,7 +140,10 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     """
     result = load_result(result_dir)
     meas = read_measurements(data, None, allow_no_channels=True)
-    pred = result.predict(meas.conditions, confidence=confidence)
+    model = result.rebuild_model()
+    for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data)):
+        printer(line)
+    pred = result.predict(meas.conditions, model=model, confidence=confidence)
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})
     figures = {"n_points": int(pred.values.shape[0]), "n_failed": int(np.count_nonzero(pred.status != 0))}
     printer(f"calib predict: {figures['n_points']} points, {figures['n_failed']} failed; wrote {out}")

@@ -324,12 +324,7 @@ class CalibrationResult:
         from scipy import stats
 
         if model is None:
-            if not self.model_spec:
-                raise InputError("this result recorded no model spec to rebuild its model; pass model=",
-                                 self.name, field="model_spec")
-            from calib.models.registry import build_model
-
-            model = build_model(self.model_spec, source=f"{self.name}: model_spec")
+            model = self.rebuild_model()
         names = [c.name for c in model.channels]
         missing = [c for c in self.channels if c not in names]
         if missing:
@@ -344,6 +339,30 @@ class CalibrationResult:
         std = np.where(ev.ok[:, None], std, np.nan)
         return Prediction(tuple(self.channels), tuple(self.channel_units), values, std, values - z * std,
                           values + z * std, ev.status.copy(), tuple(ev.messages), confidence)
+
+    def rebuild_model(self):
+        """The forward model rebuilt from ``model_spec``.
+
+        A native-BEM result rebuilds its rotor from the rotor data it recorded, wherever its
+        folder now is; one written by an older version without them rebuilds it from the
+        recorded rotor files (at their recorded paths, else in the result's folder), refused
+        when one is missing or changed since the run. An FMU result needs its FMU and mapping
+        files unchanged (:func:`calib.models.registry.check_fmu_files`).
+
+        Raises
+        ------
+        InputError
+            No model spec recorded, or recorded files missing or changed (the file named).
+        """
+        json_path = getattr(self, "_json_path", None)    # set by load_result
+        folder = None if json_path is None else json_path.parent
+        where = str(json_path) if json_path is not None else self.name
+        if not self.model_spec:
+            raise InputError("this result recorded no model spec to rebuild its model; pass model=", where,
+                             field="model_spec")
+        from calib.models.registry import build_model
+
+        return build_model(self.model_spec, base_dir=folder, source=f"{where}: model_spec")
 
     @property
     def parameter_objects(self) -> tuple[Parameter, ...]:
@@ -535,4 +554,6 @@ def load_result(path: str | Path, stem: str = "result") -> CalibrationResult:
     kwargs["multiple_roots"] = kwargs["multiple_roots"].astype(bool)
     names = {f.name for f in fields(CalibrationResult)}
     kwargs.update({k: v for k, v in data.items() if k in names})
-    return CalibrationResult(**kwargs)
+    result = CalibrationResult(**kwargs)
+    result._json_path = jpath.resolve()     # rebuild_model names it and looks for relocated rotor files beside it
+    return result

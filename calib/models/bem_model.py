@@ -19,6 +19,7 @@ from calib.errors import InputError
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 from calib.rotor.geometry import Rotor
+from calib.rotor.serialize import rotor_from_dict
 
 NUISANCE_EFFECTS = {"pitch_offset": "pitch_offset", "wind_scale": "wind_speed_scale"}
 """Nuisance parameter name -> the effect that carries it."""
@@ -45,8 +46,10 @@ class BemModel:
         Nuisance parameters appended after the corrections: ``pitch_offset`` [deg],
         ``wind_scale`` [-].
     rotor_source : dict, optional
-        How to rebuild the rotor (a workflow ``[rotor]`` table); default ``{"name": rotor.name}``
-        for an embedded rotor. Needed by :meth:`spec` (saved results rebuild their model).
+        Where the rotor came from (a workflow ``[rotor]`` table, absolute paths); default
+        ``{"name": rotor.name}`` for an embedded rotor. :meth:`spec` records it and its files'
+        digests for provenance; saved results rebuild their model from the rotor data
+        :meth:`spec` records beside it.
     effects : sequence, optional
         Further effects of :mod:`calib.effects`: instances (``make_effect("tip_loss")``),
         registry names, or ``{"name": ..., "options": {...}}`` tables. Their parameters follow
@@ -172,35 +175,86 @@ class BemModel:
     def spec(self) -> dict:
         """A JSON-able description from which :func:`calib.models.registry.build_model` rebuilds the model.
 
-        Raises
-        ------
-        InputError
-            When the rotor has no source description (neither an embedded name nor files).
+        The rotor is recorded as data (``rotor_data``, :func:`calib.rotor.serialize.rotor_to_dict`:
+        stations, chord, twist, airfoil tables, hub, orientation, name, source) with its
+        digest (``rotor_sha256``, :func:`calib.rotor.serialize.rotor_digest`), so the model is
+        rebuilt without the rotor files; ``rotor`` keeps the ``[rotor]`` table it came from
+        (absolute paths) and ``rotor_files`` each file's absolute path, path relative to the
+        workflow's folder and SHA-256 (:func:`calib.rotor.sources.recorded_rotor_files`),
+        for provenance.
         """
-        if self.rotor_source is None:
-            raise InputError("the rotor has no recorded source (embedded name or files); pass rotor_source=",
-                             "BemModel", field="rotor_source")
-        return {"kind": "bem", "rotor": dict(self.rotor_source), "settings": asdict(self.settings),
+        from calib.rotor.serialize import rotor_digest, rotor_to_dict
+        from calib.rotor.sources import recorded_rotor_files
+
+        spec = {"kind": "bem", "rotor": dict(self.rotor_source or {}), "settings": asdict(self.settings),
                 "tilt_deg": float(self.rotor.tilt_deg), "precone_deg": float(self.rotor.precone_deg),
                 "grid": self.grid.to_dict() if self.grid is not None else None,
                 "channels": [c.name for c in self.channels], "nuisance": list(self.nuisance),
-                "effects": [e.spec() for e in self.effects]}
+                "effects": [e.spec() for e in self.effects],
+                "rotor_data": rotor_to_dict(self.rotor), "rotor_sha256": rotor_digest(self.rotor)}
+        files = recorded_rotor_files(self.rotor_source)
+        if files is not None:
+            spec["rotor_files"] = files
+        return spec
 
     @classmethod
-    def from_spec(cls, spec: dict, base_dir=None) -> "BemModel":
-        """Rebuild a model from :meth:`spec`."""
+    def from_spec(cls, spec: dict, base_dir=None, source: str = "model spec") -> "BemModel":
+        """Rebuild a model from :meth:`spec`.
+
+        The rotor comes from the recorded ``rotor_data`` (its digest checked); a spec without
+        it (written by older versions) rebuilds the rotor from the embedded rotor's name, or
+        from the recorded files, looked for at their absolute paths and then in ``base_dir``
+        (:func:`calib.rotor.sources.rotor_from_recorded_files`), refused when one is missing
+        or changed since the run.
+
+        Parameters
+        ----------
+        spec : dict
+        base_dir : str or Path, optional
+            The result's folder (where relocated rotor files are looked for).
+        source : str
+            Where the spec came from (named in errors).
+
+        Raises
+        ------
+        InputError
+            Recorded rotor data that do not match their digest or are not valid; a rotor file
+            missing or changed (named).
+        """
+        from calib.history import content_digest
         from calib.rotor.library import load_rotor
 
-        rotor_table = dict(spec["rotor"])
-        if set(rotor_table) != {"name"}:
-            from calib.rotor.sources import rotor_from_table
-
-            rotor = rotor_from_table(rotor_table, "model spec", base_dir).rotor
+        rotor_table = dict(spec["rotor"] or {})
+        data = spec.get("rotor_data")
+        if data is not None:
+            rotor = rotor_from_dict(data, f"{source}.rotor_data")
+            recorded = spec.get("rotor_sha256")
+            if recorded is not None and content_digest(rotor) != recorded:
+                raise InputError(f"the recorded rotor data do not match their recorded digest (SHA-256 "
+                                 f"{str(recorded)[:12]}... recorded, {content_digest(rotor)[:12]}... of the data): "
+                                 "the result was edited or damaged", source, field="rotor_data")
         else:
-            rotor = load_rotor(rotor_table["name"])
-        changes = {k: float(spec[k]) for k in ("tilt_deg", "precone_deg") if k in spec}
-        if changes:
-            rotor = replace(rotor, **changes)
+            relocated = False
+            if not rotor_table:
+                raise InputError("the spec records neither rotor data nor a rotor table", source, field="rotor")
+            if set(rotor_table) == {"name"}:
+                rotor = load_rotor(rotor_table["name"])
+            else:
+                from calib.rotor.sources import rotor_from_recorded_files
+
+                rsrc, relocated = rotor_from_recorded_files(rotor_table, spec.get("rotor_files"), base_dir, source)
+                rotor = rsrc.rotor
+            changes = {k: float(spec[k]) for k in ("tilt_deg", "precone_deg") if k in spec}
+            if changes:
+                rotor = replace(rotor, **changes)
+            recorded = spec.get("rotor_sha256")
+            # files at their recorded paths whose bytes match must give the rotor the run used (a
+            # relocated file changes the polars' recorded source paths, which the digest includes)
+            if recorded is not None and not relocated and content_digest(rotor) != recorded:
+                raise InputError(f"the rotor rebuilt from the files differs from the one the run used (SHA-256 "
+                                 f"{str(recorded)[:12]}... recorded, {content_digest(rotor)[:12]}... now): the rotor "
+                                 "files changed since the run, or this version reads them differently", source,
+                                 field="rotor")
         grid = CorrectionGrid(**spec["grid"]) if spec.get("grid") else None
         return cls(rotor, grid, spec["channels"], BemSettings(**spec["settings"]), spec["nuisance"],
                    rotor_source=rotor_table, effects=spec.get("effects") or ())

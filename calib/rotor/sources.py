@@ -25,17 +25,27 @@ from the tower, tilt positive with the rotor disc facing up.
 Relative paths are relative to ``base_dir`` (the folder of the workflow file). Every error
 is an :class:`~calib.errors.InputError` naming the workflow file and the key
 (``rotor.hub_radius``), or the rotor file, its line and its keyword.
+
+Provenance: every file a table's rotor was read from is remembered with its SHA-256 (taken
+when read) and its path relative to the workflow's folder (:func:`recorded_rotor_files`,
+which a model's ``spec()`` records in a result). A result written without its rotor data
+rebuilds the rotor from those files (:func:`rotor_from_recorded_files`), refusing any that
+is missing or changed since the run.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import reprlib
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from calib.errors import InputError
+from calib.measurements import sha256_of
 from calib.rotor.aerodyn import read_aerodyn_main, rotor_from_aerodyn
 from calib.rotor.geometry import Rotor
 from calib.rotor.library import ROTORS, load_rotor
@@ -109,11 +119,19 @@ def _path(table: dict, key: str, source: str, base_dir: Path) -> Path:
     value = table[key]
     if not isinstance(value, str) or not value.strip():
         raise InputError(f"expected a file name (string), got {value!r}", source, None, _key(key))
-    path = Path(value).expanduser()
-    if not path.is_absolute():
-        path = base_dir / path
+    path = _resolve(value, base_dir, source, _key(key))
     if not path.is_file():
         raise InputError(f"file not found: {value!r} (looked for {path})", source, None, _key(key))
+    return path
+
+
+def _resolve(value: str, base_dir: Path | None, source: str, key: str) -> Path:
+    path = Path(value).expanduser()
+    if not path.is_absolute():
+        if base_dir is None:
+            raise InputError(f"relative path {value!r}, but no folder to resolve it against (expected an absolute "
+                             "path)", source, None, key)
+        path = base_dir / path
     return path
 
 
@@ -174,8 +192,9 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
         The ``[rotor]`` table (module notes list the keys).
     source : str
         The workflow file, named in errors.
-    base_dir : str or Path
-        Folder relative paths are resolved against (the workflow file's folder).
+    base_dir : str or Path or None
+        Folder relative paths are resolved against (the workflow file's folder); None: the
+        table's paths must be absolute.
 
     Returns
     -------
@@ -186,11 +205,23 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
     InputError
         Unknown key, no or several sources, a hub/orientation key missing where the files
         lack it or given where they carry it, a value of the wrong type, a file not found
-        (``source`` and ``rotor.<key>`` named), or an error inside a rotor file (that file,
-        line and keyword named).
+        (``source`` and ``rotor.<key>`` named), a relative path without ``base_dir``, or an
+        error inside a rotor file (that file, line and keyword named).
+
+    Notes
+    -----
+    The files read are remembered with their SHA-256 and their paths relative to
+    ``base_dir`` (:func:`recorded_rotor_files`).
     """
     src = str(source)
-    base = Path(base_dir)
+    base = None if base_dir is None else Path(base_dir)
+    out = _read(table, src, base)
+    if out.files:
+        _remember(table, base, out.files)
+    return out
+
+
+def _read(table: dict, src: str, base: Path | None) -> RotorSource:
     kind = _check_keys(table, src)
     setup = {k: _setup_value(table, k, src) for k in SETUP_KEYS if k in table}
 
@@ -241,8 +272,7 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
         for k, name in enumerate(names):
             if not isinstance(name, str) or not name.strip():
                 raise InputError(f"entry {k + 1}: expected a file name, got {name!r}", src, None, _key("airfoils"))
-            path = Path(name).expanduser()
-            path = path if path.is_absolute() else base / path
+            path = _resolve(name, base, src, _key("airfoils"))
             if not path.is_file():
                 raise InputError(f"entry {k + 1}: file not found: {name!r} (looked for {path})", src, None,
                                  _key("airfoils"))
@@ -272,3 +302,189 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
     rho, mu, shear = number(rho, "air_density"), number(mu, "air_dyn_viscosity"), number(shear, "shear_exp")
     nu = mu / rho if (mu is not None and rho) else None
     return RotorSource(rotor=rotor, air_density=rho, kinematic_viscosity=nu, shear_exponent=shear, files=(path,))
+
+
+# ----------------------------------------------------------------------------- provenance
+FILE_KEYS = ("openfast", "aerodyn", "aerodyn_blade", "windio")
+#: Recent reads, newest last: absolute table (JSON) -> (workflow folder or None, ((file, SHA-256), ...)).
+_READS: OrderedDict = OrderedDict()
+_MAX_READS = 64
+
+
+def absolute_table(table: dict, base_dir) -> dict:
+    """The ``[rotor]`` table with its file paths absolute and resolved (relative ones against
+    ``base_dir``), the form a result records."""
+    out = dict(table)
+    base = Path(base_dir) if base_dir is not None else Path()
+    for key in FILE_KEYS:
+        if isinstance(out.get(key), str):
+            out[key] = str((base / out[key]).resolve())
+    if isinstance(out.get("airfoils"), list):
+        out["airfoils"] = [str((base / a).resolve()) if isinstance(a, str) else a for a in out["airfoils"]]
+    return out
+
+
+def _table_key(table: dict) -> str:
+    return json.dumps(table, sort_keys=True, default=str)
+
+
+def _remember(table: dict, base: Path | None, files) -> None:
+    try:
+        key = _table_key(absolute_table(table, base))
+        digests = tuple((str(Path(f).resolve()), sha256_of(f)) for f in files)
+    except OSError:
+        return              # provenance only: a file that vanished right after being read is not an error here
+    _READS[key] = (None if base is None else str(base.resolve()), digests)
+    _READS.move_to_end(key)
+    while len(_READS) > _MAX_READS:
+        _READS.popitem(last=False)
+
+
+def _named_files(table: dict) -> list[tuple[str, str]]:
+    """(key, path) of the files a table names itself, in table order."""
+    out = [(f"rotor.{k}", table[k]) for k in FILE_KEYS if isinstance(table.get(k), str)]
+    if isinstance(table.get("airfoils"), list):
+        out += [(f"rotor.airfoils[{i}]", a) for i, a in enumerate(table["airfoils"]) if isinstance(a, str)]
+    return out
+
+
+def recorded_rotor_files(table: dict | None) -> dict | None:
+    """Provenance of the files behind a rotor table, for a result to record.
+
+    Parameters
+    ----------
+    table : dict or None
+        A ``[rotor]`` table with absolute paths (as :func:`absolute_table` gives it).
+
+    Returns
+    -------
+    dict or None
+        None for an embedded rotor (no files). Else ``{"workflow_dir", "all_files_read",
+        "files": [{"path", "relative", "sha256"}, ...]}``: absolute path, path relative to the
+        workflow's folder and SHA-256 of each file. When this process read the table
+        (:func:`rotor_from_table`), the files are every file read, in reading order (an
+        OpenFAST deck's ElastoDyn, AeroDyn, blade and airfoil files too), hashed when read,
+        and ``all_files_read`` is true; otherwise they are the files the table names, hashed
+        now (``sha256`` None for one that is missing), and ``relative`` and ``workflow_dir``
+        are None.
+    """
+    if not isinstance(table, dict):
+        return None
+    named = _named_files(table)
+    if not named:
+        return None
+    hit = _READS.get(_table_key(absolute_table(table, None)))
+    if hit is not None:
+        wdir, digests = hit
+        files = []
+        for path, digest in digests:
+            try:
+                rel = os.path.relpath(path, wdir) if wdir is not None else None
+            except ValueError:          # another drive (Windows)
+                rel = None
+            files.append({"path": path, "relative": rel, "sha256": digest})
+        return {"workflow_dir": wdir, "all_files_read": True, "files": files}
+    files = []
+    for _, value in named:
+        path = Path(value).expanduser().resolve()
+        files.append({"path": str(path), "relative": None, "sha256": sha256_of(path) if path.is_file() else None})
+    return {"workflow_dir": None, "all_files_read": False, "files": files}
+
+
+def _changed(path, recorded: str, now: str, source: str, key: str) -> InputError:
+    return InputError(f"rotor file {path} changed since the run (SHA-256 {recorded[:12]}... recorded, {now[:12]}... "
+                      "now); restore the file the run read, or run the calibration again", source, None, key)
+
+
+def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, source: str
+                              ) -> tuple[RotorSource, bool]:
+    """Rebuild a recorded rotor from its files, refusing any that is missing or changed.
+
+    For results that recorded no rotor data (written by older versions). Each file the
+    table names is looked for at its recorded absolute path, then (if not there) in
+    ``result_dir`` under its recorded path relative to the workflow's folder, then in
+    ``result_dir`` under its name. Where ``provenance`` (:func:`recorded_rotor_files`)
+    holds a file's SHA-256, the file found must still have it; with ``all_files_read``,
+    so must every file the readers follow (an OpenFAST deck's AeroDyn, blade and airfoil
+    files), compared in reading order.
+
+    Parameters
+    ----------
+    table : dict
+        The recorded ``[rotor]`` table (absolute paths).
+    provenance : dict or None
+        The recorded files; None for results that recorded none (existence checked only).
+    result_dir : str or Path or None
+        The result's folder.
+    source : str
+        Named in errors (the result file).
+
+    Returns
+    -------
+    rotor_source : RotorSource
+    relocated : bool
+        Whether a file named by the table was found elsewhere than at its recorded path.
+
+    Raises
+    ------
+    InputError
+        Naming the file: missing (with the places looked at) or changed since the run (both
+        digests shortened); or any error of :func:`rotor_from_table`.
+    """
+    records = {}
+    for rec in (provenance or {}).get("files") or []:
+        if isinstance(rec, dict) and isinstance(rec.get("path"), str):
+            records[rec["path"]] = rec
+    rdir = None if result_dir is None else Path(result_dir).resolve()
+    relocated = False
+
+    def locate(value: str, key: str) -> str:
+        nonlocal relocated
+        rec = records.get(value) or records.get(str(Path(value).resolve())) or {}
+        candidates = [Path(value)]
+        if rdir is not None:
+            if isinstance(rec.get("relative"), str):
+                candidates.append(rdir / rec["relative"])
+            candidates.append(rdir / Path(value).name)
+        found = next((c for c in candidates if c.is_file()), None)
+        if found is None:
+            also = "".join(f", {c}" for c in candidates[1:])
+            raise InputError(f"rotor file {value} is missing (looked at {candidates[0]}{also}); this result records "
+                             "no rotor data of its own, so its model needs the files the run read", source, None, key)
+        relocated |= found != candidates[0]
+        if isinstance(rec.get("sha256"), str):
+            now = sha256_of(found)
+            if now != rec["sha256"]:
+                raise _changed(found, rec["sha256"], now, source, key)
+        return str(found.resolve())
+
+    if not isinstance(table, dict):
+        raise InputError(f"expected the recorded [rotor] table, got {table!r}", source, None, "rotor")
+    new = dict(table)
+    for key in FILE_KEYS:
+        if isinstance(new.get(key), str):
+            new[key] = locate(new[key], f"rotor.{key}")
+    if isinstance(new.get("airfoils"), list):
+        new["airfoils"] = [locate(a, f"rotor.airfoils[{i}]") if isinstance(a, str) else a
+                           for i, a in enumerate(new["airfoils"])]
+    if provenance and provenance.get("all_files_read") and not relocated:
+        # the files the readers follow, checked before reading where they were
+        for rec in records.values():
+            path = Path(rec["path"])
+            if isinstance(rec.get("sha256"), str) and path.is_file():
+                now = sha256_of(path)
+                if now != rec["sha256"]:
+                    raise _changed(path, rec["sha256"], now, source, "rotor")
+    out = rotor_from_table(new, source, None)
+    if provenance and provenance.get("all_files_read"):
+        recorded = [r for r in provenance.get("files") or [] if isinstance(r, dict)]
+        if len(recorded) != len(out.files):
+            raise InputError(f"the rotor files now lead to {len(out.files)} files, the run read {len(recorded)} "
+                             f"({', '.join(str(r.get('path')) for r in recorded)}): changed since the run", source,
+                             None, "rotor")
+        for rec, path in zip(recorded, out.files):
+            if isinstance(rec.get("sha256"), str):
+                now = sha256_of(path)
+                if now != rec["sha256"]:
+                    raise _changed(path, rec["sha256"], now, source, "rotor")
+    return out, relocated
