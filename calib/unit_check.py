@@ -29,7 +29,9 @@ Findings. Those a unit factor (or a sign) explains stop the run through
 
 - ``condition``: a condition off by a unit factor (wind speed ×3.6: km/h read as m/s);
 - ``channel``: a channel off by a unit factor (power ×10⁻³: kW read as W);
-- ``sign``: a channel with the opposite sign of the model's (measured/model ≈ −1).
+- ``sign``: a channel with the opposite sign of the model's (measured/model ≈ −1);
+- ``gross``: a channel misfit whose ratio lies outside 1/5 to 5 (:data:`GROSS_RATIO`) without
+  matching a unit factor (a kW table whose loads are also off): no polar correction explains it.
 
 Those no unit factor explains are warnings: a misfit is what calibration is for, so the run
 goes on and says so loudly (stopped only with ``strict``):
@@ -73,8 +75,13 @@ CONDITION_FACTORS = {
 #: How to override a stopped run (wired by the command line and the workflow).
 OVERRIDE_HINT = "to calibrate anyway, pass --force (workflow: [calibration] force = true)"
 
-#: Finding kinds a unit factor or a sign explains: they stop the run unless forced.
-STOPPING_KINDS = ("condition", "channel", "sign")
+#: Finding kinds that stop the run unless forced: a unit factor or a sign explains them, or the
+#: ratio is beyond anything a polar correction gives (``gross``).
+STOPPING_KINDS = ("condition", "channel", "sign", "gross")
+
+#: A channel whose measured/model ratio lies outside [1/GROSS_RATIO, GROSS_RATIO] is not a model
+#: misfit: no calibration of the polars moves a rotor load by a factor of 5 [-].
+GROSS_RATIO = 5.0
 
 _FACTOR_WORDS = ((1e3, "10³", "10⁻³", "a k prefix"), (1e6, "10⁶", "10⁻⁶", "an M prefix"),
                  (3.6, "3.6", "1/3.6", "km/h ↔ m/s"), (_RPM, "30/π", "π/30", "rpm ↔ rad/s"),
@@ -473,6 +480,15 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
     for c, name in enumerate(measurements.channels):
         if chosen.chi2_per_dof[c] > chi2_threshold:
             after = " after the correction above" if chosen is not base or chosen.factors[c] != 1.0 else ""
+            ratio = abs(chosen.ratios[c] / chosen.factors[c])
+            if not 1 / GROSS_RATIO <= ratio <= GROSS_RATIO:      # beyond what any polar correction gives
+                findings.append(UnitFinding(
+                    "gross", name, float("nan"),
+                    f"{name} is {chosen.ratios[c]:.3g} times the nominal model's (median over the points), χ²/dof = "
+                    f"{chosen.chi2_per_dof[c]:.3g}{after}: no unit factor explains it exactly, but no calibration "
+                    f"of the polars can either (outside 1/{GROSS_RATIO:g} to {GROSS_RATIO:g}); check the unit in the "
+                    f"header, what the channel measures and the rotor{_model_side(name, model_units)}"))
+                continue
             findings.append(UnitFinding(
                 "misfit", name, float("nan"),
                 f"{name} disagrees with the nominal model beyond what noise and a {model_error:.0%} model error "

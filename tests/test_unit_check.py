@@ -261,3 +261,21 @@ def test_fmu_units_name_the_mapping_as_a_cause(nrel, tmp_path):
     report = check_units(model, p0, read_measurements(path), model_units="the mapping file turbine.toml")
     assert "scale/unit mapped to 'power' in the mapping file turbine.toml" in report.findings[0].message
     assert "mapping" not in check_units(model, p0, read_measurements(path)).findings[0].message
+
+
+def test_gross_ratio_no_factor_matches_still_stops(nrel):
+    """kW read as W on data that are also 3 deg off in pitch: the power ratio (about 5e-4) matches no
+    unit factor within tolerance, but no polar correction explains it either: it stops."""
+    from calib.unit_check import GROSS_RATIO, apply_unit_check
+
+    model, p0, _ = nrel
+    meas = pitch_offset_data(nrel)
+    values, sigma = meas.values.copy(), meas.sigma.copy()
+    values[:, 0] /= 1e3
+    sigma[:, 0] /= 1e3
+    both = Measurements(meas.conditions, meas.channels, values, sigma, source="both.csv")
+    with pytest.raises(InputError, match="no calibration of the polars can either") as err:
+        apply_unit_check(model, p0, both, printer=lambda s: None)
+    assert err.value.field == "power" and "thrust" not in str(err.value)     # thrust: a misfit, not a stop
+    report = check_units(model, p0, both)
+    assert report.ratios["power"] < 1 / GROSS_RATIO
