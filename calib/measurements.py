@@ -1,4 +1,4 @@
-"""Measurement tables: CSV reading with units, noise models, synthetic measurements.
+"""Measurement tables: CSV and OpenFAST-output reading with units, noise models, synthetic measurements.
 
 A measurement table holds, per operating point k, the conditions u_k and the measured
 outputs z_k of some model channels, optionally with their 1-σ noise.
@@ -21,6 +21,17 @@ A header may give a unit as ``power [kW]``, ``Power_[kW]`` (OpenFAST style) or
 and converted to SI on load (see :data:`UNITS` and :data:`UNIT_ALIASES`). Without a unit
 SI is assumed. Rows with the same conditions are *repeated records*;
 :func:`noise_from_repeats` estimates the noise from them.
+
+Units may instead stand in a *units row* right under the header, as data loggers and
+OpenFAST write them (``(m/s)``, ``[kW]``, ``kN-m``, ``(-)``): a row with no number and at
+least one unit (a bracketed cell, or a unit of its column's quantity) is one. A column's
+unit either in brackets in the header or in the units row: both is refused.
+
+OpenFAST text output (``.out``: title lines, a channel-name row starting with ``Time``, a
+units row, the time rows; tabs or blanks) is recognised from its content and read with the
+OpenFAST channel names mapped to calib's, and its time series refused, averaged into one
+operating point or read row by row (``time_series``; :mod:`calib.openfast_out`). The binary
+``.outb`` is refused.
 
 Files as spreadsheets and loggers export them are accepted, and what was done is said in
 :attr:`Measurements.notes`:
@@ -55,6 +66,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from calib.errors import InputError
+from calib.openfast_out import CHANNELS as OPENFAST_CHANNELS
+from calib.openfast_out import (MAX_TITLE_LINES, TIME_SERIES_MODES, ChannelMap, average, channel_row,
+                                map_channels, missing_hint, refuse_binary, time_rows)
 from calib.types import CONDITION_FIELDS, OperatingConditions
 
 REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
@@ -214,8 +228,11 @@ class Measurements:
         SHA-256 of the file (empty for in-memory data).
     metadata : dict
         Free-form; :func:`read_measurements` stores ``units`` (column -> unit as declared in
-        the header, in :data:`UNITS` spelling, ``None`` where the header gave none),
-        ``delimiter``, ``decimal_comma`` and ``lines`` (file line of each point).
+        the header or the units row, in :data:`UNITS` spelling, ``None`` where none was given),
+        ``delimiter``, ``decimal_comma``, ``units_row`` (its line, or ``None``), ``format``
+        (``"csv"`` or ``"openfast"``), ``lines`` (file line of each point; of the first averaged
+        row for an averaged time series) and, for OpenFAST output, ``openfast_channels`` (calib
+        name -> OpenFAST name) and, when averaged, ``time_window`` [s] and ``time_rows``.
     notes : tuple of str
         What the reader did that a user should know (delimiter detected, columns
         ignored, rows dropped ...), one sentence each.
@@ -355,7 +372,12 @@ def _decode(raw: bytes, src: str) -> tuple[str, list[str]]:
 
 
 def _split(text: str, delimiter: str, src: str | None = None, line: int | None = None) -> list[str]:
-    """The cells of one line; a line the csv module refuses (a cell over its size limit) is an InputError."""
+    """The cells of one line; a line the csv module refuses (a cell over its size limit) is an InputError.
+
+    ``delimiter`` ``" "`` splits at runs of blanks (OpenFAST text output without tabs).
+    """
+    if delimiter == " ":
+        return text.split()
     try:
         return next(csv.reader([text], delimiter=delimiter))
     except csv.Error as exc:
@@ -417,16 +439,59 @@ def _split_unit(text: str) -> tuple[str, str | None]:
     return text, None
 
 
-def _declared_unit(column: str, unit: str | None, src: str, line: int) -> str | None:
-    """:data:`UNITS` spelling of a known column's header unit (``None`` when none was given)."""
+def _declared_unit(column: str, unit: str | None, src: str, line: int | None, where: str = "") -> str | None:
+    """:data:`UNITS` spelling of a known column's unit (``None`` when none was given).
+
+    ``where`` names the cell in the message (`` in column 3 'RotPwr' of the units row``).
+    """
     quantity = quantity_of(column)
     if quantity is None or unit is None:
         return None
     canon = canonical_unit(quantity, unit)
     if canon is None:
-        raise InputError(f"unknown unit [{unit}] for {quantity}; accepted units: "
+        raise InputError(f"unknown unit [{unit}] for {quantity}{where}; accepted units: "
                          f"{', '.join(UNITS[quantity])}", src, line, field=column)
     return canon
+
+
+def _unit_cell(cell: str) -> tuple[str, bool]:
+    """(unit, bracketed) of a units-row cell ``(m/s)``, ``[kW]`` or ``m/s`` (``''`` for ``()``)."""
+    c = cell.strip()
+    if len(c) >= 2 and (c[0], c[-1]) in (("(", ")"), ("[", "]")):
+        return c[1:-1].strip(), True
+    return c, False
+
+
+def _is_number(cell: str) -> bool:
+    """True for a cell that reads as a number, with a decimal point or a decimal comma."""
+    if _DECIMAL_COMMA.match(cell):
+        return True
+    try:
+        float(cell)
+        return True
+    except ValueError:
+        return False
+
+
+def _is_units_row(cells: Sequence[str], names: Sequence[str]) -> bool:
+    """True if ``cells``, the row right under the header, is a units row.
+
+    A units row holds no number (but ``1``, a unit of coefficients), and at least one unit: a
+    bracketed cell (``(s)``, ``[kW]``, ``(-)``) or, under a known column, a unit of that column's
+    quantity (``kW`` under ``power``). A row of descriptions (``Wind speed at hub``) is not one.
+    """
+    evidence = False
+    for cell, name in zip(cells, names):
+        c = cell.strip()
+        if not c or c.lower() in MISSING_CELLS:
+            continue
+        if c != "1" and _is_number(c):
+            return False
+        unit, bracketed = _unit_cell(c)
+        quantity = quantity_of(name)
+        known = quantity is not None and c != "1" and canonical_unit(quantity, unit) is not None
+        evidence = evidence or bracketed or known
+    return evidence
 
 
 def _to_float(cell: str, decimal_comma: bool) -> float:
@@ -448,37 +513,45 @@ def _short_list(items: Sequence, n: int = 8) -> str:
     return ", ".join(items[:n]) + (f" ... ({len(items)} in all)" if len(items) > n else "")
 
 
-def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *,
-                      drop_incomplete_rows: bool = False, allow_no_channels: bool = False) -> Measurements:
-    """Read a measurement table from CSV (see the module docstring for the layout).
+@dataclass
+class _Table:
+    """A table file split into its parts (see :func:`_read_table`).
 
-    Parameters
+    Attributes
     ----------
-    path : str or Path
-        CSV file (UTF-8 with or without byte-order mark; comma, semicolon or tab).
-    channels : sequence of str, optional
-        Channels to keep (default: every known channel column present).
-    drop_incomplete_rows : bool
-        Drop rows with a missing value (empty cell, ``nan``, ``NA`` ...) in a needed column
-        (the conditions, the kept channels and their σ) and report the count in
-        :attr:`Measurements.notes`. Default: refuse such a row, naming its line and column.
-    allow_no_channels : bool
-        Accept a table of conditions only (e.g. for predictions); default: refuse it.
-
-    Returns
-    -------
-    Measurements
-        Values in SI units; ``sigma`` set when every kept channel has a ``_sigma`` column;
-        ``notes`` say what was detected, ignored or dropped.
-
-    Raises
-    ------
-    InputError
-        File not found, binary or not UTF-8/UTF-16 text; empty file; missing required
-        column; unknown unit; missing value (unless dropped), non-numeric or non-finite cell
-        (line and column named); σ <= 0; requested channel absent.
+    src : str
+        The file.
+    header_line : int
+        Line of the header (channel-name) row.
+    delimiter : str
+        ``,``, ``;``, tab, or ``" "`` (runs of blanks, OpenFAST output without tabs).
+    raw_names : list of str
+        The header cells as written (``<column N>`` for an empty one).
+    names : list of str
+        The names the loader compares: normalized, OpenFAST channels as calib names.
+    header_units : list of (str or None)
+        The unit in brackets of each header cell.
+    lines : list of (int, str)
+        The data lines.
+    units_row : (int, list of str) or None
+        Line and cells of a units row under the header.
+    openfast : ChannelMap or None
+        The channel mapping of an OpenFAST text output.
     """
-    path = Path(path)
+
+    src: str
+    header_line: int
+    delimiter: str
+    raw_names: list
+    names: list
+    header_units: list
+    lines: list
+    units_row: tuple | None = None
+    openfast: ChannelMap | None = None
+
+
+def _read_text(path: Path) -> tuple[str, list[str]]:
+    """Text of a table file and a note on its encoding; refuses missing, unreadable and binary files."""
     src = str(path)
     try:
         raw = path.read_bytes()
@@ -486,13 +559,28 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         raise InputError("file not found", src) from None
     except OSError as exc:  # e.g. a name longer than the file system allows
         raise InputError(f"cannot read the file ({exc.strerror or exc})", src) from None
-    text, notes = _decode(raw, src)
+    refuse_binary(path)
+    return _decode(raw, src)
+
+
+def _read_table(text: str, path: Path, notes: list[str]) -> _Table:
+    """Split a table's text into header, units row and data lines (a CSV or an OpenFAST text output)."""
+    src = str(path)
     # lines end at \n, \r\n or \r only: str.splitlines also splits at form feeds, \x85 and U+2028,
     # which editors do not, and every later line number would be off
     lines = [(i + 1, ln) for i, ln in enumerate(_LINE_BREAK.split(text))
              if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise InputError("empty file: expected a header line and at least one data row", src)
+    k = channel_row(lines, path)
+    if k is None and path.suffix.lower() == ".out":
+        raise InputError(f"not OpenFAST text output: no channel-name row starting with 'Time' over a units row "
+                         f"starting with '(s)' in the first {MAX_TITLE_LINES} lines", src, field="Time")
+    return _csv_table(lines, src, notes) if k is None else _openfast_table(lines, k, src, notes)
+
+
+def _csv_table(lines: list[tuple[int, str]], src: str, notes: list[str]) -> _Table:
+    """A CSV table: the header on the first line, maybe a units row, then the data lines."""
     header_line, header = lines[0]
     delimiter = _detect_delimiter(header, [t for _, t in lines[1:6]])
     if delimiter is None:
@@ -502,68 +590,132 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     raw_names = [h.strip() for h in _split(header, delimiter, src, header_line)]
     parsed = [_parse_header(h, i + 1) for i, h in enumerate(raw_names)]
     raw_names = [h or n for h, (n, _) in zip(raw_names, parsed)]
-    names = [n for n, _ in parsed]
-    # sets and counts, not list scans: a table exported transposed has tens of thousands of columns
-    counts = Counter(names)
-    name_set = set(counts)
+    table = _Table(src, header_line, delimiter, raw_names, [n for n, _ in parsed], [u for _, u in parsed], lines[1:])
+    if len(lines) > 1:
+        line_no, text = lines[1]
+        cells = _split(text, delimiter, src, line_no)
+        if _is_units_row(cells, table.names):
+            table.units_row, table.lines = (line_no, [c.strip() for c in cells]), lines[2:]
+            notes.append(f"units row on line {line_no}")
+    return table
+
+
+def _openfast_table(lines: list[tuple[int, str]], k: int, src: str, notes: list[str]) -> _Table:
+    """An OpenFAST text output: title lines, the channel names on ``lines[k]``, the units row, the time rows."""
+    header_line, header = lines[k]
+    units_line, units = lines[k + 1]
+    delimiter = "\t" if "\t" in header else " "
+    raw_names = [h.strip() for h in _split(header, delimiter, src, header_line)]
+    channels = map_channels(raw_names)
+    unit_cells = [c.strip() for c in _split(units, delimiter, src, units_line)]
+    separated = "tabs" if delimiter == "\t" else "blanks"
+    notes.append(f"OpenFAST text output: {k} title line(s), channel names on line {header_line}, units on line "
+                 f"{units_line}, columns separated by {separated}")
+    notes.extend(channels.notes)
+    return _Table(src, header_line, delimiter, raw_names, channels.names, [None] * len(raw_names), lines[k + 2:],
+                  (units_line, unit_cells), channels)
+
+
+def _check_columns(table: _Table) -> None:
+    """Refuse duplicate columns and a missing required condition, naming the header line."""
+    counts = Counter(table.names)  # a table exported transposed has tens of thousands of columns
     dupes = sorted(n for n, k in counts.items() if k > 1)
     if dupes:
-        same = [r for r, n in zip(raw_names, names) if n == dupes[0]]
+        same = [r for r, n in zip(table.raw_names, table.names) if n == dupes[0]]
         raise InputError(f"duplicate column(s) {_short_list(dupes)} (headers {_short_list(list(map(repr, same)))})",
-                         src, header_line, field=dupes[0])
-    unknown_cols = [n for n in names if quantity_of(n) is None]
+                         table.src, table.header_line, field=dupes[0])
     for req in REQUIRED_CONDITIONS:
-        if req not in name_set:
-            raise InputError(f"missing required column '{req}'{_did_you_mean(req, unknown_cols)}; columns "
-                             f"present: {_short_list(raw_names, 30)}", src, header_line, field=req)
-    if len(lines) < 2:
-        raise InputError("no data rows after the header", src, header_line)
-    declared = {n: _declared_unit(n, u, src, header_line) for n, u in parsed if quantity_of(n) is not None}
+        if req not in counts:
+            raise InputError(f"missing required column '{req}'{_absent_hint(table, req)}; columns present: "
+                             f"{_short_list(table.raw_names, 30)}", table.src, table.header_line, field=req)
 
-    def cells_error(n_cells: int, line_no: int) -> InputError:
-        hint = ("; numbers with a decimal comma need columns separated by ';' or tab"
-                if delimiter == "," and n_cells > len(names) else "")
-        return InputError(f"row has {n_cells} cells, header has {len(names)}{hint}", src, line_no)
 
+def _absent_hint(table: _Table, name: str) -> str:
+    """What to look for when a column ``name`` is absent: a close name, or the OpenFAST channel read for it."""
+    if table.openfast is not None:
+        return missing_hint(name, table.raw_names)
+    return _did_you_mean(name, [n for n in table.names if quantity_of(n) is None])
+
+
+def _declared_units(table: _Table) -> dict[str, str | None]:
+    """:data:`UNITS` spelling of each known column's unit, from its header or from the units row.
+
+    Raises
+    ------
+    InputError
+        A unit in both the header and the units row, or an unknown unit (line and column named).
+    """
+    row_line, row = table.units_row or (None, [])
+    declared = {}
+    for i, (name, head) in enumerate(zip(table.names, table.header_units)):
+        if quantity_of(name) is None:
+            continue
+        cell = row[i] if i < len(row) else ""
+        where = f" in column {i + 1} '{table.raw_names[i]}'"
+        if cell and head is not None:
+            raise InputError(f"unit given twice{where}: [{head}] in the header (line {table.header_line}) and "
+                             f"{cell!r} in the units row; give a column's unit either in brackets in the header "
+                             "or in the units row", table.src, row_line, field=name)
+        if cell:
+            declared[name] = _declared_unit(name, _unit_cell(cell)[0] or None, table.src, row_line,
+                                            where + " of the units row")
+        elif table.openfast is not None:   # OpenFAST writes every unit; a gap is a damaged file, not SI
+            raise InputError(f"no unit{where} of the units row; OpenFAST writes one for every channel",
+                             table.src, row_line, field=name)
+        else:
+            declared[name] = _declared_unit(name, head, table.src, table.header_line, where)
+    return declared
+
+
+def _cells_error(table: _Table, n_cells: int, line_no: int) -> InputError:
+    hint = ("; numbers with a decimal comma need columns separated by ';' or tab"
+            if table.delimiter == "," and n_cells > len(table.names) else "")
+    return InputError(f"row has {n_cells} cells, header has {len(table.names)}{hint}", table.src, line_no)
+
+
+def _split_rows(table: _Table) -> list[tuple[int, list[str]]]:
+    """The data lines as (line number, stripped cells); a row longer than the header is refused."""
     rows = []
-    for line_no, t in lines[1:]:
-        cells = _split(t, delimiter, src, line_no)
-        if len(cells) > len(names):
-            raise cells_error(len(cells), line_no)
+    for line_no, t in table.lines:
+        cells = _split(t, table.delimiter, table.src, line_no)
+        if len(cells) > len(table.names):
+            raise _cells_error(table, len(cells), line_no)
         rows.append((line_no, [c.strip() for c in cells]))
+    return rows
 
-    present = [n for n in names if is_channel_name(n)]
-    present_set = set(present)
+
+def _kept_channels(table: _Table, channels: Sequence[str] | None, allow_no_channels: bool) -> tuple[list, list]:
+    """The channels to keep and their ``_sigma`` columns (empty when the table gives no σ)."""
+    src, line = table.src, table.header_line
+    present = [n for n in table.names if is_channel_name(n)]
+    present_set, name_set = set(present), set(table.names)
     channels = present if channels is None else list(channels)
     for c in channels:
         if c not in present_set:
-            raise InputError(f"channel '{c}' is not in the file{_did_you_mean(c, unknown_cols)}; channel "
-                             f"columns present: {_short_list(present, 30) or '(none)'}", src, header_line, field=c)
+            raise InputError(f"channel '{c}' is not in the file{_absent_hint(table, c)}; channel columns present: "
+                             f"{_short_list(present, 30) or '(none)'}", src, line, field=c)
     if not channels and not allow_no_channels:
-        guesses = [f"'{r}'{_did_you_mean(n, list(_FIXED_QUANTITY))}" for r, n in zip(raw_names, names)
+        if table.openfast is not None:
+            raise InputError("no calib channel among the OpenFAST channels; read are: " + "; ".join(
+                f"{c} from {', '.join(names)}" for c, names in OPENFAST_CHANNELS.items()
+                if c not in REQUIRED_CONDITIONS), src, line)
+        guesses = [f"'{r}'{_did_you_mean(n, list(_FIXED_QUANTITY))}" for r, n in zip(table.raw_names, table.names)
                    if quantity_of(n) is None][:30]
         raise InputError("no channel columns (e.g. power, thrust, cn@0.30; a unit goes in brackets: "
-                         f"'power [kW]'); unrecognised columns: {_short_list(guesses, 30) or '(none)'}",
-                         src, header_line)
+                         f"'power [kW]'); unrecognised columns: {_short_list(guesses, 30) or '(none)'}", src, line)
     sig_cols = [f"{c}_sigma" for c in channels]
-    has_sigma = any(s in name_set for s in sig_cols)
-    if has_sigma:
-        missing = [s for s in sig_cols if s not in name_set]
-        if missing:
-            given = [s for s in sig_cols if s in name_set]
-            raise InputError(f"sigma given for some channels ({', '.join(given)}) but not for "
-                             f"{', '.join(missing)}; give a _sigma column for every kept channel or none",
-                             src, header_line, field=missing[0])
-    needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in names] + channels
-    needed += sig_cols if has_sigma else []
-    index_of = {n: i for i, n in enumerate(names)}
-    col_of = {n: index_of[n] for n in needed}
+    if not any(s in name_set for s in sig_cols):
+        return channels, []
+    missing = [s for s in sig_cols if s not in name_set]
+    if missing:
+        given = [s for s in sig_cols if s in name_set]
+        raise InputError(f"sigma given for some channels ({', '.join(given)}) but not for {', '.join(missing)}; "
+                         "give a _sigma column for every kept channel or none", src, line, field=missing[0])
+    return channels, sig_cols
 
-    decimal_comma = delimiter in (";", "\t") and any(
-        _DECIMAL_COMMA.match(cells[i]) for _, cells in rows for i in col_of.values() if i < len(cells))
-    if decimal_comma:
-        notes.append("decimal comma: ',' read as the decimal separator")
 
+def _ignored_column_notes(table: _Table, rows: list, decimal_comma: bool) -> list[str]:
+    """Notes naming the columns that are not known names: non-numeric ones and numeric ones."""
     def is_number(cell: str) -> bool:
         try:
             _to_float(cell, decimal_comma)
@@ -572,69 +724,79 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
             return False
 
     ignored_text, ignored_numeric = [], []
-    for i, n in enumerate(names):
+    for i, n in enumerate(table.names):
         if quantity_of(n) is not None:
             continue
         column = [cells[i] for _, cells in rows if i < len(cells) and cells[i].lower() not in MISSING_CELLS]
         (ignored_numeric if column and all(map(is_number, column)) else ignored_text).append(i)
+    raw, names, notes = table.raw_names, table.names, []
     if ignored_text:
-        notes.append(f"ignored non-numeric column(s): {_short_list([raw_names[i] for i in ignored_text], 30)}")
+        notes.append(f"ignored non-numeric column(s): {_short_list([raw[i] for i in ignored_text], 30)}")
     if ignored_numeric:
-        named = _short_list([raw_names[i] + _did_you_mean(names[i], list(_FIXED_QUANTITY))
-                             for i in ignored_numeric[:30]] + [raw_names[i] for i in ignored_numeric[30:]], 30)
+        named = _short_list([raw[i] + _did_you_mean(names[i], list(_FIXED_QUANTITY)) for i in ignored_numeric[:30]]
+                            + [raw[i] for i in ignored_numeric[30:]], 30)
         notes.append(f"ignored unrecognised numeric column(s): {named}; known names: {_known_names_text()}")
-    no_unit = [n for n in needed if declared.get(n) is None]
-    if no_unit:
-        notes.append("no unit in the header, SI assumed: "
-                     + ", ".join(f"{n} [{si_unit(quantity_of(n))}]" for n in no_unit))
+    return notes
 
+
+def _cell_value(table: _Table, cells: list[str], i: int, name: str, line_no: int, decimal_comma: bool,
+                drop_incomplete_rows: bool) -> float | None:
+    """The number in cell ``i`` of a row (``None``: missing, the row is to be dropped); refuses a bad cell."""
+    src, where = table.src, f"column {i + 1} '{table.raw_names[i]}'"
     drop_hint = ("; to drop incomplete rows instead, pass drop_incomplete_rows=True "
                  "(workflow: [measurements] drop_incomplete_rows = true)")
+    if i >= len(cells) or cells[i].lower() in MISSING_CELLS:
+        if drop_incomplete_rows:
+            return None
+        if i >= len(cells):
+            e = _cells_error(table, len(cells), line_no)
+            raise InputError(e.message + f" (no value for {where})" + drop_hint, src, line_no, field=name)
+        what = "empty cell" if not cells[i] else repr(cells[i])
+        raise InputError(f"missing value ({what}) in {where}: expected a finite number{drop_hint}",
+                         src, line_no, field=name)
+    cell = cells[i]
+    try:
+        x = _to_float(cell, decimal_comma)
+    except ValueError:
+        if decimal_comma and "." in cell and _is_number(cell.replace(".", "")):
+            raise InputError(f"ambiguous number {cell!r} in {where}: this file uses a decimal comma, so a point "
+                             "could be a thousands separator; export the table without thousands separators",
+                             src, line_no, field=name) from None
+        raise InputError(f"not a number: {cell!r} in {where}", src, line_no, field=name) from None
+    if not np.isfinite(x):
+        raise InputError(f"value is {cell!r} in {where}; every cell must be a finite number", src, line_no, field=name)
+    return x
+
+
+def _parse_values(table: _Table, rows: list, needed: list[str], col_of: dict, decimal_comma: bool,
+                  drop_incomplete_rows: bool, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The needed cells as numbers, shape (n_kept, n_needed), and the indices of the rows kept.
+
+    A row with a missing value is refused, or dropped (``drop_incomplete_rows``, noted).
+    """
     data = np.full((len(rows), len(needed)), np.nan)
     incomplete = []
     for r, (line_no, cells) in enumerate(rows):
-        missing_here = False
-        for j, n in enumerate(needed):
-            i = col_of[n]
-            where = f"column {i + 1} '{raw_names[i]}'"
-            if i >= len(cells):
-                if not drop_incomplete_rows:
-                    e = cells_error(len(cells), line_no)
-                    raise InputError(e.message + f" (no value for {where})" + drop_hint, src, line_no, field=n)
-                missing_here = True
-                continue
-            cell = cells[i]
-            if cell.lower() in MISSING_CELLS:
-                if not drop_incomplete_rows:
-                    what = "empty cell" if not cell else repr(cell)
-                    raise InputError(f"missing value ({what}) in {where}: expected a finite number{drop_hint}",
-                                     src, line_no, field=n)
-                missing_here = True
-                continue
-            try:
-                x = _to_float(cell, decimal_comma)
-            except ValueError:
-                if decimal_comma and "." in cell and is_number(cell.replace(".", "")):
-                    raise InputError(f"ambiguous number {cell!r} in {where}: this file uses a decimal comma, so "
-                                     "a point could be a thousands separator; export the table without "
-                                     "thousands separators", src, line_no, field=n) from None
-                raise InputError(f"not a number: {cell!r} in {where}", src, line_no, field=n) from None
-            if not np.isfinite(x):
-                raise InputError(f"value is {cell!r} in {where}; every cell must be a finite number",
-                                 src, line_no, field=n)
-            data[r, j] = x
-        if missing_here:
+        values = [_cell_value(table, cells, col_of[n], n, line_no, decimal_comma, drop_incomplete_rows)
+                  for n in needed]
+        if any(v is None for v in values):
             incomplete.append(r)
-    line_of = [ln for ln, _ in rows]
+        else:
+            data[r] = values
+    kept = np.arange(len(rows))
     if incomplete:
         if len(incomplete) == len(rows):
             raise InputError(f"every one of the {len(rows)} rows has a missing value in a needed column "
-                             f"({', '.join(needed)})", src, header_line)
+                             f"({', '.join(needed)})", table.src, table.header_line)
         notes.append(f"dropped {len(incomplete)} of {len(rows)} rows with a missing value in a needed column "
-                     f"(lines {_short_list([line_of[r] for r in incomplete])})")
-        keep = np.setdiff1d(np.arange(len(rows)), incomplete)
-        data = data[keep]
-        line_of = [line_of[k] for k in keep]
+                     f"(lines {_short_list([rows[r][0] for r in incomplete])})")
+        kept = np.setdiff1d(kept, incomplete)
+    return data[kept], kept
+
+
+def _to_si(table: _Table, data: np.ndarray, needed: list[str], declared: dict, col_of: dict, rows: list,
+           kept: np.ndarray) -> np.ndarray:
+    """The values converted to SI units; a value that overflows is refused (line and column named)."""
     factors = np.array([UNITS[quantity_of(n)][declared[n]] if declared.get(n) else 1.0 for n in needed])
     with np.errstate(over="ignore"):
         data = data * factors
@@ -642,14 +804,15 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     if bad.size:
         k, j = bad[0]
         i = col_of[needed[j]]
-        raise InputError(f"value {rows[keep[k] if incomplete else k][1][i]!r} in column {i + 1} '{raw_names[i]}' "
-                         f"is too large: not a finite number in {si_unit(quantity_of(needed[j]))}", src, line_of[k],
-                         field=needed[j])
-    col = {n: data[:, j] for j, n in enumerate(needed)}
-    cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
-    values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(rows), 0))
-    sigma = None
-    if has_sigma:
+        line_no, cells = rows[kept[k]]
+        raise InputError(f"value {cells[i]!r} in column {i + 1} '{table.raw_names[i]}' is too large: not a finite "
+                         f"number in {si_unit(quantity_of(needed[j]))}", table.src, line_no, field=needed[j])
+    return data
+
+
+def _check_values(col: dict, sig_cols: list[str], line_of: list[int], src: str) -> None:
+    """Refuse σ <= 0, a wind speed <= 0, a rotor speed < 0 and an air density <= 0 (line named)."""
+    if sig_cols:
         sigma = np.column_stack([col[s] for s in sig_cols])
         bad = np.argwhere(~(sigma > 0))
         if bad.size:
@@ -658,17 +821,121 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     bad = np.flatnonzero(~(col["wind_speed"] > 0))
     if bad.size:
         raise InputError("wind speed must be > 0", src, line_of[bad[0]], field="wind_speed")
-    bad = np.flatnonzero(~(col["rotor_speed"] >= 0))
-    if bad.size:
-        raise InputError(f"rotor speed must be >= 0, got {col['rotor_speed'][bad[0]]:g}", src, line_of[bad[0]],
-                         field="rotor_speed")
-    if "air_density" in col:
-        bad = np.flatnonzero(~(col["air_density"] > 0))
-        if bad.size:
-            raise InputError(f"air density must be > 0, got {col['air_density'][bad[0]]:g}", src, line_of[bad[0]],
-                             field="air_density")
-    metadata = {"units": declared, "delimiter": delimiter, "decimal_comma": decimal_comma,
-                "lines": tuple(line_of)}
+    for name, text in (("rotor_speed", "rotor speed must be >= 0"), ("air_density", "air density must be > 0")):
+        if name in col:
+            ok = col[name] >= 0 if name == "rotor_speed" else col[name] > 0
+            bad = np.flatnonzero(~ok)
+            if bad.size:
+                raise InputError(f"{text}, got {col[name][bad[0]]:g}", src, line_of[bad[0]], field=name)
+
+
+def _check_time_series_options(time_series, average_from, src: str) -> None:
+    """Refuse an unknown ``time_series`` and an ``average_from`` without ``time_series='mean'``."""
+    if time_series not in TIME_SERIES_MODES:
+        raise InputError(f"time_series must be None, 'mean' or 'rows', got {time_series!r}", src, field="time_series")
+    if average_from is None:
+        return
+    if time_series != "mean":
+        raise InputError("average_from [s] applies with time_series='mean' only", src, field="average_from")
+    try:
+        ok = np.isfinite(float(average_from))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(f"average_from must be a finite time [s], got {average_from!r}", src, field="average_from")
+
+
+def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *,
+                      drop_incomplete_rows: bool = False, allow_no_channels: bool = False,
+                      time_series: str | None = None, average_from: float | None = None) -> Measurements:
+    """Read a measurement table from CSV or OpenFAST text output (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV file (UTF-8 with or without byte-order mark; comma, semicolon or tab), or OpenFAST
+        text output (``.out``, recognised from its content; :mod:`calib.openfast_out`).
+    channels : sequence of str, optional
+        Channels to keep (default: every known channel column present).
+    drop_incomplete_rows : bool
+        Drop rows with a missing value (empty cell, ``nan``, ``NA`` ...) in a needed column
+        (the conditions, the kept channels and their σ) and report the count in
+        :attr:`Measurements.notes`. Default: refuse such a row, naming its line and column.
+    allow_no_channels : bool
+        Accept a table of conditions only (e.g. for predictions); default: refuse it.
+    time_series : {None, "mean", "rows"}
+        For OpenFAST output with more than one time row: None refuses it (calib expects one
+        row per operating point), ``"mean"`` averages the rows into one operating point,
+        ``"rows"`` reads every time row as a point. Other tables: noted and ignored.
+    average_from : float, optional
+        With ``time_series="mean"``: the time [s] the average starts at (the end of the
+        start-up transient); default the first row.
+
+    Returns
+    -------
+    Measurements
+        Values in SI units; ``sigma`` set when every kept channel has a ``_sigma`` column;
+        ``notes`` say what was detected, ignored, dropped or averaged.
+
+    Raises
+    ------
+    InputError
+        File not found, binary (an OpenFAST ``.outb`` among them) or not UTF-8/UTF-16 text;
+        empty file; missing required column; unknown unit, or a unit both in the header and
+        in the units row; missing value (unless dropped), non-numeric or non-finite cell (line
+        and column named); σ <= 0; requested channel absent; an OpenFAST time series without
+        ``time_series``.
+    """
+    path = Path(path)
+    src = str(path)
+    _check_time_series_options(time_series, average_from, src)
+    text, notes = _read_text(path)
+    table = _read_table(text, path, notes)
+    _check_columns(table)
+    if not table.lines:
+        raise InputError("no data rows after the header", src, table.header_line)
+    declared = _declared_units(table)
+    rows = _split_rows(table)
+    channels, sig_cols = _kept_channels(table, channels, allow_no_channels)
+    needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in set(table.names)] + channels + sig_cols
+    index_of = {n: i for i, n in enumerate(table.names)}
+    col_of = {n: index_of[n] for n in needed}
+    times = {}
+    if table.openfast is not None:
+        rows, times, more = time_rows(rows, table.raw_names, time_series, average_from, src)
+        notes += more
+    elif time_series is not None:
+        notes.append(f"time_series={time_series!r} ignored: the table is not OpenFAST time-series output")
+    decimal_comma = table.delimiter in (";", "\t") and any(
+        _DECIMAL_COMMA.match(cells[i]) for _, cells in rows for i in col_of.values() if i < len(cells))
+    if decimal_comma:
+        notes.append("decimal comma: ',' read as the decimal separator")
+    if table.openfast is None:
+        notes += _ignored_column_notes(table, rows, decimal_comma)
+    no_unit = [n for n in needed if declared.get(n) is None]
+    if no_unit:
+        notes.append(f"no unit in the {'units row' if table.units_row else 'header'}, SI assumed: "
+                     + ", ".join(f"{n} [{si_unit(quantity_of(n))}]" for n in no_unit))
+    data, kept = _parse_values(table, rows, needed, col_of, decimal_comma, drop_incomplete_rows, notes)
+    data = _to_si(table, data, needed, declared, col_of, rows, kept)
+    line_of = [rows[k][0] for k in kept]
+    col = {n: data[:, j] for j, n in enumerate(needed)}
+    _check_values(col, sig_cols, line_of, src)
+    metadata = {"units": declared, "delimiter": table.delimiter, "decimal_comma": decimal_comma,
+                "units_row": table.units_row[0] if table.units_row else None,
+                "format": "openfast" if table.openfast is not None else "csv"}
+    if table.openfast is not None:
+        metadata["openfast_channels"] = dict(table.openfast.read)
+        if time_series == "mean" and len(line_of) > 1:
+            t = np.array([times[ln] for ln in line_of])
+            col, note = average(col, t, {n: si_unit(quantity_of(n)) for n in col})
+            notes.append(note)
+            metadata["time_window"], metadata["time_rows"] = (float(t[0]), float(t[-1])), int(t.size)
+            line_of = line_of[:1]
+    metadata["lines"] = tuple(line_of)
+    cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
+    values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(line_of), 0))
+    sigma = np.column_stack([col[s] for s in sig_cols]) if sig_cols else None
     return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256_of(path),
                         metadata=metadata, notes=tuple(notes))
 
