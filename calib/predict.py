@@ -61,7 +61,8 @@ def _span(values, fmt: str) -> str:
     return fmt.format(lo) if lo == hi else f"{fmt.format(lo)}-{fmt.format(hi)}"
 
 
-def setup_lines(spec: dict | None, recorded: dict | None, conditions: dict, data: str) -> list[str]:
+def setup_lines(spec: dict | None, recorded: dict | None, conditions: dict, data: str,
+                rotor_name: str | None = None) -> list[str]:
     """The recorded set-up a prediction runs with, in two lines.
 
     Parameters
@@ -75,6 +76,8 @@ def setup_lines(spec: dict | None, recorded: dict | None, conditions: dict, data
         The prediction's conditions (``OperatingConditions.as_dict()``).
     data : str
         The prediction's conditions file (named).
+    rotor_name : str, optional
+        The rebuilt model's rotor name (for a result that recorded no rotor data).
 
     Returns
     -------
@@ -90,7 +93,7 @@ def setup_lines(spec: dict | None, recorded: dict | None, conditions: dict, data
     if spec.get("kind") == "bem":
         data_ = spec.get("rotor_data") or {}
         table = spec.get("rotor") or {}
-        name = data_.get("name") or table.get("name") or "?"
+        name = data_.get("name") or table.get("name") or rotor_name or "?"
         origin = ("the result's recorded rotor data" if data_ else
                   "the embedded rotor of this calib version" if set(table) == {"name"} else
                   "the rotor files (the result records no rotor data)")
@@ -141,7 +144,9 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     result = load_result(result_dir)
     meas = read_measurements(data, None, allow_no_channels=True)
     model = result.rebuild_model()
-    for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data)):
+    rotor = getattr(model, "rotor", None)
+    for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data),
+                            getattr(rotor, "name", None)):
         printer(line)
     pred = result.predict(meas.conditions, model=model, confidence=confidence)
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})

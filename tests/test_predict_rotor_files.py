@@ -9,6 +9,7 @@ naming the file, when one is missing or changed.
 
 import csv
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -99,9 +100,13 @@ def calibrate(root: Path, kind: str) -> dict:
             shutil.copytree(f, project / "rotor" / f.name)
         else:
             shutil.copy(f, project / "rotor" / f.name)
-    wf = project / "wf.toml"
-    wf.write_text(WORKFLOW.format(rotor=table))
-    assert cli_main(["run", str(wf), "--out", str(root / "out"), "-q", "--no-history"]) == 0
+    (project / "wf.toml").write_text(WORKFLOW.format(rotor=table))
+    here = os.getcwd()
+    os.chdir(root)              # relative paths, as typed: the readers' provenance strings are relative too
+    try:
+        assert cli_main(["run", "project/wf.toml", "--out", "out", "-q", "--no-history"]) == 0
+    finally:
+        os.chdir(here)
     stage = root / "out" / "stage1_hub"
     cond = write_conditions(root / "new.csv")
     assert cli_main(["predict", str(stage), "--data", str(cond), "--out", str(root / "pred_before.csv")]) == 0

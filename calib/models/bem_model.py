@@ -228,13 +228,15 @@ class BemModel:
         data = spec.get("rotor_data")
         if data is not None:
             rotor = rotor_from_dict(data, f"{source}.rotor_data")
-            recorded = spec.get("rotor_sha256")
-            if recorded is not None and content_digest(rotor) != recorded:
+            recorded, digest = spec.get("rotor_sha256"), content_digest(rotor)
+            if recorded is not None and digest != recorded:
                 raise InputError(f"the recorded rotor data do not match their recorded digest (SHA-256 "
-                                 f"{str(recorded)[:12]}... recorded, {content_digest(rotor)[:12]}... of the data): "
-                                 "the result was edited or damaged", source, field="rotor_data")
+                                 f"{str(recorded)[:12]}... recorded, {digest[:12]}... of the data): the result "
+                                 "was edited or damaged", source, field="rotor_data")
         else:
-            relocated = False
+            # no rotor data (older results): the embedded rotor by name, or the files, checked by their
+            # own SHA-256 (the rotor's digest cannot be compared: it holds the path strings the files were
+            # read under, which differ with the working directory and the files' place)
             if not rotor_table:
                 raise InputError("the spec records neither rotor data nor a rotor table", source, field="rotor")
             if set(rotor_table) == {"name"}:
@@ -242,19 +244,10 @@ class BemModel:
             else:
                 from calib.rotor.sources import rotor_from_recorded_files
 
-                rsrc, relocated = rotor_from_recorded_files(rotor_table, spec.get("rotor_files"), base_dir, source)
-                rotor = rsrc.rotor
+                rotor = rotor_from_recorded_files(rotor_table, spec.get("rotor_files"), base_dir, source).rotor
             changes = {k: float(spec[k]) for k in ("tilt_deg", "precone_deg") if k in spec}
             if changes:
                 rotor = replace(rotor, **changes)
-            recorded = spec.get("rotor_sha256")
-            # files at their recorded paths whose bytes match must give the rotor the run used (a
-            # relocated file changes the polars' recorded source paths, which the digest includes)
-            if recorded is not None and not relocated and content_digest(rotor) != recorded:
-                raise InputError(f"the rotor rebuilt from the files differs from the one the run used (SHA-256 "
-                                 f"{str(recorded)[:12]}... recorded, {content_digest(rotor)[:12]}... now): the rotor "
-                                 "files changed since the run, or this version reads them differently", source,
-                                 field="rotor")
         grid = CorrectionGrid(**spec["grid"]) if spec.get("grid") else None
         return cls(rotor, grid, spec["channels"], BemSettings(**spec["settings"]), spec["nuisance"],
                    rotor_source=rotor_table, effects=spec.get("effects") or ())

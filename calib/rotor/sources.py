@@ -396,8 +396,7 @@ def _changed(path, recorded: str, now: str, source: str, key: str) -> InputError
                       "now); restore the file the run read, or run the calibration again", source, None, key)
 
 
-def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, source: str
-                              ) -> tuple[RotorSource, bool]:
+def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, source: str) -> RotorSource:
     """Rebuild a recorded rotor from its files, refusing any that is missing or changed.
 
     For results that recorded no rotor data (written by older versions). Each file the
@@ -421,9 +420,7 @@ def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, 
 
     Returns
     -------
-    rotor_source : RotorSource
-    relocated : bool
-        Whether a file named by the table was found elsewhere than at its recorded path.
+    RotorSource
 
     Raises
     ------
@@ -487,4 +484,4 @@ def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, 
                 now = sha256_of(path)
                 if now != rec["sha256"]:
                     raise _changed(path, rec["sha256"], now, source, "rotor")
-    return out, relocated
+    return out
