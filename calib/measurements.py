@@ -667,6 +667,33 @@ def _declared_units(table: _Table) -> dict[str, str | None]:
     return declared
 
 
+def _model_specific_channels(table: _Table, needed: list[str]) -> list[str]:
+    """Requested columns whose names calib does not know (a model's own outputs, e.g. an FMU
+    mapping's ``shaft_power``): read as given; a unit on them is refused, since it cannot be
+    converted.
+
+    Raises
+    ------
+    InputError
+        A unit in the header or the units row of such a column (line and column named).
+    """
+    out = []
+    row_line, row = table.units_row or (None, [])
+    for name in needed:
+        if quantity_of(name) is not None:
+            continue
+        i = table.names.index(name)
+        unit, line = table.header_units[i], table.header_line
+        if unit is None and i < len(row) and row[i]:
+            unit, line = row[i], row_line
+        if unit is not None and unit.strip("()[] ") not in ("", "-"):
+            raise InputError(f"column {i + 1} '{table.raw_names[i]}' is a channel calib knows no quantity of, so "
+                             f"its unit {unit!r} cannot be converted: give its values in the model's unit "
+                             "(the mapping's channel_unit) without a unit", table.src, line, field=name)
+        out.append(name)
+    return out
+
+
 def _cells_error(table: _Table, n_cells: int, line_no: int) -> InputError:
     hint = ("; numbers with a decimal comma need columns separated by ';' or tab"
             if table.delimiter == "," and n_cells > len(table.names) else "")
@@ -689,6 +716,9 @@ def _kept_channels(table: _Table, channels: Sequence[str] | None, allow_no_chann
     src, line = table.src, table.header_line
     present = [n for n in table.names if is_channel_name(n)]
     present_set, name_set = set(present), set(table.names)
+    if channels is not None:   # a model's own output names (an FMU mapping's) are channels when asked for
+        present_set |= {c for c in channels if c in name_set and c not in CONDITION_FIELDS
+                        and not c.endswith("_sigma")}
     channels = present if channels is None else list(channels)
     for c in channels:
         if c not in present_set:
@@ -912,7 +942,11 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         notes.append("decimal comma: ',' read as the decimal separator")
     if table.openfast is None:
         notes += _ignored_column_notes(table, rows, decimal_comma)
-    no_unit = [n for n in needed if declared.get(n) is None]
+    model_specific = _model_specific_channels(table, needed)
+    if model_specific:
+        notes.append("read as given, in the model's unit (no unit conversion for names calib does not know): "
+                     + ", ".join(model_specific))
+    no_unit = [n for n in needed if declared.get(n) is None and n not in model_specific]
     if no_unit:
         notes.append(f"no unit in the {'units row' if table.units_row else 'header'}, SI assumed: "
                      + ", ".join(f"{n} [{si_unit(quantity_of(n))}]" for n in no_unit))

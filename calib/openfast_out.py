@@ -237,7 +237,8 @@ def time_rows(rows: list[tuple[int, list[str]]], raw_names: Sequence[str], time_
             f"an OpenFAST time series ({len(rows)} time rows, t = {first:g} to {last:g} s): calib expects one row "
             "per operating point (steady averages); average each steady run into one row first, or read it with "
             "time_series='mean' (average_from=<end of the start-up transient> [s]) to average this file into one "
-            "operating point, or time_series='rows' to read every time row as a point", src, rows[0][0])
+            "operating point, or time_series='rows' to read every time row as a point (in a workflow: "
+            "[measurements] time_series = \"mean\", average_from = ...)", src, rows[0][0])
     if time_series == "rows":
         return rows, times, [f"time series read row by row (time_series='rows'): {len(rows)} points from "
                              f"t = {first:g} to {last:g} s, successive samples of one run, not independent records"]

@@ -98,7 +98,8 @@ SCHEMA = {
              "n_alpha_nodes": (int, False), "alpha_percentiles": (list, False)},
     "conditions": {"tsr": (list, True), "pitch": (list, True), "rotor_speed": (NUM, True),
                    "air_density": (NUM, False), "yaw": (NUM, False)},
-    "measurements": {"file": (str, True), "drop_incomplete_rows": (bool, False)},
+    "measurements": {"file": (str, True), "drop_incomplete_rows": (bool, False), "time_series": (str, False),
+                     "average_from": (NUM, False)},
     "truth": {"pitch_offset": (NUM, False), "wind_scale": (NUM, False), "alpha_step_deg": (NUM, False),
               "eta_step": (NUM, False), "bumps": (list, True)},
     "truth.bumps": {"block": (str, True), "amplitude": (NUM, True), "alpha_deg": (NUM, True),
@@ -568,6 +569,19 @@ def _absolute_rotor_table(table: dict, base_dir) -> dict:
     return out
 
 
+def measurements_of(cfg: dict, channels) -> "Measurements":
+    """The measurement table of ``[measurements]`` (CSV, or OpenFAST output with ``time_series``)."""
+    table = cfg["measurements"]
+    try:
+        return read_measurements(Path(cfg["_dir"]) / table["file"], channels,
+                                 drop_incomplete_rows=table.get("drop_incomplete_rows", False),
+                                 time_series=table.get("time_series"), average_from=table.get("average_from"))
+    except InputError as exc:
+        if exc.field in ("time_series", "average_from"):     # a setting: name the workflow key
+            raise InputError(exc.message, cfg["_source"], field=f"measurements.{exc.field}") from None
+        raise
+
+
 def run_inputs(cfg: dict) -> dict:
     """What a run's results depend on, for its history manifest: {label: SHA-256 or value}.
 
@@ -661,8 +675,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
     unit_notes = {}
     if "measurements" in cfg:
         file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
-        meas = read_measurements(file, all_channels,
-                                 drop_incomplete_rows=cfg["measurements"].get("drop_incomplete_rows", False))
+        meas = measurements_of(cfg, all_channels)
         if "air_density" not in meas.metadata.get("units", {}):
             meas = dataclasses.replace(meas, conditions=dataclasses.replace(
                 meas.conditions, air_density=np.full(meas.n_points, setup.density)))

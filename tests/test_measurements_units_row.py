@@ -227,3 +227,21 @@ def test_fuzzed_units_rows_and_openfast_output_never_crash(tmp_path, case, mode)
         return
     assert isinstance(m, Measurements) and m.n_points >= 1
     assert np.all(np.isfinite(m.values)) and np.all(m.conditions.wind_speed > 0)
+
+
+def test_workflow_passes_the_time_series_options(tmp_path):
+    """[measurements] time_series / average_from reach the reader; a bad value names the workflow key."""
+    from calib.workflow import measurements_of
+
+    write(tmp_path, openfast_text(), "5MW_Land.out")
+    cfg = {"_dir": str(tmp_path), "_source": "wf.toml",
+           "measurements": {"file": "5MW_Land.out", "time_series": "mean", "average_from": 10.0}}
+    m = measurements_of(cfg, ["power"])
+    assert m.n_points == 1 and m.metadata["time_rows"] == 10
+    cfg["measurements"]["time_series"] = "median"
+    with pytest.raises(InputError, match="time_series must be") as err:
+        measurements_of(cfg, ["power"])
+    assert err.value.source == "wf.toml" and err.value.field == "measurements.time_series"
+    del cfg["measurements"]["time_series"], cfg["measurements"]["average_from"]
+    with pytest.raises(InputError, match=r'\[measurements\] time_series = "mean"'):
+        measurements_of(cfg, ["power"])

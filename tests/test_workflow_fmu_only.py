@@ -1,0 +1,123 @@
+"""A third-party FMU calibrated from a workflow with no [rotor] and no [grid].
+
+The FMU is the PythonFMU test rotor (tests/data/fmu/GenericRotor.py: km/h, rad/s, rad, kW,
+kN, three scalar tuning parameters, no correction field). Its workflow names only [model]
+(FMU + mapping), [measurements], [calibration] and [[stages]]; channels are checked against
+the FMU's mapping, not the native BEM, so an output the BEM does not know is a channel.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.cli import main
+from calib.errors import InputError
+from calib.measurements import synthesize
+from calib.models.fmu_model import FmuModel
+from calib.result import load_result
+from calib.types import OperatingConditions
+from calib.workflow import load_workflow, prepare
+
+DATA = Path(__file__).parent / "data" / "fmu"
+TRUTH = {"cp_gain": 1.08, "ct_gain": 0.94, "pitch_bias": 1.5}
+
+pytestmark = pytest.mark.filterwarnings("ignore:.*InitialUnknowns")
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    """The FMU, a mapping whose power output is called ``shaft_power``, and 18 measured points."""
+    out = tmp_path_factory.mktemp("fmu-only")
+    cmd = [sys.executable, "-m", "pythonfmu", "build", "-f", str(DATA / "GenericRotor.py"), "--handle-state",
+           "--serialize-state", "-d", str(out)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    mapping = (DATA / "generic_rotor_mapping.toml").read_text().replace(
+        'power = { variable = "p_kw", unit = "kW", scale = 1000.0 }',
+        'shaft_power = { variable = "p_kw", unit = "kW", scale = 1000.0, channel_unit = "W" }')
+    assert "shaft_power" in mapping
+    (out / "mapping.toml").write_text(mapping)
+    model = FmuModel(out / "GenericRotor.fmu", out / "mapping.toml", ["shaft_power", "thrust"])
+    wind, rpm, pitch = np.meshgrid([6.0, 8.0, 10.0], [12.0, 16.0], [0.0, 6.0, 12.0], indexing="ij")
+    cond = OperatingConditions(wind.ravel(), rpm.ravel(), pitch.ravel())
+    meas = synthesize(model, np.array(list(TRUTH.values())), cond,
+                      relative_sigma={"shaft_power": 0.01, "thrust": 0.01}, seed=5)
+    model.close()
+    meas.write_csv(out / "field.csv")
+    return out
+
+
+def workflow(folder: Path, channels=("shaft_power", "thrust"), extra: str = "") -> Path:
+    path = folder / "fmu_only.toml"
+    path.write_text(f"""name = "generic FMU, no rotor"
+[model]
+kind = "fmu"
+fmu = "GenericRotor.fmu"
+mapping = "mapping.toml"
+[measurements]
+file = "field.csv"
+[calibration]
+noise = "known"
+[[stages]]
+name = "loads"
+channels = {list(channels)!r}
+retain = "all"
+{extra}""".replace("'", '"'))
+    return path
+
+
+def test_fmu_workflow_needs_no_rotor_and_no_grid(campaign, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(workflow(campaign)), "--out", str(out), "-q"]) == 0
+    res = load_result(out / "stage1_loads")
+    assert res.status == "converged"
+    for v in res.verdicts:
+        assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v
+    report = (out / "report.html").read_text()
+    assert "correction node" not in report and "Every parameter of the model" in report
+    assert "FMU GenericRotor.fmu" in (out / "calib.log").read_text()
+
+
+def test_channels_are_checked_against_the_fmu(campaign):
+    setup = prepare(load_workflow(workflow(campaign)))     # shaft_power: a channel the native BEM does not know
+    assert setup.rotor is None and setup.grid(None) is None
+    with pytest.raises(InputError, match="'power' is not provided by GenericRotor.fmu") as err:
+        prepare(load_workflow(workflow(campaign, channels=("power",))))
+    assert err.value.field == "stages.channels" and "shaft_power" in str(err.value)
+
+
+def test_rotor_and_grid_stay_required_where_they_are_used(campaign, tmp_path):
+    bem = tmp_path / "bem.toml"
+    bem.write_text(workflow(campaign).read_text().replace('kind = "fmu"\nfmu = "GenericRotor.fmu"\n'
+                                                          'mapping = "mapping.toml"\n', ""))
+    with pytest.raises(InputError, match="missing required key 'rotor' .the native BEM's rotor"):
+        load_workflow(bem)
+    variant = tmp_path / "variant.toml"
+    variant.write_text(workflow(campaign).read_text().replace('fmu = "GenericRotor.fmu"\nmapping = "mapping.toml"',
+                                                              'variant = "A"') + '[rotor]\nname = "nrel5mw"\n')
+    with pytest.raises(InputError, match="missing required key 'grid' .a bundled FMU variant"):
+        load_workflow(variant)
+    ignored = prepare(load_workflow(workflow(campaign, extra='[grid]\nalpha_nodes_deg = [0.0, 10.0]\n'
+                                                            'eta_nodes = [0.5, 1.0]\n')))
+    assert any("[grid] is not used" in note for note in ignored.notes)
+
+
+def test_a_model_specific_channel_is_read_as_given_and_a_unit_on_it_refused(tmp_path):
+    from calib.measurements import read_measurements
+
+    path = tmp_path / "t.csv"
+    path.write_text("wind_speed,rotor_speed,pitch,shaft_power,other\n8,12,0,1.5e6,3\n10,12,0,2.5e6,4\n")
+    meas = read_measurements(path, ["shaft_power"])
+    np.testing.assert_allclose(meas.channel("shaft_power"), [1.5e6, 2.5e6], rtol=0)
+    assert any("read as given" in note and "shaft_power" in note for note in meas.notes)
+    with pytest.raises(InputError, match="'power' is not in the file"):      # a known name is still required
+        read_measurements(path, ["power"])
+    path.write_text("wind_speed,rotor_speed,pitch,shaft_power [kW]\n8,12,0,1.5e3\n")
+    with pytest.raises(InputError, match="cannot be converted") as err:
+        read_measurements(path, ["shaft_power"])
+    assert err.value.line == 1 and err.value.field == "shaft_power"
