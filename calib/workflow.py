@@ -29,7 +29,7 @@ from calib.measurements import Measurements, read_measurements, sha256_of, synth
 from calib.models.base import FieldModel
 from calib.types import OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
-from calib.rotor.sources import rotor_from_table
+from calib.rotor.sources import absolute_table, file_provenance, rotor_from_table
 from calib.tomlfile import read_toml
 from calib.setup_statement import statement, statement_html, statement_lines
 from calib.unit_check import apply_unit_check
@@ -352,6 +352,7 @@ class WorkflowSetup:
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
     validation: object = None             # calib.campaign.ValidationSettings of [validation]
     strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
+    rotor_files: dict | None = None       # provenance of the rotor files read (calib.rotor.sources.file_provenance)
     origins: dict = dataclasses.field(default_factory=dict)   # set-up key -> where its value came from
 
     def model(self, grid: CorrectionGrid, channels, executor=None, effects=()):
@@ -359,7 +360,7 @@ class WorkflowSetup:
         ``[diagnosis]`` named), or the FMU of ``[model] kind = "fmu"``."""
         if self.fmu_table is None:
             return BemModel(self.rotor, grid, channels, self.settings, self.nuisance, rotor_source=self.rotor_spec,
-                            effects=effects)
+                            effects=effects, rotor_files=self.rotor_files)
         from calib.models.from_config import model_from_workflow
         return model_from_workflow(self.fmu_table, self.rotor_spec, list(channels), self.source, self.base_dir,
                                    grid=grid, executor=executor)
@@ -512,7 +513,7 @@ def prepare(cfg: dict) -> WorkflowSetup:
     if g is not None and isinstance(g["alpha_nodes_deg"], str) and g["alpha_nodes_deg"] != "auto":
         raise InputError(f"must be an array of angles [deg] or \"auto\", got {g['alpha_nodes_deg']!r}", src,
                          field="grid.alpha_nodes_deg")
-    rotor_spec = _absolute_rotor_table(cfg["rotor"], cfg["_dir"]) if "rotor" in cfg else None
+    rotor_spec = absolute_table(cfg["rotor"], cfg["_dir"]) if "rotor" in cfg else None
     setup = WorkflowSetup(rotor, rotor_spec, settings, nuisance, density,
                           channels, calib_cfg, cal, force, g, src, notes, fmu_table, cfg.get("executor"),
                           cfg["_dir"], yaw)
@@ -536,6 +537,8 @@ def prepare(cfg: dict) -> WorkflowSetup:
         setup.validation = ValidationSettings.from_table(cfg["validation"], src)
     setup.strict_units = strict_units
     setup.origins = origins
+    if rsrc is not None and rsrc.files:
+        setup.rotor_files = file_provenance(rsrc.files, cfg["_dir"])
     return setup
 
 
@@ -556,17 +559,6 @@ def _check_channels(fmu_table: dict | None, rotor, settings: BemSettings, channe
         if exc.field not in ("channels", "outputs"):     # not about a channel: the error as the model gave it
             raise
         raise InputError(exc.message, src, field="stages.channels") from None
-
-
-def _absolute_rotor_table(table: dict, base_dir) -> dict:
-    """The ``[rotor]`` table with file paths made absolute (results rebuild the rotor from it)."""
-    out = dict(table)
-    for key in ("openfast", "aerodyn", "aerodyn_blade", "windio"):
-        if isinstance(out.get(key), str):
-            out[key] = str((Path(base_dir) / out[key]).resolve())
-    if isinstance(out.get("airfoils"), list):
-        out["airfoils"] = [str((Path(base_dir) / a).resolve()) if isinstance(a, str) else a for a in out["airfoils"]]
-    return out
 
 
 def measurements_of(cfg: dict, channels) -> "Measurements":

@@ -23,7 +23,7 @@ from calib.models.registry import build_model, check_fmu_files
 from calib.result import load_result
 from calib.rotor.library import DATA_DIR, ROTORS, load_rotor
 from calib.rotor.serialize import rotor_digest, rotor_from_dict, rotor_to_dict
-from calib.rotor.sources import rotor_from_table
+from calib.rotor.sources import file_provenance, rotor_from_table
 from calib.types import OperatingConditions
 
 DATA = Path(__file__).parent / "data"
@@ -295,7 +295,8 @@ def test_changed_airfoil_behind_an_openfast_deck_is_named(tmp_path, capsys):
     table = {"openfast": str(project / "rotor/5MW_Land_DLL_WTurb/5MW_Land_DLL_WTurb.fst")}
     rsrc = rotor_from_table(table, "wf.toml", project)
     from calib.models.bem_model import BemModel
-    spec = BemModel(rsrc.rotor, None, ("power",), nuisance=(), rotor_source=table).spec()
+    spec = BemModel(rsrc.rotor, None, ("power",), nuisance=(), rotor_source=table,
+                    rotor_files=file_provenance(rsrc.files, project)).spec()
     assert spec["rotor_files"]["all_files_read"] and len(spec["rotor_files"]["files"]) == len(rsrc.files)
     del spec["rotor_data"]
     cond = OperatingConditions([8.0], [10.0], [0.0])

@@ -54,6 +54,10 @@ class BemModel:
         Further effects of :mod:`calib.effects`: instances (``make_effect("tip_loss")``),
         registry names, or ``{"name": ..., "options": {...}}`` tables. Their parameters follow
         the nuisance parameters in ``p``, in this order.
+    rotor_files : dict, optional
+        Provenance of the rotor files as read (:func:`calib.rotor.sources.file_provenance`:
+        every file with its SHA-256 and path relative to the workflow); without it
+        :meth:`spec` hashes the files ``rotor_source`` names when called.
 
     Notes
     -----
@@ -72,8 +76,9 @@ class BemModel:
     def __init__(self, rotor: Rotor, grid: CorrectionGrid | None = None,
                  channels: Sequence[str] = ("power", "thrust"), settings: BemSettings | None = None,
                  nuisance: Sequence[str] = ("pitch_offset", "wind_scale"), rotor_source: dict | None = None,
-                 effects: Sequence = ()):
+                 effects: Sequence = (), rotor_files: dict | None = None):
         self.rotor = rotor
+        self.rotor_files = rotor_files
         if rotor_source is None:
             from calib.rotor.library import ROTORS
 
@@ -192,7 +197,7 @@ class BemModel:
                 "channels": [c.name for c in self.channels], "nuisance": list(self.nuisance),
                 "effects": [e.spec() for e in self.effects],
                 "rotor_data": rotor_to_dict(self.rotor), "rotor_sha256": rotor_digest(self.rotor)}
-        files = recorded_rotor_files(self.rotor_source)
+        files = recorded_rotor_files(self.rotor_source, self.rotor_files)
         if files is not None:
             spec["rotor_files"] = files
         return spec

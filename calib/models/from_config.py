@@ -140,8 +140,9 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
     build = None
     if "variant" in cfg:
         from calib.fmu.build import mapping_path
+        from calib.rotor.sources import absolute_table
 
-        build = {"variant": cfg["variant"].upper(), "rotor": _absolute_rotor(rotor_table, base_dir),
+        build = {"variant": cfg["variant"].upper(), "rotor": absolute_table(rotor_table or {}, base_dir),
                  "grid": grid.to_dict() if grid is not None else None}
         fmu = build_variant(build, source, base_dir)
         mapping = _path(cfg["mapping"], base_dir) if "mapping" in cfg else mapping_path(build["variant"])
@@ -162,16 +163,6 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
                     switches=cfg.get("switches"), settings=cfg.get("settings"), steady=cfg.get("steady"),
                     jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", 60.0)),
                     isolate=cfg.get("isolate", True), build=build)
-
-
-def _absolute_rotor(table: dict, base_dir) -> dict:
-    out = dict(table or {})
-    for key in ("openfast", "aerodyn", "aerodyn_blade", "windio"):
-        if isinstance(out.get(key), str):
-            out[key] = str(_path(out[key], base_dir).resolve())
-    if isinstance(out.get("airfoils"), list):
-        out["airfoils"] = [str(_path(a, base_dir).resolve()) if isinstance(a, str) else a for a in out["airfoils"]]
-    return out
 
 
 def executor_from_table(table: dict | None, source: str, progress=None):

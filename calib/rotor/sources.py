@@ -38,7 +38,6 @@ from __future__ import annotations
 import json
 import os
 import reprlib
-from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -210,15 +209,12 @@ def rotor_from_table(table: dict, source: str, base_dir) -> RotorSource:
 
     Notes
     -----
-    The files read are remembered with their SHA-256 and their paths relative to
-    ``base_dir`` (:func:`recorded_rotor_files`).
+    ``RotorSource.files`` lists every file read; :func:`file_provenance` turns them into
+    the provenance a result records.
     """
     src = str(source)
     base = None if base_dir is None else Path(base_dir)
-    out = _read(table, src, base)
-    if out.files:
-        _remember(table, base, out.files)
-    return out
+    return _read(table, src, base)
 
 
 def _read(table: dict, src: str, base: Path | None) -> RotorSource:
@@ -306,9 +302,6 @@ def _read(table: dict, src: str, base: Path | None) -> RotorSource:
 
 # ----------------------------------------------------------------------------- provenance
 FILE_KEYS = ("openfast", "aerodyn", "aerodyn_blade", "windio")
-#: Recent reads, newest last: absolute table (JSON) -> (workflow folder or None, ((file, SHA-256), ...)).
-_READS: OrderedDict = OrderedDict()
-_MAX_READS = 64
 
 
 def absolute_table(table: dict, base_dir) -> dict:
@@ -324,20 +317,33 @@ def absolute_table(table: dict, base_dir) -> dict:
     return out
 
 
-def _table_key(table: dict) -> str:
-    return json.dumps(table, sort_keys=True, default=str)
+def file_provenance(files, base_dir) -> dict:
+    """Provenance of the files a rotor was read from (:attr:`RotorSource.files`), for a result.
 
+    Parameters
+    ----------
+    files : sequence of path
+        Every file read, in reading order (an OpenFAST deck's ElastoDyn, AeroDyn, blade and
+        airfoil files too).
+    base_dir : str or Path or None
+        The workflow's folder, that relative paths are given against.
 
-def _remember(table: dict, base: Path | None, files) -> None:
-    try:
-        key = _table_key(absolute_table(table, base))
-        digests = tuple((str(Path(f).resolve()), sha256_of(f)) for f in files)
-    except OSError:
-        return              # provenance only: a file that vanished right after being read is not an error here
-    _READS[key] = (None if base is None else str(base.resolve()), digests)
-    _READS.move_to_end(key)
-    while len(_READS) > _MAX_READS:
-        _READS.popitem(last=False)
+    Returns
+    -------
+    dict
+        ``{"workflow_dir", "all_files_read": True, "files": [{"path", "relative", "sha256"}, ...]}``:
+        absolute path, path relative to ``base_dir`` and SHA-256 of each file.
+    """
+    wdir = None if base_dir is None else str(Path(base_dir).resolve())
+    out = []
+    for f in files:
+        path = str(Path(f).resolve())
+        try:
+            rel = os.path.relpath(path, wdir) if wdir is not None else None
+        except ValueError:          # another drive (Windows)
+            rel = None
+        out.append({"path": path, "relative": rel, "sha256": sha256_of(path) if Path(path).is_file() else None})
+    return {"workflow_dir": wdir, "all_files_read": True, "files": out}
 
 
 def _named_files(table: dict) -> list[tuple[str, str]]:
@@ -348,42 +354,31 @@ def _named_files(table: dict) -> list[tuple[str, str]]:
     return out
 
 
-def recorded_rotor_files(table: dict | None) -> dict | None:
+def recorded_rotor_files(table: dict | None, read: dict | None = None) -> dict | None:
     """Provenance of the files behind a rotor table, for a result to record.
 
     Parameters
     ----------
     table : dict or None
         A ``[rotor]`` table with absolute paths (as :func:`absolute_table` gives it).
+    read : dict, optional
+        The provenance taken when the rotor was read (:func:`file_provenance`): every file
+        read, hashed then, with paths relative to the workflow's folder.
 
     Returns
     -------
     dict or None
-        None for an embedded rotor (no files). Else ``{"workflow_dir", "all_files_read",
-        "files": [{"path", "relative", "sha256"}, ...]}``: absolute path, path relative to the
-        workflow's folder and SHA-256 of each file. When this process read the table
-        (:func:`rotor_from_table`), the files are every file read, in reading order (an
-        OpenFAST deck's ElastoDyn, AeroDyn, blade and airfoil files too), hashed when read,
-        and ``all_files_read`` is true; otherwise they are the files the table names, hashed
-        now (``sha256`` None for one that is missing), and ``relative`` and ``workflow_dir``
-        are None.
+        None for an embedded rotor (no files); ``read`` when given; otherwise the files the
+        table names, hashed now (``sha256`` None for one that is missing), with
+        ``relative`` and ``workflow_dir`` None and ``all_files_read`` false.
     """
     if not isinstance(table, dict):
         return None
     named = _named_files(table)
     if not named:
         return None
-    hit = _READS.get(_table_key(absolute_table(table, None)))
-    if hit is not None:
-        wdir, digests = hit
-        files = []
-        for path, digest in digests:
-            try:
-                rel = os.path.relpath(path, wdir) if wdir is not None else None
-            except ValueError:          # another drive (Windows)
-                rel = None
-            files.append({"path": path, "relative": rel, "sha256": digest})
-        return {"workflow_dir": wdir, "all_files_read": True, "files": files}
+    if read is not None:
+        return read
     files = []
     for _, value in named:
         path = Path(value).expanduser().resolve()
