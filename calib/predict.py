@@ -12,6 +12,7 @@ columns, else the noise the calibration used).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import os
 import tempfile
 from pathlib import Path
@@ -131,6 +132,27 @@ def setup_lines(spec: dict | None, recorded: dict | None, conditions: dict, data
     return lines
 
 
+def calibration_fluid(meas, recorded: dict | None, printer=print):
+    """The prediction's table with the calibration's air density where it has no ``air_density``
+    column (a water rotor calibrated at 1000 kg/m^3 is not predicted in air), said in a line.
+
+    Parameters
+    ----------
+    meas : Measurements
+        The prediction's conditions as read.
+    recorded : dict or None
+        The calibration's conditions (``CalibrationResult.conditions``).
+    printer : callable(str)
+    """
+    units = meas.metadata.get("units") or {}
+    density = np.unique(np.asarray((recorded or {}).get("air_density", []), float))
+    if "air_density" in units or density.size != 1:
+        return meas
+    cond = dataclasses.replace(meas.conditions, air_density=np.full(meas.n_points, float(density[0])))
+    printer(f"calib predict: no air_density column in the data: the calibration's {density[0]:.4g} kg/m^3 used")
+    return dataclasses.replace(meas, conditions=cond)
+
+
 def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confidence: float = 0.95,
                 printer=print) -> dict:
     """Predict the result's channels at the conditions of ``data``; returns the χ² figures (if measured).
@@ -142,7 +164,7 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
         ``chi2_per_dof`` overall and per channel.
     """
     result = load_result(result_dir)
-    meas = read_measurements(data, None, allow_no_channels=True)
+    meas = calibration_fluid(read_measurements(data, None, allow_no_channels=True), result.conditions, printer)
     model = result.rebuild_model()
     rotor = getattr(model, "rotor", None)
     for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data),

@@ -372,3 +372,25 @@ def test_fmu_files_are_checked_before_the_model_is_rebuilt(tmp_path):
     with pytest.raises(InputError, match="missing") as err:
         build_model(spec, tmp_path, "result.json: model_spec")
     assert str(mapping) in str(err.value) and err.value.field == "mapping"
+
+
+def test_prediction_without_a_density_column_takes_the_calibrations(tmp_path):
+    """A water rotor calibrated at 1000 kg/m^3 is not predicted in air because the new table
+    has no air_density column; a column in the table wins."""
+    from calib.measurements import read_measurements
+    from calib.predict import calibration_fluid
+
+    path = tmp_path / "new.csv"
+    path.write_text("wind_speed,rotor_speed,pitch\n2.0,20,0\n2.5,20,0\n")
+    lines = []
+    meas = calibration_fluid(read_measurements(path, None, allow_no_channels=True),
+                             {"air_density": [1000.0, 1000.0]}, lines.append)
+    np.testing.assert_array_equal(meas.conditions.air_density, [1000.0, 1000.0])
+    assert "the calibration's 1000 kg/m^3 used" in lines[0]
+    path.write_text("wind_speed,rotor_speed,pitch,air_density\n2.0,20,0,998\n")
+    own = calibration_fluid(read_measurements(path, None, allow_no_channels=True), {"air_density": [1000.0]}, print)
+    np.testing.assert_array_equal(own.conditions.air_density, [998.0])
+    path.write_text("wind_speed,rotor_speed,pitch\n8,12,0\n")         # several densities recorded: no guess
+    mixed = calibration_fluid(read_measurements(path, None, allow_no_channels=True), {"air_density": [1.2, 1.22]},
+                              print)
+    np.testing.assert_array_equal(mixed.conditions.air_density, [1.225])
