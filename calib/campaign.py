@@ -21,7 +21,7 @@ import numpy as np
 from scipy import stats
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.discrepancy import DiagnosisSettings
+from calib.discrepancy import NAMEABLE, DiagnosisSettings
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
 
@@ -33,8 +33,11 @@ VALIDATION_KEYS = ("leave_out", "channels", "confidence")
 LEAVE_OUT = ("wind_speed", "rotor_speed", "pitch", "point")
 
 
-def diagnosis_settings(table: dict, source: str) -> tuple[DiagnosisSettings, list | None]:
-    """The :class:`DiagnosisSettings` and channel list of a workflow's ``[diagnosis]`` table."""
+def diagnosis_settings(table: dict, source: str, valid=NAMEABLE) -> tuple[DiagnosisSettings, list | None]:
+    """The :class:`DiagnosisSettings` and channel list of a ``[diagnosis]`` table (of a workflow
+    or of ``calib diagnose --config``); ``valid``: the candidate names of the model family."""
+    if not isinstance(table, dict):
+        raise InputError(f"'diagnosis' must be a table, got {table!r:.60}", source, field="diagnosis")
     bad = [k for k in table if k not in DIAGNOSIS_KEYS]
     if bad:
         raise InputError(f"unknown key 'diagnosis.{bad[0]}'; valid keys here: {', '.join(sorted(DIAGNOSIS_KEYS))}",
@@ -48,7 +51,7 @@ def diagnosis_settings(table: dict, source: str) -> tuple[DiagnosisSettings, lis
                                  or not all(isinstance(c, str) for c in channels)):
         raise InputError(f"must be a non-empty array of channel names, got {channels!r}", source,
                          field="diagnosis.channels")
-    return dset.validate(source, "diagnosis."), channels
+    return dset.validate(source, "diagnosis.", valid=valid), channels
 
 
 @dataclass(frozen=True)
@@ -107,7 +110,7 @@ def named_effect_specs(diag, skip=()) -> list[dict]:
     specs = []
     for rnd in diag.rounds:
         verdict = rnd["verdict"]
-        if verdict in ("none", "ambiguous"):
+        if verdict in ("none", "ambiguous", "failed"):
             break
         best = next(f for f in rnd["candidates"] if f.effect == verdict and f.significant)
         if best.effect not in skip:
@@ -307,13 +310,14 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
 
 def diagnosis_sentence(diag) -> str:
     """One line for a result's checks: what the discrepancy workflow named, with its evidence."""
+    failed = f"; stopped early: {diag.failure}" if getattr(diag, "failure", "") else ""
     if not diag.rounds:
-        return f"no candidate could be fitted; named {diag.effect}"
+        return f"no candidate could be fitted; named {diag.effect}{failed}"
     reasons = "; ".join(r["reason"] for r in diag.rounds)
     added = ", ".join(diag.effects) if diag.effects else "nothing"
     return (f"named {diag.effect} (free parameters of this model: {added}); {reasons}; χ²/dof "
             f"{diag.before['chi2_per_dof']:.3g} nominal -> {diag.with_effects['chi2_per_dof']:.3g} with the effect(s) "
-            f"at their fitted values (see diagnosis/report.html)")
+            f"at their fitted values{failed} (see diagnosis/report.html)")
 
 
 def write_validation(validation: Validation, stage_dir) -> None:

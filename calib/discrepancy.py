@@ -29,6 +29,14 @@ Steps
    nothing significant the result is ``none``. After naming one effect, it is added with its
    fitted parameters and, while the model is still inconsistent with the noise (χ² test at
    ``significance``), the remaining candidates are tried on top (up to ``max_effects``).
+
+   A fitted parameter within :data:`AT_BOUND_TOLERANCE` (10⁻³) of its scale of a bound is
+   **at bound** (:func:`bound_side`): the candidate table and the verdict say so, since its
+   value is the bound the data push against, not an estimate. A named effect joins the next
+   round with its fitted values clipped into their bounds (an estimate on a bound may end a
+   few ulp past it). A round that fails (a :class:`~calib.errors.CalibError`) is recorded
+   with verdict ``failed``; the naming stops there and the earlier rounds' findings stand
+   (``Diagnosis.failure`` says what failed), as when the recalibration fails.
 4. **Add** the named effect(s) with their fitted parameters; **recalibrate** the correction
    field on top for what remains.
 5. **Show** χ²/dof and per-channel RMS before (nominal), with the named effect(s), and after
@@ -58,12 +66,16 @@ from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.effects import EFFECTS, make_effect
-from calib.errors import InputError
+from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
 from calib.models.bem_model import BemModel
 
 #: Effects the native BEM can name (the correction field is the localizer, not a candidate).
 NAMEABLE = tuple(n for n in EFFECTS if n != "correction_field")
+
+#: A fitted parameter is "at bound" when it lies within this fraction of its scale of a bound
+#: (or beyond it by round-off): the rule of :func:`calib.identifiability.parameter_verdicts`.
+AT_BOUND_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -147,6 +159,16 @@ class CandidateFit:
     spec: dict = field(default_factory=dict)
     model_values: np.ndarray | None = None
     effect: str = ""
+    at_bound: list = field(default_factory=list)    # names of the parameters at a bound
+
+    def bound_phrase(self) -> str:
+        """The parameters at a bound in words ("" when none): their value is the bound, not an estimate."""
+        at = [q for q in self.parameters if q.get("at_bound")]
+        if not at:
+            return ""
+        unit = {q["name"]: "" if q["unit"] in ("", "-") else f" {q['unit']}" for q in at}
+        return "at bound: " + ", ".join(f"{q['name']} = {q[q['at_bound']]:.4g}{unit[q['name']]} ({q['at_bound']} bound)"
+                                        for q in at)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -177,6 +199,7 @@ class Diagnosis:
     rotor_radius: float
     wall_time: float = 0.0
     notes: list = field(default_factory=list)
+    failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
 
     @property
     def candidates(self) -> list:
@@ -190,6 +213,7 @@ class Diagnosis:
                             "candidates": [c.to_dict() for c in r["candidates"]]} for r in self.rounds],
                 "before": self.before, "with_effects": self.with_effects, "after": self.after,
                 "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,
+                "failure": self.failure,
                 "localization": {"n_retained": self.localization.n_retained,
                                  "chi2_per_dof_after": self.localization.chi2_per_dof_after,
                                  "status": self.localization.status},
@@ -268,10 +292,40 @@ def _candidate_model(rotor, channels, settings, base_effects, effect):
     return BemModel(rotor, None, channels, settings, (), effects=list(base_effects) + [effect])
 
 
+def bound_side(value: float, lower: float, upper: float, scale: float,
+               tolerance: float = AT_BOUND_TOLERANCE) -> str:
+    """Which bound a fitted value sits on: ``"lower"``, ``"upper"`` or ``""`` (neither).
+
+    Parameters
+    ----------
+    value, lower, upper : float
+        The estimate and the parameter's bounds [parameter unit].
+    scale : float
+        The parameter's scale, a typical meaningful change [parameter unit].
+    tolerance : float
+        A value within ``tolerance`` × ``scale`` of a bound, or past it (round-off of the
+        optimizer's step ends an estimate a few ulp outside), is at that bound [-]. The
+        default, 10⁻³ of the scale, is far below any σ a fit gives.
+    """
+    tol = tolerance * abs(float(scale))
+    if value <= lower + tol:
+        return "lower"
+    if value >= upper - tol:
+        return "upper"
+    return ""
+
+
 def _fixed_effect(effect_spec: dict, fitted: dict):
-    """The effect of ``effect_spec`` with its fitted values as nominal (frozen in later rounds)."""
+    """The effect of ``effect_spec`` with its fitted values as nominal (frozen in later rounds).
+
+    A fitted value is clipped into its parameter's bounds first: an estimate that ends on a
+    bound may lie a few ulp past it, which is the bound, not an invalid nominal value.
+    """
     options = dict(effect_spec.get("options", {}))
-    options["nominal"] = {**options.get("nominal", {}), **fitted}
+    bare = make_effect(effect_spec["name"], **{k: v for k, v in options.items() if k != "nominal"})
+    bounds = {q.name: (q.lower, q.upper) for q in bare.parameters()}
+    clipped = {k: float(np.clip(v, *bounds[k])) if k in bounds else v for k, v in fitted.items()}
+    options["nominal"] = {**options.get("nominal", {}), **clipped}
     return make_effect(effect_spec["name"], **options)
 
 
@@ -365,6 +419,8 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     Returns
     -------
     Diagnosis
+        With ``failure`` non-empty when a naming round or the recalibration failed: the
+        rounds before it, and the gap with the effects they named, are still reported.
     """
     t0 = time.perf_counter()
     settings = settings or BemSettings()
@@ -394,130 +450,219 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     before = gap(meas.values, y0, sigma, channels)
     findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
     say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} (p = {before['p_value']:.2g})")
-    n_res = int(np.isfinite(y0).all(axis=1).sum() * len(channels))
-    field_change = (loc.model_after - y0) / sigma
 
-    # 3. name, up to max_effects rounds
-    base_effects, named, rounds, notes = [], [], [], []
-    base_chi2, base_values = before["chi2"], y0
-    remaining = list(candidates)
-    for round_no in range(dset.max_effects):
-        if not remaining:
-            break
-        labels, effects = [], {}
-        for c in list(remaining):
+    # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand)
+    namer = _Namer(family, meas, y0, before["chi2"], (loc.model_after - y0) / sigma, dset, known, executor, wrap,
+                   fit_progress, say)
+    namer.run(candidates)
+    effect, effects_named = namer.verdict()
+    n_fit = family.n_parameters(namer.base_effects)
+    with_effects = gap(meas.values, namer.base_values, sigma, channels, n_fit)
+
+    # 4. add + recalibrate the field on top
+    recal = _recalibrate(family, namer, meas, cal, dset, wrap, on_iteration, say, effects_named)
+    y_after = None if recal is None else recal.model_after
+    after = with_effects if recal is None else gap(meas.values, y_after, sigma, channels, n_fit + recal.n_retained)
+    say(f"show: χ²/dof {before['chi2_per_dof']:.3g} -> {with_effects['chi2_per_dof']:.3g} with "
+        f"{', '.join(effects_named) or 'no effect'}" + ("" if recal is None else
+                                                        f" -> {after['chi2_per_dof']:.3g} after recalibration"))
+    return Diagnosis(effect, effects_named, namer.rounds, before, with_effects, after, findings, loc, recal, channels,
+                     meas.values, sigma, meas.conditions.as_dict(), y0, namer.base_values, y_after,
+                     family.rotor_radius, time.perf_counter() - t0, namer.notes, "; ".join(namer.failures))
+
+
+def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, say, effects_named):
+    """The correction field recalibrated on top of the named effects (a CalibrationResult), or
+    None when switched off or when it fails (the failure is noted)."""
+    if not dset.recalibrate:
+        return None
+    model = wrap(family.field_model(namer.base_effects), "recalibration")
+    known_field = dataclasses.replace(cal, noise="known", sigma=None)
+    say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
+    try:
+        recal = Calibrator(model, meas, known_field, _tagged(on_iteration, "recalibration"),
+                           name="recalibration").run()
+    except CalibError as exc:
+        namer.fail(f"the recalibration failed: {exc}; the figures after it are those with the named effect(s)")
+        return None
+    return recal
+
+
+class _Namer:
+    """Step 3 of :func:`diagnose`: naming rounds, each on top of the effects named before.
+
+    A round that raises a :class:`~calib.errors.CalibError` (a fit that cannot run, an effect
+    that cannot take its fitted values) is recorded with verdict ``failed`` and the failure in
+    words; the naming stops there and what the earlier rounds found stands.
+    """
+
+    def __init__(self, family, meas, y0, chi2_nominal, field_change, dset, known, executor, wrap, fit_progress,
+                 say):
+        self.family, self.meas, self.y0, self.field_change = family, meas, y0, field_change
+        self.dset, self.known, self.executor, self.wrap = dset, known, executor, wrap
+        self.fit_progress, self.say = fit_progress, say
+        self.base_effects, self.named, self.rounds, self.notes, self.failures = [], [], [], [], []
+        self.base_chi2, self.base_values = chi2_nominal, y0
+        self.n_res = int(np.isfinite(y0).all(axis=1).sum() * y0.shape[1])
+        self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
+
+    def run(self, candidates) -> None:
+        self.remaining = list(candidates)
+        for round_no in range(self.dset.max_effects):
+            if not self.remaining:
+                break
+            self._fits = []
             try:
-                variants = family.variants(c, dset.candidate_options.get(c, {}))
+                if self._round(round_no):
+                    break
+            except CalibError as exc:
+                self.rounds.append({"base": self.family.names_of(self.base_effects), "candidates": self._fits,
+                                    "verdict": "failed", "reason": f"failed: {exc}"})
+                before = {0: "no effect was named", 1: "what round 1 found stands"}.get(
+                    round_no, f"what rounds 1-{round_no} found stands")
+                self.fail(f"naming round {round_no + 1} failed: {exc}; {before}")
+                break
+
+    def fail(self, message: str) -> None:
+        self.failures.append(message)
+        self.notes.append(message)
+        self.say(message)
+
+    def verdict(self) -> tuple[str, list]:
+        """The diagnosis' one-word result and the effects named (in order)."""
+        effects_named = [n for n in self.named if not n.startswith("ambiguous:")]
+        if self.named and self.named[0].startswith("ambiguous:"):
+            return "ambiguous", effects_named
+        return (effects_named[0] if effects_named else "none"), effects_named
+
+    def _round(self, round_no: int) -> bool:
+        """One naming round; True when the naming is over."""
+        labels, effects = self._applicable()
+        if not labels:
+            return True
+        self._fits = fits = self._fit(round_no, labels, effects)
+        rnd, best = self._judge(fits)
+        if best is None:
+            self.rounds.append(rnd)
+            if rnd["verdict"] == "ambiguous" and not self.named:
+                self.named.append("ambiguous:" + "+".join(rnd["ambiguous"]))
+            return True
+        new_base = self.family.add(self.base_effects, best)    # may raise: the round then fails
+        self.rounds.append(rnd)
+        self.named.append(best.effect)
+        self.base_effects = new_base
+        self.base_chi2, self.base_values = best.chi2, best.model_values
+        self.remaining = [c for c in self.remaining if c != best.effect]
+        # a further effect is looked for only while the model is still inconsistent with the noise
+        fit_now = gap(self.meas.values, self.base_values, self.meas.sigma, list(self.meas.channels),
+                      self.family.n_parameters(self.base_effects))
+        if fit_now["p_value"] >= self.dset.significance:
+            self.say(f"name: with {', '.join(self.named)} the model is consistent with the noise (χ²/dof "
+                     f"{fit_now['chi2_per_dof']:.3g}, p = {fit_now['p_value']:.2g}); no further effect is looked for")
+            return True
+        return False
+
+    def _applicable(self) -> tuple[list, dict]:
+        """Labels and effects of the remaining candidates' variants that can act on this rotor."""
+        labels, effects = [], {}
+        for c in list(self.remaining):
+            try:
+                variants = self.family.variants(c, self.dset.candidate_options.get(c, {}))
                 for label, effect in variants:
                     # an effect that cannot act on this rotor (e.g. no reference Reynolds number) is
                     # reported as not applicable, not fitted
-                    family.check(base_effects, effect, meas.conditions)
+                    self.family.check(self.base_effects, effect, self.meas.conditions)
             except InputError as exc:
-                notes.append(f"candidate {c} not applicable: {exc}")
-                say(f"name: candidate {c} not applicable: {exc}")
-                remaining.remove(c)
+                self.notes.append(f"candidate {c} not applicable: {exc}")
+                self.say(f"name: candidate {c} not applicable: {exc}")
+                self.remaining.remove(c)
                 continue
             for label, effect in variants:
                 labels.append(label)
                 effects[label] = effect
-        if not labels:
-            break
-        tasks = [{"name": lab, "measurements": meas, "settings": known,
-                  "model": wrap(family.candidate_model(base_effects, effects[lab]),
-                                f"round {round_no + 1}: {lab}")} for lab in labels]
-        say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
-        outs = executor.map(_fit_task, tasks, fit_progress)
-        fits = []
-        alpha = dset.significance / max(len(remaining), 1)
-        bic_base = base_chi2
-        for c, task, out in zip(labels, tasks, outs):
-            res, values = out["result"], out["values"]
-            n_base = family.n_parameters(base_effects)
-            own = list(range(n_base, res.n_params))
-            chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
-            k = len(own)
-            lr = max(base_chi2 - chi2, 0.0)
-            p = float(stats.chi2.sf(lr, k)) if k else 1.0
-            change = (values - base_values) / sigma
-            a, b = change.reshape(-1), (field_change - (base_values - y0) / sigma).reshape(-1)
-            good = np.isfinite(a) & np.isfinite(b)
-            agree = float(np.corrcoef(a[good], b[good])[0, 1]) if good.sum() > 2 and np.std(a[good]) > 0 and \
-                np.std(b[good]) > 0 else float("nan")
-            params = [{"name": res.parameters[j]["name"], "value": float(res.p_hat[j]), "std": float(res.std_p[j]),
-                       "unit": res.parameters[j]["unit"], "nominal": float(res.p_nominal[j])} for j in own]
-            spec = family.spec(effects[c])
-            fits.append(CandidateFit(c, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(n_res), lr, p, p < alpha,
-                                     pattern_agreement=agree, status=res.status, spec=spec, model_values=values,
-                                     effect=c.split(":")[0]))
-        bics = np.array([f.bic for f in fits] + [bic_base])
+        return labels, effects
+
+    def _fit(self, round_no: int, labels: list, effects: dict) -> list:
+        """Every candidate fitted on top of the base effects, scored against the base model."""
+        tasks = [{"name": lab, "measurements": self.meas, "settings": self.known,
+                  "model": self.wrap(self.family.candidate_model(self.base_effects, effects[lab]),
+                                     f"round {round_no + 1}: {lab}")} for lab in labels]
+        self.say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
+        outs = self.executor.map(_fit_task, tasks, self.fit_progress)
+        alpha = self.dset.significance / max(len(self.remaining), 1)
+        return [self._score(lab, out, effects[lab], alpha) for lab, out in zip(labels, outs)]
+
+    def _score(self, label: str, out: dict, effect, alpha: float) -> CandidateFit:
+        res, values = out["result"], out["values"]
+        meas, sigma = self.meas, self.meas.sigma
+        own = list(range(self.family.n_parameters(self.base_effects), res.n_params))
+        chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
+        k = len(own)
+        lr = max(self.base_chi2 - chi2, 0.0)
+        p = float(stats.chi2.sf(lr, k)) if k else 1.0
+        change = (values - self.base_values) / sigma
+        a, b = change.reshape(-1), (self.field_change - (self.base_values - self.y0) / sigma).reshape(-1)
+        good = np.isfinite(a) & np.isfinite(b)
+        agree = float(np.corrcoef(a[good], b[good])[0, 1]) if good.sum() > 2 and np.std(a[good]) > 0 and \
+            np.std(b[good]) > 0 else float("nan")
+        params = _parameter_records(res, own)
+        return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p, p < alpha,
+                            pattern_agreement=agree, status=res.status, spec=self.family.spec(effect),
+                            model_values=values, effect=label.split(":")[0],
+                            at_bound=[q["name"] for q in params if q["at_bound"]])
+
+    def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
+        """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
+        names (None for ``none`` and ``ambiguous``)."""
+        dset = self.dset
+        bics = np.array([f.bic for f in fits] + [self.base_chi2])
         wts = np.exp(-0.5 * (bics - bics.min()))
         wts /= wts.sum()
         for f, wgt in zip(fits, wts[:-1]):
             f.weight = float(wgt)
         fits.sort(key=lambda f: f.bic)
+        rnd = {"base": self.family.names_of(self.base_effects), "candidates": fits}
         sig = [f for f in fits if f.significant]
         if not sig:
-            verdict, reason = "none", (f"no candidate improves the fit significantly (likelihood ratio at family-wise "
-                                       f"level {dset.significance:g}); best {fits[0].name}: Λ = "
-                                       f"{fits[0].lr_statistic:.3g}, p = {fits[0].p_value:.2g}")
-            rounds.append({"base": family.names_of(base_effects), "candidates": fits, "verdict": verdict,
-                           "reason": reason})
-            say(f"name: {reason}")
-            break
+            rnd.update(verdict="none", reason=(
+                f"no candidate improves the fit significantly (likelihood ratio at family-wise level "
+                f"{dset.significance:g}); best {fits[0].name}: Λ = {fits[0].lr_statistic:.3g}, p = "
+                f"{fits[0].p_value:.2g}" + _bound_suffix(fits[0])))
+            self.say(f"name: {rnd['reason']}")
+            return rnd, None
         best = sig[0]
         # variants of the same effect are not rivals: the best variant names the effect
         rivals = [f for f in sig[1:] if f.bic - best.bic < dset.ambiguity_bic and f.effect != best.effect]
         if rivals:
-            verdict = "ambiguous"
-            reason = (f"{best.effect} and {rivals[0].effect} fit about equally well (ΔBIC = "
-                      f"{rivals[0].bic - best.bic:.3g} < {dset.ambiguity_bic:g}); the data cannot tell them apart")
-            rounds.append({"base": family.names_of(base_effects), "candidates": fits, "verdict": verdict,
-                           "reason": reason, "ambiguous": [best.effect, rivals[0].effect]})
-            say(f"name: {reason}")
-            if not named:
-                named.append("ambiguous:" + "+".join([best.effect, rivals[0].effect]))
-            break
-        reason = (f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), p = {best.p_value:.2g}; "
-                  f"BIC weight {best.weight:.3f}; next {fits[1].name if len(fits) > 1 else 'none'} "
-                  f"ΔBIC = {(fits[1].bic - best.bic) if len(fits) > 1 else float('inf'):.3g}; pattern agreement "
-                  f"with the localized correction {best.pattern_agreement:.2f}")
-        rounds.append({"base": family.names_of(base_effects), "candidates": fits, "verdict": best.effect,
-                       "reason": reason})
-        say(f"name: {reason}")
-        named.append(best.effect)
-        base_effects = family.add(base_effects, best)
-        base_chi2, base_values = best.chi2, best.model_values
-        remaining = [c for c in remaining if c != best.effect]
-        # a further effect is looked for only while the model is still inconsistent with the noise
-        fit_now = gap(meas.values, base_values, sigma, channels, family.n_parameters(base_effects))
-        if fit_now["p_value"] >= dset.significance:
-            say(f"name: with {', '.join(named)} the model is consistent with the noise (χ²/dof "
-                f"{fit_now['chi2_per_dof']:.3g}, p = {fit_now['p_value']:.2g}); no further effect is looked for")
-            break
+            rnd.update(verdict="ambiguous", ambiguous=[best.effect, rivals[0].effect], reason=(
+                f"{best.effect} and {rivals[0].effect} fit about equally well (ΔBIC = {rivals[0].bic - best.bic:.3g} "
+                f"< {dset.ambiguity_bic:g}); the data cannot tell them apart"))
+            self.say(f"name: {rnd['reason']}")
+            return rnd, None
+        nxt = fits[1] if len(fits) > 1 else None
+        rnd.update(verdict=best.effect, reason=(
+            f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), p = {best.p_value:.2g}; "
+            f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
+            f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
+            f"{best.pattern_agreement:.2f}" + _bound_suffix(best)))
+        self.say(f"name: {rnd['reason']}")
+        return rnd, best
 
-    effects_named = [n for n in named if not n.startswith("ambiguous:")]
-    if named and named[0].startswith("ambiguous:"):
-        effect = "ambiguous"
-    elif effects_named:
-        effect = effects_named[0]
-    else:
-        effect = "none"
-    n_fit = family.n_parameters(base_effects)
-    with_effects = gap(meas.values, base_values, sigma, channels, n_fit)
 
-    # 4. add + recalibrate the field on top
-    recal, y_after = None, None
-    if dset.recalibrate:
-        model = wrap(family.field_model(base_effects), "recalibration")
-        known_field = dataclasses.replace(cal, noise="known", sigma=None)
-        say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
-        recal = Calibrator(model, meas, known_field, _tagged(on_iteration, "recalibration"), name="recalibration").run()
-        y_after = recal.model_after
-        after = gap(meas.values, y_after, sigma, channels, n_fit + recal.n_retained)
-    else:
-        after = with_effects
-    say(f"show: χ²/dof {before['chi2_per_dof']:.3g} -> {with_effects['chi2_per_dof']:.3g} with "
-        f"{', '.join(effects_named) or 'no effect'} -> {after['chi2_per_dof']:.3g} after recalibration")
-    return Diagnosis(effect, effects_named, rounds, before, with_effects, after, findings, loc, recal, channels,
-                     meas.values, sigma, meas.conditions.as_dict(), y0, base_values, y_after, family.rotor_radius,
-                     time.perf_counter() - t0, notes)
+def _bound_suffix(fit: CandidateFit) -> str:
+    """"; <fit's parameters at a bound>, ..." for a verdict ("" when none is at a bound)."""
+    phrase = fit.bound_phrase()
+    return (f"; {phrase}: the fit pushed against the bound, so the value is the bound, not an estimate (the "
+            f"effect may stand in for another one, or the data hold a gross error)") if phrase else ""
+
+
+def _parameter_records(res, own: list) -> list[dict]:
+    """{name, value, std, unit, nominal, lower, upper, at_bound} of a candidate's own parameters."""
+    out = []
+    for j in own:
+        lo, hi = float(res.lower[j]), float(res.upper[j])
+        value = float(res.p_hat[j])
+        out.append({"name": res.parameters[j]["name"], "value": value, "std": float(res.std_p[j]),
+                    "unit": res.parameters[j]["unit"], "nominal": float(res.p_nominal[j]), "lower": lo, "upper": hi,
+                    "at_bound": bound_side(value, lo, hi, float(res.scale[j]))})
+    return out

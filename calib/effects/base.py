@@ -44,7 +44,10 @@ class Effect:
     ------
     InputError
         For an unknown option (the message lists the valid ones), an option value outside
-        its choices, or a nominal value for an unknown parameter or outside the bounds.
+        its choices, or a nominal value for an unknown parameter or outside the bounds. A
+        nominal value past a bound by no more than :data:`NOMINAL_ROUND_OFF` × the
+        parameter's scale (round-off of a fitted value that ended on the bound) is taken as
+        the bound.
     """
 
     name: ClassVar[str] = ""
@@ -73,10 +76,10 @@ class Effect:
                 raise InputError(f"no parameter {key!r} in effect {self.name!r}; its parameters: "
                                  f"{', '.join(params)}", f"effect {self.name!r}", field="nominal")
             try:
-                params[key] = replace(params[key], nominal=float(value))
+                params[key] = replace(params[key], nominal=_within_round_off(params[key], float(value)))
             except InputError as exc:
                 raise InputError(exc.message, f"effect {self.name!r}", field=f"nominal.{key}") from None
-        self._nominal = {k: float(v) for k, v in nominal.items()}
+        self._nominal = {k: params[k].nominal for k in nominal}
         self._params = tuple(params.values())
 
     # -- declaration ------------------------------------------------------
@@ -111,6 +114,21 @@ class Effect:
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.spec()["options"].items())
         return f"{type(self).__name__}({opts})"
+
+
+#: A nominal value past a bound by at most this fraction of the parameter's scale is round-off [-].
+NOMINAL_ROUND_OFF = 1e-9
+
+
+def _within_round_off(q: Parameter, value: float) -> float:
+    """``value`` moved onto the bound of ``q`` it passes by round-off only, else unchanged
+    (so that :class:`~calib.types.Parameter` still refuses a value truly outside its bounds)."""
+    tol = NOMINAL_ROUND_OFF * abs(q.scale)
+    if q.lower - tol <= value < q.lower:
+        return float(q.lower)
+    if q.upper < value <= q.upper + tol:
+        return float(q.upper)
+    return value
 
 
 def _jsonable(v):

@@ -5,6 +5,10 @@
 - what was named on what evidence: ΔBIC and likelihood-ratio p-value of every candidate,
   with the named one marked;
 - how much the gap shrank: χ²/dof and per-channel RMS before and after.
+
+Every candidate's fit status is shown, and a fitted parameter at a bound
+(:func:`calib.discrepancy.bound_side`) is marked "at lower/upper bound"; a diagnosis that
+stopped early (``Diagnosis.failure``) says so at the top of the page.
 """
 
 from __future__ import annotations
@@ -83,6 +87,28 @@ def _table(header, rows, wrap=()) -> str:
     return f'<div class="table"><table><tr>{th}</tr>{body}</table></div>'
 
 
+def _parameter_text(q: dict) -> str:
+    """"name = value ± std unit", with "(at lower bound)" / "(at upper bound)" when it is."""
+    text = f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g} {q['unit']}"
+    return text + (f" (at {q['at_bound']} bound)" if q.get("at_bound") else "")
+
+
+def _candidate_rows(d) -> list[tuple]:
+    """One row of the candidate table per candidate of every round (HTML-escaped)."""
+    rows = []
+    for r_no, rnd in enumerate(d.rounds):
+        for f in rnd["candidates"]:
+            name = html.escape(f.name).replace(":", ":<wbr>")        # may break after "effect:"
+            status = f.status or "?"
+            if getattr(f, "at_bound", None):
+                status += f"; at bound: {', '.join(f.at_bound)}"
+            rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
+                         f"{f.lr_statistic:.4g}", f"{f.p_value:.2g}", "yes" if f.significant else "no",
+                         f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}",
+                         html.escape("; ".join(_parameter_text(q) for q in f.parameters)), html.escape(status)))
+    return rows
+
+
 def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     """Write ``diagnosis.json``, the figures and ``report.html`` into ``out_dir`` (atomically)."""
     out = Path(out_dir)
@@ -105,40 +131,38 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     def img(p):
         return f'<img alt="{p.stem}" src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
 
-    rows = []
-    for r_no, rnd in enumerate(d.rounds):
-        for f in rnd["candidates"]:
-            name = html.escape(f.name).replace(":", ":<wbr>")        # may break after "effect:"
-            rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
-                         f"{f.lr_statistic:.4g}", f"{f.p_value:.2g}", "yes" if f.significant else "no",
-                         f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}",
-                         html.escape("; ".join(f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g} {q['unit']}"
-                                               for q in f.parameters))))
+    rows = _candidate_rows(d)
     gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{g['p_value']:.2g}",
                  html.escape(", ".join(f"{c} {v:.4g}" for c, v in g["rms"].items())))
                 for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
-                                                         d.with_effects), ("after recalibration", d.after))]
+                                                         d.with_effects),
+                                 ("after recalibration" if d.recalibration is not None
+                                  else "no recalibration (as above)", d.after))]
     reasons = "".join(f"<li>round {k + 1}: {html.escape(r['reason'])}</li>" for k, r in enumerate(d.rounds))
     trend_rows = [(html.escape(c), f"{t['chi2_per_point']:.3g}", f"{t['mean_whitened']:+.2f}",
                    f"{t['corr_tip_speed_ratio']:+.2f}", f"{t['corr_pitch']:+.2f}", f"{t['corr_wind_speed']:+.2f}",
                    f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
-    body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>",
-            f"<p>Named effect(s): <b>{html.escape(', '.join(d.effects) or d.effect)}</b>. "
-            f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal) → {d.with_effects['chi2_per_dof']:.3g} (with the "
-            f"effect) → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field). "
-            f"Wall time {d.wall_time:.1f} s.</p>",
-            f"<h2>Evidence</h2><ul>{reasons}</ul>",
-            _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
-                    "pattern agreement", "fitted parameters (1σ)"], rows, wrap=(10,)),
-            img(figs["candidates"]),
-            "<h2>Where the gap is</h2>",
-            _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
-                    "corr. with wind speed", "corr. with load level"], trend_rows),
-            img(figs["gap"]),
-            "<h2>How much it shrank</h2>",
-            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel"], gap_rows, wrap=(4,)),
-            f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
-            f"{d.localization.chi2_per_dof_after:.3g}.</p>"]
+    failure = getattr(d, "failure", "")
+    body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>"]
+    if failure:
+        body.append(f'<p class="failed"><b>Stopped early:</b> {html.escape(failure)}. What the rounds before '
+                    "found is reported below.</p>")
+    body += [f"<p>Named effect(s): <b>{html.escape(', '.join(d.effects) or d.effect)}</b>. "
+             f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal) → {d.with_effects['chi2_per_dof']:.3g} (with the "
+             f"effect) → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field). "
+             f"Wall time {d.wall_time:.1f} s.</p>",
+             f"<h2>Evidence</h2><ul>{reasons}</ul>",
+             _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
+                     "pattern agreement", "fitted parameters (1σ)", "fit status"], rows, wrap=(10, 11)),
+             img(figs["candidates"]),
+             "<h2>Where the gap is</h2>",
+             _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
+                     "corr. with wind speed", "corr. with load level"], trend_rows),
+             img(figs["gap"]),
+             "<h2>How much it shrank</h2>",
+             _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel"], gap_rows, wrap=(4,)),
+             f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
+             f"{d.localization.chi2_per_dof_after:.3g}.</p>"]
     if d.notes:
         body.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in d.notes) + "</ul>")
     # long text cells (fitted parameters) may break inside words, a candidate after its ":"
@@ -147,7 +171,7 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     css = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
            ".table{overflow-x:auto;max-width:100%;margin:.5em 0 1.2em}table{border-collapse:collapse}"
            "td,th{border:1px solid #ccc;padding:3px 7px}td.w{overflow-wrap:anywhere}"
-           "th{background:#f0f0f0}img{max-width:100%;height:auto}")
+           "th{background:#f0f0f0}img{max-width:100%;height:auto}.failed{background:#fde8e8;padding:.5em}")
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>calib diagnose</title><style>{css}</style>"
             f"</head><body>{''.join(body)}</body></html>")
     atomic_write_text(out / "report.html", page)
