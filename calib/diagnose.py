@@ -3,8 +3,12 @@
 Reads the rotor (an embedded name, or a rotor file: ``.fst`` OpenFAST deck, ``.yaml``
 windIO, ``.dat`` AeroDyn15 main file), the measurement table and, optionally, the
 ``[rotor]``, ``[model]``, ``[fluid]``, ``[grid]``, ``[calibration]`` and ``[diagnosis]``
-tables of a workflow-style TOML file; runs :func:`calib.discrepancy.diagnose`; writes
-``DIR/diagnosis.json`` and ``DIR/report.html``.
+tables of a workflow-style TOML file; checks the measurements' units against the nominal
+model as ``calib run`` does (:func:`calib.unit_check.apply_unit_check`: a unit factor that
+explains the data stops it unless ``--force``); runs :func:`calib.discrepancy.diagnose`;
+writes ``DIR/diagnosis.json`` and ``DIR/report.html``. A naming round or the recalibration
+that fails ends the diagnosis early: what the rounds before it found is still written, with
+the failure stated, and the command exits 0.
 """
 
 from __future__ import annotations
@@ -13,7 +17,8 @@ import json
 import logging
 from pathlib import Path
 
-from calib.discrepancy import DiagnosisSettings, diagnose
+from calib.campaign import diagnosis_settings
+from calib.discrepancy import diagnose
 from calib.errors import CalibError, InputError
 from calib.logs import add_output_arguments, say
 from calib.tomlfile import read_toml
@@ -21,7 +26,6 @@ from calib.measurements import read_measurements
 
 CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis", "executor")
 DEFAULT_GRID = {"alpha_nodes_deg": "auto", "eta_nodes": [0.25, 0.5, 0.75, 1.0]}
-DIAGNOSIS_KEYS = {f for f in DiagnosisSettings.__dataclass_fields__}
 
 log = logging.getLogger("calib.diagnose")
 
@@ -50,13 +54,16 @@ def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
 
 
 def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
-                 resume: bool = False, history: bool = True):
+                 resume: bool = False, history: bool = True, force: bool = False):
     """Run the discrepancy workflow from the command line's arguments; returns the Diagnosis.
 
     Parameters
     ----------
     rotor, data, out, config : str
         As ``calib diagnose --rotor --data --out --config``.
+    force : bool
+        Diagnose even when the unit check finds a unit factor that explains the data
+        (``--force``, or ``[calibration] force = true``); the report says what was overridden.
     printer : callable(str), optional
         Receives the progress lines (default: logged under ``calib.diagnose`` and printed
         unless a command console is active, :func:`calib.logs.say`).
@@ -90,25 +97,12 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         cfg["rotor"] = _rotor_table(rotor)
     if "rotor" not in cfg:
         raise InputError("no rotor: give --rotor NAME_OR_FILE or a [rotor] table in --config", src, field="rotor")
-    dcfg = cfg.pop("diagnosis", {})
-    if not isinstance(dcfg, dict):
-        raise InputError(f"'diagnosis' must be a table, got {dcfg!r:.60}", src, field="diagnosis")
-    dcfg = dict(dcfg)
-    bad = [k for k in dcfg if k not in DIAGNOSIS_KEYS]
-    if bad:
-        raise InputError(f"unknown key 'diagnosis.{bad[0]}'; valid keys here: {', '.join(sorted(DIAGNOSIS_KEYS))}",
-                         src, field=f"diagnosis.{bad[0]}")
-    if isinstance(dcfg.get("candidates"), list):
-        dcfg["candidates"] = tuple(dcfg["candidates"])
     is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
-    dset = DiagnosisSettings(**dcfg)
-    if not is_fmu:
-        dset.validate(src, "diagnosis.")
-    else:                  # an FMU's candidates are its mapped parameters: their names are checked with the model
-        dset.validate(src, "diagnosis.", valid=dset.candidates if isinstance(dset.candidates, tuple) else ())
+    dset, channels = _diagnosis_table(cfg.pop("diagnosis", {}), src, is_fmu)
     meas = read_measurements(data)
     for note in meas.notes:
         printer(f"[calib diagnose] {Path(data).name}: {note}")
+    meas = _select_channels(meas, channels, src)
     wf = {"name": "diagnose", "rotor": cfg["rotor"], "grid": cfg.get("grid", DEFAULT_GRID),
           "stages": [{"name": "diagnose", "channels": list(meas.channels)}], "_source": src, "_dir": str(base_dir)}
     for key in ("model", "fluid", "calibration", "executor"):
@@ -119,6 +113,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         if key in wf and not (key == "model" and is_fmu):   # an FMU's [model]: checked by calib.models.from_config
             _check_table(wf[key], key, src)
     setup = prepare(wf)
+    meas = _fill_conditions(meas, setup)
     grid = setup.grid(meas.conditions)
     hist = None
     if history or resume:
@@ -127,7 +122,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         rotor_arg = str(Path(rotor).resolve()) if rotor is not None and Path(rotor).is_file() else rotor
         hist = open_history(out, {"command": "diagnose", "arguments": {
             "rotor": rotor_arg, "data": str(Path(data).resolve()),
-            "config": str(Path(config).resolve()) if config else None},
+            "config": str(Path(config).resolve()) if config else None, "force": bool(force)},
             "inputs": {**diagnose_inputs(rotor_arg, data, config),
                        "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
         hist.event("start", resumed=resume, records=hist.n_records)
@@ -143,6 +138,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         return recorded(model, hist, label, chunk, progress=progress_line)
 
     try:
+        unit_notes = _unit_check(setup, family, meas, wrap, data, force or setup.force, printer)
         diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
                         progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
                         wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
@@ -151,6 +147,9 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     finally:
         if executor is not None:
             executor.close()
+    diag.notes.extend(f"{key}: {text}" for key, text in unit_notes.items())
+    if diag.failure:
+        printer(f"[calib diagnose] stopped early: {diag.failure}")
     paths = write_diagnosis(diag, out)
     if hist is not None:
         hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
@@ -161,7 +160,68 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     return diag
 
 
-def _fmu_family(setup, grid, channels: list, dset: DiagnosisSettings, src: str):
+def _diagnosis_table(table, src: str, is_fmu: bool):
+    """The DiagnosisSettings and channel list (None: every measured channel) of ``[diagnosis]``."""
+    if not is_fmu:
+        return diagnosis_settings(table, src)
+    # an FMU's candidates are its mapped parameters: their names are checked with the model
+    cands = table.get("candidates") if isinstance(table, dict) else None
+    return diagnosis_settings(table, src, valid=tuple(cands) if isinstance(cands, list) else ())
+
+
+def _fill_conditions(meas, setup):
+    """Air density and yaw of a table without those columns from the config (``[fluid] density``,
+    ``[model] yaw``), as ``calib run`` fills them."""
+    import dataclasses
+
+    import numpy as np
+
+    declared = meas.metadata.get("units", {})
+    fill = {}
+    if "air_density" not in declared:
+        fill["air_density"] = np.full(meas.n_points, float(setup.density))
+    if "yaw" not in declared and setup.yaw != 0.0:
+        fill["yaw"] = np.full(meas.n_points, float(setup.yaw))
+    if not fill:
+        return meas
+    return dataclasses.replace(meas, conditions=dataclasses.replace(meas.conditions, **fill))
+
+
+def _select_channels(meas, channels, src: str):
+    """``meas`` restricted to the ``[diagnosis] channels`` (all of them when None)."""
+    if channels is None:
+        return meas
+    missing = [c for c in channels if c not in meas.channels]
+    if missing:
+        raise InputError(f"channel(s) {', '.join(missing)} not in the data file {meas.source} (its channels: "
+                         f"{', '.join(meas.channels)})", src, field="diagnosis.channels")
+    return meas.select_channels(channels)
+
+
+def _unit_check(setup, family, meas, wrap, data: str, force: bool, printer) -> dict:
+    """The unit check of ``calib run`` on the nominal model (same messages); its notes for the report.
+
+    Raises
+    ------
+    InputError
+        When a unit factor explains the data and not ``force`` (the file, the channel or
+        condition and the suspected factor named).
+    """
+    import numpy as np
+
+    from calib.unit_check import apply_unit_check
+
+    # the nominal model: an FMU family's own, else the native BEM with its nuisance parameters at nominal
+    model = wrap(family.nominal_model() if family is not None else setup.model(None, list(meas.channels)),
+                 "unit check")
+    p = np.array([q.nominal for q in model.parameters], float)
+    _, notes = apply_unit_check(model, p, meas, sigma=setup.calibration.get("sigma"), force=force,
+                                strict=setup.strict_units, source=str(data), printer=printer,
+                                prefix="[calib diagnose]", model_units=setup.model_units())
+    return notes
+
+
+def _fmu_family(setup, grid, channels: list, dset, src: str):
     """The FMU family of a ``[model] kind = "fmu"`` config and the executor its simulations run on."""
     from calib.fmu_diagnosis import FmuFamily
     from calib.models.from_config import executor_from_table, model_from_workflow
@@ -188,11 +248,14 @@ def add_diagnose_arguments(parser) -> None:
                         "unless --resume")
     parser.add_argument("--out", default=None, help="output folder (required unless --resume DIR)")
     parser.add_argument("--config", default=None, help="TOML with [rotor], [model], [fluid], [grid], [calibration] "
-                        "tables of the workflow schema and a [diagnosis] table (candidates, max_effects, "
-                        "significance, ambiguity_bic, recalibrate)")
+                        "tables of the workflow schema and a [diagnosis] table (candidates, candidate_options, "
+                        "max_effects, significance, ambiguity_bic, recalibrate, channels)")
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed diagnosis whose output "
                         "folder is DIR with the arguments it started with: model calls on record in DIR/history are "
                         "read back, not computed again; refused if the data, config or rotor changed")
+    parser.add_argument("--force", action="store_true", help="diagnose even when the unit check suspects a unit "
+                        "mistake in the measurements (the report says so); a resumed diagnosis keeps the --force "
+                        "it started with")
     add_output_arguments(parser, "also print every model call (the log file DIR/calib.log always has them)")
 
 
@@ -201,6 +264,7 @@ def diagnose_from_args(args) -> int:
     from calib.logs import command_logging
 
     rotor, data, config, out = args.rotor, args.data, args.config, args.out
+    force = bool(getattr(args, "force", False))
     if args.resume is not None:
         if out is not None and Path(out).resolve() != Path(args.resume).resolve():
             raise InputError(f"--out {out} and --resume {args.resume} name different folders; give one",
@@ -213,12 +277,14 @@ def diagnose_from_args(args) -> int:
         rotor = rotor if rotor is not None else recorded_args.get("rotor")
         data = data if data is not None else recorded_args.get("data")
         config = config if config is not None else recorded_args.get("config")
+        force = force or bool(recorded_args.get("force", False))
     if data is None or out is None:
         raise InputError("give --data FILE and --out DIR (or --resume DIR)", "calib diagnose",
                          field="--data" if data is None else "--out")
     with command_logging(out, args.verbose, args.quiet):
         try:
-            run_diagnose(rotor, data, out, config, resume=args.resume is not None, history=not args.no_history)
+            run_diagnose(rotor, data, out, config, resume=args.resume is not None, history=not args.no_history,
+                         force=force)
         except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
             log.debug(f"calib: error: {exc}", exc_info=True)
             raise
