@@ -21,16 +21,44 @@ from test_report_atomic import broken_files
 from twin_model import TwinModel, twin_conditions
 
 ROOT = Path(__file__).resolve().parents[1]
+@pytest.fixture(scope="module")
+def fresh_outcomes():
+    """Outcomes of the fork tests run in a fresh interpreter, or None when this one can fork.
+
+    An earlier test of the session (a Dask executor: its ``Dask-Offload`` thread lives as long
+    as the process) may leave threads running, and then this process draws figures in one
+    process by design. The fork tests then run once more in a fresh ``python -m pytest`` of
+    this module, and each asserts its own outcome there, so they run in every suite order.
+    """
+    if fork_available():
+        return None
+    if os.environ.get("CALIB_FRESH_FORK_TESTS"):
+        pytest.fail("threads are running even in a fresh interpreter: the fork tests cannot run")
+    env = dict(os.environ, CALIB_FRESH_FORK_TESTS="1")
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", "-m", "not statistics",
+                           __file__, "-k", " or ".join(FORK_TESTS)], capture_output=True, text=True, cwd=ROOT,
+                          env=env, timeout=600)
+    outcomes = {}
+    for line in done.stdout.splitlines():
+        word, _, rest = line.partition(" ")
+        if word in ("PASSED", "FAILED", "ERROR", "SKIPPED") and "::" in rest:
+            outcomes[rest.split("::", 1)[1].split()[0]] = (word, done.stdout[-3000:])
+    return outcomes
+
+
 @pytest.fixture
-def needs_fork_now():
-    """Skip at run time (not collection time) when forking is off: an earlier test in the same
-    session (a Dask or process-pool executor) may have left threads running, and then the
-    figures are drawn in one process by design."""
-    if not fork_available():
-        pytest.skip("no os.fork, or other threads running in this process")
+def forks_here(request, fresh_outcomes) -> bool:
+    """True when the test runs here; False after asserting that it passed in a fresh interpreter
+    (the test then returns at once: its body forks, which this process does not)."""
+    if fresh_outcomes is None:
+        return True
+    word, log = fresh_outcomes.get(request.node.name, ("NOT RUN", ""))
+    assert word == "PASSED", f"{request.node.name} in a fresh interpreter: {word}\n{log}"
+    return False
 
 
-needs_fork = pytest.mark.usefixtures("needs_fork_now")
+FORK_TESTS = ("test_workers_write_the_same_files_as_one_process", "test_a_figure_failing_in_a_worker_raises_its_own_error",
+              "test_sigint_stops_the_workers_and_leaves_no_truncated_file")
 
 
 @pytest.fixture(scope="module")
@@ -55,8 +83,9 @@ def test_partition_balances_the_costs_and_keeps_the_order():
     assert partition(costs, 1) == [list(costs)]
 
 
-@needs_fork
-def test_workers_write_the_same_files_as_one_process(result, tmp_path):
+def test_workers_write_the_same_files_as_one_process(result, tmp_path, forks_here):
+    if not forks_here:
+        return
     def truth(alpha_deg, eta):
         return 0.05 * np.cos(np.radians(alpha_deg)) + 0 * eta, 0.001 + 0 * alpha_deg
 
@@ -74,8 +103,9 @@ def test_workers_write_the_same_files_as_one_process(result, tmp_path):
     assert not [p for p in (tmp_path / "two").iterdir() if is_temporary(p)]
 
 
-@needs_fork
-def test_a_figure_failing_in_a_worker_raises_its_own_error(result, tmp_path, monkeypatch):
+def test_a_figure_failing_in_a_worker_raises_its_own_error(result, tmp_path, monkeypatch, forks_here):
+    if not forks_here:
+        return
     def broken(res, truth=None):
         raise ValueError("this figure cannot be drawn")
 
@@ -137,9 +167,10 @@ def _interrupt(tmp_path, saved: Path, whole_group: bool):
     return out
 
 
-@needs_fork
 @pytest.mark.parametrize("whole_group", [True, False], ids=["ctrl-c", "sigint-to-parent"])
-def test_sigint_stops_the_workers_and_leaves_no_truncated_file(result, tmp_path, whole_group):
+def test_sigint_stops_the_workers_and_leaves_no_truncated_file(result, tmp_path, whole_group, forks_here):
+    if not forks_here:
+        return
     saved = tmp_path / "saved"
     result.save(saved)
     out = _interrupt(tmp_path, saved, whole_group)
