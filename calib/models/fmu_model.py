@@ -15,7 +15,10 @@
 It extracts the FMU once (cached by the file's SHA-256), and hands workers a picklable
 :class:`~calib.models.fmu_worker.SimulationPlan` (paths and value references, never an
 instance). Simulations run through :func:`calib.models.fmu_worker.run_point` on the
-model's executor (serial by default), in worker processes with a per-simulation timeout.
+model's executor (serial by default), in worker processes with a per-simulation timeout
+that adapts to the measured cost of healthy runs; a point that crashed or hung is
+quarantined by the model (planned here, whatever the executor): see
+:class:`calib.models.fmu_worker.FaultLedger` and :meth:`FmuModel.fault_summary`.
 
 Steady outputs: settle ``settle_revolutions``, then average ``average_revolutions`` whole
 revolutions (``[steady]`` of the mapping); the status of a point says whether the two
@@ -241,7 +244,12 @@ class FmuModel:
     executor : Executor, optional
         Where simulations run (:mod:`calib.executors`); default serial.
     timeout : float
-        Longest wall time of one simulation [s] (worker killed and rebuilt beyond it).
+        Longest wall time of one simulation [s] (worker killed and rebuilt beyond it). Once
+        healthy runs are measured the timeout in force adapts: 10 x their median wall time,
+        at least 5 s, never above this (:func:`calib.models.fmu_worker.adaptive_timeout`).
+    start_timeout : float
+        Longest wall time for a worker process to start and for an FMU instance to be
+        created [s] (timed apart from the simulations).
     isolate : bool
         Simulate in worker processes (default). ``False`` simulates in the calling
         process: faster to start, but a crash of the FMU ends the process and a hang is
@@ -251,6 +259,14 @@ class FmuModel:
         :meth:`spec` so that a saved result can rebuild the FMU.
     progress : callable(done, total), optional
         Called as operating points finish.
+
+    Notes
+    -----
+    Faults: a point whose simulation crashed the FMU process, hung or got a fatal status is
+    quarantined, not simulated again by later calls, retried once at most when a parameter
+    has moved one scale from where it failed; an error status is not quarantined
+    (:class:`calib.models.fmu_worker.FaultLedger` says why). :meth:`fault_summary` reports
+    the timeout in force, the quarantined points and the errors.
     """
 
     def __new__(cls, fmu=None, mapping=None, *args, **kwargs):
@@ -266,7 +282,7 @@ class FmuModel:
                  parameters: Sequence[str] | None = None, corrections: bool = True,
                  switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
                  jacobian: dict | None = None, executor=None, timeout: float = 60.0, isolate: bool = True,
-                 build: dict | None = None, progress=None):
+                 build: dict | None = None, progress=None, start_timeout: float = 60.0):
         import fmpy
         from fmpy.model_description import read_model_description
 
@@ -333,6 +349,9 @@ class FmuModel:
         self._probed: dict | None = None
         self._build_channels(channels)
         self._plan = self._make_plan()
+        self.start_timeout = float(start_timeout)
+        self._faults = fw.FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
+                                      self.timeout, self.start_timeout, self.fmu_path.name)
 
     # ------------------------------------------------------------------ load-time checks
     def _validation_warnings(self, src: str) -> None:
@@ -771,9 +790,49 @@ class FmuModel:
             out.append((self._input_writer.assignment(flat, "real"),))
         return out
 
-    def _run(self, tasks: list) -> list:
-        jobs = [(self._plan, t, self.isolate, self.timeout) for t in tasks]
-        return self.executor.map(fw.run_point, jobs, self.progress)
+    def _run(self, tasks: list, p, conditions) -> list:
+        """Results of ``tasks`` at ``p``: quarantined points are not simulated (the ledger
+        fills their results), the others run on the executor with the adaptive timeout."""
+        run, results = self._faults.plan(tasks, p, len(self._plan.signals))
+        policy = self._faults.policy()
+        jobs = [(self._plan, tasks[k], self.isolate, policy) for k in run]
+        done = self.executor.map(fw.run_point, jobs, self.progress) if jobs else []
+        for k, r in zip(run, done):
+            results[k] = r
+        self._faults.record(tasks, results, run, p, conditions)
+        return results
+
+    def fault_summary(self) -> dict:
+        """Faults met by this model's simulations so far, as a plain (JSON-able) dict.
+
+        Returns
+        -------
+        dict
+            ``timeout``: ``configured_s``, ``start_timeout_s``, ``multiple`` [-], ``floor_s``,
+            ``in_force_s`` (the adaptive timeout now), ``median_healthy_s`` (None before any
+            healthy run), ``healthy_runs``, ``changes`` (list of ``{call, timeout_s,
+            median_healthy_s, healthy_runs}``, one per notable change, > 20 %);
+            ``quarantine``: one dict per quarantined point: ``index`` (its position in the
+            call where it failed), ``conditions`` (package units), ``status``,
+            ``status_name``, ``fault`` ("crash", "timeout", "fatal"), ``run`` (which run failed),
+            ``message``, ``p`` (parameters then), ``call``, ``timeout`` [s], ``faults``
+            (simulations that faulted), ``skipped`` (calls that did not simulate it),
+            ``retried``, ``retry_call``, ``retry_outcome`` (None, "failed again",
+            "recovered"), ``active`` (still quarantined);
+            ``errors``: points with an error status (fault "error": not quarantined; or
+            "fatal": also quarantined): ``conditions``,
+            ``count``, ``status``, ``status_name``, ``fault``, ``run``, ``message``, ``call``;
+            ``counts``: ``calls``, ``points_simulated``, ``points_skipped``, ``crashes``,
+            ``timeouts``, ``start_timeouts``, ``errors``, ``fatal`` (runs that met each),
+            ``retries``;
+            ``rules``: the quarantined fault kinds and the retry distance [parameter scales].
+        """
+        return {"fmu": self.fmu_path.name, **self._faults.summary()}
+
+    def clear_quarantine(self) -> None:
+        """Simulate quarantined points again from now on (e.g. a new stage with another
+        model setting); the timeout statistics are kept."""
+        self._faults.clear()
 
     def _values(self, outcomes: list) -> np.ndarray:
         """Channel values (n, n_channels) from run outcomes."""
@@ -850,7 +909,7 @@ class FmuModel:
         ``perturbation_settle_revolutions``.
         """
         p, tasks, _ = self._tasks(p, conditions, perturb=False, start_states=start_states)
-        return self._evaluation(self._run(tasks), conditions)
+        return self._evaluation(self._run(tasks, p, conditions), conditions)
 
     def jacobian(self, p, conditions: OperatingConditions, start_states=None):
         """Central-difference sensitivities ``G[k, c, j] = d y[k, c] / d p[j]``.
@@ -864,7 +923,7 @@ class FmuModel:
             NaN on failed points.
         """
         p, tasks, steps = self._tasks(p, conditions, perturb=True, start_states=start_states)
-        results = self._run(tasks)
+        results = self._run(tasks, p, conditions)
         ev = self._evaluation(results, conditions)
         n_par = p.size
         n_ch = len(self._channels)
@@ -932,7 +991,7 @@ class FmuModel:
         if not (self.can_get_state and self.can_serialize):
             raise ModelError(f"{self.fmu_path.name} cannot serialize its state")
         p, tasks, _ = self._tasks(p, conditions, perturb=False)
-        results = self._run([replace(t, keep_state=True) for t in tasks])
+        results = self._run([replace(t, keep_state=True) for t in tasks], p, conditions)
         return [r.base_state if r.base is not None and r.base.ok else None for r in results]
 
     def save_states(self, path, states: list, conditions: OperatingConditions) -> Path:

@@ -1,6 +1,6 @@
 """FMU simulations for the adapter: one instance per worker, steady windows, faults survived.
 
-Three layers, each usable alone:
+Three layers, each usable alone, and the planner's record of faults:
 
 - :class:`Simulator` drives one FMU instance in this process through fmpy: instantiate
   once, ``reset`` between runs, settle, average over whole revolutions, save / restore /
@@ -8,11 +8,17 @@ Three layers, each usable alone:
 - :class:`WorkerProcess` runs a :class:`Simulator` in a child process (a new Python
   interpreter running :func:`child_main`) and talks to it over pipes. Every simulation has a
   timeout; an error status, a crash of the process (e.g. ``abort()`` in the FMU) or a hang
-  becomes that run's status, the child is rebuilt, and the runs still to do go on from the
-  serialized settled state (so nothing computed before is lost).
+  becomes that run's status, the child is rebuilt (after a crash, a hang or a fatal
+  status), and the runs still to do go on from the serialized settled state (so nothing
+  computed before is lost). The timeout adapts (:func:`adaptive_timeout`) to the healthy
+  runs measured by the planner (:class:`TimeoutPolicy`) and by the worker itself; creating
+  the FMU instance is timed apart, against the start timeout.
 - :func:`run_point` is what an executor maps over operating points: it gets a picklable
   :class:`SimulationPlan` and :class:`PointTask` (paths and values, never an instance) and
   uses the worker of the current process (one per plan, kept for later tasks).
+- :class:`FaultLedger` lives with the model, where tasks are planned: it quarantines points
+  that crashed or hung, so that later calls do not simulate them again, and keeps the
+  healthy wall times that set the timeout.
 
 Statistics of a run (:func:`window_statistics`): over the averaging window of N samples
 (equally spaced in azimuth, whole revolutions) the mean, the means of the two halves
@@ -24,6 +30,7 @@ with ψ the azimuth of blade 1 (0 = up) [rad].
 from __future__ import annotations
 
 import ctypes
+import logging
 import os
 import pickle
 import select
@@ -32,16 +39,32 @@ import struct
 import subprocess
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from calib.types import Status
+from calib.types import CONDITION_FIELDS, Status
 
 HARMONIC_ORDERS = (1, 2, 3)
 REAL_TYPES = ("Real", "Float64")
 INTEGER_TYPES = ("Integer", "Int32", "Enumeration")
 BOOLEAN_TYPES = ("Boolean",)
+
+#: Adaptive timeout: this multiple of the median wall time of healthy base runs [-] ...
+TIMEOUT_MULTIPLE = 10.0
+#: ... but never below this [s] (and never above the configured timeout)
+TIMEOUT_FLOOR = 5.0
+#: Healthy base-run wall times kept for the median (the most recent ones)
+HEALTHY_WALLS_KEPT = 99
+#: A quarantined point is retried (once) when a parameter has moved this many of its scales
+RETRY_DISTANCE = 1.0
+#: Faults that quarantine a point (expensive: a new process, a wait for the timeout)
+QUARANTINE_FAULTS = ("crash", "timeout", "fatal")
+#: fmi2Fatal / fmi3Fatal: no FMI call of any instance is allowed afterwards
+FMI_FATAL = 4
+
+log = logging.getLogger(__name__)
 
 
 # ----------------------------------------------------------------------------- plan and tasks
@@ -176,7 +199,16 @@ class RunOutcome:
     steps : int
         Communication steps taken.
     wall : float
-        [s].
+        [s], including ``instantiation``.
+    fault : str
+        ``""`` (no fault: converged, or a status computed from the outputs), ``"error"`` (an
+        FMI call returned an error status or raised), ``"fatal"`` (an FMI call returned
+        fmi2Fatal / fmi3Fatal: the worker process is replaced), ``"crash"`` (the process
+        hosting the FMU died), ``"timeout"`` (the run hung), ``"start-timeout"`` (creating
+        the instance exceeded the start timeout), ``"quarantined"`` (not simulated: see
+        :class:`FaultLedger`).
+    instantiation : float
+        Part of ``wall`` spent creating the FMU instance [s] (0 when the instance was reused).
     """
 
     status: int
@@ -187,12 +219,14 @@ class RunOutcome:
     counters: dict = field(default_factory=dict)
     steps: int = 0
     wall: float = 0.0
+    fault: str = ""
+    instantiation: float = 0.0
 
     @classmethod
-    def failed(cls, n_signals: int, status: int, message: str, wall: float = 0.0) -> "RunOutcome":
+    def failed(cls, n_signals: int, status: int, message: str, wall: float = 0.0, fault: str = "") -> "RunOutcome":
         nan = np.full(n_signals, np.nan)
         return cls(int(status), message, nan, np.full((2, n_signals), np.nan),
-                   np.full((n_signals, len(HARMONIC_ORDERS)), np.nan + 0j), {}, 0, wall)
+                   np.full((n_signals, len(HARMONIC_ORDERS)), np.nan + 0j), {}, 0, wall, fault)
 
     @property
     def ok(self) -> bool:
@@ -201,13 +235,81 @@ class RunOutcome:
 
 @dataclass
 class PointResult:
-    """The runs of one :class:`PointTask` (``perturbations[j]`` None if never run)."""
+    """The runs of one :class:`PointTask` (``perturbations[j]`` None if never run).
+
+    ``timeout`` is the simulation timeout in force when the task ended [s] (None in
+    process: no timeout).
+    """
 
     index: int
     base: RunOutcome | None
     perturbations: list
     restarts: int = 0
     base_state: bytes | None = None
+    timeout: float | None = None
+
+    def outcomes(self) -> list:
+        """The runs made, base first (perturbed runs never run left out)."""
+        return [o for o in (self.base, *self.perturbations) if o is not None]
+
+
+# ----------------------------------------------------------------------------- adaptive timeout
+def adaptive_timeout(healthy_walls, configured: float, multiple: float = TIMEOUT_MULTIPLE,
+                     floor: float = TIMEOUT_FLOOR) -> float:
+    """Simulation timeout from the wall times of healthy runs.
+
+    ``min(configured, max(floor, multiple * median(healthy_walls)))``; ``configured`` while
+    no healthy run has been measured.
+
+    Parameters
+    ----------
+    healthy_walls : sequence of float
+        Wall times of converged base runs (cold, full window, instantiation excluded) [s].
+    configured : float
+        The user's timeout [s]: the rule never exceeds it.
+    multiple : float
+        [-]; 10 covers the spread of a healthy point's cost over the operating range and
+        the slowdown of a loaded machine, and still stops a hang after ten healthy runs' worth.
+    floor : float
+        [s]; scheduling hiccups of a shared machine (seconds) must not kill a healthy run of
+        a fast FMU (milliseconds).
+    """
+    walls = np.asarray(healthy_walls, float)
+    if walls.size == 0:
+        return float(configured)
+    return float(min(configured, max(floor, multiple * float(np.median(walls)))))
+
+
+@dataclass(frozen=True)
+class TimeoutPolicy:
+    """The timeouts a worker applies (picklable; sent with every task).
+
+    Attributes
+    ----------
+    configured : float
+        The user's timeout of one simulation [s] (the upper limit).
+    multiple, floor : float
+        Of :func:`adaptive_timeout` [-], [s].
+    walls : tuple of float
+        Healthy base-run wall times measured so far by the model (the planning process) [s].
+    start_timeout : float
+        Longest wall time for a worker process to start and for an FMU instance to be
+        created [s]: instantiation is timed apart from the simulations.
+    """
+
+    configured: float
+    multiple: float = TIMEOUT_MULTIPLE
+    floor: float = TIMEOUT_FLOOR
+    walls: tuple = ()
+    start_timeout: float = 60.0
+
+    def timeout(self, more=()) -> float:
+        """The simulation timeout [s] from ``walls`` and ``more`` (a worker's own measurements)."""
+        return adaptive_timeout((*self.walls, *more), self.configured, self.multiple, self.floor)
+
+
+def _policy(timeout) -> TimeoutPolicy:
+    return timeout if isinstance(timeout, TimeoutPolicy) else TimeoutPolicy(float(timeout))
 
 
 # ----------------------------------------------------------------------------- statistics
@@ -262,7 +364,12 @@ class Simulator:
 
     The instance is created on first use and reused: ``reset`` before every cold run; after
     an error the instance is freed and created again (a vendor FMU may be unusable after
-    an error). FMU log messages are kept (the last 20) and quoted in failure messages.
+    an error). After a fatal status ``fatal`` is set: FMI allows no further call of any
+    instance, so a worker process ends (:func:`child_main`); in process, the instance is
+    created again as after an error (nothing better is possible there). FMU log messages are
+    kept (the last 20) and quoted in failure messages. ``notify`` (a callable, optional)
+    receives ``("instantiating",)`` and ``("instantiated", seconds)`` around the creation of
+    an instance, so that a supervisor can time it apart from the simulation.
     """
 
     def __init__(self, plan: SimulationPlan):
@@ -275,6 +382,9 @@ class Simulator:
         self._vr_array = (ctypes.c_uint * max(len(plan.read_vrs), 1))(*plan.read_vrs)
         self._fmi3 = plan.fmi_version.startswith("3")
         self.instantiations = 0
+        self.last_instantiation = 0.0
+        self.fatal = False
+        self.notify = None
 
     # -- lifecycle ----------------------------------------------------------------
     def _logger2(self, env, instance_name, status, category, message):
@@ -290,6 +400,15 @@ class Simulator:
         del self._log[:-20]
 
     def _instantiate(self):
+        t0 = time.perf_counter()
+        if self.notify is not None:
+            self.notify(("instantiating",))
+        self._create_instance()
+        self.last_instantiation = time.perf_counter() - t0
+        if self.notify is not None:
+            self.notify(("instantiated", self.last_instantiation))
+
+    def _create_instance(self):
         p = self.plan
         if self._fmi3:
             from fmpy.fmi3 import FMU3Slave, fmi3LogMessageCallback  # noqa: F401
@@ -455,10 +574,11 @@ class Simulator:
 
     def _failure(self, exc: BaseException, what: str, t0_wall: float) -> RunOutcome:
         self._healthy = False
-        log = " | ".join(m for m in self._log if not m.startswith("[OK]"))[-600:]
-        msg = f"{what}: {type(exc).__name__}: {exc}" + (f"; FMU log: {log}" if log else "")
+        self.fatal = self.fatal or getattr(exc, "status", None) == FMI_FATAL
+        fmu_log = " | ".join(m for m in self._log if not m.startswith("[OK]"))[-600:]
+        msg = f"{what}: {type(exc).__name__}: {exc}" + (f"; FMU log: {fmu_log}" if fmu_log else "")
         return RunOutcome.failed(len(self.plan.signals), Status.SIMULATION_FAILED, msg,
-                                 time.perf_counter() - t0_wall)
+                                 time.perf_counter() - t0_wall, "fatal" if self.fatal else "error")
 
     def cold_run(self, task: PointTask, parameters, keep_state: bool):
         """Reset, set everything, initialize, settle (optionally save the state), average.
@@ -473,7 +593,7 @@ class Simulator:
         """
         t0_wall = time.perf_counter()
         h, n_settle, n_average = self.plan.steady.window(task.rotor_speed)
-        state, t_state = None, 0.0
+        state, t_state, created = None, 0.0, self.instantiations
         try:
             self._fresh()
             t = 0.0
@@ -496,7 +616,9 @@ class Simulator:
             raw, times, counters, t = self._window(t, h, 0, n_average)
         except Exception as exc:  # noqa: BLE001 - an FMU error is this run's status
             return self._failure(exc, "simulation failed", t0_wall), None, 0.0
-        return self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall), state, t_state
+        outcome = self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall)
+        outcome.instantiation = self.last_instantiation if self.instantiations != created else 0.0
+        return outcome, state, t_state
 
     def warm_run(self, task: PointTask, parameters, state, state_time: float) -> RunOutcome:
         """Restore the settled base state, set the (perturbed) parameters, settle, average."""
@@ -614,7 +736,8 @@ def child_main() -> int:
     """Entry point of a worker process: read requests from stdin, answer on the original stdout.
 
     File descriptor 1 is pointed at stderr first, so that an FMU printing to stdout cannot
-    corrupt the message stream.
+    corrupt the message stream. After a fatal FMI status the process answers ``("fatal",)``
+    and exits at once, without any further FMI call (the supervisor starts a new one).
     """
     out_fd = os.dup(1)
     os.dup2(2, 1)
@@ -631,19 +754,37 @@ def child_main() -> int:
             if sim is not None:
                 sim.close()
             sim = Simulator(payload)
+            sim.notify = lambda m: _write_message(out_fd, m)
             _write_message(out_fd, ("ready", os.getpid()))
         elif kind == "probe":
-            try:
-                _write_message(out_fd, ("probe", sim.probe(payload)))
-            except Exception as exc:  # noqa: BLE001
-                _write_message(out_fd, ("error", f"{type(exc).__name__}: {exc}"))
+            _child_probe(sim, payload, out_fd)
         elif kind == "point":
-            try:
-                for item in sim.runs(payload):
-                    _write_message(out_fd, item)
-            except Exception as exc:  # noqa: BLE001 - reported to the supervisor
-                _write_message(out_fd, ("error", f"{type(exc).__name__}: {exc}"))
-            _write_message(out_fd, ("done",))
+            _child_point(sim, payload, out_fd)
+
+
+def _child_fatal(out_fd: int) -> None:
+    _write_message(out_fd, ("fatal",))
+    os._exit(0)
+
+
+def _child_probe(sim: Simulator, reads, out_fd: int) -> None:
+    try:
+        _write_message(out_fd, ("probe", sim.probe(reads)))
+    except Exception as exc:  # noqa: BLE001
+        _write_message(out_fd, ("error", f"{type(exc).__name__}: {exc}"))
+        if getattr(exc, "status", None) == FMI_FATAL:
+            _child_fatal(out_fd)
+
+
+def _child_point(sim: Simulator, task: PointTask, out_fd: int) -> None:
+    try:
+        for item in sim.runs(task):
+            _write_message(out_fd, item)
+            if sim.fatal:
+                _child_fatal(out_fd)
+    except Exception as exc:  # noqa: BLE001 - reported to the supervisor
+        _write_message(out_fd, ("error", f"{type(exc).__name__}: {exc}"))
+    _write_message(out_fd, ("done",))
 
 
 # ----------------------------------------------------------------------------- supervisor
@@ -671,25 +812,54 @@ _CHILD_COMMAND = (
 
 
 class WorkerProcess:
-    """A child process that simulates; rebuilt after a crash or a hang.
+    """A child process that simulates; rebuilt after a crash, a hang or a fatal status.
 
     Parameters
     ----------
     plan : SimulationPlan
-    timeout : float
-        Longest wall time of one simulation [s]; a run taking longer is killed and recorded
-        with status ``TIMEOUT``.
-    start_timeout : float
-        Longest wall time for the child to start and load the plan [s].
+    timeout : float or TimeoutPolicy
+        Longest wall time of one simulation [s], or the policy of an adaptive one: a run
+        taking longer is killed and recorded with status ``TIMEOUT``. With a policy the
+        timeout in force (:attr:`timeout`) follows :func:`adaptive_timeout` over the policy's
+        wall times and those this worker measured since it got the policy.
+    start_timeout : float, optional
+        Longest wall time for the child to start and load the plan, and for an FMU
+        instance to be created [s] (default: the policy's, 60 s).
     """
 
-    def __init__(self, plan: SimulationPlan, timeout: float = 60.0, start_timeout: float = 60.0):
+    def __init__(self, plan: SimulationPlan, timeout=60.0, start_timeout: float | None = None):
         self.plan = plan
-        self.timeout = float(timeout)
-        self.start_timeout = float(start_timeout)
+        policy = _policy(timeout)
+        if start_timeout is not None:
+            policy = replace(policy, start_timeout=float(start_timeout))
+        self.policy = policy
+        self._walls: list[float] = []
         self.proc: subprocess.Popen | None = None
         self.restarts = 0
         self.owner = os.getpid()
+
+    @property
+    def timeout(self) -> float:
+        """The simulation timeout in force [s]."""
+        return self.policy.timeout(self._walls)
+
+    @property
+    def start_timeout(self) -> float:
+        return self.policy.start_timeout
+
+    def set_policy(self, policy) -> None:
+        """Use ``policy`` (a float: a fixed timeout); this worker's own measurements are
+        dropped when it changes (the new policy holds them, measured by the planner)."""
+        policy = _policy(policy)
+        if policy != self.policy:
+            self.policy = policy
+            self._walls = []
+
+    def _measured(self, outcome: RunOutcome, task: PointTask) -> None:
+        """Count a healthy base run (full window, from scratch) in the timeout rule."""
+        if outcome.ok and task.start_state is None:
+            self._walls.append(outcome.wall - outcome.instantiation)
+            del self._walls[:-HEALTHY_WALLS_KEPT]
 
     def _start(self):
         env = dict(os.environ)
@@ -705,6 +875,11 @@ class WorkerProcess:
             self.kill()
             raise RuntimeError(f"FMU worker process did not start: {why}")
 
+    def _ensure_started(self):
+        if self.proc is None or self.proc.poll() is not None:
+            self.kill()
+            self._start()
+
     def _receive(self, timeout: float):
         """The next message, or "timeout" / "died" (strings)."""
         fd = self.proc.stdout.fileno()
@@ -716,6 +891,19 @@ class WorkerProcess:
             self.proc.wait()
             return "died"
         return msg
+
+    def _next(self):
+        """The next message that is not an instantiation notice, or "timeout", "start-timeout"
+        (the instance was not created within ``start_timeout``), "died". An instance being
+        created is waited for up to ``start_timeout``; the run's timeout starts again after it."""
+        limit, creating = self.timeout, False
+        while True:
+            msg = self._receive(limit)
+            if isinstance(msg, tuple) and msg[0] in ("instantiating", "instantiated"):
+                creating = msg[0] == "instantiating"
+                limit = self.start_timeout if creating else self.timeout
+                continue
+            return "start-timeout" if msg == "timeout" and creating else msg
 
     def kill(self):
         if self.proc is not None:
@@ -743,11 +931,9 @@ class WorkerProcess:
 
     def probe(self, reads) -> list:
         """:meth:`Simulator.probe` in the child (raises RuntimeError on any fault)."""
-        if self.proc is None or self.proc.poll() is not None:
-            self.kill()
-            self._start()
+        self._ensure_started()
         _write_message(self.proc.stdin.fileno(), ("probe", reads))
-        msg = self._receive(self.timeout)
+        msg = self._next()
         if not (isinstance(msg, tuple) and msg[0] == "probe"):
             why = msg[1] if isinstance(msg, tuple) else msg
             self.kill()
@@ -756,72 +942,331 @@ class WorkerProcess:
 
     def run_point(self, task: PointTask) -> PointResult:
         """All runs of a point; a fault becomes the status of the run it hit, and the rest go on."""
-        n_sig = len(self.plan.signals)
         res = PointResult(task.index, None, [None] * len(task.perturbations))
         pending = task
-        while True:
-            if self.proc is None or self.proc.poll() is not None:
-                self.kill()
-                self._start()
+        while pending is not None:
+            self._ensure_started()
             _write_message(self.proc.stdin.fileno(), ("point", pending))
-            current = "base run" if pending.base_state is None else f"perturbed run {pending.skip + 1}"
-            fault = None
-            while True:
-                msg = self._receive(self.timeout)
-                if msg == "timeout":
-                    fault = (Status.TIMEOUT, f"{current} exceeded the timeout of {self.timeout:g} s; "
-                                             "worker process killed and rebuilt")
-                    break
-                if msg == "died":
-                    fault = (Status.SIMULATION_FAILED, f"the FMU process died during the {current} "
-                                                       f"({_signal_name(self.proc.returncode)}); worker rebuilt")
-                    break
-                if msg[0] == "base":
-                    res.base, res.base_state = msg[1], msg[2]
-                    current = "perturbed run 1"
-                elif msg[0] == "run":
-                    res.perturbations[msg[1]] = msg[2]
-                    current = f"perturbed run {msg[1] + 2}"
-                elif msg[0] == "error":
-                    fault = (Status.SIMULATION_FAILED, f"worker error during the {current}: {msg[1]}")
-                elif msg[0] == "done":
-                    break
-            if fault is None:
-                return res
-            status, message = fault
-            if msg in ("timeout", "died"):
-                self.kill()
-                self.restarts += 1
-                res.restarts += 1
-            failed = RunOutcome.failed(n_sig, status, message)
+            fault = self._collect(pending, res)
+            res.timeout = self.timeout
+            pending = None if fault is None else self._after_fault(task, res, *fault)
+        return res
+
+    def _collect(self, pending: PointTask, res: PointResult):
+        """Read the runs of ``pending`` into ``res`` until done; the fault met, as (status,
+        message, kind), or None."""
+        current = "base run" if pending.base_state is None else f"perturbed run {pending.skip + 1}"
+        fault = None
+        while True:
+            timeout = self.timeout
+            msg = self._next()
+            if msg == "timeout":
+                return (Status.TIMEOUT, f"{current} exceeded the timeout of {timeout:g} s; worker process killed "
+                                        "and rebuilt", "timeout")
+            if msg == "start-timeout":
+                return (Status.TIMEOUT, f"creating the FMU instance for the {current} exceeded the start timeout of "
+                                        f"{self.start_timeout:g} s; worker process killed and rebuilt", "start-timeout")
+            if msg == "died":
+                return (Status.SIMULATION_FAILED, f"the FMU process died during the {current} "
+                                                  f"({_signal_name(self.proc.returncode)}); worker rebuilt", "crash")
+            if msg[0] == "base":
+                res.base, res.base_state = msg[1], msg[2]
+                self._measured(msg[1], pending)
+                current = "perturbed run 1"
+            elif msg[0] == "run":
+                res.perturbations[msg[1]] = msg[2]
+                current = f"perturbed run {msg[1] + 2}"
+            elif msg[0] == "fatal":
+                return (None, "", "fatal")
+            elif msg[0] == "error":
+                fault = (Status.SIMULATION_FAILED, f"worker error during the {current}: {msg[1]}", "error")
+            elif msg[0] == "done":
+                return fault
+
+    def _after_fault(self, task: PointTask, res: PointResult, status, message: str, kind: str):
+        """Record a fault in ``res``; the task of the runs still to do, or None."""
+        if kind in ("timeout", "start-timeout", "crash", "fatal"):
+            self.kill()
+            self.restarts += 1
+            res.restarts += 1
+        done = [k for k, r in enumerate(res.perturbations) if r is not None]
+        last = max(done) if done else -1
+        if kind == "fatal":                 # the run's own outcome arrived: say what follows
+            hit = res.base if last < 0 else res.perturbations[last]
+            hit.message = (hit.message.rstrip(".") + "; fatal status: no further FMI call allowed, worker process "
+                           "replaced")
+        else:
+            failed = RunOutcome.failed(len(self.plan.signals), status, message, fault=kind)
             if res.base is None:
                 res.base = failed
-                return res
-            done = [k for k, r in enumerate(res.perturbations) if r is not None]
-            j = (max(done) + 1) if done else 0
-            if j >= len(task.perturbations):
-                return res
-            res.perturbations[j] = failed
-            if j + 1 >= len(task.perturbations) or not res.base.ok:
-                return res
-            pending = replace(task, base_state=res.base_state, skip=j + 1)
-            if res.base_state is None:      # no serialized state: cold perturbed runs
-                pending = replace(pending, warm=False)
+                return None
+            last += 1
+            if last >= len(task.perturbations):
+                return None
+            res.perturbations[last] = failed
+        if last + 1 >= len(task.perturbations) or not res.base.ok:
+            return None
+        pending = replace(task, base_state=res.base_state, skip=last + 1)
+        if res.base_state is None:      # no serialized state: cold perturbed runs
+            pending = replace(pending, warm=False)
+        return pending
+
+
+# ----------------------------------------------------------------------------- planner side: faults
+def point_key(task: PointTask) -> tuple:
+    """Identity of an operating point: the FMU input values and the rotor speed (hashable).
+
+    Every condition the model takes either is an FMU input or must have its default, so two
+    points with the same key are the same operating point, and two different points never
+    share a key."""
+    return (task.inputs, float(task.rotor_speed))
+
+
+@dataclass
+class QuarantineEntry:
+    """A point that crashed the FMU process or hung (see :class:`FaultLedger`)."""
+
+    index: int                 # position of the point in the model call where it failed
+    conditions: dict           # operating conditions [package units]
+    status: int
+    fault: str                 # one of QUARANTINE_FAULTS
+    run: str                   # which run of the point failed
+    message: str
+    p: np.ndarray              # parameters where it (last) failed [package units]
+    call: int                  # model call (1, 2, ...) where it (last) failed
+    timeout: float | None      # timeout in force then [s]
+    faults: int = 1            # simulations of the point that faulted
+    skipped: int = 0           # times it was not simulated
+    retried: bool = False
+    retry_call: int | None = None
+    retry_outcome: str | None = None   # "failed again" | "recovered"
+    active: bool = True
+
+    def as_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["conditions"] = dict(self.conditions)
+        d["p"] = [float(x) for x in self.p]
+        d["status_name"] = Status(self.status).name
+        return d
+
+
+_FAULT_VERBS = {"crash": "crashed the FMU process", "timeout": "hung", "fatal": "got a fatal status"}
+_FAULT_COUNTS = {"crash": "crashes", "timeout": "timeouts", "start-timeout": "start_timeouts", "error": "errors",
+                 "fatal": "fatal"}
+
+
+def _run_name(j: int) -> str:
+    return "base run" if j < 0 else f"perturbed run {j + 1}"
+
+
+class FaultLedger:
+    """The faults of one model's simulations, kept where tasks are planned (the process that
+    holds the model), so that what is simulated does not depend on the executor.
+
+    Quarantine: a point whose simulation crashed the FMU process, hung, or got a fatal status
+    (any of its runs) is not simulated again for the rest of the model's lifetime (or until
+    :meth:`clear`): later
+    calls return its recorded status, with a message saying it is quarantined and why. It is
+    retried once at most, when the parameters are *far* from where it failed: some parameter
+    has moved at least ``retry_distance`` (1) of its scales, ``max_j |p_j - p_fail,j| /
+    scale_j >= 1`` (the scale is the typical size of a meaningful change; Jacobian steps,
+    ``relative_step`` x scale <= 0.5 scale, never qualify). A retry that succeeds releases the
+    point; one that fails quarantines it for good. Points are keyed by :func:`point_key`: a
+    different operating point is never affected.
+
+    Each of those costs a new worker process or a wait for the timeout (a fatal status
+    forbids any further FMI call, so the process is replaced as after a crash). An error
+    status (fmi2Error, fmi2Discard: an FMI call failed and the process lives on) does not
+    quarantine: it costs one run and a new instance, and it often depends on the parameters
+    (a vendor FMU refusing a value out of its range), so the point must come back as soon as
+    the parameters do; simulating it again gives the same status at the same parameters, so
+    evaluations and Jacobians stay consistent. Such points are listed under ``errors`` in
+    :meth:`summary` (with fatal ones, which are also quarantined). An instance not created
+    within the start timeout says nothing about the point (inputs are set afterwards): not
+    quarantined either.
+
+    Adaptive timeout: :meth:`policy` hands workers the wall times of the healthy base runs
+    measured so far (the last :data:`HEALTHY_WALLS_KEPT`); the timeout in force is
+    :func:`adaptive_timeout` of them.
+    """
+
+    def __init__(self, names, scales, configured: float, start_timeout: float = 60.0, label: str = "FMU",
+                 multiple: float = TIMEOUT_MULTIPLE, floor: float = TIMEOUT_FLOOR,
+                 retry_distance: float = RETRY_DISTANCE):
+        self.names = tuple(names)
+        self.scales = np.asarray(scales, float)
+        self.label = label
+        self.retry_distance = float(retry_distance)
+        self._rule = TimeoutPolicy(float(configured), float(multiple), float(floor), (), float(start_timeout))
+        self.clear()
+        self.walls: deque = deque(maxlen=HEALTHY_WALLS_KEPT)
+        self.n_healthy = 0
+        self.changes: list[dict] = []
+        self._announced = self._rule.configured
+
+    def clear(self) -> None:
+        """Forget quarantined points and errors (a new stage); the timeout statistics stay."""
+        self.entries: dict = {}
+        self.errors: dict = {}
+        self.counts = dict(calls=0, points_simulated=0, points_skipped=0, crashes=0, timeouts=0, start_timeouts=0,
+                           errors=0, fatal=0, retries=0)
+
+    # -- timeout ------------------------------------------------------------------
+    def policy(self) -> TimeoutPolicy:
+        return replace(self._rule, walls=tuple(self.walls))
+
+    @property
+    def timeout(self) -> float:
+        """The simulation timeout in force [s]."""
+        return self.policy().timeout()
+
+    def _note_timeout(self) -> None:
+        t = self.timeout
+        if abs(t - self._announced) <= 0.2 * self._announced:
+            return
+        med = float(np.median(self.walls))
+        self.changes.append({"call": self.counts["calls"], "timeout_s": t, "median_healthy_s": med,
+                             "healthy_runs": self.n_healthy})
+        log.info("%s: simulation timeout now %.3g s (%g x the median %.3g s of %d healthy runs, floor %g s, "
+                 "configured %g s)", self.label, t, self._rule.multiple, med, self.n_healthy, self._rule.floor,
+                 self._rule.configured)
+        self._announced = t
+
+    # -- planning -----------------------------------------------------------------
+    def _far(self, p: np.ndarray, q: np.ndarray) -> bool:
+        return p.size > 0 and float(np.max(np.abs(p - q) / self.scales)) >= self.retry_distance
+
+    def plan(self, tasks, p, n_signals: int):
+        """Which tasks to simulate; returns (indices to run, results with the skipped ones filled)."""
+        self.counts["calls"] += 1
+        p = np.asarray(p, float)
+        run, results = [], [None] * len(tasks)
+        for k, task in enumerate(tasks):
+            e = self.entries.get(point_key(task))
+            if e is None or not e.active:
+                run.append(k)
+            elif not e.retried and self._far(p, e.p):
+                self._retry(e, p)
+                run.append(k)
+            else:
+                e.skipped += 1
+                results[k] = self._skipped(e, task, n_signals)
+        self.counts["points_simulated"] += len(run)
+        self.counts["points_skipped"] += len(tasks) - len(run)
+        return run, results
+
+    def _retry(self, e: QuarantineEntry, p: np.ndarray) -> None:
+        e.retried, e.retry_call = True, self.counts["calls"]
+        self.counts["retries"] += 1
+        moved = np.abs(p - e.p) / self.scales
+        j = int(np.argmax(moved))
+        log.info("%s: retrying the quarantined point %s once (%s moved %.3g scales from where it failed)",
+                 self.label, _conditions_text(e.conditions), self.names[j], moved[j])
+
+    def _skipped(self, e: QuarantineEntry, task: PointTask, n_signals: int) -> PointResult:
+        verb = _FAULT_VERBS[e.fault]
+        retry = ("retried once, failed again" if e.retry_outcome == "failed again" else
+                 "failed again after its release" if e.retried else
+                 f"one retry when a parameter moves >= {self.retry_distance:g} scale")
+        msg = (f"quarantined, not simulated: the {e.run} {verb} at this operating point in model call {e.call} "
+               f"({retry}): {e.message}")
+        return PointResult(task.index, RunOutcome.failed(n_signals, e.status, msg, fault="quarantined"),
+                           [None] * len(task.perturbations))
+
+    # -- recording ----------------------------------------------------------------
+    def record(self, tasks, results, ran, p, conditions) -> None:
+        """Learn from the results of the simulated tasks (``ran``: their indices)."""
+        p = np.asarray(p, float)
+        for k in ran:
+            self._record_point(k, tasks[k], results[k], p, conditions)
+        self._note_timeout()
+
+    def _record_point(self, k: int, task: PointTask, r: PointResult, p, conditions) -> None:
+        runs = [r.base, *r.perturbations]
+        for o in r.outcomes():
+            key = _FAULT_COUNTS.get(o.fault)
+            if key:
+                self.counts[key] += 1
+        if r.base is not None and r.base.ok and task.start_state is None:
+            self.walls.append(r.base.wall - r.base.instantiation)
+            self.n_healthy += 1
+        where = {f: float(getattr(conditions, f)[k]) for f in CONDITION_FIELDS}
+        hit = next((j for j, o in enumerate(runs) if o is not None and o.fault in QUARANTINE_FAULTS), None)
+        e = self.entries.get(point_key(task))
+        if hit is not None:
+            self._quarantine(k, task, runs[hit], hit - 1, p, where, r.timeout)
+        elif e is not None and e.active:
+            e.active, e.retry_outcome = False, "recovered"
+            log.info("%s: the quarantined point %s simulated again without fault: released", self.label,
+                     _conditions_text(e.conditions))
+        err = next((j for j, o in enumerate(runs) if o is not None and o.fault in ("error", "fatal")), None)
+        if err is not None:
+            self._error(task, runs[err], err - 1, where)
+
+    def _quarantine(self, k, task, o: RunOutcome, j: int, p, where: dict, timeout) -> None:
+        key = point_key(task)
+        e = self.entries.get(key)
+        call = self.counts["calls"]
+        if e is None:
+            e = self.entries[key] = QuarantineEntry(k, where, o.status, o.fault, _run_name(j), o.message, p.copy(),
+                                                    call, timeout)
+        else:
+            e.faults += 1
+            e.status, e.fault, e.run, e.message, e.p, e.call, e.timeout = (o.status, o.fault, _run_name(j),
+                                                                           o.message, p.copy(), call, timeout)
+            e.active = True
+            if e.retry_call == call:
+                e.retry_outcome = "failed again"
+        log.warning("%s: operating point %s quarantined: the %s %s (%s); not simulated again%s", self.label,
+                    _conditions_text(where), e.run, _FAULT_VERBS[o.fault],
+                    o.message, "" if e.retried else f" unless a parameter moves >= {self.retry_distance:g} scale")
+
+    def _error(self, task, o: RunOutcome, j: int, where: dict) -> None:
+        key = point_key(task)
+        e = self.errors.setdefault(key, {"conditions": where, "count": 0})
+        e.update(count=e["count"] + 1, status=int(o.status), status_name=Status(o.status).name, fault=o.fault,
+                 run=_run_name(j), message=o.message, call=self.counts["calls"])
+
+    # -- report ---------------------------------------------------------------------
+    def summary(self) -> dict:
+        """Plain dict (JSON-able) of the timeout in force, quarantined points, errors and counts."""
+        med = float(np.median(self.walls)) if self.walls else None
+        r = self._rule
+        return {
+            "timeout": {"configured_s": r.configured, "start_timeout_s": r.start_timeout, "multiple": r.multiple,
+                        "floor_s": r.floor, "in_force_s": self.timeout, "median_healthy_s": med,
+                        "healthy_runs": self.n_healthy, "changes": list(self.changes)},
+            "quarantine": [e.as_dict() for e in self.entries.values()],
+            "errors": [dict(e) for e in self.errors.values()],
+            "counts": dict(self.counts),
+            "rules": {"quarantined_faults": list(QUARANTINE_FAULTS), "retry_distance_scales": self.retry_distance,
+                      "retries_per_point": 1},
+        }
+
+
+def _conditions_text(conditions: dict) -> str:
+    return "(" + ", ".join(f"{k} {v:g}" for k, v in conditions.items()) + ")"
 
 
 # ----------------------------------------------------------------------------- per-process cache
 _WORKERS: dict = {}
 
 
-def worker_for(plan: SimulationPlan, isolate: bool = True, timeout: float = 60.0):
-    """The worker of this process for ``plan`` (created once, reused by later tasks)."""
-    key = (os.getpid(), plan.key, isolate, float(timeout))
+def worker_for(plan: SimulationPlan, isolate: bool = True, timeout=60.0):
+    """The worker of this process for ``plan`` (created once, reused by later tasks).
+
+    ``timeout`` (float [s] or :class:`TimeoutPolicy`) is handed to the worker at every call:
+    a changed timeout does not start another process.
+    """
+    key = (os.getpid(), plan.key, isolate)
     w = _WORKERS.get(key)
     if w is None:
         for k in [k for k in _WORKERS if k[0] != os.getpid()]:   # inherited through fork: not ours
             _WORKERS.pop(k)
         w = WorkerProcess(plan, timeout) if isolate else Simulator(plan)
         _WORKERS[key] = w
+    elif isolate:
+        w.set_policy(timeout)
     return w
 
 
@@ -834,7 +1279,8 @@ def close_workers(plan_key: str | None = None) -> None:
 
 
 def run_point(job) -> PointResult:
-    """Executor task: ``job = (plan, task, isolate, timeout)`` -> :class:`PointResult`."""
+    """Executor task: ``job = (plan, task, isolate, timeout)`` -> :class:`PointResult`
+    (``timeout``: float [s] or :class:`TimeoutPolicy`)."""
     plan, task, isolate, timeout = job
     return worker_for(plan, isolate, timeout).run_point(task)
 
