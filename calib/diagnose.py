@@ -23,6 +23,7 @@ from calib.errors import CalibError, InputError
 from calib.logs import add_output_arguments, say
 from calib.tomlfile import read_toml
 from calib.measurements import read_measurements
+from calib.setup_statement import statement, statement_lines
 
 CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis", "executor")
 DEFAULT_GRID = {"alpha_nodes_deg": "auto", "eta_nodes": [0.25, 0.5, 0.75, 1.0]}
@@ -54,7 +55,7 @@ def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
 
 
 def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
-                 resume: bool = False, history: bool = True, force: bool = False):
+                 resume: bool = False, history: bool = True, force: bool = False, strict_units: bool = False):
     """Run the discrepancy workflow from the command line's arguments; returns the Diagnosis.
 
     Parameters
@@ -64,6 +65,9 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     force : bool
         Diagnose even when the unit check finds a unit factor that explains the data
         (``--force``, or ``[calibration] force = true``); the report says what was overridden.
+    strict_units : bool
+        Also stop when the nominal model misses the data and no unit factor explains it
+        (``--strict-units``, or ``[calibration] strict_units = true``).
     printer : callable(str), optional
         Receives the progress lines (default: logged under ``calib.diagnose`` and printed
         unless a command console is active, :func:`calib.logs.say`).
@@ -114,6 +118,9 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
             _check_table(wf[key], key, src)
     setup = prepare(wf)
     meas = _fill_conditions(meas, setup)
+    set_up = statement(setup, wf, meas)
+    for line in statement_lines(set_up):
+        printer(f"[calib diagnose] set-up in force: {line}")
     grid = setup.grid(meas.conditions)
     hist = None
     if history or resume:
@@ -138,7 +145,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         return recorded(model, hist, label, chunk, progress=progress_line)
 
     try:
-        unit_notes = _unit_check(setup, family, meas, wrap, data, force or setup.force, printer)
+        unit_notes = _unit_check(setup, family, meas, wrap, data, force or setup.force,
+                                 strict_units or setup.strict_units, printer)
         diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
                         progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
                         wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
@@ -148,6 +156,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         if executor is not None:
             executor.close()
     diag.notes.extend(f"{key}: {text}" for key, text in unit_notes.items())
+    diag.setup = set_up
     if diag.failure:
         printer(f"[calib diagnose] stopped early: {diag.failure}")
     paths = write_diagnosis(diag, out)
@@ -198,7 +207,7 @@ def _select_channels(meas, channels, src: str):
     return meas.select_channels(channels)
 
 
-def _unit_check(setup, family, meas, wrap, data: str, force: bool, printer) -> dict:
+def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool, printer) -> dict:
     """The unit check of ``calib run`` on the nominal model (same messages); its notes for the report.
 
     Raises
@@ -216,7 +225,7 @@ def _unit_check(setup, family, meas, wrap, data: str, force: bool, printer) -> d
                  "unit check")
     p = np.array([q.nominal for q in model.parameters], float)
     _, notes = apply_unit_check(model, p, meas, sigma=setup.calibration.get("sigma"), force=force,
-                                strict=setup.strict_units, source=str(data), printer=printer,
+                                strict=strict, source=str(data), printer=printer,
                                 prefix="[calib diagnose]", model_units=setup.model_units())
     return notes
 
@@ -256,6 +265,8 @@ def add_diagnose_arguments(parser) -> None:
     parser.add_argument("--force", action="store_true", help="diagnose even when the unit check suspects a unit "
                         "mistake in the measurements (the report says so); a resumed diagnosis keeps the --force "
                         "it started with")
+    parser.add_argument("--strict-units", action="store_true", help="also stop when the nominal model misses the "
+                        "data and no unit factor explains it (default: a loud warning, then diagnose)")
     add_output_arguments(parser, "also print every model call (the log file DIR/calib.log always has them)")
 
 
@@ -284,7 +295,7 @@ def diagnose_from_args(args) -> int:
     with command_logging(out, args.verbose, args.quiet):
         try:
             run_diagnose(rotor, data, out, config, resume=args.resume is not None, history=not args.no_history,
-                         force=force)
+                         force=force, strict_units=bool(getattr(args, "strict_units", False)))
         except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
             log.debug(f"calib: error: {exc}", exc_info=True)
             raise

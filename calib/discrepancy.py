@@ -200,6 +200,7 @@ class Diagnosis:
     wall_time: float = 0.0
     notes: list = field(default_factory=list)
     failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
+    setup: list = field(default_factory=list)   # calib.setup_statement.SetupItem: the set-up in force
 
     @property
     def candidates(self) -> list:
@@ -213,7 +214,7 @@ class Diagnosis:
                             "candidates": [c.to_dict() for c in r["candidates"]]} for r in self.rounds],
                 "before": self.before, "with_effects": self.with_effects, "after": self.after,
                 "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,
-                "failure": self.failure,
+                "failure": self.failure, "setup": [i.as_dict() for i in self.setup],
                 "localization": {"n_retained": self.localization.n_retained,
                                  "chi2_per_dof_after": self.localization.chi2_per_dof_after,
                                  "status": self.localization.status},

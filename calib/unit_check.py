@@ -73,7 +73,7 @@ CONDITION_FACTORS = {
 }
 
 #: How to override a stopped run (wired by the command line and the workflow).
-OVERRIDE_HINT = "to calibrate anyway, pass --force (workflow: [calibration] force = true)"
+OVERRIDE_HINT = "to go on anyway, pass --force (workflow or diagnose config: [calibration] force = true)"
 
 #: Finding kinds that stop the run unless forced: a unit factor or a sign explains them, or the
 #: ratio is beyond anything a polar correction gives (``gross``).

@@ -252,3 +252,18 @@ def test_fluid_density_fills_a_table_without_air_density(tmp_path, lift_data, mo
     with pytest.raises(Stop):
         calib.diagnose.run_diagnose("nrel5mw", str(data), str(tmp_path / "out"), str(cfg), printer=lambda s: None)
     np.testing.assert_allclose(seen["density"], 1.1, rtol=1e-12)
+
+
+def test_diagnose_states_the_set_up_in_force(tmp_path, lift_data):
+    """The tilt and precone of the embedded rotor, applied by default, are said with their origin in
+    diagnosis.json and the report (the set-up that was silent on data from an axisymmetric rotor)."""
+    text = CONFIG.replace("use_tilt = false", "use_tilt = false\ntilt = 0.0") + \
+        'candidates = ["pitch_offset"]\nmax_effects = 1\n'
+    code, out = _diagnose(tmp_path, lift_data, text)
+    assert code == 0
+    stated = {i["quantity"]: (i["value"], i["origin"]) for i in json.loads((out / "diagnosis.json").read_text())["setup"]}
+    assert stated["tilt"] == ("0 deg", "[model] tilt")
+    assert stated["precone"] == ("2.5 deg", "embedded rotor 'nrel5mw'")
+    assert stated["tilt in the BEM"] == ("ignored (use_tilt = false)", "[model] use_tilt")
+    assert "Set-up in force" in (out / "report.html").read_text()
+    assert "set-up in force: precone: 2.5 deg" in (out / "calib.log").read_text()

@@ -165,6 +165,9 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
              f"{d.localization.chi2_per_dof_after:.3g}.</p>"]
     if d.notes:
         body.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in d.notes) + "</ul>")
+    if d.setup:
+        from calib.setup_statement import statement_html
+        body.append(statement_html(d.setup))
     # long text cells (fitted parameters) may break inside words, a candidate after its ":"
     # (<wbr>); a table still too wide scrolls inside its own box, never the page (checked at
     # 1280 px in tests/test_browser_report.py)
