@@ -271,8 +271,11 @@ def _fit_task(task: dict) -> dict:
     meas = task["measurements"]
     st = task["settings"]
     # a candidate's fit serves the comparison of candidates only: no prior check
-    res = Calibrator(model, meas, dataclasses.replace(st, prior_check=False), name=task["name"]).run()
-    ev = model.evaluate(res.p_hat, meas.conditions)
+    try:
+        res = Calibrator(model, meas, dataclasses.replace(st, prior_check=False), name=task["name"]).run()
+        ev = model.evaluate(res.p_hat, meas.conditions)
+    except CalibError as exc:        # this candidate failed; the others are still compared
+        return {"error": f"{type(exc).__name__}: {exc}"}
     names = [c.name for c in model.channels]
     values = ev.values[:, [names.index(c) for c in meas.channels]]
     return {"result": res, "values": values}
@@ -591,7 +594,14 @@ class _Namer:
         self.say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
         outs = self.executor.map(_fit_task, tasks, self.fit_progress)
         alpha = self.dset.significance / max(len(self.remaining), 1)
-        return [self._score(lab, out, effects[lab], alpha) for lab, out in zip(labels, outs)]
+        failed = [(lab, out["error"]) for lab, out in zip(labels, outs) if "error" in out]
+        for lab, message in failed:
+            self.notes.append(f"round {round_no + 1}: the fit of candidate {lab} failed and it is left out of the "
+                              f"comparison: {message}")
+            self.say(f"name: {self.notes[-1]}")
+        if len(failed) == len(labels):
+            raise CalibError(f"every candidate fit of round {round_no + 1} failed (first: {failed[0][1]})")
+        return [self._score(lab, out, effects[lab], alpha) for lab, out in zip(labels, outs) if "error" not in out]
 
     def _score(self, label: str, out: dict, effect, alpha: float) -> CandidateFit:
         res, values = out["result"], out["values"]

@@ -267,3 +267,26 @@ def test_diagnose_states_the_set_up_in_force(tmp_path, lift_data):
     assert stated["tilt in the BEM"] == ("ignored (use_tilt = false)", "[model] use_tilt")
     assert "Set-up in force" in (out / "report.html").read_text()
     assert "set-up in force: precone: 2.5 deg" in (out / "calib.log").read_text()
+
+
+def test_a_failing_candidate_fit_leaves_the_others_compared(tmp_path, lift_data, monkeypatch):
+    """One candidate whose fit raises is left out with a note; the round still names from the rest."""
+    import calib.discrepancy as D
+    from calib.errors import ModelError
+
+    real = D.Calibrator
+
+    class FailsForPitch(real):
+        def run(self):
+            if self.name == "pitch_offset":
+                raise ModelError("simulated solver failure")
+            return super().run()
+
+    monkeypatch.setattr(D, "Calibrator", FailsForPitch)
+    code, out = _diagnose(tmp_path, lift_data, CONFIG + 'candidates = ["pitch_offset", "lift_offset"]\n'
+                                                       'max_effects = 1\n')
+    assert code == 0
+    d = json.loads((out / "diagnosis.json").read_text())
+    assert [c["name"] for c in d["rounds"][0]["candidates"]] == ["lift_offset"]
+    assert any("candidate pitch_offset failed" in n and "simulated solver failure" in n for n in d["notes"])
+    assert d["effect"] == "lift_offset" and not d["failure"]
