@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from calib.models import fmu_worker as fw
+from calib.models.fmu_faults import FaultLedger
 from calib.models.fmu_model import FmuModel
 from calib.types import OperatingConditions, Status
 
@@ -242,7 +243,7 @@ def test_quarantine_is_keyed_by_the_operating_point_and_retried_once_when_far():
     """A point that crashed is skipped later; points sharing its wind speed, rotor speed or
     pitch but not all of them are simulated; an error is never quarantined; the retry comes
     at one parameter scale (not 0.99), once."""
-    ledger = fw.FaultLedger(["a", "b"], [0.1, 2.0], 60.0)
+    ledger = FaultLedger(["a", "b"], [0.1, 2.0], 60.0)
     points = [(8.0, 12.0, 0.0), (8.0, 12.0, 1.0), (8.0, 13.0, 0.0), (9.0, 12.0, 0.0), (10.0, 14.0, 0.0)]
     p0 = np.array([1.0, 0.0])
     run, _ = _ledger_call(ledger, points, p0, {0: "crash", 4: "error"})
@@ -266,7 +267,7 @@ def test_quarantine_is_keyed_by_the_operating_point_and_retried_once_when_far():
 
 
 def test_a_retry_that_succeeds_releases_the_point():
-    ledger = fw.FaultLedger(["a"], [0.1], 60.0)
+    ledger = FaultLedger(["a"], [0.1], 60.0)
     points = [(8.0, 12.0, 0.0), (9.0, 12.0, 0.0)]
     _ledger_call(ledger, points, [1.0], {0: "crash"})
     run, _ = _ledger_call(ledger, points, [1.2])

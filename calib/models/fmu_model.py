@@ -18,7 +18,7 @@ instance). Simulations run through :func:`calib.models.fmu_worker.run_point` on 
 model's executor (serial by default), in worker processes with a per-simulation timeout
 that adapts to the measured cost of healthy runs; a point that crashed or hung is
 quarantined by the model (planned here, whatever the executor): see
-:class:`calib.models.fmu_worker.FaultLedger` and :meth:`FmuModel.fault_summary`.
+:class:`calib.models.fmu_faults.FaultLedger` and :meth:`FmuModel.fault_summary`.
 
 Steady outputs: settle ``settle_revolutions``, then average ``average_revolutions`` whole
 revolutions (``[steady]`` of the mapping); the status of a point says whether the two
@@ -62,6 +62,7 @@ from calib.errors import InputError, ModelError
 from calib.measurements import sha256_of
 from calib.models import fmu_worker as fw
 from calib.models.fmu_mapping import Mapping, load_mapping
+from calib.models.fmu_faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditions, Parameter, Status,
                          check_parameter_vector)
@@ -265,7 +266,7 @@ class FmuModel:
     Faults: a point whose simulation crashed the FMU process, hung or got a fatal status is
     quarantined, not simulated again by later calls, retried once at most when a parameter
     has moved one scale from where it failed; an error status is not quarantined
-    (:class:`calib.models.fmu_worker.FaultLedger` says why). :meth:`fault_summary` reports
+    (:class:`calib.models.fmu_faults.FaultLedger` says why). :meth:`fault_summary` reports
     the timeout in force, the quarantined points and the errors.
     """
 
@@ -350,7 +351,7 @@ class FmuModel:
         self._build_channels(channels)
         self._plan = self._make_plan()
         self.start_timeout = float(start_timeout)
-        self._faults = fw.FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
+        self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
                                       self.timeout, self.start_timeout, self.fmu_path.name)
 
     # ------------------------------------------------------------------ load-time checks
