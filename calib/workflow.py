@@ -713,8 +713,8 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
-        model = recorded(setup.model(grid, stage["channels"], executor, effects), hist, f"stage {k + 1}: {name}", chunk,
-                         progress_line)
+        raw_model = setup.model(grid, stage["channels"], executor, effects)
+        model = recorded(raw_model, hist, f"stage {k + 1}: {name}", chunk, progress_line)
         st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
                                                                             setup.calibration_settings.retain))
         st.validate(src, f"stages[{k}].")
@@ -741,6 +741,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         res.inputs[src] = sha256_of(src)
         res.inputs["workflow"] = cfg["name"]
         res.checks.update(unit_notes)
+        res.checks.update(_fault_checks(raw_model))
         if truth_p is not None:
             res.checks.update(truth_checks(model, res, cfg["truth"]))
         if diag is not None:
@@ -800,6 +801,20 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
                           checks={o.name: o.result.checks for o in outcomes})
     echo(f"[calib run] report: {report}")
     return outcomes
+
+
+def _fault_checks(model) -> dict[str, str]:
+    """An FMU stage's report lines on its simulations' faults: the timeout in force, the points
+    quarantined and those with an error status (:func:`calib.models.fmu_faults.fault_sentences`);
+    nothing for the native BEM."""
+    from calib.models.bem_model import BemModel
+
+    if isinstance(model, BemModel):
+        return {}
+    from calib.models.fmu_faults import fault_sentences
+    from calib.models.fmu_model import FmuModel
+
+    return fault_sentences(model.fault_summary()) if isinstance(model, FmuModel) else {}
 
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:

@@ -302,3 +302,45 @@ def test_quarantine_with_a_process_executor(faulty_fmu, tmp_path, monkeypatch):
     for ev in evs:
         np.testing.assert_allclose(ev.values[~bad], ref.values[~bad], rtol=1e-12)
         assert np.all(ev.status[bad] != Status.CONVERGED) and np.all(ev.status[~bad] == Status.CONVERGED)
+
+
+# ------------------------------------------------------------------ the run's report
+@pytest.mark.slow
+def test_calib_run_reports_the_timeout_and_the_quarantined_points(faulty_fmu, tmp_path):
+    """calib run on the faulty FMU (crash and hang on; 3 s timeout) finishes, and the stage's
+    report lines state the timeout in force and each quarantined point with its status."""
+    from calib.cli import main
+    from calib.measurements import synthesize
+    from calib.result import load_result
+
+    clean = model(faulty_fmu, faults=False)
+    truth = np.array([q.nominal for q in clean.parameters]) * [1.05, 0.97, 1.0, 1.0]
+    synthesize(clean, truth, conditions(), relative_sigma={"power": 0.01, "thrust": 0.01},
+               seed=3).write_csv(tmp_path / "field.csv")
+    clean.close()
+    (tmp_path / "faulty.toml").write_text(f"""name = "faulty FMU"
+[model]
+kind = "fmu"
+fmu = "{faulty_fmu.as_posix()}"
+mapping = "{MAPPING.as_posix()}"
+parameters = ["cp_gain", "ct_gain"]
+settings = {{ crash_wind_speed = {FAULTS['crash']}, hang_wind_speed = {FAULTS['hang']} }}
+timeout = 3.0
+[measurements]
+file = "field.csv"
+[calibration]
+noise = "known"
+[[stages]]
+name = "loads"
+channels = ["power", "thrust"]
+retain = "all"
+""")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["run", str(tmp_path / "faulty.toml"), "--out", str(tmp_path / "out"), "-q"]) == 0
+    checks = load_result(tmp_path / "out" / "stage1_loads").checks
+    assert "s in force" in checks["FMU simulation timeout"] and "configured 3 s" in checks["FMU simulation timeout"]
+    quarantined = checks["FMU points quarantined"]
+    assert f"wind_speed {FAULTS['crash']:g}" in quarantined and f"wind_speed {FAULTS['hang']:g}" in quarantined
+    assert "TIMEOUT" in quarantined
+    assert "FMU points quarantined" in (tmp_path / "out" / "report.html").read_text()

@@ -255,3 +255,29 @@ class FaultLedger:
 
 def _conditions_text(conditions: dict) -> str:
     return "(" + ", ".join(f"{k} {v:g}" for k, v in conditions.items()) + ")"
+
+
+def fault_sentences(summary: dict) -> dict[str, str]:
+    """The report's lines of :meth:`FaultLedger.summary`: {label: text}.
+
+    Always the timeout in force (how it follows from the healthy runs); then, when any
+    point faulted, the quarantined points and the points with an error status.
+    """
+    t = summary["timeout"]
+    med = t["median_healthy_s"]
+    rule = (f"{t['multiple']:g}× the median healthy simulation ({med:.3g} s over {t['healthy_runs']} runs), at least "
+            f"{t['floor_s']:g} s, at most the configured {t['configured_s']:g} s" if med is not None else
+            f"the configured {t['configured_s']:g} s (no healthy simulation measured yet)")
+    out = {"FMU simulation timeout": f"{t['in_force_s']:.3g} s in force: {rule}; instantiation "
+                                     f"{t['start_timeout_s']:g} s"}
+    quarantined = summary["quarantine"]
+    if quarantined:
+        out["FMU points quarantined"] = "; ".join(
+            f"{_conditions_text(e['conditions'])} {e['status_name']} ({e['fault']} in the {e['run']}), simulated "
+            f"{e['faults']}× and skipped {e['skipped']}×" + (f", retried: {e['retry_outcome']}" if e["retried"] else "")
+            for e in quarantined)
+    if summary["errors"]:
+        out["FMU points with an error status"] = "; ".join(
+            f"{_conditions_text(e['conditions'])} {e['status_name']} {e['count']}× ({e['message'][:80]})"
+            for e in summary["errors"])
+    return out
