@@ -21,6 +21,8 @@ Ratios printed (and stored):
 - Jacobian time / one evaluation time (target <= 3);
 - max |ΔC_P| between the native and CCBlade surfaces over the points where both
   converged (native mask: ``converged`` if returned, else finite ``cp``);
+- FMU faults (``bench_fmu_faults``): a calibration through an FMU with a crashing, a hanging
+  and an erroring point over the same calibration without the faults (target <= 3);
 - soak (``bench_soak``): the largest resident-memory growth after warm-up over the
   processes of 2000 FMU evaluations, in one worker and through Dask (target < 10 %).
 
@@ -186,6 +188,19 @@ def compute_ratios(results: dict) -> list[dict]:
     rows.append({"name": "max |ΔC_P| native vs CCBlade", "value": value, "detail": detail,
                  "target": "", "met": None})
 
+    faults = results.get("bench_fmu_faults", {})
+    ratio = _num(faults.get("ratio_faulty_over_clean"))
+    rows.append({
+        "name": "FMU faults: calibration with a crashing, a hanging and an erroring point / without (time)",
+        "value": ratio,
+        "detail": (f"{_fmt(faults.get('faulty_total_s'))} s vs {_fmt(faults.get('clean_total_s'))} s at "
+                   f"{_fmt(1e3 * faults.get('step_cost_s', 0.0))} ms per FMU step; at the toy FMU's own speed "
+                   f"{_fmt(faults.get('natural_faulty_total_s'))} s vs {_fmt(faults.get('natural_clean_total_s'))} s "
+                   f"({_fmt(faults.get('natural_ratio_faulty_over_clean'))}x)" if ratio is not None
+                   else "needs bench_fmu_faults"),
+        "target": "<= 3", "met": (ratio <= 3.0) if ratio is not None else None,
+    })
+
     soak = results.get("bench_soak", {})
     growth = [_num(soak.get(f"{k}_max_rss_growth_percent")) for k in ("one_worker", "dask")]
     growth = [g for g in growth if g is not None]
@@ -275,7 +290,7 @@ def main(argv=None) -> int:
         print(f"running {name} ...", flush=True)
         results[name], seconds[name] = run_module(name, kwargs)
     # a suite states only the ratios of its own modules
-    needs = {"soak": "bench_soak"}
+    needs = {"soak": "bench_soak", "FMU faults": "bench_fmu_faults"}
     ratios = [r for r in compute_ratios(results)
               if needs.get(r["name"].split(":")[0], "bench_bem") in order]
     print_report(order, results, seconds, ratios)
