@@ -10,8 +10,6 @@ fault, so the simulations of the faulty points are counted outside calib.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 import warnings
 from collections import Counter
@@ -24,6 +22,7 @@ from calib.models import fmu_worker as fw
 from calib.models.fmu_faults import FaultLedger
 from calib.models.fmu_model import FmuModel
 from calib.types import OperatingConditions, Status
+from pythonfmu_export import export_fmu
 
 DATA = Path(__file__).parent / "data" / "fmu"
 MAPPING = DATA / "faulty_rotor_mapping.toml"
@@ -35,11 +34,7 @@ SETTINGS = {f"{kind}_wind_speed": v for kind, v in FAULTS.items()}
 @pytest.fixture(scope="module")
 def faulty_fmu(tmp_path_factory):
     out = tmp_path_factory.mktemp("faulty_fmu")
-    cmd = [sys.executable, "-m", "pythonfmu", "build", "-f", str(DATA / "FaultyRotor.py"), "--handle-state",
-           "--serialize-state", "-d", str(out)]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    return out / "FaultyRotor.fmu"
+    return export_fmu("FaultyRotor", out)
 
 
 def conditions(wind=WIND) -> OperatingConditions:

@@ -4,8 +4,6 @@ is calibrated through its mapping file like any model, and recovers its known pa
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +14,7 @@ from calib.measurements import synthesize
 from calib.models.base import FieldModel
 from calib.models.fmu_model import FmuModel
 from calib.types import OperatingConditions
+from pythonfmu_export import export_fmu
 
 DATA = Path(__file__).parent / "data" / "fmu"
 
@@ -24,11 +23,7 @@ DATA = Path(__file__).parent / "data" / "fmu"
 def generic_fmu(tmp_path_factory):
     """Export the FMU with PythonFMU's command line (a missing PythonFMU fails the test)."""
     out = tmp_path_factory.mktemp("pythonfmu")
-    cmd = [sys.executable, "-m", "pythonfmu", "build", "-f", str(DATA / "GenericRotor.py"), "--handle-state",
-           "--serialize-state", "-d", str(out)]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    return out / "GenericRotor.fmu"
+    return export_fmu("GenericRotor", out)
 
 
 def test_generic_fmu_from_another_exporter_recovers_its_parameters(generic_fmu):

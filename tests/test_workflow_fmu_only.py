@@ -8,8 +8,6 @@ the FMU's mapping, not the native BEM, so an output the BEM does not know is a c
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +20,7 @@ from calib.models.fmu_model import FmuModel
 from calib.result import load_result
 from calib.types import OperatingConditions
 from calib.workflow import load_workflow, prepare
+from pythonfmu_export import export_fmu
 
 DATA = Path(__file__).parent / "data" / "fmu"
 TRUTH = {"cp_gain": 1.08, "ct_gain": 0.94, "pitch_bias": 1.5}
@@ -33,16 +32,13 @@ pytestmark = pytest.mark.filterwarnings("ignore:.*InitialUnknowns")
 def campaign(tmp_path_factory):
     """The FMU, a mapping whose power output is called ``shaft_power``, and 18 measured points."""
     out = tmp_path_factory.mktemp("fmu-only")
-    cmd = [sys.executable, "-m", "pythonfmu", "build", "-f", str(DATA / "GenericRotor.py"), "--handle-state",
-           "--serialize-state", "-d", str(out)]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
+    fmu = export_fmu("GenericRotor", out)
     mapping = (DATA / "generic_rotor_mapping.toml").read_text().replace(
         'power = { variable = "p_kw", unit = "kW", scale = 1000.0 }',
         'shaft_power = { variable = "p_kw", unit = "kW", scale = 1000.0, channel_unit = "W" }')
     assert "shaft_power" in mapping
     (out / "mapping.toml").write_text(mapping)
-    model = FmuModel(out / "GenericRotor.fmu", out / "mapping.toml", ["shaft_power", "thrust"])
+    model = FmuModel(fmu, out / "mapping.toml", ["shaft_power", "thrust"])
     wind, rpm, pitch = np.meshgrid([6.0, 8.0, 10.0], [12.0, 16.0], [0.0, 6.0, 12.0], indexing="ij")
     cond = OperatingConditions(wind.ravel(), rpm.ravel(), pitch.ravel())
     meas = synthesize(model, np.array(list(TRUTH.values())), cond,
