@@ -78,6 +78,13 @@ NAMEABLE = tuple(n for n in EFFECTS if n != "correction_field")
 AT_BOUND_TOLERANCE = 1e-3
 
 
+#: Noise models whose σ the calibration estimates from the residuals (no global test against it).
+ESTIMATED_NOISE = ("ml", "relative_ml")
+
+#: Relative χ² increase a recalibration may show before it is rejected (round-off of the sums) [-].
+RECALIBRATION_SLACK = 1e-9
+
+
 @dataclass(frozen=True)
 class DiagnosisSettings:
     """Settings of :func:`diagnose`.
@@ -458,7 +465,12 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand)
     namer = _Namer(family, meas, y0, before["chi2"], (loc.model_after - y0) / sigma, dset, known, executor, wrap,
                    fit_progress, say)
-    namer.run(candidates)
+    # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
+    # localization's residuals, so the nominal model would pass against it by construction
+    if cal.noise not in ESTIMATED_NOISE and before["p_value"] >= dset.significance:
+        namer.consistent(before)
+    else:
+        namer.run(candidates)
     effect, effects_named = namer.verdict()
     n_fit = family.n_parameters(namer.base_effects)
     with_effects = gap(meas.values, namer.base_values, sigma, channels, n_fit)
@@ -488,6 +500,14 @@ def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, s
                            name="recalibration").run()
     except CalibError as exc:
         namer.fail(f"the recalibration failed: {exc}; the figures after it are those with the named effect(s)")
+        return None
+    chi2 = gap(meas.values, recal.model_after, meas.sigma, list(meas.channels))["chi2"]
+    if not chi2 <= namer.base_chi2 * (1 + RECALIBRATION_SLACK):
+        # the nominal field is inside the search space: a larger χ² is an optimizer that ended
+        # worse than where it started, never a better model
+        namer.notes.append(f"the recalibration ended with χ² {chi2:.6g} above the {namer.base_chi2:.6g} of the model "
+                           f"with {', '.join(effects_named) or 'no effect'} ({recal.status}); it is not kept")
+        say(f"recalibrate: {namer.notes[-1]}")
         return None
     return recal
 
@@ -526,6 +546,16 @@ class _Namer:
                     round_no, f"what rounds 1-{round_no} found stands")
                 self.fail(f"naming round {round_no + 1} failed: {exc}; {before}")
                 break
+
+    def consistent(self, before: dict) -> None:
+        """The nominal model passes the global χ² test: nothing is named (a likelihood ratio
+        that is significant on top of a model that already fits is code-to-code residue, not
+        an effect the data demand)."""
+        reason = (f"the nominal model is consistent with the noise (χ²/dof {before['chi2_per_dof']:.3g} over "
+                  f"{before['dof']} residuals, p = {before['p_value']:.2g} ≥ significance {self.dset.significance:g}): "
+                  "no effect is looked for")
+        self.rounds.append({"base": [], "candidates": [], "verdict": "none", "reason": reason})
+        self.say(f"name: {reason}")
 
     def fail(self, message: str) -> None:
         self.failures.append(message)

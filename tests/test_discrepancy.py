@@ -202,3 +202,42 @@ def test_a_candidate_that_cannot_act_on_the_rotor_is_reported_not_applicable():
                  DiagnosisSettings(candidates=("reynolds_number", "pitch_offset"), recalibrate=False))
     assert d.effect == "pitch_offset"
     assert any("reynolds_number not applicable" in n for n in d.notes)
+
+
+def test_a_nominal_model_that_passes_the_global_test_gets_no_effect():
+    """A 0.4 % wind-speed scale under 1 % noise (seed 9602): the nominal model passes the global χ²
+    test (p = 0.26), though the likelihood ratio of wind_speed_scale alone is significant. With
+    the stated noise the global test gates: `none`, no candidate fitted. The same data are given
+    the effect when the global test is set to fail them (significance above their p-value)."""
+    rotor = load_rotor("nrel5mw")
+    meas = hidden({"wind_speed_scale": {"wind_scale": 1.004}}, campaign(rotor), 9602)
+    cal = CalibrationSettings(cd_min=0.003, noise="known")
+    d = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False))
+    assert 0.01 < d.before["p_value"] < 0.3
+    assert d.effect == "none" and d.candidates == [] and d.rounds[0]["verdict"] == "none"
+    assert "consistent with the noise" in d.rounds[0]["reason"]
+    ungated = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False, significance=0.3))
+    assert ungated.effect == "wind_speed_scale"
+
+
+def test_a_recalibration_that_ends_above_its_start_is_not_kept(monkeypatch):
+    """The nominal field is inside the recalibration's search space: a recalibration that ends with
+    a larger χ² than the model with the named effect (forced here) is rejected with a note."""
+    import calib.discrepancy as D
+
+    real = D.Calibrator
+
+    class Worse(real):
+        def run(self):
+            res = super().run()
+            if self.name == "recalibration":
+                res.model_after = res.model_after * 1.05
+            return res
+
+    monkeypatch.setattr(D, "Calibrator", Worse)
+    rotor = load_rotor("nrel5mw")
+    d = run(hidden({"pitch_offset": TRUTH["pitch_offset"]}, campaign(rotor), 9603), candidates=("pitch_offset",),
+            max_effects=1)
+    assert d.effect == "pitch_offset" and d.recalibration is None
+    assert any("recalibration ended with χ²" in n and "not kept" in n for n in d.notes)
+    assert d.after["chi2"] == d.with_effects["chi2"]
