@@ -103,6 +103,12 @@ class DiagnosisSettings:
         Two significant candidates closer than this in BIC are not told apart ("ambiguous").
     recalibrate : bool
         Re-run the correction-field calibration on top of the named effects.
+    model_form_tolerance : float or dict
+        Relative model-form error allowed to the nominal model in the naming step [-]: a
+        number for every channel, or a table channel -> fraction (``"default"`` for the
+        others). It enters the naming step's noise, σ² + (tolerance · |y|)², and a candidate
+        is named only when its change of the outputs exceeds it somewhere (practical
+        significance, reported as an effect size). 0 leaves both out.
     """
 
     candidates: tuple | None = None
@@ -111,6 +117,15 @@ class DiagnosisSettings:
     significance: float = 0.01
     ambiguity_bic: float = 6.0
     recalibrate: bool = True
+    model_form_tolerance: float | dict = 0.0
+
+    def tolerance_of(self, channels: Sequence[str]) -> np.ndarray:
+        """The model-form tolerance of each channel [-] (see the class docstring)."""
+        tol = self.model_form_tolerance
+        if not isinstance(tol, dict):
+            return np.full(len(channels), float(tol))
+        group = {c: c.split("@")[0] for c in channels}      # cn@0.30 takes "cn" when given
+        return np.array([float(tol.get(c, tol.get(group[c], tol.get("default", 0.0)))) for c in channels])
 
     def validate(self, source: str = "DiagnosisSettings", prefix: str = "",
                  valid: Sequence[str] = NAMEABLE) -> "DiagnosisSettings":
@@ -133,6 +148,10 @@ class DiagnosisSettings:
         need(number(self.significance), "significance", "a number")
         need(number(self.ambiguity_bic), "ambiguity_bic", "a number")
         need(isinstance(self.recalibrate, bool), "recalibrate", "true or false")
+        tol = self.model_form_tolerance
+        values = list(tol.values()) if isinstance(tol, dict) else [tol]
+        need(all(number(v) and 0 <= v < 1 for v in values), "model_form_tolerance",
+             "a fraction in [0, 1) or a table channel -> fraction")
         names = self.candidates if self.candidates is not None else valid
         unknown = [c for c in names if c not in valid]
         if unknown:
@@ -167,6 +186,8 @@ class CandidateFit:
     model_values: np.ndarray | None = None
     effect: str = ""
     at_bound: list = field(default_factory=list)    # names of the parameters at a bound
+    effect_size: float = float("nan")   # largest relative change of an output [-] (effect_size())
+    effect_text: str = ""               # the same in words: "-2.1 % power at 7.3 m/s (tolerance 1 %)"
 
     def bound_phrase(self) -> str:
         """The parameters at a bound in words ("" when none): their value is the bound, not an estimate."""
@@ -231,6 +252,55 @@ class Diagnosis:
 
 
 # ----------------------------------------------------------------------------- figures of merit
+#: Points whose |output| is at least this fraction of the channel's largest count in effect sizes.
+EFFECT_SIZE_USABLE = 0.1
+
+
+def effect_size(values: np.ndarray, base: np.ndarray, tolerance: np.ndarray, channels: Sequence[str],
+                wind_speed: np.ndarray) -> tuple[float, str, bool]:
+    """How much a candidate changes the outputs, against the model-form tolerance.
+
+    Parameters
+    ----------
+    values, base : ndarray, shape (n_points, n_channels)
+        The outputs with the candidate and without it [channel units].
+    tolerance : ndarray, shape (n_channels,)
+        Relative model-form tolerance per channel [-].
+    channels : sequence of str
+    wind_speed : ndarray, shape (n_points,)
+        Named in the words [m/s].
+
+    Returns
+    -------
+    size : float
+        The largest relative change (values − base) / |base| over the points where |base|
+        is at least :data:`EFFECT_SIZE_USABLE` of the channel's largest [-], in the channel
+        where it is largest against the tolerance.
+    words : str
+        E.g. ``"-2.1 % power at 7.3 m/s (tolerance 1 %)"`` (the wind speed of that point).
+    exceeds : bool
+        Whether that change exceeds the channel's tolerance (always, with tolerance 0 and a
+        change).
+    """
+    best = (-1.0, 0.0, "", 0.0, np.nan)
+    for j, c in enumerate(channels):
+        b = np.abs(base[:, j])
+        ok = np.isfinite(values[:, j]) & np.isfinite(base[:, j]) & (b >= EFFECT_SIZE_USABLE * np.nanmax(b, initial=0))
+        ok &= b > 0
+        if not ok.any():
+            continue
+        rel = (values[ok, j] - base[ok, j]) / b[ok]
+        k = int(np.argmax(np.abs(rel)))
+        score = abs(rel[k]) / tolerance[j] if tolerance[j] > 0 else (np.inf if rel[k] != 0 else 0.0)
+        if score > best[0]:
+            best = (score, float(rel[k]), c, float(tolerance[j]), float(wind_speed[ok][k]))
+    score, rel, c, tol, v = best
+    if score < 0:
+        return float("nan"), "no usable point", False
+    words = f"{100 * rel:+.2g} % {c} at {v:.3g} m/s" + (f" (tolerance {100 * tol:.2g} %)" if tol else "")
+    return abs(rel), words, bool(score > 1.0)
+
+
 def gap(measured: np.ndarray, model: np.ndarray, sigma: np.ndarray, channels: Sequence[str], n_fitted: int = 0) -> dict:
     """χ², χ²/dof (dof = N − n_fitted), p-value and per-channel RMS of measured − model."""
     ok = np.all(np.isfinite(model), axis=1)
@@ -462,13 +532,17 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
     say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} (p = {before['p_value']:.2g})")
 
-    # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand)
-    namer = _Namer(family, meas, y0, before["chi2"], (loc.model_after - y0) / sigma, dset, known, executor, wrap,
-                   fit_progress, say)
+    # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand),
+    # against the noise plus the model-form tolerance
+    tol = dset.tolerance_of(channels)
+    meas_name = dataclasses.replace(meas, sigma=np.hypot(sigma, tol * np.abs(np.nan_to_num(y0))))
+    before_name = gap(meas.values, y0, meas_name.sigma, channels)
+    namer = _Namer(family, meas_name, y0, before_name["chi2"], (loc.model_after - y0) / meas_name.sigma, dset,
+                   known, executor, wrap, fit_progress, say, tol)
     # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
     # localization's residuals, so the nominal model would pass against it by construction
-    if cal.noise not in ESTIMATED_NOISE and before["p_value"] >= dset.significance:
-        namer.consistent(before)
+    if cal.noise not in ESTIMATED_NOISE and before_name["p_value"] >= dset.significance:
+        namer.consistent(before_name, within_tolerance=before["p_value"] < dset.significance)
     else:
         namer.run(candidates)
     effect, effects_named = namer.verdict()
@@ -502,10 +576,11 @@ def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, s
         namer.fail(f"the recalibration failed: {exc}; the figures after it are those with the named effect(s)")
         return None
     chi2 = gap(meas.values, recal.model_after, meas.sigma, list(meas.channels))["chi2"]
-    if not chi2 <= namer.base_chi2 * (1 + RECALIBRATION_SLACK):
+    start = gap(meas.values, namer.base_values, meas.sigma, list(meas.channels))["chi2"]
+    if not chi2 <= start * (1 + RECALIBRATION_SLACK):
         # the nominal field is inside the search space: a larger χ² is an optimizer that ended
         # worse than where it started, never a better model
-        namer.notes.append(f"the recalibration ended with χ² {chi2:.6g} above the {namer.base_chi2:.6g} of the model "
+        namer.notes.append(f"the recalibration ended with χ² {chi2:.6g} above the {start:.6g} of the model "
                            f"with {', '.join(effects_named) or 'no effect'} ({recal.status}); it is not kept")
         say(f"recalibrate: {namer.notes[-1]}")
         return None
@@ -521,7 +596,7 @@ class _Namer:
     """
 
     def __init__(self, family, meas, y0, chi2_nominal, field_change, dset, known, executor, wrap, fit_progress,
-                 say):
+                 say, tolerance=None):
         self.family, self.meas, self.y0, self.field_change = family, meas, y0, field_change
         self.dset, self.known, self.executor, self.wrap = dset, known, executor, wrap
         self.fit_progress, self.say = fit_progress, say
@@ -529,6 +604,7 @@ class _Namer:
         self.base_chi2, self.base_values = chi2_nominal, y0
         self.n_res = int(np.isfinite(y0).all(axis=1).sum() * y0.shape[1])
         self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
+        self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
 
     def run(self, candidates) -> None:
         self.remaining = list(candidates)
@@ -547,13 +623,15 @@ class _Namer:
                 self.fail(f"naming round {round_no + 1} failed: {exc}; {before}")
                 break
 
-    def consistent(self, before: dict) -> None:
-        """The nominal model passes the global χ² test: nothing is named (a likelihood ratio
-        that is significant on top of a model that already fits is code-to-code residue, not
-        an effect the data demand)."""
-        reason = (f"the nominal model is consistent with the noise (χ²/dof {before['chi2_per_dof']:.3g} over "
-                  f"{before['dof']} residuals, p = {before['p_value']:.2g} ≥ significance {self.dset.significance:g}): "
-                  "no effect is looked for")
+    def consistent(self, before: dict, within_tolerance: bool = False) -> None:
+        """The nominal model passes the global χ² test (noise plus model-form tolerance): nothing
+        is named (a likelihood ratio that is significant on top of a model that already fits is
+        code-to-code residue, not an effect the data demand)."""
+        what = ("within the model-form tolerance (it misses the noise alone, but not the noise plus the "
+                "tolerance)" if within_tolerance else "consistent with the noise")
+        reason = (f"the nominal model is {what} (χ²/dof {before['chi2_per_dof']:.3g} over {before['dof']} "
+                  f"residuals, p = {before['p_value']:.2g} ≥ significance {self.dset.significance:g}): no effect is "
+                  "looked for")
         self.rounds.append({"base": [], "candidates": [], "verdict": "none", "reason": reason})
         self.say(f"name: {reason}")
 
@@ -647,10 +725,13 @@ class _Namer:
         agree = float(np.corrcoef(a[good], b[good])[0, 1]) if good.sum() > 2 and np.std(a[good]) > 0 and \
             np.std(b[good]) > 0 else float("nan")
         params = _parameter_records(res, own)
-        return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p, p < alpha,
-                            pattern_agreement=agree, status=res.status, spec=self.family.spec(effect),
-                            model_values=values, effect=label.split(":")[0],
-                            at_bound=[q["name"] for q in params if q["at_bound"]])
+        size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
+                                           meas.conditions.wind_speed)
+        return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
+                            p < alpha and exceeds, pattern_agreement=agree, status=res.status,
+                            spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
+                            at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
+                            effect_text=words)
 
     def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
         """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
@@ -665,10 +746,13 @@ class _Namer:
         rnd = {"base": self.family.names_of(self.base_effects), "candidates": fits}
         sig = [f for f in fits if f.significant]
         if not sig:
+            small = [f for f in fits if f.p_value < dset.significance / max(len(fits), 1) and not f.significant]
+            tail = (f"; {small[0].name} would be significant by likelihood ratio, but its change of the outputs "
+                    f"({small[0].effect_text}) is within the model-form tolerance" if small else "")
             rnd.update(verdict="none", reason=(
                 f"no candidate improves the fit significantly (likelihood ratio at family-wise level "
                 f"{dset.significance:g}); best {fits[0].name}: Λ = {fits[0].lr_statistic:.3g}, p = "
-                f"{fits[0].p_value:.2g}" + _bound_suffix(fits[0])))
+                f"{fits[0].p_value:.2g}" + _bound_suffix(fits[0]) + tail))
             self.say(f"name: {rnd['reason']}")
             return rnd, None
         best = sig[0]
@@ -685,7 +769,7 @@ class _Namer:
             f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), p = {best.p_value:.2g}; "
             f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
             f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
-            f"{best.pattern_agreement:.2f}" + _bound_suffix(best)))
+            f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best)))
         self.say(f"name: {rnd['reason']}")
         return rnd, best
 

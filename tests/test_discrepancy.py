@@ -241,3 +241,34 @@ def test_a_recalibration_that_ends_above_its_start_is_not_kept(monkeypatch):
     assert d.effect == "pitch_offset" and d.recalibration is None
     assert any("recalibration ended with χ²" in n and "not kept" in n for n in d.notes)
     assert d.after["chi2"] == d.with_effects["chi2"]
+
+
+@pytest.mark.parametrize("change, tolerance, size, exceeds, text", [
+    (0.021, 0.01, 0.021, True, "+2.1 % power at 8 m/s (tolerance 1 %)"),
+    (0.008, 0.01, 0.008, False, "+0.8 % power at 8 m/s (tolerance 1 %)"),
+    (-0.03, 0.0, 0.03, True, "-3 % power at 8 m/s"),
+])
+def test_effect_size_against_the_model_form_tolerance(change, tolerance, size, exceeds, text):
+    from calib.discrepancy import effect_size
+
+    base = np.array([[1.0e6, 5.0e5], [2.0e6, 6.0e5], [1.0e3, 7.0e5]])    # the last power is below 10 % of the largest
+    values = base.copy()
+    values[1, 0] *= 1 + change
+    values[2, 0] *= 1 + 10 * change                                    # not a usable point: not counted
+    got = effect_size(values, base, np.array([tolerance, tolerance]), ["power", "thrust"], np.array([6.0, 8.0, 4.0]))
+    assert got[0] == pytest.approx(size, rel=1e-12) and got[2] is exceeds and got[1] == text
+
+
+def test_a_misfit_within_the_model_form_tolerance_names_nothing():
+    """A 1 % wind-speed scale (about 3 % in power) under 1 % noise fails the global test and is
+    named; with a 5 % model-form tolerance the same data are within it: `none`, said so."""
+    rotor = load_rotor("nrel5mw")
+    meas = hidden({"wind_speed_scale": {"wind_scale": 1.01}}, campaign(rotor), 9604)
+    cal = CalibrationSettings(cd_min=0.003, noise="known")
+    plain = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False, max_effects=1))
+    assert plain.effect == "wind_speed_scale" and "effect +" in plain.rounds[0]["reason"]
+    tolerant = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(
+        recalibrate=False, max_effects=1, model_form_tolerance={"default": 0.05}))
+    assert tolerant.effect == "none" and "within the model-form tolerance" in tolerant.rounds[0]["reason"]
+    with pytest.raises(InputError, match="model_form_tolerance"):
+        DiagnosisSettings(model_form_tolerance=1.5).validate()

@@ -104,7 +104,7 @@ def _candidate_rows(d) -> list[tuple]:
                 status += f"; at bound: {', '.join(f.at_bound)}"
             rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
                          f"{f.lr_statistic:.4g}", f"{f.p_value:.2g}", "yes" if f.significant else "no",
-                         f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}",
+                         f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}", html.escape(f.effect_text),
                          html.escape("; ".join(_parameter_text(q) for q in f.parameters)), html.escape(status)))
     return rows
 
@@ -153,7 +153,8 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
              f"Wall time {d.wall_time:.1f} s.</p>",
              f"<h2>Evidence</h2><ul>{reasons}</ul>",
              _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
-                     "pattern agreement", "fitted parameters (1σ)", "fit status"], rows, wrap=(10, 11)),
+                     "pattern agreement", "effect size", "fitted parameters (1σ)", "fit status"],
+                    rows, wrap=(1, 10, 11, 12)),
              img(figs["candidates"]),
              "<h2>Where the gap is</h2>",
              _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
