@@ -95,8 +95,8 @@ def test_candidate_table_and_verdict_say_at_bound():
         rounds = [{"candidates": [fit]}]
 
     (row,) = _candidate_rows(D)
-    assert "erosion_onset_eta = 0.3 ± 0.01 - (at lower bound)" in row[10]
-    assert row[11] == "converged; at bound: erosion_onset_eta"
+    assert "erosion_onset_eta = 0.3 ± 0.01 - (at lower bound)" in row[11]
+    assert row[12] == "converged; at bound: erosion_onset_eta"
 
 
 # ----------------------------------------------------------------------------- end to end
