@@ -367,6 +367,14 @@ def test_fmu_files_are_checked_before_the_model_is_rebuilt(tmp_path):
         build_model(spec, tmp_path, "result.json: model_spec")
     assert str(fmu) in str(err.value)
     check_fmu_files({**spec, "build": {"variant": "A"}}, tmp_path)     # a bundled variant is built again
+    fmu.write_bytes(b"rebuilt bytes")
+    check_fmu_files({**spec, "build": {"variant": "A"}}, tmp_path)     # ... by another compiler, perhaps
+    fmu.write_bytes(b"fmu bytes")
+    mapping.write_text("schema = 2\n")
+    with pytest.raises(InputError, match="changed since the run") as err:
+        build_model(spec, tmp_path, "result.json: model_spec")
+    assert err.value.field == "mapping"
+    mapping.write_text("schema = 1\n")
     fmu.write_bytes(b"fmu bytes")
     mapping.unlink()
     with pytest.raises(InputError, match="missing") as err:

@@ -963,9 +963,10 @@ class FmuModel:
 
     def spec(self) -> dict:
         """JSON-able description; :func:`calib.models.registry.build_model` rebuilds the model."""
+        mapping = Path(self.mapping.source).resolve()
         return {"kind": "fmu", "fmu": str(self.fmu_path), "fmu_sha256": self.sha256,
-                "mapping": str(Path(self.mapping.source).resolve()), "build": self.build,
-                "channels": [c.name for c in self._channels], **self._options}
+                "mapping": str(mapping), "mapping_sha256": sha256_of(mapping) if mapping.is_file() else None,
+                "build": self.build, "channels": [c.name for c in self._channels], **self._options}
 
     @classmethod
     def from_spec(cls, spec: dict, base_dir=None) -> "FmuModel":

@@ -29,8 +29,9 @@ def check_fmu_files(spec: dict, base_dir=None, source: str = "model spec") -> No
 
     Paths resolve as :meth:`calib.models.fmu_model.FmuModel.from_spec` resolves them
     (absolute, else relative to ``base_dir``). The FMU must exist unless the spec names a
-    bundled variant to build again (``build``); where ``fmu_sha256`` (``mapping_sha256``) is
-    recorded, the file found must still have that SHA-256.
+    bundled variant to build again (``build``: then its bytes are not checked, a compiler may
+    build it again differently); where ``fmu_sha256`` (``mapping_sha256``) is recorded, the file
+    found must still have that SHA-256.
 
     Raises
     ------
@@ -55,6 +56,8 @@ def check_fmu_files(spec: dict, base_dir=None, source: str = "model spec") -> No
             raise InputError(f"the {key} file {path} the run used is missing; restore it to rebuild the model",
                              source, field=key)
         recorded = spec.get(f"{key}_sha256")
+        if rebuildable:
+            continue                        # a bundled variant built again need not repeat its bytes
         if isinstance(recorded, str) and recorded:
             now = sha256_of(path)
             if now != recorded:
