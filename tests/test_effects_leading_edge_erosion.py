@@ -1,7 +1,9 @@
 """``leading_edge_erosion``: derivatives, fingerprint (power down at every λ, drag not thrust, outboard only)."""
 
 import numpy as np
+import pytest
 
+from calib.effects import make_effect
 from test_effects_chain import (FP_LAMBDA, check_effect_derivatives, check_nominal_is_no_effect, relative_change,
                                 tsr_sweep)
 
@@ -32,3 +34,14 @@ def test_leading_edge_erosion_onset_moves_the_damage():
     late = relative_change("leading_edge_erosion", [0.8, 0.01, 0.0], cond, channels=("power", "fn@0.6"))
     assert np.all(early[:, 0] < late[:, 0])               # more eroded span, more loss
     assert np.all(late[:, 1] == 0.0) and np.all(early[:, 1] != 0.0)
+
+
+def test_erosion_cannot_make_a_section_cleaner():
+    """Negative erosion (a lift gain, a drag reduction) is not erosion: the WISDEM correction3D truth
+    of the out-of-family battery was named erosion with a negative lift loss 39 of 40 times while
+    these bounds allowed it (tests/test_oof_battery.py now checks that data set is named right)."""
+    from calib.errors import InputError
+
+    for name in ("erosion_lift_loss", "erosion_drag_rise"):
+        with pytest.raises(InputError, match="outside its bounds|bounds"):
+            make_effect("leading_edge_erosion", nominal={name: -0.01})

@@ -36,7 +36,10 @@ class LeadingEdgeErosion(Effect):
     the boundary layer early and lower C_L,max (Sareen et al. 2014; Abbott & von Doenhoff's
     "standard roughness" polars), with little change of the lift slope at low α.
 
-    All three are parameters. At zero damage (ΔC_D,e = m = 0, the nominal) the outputs do
+    All three are parameters; the drag rise and the lift loss are bounded below by 0: erosion
+    and roughness never make a section cleaner than its 2-D polar (a fit that wants a lift gain
+    or a drag reduction is another effect, e.g. rotational augmentation, not negative erosion).
+    At zero damage (ΔC_D,e = m = 0, the nominal) the outputs do
     not depend on η0: its derivative is zero there, and it becomes identifiable only with a
     non-zero magnitude.
 
@@ -59,9 +62,9 @@ class LeadingEdgeErosion(Effect):
     PARAMETERS = (
         Parameter("erosion_onset_eta", 0.7, 0.3, 0.95, 0.05, "-", "effect",
                   description="span r/R where the erosion starts", prior_std=0.15),
-        Parameter("erosion_drag_rise", 0.0, -0.01, 0.05, 0.003, "-", "effect",
+        Parameter("erosion_drag_rise", 0.0, 0.0, 0.05, 0.003, "-", "effect",
                   description="drag-coefficient rise of the eroded sections", prior_std=0.01),
-        Parameter("erosion_lift_loss", 0.0, -0.2, 0.5, 0.05, "-", "effect",
+        Parameter("erosion_lift_loss", 0.0, 0.0, 0.5, 0.05, "-", "effect",
                   description="relative C_L loss near stall of the eroded sections", prior_std=0.1),
     )
 
