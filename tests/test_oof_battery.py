@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from oof_battery import campaign, hidden_effects, runner  # noqa: E402
 
-SUBSET = ("control", "reynolds_following", "leading_edge_erosion")
+SUBSET = ("control", "reynolds_following", "leading_edge_erosion", "rotational_augmentation")
 CSVS = sorted(DATA.glob("*.csv"))
 
 
@@ -156,6 +156,15 @@ def test_reynolds_effect_of_another_form_is_named(diagnose, setup):
 def test_erosion_of_another_form_is_named(diagnose, setup):
     d = diagnose(setup, "leading_edge_erosion")
     assert d.effect == "leading_edge_erosion", (d.effect, d.effects, d.rounds[0]["reason"])
+
+
+@pytest.mark.parametrize("setup", SETUPS)
+def test_rotational_augmentation_of_another_form_is_named(diagnose, setup):
+    """WISDEM's correction3D (Du-Selig lift, Eggers drag increase): named rotational augmentation,
+    not erosion with a lift gain (measured before erosion was bounded to physical values: erosion
+    39 of 40 in the battery)."""
+    d = diagnose(setup, "rotational_augmentation")
+    assert d.effect == "rotational_augmentation", (d.effect, d.effects, d.rounds[0]["reason"])
 
 
 @pytest.mark.xfail(strict=False, reason="measured 2026-11-25 on this subset (seed 24999), both set-ups: "

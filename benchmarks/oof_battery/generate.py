@@ -43,8 +43,8 @@ from oof_battery import campaign  # noqa: E402
 VENV = Path(os.environ.get("CALIB_BENCH_VENV", ROOT / ".bench-venv"))
 OUT_DIR = ROOT / "bench_output" / "oof_battery"
 ROTOR = "nrel5mw"
-#: Data sets of the committed subset: the control and two effects calib's diagnosis names.
-SUBSET_DATA_SETS = ("control", "reynolds_following", "leading_edge_erosion")
+#: Data sets of the committed subset: the control and three effects calib's diagnosis names.
+SUBSET_DATA_SETS = ("control", "reynolds_following", "leading_edge_erosion", "rotational_augmentation")
 CCBLADE_TIMEOUT_S = 1800
 
 
