@@ -212,11 +212,12 @@ def test_a_nominal_model_that_passes_the_global_test_gets_no_effect():
     rotor = load_rotor("nrel5mw")
     meas = hidden({"wind_speed_scale": {"wind_scale": 1.004}}, campaign(rotor), 9602)
     cal = CalibrationSettings(cd_min=0.003, noise="known")
-    d = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False))
+    d = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False, model_form_tolerance=0.0))
     assert 0.01 < d.before["p_value"] < 0.3
     assert d.effect == "none" and d.candidates == [] and d.rounds[0]["verdict"] == "none"
     assert "consistent with the noise" in d.rounds[0]["reason"]
-    ungated = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False, significance=0.3))
+    ungated = diagnose(rotor, meas, GRID, SETTINGS, cal, DiagnosisSettings(recalibrate=False, significance=0.3,
+                                                                          model_form_tolerance=0.0))
     assert ungated.effect == "wind_speed_scale"
 
 
