@@ -139,7 +139,9 @@ def test_diagnose_names_an_effect_on_its_bound_and_goes_on(tmp_path, lift_data, 
     """Erosion follows the hidden lift offset to its lower onset bound; the estimate ends past
     the bound by round-off (made certain here), which on main stopped the run with exit 2."""
     monkeypatch.setattr(discrepancy, "_fit_task", _past_the_bound(discrepancy._fit_task))
-    code, out = _diagnose(tmp_path, lift_data, CONFIG + 'candidates = ["leading_edge_erosion", "pitch_offset"]\n')
+    # erosion's near-stall form, which can follow the offset only with its onset on the bound
+    code, out = _diagnose(tmp_path, lift_data, CONFIG + 'candidates = ["leading_edge_erosion", "pitch_offset"]\n'
+                          'candidate_options = { leading_edge_erosion = { variant = "stall" } }\n')
     assert code == 0
     d = json.loads((out / "diagnosis.json").read_text())
     assert d["effects"][0] == "leading_edge_erosion" and len(d["rounds"]) == 2 and d["failure"] == ""

@@ -13,6 +13,11 @@ class LeadingEdgeErosion(Effect):
 
     Parameters
     ----------
+    variant : {"stall", "slope"}
+        Where the lift is lost: ``"stall"`` (default) near stall only, a loss of C_L,max;
+        ``"slope"`` over the whole attached range, a loss of lift slope (heavier roughness,
+        or another author's erosion model). Both compete in a diagnosis; the better names the
+        effect.
     ramp_width : float
         Width Δη over which the damage ramps in from the onset span [-]. Default 0.1.
     stall_width_deg : float
@@ -32,7 +37,9 @@ class LeadingEdgeErosion(Effect):
     w_D = 1 for |α| <= 20 deg, falling (C¹) to 0 at 40 deg (roughness adds skin-friction and
     transition drag to attached flow; separated flow is dominated by pressure drag);
     w_L rises (C¹) from 0 at α_s − 8 deg to 1 at the station's stall angle α_s (maximum of
-    its C_L on 0…30 deg) and fades from 25 to 45 deg: eroded and rough leading edges trip
+    its C_L on 0…30 deg) and fades from 25 to 45 deg (variant ``"stall"``), or w_L = w_D
+    (variant ``"slope"``: a lift-slope loss over the attached range, as a roughness that
+    thickens the boundary layer everywhere gives): eroded and rough leading edges trip
     the boundary layer early and lower C_L,max (Sareen et al. 2014; Abbott & von Doenhoff's
     "standard roughness" polars), with little change of the lift slope at low α.
 
@@ -58,7 +65,8 @@ class LeadingEdgeErosion(Effect):
     stage = "polar"
     fingerprint = ("C_P low at every tip-speed ratio, most (absolute) near the optimal lambda; Delta C_D > 0 "
                    "outboard of the onset span, lift loss near stall there")
-    OPTIONS = {"ramp_width": 0.1, "stall_width_deg": 8.0}
+    OPTIONS = {"variant": "stall", "ramp_width": 0.1, "stall_width_deg": 8.0}
+    CHOICES = {"variant": ("stall", "slope")}
     PARAMETERS = (
         Parameter("erosion_onset_eta", 0.7, 0.3, 0.95, 0.05, "-", "effect",
                   description="span r/R where the erosion starts", prior_std=0.15),
@@ -74,7 +82,8 @@ class LeadingEdgeErosion(Effect):
         a = state.alpha_deg
         alpha_stall = np.clip(ctx.rotor.features.alpha_stall_deg[ctx.station], 5.0, 20.0)
         w_d = attached_weight(a, 20.0, 40.0)
-        w_l = stall_weight(a, alpha_stall, float(self.options["stall_width_deg"]))
+        w_l = stall_weight(a, alpha_stall, float(self.options["stall_width_deg"])) \
+            if self.options["variant"] == "stall" else w_d
         cd = state.cd + drag_rise * ramp * w_d
         cl = state.cl * (1.0 - lift_loss * ramp * w_l)
         return state.replace(cl=cl, cd=cd)
