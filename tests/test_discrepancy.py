@@ -273,3 +273,20 @@ def test_a_misfit_within_the_model_form_tolerance_names_nothing():
     assert tolerant.effect == "none" and "within the model-form tolerance" in tolerant.rounds[0]["reason"]
     with pytest.raises(InputError, match="model_form_tolerance"):
         DiagnosisSettings(model_form_tolerance=1.5).validate()
+
+
+def test_a_parameter_whose_derivative_vanishes_at_nominal_is_fitted_away_from_it():
+    """Erosion's onset span has zero derivative at nominal (no damage, no onset to see): the
+    candidate fit still moves it from its nominal r/R 0.7 to the truth's 0.45."""
+    rotor = load_rotor("nrel5mw")
+    truth = {"erosion_onset_eta": 0.45, **TRUTH["leading_edge_erosion"]}
+    cond = campaign(rotor)
+    model = BemModel(rotor, None, CHANNELS, SETTINGS, (), effects=[make_effect("leading_edge_erosion")])
+    _, G = model.jacobian(np.array([q.nominal for q in model.parameters]), cond)
+    assert np.all(G[:, :, 0] == 0.0)                               # d/d(onset) at nominal
+    d = run(hidden({"leading_edge_erosion": truth}, cond, 9605), candidates=("leading_edge_erosion",),
+            max_effects=1, recalibrate=False, candidate_options={"leading_edge_erosion": {"variant": "stall"}})
+    fit = d.candidates[0]
+    onset = next(q for q in fit.parameters if q["name"] == "erosion_onset_eta")
+    assert d.effect == "leading_edge_erosion" and fit.status == "converged"
+    assert abs(onset["value"] - 0.45) < max(3 * onset["std"], 0.03), onset
