@@ -215,18 +215,24 @@ def test_old_style_result_rebuilds_from_unchanged_files(blade_run, tmp_path, mon
     np.testing.assert_allclose(res.predict(NEW).values, blade_run["values"], rtol=1e-12, atol=0.0)
 
 
-def test_old_style_result_with_a_missing_file_names_it(blade_run, tmp_path, capsys):
+def predict_without(blade_run, tmp_path, capsys, missing: Path, keep_files: bool = True) -> tuple[int, str]:
+    """``calib predict`` on an old-style copy of the result (no rotor data) while ``missing`` is
+    away; (exit code, stderr)."""
     target = moved_copy(blade_run, tmp_path)
-    strip_rotor_data(target)
-    airfoil = blade_run["project"] / BLADE_AIRFOIL
-    saved = airfoil.read_bytes()
-    airfoil.unlink()
+    strip_rotor_data(target, keep_files=keep_files)
+    saved = missing.read_bytes()
+    missing.unlink()
     try:
         code = cli_main(["predict", str(target), "--data", str(blade_run["conditions"]),
                          "--out", str(tmp_path / "p.csv")])
     finally:
-        airfoil.write_bytes(saved)
-    err = capsys.readouterr().err
+        missing.write_bytes(saved)
+    return code, capsys.readouterr().err
+
+
+def test_old_style_result_with_a_missing_file_names_it(blade_run, tmp_path, capsys):
+    airfoil = blade_run["project"] / BLADE_AIRFOIL
+    code, err = predict_without(blade_run, tmp_path, capsys, airfoil)
     assert code == 2
     assert str(airfoil.resolve()) in err and "missing" in err and "Traceback" not in err
     assert "rotor.airfoils[5]" in err                                  # the key of the table that names it
@@ -234,17 +240,8 @@ def test_old_style_result_with_a_missing_file_names_it(blade_run, tmp_path, caps
 
 
 def test_old_style_result_without_digests_with_a_missing_file_names_it(blade_run, tmp_path, capsys):
-    target = moved_copy(blade_run, tmp_path)
-    strip_rotor_data(target, keep_files=False)
     blade = blade_run["project"] / "rotor/5MW_Baseline/NRELOffshrBsline5MW_AeroDyn_blade.dat"
-    saved = blade.read_bytes()
-    blade.unlink()
-    try:
-        code = cli_main(["predict", str(target), "--data", str(blade_run["conditions"]),
-                         "--out", str(tmp_path / "p.csv")])
-    finally:
-        blade.write_bytes(saved)
-    err = capsys.readouterr().err
+    code, err = predict_without(blade_run, tmp_path, capsys, blade, keep_files=False)
     assert code == 2 and str(blade.resolve()) in err and "missing" in err and "Traceback" not in err
 
 
