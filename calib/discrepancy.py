@@ -81,9 +81,10 @@ AT_BOUND_TOLERANCE = 1e-3
 #: Default model-form tolerance [-]: the RMS relative difference between calib's native BEM and an
 #: independent code, WISDEM's CCBlade 4.2.9, on the same rotor and polars (NREL 5-MW, 63 operating
 #: points of the out-of-family battery, no effect, no noise; the larger of the rigid and the
-#: tilted/coned set-up; benchmarks/bench_oof_battery.py, measured 2026-11-25). The difference is
-#: CCBlade's smoothing spline on the polars (below 5e-5 with calib's polar_smoothing of the same
-#: spline). Channels not measured take the largest ("default").
+#: tilted/coned set-up; benchmarks/bench_oof_battery.py, measured 2026-11-25), rounded up. The
+#: difference is CCBlade's smoothing spline on the polars (below 5e-5 with calib's polar_smoothing
+#: of the same spline). root_flap_moment takes the hub flap moment's (the same loads about another
+#: point); other channels not measured take the largest ("default").
 MODEL_FORM_TOLERANCE = {"power": 0.0097, "torque": 0.0097, "thrust": 0.0024, "hub_flap_moment": 0.0029,
                         "root_flap_moment": 0.0029, "default": 0.0097}
 
