@@ -50,9 +50,6 @@ calibration here; 30 seeds about 5–10 min, the held-back part about as long).
 
 from __future__ import annotations
 
-#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
-SUITE = "validate"
-
 import dataclasses
 import os
 import sys
@@ -68,6 +65,9 @@ from calib.measurements import Measurements, synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 from calib.workflow import _conditions, load_workflow, prepare, smooth_field, truth_model
+
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 WORKFLOW = "workflows/wind_tunnel_hub_loads.toml"

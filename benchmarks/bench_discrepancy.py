@@ -11,9 +11,6 @@ blockage 11-16 s, the others under 4 s; 20 seeds: 180 diagnoses); ``make bench``
 
 from __future__ import annotations
 
-#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
-SUITE = "validate"
-
 import os
 import sys
 import time
@@ -26,6 +23,9 @@ from test_discrepancy import TRUTH, campaign, hidden  # noqa: E402
 from test_discrepancy import run as diagnose_data  # noqa: E402
 
 from calib.rotor.library import load_rotor  # noqa: E402
+
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
 
 
 def run_bench(n_seeds: int = 3) -> dict:

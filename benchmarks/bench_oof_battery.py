@@ -22,9 +22,6 @@ its own figure in ``battery_wall_seconds``.
 
 from __future__ import annotations
 
-#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
-SUITE = "validate"
-
 import json
 import sys
 import time
@@ -34,6 +31,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from oof_battery import campaign, generate, runner  # noqa: E402
+
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
 
 ROOT = HERE.parent
 OUT_JSON = ROOT / "bench_output" / "oof_battery.json"

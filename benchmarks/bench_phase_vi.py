@@ -17,9 +17,6 @@ models:
 
 from __future__ import annotations
 
-#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
-SUITE = "validate"
-
 import dataclasses
 import os
 import sys
@@ -33,6 +30,9 @@ from calib.campaign import ValidationSettings, leave_one_out, named_effect_specs
 from calib.discrepancy import diagnose  # noqa: E402
 from calib.measurements import read_measurements  # noqa: E402
 from calib.workflow import load_workflow, prepare  # noqa: E402
+
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
 
 WORKFLOW = os.path.join(ROOT, "workflows", "phase_vi.toml")
 STATED = {"torque": 0.03, "thrust": 0.03, "cn": 0.05, "ct": 0.10}

@@ -41,9 +41,6 @@ Usage: ``python benchmarks/bench_soak.py [--evaluations 2000] [--warmup 200] [--
 
 from __future__ import annotations
 
-#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
-SUITE = "validate"
-
 import argparse
 import json
 import os
@@ -52,6 +49,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+#: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
 
 ROOT = Path(__file__).resolve().parents[1]
 RSS_GROWTH_LIMIT = 0.10

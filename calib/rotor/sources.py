@@ -35,7 +35,6 @@ is missing or changed since the run.
 
 from __future__ import annotations
 
-import json
 import os
 import reprlib
 from dataclasses import dataclass
