@@ -24,6 +24,7 @@ import json
 import os
 import selectors
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -78,20 +79,34 @@ def _worker(group: list[str], render: Callable[[str], object], write_fd: int) ->
 
     SIGINT and SIGTERM stop the worker. Their exception can reach it as another error
     (matplotlib's C++ converters report a failing Python callback as ``ValueError``), so
-    the handlers also set a flag that any exception is checked against.
+    the handlers also set a flag that any exception, and each new figure, is checked
+    against. Only the first signal raises: Ctrl-C reaches the worker and then the parent's
+    SIGTERM follows, and a second exception raised while the first unwinds (in a finalizer
+    or the unraisable-exception hook) would print a traceback. The stop exception itself,
+    should it land in a finalizer, is not reported either: the worker is stopping anyway.
     """
     code = 1
     stop = []
 
     def on_signal(signum, frame):
         stop.append(signum)
-        raise KeyboardInterrupt if signum == signal.SIGINT else SystemExit(128 + signum)
+        if len(stop) == 1:
+            raise KeyboardInterrupt if signum == signal.SIGINT else SystemExit(128 + signum)
+
+    default_hook = sys.unraisablehook
+
+    def quiet_when_stopping(unraisable):
+        if not (stop and isinstance(unraisable.exc_value, (KeyboardInterrupt, SystemExit))):
+            default_hook(unraisable)
 
     try:
+        sys.unraisablehook = quiet_when_stopping
         signal.signal(signal.SIGTERM, on_signal)
         if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
             signal.signal(signal.SIGINT, on_signal)
         for name in group:
+            if stop:
+                raise SystemExit(128 + stop[0])
             t0 = time.perf_counter()
             try:
                 message = {"name": name, "value": render(name), "seconds": time.perf_counter() - t0}
