@@ -178,3 +178,40 @@ def test_sigint_stops_the_workers_and_leaves_no_truncated_file(result, tmp_path,
     written = {p.stem for p in out.iterdir()}
     applicable = len(F.FIGURES) - (not result.truncation)  # the truncation curve needs sigma_bar = "auto"
     assert 1 <= len(written) < applicable                  # stopped part-way, not finished
+
+
+FINALIZER_CHILD = textwrap.dedent('''
+    import os
+    import signal
+    import time
+    from calib.report.parallel import run_forked
+
+    parent = os.getpid()
+
+    class Finalized:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    def render(name):
+        if os.getpid() != parent:
+            obj = Finalized()
+            del obj
+            time.sleep(0.5)                   # the worker is stopping: this figure is never reported
+        return name.upper()
+
+    print(run_forked({"a": 1.0, "b": 1.0}, render, 2), flush=True)
+''')
+
+
+def test_a_stop_signal_landing_in_a_finalizer_prints_no_traceback(tmp_path):
+    """Ctrl-C reaches a worker and the parent's SIGTERM follows at once; when the first lands in a
+    finalizer (where Python can only report it through the unraisable hook) and the second
+    arrives while it unwinds, the worker still stops without a traceback and the parent draws
+    its figures. A plain interpreter (pytest's own unraisable hook would hide the traceback)."""
+    script = tmp_path / "finalizer.py"
+    script.write_text(FINALIZER_CHILD)
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "{'a': 'A', 'b': 'B'}", (done.stdout, done.stderr)
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
