@@ -276,10 +276,16 @@ class Calibrator:
         with ``settings.verbose`` a line is also printed.
     name : str
         Name of the run (reports, files).
+    start : ndarray, optional
+        The optimizer's first iterate [parameter units] (default: the nominal values). The
+        nominal values stay the reference of the scaled coordinates and of the prior; a start
+        away from them serves fits whose derivative vanishes at nominal (a candidate effect at
+        zero magnitude). Clipped into the bounds.
     """
 
     def __init__(self, model, measurements: Measurements, settings: CalibrationSettings | None = None,
-                 callback: Callable[[dict], None] | None = None, name: str = "calibration"):
+                 callback: Callable[[dict], None] | None = None, name: str = "calibration",
+                 start: np.ndarray | None = None):
         self.model = model
         self.measurements = measurements
         self.settings = (settings or CalibrationSettings()).validate()
@@ -298,6 +304,13 @@ class Calibrator:
                              field=self.parameters[j].name)
         self.field = model.correction_field() if isinstance(model, FieldModel) else None
         self.lower, self.upper = self._effective_bounds()
+        self.start = None
+        if start is not None:
+            start = np.asarray(start, float)
+            if start.shape != self.p0.shape or not np.all(np.isfinite(start)):
+                raise InputError(f"must be {self.p0.size} finite values, got shape {start.shape}", "Calibrator",
+                                 field="start")
+            self.start = np.clip(start, self.lower, self.upper)
         self.prior_std = np.array([q.prior_std if np.isfinite(q.prior_std) else self.settings.prior_sigma * q.scale
                                    for q in self.parameters], float)
         self.history: list[dict] = []
@@ -374,7 +387,7 @@ class Calibrator:
             sigma = np.broadcast_to(ml_noise(resid, nominal.ok), m.values.shape).copy()
             problem = problem.with_sigma(sigma)
         noise_iters = st.max_noise_iterations if st.noise in ("ml", "relative_ml") else 1
-        p = self.p0.copy()
+        p = self.p0.copy() if self.start is None else self.start.copy()
         for k_noise in range(noise_iters):
             p, svd, lin, status, message = self._fit(problem, p)
             if st.noise not in ("ml", "relative_ml"):

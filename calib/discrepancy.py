@@ -199,6 +199,7 @@ class CandidateFit:
     at_bound: list = field(default_factory=list)    # names of the parameters at a bound
     effect_size: float = float("nan")   # largest relative change of an output [-] (effect_size())
     effect_text: str = ""               # the same in words: "-2.1 % power at 7.3 m/s (tolerance 1 %)"
+    start: str = ""                     # the second start, when one ran (_fit_task): "second start kept (...)"
 
     def bound_phrase(self) -> str:
         """The parameters at a bound in words ("" when none): their value is the bound, not an estimate."""
@@ -353,20 +354,77 @@ def find(measured, model, sigma, conditions: dict, channels, rotor_radius: float
 
 
 # ----------------------------------------------------------------------------- candidate fits
+#: An own parameter of a candidate that ends within this fraction of its scale of its start
+#: never left it: the fit is started again away from it (:func:`away_start`).
+STUCK_TOLERANCE = 1e-6
+
+
+def away_start(p: np.ndarray, lower: np.ndarray, upper: np.ndarray, scale: np.ndarray, which) -> np.ndarray:
+    """A start one scale away from ``p`` in the parameters ``which``, toward the side with more room.
+
+    Parameters
+    ----------
+    p, lower, upper, scale : ndarray
+        The point a fit ended on, the bounds and the parameters' scales [parameter units].
+    which : sequence of int
+        The parameters to move (those that never left their start).
+
+    Returns
+    -------
+    ndarray
+        ``p`` with each of ``which`` moved by one scale (at most half the room to the bound it
+        moves toward) into the interior: a candidate at zero magnitude, where the derivative
+        of a shape parameter (an onset span, a radial exponent) vanishes and Gauss-Newton
+        cannot take a step, starts where every parameter acts.
+    """
+    start = np.array(p, float)
+    for j in which:
+        up, down = upper[j] - p[j], p[j] - lower[j]
+        room = up if up >= down else -down
+        start[j] = p[j] + np.sign(room) * min(abs(scale[j]), 0.5 * abs(room))
+    return start
+
+
 def _fit_task(task: dict) -> dict:
-    """Fit one candidate (module-level so executors can ship it to other processes)."""
+    """Fit one candidate (module-level so executors can ship it to other processes).
+
+    A candidate's own parameter (``task["own"]``: its indices) that ends where it started, to
+    :data:`STUCK_TOLERANCE` of its scale, may sit on a stationary point of χ² (every derivative
+    of a zero-magnitude effect's shape parameters vanishes at nominal): the fit is started
+    again from :func:`away_start` and the one with the lower χ² is kept; the fit's status says
+    which ("second start kept" / "second start not kept").
+    """
     model = task["model"]
     meas = task["measurements"]
-    st = task["settings"]
-    # a candidate's fit serves the comparison of candidates only: no prior check
+    st = dataclasses.replace(task["settings"], prior_check=False)   # the comparison needs no prior check
+    names = [c.name for c in model.channels]
+    cols = [names.index(c) for c in meas.channels]
+
+    def fit(start=None):
+        res = Calibrator(model, meas, st, name=task["name"], start=start).run()
+        values = model.evaluate(res.p_hat, meas.conditions).values[:, cols]
+        ok = np.isfinite(values).all(axis=1)
+        chi2 = float(np.sum(((meas.values - values) / meas.sigma)[ok] ** 2)) if ok.any() else float("inf")
+        return res, values, chi2
+
     try:
-        res = Calibrator(model, meas, dataclasses.replace(st, prior_check=False), name=task["name"]).run()
-        ev = model.evaluate(res.p_hat, meas.conditions)
+        res, values, chi2 = fit()
     except CalibError as exc:        # this candidate failed; the others are still compared
         return {"error": f"{type(exc).__name__}: {exc}"}
-    names = [c.name for c in model.channels]
-    values = ev.values[:, [names.index(c) for c in meas.channels]]
-    return {"result": res, "values": values}
+    own = list(task.get("own", range(res.n_params)))
+    stuck = [j for j in own if abs(res.p_hat[j] - res.p_nominal[j]) <= STUCK_TOLERANCE * res.scale[j]]
+    note = ""
+    if stuck:
+        try:
+            res2, values2, chi2_2 = fit(away_start(res.p_hat, res.lower, res.upper, res.scale, stuck))
+        except CalibError as exc:
+            note = f"second start failed ({type(exc).__name__})"
+        else:
+            keep = chi2_2 < chi2
+            note = f"second start {'kept' if keep else 'not kept'} (χ² {chi2_2:.6g} against {chi2:.6g})"
+            if keep:
+                res, values = res2, values2
+    return {"result": res, "values": values, "start_note": note}
 
 
 def _variants(name: str, options: dict) -> list:
@@ -707,7 +765,9 @@ class _Namer:
 
     def _fit(self, round_no: int, labels: list, effects: dict) -> list:
         """Every candidate fitted on top of the base effects, scored against the base model."""
+        n_base = self.family.n_parameters(self.base_effects)
         tasks = [{"name": lab, "measurements": self.meas, "settings": self.known,
+                  "own": list(range(n_base, n_base + len(effects[lab].parameters()))),
                   "model": self.wrap(self.family.candidate_model(self.base_effects, effects[lab]),
                                      f"round {round_no + 1}: {lab}")} for lab in labels]
         self.say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
@@ -740,6 +800,7 @@ class _Namer:
                                            meas.conditions.wind_speed)
         return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
                             p < alpha and exceeds, pattern_agreement=agree, status=res.status,
+                            start=out.get("start_note", ""),
                             spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
                             at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
                             effect_text=words)

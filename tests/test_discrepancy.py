@@ -290,3 +290,56 @@ def test_a_parameter_whose_derivative_vanishes_at_nominal_is_fitted_away_from_it
     onset = next(q for q in fit.parameters if q["name"] == "erosion_onset_eta")
     assert d.effect == "leading_edge_erosion" and fit.status == "converged"
     assert abs(onset["value"] - 0.45) < max(3 * onset["std"], 0.03), onset
+
+
+class _ProductModel:
+    """Outputs base·(1 + a·b·λ/7 + a²·(λ/7)²/4): every derivative in (a, b) vanishes at the nominal
+    (0, 0), where Gauss-Newton cannot take a step (a zero-magnitude effect's shape parameters)."""
+
+    def __init__(self):
+        from calib.types import Channel, Parameter
+        self.parameters = (Parameter("a", 0.0, -3.0, 3.0, 0.5, "-", "effect"),
+                           Parameter("b", 0.0, -3.0, 3.0, 0.5, "-", "effect"))
+        self.channels = (Channel("power", "W"), Channel("thrust", "N"))
+
+    def _parts(self, conditions):
+        lam = conditions.rotor_speed * np.pi / 30.0 * 60.0 / conditions.wind_speed / 7.0
+        return np.column_stack([1e6 * lam, 4e5 + 0 * lam]), lam
+
+    def evaluate(self, p, conditions):
+        from calib.types import Evaluation
+        base, lam = self._parts(conditions)
+        a, b = p
+        factor = 1.0 + a * b * lam + a * a * lam ** 2 / 4.0
+        return Evaluation(base * factor[:, None], np.zeros(len(conditions), int), ("",) * len(conditions),
+                          self.channels, {})
+
+    def jacobian(self, p, conditions):
+        base, lam = self._parts(conditions)
+        a, b = p
+        G = np.stack([base * (b * lam + a * lam ** 2 / 2.0)[:, None], base * (a * lam)[:, None]], axis=-1)
+        return self.evaluate(p, conditions), G
+
+
+def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again_away_from_it():
+    """Gauss-Newton cannot leave a point where every derivative vanishes: the candidate fit ends
+    on its start, is started again one scale away, and the second start (kept) finds the truth."""
+    from calib.discrepancy import _fit_task, away_start
+    model = _ProductModel()
+    J = model.jacobian(np.zeros(2), campaign(load_rotor("nrel5mw")))[1]
+    assert np.all(J == 0.0)
+    truth = np.array([1.0, 0.5])
+    meas = synthesize(model, truth, campaign(load_rotor("nrel5mw")), relative_sigma={"power": 0.01, "thrust": 0.01},
+                      seed=9611)
+    known = CalibrationSettings(noise="known", retain="all")
+    out = _fit_task({"name": "product", "model": model, "measurements": meas, "settings": known, "own": [0, 1]})
+    a, b = out["result"].p_hat
+    assert out["start_note"].startswith("second start kept"), out["start_note"]
+    assert abs(a * b - 0.5) < 0.05 and abs(a * a - 1.0) < 0.1, (a, b)
+    from calib.calibration import Calibrator
+    with pytest.raises(InputError, match="start"):
+        Calibrator(model, meas, known, start=np.array([1.0]))
+    # the away start moves toward the side with more room, by one scale at most half the room
+    assert np.allclose(away_start(np.array([0.0, 2.9]), np.array([-3.0, -3.0]), np.array([3.0, 3.0]),
+                                  np.array([0.5, 0.5]), [0, 1]), [0.5, 2.4])
+    assert np.allclose(away_start(np.array([0.0]), np.array([0.0]), np.array([0.4]), np.array([0.5]), [0]), [0.2])

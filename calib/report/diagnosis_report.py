@@ -100,6 +100,8 @@ def _candidate_rows(d) -> list[tuple]:
         for f in rnd["candidates"]:
             name = html.escape(f.name).replace(":", ":<wbr>")        # may break after "effect:"
             status = f.status or "?"
+            if getattr(f, "start", ""):
+                status += f"; {f.start}"
             if getattr(f, "at_bound", None):
                 status += f"; at bound: {', '.join(f.at_bound)}"
             rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
