@@ -69,6 +69,8 @@ from calib.effects import EFFECTS, make_effect
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
 from calib.models.bem_model import BemModel
+from calib.separation import envelope_words, probe_conditions, separating_probes
+from calib.types import CONDITION_FIELDS, OperatingConditions
 
 #: Effects the native BEM can name (the correction field is the localizer, not a candidate).
 NAMEABLE = tuple(n for n in EFFECTS if n != "correction_field")
@@ -110,7 +112,13 @@ class DiagnosisSettings:
     significance : float
         Family-wise level of the likelihood-ratio tests (Bonferroni over the candidates).
     ambiguity_bic : float
-        Two significant candidates closer than this in BIC are not told apart ("ambiguous").
+        Two significant candidates closer than this in BIC are not told apart by the
+        information criterion.
+    ambiguity_pattern : float
+        ... nor by their pattern when their agreements with the localized correction differ
+        by less than this [-]; then the verdict is ``ambiguous``, with the measurement that
+        would separate them (:mod:`calib.separation`). When the patterns differ by more, the
+        candidate whose pattern agrees better is named.
     recalibrate : bool
         Re-run the correction-field calibration on top of the named effects.
     model_form_tolerance : float or dict
@@ -127,6 +135,7 @@ class DiagnosisSettings:
     max_effects: int = 2
     significance: float = 0.01
     ambiguity_bic: float = 6.0
+    ambiguity_pattern: float = 0.1
     recalibrate: bool = True
     model_form_tolerance: float | dict = field(default_factory=lambda: dict(MODEL_FORM_TOLERANCE))
 
@@ -158,6 +167,8 @@ class DiagnosisSettings:
              "an integer")
         need(number(self.significance), "significance", "a number")
         need(number(self.ambiguity_bic), "ambiguity_bic", "a number")
+        need(number(self.ambiguity_pattern) and 0 <= self.ambiguity_pattern <= 2, "ambiguity_pattern",
+             "a number in [0, 2] (a difference of correlations)")
         need(isinstance(self.recalibrate, bool), "recalibrate", "true or false")
         tol = self.model_form_tolerance
         values = list(tol.values()) if isinstance(tol, dict) else [tol]
@@ -200,6 +211,7 @@ class CandidateFit:
     effect_size: float = float("nan")   # largest relative change of an output [-] (effect_size())
     effect_text: str = ""               # the same in words: "-2.1 % power at 7.3 m/s (tolerance 1 %)"
     start: str = ""                     # the second start, when one ran (_fit_task): "second start kept (...)"
+    p_hat: np.ndarray | None = None     # every fitted parameter (base effects' too) [parameter units]
 
     def bound_phrase(self) -> str:
         """The parameters at a bound in words ("" when none): their value is the bound, not an estimate."""
@@ -213,6 +225,7 @@ class CandidateFit:
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         d.pop("model_values")
+        d.pop("p_hat")
         return d
 
 
@@ -251,6 +264,7 @@ class Diagnosis:
         return {"effect": self.effect, "effects": self.effects,
                 "candidates": [c.to_dict() for c in self.candidates],
                 "rounds": [{"base": r["base"], "verdict": r["verdict"], "reason": r["reason"],
+                            **{k: r[k] for k in ("ambiguous", "separate") if k in r},
                             "candidates": [c.to_dict() for c in r["candidates"]]} for r in self.rounds],
                 "before": self.before, "with_effects": self.with_effects, "after": self.after,
                 "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,
@@ -530,6 +544,26 @@ class BemFamily:
     def names_of(self, base) -> list:
         return [e.name for e in base]
 
+    def probe_channels(self, measured: list) -> list:
+        """Channels the separation probes predict: the measured ones, the rotor loads and the
+        normal force per length at four spanwise stations (:mod:`calib.separation`)."""
+        extra = ["power", "thrust", "root_flap_moment"] + [f"fn@{eta:.2f}" for eta in PROBE_STATIONS]
+        return list(measured) + [c for c in extra if c not in measured]
+
+    def predict(self, base, effect, p: np.ndarray, conditions, channels: list) -> tuple[np.ndarray, list]:
+        """A fitted candidate's outputs and their units at ``conditions``."""
+        model = BemModel(self.rotor, None, channels, self.settings, (), effects=list(base) + [effect],
+                         rotor_source=self.rotor_source)
+        ev = model.evaluate(p, conditions)
+        return ev.values, [c.unit for c in model.channels]
+
+    def fingerprint(self, name: str) -> str:
+        return getattr(EFFECTS.get(name), "fingerprint", "")
+
+
+#: Spanwise stations r/R of the normal-force probes (:meth:`BemFamily.probe_channels`).
+PROBE_STATIONS = (0.3, 0.5, 0.7, 0.9)
+
 
 def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: BemSettings | None = None,
              calibration: CalibrationSettings | None = None, diagnosis: DiagnosisSettings | None = None,
@@ -673,6 +707,7 @@ class _Namer:
         self.base_chi2, self.base_values = chi2_nominal, y0
         self.n_res = int(np.isfinite(y0).all(axis=1).sum() * y0.shape[1])
         self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
+        self._effects = {}                        # the current round's candidate effects by label
         self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
 
     def run(self, candidates) -> None:
@@ -721,6 +756,7 @@ class _Namer:
         labels, effects = self._applicable()
         if not labels:
             return True
+        self._effects = effects
         self._fits = fits = self._fit(round_no, labels, effects)
         rnd, best = self._judge(fits)
         if best is None:
@@ -800,7 +836,7 @@ class _Namer:
                                            meas.conditions.wind_speed)
         return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
                             p < alpha and exceeds, pattern_agreement=agree, status=res.status,
-                            start=out.get("start_note", ""),
+                            start=out.get("start_note", ""), p_hat=np.array(res.p_hat, float),
                             spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
                             at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
                             effect_text=words)
@@ -830,20 +866,73 @@ class _Namer:
         best = sig[0]
         # variants of the same effect are not rivals: the best variant names the effect
         rivals = [f for f in sig[1:] if f.bic - best.bic < dset.ambiguity_bic and f.effect != best.effect]
+        pattern_note = ""
         if rivals:
-            rnd.update(verdict="ambiguous", ambiguous=[best.effect, rivals[0].effect], reason=(
-                f"{best.effect} and {rivals[0].effect} fit about equally well (ΔBIC = {rivals[0].bic - best.bic:.3g} "
-                f"< {dset.ambiguity_bic:g}); the data cannot tell them apart"))
-            self.say(f"name: {rnd['reason']}")
-            return rnd, None
+            rival = rivals[0]
+            a, b = best.pattern_agreement, rival.pattern_agreement
+            close = f"{best.effect} and {rival.effect} fit about equally well (ΔBIC = {rival.bic - best.bic:.3g} < " \
+                    f"{dset.ambiguity_bic:g})"
+            if np.isfinite(a) and np.isfinite(b) and abs(a - b) >= dset.ambiguity_pattern:
+                # the information criterion cannot tell them apart, the pattern can
+                best, other = (best, rival) if a > b else (rival, best)
+                pattern_note = (f"; {close}, but the pattern of {best.effect} agrees better with the localized "
+                                f"correction ({best.pattern_agreement:.2f} against {other.pattern_agreement:.2f}, "
+                                f"a difference of at least {dset.ambiguity_pattern:g})")
+            else:
+                separate = _separation_of(self, best, rival)
+                rnd.update(verdict="ambiguous", ambiguous=[best.effect, rival.effect], separate=separate, reason=(
+                    f"{close} and their patterns agree equally with the localized correction ({a:.2f} and {b:.2f}): "
+                    f"the data cannot tell them apart; {separate['text']}"))
+                self.say(f"name: {rnd['reason']}")
+                return rnd, None
         nxt = fits[1] if len(fits) > 1 else None
         rnd.update(verdict=best.effect, reason=(
             f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), p = {best.p_value:.2g}; "
             f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
             f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
-            f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best)))
+            f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best) + pattern_note))
         self.say(f"name: {rnd['reason']}")
         return rnd, best
+
+
+def _separation_of(namer: "_Namer", a: CandidateFit, b: CandidateFit) -> dict:
+    """The measurement that would tell ``a`` from ``b`` (:mod:`calib.separation`): {"text", "probes",
+    "envelope", "fingerprints"}; a probe that cannot be evaluated is said, never raised."""
+    fam, meas = namer.family, namer.meas
+    names = (a.effect, b.effect)
+    fingerprints = {n: fam.fingerprint(n) for n in names if fam.fingerprint(n)}
+    envelope = envelope_words(meas.conditions, fam.rotor_radius)
+    out = {"probes": [], "envelope": envelope, "fingerprints": fingerprints}
+    try:
+        probes = probe_conditions(meas.conditions, fam.rotor_radius)
+        both = OperatingConditions(*(np.concatenate([getattr(meas.conditions, f), getattr(probes, f)])
+                                     for f in CONDITION_FIELDS))
+        channels = fam.probe_channels(list(meas.channels))
+        va, units = fam.predict(namer.base_effects, namer._effects[a.name], a.p_hat, both, channels)
+        vb, _ = fam.predict(namer.base_effects, namer._effects[b.name], b.p_hat, both, channels)
+    except CalibError as exc:
+        out["text"] = f"the probes that would separate them could not be evaluated ({exc})"
+        return out
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = {c: float(np.nanmedian(np.where(namer.y0[:, j] != 0, meas.sigma[:, j] / np.abs(namer.y0[:, j]), np.nan)))
+               for j, c in enumerate(meas.channels)}
+    rel = {c: r for c, r in rel.items() if np.isfinite(r) and r > 0}
+    found = separating_probes(va, vb, both, channels, list(meas.channels), rel, len(meas.conditions),
+                              fam.rotor_radius)
+    unit = dict(zip(channels, units))
+    out["probes"] = [{**dataclasses.asdict(p), "words": p.words(names, unit[p.channel])} for p in found]
+    if not found:
+        text = "no probe could compare them"
+    elif found[0].separation > 1.0:
+        text = "to tell them apart, measure " + "; or ".join(p["words"] for p in out["probes"] if p["separation"] > 1)
+    else:
+        text = ("no probe considered separates them beyond the noise and model-form tolerance (closest: "
+                f"{out['probes'][0]['words']})")
+    text += f"; the campaign measured {envelope}"
+    if fingerprints:
+        text += "; fingerprints: " + "; ".join(f"{n}: {fp}" for n, fp in fingerprints.items())
+    out["text"] = text
+    return out
 
 
 def _bound_suffix(fit: CandidateFit) -> str:

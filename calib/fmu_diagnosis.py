@@ -92,3 +92,19 @@ class FmuFamily:
 
     def names_of(self, base) -> list:
         return [c.name for c in base]
+
+    def probe_channels(self, measured: list) -> list:
+        """The FMU's channels are what its mapping maps: the separation probes predict the measured ones."""
+        return list(measured)
+
+    def predict(self, base, candidate: MappedParameter, p, conditions, channels: list):
+        """A fitted candidate's outputs (``channels``) and their units at ``conditions``."""
+        model = self.candidate_model(base, candidate)
+        ev = model.evaluate(p, conditions)
+        names = [c.name for c in model.channels]
+        cols = [names.index(c) for c in channels]
+        return ev.values[:, cols], [model.channels[j].unit for j in cols]
+
+    def fingerprint(self, name: str) -> str:
+        """A mapped parameter carries no fingerprint (its physics is the vendor's)."""
+        return ""

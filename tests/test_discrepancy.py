@@ -85,6 +85,12 @@ def test_blockage_and_wind_scale_ambiguous_unless_the_data_separate_them(wide):
     else:
         assert d.effect == "ambiguous", d.rounds[0]["reason"]
         assert set(d.rounds[0]["ambiguous"]) == {"wind_tunnel_blockage", "wind_speed_scale"}
+        # the measurement that separates them: another thrust coefficient (tip-speed ratio or pitch)
+        best = d.rounds[0]["separate"]["probes"][0]
+        assert best["kind"] == "another operating point" and best["separation"] > 3, best
+        assert abs(best["tip_speed_ratio"] - 7.5) > 0.5 or abs(best["pitch"]) > 1.0, best
+        assert "to tell them apart, measure" in d.rounds[0]["reason"] and "thrust coefficient" in d.rounds[0]["reason"]
+        assert d.to_dict()["rounds"][0]["separate"]["probes"][0] == best
 
 
 def test_diagnose_cli_writes_json_and_report(tmp_path, capsys):
@@ -343,3 +349,62 @@ def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again
     assert np.allclose(away_start(np.array([0.0, 2.9]), np.array([-3.0, -3.0]), np.array([3.0, 3.0]),
                                   np.array([0.5, 0.5]), [0, 1]), [0.5, 2.4])
     assert np.allclose(away_start(np.array([0.0]), np.array([0.0]), np.array([0.4]), np.array([0.5]), [0]), [0.2])
+
+
+def _namer(monkeypatch, ambiguity_pattern=0.1):
+    """A naming step with nothing but settings (for the verdict rules alone)."""
+    from calib import discrepancy as D
+    monkeypatch.setattr(D, "_separation_of", lambda namer, a, b: {"text": f"separate {a.effect} from {b.effect}"})
+
+    class Family:
+        def names_of(self, base):
+            return []
+    y0 = np.ones((10, 2))
+    return D._Namer(Family(), None, y0, 100.0, np.zeros_like(y0), DiagnosisSettings(ambiguity_pattern=ambiguity_pattern),
+                    None, None, None, None, lambda s: None)
+
+
+def _fit(name, bic, agreement):
+    from calib.discrepancy import CandidateFit
+    return CandidateFit(name, [], bic - 2.0, 1, -0.5 * bic, bic, 100.0 - bic, 1e-9, True, pattern_agreement=agreement,
+                        status="converged", effect=name, effect_text="+3 % power")
+
+
+def test_two_candidates_equal_by_bic_are_told_apart_by_their_pattern_or_called_ambiguous(monkeypatch):
+    """Equal BIC and equal pattern agreement: ambiguous, with the separating measurement; equal BIC but
+    patterns apart by more than ``ambiguity_pattern``: the better-agreeing one is named, even with
+    the (slightly) worse BIC; BIC apart by more than ``ambiguity_bic``: the better BIC is named."""
+    rnd, best = _namer(monkeypatch)._judge([_fit("tip_loss", 20.0, 0.90), _fit("lift_offset", 21.0, 0.86)])
+    assert best is None and rnd["verdict"] == "ambiguous" and set(rnd["ambiguous"]) == {"tip_loss", "lift_offset"}
+    assert "separate tip_loss from lift_offset" in rnd["reason"] and rnd["separate"]["text"] in rnd["reason"]
+    rnd, best = _namer(monkeypatch)._judge([_fit("tip_loss", 20.0, 0.50), _fit("lift_offset", 21.0, 0.90)])
+    assert best.effect == "lift_offset" and "agrees better with the localized correction (0.90 against 0.50" in \
+        rnd["reason"]
+    rnd, best = _namer(monkeypatch, ambiguity_pattern=0.5)._judge([_fit("tip_loss", 20.0, 0.50),
+                                                                    _fit("lift_offset", 21.0, 0.90)])
+    assert rnd["verdict"] == "ambiguous"
+    rnd, best = _namer(monkeypatch)._judge([_fit("tip_loss", 20.0, 0.50), _fit("lift_offset", 30.0, 0.90)])
+    assert best.effect == "tip_loss"
+    with pytest.raises(InputError, match="ambiguity_pattern"):
+        DiagnosisSettings(ambiguity_pattern=-1).validate()
+
+
+def test_the_separating_probe_is_where_the_two_predictions_differ_most_against_the_noise():
+    from calib.separation import probe_conditions, separating_probes
+    measured = OperatingConditions(np.array([8.0, 10.0]), np.array([10.0, 12.0]), np.array([0.0, 0.0]))
+    probes = probe_conditions(measured, 63.0)
+    lam = probes.tip_speed_ratio(63.0)
+    assert len(probes) == 7 * 3 * 3 and np.isclose(lam.min(), 0.75 * measured.tip_speed_ratio(63.0).min())
+    assert set(np.round(probes.wind_speed, 6)) == {4.0, 9.0, 15.0} and set(probes.pitch) == {-2.0, 0.0, 4.0}
+    both = OperatingConditions(*(np.concatenate([getattr(measured, f), getattr(probes, f)])
+                                 for f in ("wind_speed", "rotor_speed", "pitch")))
+    a = np.ones((len(both), 2)) * [1e6, 5e5]
+    b = a.copy()
+    b[1, 1] *= 1.05             # a measured point, in the unmeasured channel: 5 % = 2.5 noise
+    b[30, 0] *= 1.10            # a probe, in the measured channel: 10 % = 5 noise
+    found = separating_probes(a, b, both, ["power", "fn@0.70"], ["power"], {"power": 0.02}, 2, 63.0)
+    assert [(p.kind, p.channel) for p in found] == [("another operating point", "power"),
+                                                    ("measured point, another channel", "fn@0.70")]
+    assert np.isclose(found[0].separation, 0.1 / 0.02 / 1.05, rtol=1e-12)
+    assert np.isclose(found[1].separation, 0.05 / 0.02 / 1.025, rtol=1e-12)
+    assert np.isclose(found[0].tip_speed_ratio, lam[28]) and "power at λ" in found[0].words(("x", "y"), "W")

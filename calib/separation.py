@@ -1,0 +1,148 @@
+"""What measurement would tell two candidate effects apart, when the data cannot (DESIGN §6).
+
+When two candidates of different physics explain a campaign about equally (an ``ambiguous``
+verdict of :mod:`calib.discrepancy`), both fitted models agree where the campaign measured.
+Where they disagree is found by asking them: both are evaluated on *probes*, operating
+points around and beyond the measured envelope (other tip-speed ratios, pitch angles and
+wind speeds at the same tip-speed ratio, which change only the Reynolds number) and channels
+the campaign did not measure (spanwise blade loads, where the model has them). The probe
+where their predictions differ most against the noise and model-form tolerance of that
+channel names the measurement that separates them, in the engineer's terms ("power at
+λ 7, pitch 0°, 4 m/s"); each candidate's fingerprint (:attr:`calib.effects.base.Effect.fingerprint`)
+says the same in words.
+
+The separation of a probe is
+
+.. math::
+    s = |y_a − y_b| \\,/\\, (ρ_c\\, \\max(|\\bar y|, 0.1 \\max_{probes} |\\bar y|))
+
+with ρ_c the channel's relative noise-plus-tolerance (the median σ/|y| of the measured
+channel; for a channel not measured, the median over the measured channels) and ȳ the two
+predictions' mean: s > 1 means one measurement at that probe, with the campaign's
+accuracy, tells the candidates apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.types import OperatingConditions
+
+#: Tip-speed ratios, pitch angles and wind speeds probed, relative to the measured envelope:
+#: λ from 0.75 λ_min (at least 1.5) to 1.25 λ_max; pitch 2 deg below to 4 deg above the
+#: measured; wind speed from half the lowest to 1.5 times the highest.
+PROBE_TSR_POINTS = 7
+PROBE_FLOOR = 0.1
+
+
+@dataclass(frozen=True)
+class Probe:
+    """Where two candidates' predictions differ most (one measurement that separates them)."""
+
+    channel: str
+    tip_speed_ratio: float
+    pitch: float                 # [deg]
+    wind_speed: float            # [m/s]
+    values: tuple                # (candidate a, candidate b) [channel unit]
+    separation: float            # |y_a − y_b| against the noise-plus-tolerance [-]
+    kind: str                    # "measured point, another channel" / "another operating point"
+
+    def words(self, names: tuple, unit: str = "") -> str:
+        a, b = self.values
+        rel = 100.0 * (a - b) / max(abs(0.5 * (a + b)), 1e-300)
+        u = f" {unit}" if unit and unit != "-" else ""
+        return (f"{self.channel} at λ {self.tip_speed_ratio:.3g}, pitch {self.pitch:.3g} deg, {self.wind_speed:.3g} m/s "
+                f"({self.kind}): {names[0]} {a:.4g}{u}, {names[1]} {b:.4g}{u} ({rel:+.2g} %, {self.separation:.2g}× "
+                f"the noise and model-form tolerance)")
+
+
+def probe_conditions(conditions: OperatingConditions, radius: float) -> OperatingConditions:
+    """Operating points around and beyond the measured envelope (see :data:`PROBE_TSR_POINTS`).
+
+    Parameters
+    ----------
+    conditions : OperatingConditions
+        The measured points.
+    radius : float
+        Rotor radius [m].
+
+    Returns
+    -------
+    OperatingConditions
+        A λ × pitch × wind-speed grid (air density and yaw: the measured medians).
+    """
+    lam = conditions.tip_speed_ratio(radius)
+    v, pitch = conditions.wind_speed, conditions.pitch
+    lams = np.linspace(max(1.5, 0.75 * lam.min()), 1.25 * lam.max(), PROBE_TSR_POINTS)
+    pitches = np.unique(np.round([pitch.min() - 2.0, np.median(pitch), pitch.max() + 4.0], 6))
+    speeds = np.unique(np.round([0.5 * v.min(), np.median(v), 1.5 * v.max()], 6))
+    L, P, V = (a.ravel() for a in np.meshgrid(lams, pitches, speeds, indexing="ij"))
+    rpm = L * V / radius * 30.0 / np.pi
+    return OperatingConditions(V, rpm, P, float(np.median(conditions.air_density)), float(np.median(conditions.yaw)))
+
+
+def separating_probes(values_a: np.ndarray, values_b: np.ndarray, conditions: OperatingConditions,
+                      channels: list, measured_channels: list, relative_noise: dict, n_measured: int,
+                      radius: float) -> list[Probe]:
+    """The probe of largest separation for each kind: measured points with a channel not
+    measured, and other operating points (measured channels or not).
+
+    Parameters
+    ----------
+    values_a, values_b : ndarray, shape (n_probes, n_channels)
+        The two fitted candidates' predictions [channel units].
+    conditions : OperatingConditions
+        The probes: the first ``n_measured`` are the measured points.
+    channels : list of str
+        The predicted channels.
+    measured_channels : list of str
+    relative_noise : dict
+        Measured channel -> relative noise-plus-tolerance [-].
+    n_measured : int
+    radius : float
+        [m]
+
+    Returns
+    -------
+    list of Probe
+        Best first; empty when nothing could be compared.
+    """
+    rho_default = float(np.median(list(relative_noise.values()))) if relative_noise else 0.01
+    lam = conditions.tip_speed_ratio(radius)
+    best: dict[str, Probe] = {}
+    for j, c in enumerate(channels):
+        a, b = values_a[:, j], values_b[:, j]
+        mean = np.abs(0.5 * (a + b))
+        ok = np.isfinite(a) & np.isfinite(b)
+        if not ok.any():
+            continue
+        floor = PROBE_FLOOR * float(np.max(mean[ok]))
+        if not floor > 0:
+            continue
+        s = np.where(ok, np.abs(a - b) / (relative_noise.get(c, rho_default) * np.maximum(mean, floor)), -1.0)
+        is_measured_point = np.arange(len(s)) < n_measured
+        for kind, mask in (("measured point, another channel", is_measured_point & (c not in measured_channels)),
+                           ("another operating point", ~is_measured_point)):
+            if not mask.any():
+                continue
+            k = int(np.flatnonzero(mask)[np.argmax(s[mask])])
+            if s[k] < 0:
+                continue
+            probe = Probe(c, float(lam[k]), float(conditions.pitch[k]), float(conditions.wind_speed[k]),
+                          (float(a[k]), float(b[k])), float(s[k]), kind)
+            if kind not in best or probe.separation > best[kind].separation:
+                best[kind] = probe
+    return sorted(best.values(), key=lambda p: -p.separation)
+
+
+def envelope_words(conditions: OperatingConditions, radius: float) -> str:
+    """The measured envelope in words ("λ 3-11, pitch -1-8 deg, 4.5-17 m/s")."""
+    lam = conditions.tip_speed_ratio(radius)
+
+    def span(x, fmt=".3g"):
+        lo, hi = float(np.min(x)), float(np.max(x))
+        return f"{lo:{fmt}}" if np.isclose(lo, hi) else f"{lo:{fmt}} to {hi:{fmt}}"
+
+    return f"λ {span(lam)}, pitch {span(conditions.pitch)} deg, {span(conditions.wind_speed)} m/s"
