@@ -258,7 +258,7 @@ def add_diagnose_arguments(parser) -> None:
     parser.add_argument("--out", default=None, help="output folder (required unless --resume DIR)")
     parser.add_argument("--config", default=None, help="TOML with [rotor], [model], [fluid], [grid], [calibration] "
                         "tables of the workflow schema and a [diagnosis] table (candidates, candidate_options, "
-                        "max_effects, significance, ambiguity_bic, recalibrate, channels)")
+                        "max_effects, significance, ambiguity_bic, ambiguity_pattern, model_form_tolerance, recalibrate, channels)")
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed diagnosis whose output "
                         "folder is DIR with the arguments it started with: model calls on record in DIR/history are "
                         "read back, not computed again; refused if the data, config or rotor changed")
