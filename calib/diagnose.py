@@ -237,10 +237,10 @@ def _fmu_family(setup, grid, channels: list, dset, src: str):
 
     executor = executor_from_table(setup.executor_table, src)
 
-    def build(parameters, corrections):
+    def build(parameters, corrections, probe_channels=None):
         table = {**setup.fmu_table, "parameters": list(parameters), "corrections": bool(corrections)}
-        return model_from_workflow(table, setup.rotor_spec, channels, src, setup.base_dir, grid=grid,
-                                   executor=executor)
+        return model_from_workflow(table, setup.rotor_spec, probe_channels or channels, src, setup.base_dir,
+                                   grid=grid, executor=executor)
 
     try:
         family = FmuFamily(build, dset.candidates)

@@ -40,10 +40,11 @@ class FmuFamily:
 
     Parameters
     ----------
-    build : callable(parameters, corrections) -> FmuModel
+    build : callable(parameters, corrections, channels=None) -> FmuModel
         An FMU model calibrating the mapped scalar ``parameters`` (list of names) and, with
         ``corrections``, the correction field (e.g. a ``[model] kind = "fmu"`` table through
-        :func:`calib.models.from_config.model_from_workflow`).
+        :func:`calib.models.from_config.model_from_workflow`), with the diagnosis' channels or
+        ``channels`` (the separation probes ask for the FMU's other outputs).
     candidates : sequence of str, optional
         Mapped parameters that may be named (default: every one the mapping maps).
     """
@@ -94,16 +95,21 @@ class FmuFamily:
         return [c.name for c in base]
 
     def probe_channels(self, measured: list) -> list:
-        """The FMU's channels are what its mapping maps: the separation probes predict the measured ones."""
-        return list(measured)
+        """Channels the separation probes predict: the measured ones and every other steady output
+        the mapping maps (per-blade root moments, spanwise normal force, ...)."""
+        offered = [c for c in self._nominal.available_channels() if not c.startswith("<")]
+        return list(measured) + [c for c in offered if c not in measured]
 
     def predict(self, base, candidate: MappedParameter, p, conditions, channels: list):
         """A fitted candidate's outputs (``channels``) and their units at ``conditions``."""
-        model = self.candidate_model(base, candidate)
-        ev = model.evaluate(p, conditions)
-        names = [c.name for c in model.channels]
-        cols = [names.index(c) for c in channels]
-        return ev.values[:, cols], [model.channels[j].unit for j in cols]
+        model = self.build([c.name for c in base] + [candidate.name], False, channels)
+        try:
+            ev = model.evaluate(p, conditions)
+        finally:
+            close = getattr(model, "close", None)
+            if close is not None:
+                close()
+        return ev.values, [c.unit for c in model.channels]
 
     def fingerprint(self, name: str) -> str:
         """A mapped parameter carries no fingerprint (its physics is the vendor's)."""

@@ -1,0 +1,172 @@
+"""The discrepancy workflow on the bundled FMUs (issue 25, item 5): the same rules, an unsteady truth.
+
+Truth: the bundled rotor FMU (variants A, FMI 2.0, SI, and B, FMI 3.0, kW/kN and rad/s:
+each read through its own mapping) on the NREL 5-MW with the periodic physics on (tower
+shadow, wind shear, Øye dynamic inflow), simulated at 72 steps per revolution and averaged
+over 4 whole revolutions after 10 settling ones (with 3, and with 6 and a pitched blade, the
+dynamic inflow is still settling at λ 9-11 and the FMU reports those points not steady); 12 operating points (λ 5-11 × pitch 0, 3,
+6 deg at 10 rpm), power, thrust and blade-1 root flap moment, 1 % noise. The diagnosis runs
+``calib diagnose`` with the same FMU configured as a user would for speed: 24 steps per
+revolution, 4 settling and 2 averaged revolutions, and a 2 × 2 correction grid; so the model
+never reproduces its truth exactly (time discretization, averaging windows, the transient left
+after settling): out of family by construction. Candidates: the mapped pitch offsets of
+blades 1 and 2 and the stall-delay strength.
+
+Data sets (the truth's mapped parameters): ``control`` (nominal), ``pitch_offset_blade1``
+(+1 deg on blade 1), ``stall_delay_strength`` (1.8 instead of 1). Right: ``none`` on the
+control, the data set's parameter (or ``ambiguous`` with it) on the others.
+
+``python benchmarks/bench_fmu_diagnosis.py [n_seeds]`` (default 3); under ``make validate``
+``run(n_seeds=3)``. Writes ``bench_output/fmu_diagnosis.json`` and ``.md``; two worker
+processes per diagnosis.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT_JSON = ROOT / "bench_output" / "fmu_diagnosis.json"
+OUT_MD = ROOT / "bench_output" / "fmu_diagnosis.md"
+WORK = ROOT / "bench_output" / "fmu_diagnosis"
+
+#: A statistical study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
+CHANNELS = ["power", "thrust", "root_flap_moment"]
+SWITCHES = {"tower_shadow": True, "shear": True, "yaw": False, "flexible_blades": False, "gravity": False,
+            "skewed_wake": False, "dynamic_inflow": True, "tip_loss": True, "hub_loss": True}
+TRUTH_STEADY = {"steps_per_revolution": 72, "settle_revolutions": 10, "average_revolutions": 4}
+MODEL_STEADY = {"steps_per_revolution": 24, "settle_revolutions": 4, "average_revolutions": 2}
+CANDIDATES = ["pitch_offset_blade1", "pitch_offset_blade2", "stall_delay_strength"]
+DATA_SETS = {"control": {}, "pitch_offset_blade1": {"pitch_offset_blade1": 1.0},
+             "stall_delay_strength": {"stall_delay_strength": 1.8}}
+SEED0 = 9700
+
+
+def _inline(table: dict) -> str:
+    return "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in table.items()) + " }"
+
+
+def config_text(variant: str) -> str:
+    """The ``calib diagnose`` config of the model (the user's faster FMU configuration)."""
+    return f"""[rotor]
+name = "nrel5mw"
+
+[model]
+kind = "fmu"
+variant = "{variant}"
+switches = {_inline(SWITCHES)}
+steady = {_inline(MODEL_STEADY)}
+
+[grid]
+alpha_nodes_deg = [0.0, 10.0]
+eta_nodes = [0.6, 1.0]
+
+[calibration]
+noise = "known"
+
+[diagnosis]
+candidates = {json.dumps(CANDIDATES)}
+max_effects = 1
+recalibrate = false
+
+[executor]
+kind = "process"
+workers = 2
+"""
+
+
+def conditions():
+    from calib.rotor.library import load_rotor
+    from calib.types import OperatingConditions
+    rotor = load_rotor("nrel5mw")
+    T, P = np.meshgrid([5.0, 7.0, 9.0, 11.0], [0.0, 3.0, 6.0], indexing="ij")
+    v = 10.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
+    return OperatingConditions(v, np.full(v.size, 10.0), P.ravel())
+
+
+def truth_values(variant: str, values: dict, folder: Path):
+    """The truth FMU's steady outputs at the campaign, shape (12, 3) [SI]."""
+    from calib.corrections import CorrectionGrid
+    from calib.models.from_config import model_from_workflow
+    names = list(values)
+    model = model_from_workflow({"kind": "fmu", "variant": variant, "switches": SWITCHES, "steady": TRUTH_STEADY,
+                                 "parameters": names or ["pitch_offset_blade1"], "corrections": False},
+                                {"name": "nrel5mw"}, CHANNELS, str(folder / "truth.toml"), folder,
+                                grid=CorrectionGrid([0.0, 10.0], [0.6, 1.0]))
+    try:
+        p = np.array([values[n] for n in names] if names else [0.0])
+        ev = model.evaluate(p, conditions())
+    finally:
+        model.close()
+    if ev.n_failed:
+        raise RuntimeError(f"the truth FMU failed: {ev.failure_summary()}")
+    return ev.values
+
+
+def run(n_seeds: int = 3, variants=("A", "B")) -> dict:
+    """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures."""
+    from calib.diagnose import run_diagnose
+    from calib.measurements import Measurements
+    t_start = time.perf_counter()
+    WORK.mkdir(parents=True, exist_ok=True)
+    rows, verdicts = [], []
+    for variant in variants:
+        config = WORK / f"config_{variant}.toml"
+        config.write_text(config_text(variant))
+        for name, values in DATA_SETS.items():
+            t0 = time.perf_counter()
+            clean = truth_values(variant, values, WORK)
+            truth_seconds = time.perf_counter() - t0
+            named, seconds = [], []
+            for k in range(n_seeds):
+                rng = np.random.default_rng(SEED0 + 10 * k)
+                sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
+                noisy = clean + rng.standard_normal(clean.shape) * sigma
+                meas = Measurements(conditions(), tuple(CHANNELS), noisy, np.broadcast_to(sigma, noisy.shape).copy(),
+                                    source=f"fmu {variant} {name} seed {k}")
+                data = WORK / f"{variant}_{name}_{k}.csv"
+                meas.write_csv(data)
+                t1 = time.perf_counter()
+                d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}"), str(config),
+                                 printer=lambda line: None, history=False)
+                seconds.append(time.perf_counter() - t1)
+                named.append(d.effect)
+                verdicts.append({"variant": variant, "data_set": name, "seed": k, "effect": d.effect,
+                                 "effects": d.effects, "chi2_per_dof_before": d.before["chi2_per_dof"],
+                                 "reason": d.rounds[0]["reason"] if d.rounds else "", "notes": d.notes})
+                print(f"[fmu diagnosis] {variant} {name} seed {k}: {d.effect} ({seconds[-1]:.0f} s)", flush=True)
+            want = "none" if name == "control" else name
+            right = sum(1 for v in verdicts if v["variant"] == variant and v["data_set"] == name and
+                        (v["effect"] == want or (v["effect"] == "ambiguous" and want in v["effects"] + [want])))
+            rows.append({"variant": variant, "data_set": name, "right": right, "total": n_seeds,
+                         "verdicts": dict(Counter(named)), "seconds_per_diagnosis": float(np.mean(seconds)),
+                         "truth_seconds": truth_seconds,
+                         "chi2_per_dof_before_median": float(np.median(
+                             [v["chi2_per_dof_before"] for v in verdicts[-n_seeds:]]))})
+    out = {"n_seeds": n_seeds, "rows": rows, "verdicts": verdicts, "wall_seconds": time.perf_counter() - t_start,
+           "truth_steady": TRUTH_STEADY, "model_steady": MODEL_STEADY, "switches": SWITCHES}
+    OUT_JSON.parent.mkdir(parents=True, exist_ok=True)
+    OUT_JSON.write_text(json.dumps(out, indent=1))
+    lines = [f"# calib diagnose on the bundled FMUs ({n_seeds} seeds, {out['wall_seconds'] / 60:.1f} min)", "",
+             "Truth: the FMU at 72 steps/rev, 10 + 4 revolutions; model: the same FMU at 24 steps/rev, 4 + 2.", "",
+             "| variant | data set | right / total | verdicts | χ²/dof before (median) | s / diagnosis |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['variant']} | {r['data_set']} | {r['right']} / {r['total']} | "
+                     f"{', '.join(f'{k} {v}' for k, v in r['verdicts'].items())} | "
+                     f"{r['chi2_per_dof_before_median']:.3g} | {r['seconds_per_diagnosis']:.0f} |")
+    OUT_MD.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return out
+
+
+if __name__ == "__main__":
+    run(int(sys.argv[1]) if len(sys.argv) > 1 else 3)

@@ -1,0 +1,57 @@
+"""An FMU diagnosis that cannot tell two candidates apart says so and names what would.
+
+Rotor power and thrust cannot say which blade is pitched: a blade-1 and a blade-2 pitch offset
+of the bundled FMU (variant A, quasi-steady, axisymmetric) fit them equally. The diagnosis
+says ``ambiguous`` with both, and its separation probes, which ask the FMU for every steady
+output its mapping maps, name a load on one blade (its root moment, its spanwise normal force).
+"""
+
+import json
+
+import numpy as np
+
+from calib.corrections import CorrectionGrid
+from calib.diagnose import run_diagnose
+from calib.measurements import synthesize
+from calib.models.from_config import model_from_workflow
+from calib.rotor.library import load_rotor
+from calib.tomlfile import read_toml
+from calib.types import OperatingConditions
+from test_resume import FMU_CONFIG
+
+CHANNELS = ["power", "thrust"]
+
+
+def test_blade_pitch_offsets_from_rotor_loads_are_ambiguous_and_a_blade_root_moment_separates_them(tmp_path):
+    config = tmp_path / "diagnose.toml"
+    config.write_text(FMU_CONFIG.replace('candidates = ["pitch_offset_blade1", "stall_delay_strength"]',
+                                         'candidates = ["pitch_offset_blade1", "pitch_offset_blade2"]')
+                      .replace('[executor]\nkind = "process"\nworkers = 2\n', ""))
+    cfg = read_toml(config, "config")
+    assert cfg["diagnosis"]["candidates"] == ["pitch_offset_blade1", "pitch_offset_blade2"] and "executor" not in cfg
+    grid = CorrectionGrid(cfg["grid"]["alpha_nodes_deg"], cfg["grid"]["eta_nodes"])
+    truth = model_from_workflow({**cfg["model"], "parameters": ["pitch_offset_blade1"], "corrections": False},
+                                {"name": "nrel5mw"}, CHANNELS, str(config), tmp_path, grid=grid)
+    rotor = load_rotor("nrel5mw")
+    T, P = np.meshgrid([6.0, 9.0], [0.0, 4.0], indexing="ij")
+    v = 10.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
+    meas = synthesize(truth, np.array([2.0]), OperatingConditions(v, np.full(v.size, 10.0), P.ravel()),
+                      relative_sigma={c: 0.005 for c in CHANNELS}, seed=9630)
+    truth.close()
+    data = tmp_path / "campaign.csv"
+    meas.write_csv(data)
+
+    d = run_diagnose(None, str(data), str(tmp_path / "out"), str(config), printer=lambda line: None, history=False)
+    rnd = d.rounds[0]
+    assert d.effect == "ambiguous", rnd["reason"]
+    assert set(rnd["ambiguous"]) == {"pitch_offset_blade1", "pitch_offset_blade2"}
+    probes = rnd["separate"]["probes"]
+    best = probes[0]
+    assert best["channel"].startswith(("root_flap_moment", "root_edge_moment")) and best["separation"] > 3, probes
+    # already at a measured point: a load on one blade (root moment or spanwise normal force), which
+    # the campaign did not measure
+    here = next(p for p in probes if p["kind"] == "measured point, another channel")
+    assert here["channel"].startswith(("root_", "fn@")) and here["separation"] > 3, probes
+    assert "to tell them apart, measure " + best["channel"] in rnd["reason"]
+    saved = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
+    assert saved["effect"] == "ambiguous" and saved["rounds"][0]["separate"]["probes"][0]["channel"] == best["channel"]
