@@ -105,6 +105,13 @@ class CorrectionGrid:
         Typical magnitude of a lift / drag correction [-] (SVD scaling, DESIGN §5).
     cl_bound, cd_bound : float
         Symmetric bounds on each nodal correction [-].
+    cd_floor : float
+        Least corrected C_D anywhere [-] (default 0.001): the corrected drag is held at
+        min(``cd_floor``, C_D,0) wherever the field would take it lower, at every section's
+        angle of attack, inside and outside the node range (:meth:`floor_drag`). Node bounds
+        keep C_D ≥ ``cd_min`` at the nodes only; between and beyond them a bilinear field
+        over a polar whose drag bucket lies between nodes can reach C_D ≤ 0, where the BEM
+        cannot evaluate.
     """
 
     alpha_nodes_deg: np.ndarray
@@ -113,11 +120,12 @@ class CorrectionGrid:
     cd_scale: float = 0.01
     cl_bound: float = 1.0
     cd_bound: float = 0.2
+    cd_floor: float = 0.001
 
     def __post_init__(self):
         object.__setattr__(self, "alpha_nodes_deg", _check_nodes(self.alpha_nodes_deg, "alpha_nodes_deg"))
         object.__setattr__(self, "eta_nodes", _check_nodes(self.eta_nodes, "eta_nodes"))
-        for name in ("cl_scale", "cd_scale", "cl_bound", "cd_bound"):
+        for name in ("cl_scale", "cd_scale", "cl_bound", "cd_bound", "cd_floor"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise InputError(f"must be a positive number, got {getattr(self, name)!r}",
                                  "CorrectionGrid", field=name)
@@ -218,4 +226,4 @@ class CorrectionGrid:
     def to_dict(self) -> dict:
         return {"alpha_nodes_deg": self.alpha_nodes_deg.tolist(), "eta_nodes": self.eta_nodes.tolist(),
                 "cl_scale": self.cl_scale, "cd_scale": self.cd_scale,
-                "cl_bound": self.cl_bound, "cd_bound": self.cd_bound}
+                "cl_bound": self.cl_bound, "cd_bound": self.cd_bound, "cd_floor": self.cd_floor}

@@ -95,7 +95,7 @@ SCHEMA = {
     "fluid": {"density": (NUM, False), "kinematic_viscosity": (NUM, False)},
     "grid": {"alpha_nodes_deg": ((list, str), True), "eta_nodes": (list, True), "cl_scale": (NUM, False),
              "cd_scale": (NUM, False), "cl_bound": (NUM, False), "cd_bound": (NUM, False),
-             "n_alpha_nodes": (int, False), "alpha_percentiles": (list, False)},
+             "cd_floor": (NUM, False), "n_alpha_nodes": (int, False), "alpha_percentiles": (list, False)},
     "conditions": {"tsr": (list, True), "pitch": (list, True), "rotor_speed": (NUM, True),
                    "air_density": (NUM, False), "yaw": (NUM, False)},
     "measurements": {"file": (str, True), "drop_incomplete_rows": (bool, False), "time_series": (str, False),
@@ -424,7 +424,7 @@ class WorkflowSetup:
                              field="grid.eta_nodes")
         try:
             return CorrectionGrid(alpha, eta, **{k: float(g[k]) for k in ("cl_scale", "cd_scale", "cl_bound",
-                                                                          "cd_bound") if k in g})
+                                                                          "cd_bound", "cd_floor") if k in g})
         except InputError as exc:
             raise InputError(exc.message, src, field=f"grid.{exc.field}") from None
 
