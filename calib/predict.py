@@ -3,8 +3,9 @@
 The result rebuilds its model from the spec it recorded, evaluates it at the conditions of
 FILE.csv and writes, next to the conditions, for each channel of the result
 ``<channel>``, ``<channel>_lower`` and ``<channel>_upper`` (the 95 % interval of the model
-output, :meth:`calib.result.CalibrationResult.predict`) in SI units, and a ``status``
-column. When FILE.csv also holds measured channels, χ²/dof of measured against predicted is
+output, :meth:`calib.result.CalibrationResult.predict`) in SI units, a ``status`` column,
+and ``envelope`` (``inside`` / ``outside``) with ``outside_because`` (what lies outside the
+calibration's operating ranges or the angles of attack it reached; :mod:`calib.envelope`). When FILE.csv also holds measured channels, χ²/dof of measured against predicted is
 printed per channel and overall, with σ² = σ_meas² + σ_pred² (σ_meas from the ``_sigma``
 columns, else the noise the calibration used).
 """
@@ -32,7 +33,7 @@ def write_prediction_csv(path: str | Path, conditions: dict, prediction: Predict
     header = [f"{c} [{cond_units[c]}]" for c in CONDITION_FIELDS]
     for c, u in zip(prediction.channels, prediction.units):
         header += [f"{c} [{u}]", f"{c}_lower [{u}]", f"{c}_upper [{u}]"]
-    header.append("status")
+    header += ["status", "envelope", "outside_because"]
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
@@ -45,6 +46,8 @@ def write_prediction_csv(path: str | Path, conditions: dict, prediction: Predict
                     row += [f"{prediction.values[k, j]:.10g}", f"{prediction.lower[k, j]:.10g}",
                             f"{prediction.upper[k, j]:.10g}"]
                 row.append(Status(int(prediction.status[k])).name)
+                why = prediction.envelope[k] if prediction.envelope else ""
+                row += ["outside" if why else "inside", why]
                 w.writerow(row)
         os.replace(tmp, path)
     finally:
@@ -174,6 +177,16 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})
     figures = {"n_points": int(pred.values.shape[0]), "n_failed": int(np.count_nonzero(pred.status != 0))}
     printer(f"calib predict: {figures['n_points']} points, {figures['n_failed']} failed; wrote {out}")
+    outside = pred.outside
+    figures["n_outside"] = int(outside.sum())
+    if outside.any():
+        first = int(np.flatnonzero(outside)[0])
+        printer(f"  {int(outside.sum())} of {len(outside)} points lie outside the calibration envelope (extrapolation; "
+                f"the CSV's envelope and outside_because columns say which and why), e.g. point {first + 1}: "
+                f"{pred.envelope[first]}")
+    else:
+        printer("  every point lies inside the calibration envelope (operating ranges and the angles of attack "
+                "the calibration reached at each station)")
     common = [c for c in meas.channels if c in pred.channels]
     if common:
         chi = {}

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.envelope import envelope_of
 from calib.errors import InputError
 from calib.identifiability import NodeLayout, eigenshapes, node_layout
 from calib.types import Parameter
@@ -337,8 +338,11 @@ class CalibrationResult:
         z = float(stats.norm.ppf(0.5 * (1 + confidence)))
         values = ev.values[:, idx]
         std = np.where(ev.ok[:, None], std, np.nan)
+        extras = getattr(ev, "extras", None) or {}
+        envelope = envelope_of(self.conditions, self.rotor_radius, conditions.as_dict(), extras.get("alpha_deg"),
+                               extras.get("eta"), self.alpha_seen, self.eta_seen) if self.conditions else []
         return Prediction(tuple(self.channels), tuple(self.channel_units), values, std, values - z * std,
-                          values + z * std, ev.status.copy(), tuple(ev.messages), confidence)
+                          values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope))
 
     def rebuild_model(self):
         """The forward model rebuilt from ``model_spec``.
@@ -484,6 +488,9 @@ class Prediction:
     status : ndarray of int, shape (n_points,)
     messages : tuple of str
     confidence : float
+    envelope : tuple of str
+        Per point, "" inside the calibration envelope, else what lies outside it
+        (:func:`calib.envelope.envelope_of`): an extrapolation.
     """
 
     channels: tuple
@@ -495,6 +502,13 @@ class Prediction:
     status: np.ndarray
     messages: tuple
     confidence: float
+    envelope: tuple = ()
+
+    @property
+    def outside(self) -> np.ndarray:
+        """True where the point lies outside the calibration envelope."""
+        return np.array([bool(e) for e in self.envelope], bool) if self.envelope else \
+            np.zeros(self.values.shape[0], bool)
 
 
 def _jsonable(x, fallback=None):
