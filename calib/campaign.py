@@ -6,7 +6,8 @@ measurements before its stages; every effect it names joins each stage's model w
 *default* nominal value and prior (the stage re-estimates it with the correction field, so
 a validation fold never sees a value fitted on its held-out point). A ``[validation]``
 table makes each stage repeat its calibration with the points of one operating condition
-left out (e.g. one wind speed at a time) and predict them with 95 % prediction intervals:
+left out (e.g. one wind speed at a time), or with one band of it (calibrate at low wind,
+predict at high wind, and the reverse), and predict them with 95 % prediction intervals:
 the model output's interval (:meth:`calib.result.CalibrationResult.predict`, frozen
 directions included) combined with the noise σ of a new measurement.
 """
@@ -28,7 +29,9 @@ from calib.measurements import Measurements
 #: [diagnosis] keys of a workflow: the DiagnosisSettings fields, plus the channels it uses.
 DIAGNOSIS_KEYS = tuple(f.name for f in dataclasses.fields(DiagnosisSettings)) + ("channels",)
 #: [validation] keys of a workflow.
-VALIDATION_KEYS = ("leave_out", "channels", "confidence")
+VALIDATION_KEYS = ("leave_out", "split", "band_at", "channels", "confidence")
+#: How held-back points are chosen: one value of the condition at a time, or two bands of it.
+SPLITS = ("one", "band")
 #: Operating conditions a validation may leave out one value of at a time ("point": each point).
 LEAVE_OUT = ("wind_speed", "rotor_speed", "pitch", "point")
 
@@ -61,7 +64,14 @@ class ValidationSettings:
     Parameters
     ----------
     leave_out : {"wind_speed", "rotor_speed", "pitch", "point"}
-        The condition whose values are left out one at a time.
+        The condition whose values are held back.
+    split : {"one", "band"}
+        ``"one"`` (default): each value left out in turn (leave-one-out). ``"band"``: calibrate
+        on the values at or below ``band_at`` and predict those above, then the reverse: the
+        extrapolation an engineer needs (calibrated at low wind, used at high wind).
+    band_at : float, optional
+        Where the bands part [unit of ``leave_out``]; default: the median of the distinct values
+        (the lower band takes it).
     channels : tuple of str, optional
         Channels scored (default: every channel of the stage).
     confidence : float
@@ -71,6 +81,8 @@ class ValidationSettings:
     leave_out: str = "wind_speed"
     channels: tuple | None = None
     confidence: float = 0.95
+    split: str = "one"
+    band_at: float | None = None
 
     @classmethod
     def from_table(cls, table: dict, source: str) -> "ValidationSettings":
@@ -88,7 +100,33 @@ class ValidationSettings:
         chans = table.get("channels")
         if chans is not None and (not isinstance(chans, list) or not all(isinstance(c, str) for c in chans)):
             raise InputError(f"must be an array of channel names, got {chans!r}", source, field="validation.channels")
-        return cls(leave, tuple(chans) if chans else None, float(conf))
+        split = table.get("split", "one")
+        if split not in SPLITS:
+            raise InputError(f"must be one of {', '.join(SPLITS)}, got {split!r}", source, field="validation.split")
+        if split == "band" and leave == "point":
+            raise InputError("a band split needs a condition (wind_speed, rotor_speed or pitch), not 'point'", source,
+                             field="validation.leave_out")
+        at = table.get("band_at")
+        if at is not None and (split != "band" or isinstance(at, bool) or not isinstance(at, (int, float))):
+            raise InputError(f"must be a number, with split = \"band\"; got {at!r}", source, field="validation.band_at")
+        return cls(leave, tuple(chans) if chans else None, float(conf), split, None if at is None else float(at))
+
+    def folds(self, groups: np.ndarray, source: str) -> list[tuple[str, np.ndarray]]:
+        """(label, held-back mask) of every fold over the condition values ``groups``."""
+        values = np.unique(groups)
+        if self.split == "one":
+            if values.size < 3:
+                raise InputError(f"leave-one-out over {self.leave_out} needs at least 3 distinct values, found "
+                                 f"{values.size}", source, field="validation.leave_out")
+            return [(f"{self.leave_out} = {g:g} held back", groups == g) for g in values]
+        at = float(values[(values.size - 1) // 2]) if self.band_at is None else self.band_at
+        low, high = groups <= at, groups > at
+        if np.unique(groups[low]).size < 1 or np.unique(groups[high]).size < 1:
+            raise InputError(f"a band split at {at:g} leaves one band empty ({self.leave_out} spans "
+                             f"{values.min():g} to {values.max():g})", source, field="validation.band_at")
+        name = self.leave_out.replace("_", " ")
+        return [(f"calibrated at {name} <= {at:g}, predicting above", high),
+                (f"calibrated at {name} > {at:g}, predicting at or below", low)]
 
 
 def named_effect_specs(diag, skip=()) -> list[dict]:
@@ -133,6 +171,8 @@ class FoldRow:
     noise_std: float
     n_retained: int
     status: str
+    fold: str = ""
+    outside: str = ""      # why the point lies outside the fold's calibration envelope ("" inside)
 
     @property
     def inside(self) -> bool:
@@ -147,33 +187,46 @@ class Validation:
     confidence: float
     rows: list = field(default_factory=list)
     units: dict = field(default_factory=dict)
+    split: str = "one"
 
     def channels(self) -> list[str]:
         return list(dict.fromkeys(r.channel for r in self.rows))
 
     def summary(self, channel: str) -> dict:
-        """Mean absolute error of the nominal and the calibrated model at the held-out points,
-        and how many held-out measurements fall inside the prediction intervals."""
+        """Mean absolute error and χ² per point of the nominal and the calibrated model at the
+        held-back points (calibrated: σ² = noise² + prediction variance; nominal: noise²), how
+        many held-back measurements fall inside the prediction intervals, and how many held-back
+        points lay outside their fold's calibration envelope."""
         rows = [r for r in self.rows if r.channel == channel and np.isfinite(r.predicted)]
         err_nom = [abs(r.measured - r.nominal) for r in rows if np.isfinite(r.nominal)]
+        chi_nom = [((r.measured - r.nominal) / r.noise_std) ** 2 for r in rows if np.isfinite(r.nominal)]
+        chi_cal = [(r.measured - r.predicted) ** 2 / (r.noise_std ** 2 + r.model_std ** 2) for r in rows]
         return {"channel": channel, "unit": self.units.get(channel, ""), "folds": len(rows),
                 "mean_abs_error_nominal": float(np.mean(err_nom)) if err_nom else float("nan"),
                 "mean_abs_error_calibrated": float(np.mean([abs(r.measured - r.predicted) for r in rows]))
                 if rows else float("nan"),
+                "chi2_per_point_nominal": float(np.mean(chi_nom)) if chi_nom else float("nan"),
+                "chi2_per_point_calibrated": float(np.mean(chi_cal)) if chi_cal else float("nan"),
                 "inside": int(sum(r.inside for r in rows)),
+                "outside_envelope": int(sum(bool(r.outside) for r in rows)),
                 "failed": int(sum(1 for r in self.rows if r.channel == channel and not np.isfinite(r.predicted)))}
 
     def sentence(self, channel: str) -> str:
         s = self.summary(channel)
         better = s["mean_abs_error_calibrated"] < s["mean_abs_error_nominal"]
-        return (f"{channel}, one {self.leave_out.replace('_', ' ')} left out at a time ({s['folds']} folds"
-                + (f", {s['failed']} failed" if s["failed"] else "") + "): mean |error| at the held-out points "
-                f"{s['mean_abs_error_calibrated']:.4g} {s['unit']} calibrated vs {s['mean_abs_error_nominal']:.4g} "
-                f"{s['unit']} nominal ({'better' if better else 'NOT better'}); {s['inside']} of {s['folds']} "
-                f"held-out measurements inside the {100 * self.confidence:g} % prediction intervals")
+        how = (f"one {self.leave_out.replace('_', ' ')} left out at a time ({s['folds']} folds" if self.split == "one"
+               else f"calibrated on one band of {self.leave_out.replace('_', ' ')} and predicting the other "
+                    f"({s['folds']} held-back points")
+        return (f"{channel}, {how}" + (f", {s['failed']} failed" if s["failed"] else "") + "): mean |error| at the "
+                f"held-back points {s['mean_abs_error_calibrated']:.4g} {s['unit']} calibrated vs "
+                f"{s['mean_abs_error_nominal']:.4g} {s['unit']} nominal ({'better' if better else 'NOT better'}); χ² "
+                f"per point {s['chi2_per_point_calibrated']:.3g} calibrated vs {s['chi2_per_point_nominal']:.3g} "
+                f"nominal; {s['inside']} of {s['folds']} held-back measurements inside the "
+                f"{100 * self.confidence:g} % prediction intervals; {s['outside_envelope']} outside their fold's "
+                f"calibration envelope")
 
     def to_dict(self) -> dict:
-        return {"leave_out": self.leave_out, "confidence": self.confidence,
+        return {"leave_out": self.leave_out, "split": self.split, "confidence": self.confidence,
                 "summary": [self.summary(c) for c in self.channels()],
                 "rows": [{**dataclasses.asdict(r), "inside": r.inside} for r in self.rows]}
 
@@ -181,14 +234,20 @@ class Validation:
         from calib.report.atomic import atomic_path
 
         head = [self.leave_out, "channel", "measured", "nominal", "predicted", "lower", "upper", "model_std",
-                "noise_std", "inside", "n_retained", "status"]
+                "noise_std", "inside", "n_retained", "status", "fold", "outside_because"]
         with atomic_path(path) as tmp:
             with open(tmp, "w") as f:
                 f.write(",".join(head) + "\n")
                 for r in self.rows:
                     f.write(",".join([f"{r.group:.6g}", r.channel] + [f"{v:.8g}" for v in (
                         r.measured, r.nominal, r.predicted, r.lower, r.upper, r.model_std, r.noise_std)]
-                        + [str(r.inside).lower(), str(r.n_retained), r.status]) + "\n")
+                        + [str(r.inside).lower(), str(r.n_retained), r.status, _csv_text(r.fold),
+                           _csv_text(r.outside)]) + "\n")
+
+
+def _csv_text(text: str) -> str:
+    """A CSV field: quoted when it holds a comma or a quote."""
+    return '"' + text.replace('"', '""') + '"' if ("," in text or '"' in text) else text
 
 
 def _groups(measurements: Measurements, leave_out: str) -> np.ndarray:
@@ -200,7 +259,8 @@ def _groups(measurements: Measurements, leave_out: str) -> np.ndarray:
 def leave_one_out(make_model: Callable, measurements: Measurements, settings: CalibrationSettings,
                   validation: ValidationSettings = ValidationSettings(),
                   progress: Callable[[str], None] | None = None) -> Validation:
-    """Calibrate with each value of one condition left out and predict the points left out.
+    """Calibrate with points held back (one value of a condition at a time, or a band of it) and
+    predict the points held back.
 
     Parameters
     ----------
@@ -223,10 +283,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
     """
     say = progress or (lambda s: None)
     groups = _groups(measurements, validation.leave_out)
-    values = np.unique(groups)
-    if values.size < 3:
-        raise InputError(f"leave-one-out over {validation.leave_out} needs at least 3 distinct values, found "
-                         f"{values.size}", measurements.source, field="validation.leave_out")
+    folds = validation.folds(groups, measurements.source)
     channels = list(validation.channels or measurements.channels)
     missing = [c for c in channels if c not in measurements.channels]
     if missing:
@@ -239,9 +296,9 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
     p0 = np.array([q.nominal for q in model.parameters])
     nominal = model.evaluate(p0, measurements.conditions)
     y_nom = nominal.values[:, [names.index(c) for c in measurements.channels]]
-    out = Validation(validation.leave_out, validation.confidence, units={c: units.get(c, "") for c in channels})
-    for i, g in enumerate(values):
-        test = groups == g
+    out = Validation(validation.leave_out, validation.confidence, units={c: units.get(c, "") for c in channels},
+                     split=validation.split)
+    for i, (label, test) in enumerate(folds):
         train = dataclasses.replace(
             measurements, conditions=measurements.conditions.subset(~test), values=measurements.values[~test],
             sigma=None if measurements.sigma is None else measurements.sigma[~test])
@@ -253,26 +310,27 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
                                confidence=validation.confidence)
             status = res.status
         except CalibError as exc:   # a failed fold is counted and shown, the others go on
-            say(f"fold {i + 1}/{values.size} ({validation.leave_out} = {g:g}) failed: {exc}")
+            say(f"fold {i + 1}/{len(folds)} ({label}) failed: {exc}")
             res, pred, status = None, None, f"failed: {type(exc).__name__}"
         for c in channels:
             j = list(measurements.channels).index(c)
             for kk, k in enumerate(np.flatnonzero(test)):     # kk: row of the prediction, k: of the table
+                g = float(groups[k])
                 if pred is None or not np.isfinite(pred.values[kk, j]):
-                    out.rows.append(FoldRow(float(g), c, float(measurements.values[k, j]), float(y_nom[k, j]),
+                    out.rows.append(FoldRow(g, c, float(measurements.values[k, j]), float(y_nom[k, j]),
                                             np.nan, np.nan, np.nan, np.nan, np.nan,
-                                            -1 if res is None else res.n_retained, status))
+                                            -1 if res is None else res.n_retained, status, label))
                     continue
                 noise = float(measurements.sigma[k, j]) if measurements.sigma is not None else float(
                     np.median(res.sigma[:, j]))
                 sd = float(pred.std[kk, j])
                 half = z * float(np.hypot(sd, noise))
                 yk = float(pred.values[kk, j])
-                out.rows.append(FoldRow(float(g), c, float(measurements.values[k, j]), float(y_nom[k, j]), yk,
-                                        yk - half, yk + half, sd, noise, res.n_retained, status))
+                why = pred.envelope[kk] if pred.envelope else ""
+                out.rows.append(FoldRow(g, c, float(measurements.values[k, j]), float(y_nom[k, j]), yk,
+                                        yk - half, yk + half, sd, noise, res.n_retained, status, label, why))
         if res is not None:
-            say(f"fold {i + 1}/{values.size} ({validation.leave_out} = {g:g}): {res.n_retained} θ retained, "
-                f"{res.status}")
+            say(f"fold {i + 1}/{len(folds)} ({label}): {res.n_retained} θ retained, {res.status}")
     return out
 
 
@@ -365,15 +423,17 @@ def section_html(diag, validations: dict) -> str:
         parts.append("<h2>Discrepancy workflow</h2><p>" + html.escape(diagnosis_sentence(diag))
                      + ' <a href="diagnosis/report.html">Full diagnosis report</a>.</p>')
     for name, val in validations.items():
-        parts.append(f"<h2>Leave-one-out validation: {html.escape(name)}</h2>")
+        kind = "Leave-one-out validation" if val.split == "one" else "Validation by extrapolation (band split)"
+        parts.append(f"<h2>{kind}: {html.escape(name)}</h2>")
         for c in val.channels():
             parts.append("<p>" + html.escape(val.sentence(c)) + "</p>")
         head = [val.leave_out.replace("_", " "), "channel", "measured", "nominal", "predicted", "95 % PI",
-                "inside", "θ retained"]
+                "inside", "θ retained", "envelope"]
         rows = "".join(
             "<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in (
                 f"{r.group:g}", r.channel, f"{r.measured:.4g}", f"{r.nominal:.4g}", f"{r.predicted:.4g}",
-                f"{r.lower:.4g} … {r.upper:.4g}", "yes" if r.inside else "NO", r.n_retained)) + "</tr>"
+                f"{r.lower:.4g} … {r.upper:.4g}", "yes" if r.inside else "NO", r.n_retained,
+                f"outside: {r.outside}" if r.outside else "inside")) + "</tr>"
             for r in val.rows)
         parts.append('<div style="overflow-x:auto"><table><tr>' + "".join(f"<th>{h}</th>" for h in head)
                      + "</tr>" + rows + "</table></div>")

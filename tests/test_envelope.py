@@ -44,3 +44,38 @@ def test_a_calibrated_twin_flags_its_extrapolations_in_the_prediction_and_the_cs
     rows = list(csv.reader(path.open()))[1:]
     assert rows[0][-2:] == ["envelope", "outside_because"]
     assert [r[-2] for r in rows[1:]] == ["inside", "outside"] and rows[2][-1] == pred.envelope[1]
+
+
+def test_a_band_split_calibrates_on_one_band_and_predicts_the_other_with_the_nominal_beside_it():
+    import pytest
+
+    from calib.campaign import ValidationSettings, leave_one_out
+    from calib.errors import InputError
+    model = TwinModel(channels=("power", "thrust"))
+    p_true = nominal_vector(model.parameters)
+    p_true[:model.grid.n_lift] = 0.05 * np.sin(np.arange(model.grid.n_lift))
+    cond = twin_conditions(tsr=(4.0, 5.5, 7.0), pitch=(0.0, 2.0), wind=(5.0, 7.0, 9.0, 11.0))
+    meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=9812)
+    band = ValidationSettings.from_table({"leave_out": "wind_speed", "split": "band"}, "cfg.toml")
+    val = leave_one_out(lambda: TwinModel(channels=("power", "thrust")), meas, CalibrationSettings(sigma_bar=0.3),
+                        band)
+    assert sorted({r.fold for r in val.rows}) == ["calibrated at wind speed <= 7, predicting above",
+                                                  "calibrated at wind speed > 7, predicting at or below"]
+    assert len(val.rows) == 2 * meas.n_points                     # every point held back once, per channel
+    above = [r for r in val.rows if r.group > 7]
+    assert all(r.fold.endswith("predicting above") and r.outside.startswith("wind speed") for r in above)
+    s = val.summary("power")
+    assert s["folds"] == meas.n_points and s["outside_envelope"] == meas.n_points
+    assert np.isfinite(s["chi2_per_point_calibrated"]) and np.isfinite(s["chi2_per_point_nominal"])
+    assert "calibrated on one band of wind speed" in val.sentence("power")
+    at9 = leave_one_out(lambda: TwinModel(channels=("power", "thrust")), meas, CalibrationSettings(sigma_bar=0.3),
+                        ValidationSettings.from_table({"split": "band", "band_at": 9.0}, "cfg.toml"))
+    assert {r.group for r in at9.rows if r.fold.endswith("predicting above")} == {11.0}
+    for table, key in (({"split": "bands"}, "validation.split"), ({"split": "band", "leave_out": "point"},
+                                                                   "validation.leave_out"),
+                       ({"band_at": 5.0}, "validation.band_at")):
+        with pytest.raises(InputError, match=key.replace(".", r"\.")):
+            ValidationSettings.from_table(table, "cfg.toml")
+    with pytest.raises(InputError, match="leaves one band empty"):
+        ValidationSettings.from_table({"split": "band", "band_at": 11.0}, "cfg.toml").folds(
+            np.array([5.0, 7.0, 11.0]), "data.csv")

@@ -71,7 +71,7 @@ def test_leave_one_wind_speed_out_beats_the_nominal_model(run, stage):
     assert torque["inside"] >= 5
     # the table in the report is the same one
     report = (out / "report.html").read_text()
-    assert "Leave-one-out validation" in report and f"{torque['inside']} of 6 held-out" in report
+    assert "Leave-one-out validation" in report and f"{torque['inside']} of 6 held-back" in report
 
 
 def _field_modes(res):
