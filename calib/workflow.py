@@ -747,12 +747,13 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         if diag is not None:
             res.checks["discrepancy workflow"] = campaign.diagnosis_sentence(diag)
         if setup.validation is not None:
+            kind = "leave-one-out" if setup.validation.split == "one" else "band split"
             val = campaign.leave_one_out(
                 lambda _c=tuple(stage["channels"]): setup.model(grid, list(_c), executor, effects),
                 meas.select_channels(stage["channels"]), st, setup.validation,
-                progress=lambda line, _n=name: echo(f"[calib run] {_n}: leave-one-out: {line}"))
+                progress=lambda line, _n=name, _k=kind: echo(f"[calib run] {_n}: {_k}: {line}"))
             validations[name] = val
-            res.checks.update({f"leave-one-out ({c})": val.sentence(c) for c in val.channels()})
+            res.checks.update({f"{kind} ({c})": val.sentence(c) for c in val.channels()})
         stage_dir = out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
         stage_dir.mkdir(exist_ok=True)
         t_rep = time.perf_counter()
