@@ -8,38 +8,18 @@ output its mapping maps, name a load on one blade (its root moment, its spanwise
 
 import json
 
-import numpy as np
-
-from calib.corrections import CorrectionGrid
 from calib.diagnose import run_diagnose
-from calib.measurements import synthesize
-from calib.models.from_config import model_from_workflow
-from calib.rotor.library import load_rotor
-from calib.tomlfile import read_toml
-from calib.types import OperatingConditions
-from test_resume import FMU_CONFIG
+from test_resume import FMU_CONFIG, fmu_campaign
 
 CHANNELS = ["power", "thrust"]
 
 
 def test_blade_pitch_offsets_from_rotor_loads_are_ambiguous_and_a_blade_root_moment_separates_them(tmp_path):
-    config = tmp_path / "diagnose.toml"
-    config.write_text(FMU_CONFIG.replace('candidates = ["pitch_offset_blade1", "stall_delay_strength"]',
-                                         'candidates = ["pitch_offset_blade1", "pitch_offset_blade2"]')
-                      .replace('[executor]\nkind = "process"\nworkers = 2\n', ""))
-    cfg = read_toml(config, "config")
-    assert cfg["diagnosis"]["candidates"] == ["pitch_offset_blade1", "pitch_offset_blade2"] and "executor" not in cfg
-    grid = CorrectionGrid(cfg["grid"]["alpha_nodes_deg"], cfg["grid"]["eta_nodes"])
-    truth = model_from_workflow({**cfg["model"], "parameters": ["pitch_offset_blade1"], "corrections": False},
-                                {"name": "nrel5mw"}, CHANNELS, str(config), tmp_path, grid=grid)
-    rotor = load_rotor("nrel5mw")
-    T, P = np.meshgrid([6.0, 9.0], [0.0, 4.0], indexing="ij")
-    v = 10.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
-    meas = synthesize(truth, np.array([2.0]), OperatingConditions(v, np.full(v.size, 10.0), P.ravel()),
-                      relative_sigma={c: 0.005 for c in CHANNELS}, seed=9630)
-    truth.close()
-    data = tmp_path / "campaign.csv"
-    meas.write_csv(data)
+    text = (FMU_CONFIG.replace('candidates = ["pitch_offset_blade1", "stall_delay_strength"]',
+                               'candidates = ["pitch_offset_blade1", "pitch_offset_blade2"]')
+            .replace('[executor]\nkind = "process"\nworkers = 2\n', ""))
+    assert 'candidates = ["pitch_offset_blade1", "pitch_offset_blade2"]' in text and "[executor]" not in text
+    config, data = fmu_campaign(tmp_path, text, CHANNELS, offset=2.0, relative_sigma=0.005, seed=9630)
 
     d = run_diagnose(None, str(data), str(tmp_path / "out"), str(config), printer=lambda line: None, history=False)
     rnd = d.rounds[0]

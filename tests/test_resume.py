@@ -262,9 +262,11 @@ workers = 2
 FMU_CHANNELS = ["power", "thrust", "root_flap_moment"]
 
 
-def fmu_campaign(tmp_path: Path) -> tuple[Path, Path]:
+def fmu_campaign(tmp_path: Path, config_text: str = FMU_CONFIG, channels=tuple(FMU_CHANNELS), offset: float = 1.0,
+                 relative_sigma: float = 0.01, seed: int = 5) -> tuple[Path, Path]:
     """A config of the bundled FMU (variant A, 8 correction nodes, quasi-steady and short windows)
-    and four operating points of that FMU with blade 1 pitched by 1 deg, 1 % noise."""
+    and four operating points of that FMU with blade 1 pitched by ``offset`` [deg], noise
+    ``relative_sigma`` of each channel's RMS, in ``channels``."""
     from calib.corrections import CorrectionGrid
     from calib.measurements import synthesize
     from calib.models.from_config import model_from_workflow
@@ -272,17 +274,18 @@ def fmu_campaign(tmp_path: Path) -> tuple[Path, Path]:
     from calib.tomlfile import read_toml
     from calib.types import OperatingConditions
 
+    channels = list(channels)
     config = tmp_path / "diagnose.toml"
-    config.write_text(FMU_CONFIG)
+    config.write_text(config_text)
     cfg = read_toml(config, "config")
     grid = CorrectionGrid(cfg["grid"]["alpha_nodes_deg"], cfg["grid"]["eta_nodes"])
     truth = model_from_workflow({**cfg["model"], "parameters": ["pitch_offset_blade1"], "corrections": False},
-                                {"name": "nrel5mw"}, FMU_CHANNELS, str(config), tmp_path, grid=grid)
+                                {"name": "nrel5mw"}, channels, str(config), tmp_path, grid=grid)
     rotor = load_rotor("nrel5mw")
     T, P = np.meshgrid([6.0, 9.0], [0.0, 4.0], indexing="ij")
     v = 10.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
-    meas = synthesize(truth, np.array([1.0]), OperatingConditions(v, np.full(v.size, 10.0), P.ravel()),
-                      relative_sigma={c: 0.01 for c in FMU_CHANNELS}, seed=5)
+    meas = synthesize(truth, np.array([offset]), OperatingConditions(v, np.full(v.size, 10.0), P.ravel()),
+                      relative_sigma={c: relative_sigma for c in channels}, seed=seed)
     truth.close()
     data = tmp_path / "campaign.csv"
     meas.write_csv(data)
