@@ -4,8 +4,11 @@ Truth: the bundled rotor FMU (variants A, FMI 2.0, SI, and B, FMI 3.0, kW/kN and
 each read through its own mapping) on the NREL 5-MW with the periodic physics on (tower
 shadow, wind shear, Øye dynamic inflow), simulated at 72 steps per revolution and averaged
 over 4 whole revolutions after 10 settling ones (with 3, and with 6 and a pitched blade, the
-dynamic inflow is still settling at λ 9-11 and the FMU reports those points not steady); 12 operating points (λ 5-11 × pitch 0, 3,
-6 deg at 10 rpm), power, thrust and blade-1 root flap moment, 1 % noise. The diagnosis runs
+dynamic inflow is still settling at λ 9-11 and the FMU reports those points not steady);
+10 operating points (λ 3, 5, 7, 9, 11 × pitch 0 and 4 deg at 10 rpm: the low λ stall the
+inboard blade, where a stall delay shows; a first version with λ 5-11 saw no stall, and its
+stall-delay data set was rightly called ``none``), power, thrust and blade-1 root flap
+moment, 1 % noise. The diagnosis runs
 ``calib diagnose`` with the same FMU configured as a user would for speed: 24 steps per
 revolution, 4 settling and 2 averaged revolutions, and a 2 × 2 correction grid; so the model
 never reproduces its truth exactly (time discretization, averaging windows, the transient left
@@ -93,13 +96,13 @@ def conditions():
     from calib.rotor.library import load_rotor
     from calib.types import OperatingConditions
     rotor = load_rotor("nrel5mw")
-    T, P = np.meshgrid([5.0, 7.0, 9.0, 11.0], [0.0, 3.0, 6.0], indexing="ij")
+    T, P = np.meshgrid([3.0, 5.0, 7.0, 9.0, 11.0], [0.0, 4.0], indexing="ij")
     v = 10.0 * np.pi / 30 * rotor.rotor_radius / T.ravel()
     return OperatingConditions(v, np.full(v.size, 10.0), P.ravel())
 
 
 def truth_values(variant: str, values: dict, folder: Path):
-    """The truth FMU's steady outputs at the campaign, shape (12, 3) [SI]."""
+    """The truth FMU's steady outputs at the campaign, shape (10, 3) [SI]."""
     from calib.corrections import CorrectionGrid
     from calib.models.from_config import model_from_workflow
     names = list(values)
