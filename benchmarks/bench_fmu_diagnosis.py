@@ -2,12 +2,12 @@
 
 Truth: the bundled rotor FMU (variants A, FMI 2.0, SI, and B, FMI 3.0, kW/kN and rad/s:
 each read through its own mapping) on the NREL 5-MW with the periodic physics on (tower
-shadow, wind shear, Øye dynamic inflow), simulated at 72 steps per revolution and averaged
-over 4 whole revolutions after 10 settling ones (with 3, and with 6 and a pitched blade, the
-dynamic inflow is still settling at λ 9-11 and the FMU reports those points not steady);
-10 operating points (λ 3, 5, 7, 9, 11 × pitch 0 and 4 deg at 10 rpm: the low λ stall the
-inboard blade, where a stall delay shows; a first version with λ 5-11 saw no stall, and its
-stall-delay data set was rightly called ``none``), power, thrust and blade-1 root flap
+shadow, wind shear, Øye dynamic inflow) and Du & Selig's stall delay at strength 1,
+simulated at 72 steps per revolution and averaged over 4 whole revolutions after 10
+settling ones (with 3, and with 6 and a pitched blade, the dynamic inflow is still settling
+at λ 9-11 and the FMU reports those points not steady); 10 operating points (λ 3, 5, 7, 9,
+11 × pitch 0 and 4 deg at 10 rpm: the low λ stall the inboard blade, where a stall delay
+shows), power, thrust and blade-1 root flap
 moment, 1 % noise. The diagnosis runs
 ``calib diagnose`` with the same FMU configured as a user would for speed: 24 steps per
 revolution, 4 settling and 2 averaged revolutions, and a 2 × 2 correction grid; so the model
@@ -47,7 +47,7 @@ SUITE = "validate"
 
 CHANNELS = ["power", "thrust", "root_flap_moment"]
 SWITCHES = {"tower_shadow": True, "shear": True, "yaw": False, "flexible_blades": False, "gravity": False,
-            "skewed_wake": False, "dynamic_inflow": True, "tip_loss": True, "hub_loss": True}
+            "skewed_wake": False, "dynamic_inflow": True, "tip_loss": True, "hub_loss": True, "stall_delay": "du_selig"}
 TRUTH_STEADY = {"steps_per_revolution": 72, "settle_revolutions": 10, "average_revolutions": 4}
 MODEL_STEADY = {"steps_per_revolution": 24, "settle_revolutions": 4, "average_revolutions": 2}
 CANDIDATES = ["pitch_offset_blade1", "pitch_offset_blade2", "stall_delay_strength"]

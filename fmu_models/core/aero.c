@@ -9,7 +9,8 @@
  *   dCL(alpha, eta) = sum_ij N_i(alpha) H_j(eta) pL_ij, dCD likewise,
  * with the piecewise-linear hat functions of calib.corrections (the end hats ramp to
  * zero over one node spacing outside the node range). Lift node (i, j) has index
- * i * n_eta + j.
+ * i * n_eta + j. The corrected C_D is held at or above min(CD_FLOOR, C_D,0), as in
+ * calib.effects.correction_field.floor_drag (default cd_floor of calib.corrections).
  *
  * Stall delay (rotational augmentation), increment on C_L added before the correction:
  *   Snel et al. (ECN-C--94-107, 1994):   dCL = s * 3 (c/r)^2 (CL_inv - CL)
@@ -72,17 +73,20 @@ static double stall_delay_increment(const Element *e, double alpha_deg, double c
     return p->stall_strength * fade * f * (cl_inv - cl);
 }
 
+#define CD_FLOOR 0.001   /* least corrected drag coefficient [-] (calib.corrections.CorrectionGrid.cd_floor) */
+
 void aero_coefficients(const Element *e, double alpha, double *cl, double *cd)
 {
     const RotorData *d = &e->core->data;
     const CoreParams *p = &e->core->dyn.par;
     int st = e->station, ka, ke, nl = d->n_eta_nodes, i, j;
-    double a_deg, wa[2];
+    double a_deg, wa[2], floor;
     a_deg = fmod(alpha * RAD2DEG + 180.0, 360.0);
     if (a_deg < 0.0) a_deg += 360.0;
     a_deg -= 180.0;
     base_polar(d, st, a_deg, cl, cd);
     *cl += stall_delay_increment(e, a_deg, *cl);
+    floor = *cd < CD_FLOOR ? *cd : CD_FLOOR;
     alpha_hats(d, a_deg, &ka, wa);
     ke = d->eta_index[st];
     for (i = 0; i < 2; i++) {
@@ -95,6 +99,7 @@ void aero_coefficients(const Element *e, double alpha, double *cl, double *cd)
             }
         }
     }
+    if (*cd < floor) *cd = floor;
 }
 
 /* Induction factors and residual at inflow angle phi (Ning 2014, eqs. as in CCBlade). */
