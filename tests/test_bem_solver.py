@@ -90,16 +90,32 @@ def test_invalid_conditions_give_failed_status_not_nan(field, bad):
     assert np.isfinite(res.power[0])
 
 
-def test_negative_drag_correction_is_reported():
+def test_negative_drag_is_reported_and_the_correction_field_cannot_cause_it():
+    """A polar stage that takes C_D to zero or below is refused at that point (the BEM needs
+    positive drag); the correction field itself holds the drag at its floor, so the same
+    downward field evaluates."""
     from calib.corrections import CorrectionGrid
     from calib.effects import CorrectionField
+    from calib.effects.base import Effect
+
+    class DragSink(Effect):
+        name = "drag_sink"
+        stage = "polar"
+        PARAMETERS = ()
+
+        def apply(self, theta, state, ctx):
+            return state.replace(cd=state.cd - 0.5)
+
     rotor = synthetic_rotor()
-    grid = CorrectionGrid([-10.0, 0.0, 10.0, 20.0], [0.0, 0.5, 1.0])
-    p = np.zeros(grid.n_params)
-    p[grid.n_lift:] = -0.5            # drives C_D negative everywhere
-    res = solve_bem(rotor, OperatingConditions([8.0], [15.0], [0.0]), effects=[CorrectionField(grid)], p=p)
+    cond = OperatingConditions([8.0], [15.0], [0.0])
+    res = solve_bem(rotor, cond, effects=[DragSink()], p=np.zeros(0))
     assert res.status[0] == Status.INVALID_INPUT
     assert "C_D <= 0" in res.messages[0]
+    grid = CorrectionGrid([-10.0, 0.0, 10.0, 20.0], [0.0, 0.5, 1.0])
+    p = np.zeros(grid.n_params)
+    p[grid.n_lift:] = -0.5            # would drive C_D negative everywhere without the floor
+    res = solve_bem(rotor, cond, effects=[CorrectionField(grid)], p=p)
+    assert res.status[0] == Status.CONVERGED, res.messages[0]
 
 
 def test_vectorized_equals_one_at_a_time():

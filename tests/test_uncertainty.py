@@ -443,7 +443,9 @@ def test_prediction_intervals_cover_the_noise_free_truth(bem_twin, tmp_path):
     assert cli_main(["predict", str(tmp_path / "res"), "--data", str(tmp_path / "new.csv"), "--out", str(out)]) == 0
     import csv
     rows = [r for r in csv.reader(open(out)) if r and not r[0].startswith("#")]
-    header, body = rows[0], np.array([[float(x) for x in r[:-1]] for r in rows[1:]])
+    header = rows[0]
+    n_numbers = header.index("status")                   # then status, envelope, outside_because
+    body = np.array([[float(x) for x in r[:n_numbers]] for r in rows[1:]])
     inside = []
     for j, c in enumerate(res.channels):
         col = header.index(f"{c} [{res.channel_units[j]}]")
