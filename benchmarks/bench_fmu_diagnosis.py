@@ -151,11 +151,12 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                 named.append(d.effect)
                 verdicts.append({"variant": variant, "data_set": name, "seed": k, "effect": d.effect,
                                  "effects": d.effects, "chi2_per_dof_before": d.before["chi2_per_dof"],
+                                 "ambiguous": d.rounds[0].get("ambiguous", []) if d.rounds else [],
                                  "reason": d.rounds[0]["reason"] if d.rounds else "", "notes": d.notes})
                 print(f"[fmu diagnosis] {variant} {name} seed {k}: {d.effect} ({seconds[-1]:.0f} s)", flush=True)
             want = "none" if name == "control" else name
             right = sum(1 for v in verdicts if v["variant"] == variant and v["data_set"] == name and
-                        (v["effect"] == want or (v["effect"] == "ambiguous" and want in v["effects"] + [want])))
+                        (v["effect"] == want or (v["effect"] == "ambiguous" and want in v["ambiguous"])))
             rows.append({"variant": variant, "data_set": name, "right": right, "total": n_seeds,
                          "verdicts": dict(Counter(named)), "seconds_per_diagnosis": float(np.mean(seconds)),
                          "truth_seconds": truth_seconds,

@@ -121,7 +121,7 @@ class ValidationSettings:
             return [(f"{self.leave_out} = {g:g} held back", groups == g) for g in values]
         at = float(values[(values.size - 1) // 2]) if self.band_at is None else self.band_at
         low, high = groups <= at, groups > at
-        if np.unique(groups[low]).size < 1 or np.unique(groups[high]).size < 1:
+        if not low.any() or not high.any():
             raise InputError(f"a band split at {at:g} leaves one band empty ({self.leave_out} spans "
                              f"{values.min():g} to {values.max():g})", source, field="validation.band_at")
         name = self.leave_out.replace("_", " ")

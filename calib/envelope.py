@@ -71,25 +71,18 @@ def envelope_of(calibration: dict, radius: float, conditions: dict, alpha_deg=No
             reasons[k].append(f"{name} {fmt.format(new[k])}{unit} above {fmt.format(hi)}{unit}")
     if alpha_deg is not None and eta is not None and alpha_seen is not None and np.size(alpha_seen):
         ranges = _ranges(np.asarray(alpha_seen, float), np.asarray(eta_seen, float))
-        a = np.asarray(alpha_deg, float)
+        a = np.asarray(alpha_deg, float)[:n]
         eta = np.asarray(eta, float)
-        known = [j for j, e in enumerate(eta) if any(abs(e - s) <= 1e-9 for s in ranges)]
-        for k in range(min(n, a.shape[0])):
-            loaded = [j for j in known if np.isfinite(a[k, j])]
-            out = [j for j in loaded if not (ranges[_nearest(ranges, eta[j])][0] - ALPHA_MARGIN_DEG <= a[k, j] <=
-                                             ranges[_nearest(ranges, eta[j])][1] + ALPHA_MARGIN_DEG)]
-            if out:
-                worst = max(out, key=lambda j: _distance(ranges[_nearest(ranges, eta[j])], a[k, j]))
-                lo, hi = ranges[_nearest(ranges, eta[worst])]
-                reasons[k].append(f"{len(out)} of {len(loaded)} stations at α outside the calibrated range (r/R "
-                                  f"{eta[worst]:.2f}: α {a[k, worst]:.3g} deg, calibrated {lo:.3g} to {hi:.3g} deg)")
+        # each station's calibrated α range (NaN for a station the calibration did not load)
+        span = np.array([ranges[min(ranges, key=lambda s: abs(s - e))] if any(abs(e - s) <= 1e-9 for s in ranges)
+                         else (np.nan, np.nan) for e in eta]).reshape(-1, 2)
+        lo, hi = span[:, 0], span[:, 1]
+        loaded = np.isfinite(a) & np.isfinite(lo)
+        beyond = np.maximum(lo - a, a - hi)                  # > 0 outside the range [deg]
+        out = loaded & (beyond > ALPHA_MARGIN_DEG)
+        for k in np.flatnonzero(out.any(axis=1)):
+            worst = int(np.argmax(np.where(out[k], beyond[k], -np.inf)))
+            reasons[k].append(f"{int(out[k].sum())} of {int(loaded[k].sum())} stations at α outside the calibrated "
+                              f"range (r/R {eta[worst]:.2f}: α {a[k, worst]:.3g} deg, calibrated {lo[worst]:.3g} to "
+                              f"{hi[worst]:.3g} deg)")
     return ["; ".join(r) for r in reasons]
-
-
-def _nearest(ranges: dict, e: float) -> float:
-    return min(ranges, key=lambda s: abs(s - e))
-
-
-def _distance(span: tuple, a: float) -> float:
-    lo, hi = span
-    return max(lo - a, a - hi, 0.0)
