@@ -44,7 +44,12 @@ best of the sweep; on both shipped workflows (with their own noise seeds; the lo
 study's stage 2) and on the analytic twin of ``tests/twin_model.py`` (56 points, truth of
 ``tests/test_calibration.py``).
 
-Run: ``python benchmarks/bench_coverage.py [n_seeds] [--no-held-back]`` (a few seconds per
+Also, per twin: the NEES of the whole scaled parameter vector against the truth at the nodes
+with the stated covariance, and the in-sample predictive check: measured against predicted at
+the calibration points with σ² = noise² + prediction variance (χ² per row and the fraction of
+rows inside the 95 % interval; far below 1 means bands wider than the data justify).
+
+Run: ``python benchmarks/bench_coverage.py [n_seeds] [--no-held-back] [--estimator=map|truncated]`` (a few seconds per
 calibration here; 30 seeds about 5–10 min, the held-back part about as long).
 """
 
@@ -180,6 +185,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
         hits = {"lift": [0, 0], "drag": [0, 0]}
         nees, nees_noise, dims, stable, kept, failed = [], [], [], [], [], 0
         prior_checks, second, fold_runs = [], [0, 0], 0
+        full_nees, pred_chi2, pred_cover, pred_rows = [], 0.0, 0, 0
         t0 = time.perf_counter()
         for k in range(n_seeds):
             if p_fixed is not None:
@@ -214,6 +220,18 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             C = Vr.T @ (res.cov_p / np.outer(res.scale, res.scale)) @ Vr
             nees.append(float(err @ np.linalg.solve(C, err)) if err.size else 0.0)
             nees_noise.append(float(np.sum((err / res.sigma_theta[res.retained]) ** 2)))
+            # the whole scaled vector against the truth at the nodes (the posterior's own NEES)
+            e_all = (res.p_hat - p_nodes) / res.scale
+            full_nees.append(float(e_all @ np.linalg.lstsq(res.cov_p / np.outer(res.scale, res.scale), e_all,
+                                                           rcond=None)[0]))
+            # in-sample predictive check: measured against predicted with σ² = noise² + prediction variance
+            pred = res.predict(cond, model)
+            ok = pred.status == 0
+            sd = np.sqrt(res.sigma ** 2 + pred.std ** 2)[ok]
+            zz = ((meas.values - pred.values)[ok] / sd).ravel()
+            pred_chi2 += float(np.sum(zz ** 2))
+            pred_cover += int(np.sum(np.abs(zz) <= stats.norm.ppf(0.975)))
+            pred_rows += zz.size
             dims.append(err.size)
             stable.append(res.status == "converged")
             rep = res.prior_std if res.settings.get("representation_error", True) else None
@@ -254,6 +272,12 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                                              for v in ("consistent", "larger", "smaller")},
                     "prior_check_amplitude_median_p10_p90": [float(np.median(amp)),
                                                              *np.percentile(amp, [10, 90]).tolist()]})
+        lo, hi = stats.chi2.ppf([0.025, 0.975], n_seeds * len(res.p_hat))
+        fig.update({"estimator": res.settings.get("estimator", "truncated"),
+                    "nees_full_vector_sum": float(np.sum(full_nees)), "nees_full_vector_dof": n_seeds * len(res.p_hat),
+                    "nees_full_vector_band": [float(lo), float(hi)],
+                    "in_sample_predictive_chi2_per_row": pred_chi2 / max(pred_rows, 1),
+                    "in_sample_predictive_coverage_95": pred_cover / max(pred_rows, 1)})
         fig.update({"retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
                     "runs_with_fold_directions": fold_runs,
                     "second_start_run_kept": second,
@@ -341,8 +365,8 @@ def held_back(name: str, sweep=SWEEP, seed: int | None = None, split: str = "row
     return fig
 
 
-def run(n_seeds: int = 30, with_held_back: bool = True) -> dict:
-    out = coverage(n_seeds)
+def run(n_seeds: int = 30, with_held_back: bool = True, estimator: str | None = None) -> dict:
+    out = coverage(n_seeds, **({"estimator": estimator} if estimator else {}))
     if with_held_back:
         out["held_back"] = {name: held_back(name) for name in ("wind_tunnel", "localization", "twin")}
         out["held_back"]["wind_tunnel_interleaved"] = held_back("wind_tunnel", split="interleaved")
@@ -353,4 +377,5 @@ if __name__ == "__main__":
     import json
 
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    print(json.dumps(run(int(args[0]) if args else 30, "--no-held-back" not in sys.argv), indent=1))
+    chosen = [a.split("=", 1)[1] for a in sys.argv[1:] if a.startswith("--estimator=")]
+    print(json.dumps(run(int(args[0]) if args else 30, "--no-held-back" not in sys.argv, *chosen[-1:]), indent=1))

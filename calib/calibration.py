@@ -47,6 +47,7 @@ from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
 from calib.parametrizations.aliasing import FineSensitivities
+from calib.prior_check import psd_sqrt
 from calib.result import CalibrationResult
 from calib.truncation import cv_curve, prior_limit
 from calib.types import nominal_vector
@@ -57,6 +58,7 @@ AUTO_CHOICES = 4
 SECOND_START_P = 0.01
 """χ² p-value of the first fit below which ``second_start`` runs (see ``Calibrator._second_start``)."""
 RETAIN_MODES = ("threshold", "all")
+ESTIMATORS = ("map", "truncated")
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,15 @@ class CalibrationSettings:
 
     Parameters
     ----------
+    estimator : {"map", "truncated"}
+        ``"map"``: the maximum a posteriori estimate under the stated prior (``prior_sigma``,
+        ``prior_std``, ``prior_correlation``) and its Laplace covariance; every parameter moves,
+        held by the prior where the data say little, and the SVD of the prior-whitened
+        sensitivities gives the directions where the data beat the prior (s_i > 1), their
+        eigenshapes and verdicts (:meth:`Calibrator._fit_map`). ``"truncated"``: the truncated
+        ML estimate of Bottasso et al. (2014), re-linearized until the retained set is stable,
+        with the frozen directions' prior and the added terms below (``sigma_bar``, ``cv_*``,
+        ``second_start``, ``curvature_samples``, ``representation_error``'s aliasing term).
     sigma_bar : float or "auto"
         ``"auto"`` (default): retain the number of θ chosen by the K-fold cross-validated
         prediction error over operating points (:func:`calib.truncation.cv_curve`), among the
@@ -161,6 +172,7 @@ class CalibrationSettings:
         Spanwise positions of the polar bands (default: the η nodes).
     """
 
+    estimator: str = "truncated"
     sigma_bar: float | str = "auto"
     prior_sigma: float = 1.0
     prior_correlation: float = 1.0
@@ -197,6 +209,8 @@ class CalibrationSettings:
 
         if self.noise not in NOISE_MODES:
             bad(f"unknown noise mode {self.noise!r}; valid: {', '.join(NOISE_MODES)}", "noise")
+        if self.estimator not in ESTIMATORS:
+            bad(f"unknown estimator {self.estimator!r}; valid: {', '.join(ESTIMATORS)}", "estimator")
         if self.retain not in RETAIN_MODES:
             bad(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", "retain")
         if isinstance(self.sigma_bar, str) and self.sigma_bar != "auto" or \
@@ -408,6 +422,8 @@ class Calibrator:
             if change < 1e-3:
                 break
         lin = problem.linearize(p)
+        if st.estimator == "map":
+            return self._finish_map(problem, nominal, lin, status, message, time.perf_counter() - t0)
         svd = self._svd(problem, lin)
         return self._finish(problem, nominal, lin, svd, status, message, time.perf_counter() - t0)
 
@@ -460,6 +476,8 @@ class Calibrator:
         """The re-linearization loop from ``p``; the first time with ``sigma_bar = "auto"``,
         followed by :meth:`_second_start` when the fit's χ² rejects the stated noise."""
         st = self.settings
+        if st.estimator == "map":
+            return self._fit_map(problem, p)
         first = st.sigma_bar == "auto" and st.retain != "all" and self._auto_frozen is None
         lin0 = problem.linearize(p)
         out = self._relinearize_loop(problem, p, lin0)
@@ -569,13 +587,98 @@ class Calibrator:
                        "sigma_bar")
         return p, svd, lin, status, message
 
+    def _fit_map(self, problem: LeastSquaresProblem, p: np.ndarray):
+        """The maximum a posteriori estimate under the stated prior (``estimator = "map"``).
+
+        min ½‖R^(−½) r(p)‖² + ½ p̃ᵀP⁻¹p̃ under the bounds, by the damped Gauss–Newton of
+        :func:`calib.estimation.estimate` in the prior-whitened coordinates u (p̃ = L u,
+        P = L Lᵀ), where the prior term is ½‖u‖² (MacKay 1992; Rasmussen & Williams 2006,
+        ch. 3, on the Laplace approximation). There is no retained set to settle: the status is
+        the estimator's (``converged``, ``max_iterations``, ``stalled``, ``failed``).
+        """
+        st = self.settings
+        L = psd_sqrt(self._prior_cov_scaled())
+        u0 = np.linalg.lstsq(L, problem.scaled(p), rcond=None)[0]
+        out = estimate(problem, L, u0, st.optimizer, st.max_iterations, st.tolerance, callback=self._emit,
+                       stage="map", prior=True)
+        status = {"qp_failed": "failed"}.get(out.status, out.status)
+        lin = out.linearization
+        analysis = self._map_analysis(lin)[0]
+        self._emit({"stage": "map_done", "status": status, "cost": out.cost, "iterations": out.iterations,
+                    "data_beat_prior": analysis.n_retained, "n_failed": lin.n_failed})
+        return out.p, analysis, lin, status, out.message
+
+    def _map_analysis(self, lin, fit_scale: float = 1.0):
+        """The SVD of the prior-whitened sensitivities A = R^(−½) G̃ L = U S Wᵀ at ``lin`` and the
+        Laplace covariance of the scaled parameters, (G̃ᵀR⁻¹G̃/k + P⁻¹)⁻¹ = L W (I + S²/k)⁻¹ (L W)ᵀ
+        with k = ``fit_scale``.
+
+        Returns the analysis in the result's terms (directions p̃ ∝ L w_i as unit columns of V,
+        s_i, σ of each direction's coordinate [scale units], "retained" = s_i > 1: the data
+        determine that direction better than the prior), the covariance [scale units²] and
+        its part along the directions where the prior dominates (s_i ≤ 1).
+        """
+        L = psd_sqrt(self._prior_cov_scaled())
+        A = lin.M @ L
+        lam, W = np.linalg.eigh(A.T @ A)
+        order = np.argsort(lam)[::-1]
+        s, W = np.sqrt(np.clip(lam[order], 0.0, None)), W[:, order]
+        LW = L @ W
+        shrink = 1.0 / (1.0 + s ** 2 / fit_scale)
+        cov = (LW * shrink) @ LW.T
+        weak = s <= 1.0
+        cov_weak = (LW[:, weak] * shrink[weak]) @ LW[:, weak].T
+        c = np.linalg.norm(LW, axis=0)
+        c = np.where(c > 0, c, 1.0)
+        analysis = SvdAnalysis(s, LW / c, c * np.sqrt(shrink), 1.0, ~weak)
+        return analysis, cov, cov_weak, W, L
+
+    def _finish_map(self, problem, nominal, lin, status, message, wall) -> CalibrationResult:
+        """The result of ``estimator = "map"``: the Laplace covariance at the estimate, widened by
+        the fit scale (the noise variance multiplied by max(1, χ²/(N − n_eff)), n_eff = Σ s²/(1+s²)
+        the effective number of parameters; MacKay 1992) with a stated noise and ``scale_by_fit``."""
+        st = self.settings
+        n_rows = int(lin.ok.sum()) * len(self.channel_index)
+        s = self._map_analysis(lin)[0].singular_values
+        n_eff = float(np.sum(s ** 2 / (1.0 + s ** 2)))
+        chi2 = float(np.sum(lin.residual[lin.ok] ** 2))
+        fit_scale = 1.0
+        if st.scale_by_fit and st.noise not in ("ml", "relative_ml") and n_rows > n_eff:
+            fit_scale = max(1.0, chi2 / (n_rows - n_eff))
+        svd, cov, cov_weak, W, L = self._map_analysis(lin, fit_scale)
+        ev = lin.evaluation
+        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
+        LW = L @ W
+        gain = (LW / (1.0 + s ** 2)) @ (lin.M @ LW).T    # p̃̂ = gain r̃: L (AᵀA + I)⁻¹ Aᵀ
+        alias, _, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen, gain=gain)
+        if alias is not None:   # the field between the nodes, taken up by the estimate
+            cov = cov + alias
+        u_hat = np.linalg.lstsq(L, problem.scaled(lin.p), rcond=None)[0]
+        c = np.linalg.norm(L @ W, axis=0)
+        theta_hat = (np.where(c > 0, c, 1.0) * (W.T @ u_hat))[svd.retained]
+        prior_var = np.diag(self._prior_cov_scaled())
+        obs = np.clip(1.0 - np.diag(cov) / np.where(prior_var > 0, prior_var, 1.0), 0.0, 1.0)
+        try:
+            prior_check = self._prior_check(problem, lin, fine)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a check, not the result
+            prior_check = {"failed": f"{type(exc).__name__}: {exc}"}
+        multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
+        D = np.outer(self.scale, self.scale)
+        self._emit({"stage": "map_covariance", "n_eff": n_eff, "fit_scale": fit_scale})
+        return self._result(problem, nominal, lin, svd, cov * D, cov_weak * D,
+                            np.diag(svd.sigma_theta[svd.retained] ** 2), theta_hat, obs, status, message, wall,
+                            fit_scale=fit_scale, prior_check=prior_check, multiple_roots=multiple_roots,
+                            aliasing_note=alias_note)
+
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen
+    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen, gain: np.ndarray | None = None
                   ) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:
         """Cov of the retained θ from the field between the nodes (scale units²), the χ² it adds
         to the residuals on average, why it is left out ('' when it is in, or when there is
         no correction field or nothing for it to act on; :mod:`calib.parametrizations.aliasing`),
-        and the fine-grid sensitivities it used (None when left out)."""
+        and the fine-grid sensitivities it used (None when left out). With ``gain`` (the MAP
+        estimate's linear response to the whitened data, p̃ per row [scale units]) the covariance is
+        that of the whole scaled vector, gain W Σ_δ Wᵀ gainᵀ, and the χ² is not computed (0)."""
         st = self.settings
         if self.field is None or self.field.grid is None or not svd.retained.any() or not alpha_seen.size:
             return None, 0.0, "", None
@@ -598,6 +701,11 @@ class Calibrator:
         r = svd.retained
         fine = fine_sensitivities(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
                                   lin.ok, alpha_seen, eta_seen)
+        if gain is not None:
+            from calib.parametrizations.aliasing import discrepancy_propagated
+
+            return (discrepancy_propagated(gain @ fine.W, self.field, fine, self.prior_std, st.prior_correlation),
+                    0.0, "", fine)
         cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
                                         lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
                                         st.prior_correlation, alpha_seen, eta_seen, sensitivities=fine)
@@ -744,10 +852,24 @@ class Calibrator:
         multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
         cov_ret, fold = self._fold_directions(lin, svd, multiple_roots, cov_ret, prior_cov)
         D = np.outer(self.scale, self.scale)
-        cov_p, cov_frozen = (cov_ret + cov_frz) * D, cov_frz * D
+        return self._result(problem, nominal, lin, svd, (cov_ret + cov_frz) * D, cov_frz * D, cov_theta,
+                            B.T @ problem.scaled(lin.p), observability(svd.V, svd.retained), status, message, wall,
+                            fit_scale=fit_scale, aliasing_chi2=alias_misfit, aliasing_note=alias_note,
+                            curvature=curvature, prior_check=prior_check, multiple_roots=multiple_roots,
+                            fold_directions=fold)
+
+    def _result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
+                wall, **extra) -> CalibrationResult:
+        """The :class:`CalibrationResult` of either estimator from its covariance [parameter units²]
+        and its directions; ``extra`` are the estimator's own result fields."""
+        st = self.settings
+        m = self.measurements
+        ev = lin.evaluation
+        F = fisher_matrix(lin.M)
+        prior_scaled = self.prior_std / self.scale
+        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
         std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
         _, crb_std_scaled, corr = cramer_rao(F)
-        obs = observability(svd.V, svd.retained)
         conf = confounding(F, prior_scaled, self.parameters)
         verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
                                       conf, st.identified_ratio, st.confounded_share)
@@ -765,7 +887,8 @@ class Calibrator:
         settings["model"] = type(self.model).__name__
         settings["lower_effective"] = self.lower.tolist()
         inputs = {m.source: m.sha256} if m.sha256 else {}
-        truncation = self._curve.to_dict() if st.sigma_bar == "auto" and st.retain != "all" else {}
+        truncation = self._curve.to_dict() if self._curve is not None and st.sigma_bar == "auto" \
+            and st.retain != "all" else {}
         if truncation and self._second_start_record:
             truncation.update(self._second_start_record)
         res = CalibrationResult(
@@ -773,7 +896,7 @@ class Calibrator:
             channel_units=self.channel_units, conditions=m.conditions.as_dict(), settings=settings,
             p_nominal=self.p0, p_hat=lin.p, lower=self.lower, upper=self.upper, scale=self.scale,
             cov_p=cov_p, std_p=std_p, singular_values=svd.singular_values, V=svd.V,
-            sigma_theta=svd.sigma_theta, retained=svd.retained, theta_hat=B.T @ problem.scaled(lin.p),
+            sigma_theta=svd.sigma_theta, retained=svd.retained, theta_hat=theta_hat,
             cov_theta=cov_theta, theta_nominal_linearization=np.zeros(0), correlation=corr,
             crb_std=crb_std_scaled * self.scale, observability=obs, measured=m.values, sigma=problem.sigma,
             model_before=nominal.evaluation.values[:, self.channel_index],
@@ -785,9 +908,7 @@ class Calibrator:
                                       / problem.sigma[nominal.ok]) ** 2)),
             chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
             wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
-            truncation=truncation, model_spec=spec, confounding=conf, fit_scale=fit_scale,
-            aliasing_chi2=alias_misfit, aliasing_note=alias_note, curvature=curvature, prior_check=prior_check,
-            multiple_roots=multiple_roots, fold_directions=fold)
+            truncation=truncation, model_spec=spec, confounding=conf, **extra)
         if self.field is not None and self.field.grid is not None:
             res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
                                                confidence=st.band_confidence,

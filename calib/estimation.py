@@ -361,8 +361,8 @@ def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.n
 def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
              optimizer: str = "sqpmethod", max_iterations: int = 30, tolerance: float = 1e-9,
              step_tolerance: float = 1e-7, callback: Callable[[dict], None] | None = None,
-             stage: str = "estimate") -> EstimationOutcome:
-    """Constrained ML estimate of θ in p = p₀ + D B θ by damped Gauss–Newton.
+             stage: str = "estimate", prior: bool = False) -> EstimationOutcome:
+    """Constrained ML (or MAP) estimate of θ in p = p₀ + D B θ by damped Gauss–Newton.
 
     Parameters
     ----------
@@ -380,12 +380,22 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         Step norm [scale units] below which the iteration stops.
     callback : callable(dict), optional
         Called after every iteration with keys stage, iteration, cost, step, damping, n_failed.
+    prior : bool
+        Add ½‖θ‖² to the cost: the maximum a posteriori estimate under θ ~ N(0, I), i.e. with
+        B = L, P = L Lᵀ, the prior p̃ ~ N(0, P) (:class:`calib.calibration.Calibrator`,
+        ``estimator = "map"``). The Gauss–Newton model of the prior term is exact.
 
     Returns
     -------
     EstimationOutcome
+        ``cost`` includes the prior term when ``prior``.
     """
     qp = get_optimizer(optimizer)
+    w = 1.0 if prior else 0.0
+
+    def total(at, th):
+        return at.cost + 0.5 * w * float(th @ th)
+
     basis = np.asarray(basis, float)
     n_theta = basis.shape[1]
     theta = np.zeros(n_theta) if theta0 is None else np.asarray(theta0, float).copy()
@@ -401,16 +411,17 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
     lin = problem.linearize(problem.p_of(basis, theta))
     history = []
     if n_theta == 0:
-        return EstimationOutcome(theta, lin.p, lin.cost, 0, "converged", "nothing to estimate", lin, history)
+        return EstimationOutcome(theta, lin.p, total(lin, theta), 0, "converged", "nothing to estimate", lin, history)
     mu = 1e-6
     status, message = "max_iterations", f"stopped after {max_iterations} iterations"
     it = 0
     for it in range(1, max_iterations + 1):
         J = -(lin.M @ basis)
         r = lin.residual.reshape(-1)
-        H = J.T @ J
-        g = J.T @ r
+        H = J.T @ J + w * np.eye(n_theta)
+        g = J.T @ r + w * theta
         dH = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
+        cost_now = total(lin, theta)
         accepted = False
         for _ in range(DAMPING_TRIES):
             sol = qp(H + mu * np.diag(dH), g, basis, lb - basis @ theta, ub - basis @ theta)
@@ -420,8 +431,9 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
             x = _feasible_step(basis, theta, sol.x, lb, ub)
             trial = problem.linearize(problem.p_of(basis, theta + x))
             predicted = -(g @ x + 0.5 * x @ H @ x)
-            if trial.n_failed <= lin.n_failed and trial.cost <= lin.cost:
-                rho = (lin.cost - trial.cost) / predicted if predicted > 0 else 1.0
+            cost_trial = total(trial, theta + x)
+            if trial.n_failed <= lin.n_failed and cost_trial <= cost_now:
+                rho = (cost_now - cost_trial) / predicted if predicted > 0 else 1.0
                 mu = max(mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
                 accepted = True
                 break
@@ -437,16 +449,16 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
             else:
                 status, message = "stalled", "no step decreased the cost (damping exhausted)"
             break
-        decrease = lin.cost - trial.cost
+        decrease = cost_now - cost_trial
         theta = theta + x
         step = float(np.linalg.norm(x))
         lin = trial
-        rec = {"stage": stage, "iteration": it, "cost": lin.cost, "step": step, "damping": mu,
+        rec = {"stage": stage, "iteration": it, "cost": cost_trial, "step": step, "damping": mu,
                "n_failed": lin.n_failed, "qp": sol.message}
         history.append(rec)
         if callback:
             callback(rec)
-        if decrease <= tolerance * (1.0 + lin.cost) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
+        if decrease <= tolerance * (1.0 + cost_trial) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
             if sol.success or (step <= step_tolerance * (1.0 + np.linalg.norm(theta)) and
                                "Search_Direction_Becomes_Too_Small" in sol.message):
                 # CasADi's SQP reports a vanishing search direction as a failure; at a step below
@@ -457,4 +469,4 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
                 status, message = "qp_failed", f"{optimizer} made no progress: {sol.message}"
             break
     problem._cache = lin
-    return EstimationOutcome(theta, lin.p, lin.cost, it, status, message, lin, history)
+    return EstimationOutcome(theta, lin.p, total(lin, theta), it, status, message, lin, history)

@@ -121,7 +121,7 @@ class PriorCheck:
         return f"Prior check: the data are consistent with the stated prior ({interval})."
 
 
-def _psd_sqrt(K: np.ndarray) -> np.ndarray:
+def psd_sqrt(K: np.ndarray) -> np.ndarray:
     """L with L Lᵀ = K for a symmetric positive semi-definite K (eigen-decomposition)."""
     w, Q = np.linalg.eigh(0.5 * (K + K.T))
     return Q * np.sqrt(np.clip(w, 0.0, None))
@@ -158,7 +158,7 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
     z = np.asarray(z, float).reshape(-1)
     n = z.size
     if Z_other is not None and Z_other.shape[1]:
-        U_n, s_n, _ = np.linalg.svd(np.asarray(Z_other, float) @ _psd_sqrt(np.asarray(K_other, float)),
+        U_n, s_n, _ = np.linalg.svd(np.asarray(Z_other, float) @ psd_sqrt(np.asarray(K_other, float)),
                                     full_matrices=False)
         shrink = 1.0 - 1.0 / np.sqrt(1.0 + s_n ** 2)
         logdet_b = float(np.sum(np.log1p(s_n ** 2)))
@@ -170,7 +170,7 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
 
         def b_half_inv(X):
             return X
-    L_f = _psd_sqrt(np.asarray(K_field, float)) if field_sqrt is None else np.asarray(field_sqrt, float)
+    L_f = psd_sqrt(np.asarray(K_field, float)) if field_sqrt is None else np.asarray(field_sqrt, float)
     G = b_half_inv(np.asarray(Z_field, float) @ L_f)
     w = b_half_inv(z[:, None])[:, 0]
     U, s, _ = np.linalg.svd(G, full_matrices=False) if G.size else (np.zeros((n, 0)), np.zeros(0), None)
@@ -282,7 +282,7 @@ def map_point(linearize_at, x0: np.ndarray, prior_cov: np.ndarray, max_iteration
     -------
     MapPoint
     """
-    L = _psd_sqrt(np.asarray(prior_cov, float))
+    L = psd_sqrt(np.asarray(prior_cov, float))
     evaluate_at = evaluate_at or (lambda x: linearize_at(x)[:3])
 
     def cost_of(x, r, ok):

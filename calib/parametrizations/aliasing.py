@@ -214,21 +214,47 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
         average, tr(P⊥ W Σ_δ Wᵀ P⊥) with P⊥ = I − U_ID U_IDᵀ [-].
     """
     field = model.correction_field()
-    coarse, clay = field.grid, field.layout
     k = V_retained.shape[1]
     if k == 0 or not correlation_length > 0:
         return np.zeros((k, k)), 0.0
     fs = sensitivities or fine_sensitivities(model, p, conditions, sigma, channel_index, ok, alpha_deg, eta, factor)
-    fine, W = fs.fine, fs.W
+    W = fs.W
     B = (V_retained.T @ (M.T @ W)) / s_retained[:, None] ** 2
     U = (M @ V_retained) / s_retained                  # retained left singular vectors
     P_W = W - U @ (U.T @ W)                            # the part of W δ the fit leaves in the residuals
-    D = discrepancy_correlation(coarse, fine, field.correlation_lengths(correlation_length))
+    return (discrepancy_propagated(B, field, fs, prior_std, correlation_length),
+            float(np.sum(discrepancy_propagated(P_W, field, fs, prior_std, correlation_length, diagonal=True))))
+
+
+def discrepancy_propagated(B: np.ndarray, field, fs: FineSensitivities, prior_std: np.ndarray,
+                           correlation_length: float, diagonal: bool = False) -> np.ndarray:
+    """Cov(B δ) of a linear map B of the field between the nodes on the fine grid, δ ~ N(0, Σ_δ)
+    per block (lift, drag) with Σ_δ = σ_p² (K_ff − T K_cf − K_fc Tᵀ + T K_cc Tᵀ).
+
+    Parameters
+    ----------
+    B : ndarray, shape (k, 2 * n_fine)
+        E.g. an estimator's gain times ``fs.W``: how the fine-grid field enters its output.
+    field : CorrectionField
+        The calibration's field (grid, layout, correlation lengths).
+    fs : FineSensitivities
+    prior_std : ndarray, shape (n_params,)
+        Prior 1-σ per parameter [parameter unit]; each block's mean variance sets its σ_p².
+    correlation_length : float
+        Of the smooth-field prior, in node spacings.
+    diagonal : bool
+        Only the variances (shape (k,)), without forming the k × k matrix.
+
+    Returns
+    -------
+    ndarray, shape (k, k) or (k,)
+    """
+    D = discrepancy_correlation(field.grid, fs.fine, field.correlation_lengths(correlation_length))
     n = D.shape[0]
-    out, misfit = np.zeros((k, k)), 0.0
-    for block, c_idx in enumerate((clay.lift_index, clay.drag_index)):
+    k = B.shape[0]
+    out = np.zeros(k) if diagonal else np.zeros((k, k))
+    for block, c_idx in enumerate((field.layout.lift_index, field.layout.drag_index)):
         var = float(np.mean(np.asarray(prior_std, float)[c_idx.ravel()] ** 2))
-        Bb, Pb = B[:, block * n:(block + 1) * n], P_W[:, block * n:(block + 1) * n]
-        out += var * (Bb @ D @ Bb.T)
-        misfit += var * float(np.sum((Pb @ D) * Pb))
-    return 0.5 * (out + out.T), misfit
+        Bb = B[:, block * n:(block + 1) * n]
+        out += var * (np.sum((Bb @ D) * Bb, axis=1) if diagonal else Bb @ D @ Bb.T)
+    return out if diagonal else 0.5 * (out + out.T)

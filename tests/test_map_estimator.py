@@ -1,0 +1,115 @@
+"""The maximum a posteriori estimator (``estimator = "map"``) against closed forms and by coverage.
+
+On a model linear in its parameters the MAP under a Gaussian prior and its Laplace covariance are
+the exact Gaussian posterior (Rasmussen & Williams 2006, eq. 2.8): the calibrator's estimate and
+covariance must equal (MᵀM + P⁻¹)⁻¹Mᵀr₀ and (MᵀM + P⁻¹)⁻¹ computed here from the model's
+Jacobian, and its "directions where the data beat the prior" must be the eigenvectors of
+LᵀMᵀML with eigenvalue above 1.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.corrections import CorrectionGrid
+from calib.errors import InputError
+from calib.measurements import synthesize
+from calib.types import nominal_vector
+from twin_model import TwinModel, twin_conditions
+
+LINEAR = dict(estimator="map", cd_min=None, scale_by_fit=False, representation_error=False, prior_check=False)
+
+
+def _linear_problem(seed=3, grid=None):
+    model = TwinModel(grid, channels=("power", "thrust", "root_flap_moment"), nuisance=(), nonlinearity=0.0)
+    cond = twin_conditions()
+    rng = np.random.default_rng(seed)
+    p0 = nominal_vector(model.parameters)
+    scale = np.array([q.scale for q in model.parameters])
+    p_true = p0 + 0.8 * scale * rng.standard_normal(p0.size)
+    meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01, "root_flap_moment": 0.01},
+                      seed=seed)
+    return model, cond, meas, p0, scale
+
+
+def _closed_form(model, cond, meas, p0, scale, P):
+    ev, G = model.jacobian(p0, cond)
+    idx = [[c.name for c in model.channels].index(c) for c in meas.channels]
+    M = (G[:, idx, :] * scale / meas.sigma[:, :, None]).reshape(-1, p0.size)
+    r0 = ((meas.values - ev.values[:, idx]) / meas.sigma).ravel()
+    A = M.T @ M + np.linalg.inv(P)
+    cov = np.linalg.inv(A)
+    return p0 + scale * (cov @ (M.T @ r0)), cov * np.outer(scale, scale), M
+
+
+@pytest.mark.parametrize("correlation", [0.0, 1.0])
+def test_map_is_the_exact_posterior_on_a_linear_model(correlation):
+    model, cond, meas, p0, scale = _linear_problem()
+    cal = Calibrator(model, meas, CalibrationSettings(prior_correlation=correlation, **LINEAR))
+    res = cal.run()
+    assert res.status == "converged", res.message
+    p_map, cov, M = _closed_form(model, cond, meas, p0, scale, cal._prior_cov_scaled())
+    # the Gauss–Newton of a linear least-squares problem with a quadratic prior lands on the
+    # normal equations' solution; the tolerance is that of the iteration's stopping rule
+    assert np.max(np.abs(res.p_hat - p_map) / np.sqrt(np.diag(cov))) < 1e-3
+    # the twin's Jacobian is a central difference: exact for a linear model up to its round-off
+    d = np.sqrt(np.diag(cov))
+    assert np.max(np.abs(res.cov_p - cov) / np.outer(d, d)) < 1e-6
+    # the directions where the data beat the prior: s² are the eigenvalues of LᵀMᵀML
+    L = np.linalg.cholesky(cal._prior_cov_scaled() + 1e-14 * np.eye(p0.size))
+    s2 = np.sort(np.linalg.eigvalsh(L.T @ M.T @ M @ L))[::-1]
+    assert np.allclose(res.singular_values ** 2, s2, rtol=1e-6, atol=1e-9 * s2[0])
+    assert res.n_retained == int(np.sum(s2 > 1.0))
+    assert 0 < res.n_retained < res.n_params
+
+
+def test_map_moves_every_parameter_and_keeps_the_prior_where_the_data_say_nothing():
+    """A node no operating point reaches keeps its prior mean and its prior σ."""
+    grid = CorrectionGrid([-4.0, 2.0, 8.0, 14.0, 20.0, 40.0, 60.0], [0.2, 0.6, 1.0])   # 60°: no point reaches it
+    model, cond, meas, p0, scale = _linear_problem(seed=5, grid=grid)
+    res = Calibrator(model, meas, CalibrationSettings(prior_correlation=0.0, **LINEAR)).run()
+    ev = model.evaluate(res.p_hat, cond)
+    a, e = model.correction_field().seen(ev)
+    field = model.correction_field()
+    reached = np.zeros(res.n_params, bool)
+    for block in ("lift", "drag"):
+        reached |= np.any(np.abs(field.basis(a, e, block)) > 0, axis=0)
+    assert (~reached).any() and reached.any()
+    assert np.allclose(res.p_hat[~reached], p0[~reached], atol=1e-12)
+    assert np.allclose(res.std_p[~reached], res.prior_std[~reached], rtol=1e-9)
+    assert np.all(res.std_p[reached] < res.prior_std[reached])
+
+
+def test_the_estimator_setting_is_checked():
+    with pytest.raises(InputError, match="unknown estimator 'laplace'; valid: map, truncated"):
+        CalibrationSettings(estimator="laplace").validate()
+
+
+def test_map_covers_prior_draws_on_the_nonlinear_twin():
+    """Truths drawn from the stated prior (independent nodes, σ_p = 1 scale unit, pitch offset
+    from its prior) on the mildly nonlinear twin: the summed NEES of the whole vector over 12
+    draws inside its two-sided 99 % χ² band (seeds 900–911, not used to build the method)."""
+    from scipy import stats
+
+    model = TwinModel(channels=("power", "thrust", "root_flap_moment"), nonlinearity=0.05)
+    cond = twin_conditions()
+    settings = CalibrationSettings(estimator="map", prior_correlation=0.0, cd_min=None, prior_check=False,
+                                   representation_error=False)
+    p0 = nominal_vector(model.parameters)
+    nees, dof = 0.0, 0
+    for seed in range(900, 912):
+        cal = Calibrator(model, synthesize(model, p0, cond, channels=("power",), relative_sigma={"power": 0.01}),
+                         settings)
+        rng = np.random.default_rng(seed)
+        p_true = p0 + cal.prior_std * rng.standard_normal(p0.size)
+        meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01,
+                                                               "root_flap_moment": 0.01}, seed=seed)
+        res = Calibrator(model, meas, settings).run()
+        assert res.status == "converged", res.message
+        err = res.p_hat - p_true
+        nees += float(err @ np.linalg.solve(res.cov_p, err))
+        dof += err.size
+    lo, hi = stats.chi2.ppf([0.005, 0.995], dof)
+    assert lo < nees < hi, (nees, dof, lo, hi)
