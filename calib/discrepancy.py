@@ -610,7 +610,10 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     settings = settings or BemSettings()
     channels = list(measurements.channels)
     family = family or BemFamily(rotor, channels, grid, settings, rotor_source)
-    cal = (calibration or CalibrationSettings()).validate()
+    # the diagnosis's fits (localization, candidates, recalibration) use the truncated estimator:
+    # its statistics (Λ, ΔBIC, pattern agreement, the gates) were set and validated with it, in and
+    # out of family; the MAP estimator is not yet measured there
+    cal = dataclasses.replace(calibration or CalibrationSettings(), estimator="truncated").validate()
     dset = (diagnosis or DiagnosisSettings()).validate(valid=family.names)
     say = progress or (lambda s: None)
     candidates = tuple(dset.candidates) if dset.candidates is not None else tuple(family.names)

@@ -361,7 +361,7 @@ def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.n
 def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
              optimizer: str = "sqpmethod", max_iterations: int = 30, tolerance: float = 1e-9,
              step_tolerance: float = 1e-7, callback: Callable[[dict], None] | None = None,
-             stage: str = "estimate", prior: bool = False) -> EstimationOutcome:
+             stage: str = "estimate", prior: bool = False, decrease_tolerance: float = 0.0) -> EstimationOutcome:
     """Constrained ML (or MAP) estimate of θ in p = p₀ + D B θ by damped Gauss–Newton.
 
     Parameters
@@ -380,6 +380,10 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         Step norm [scale units] below which the iteration stops.
     callback : callable(dict), optional
         Called after every iteration with keys stage, iteration, cost, step, damping, n_failed.
+    decrease_tolerance : float
+        Stop also when an accepted step lowers the cost by at most this much [-]. The cost is
+        half a χ², so a decrease δ means the step was about √(2δ) standard deviations of the
+        estimate long (its Gauss–Newton model is ½ xᵀHx with H the inverse covariance).
     prior : bool
         Add ½‖θ‖² to the cost: the maximum a posteriori estimate under θ ~ N(0, I), i.e. with
         B = L, P = L Lᵀ, the prior p̃ ~ N(0, P) (:class:`calib.calibration.Calibrator`,
@@ -458,7 +462,7 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         history.append(rec)
         if callback:
             callback(rec)
-        if decrease <= tolerance * (1.0 + cost_trial) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
+        if decrease <= max(tolerance * (1.0 + cost_trial), decrease_tolerance) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
             if sol.success or (step <= step_tolerance * (1.0 + np.linalg.norm(theta)) and
                                "Search_Direction_Becomes_Too_Small" in sol.message):
                 # CasADi's SQP reports a vanishing search direction as a failure; at a step below

@@ -79,7 +79,8 @@ MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
 #: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force`` and
 #: ``strict_units``.
 CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
-                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict, "cd_min": NUM,
+                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict, "prior_std": dict,
+                                              "cd_min": NUM,
                                               "max_retained": int, "band_eta": list}),
                     "force": (bool, False), "strict_units": (bool, False)}
 
@@ -724,6 +725,10 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
             if rec.get("stage") == "relinearize":
                 echo(f"[calib run] {_name}: re-linearization {rec.get('iteration')}: "
                      f"{rec.get('n_retained')} retained, cost {rec.get('cost', float('nan')):.4g}")
+            elif rec.get("stage") == "map_done":
+                echo(f"[calib run] {_name}: MAP estimate {rec['status']} after {rec['iterations']} iteration(s), "
+                     f"cost {rec['cost']:.4g}; the data determine {rec['data_beat_prior']} direction(s) better "
+                     "than the prior")
             elif rec.get("stage") == "second_start":
                 echo(f"[calib run] {_name}: χ² {rec['chi2']:.4g} over {rec['dof']} rejects the stated noise "
                      f"(p = {rec['p_value']:.2g}): the automatic choice starts again from the prior limit's count")

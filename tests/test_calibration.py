@@ -41,7 +41,7 @@ def run_twin(model, cond, p_true, seed, **settings):
     these tests are about the retained θ, and the twin's finite-difference Jacobian makes the
     check's Gauss–Newton steps cost 2 × 71 evaluations each (tests/test_prior_check.py)."""
     meas = synthesize(model, p_true, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=seed)
-    st = dict(sigma_bar=0.5, optimizer="sqpmethod", cd_min=None, prior_check=False)
+    st = dict(estimator="truncated", sigma_bar=0.5, optimizer="sqpmethod", cd_min=None, prior_check=False)
     st.update(settings)
     return Calibrator(model, meas, CalibrationSettings(**st)).run()
 

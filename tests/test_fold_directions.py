@@ -94,7 +94,7 @@ def _calibrate(flagged, tmp_path=None):
     values[0] = model.evaluate(truth, cond).values[0]
     sigma[0] /= 300.0
     meas = Measurements(meas.conditions, meas.channels, values, sigma, "fold twin")
-    return Calibrator(model, meas, CalibrationSettings(cd_min=None, sigma_bar=1.0, prior_check=False,
+    return Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0, prior_check=False,
                                                       curvature_samples=0)).run()
 
 

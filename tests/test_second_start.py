@@ -51,7 +51,7 @@ def twin():
 
 
 def _settings(**kw):
-    return CalibrationSettings(**{"sigma_bar": "auto", "cd_min": None, "prior_check": False,
+    return CalibrationSettings(estimator="truncated", **{"sigma_bar": "auto", "cd_min": None, "prior_check": False,
                                   "curvature_samples": 0, "second_start": True, **kw})
 
 
@@ -101,7 +101,7 @@ def test_no_second_start_with_noise_from_the_residuals(twin):
 
 def test_second_start_must_be_a_boolean():
     with pytest.raises(Exception, match="second_start"):
-        CalibrationSettings(second_start="yes").validate()
+        CalibrationSettings(estimator="truncated", second_start="yes").validate()
 
 
 @pytest.mark.parametrize("first, second, kept", [

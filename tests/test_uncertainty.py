@@ -99,7 +99,7 @@ def test_a_calibration_retains_no_direction_the_prior_knows_better():
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 9))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7122)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=None)).run()
+    res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None)).run()
     field = model.correction_field()
     std = res.prior_std / res.scale
     P = np.outer(std, std) * field.node_correlation(res.settings["prior_correlation"])
@@ -212,7 +212,7 @@ def test_the_frozen_part_of_an_in_span_truth_widens_the_retained_covariance_wher
     A, E = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
     p[:grid.n_lift] = (0.15 * np.sin(A / 5.0) * np.cos(3 * E)).ravel()     # about one prior σ, in the span
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7022)
-    st = CalibrationSettings(sigma_bar=0.05, cd_min=None)
+    st = CalibrationSettings(estimator="truncated", sigma_bar=0.05, cd_min=None)
     with_term = Calibrator(model, meas, st).run()
     without = Calibrator(model, meas, dataclasses.replace(st, curvature_samples=0)).run()
     assert 0 < with_term.n_retained < with_term.n_params
@@ -387,7 +387,7 @@ def test_pure_polar_change_is_not_absorbed_by_the_nuisance_parameters(bem_twin):
     p[:grid.n_lift] = (-0.12 * np.exp(-0.5 * ((A - 8) / 5) ** 2) * (E > 0.5)).ravel()
     for seed in (7010, 7011, 7012):
         meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=seed)
-        res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+        res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=0.003)).run()
         z = _nuisance_z(res, {})
         assert all(abs(v) <= 3.0 for v in z.values()), (seed, z)
 
@@ -399,7 +399,7 @@ def test_pure_pitch_offset_is_recovered_within_three_sigma(bem_twin):
     p[j] = 1.5
     for seed in (7020, 7021, 7022):
         meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=seed)
-        res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+        res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=0.003)).run()
         z = _nuisance_z(res, {"pitch_offset": 1.5})
         assert abs(z["pitch_offset"]) <= 3.0 and abs(z["wind_scale"]) <= 3.0, (seed, z)
         # the report says how much the pitch offset shares with the field instead of hiding it
@@ -412,7 +412,7 @@ def test_goodness_of_fit_counts_dof_right(bem_twin):
     p = nominal_vector(model.parameters)
     p[:grid.n_lift] = -0.05
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7030)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+    res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=0.003)).run()
     gof = res.goodness_of_fit()
     n = len(cond) * len(model.channels)
     assert gof["dof_before"] == n and gof["dof_after"] == n - res.n_retained
@@ -431,7 +431,7 @@ def test_prediction_intervals_cover_the_noise_free_truth(bem_twin, tmp_path):
     p[grid.n_lift:grid.n_params] = 0.003 * (A > 10).ravel()
     p[[q.name for q in model.parameters].index("pitch_offset")] = 0.4
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7040)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003)).run()
+    res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=0.003)).run()
     res.save(tmp_path / "res")
     tsr, pitch = np.meshgrid(np.linspace(5.0, 10.0, 6), [0.0, 2.5, 5.0], indexing="ij")
     v = 11.0 * np.pi / 30 * model.rotor.rotor_radius / tsr.ravel()
@@ -645,7 +645,7 @@ def test_a_result_whose_retained_set_did_not_settle_says_its_bands_can_be_too_na
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 4))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=2,
+    res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, max_relinearizations=2,
                                                       stability_cosine=1.0 - 1e-12)).run()
     assert res.status == "not_stable"
     assert "can be too narrow" in res.message and "sigma_bar" in res.message
@@ -663,8 +663,8 @@ def test_the_last_allowed_re_linearization_is_checked_for_stability():
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 4))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
-    one = Calibrator(model, meas, CalibrationSettings(cd_min=None, max_relinearizations=1)).run()
-    more = Calibrator(model, meas, CalibrationSettings(cd_min=None)).run()
+    one = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, max_relinearizations=1)).run()
+    more = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None)).run()
     assert more.status == "converged" and "stable after 1 re-linearization(s)" in more.message
     assert one.status == "converged" and "stable after 1 re-linearization(s)" in one.message
     np.testing.assert_allclose(one.p_hat, more.p_hat)
@@ -680,7 +680,7 @@ def test_misfit_beyond_the_stated_noise_scales_the_retained_covariance():
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 7))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.02 for c in CHANNELS}, seed=7130)
     stated = type(meas)(meas.conditions, meas.channels, meas.values, 0.5 * meas.sigma, "stated half")
-    base = CalibrationSettings(cd_min=None, sigma_bar=1.0)
+    base = CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)
     res = Calibrator(model, stated, base).run()
     off = Calibrator(model, stated, dataclasses.replace(base, scale_by_fit=False)).run()
     ratio = res.chi2_after / res.dof
@@ -712,7 +712,7 @@ def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monk
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 5))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7121)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, sigma_bar=1.0)).run()
+    res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)).run()
     assert res.status == "stalled", res.message
     assert "not of a minimum" in res.message
     np.testing.assert_allclose(res.p_hat, res.p_nominal)
@@ -730,7 +730,7 @@ def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_p
     model = TwinModel(channels=CHANNELS)
     meas = synthesize(model, twin_truth(model), twin_conditions(tsr=np.linspace(4.0, 10.0, 5)),
                       relative_sigma={c: 0.01 for c in CHANNELS}, seed=7123)
-    res = Calibrator(model, meas, CalibrationSettings(cd_min=None, sigma_bar=1.0)).run()
+    res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)).run()
     assert res.aliasing_chi2 == 0.0 and "cannot be rebuilt on a finer correction grid" in res.aliasing_note
     assert any(t.startswith("Not in the bands: ") and "TwinModel" in t for t in _sentences(res))
     res.save(tmp_path)
@@ -740,8 +740,8 @@ def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_p
     p = nominal_vector(bem.parameters)
     p[:grid.n_lift] = -0.05
     meas = synthesize(bem, p, cond, relative_sigma={c.name: 0.01 for c in bem.channels}, seed=7124)
-    on = Calibrator(bem, meas, CalibrationSettings(cd_min=0.003, sigma_bar=1.0)).run()
+    on = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0)).run()
     assert on.aliasing_note == "" and on.aliasing_chi2 > 0.0
     assert not any(t.startswith("Not in the bands") for t in _sentences(on))
-    off = Calibrator(bem, meas, CalibrationSettings(cd_min=0.003, sigma_bar=1.0, representation_error=False)).run()
+    off = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0, representation_error=False)).run()
     assert "representation_error = false" in off.aliasing_note and off.aliasing_chi2 == 0.0

@@ -1,0 +1,77 @@
+"""Cost against campaign size: the wind-tunnel study on denser operating grids.
+
+The set-up of ``workflows/wind_tunnel_hub_loads.toml`` (NREL Phase VI rotor at 72 rpm, power and
+thrust with 1 % noise, 6 × 5 correction nodes and a pitch offset; its smooth truth on the fine
+grid, pitch offset 0.2°), with the tip-speed ratio × pitch grid refined: 12 × 6 = 72 points (the
+workflow), 36 × 18 = 648 and 72 × 36 = 2592 over the same ranges. Each size is calibrated with
+the default settings of each estimator once (a time per point, the model calls, the status and
+χ²/dof); a linear cost gives the same seconds per point at every size. The truncated estimator's
+largest size is skipped unless ``--all`` (221 s there before the MAP estimator existed).
+
+Run: ``python benchmarks/bench_scaling.py [--all]`` (make bench).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+
+from calib.bem import BemSettings
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.corrections import CorrectionGrid
+from calib.measurements import synthesize
+from calib.models.bem_model import BemModel
+from calib.rotor.library import load_rotor
+from calib.workflow import _conditions, load_workflow, truth_model
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+WORKFLOW = "workflows/wind_tunnel_hub_loads.toml"
+SIZES = ((12, 6), (36, 18), (72, 36))
+
+
+def _case(n_tsr: int, n_pitch: int):
+    cfg = load_workflow(os.path.join(ROOT, WORKFLOW))
+    rotor = load_rotor(cfg["rotor"]["name"])
+    settings = BemSettings(use_tilt=False)
+    channels = list(cfg["stages"][0]["channels"])
+    c = dict(cfg["conditions"])
+    c["tsr"] = np.linspace(min(c["tsr"]), max(c["tsr"]), n_tsr).tolist()
+    c["pitch"] = np.linspace(min(c["pitch"]), max(c["pitch"]), n_pitch).tolist()
+    cond = _conditions(c, rotor, WORKFLOW)
+    g = cfg["grid"]
+    model = BemModel(rotor, CorrectionGrid(g["alpha_nodes_deg"], g["eta_nodes"]), channels, settings,
+                     nuisance=("pitch_offset",))
+    tmodel, p_true = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
+    rel = {ch: float(cfg["noise"]["relative"][ch]) for ch in channels}
+    meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=int(cfg["noise"]["seed"]))
+    return model, meas
+
+
+def run(everything: bool = False) -> dict:
+    out = {}
+    for n_tsr, n_pitch in SIZES:
+        model, meas = _case(n_tsr, n_pitch)
+        n = len(meas.conditions)
+        for estimator in ("map", "truncated"):
+            if estimator == "truncated" and n > 1000 and not everything:
+                continue
+            t = time.perf_counter()
+            res = Calibrator(model, meas, CalibrationSettings(estimator=estimator, cd_min=0.003)).run()
+            wall = time.perf_counter() - t
+            rec = {"points": n, "seconds": wall, "ms_per_point": 1e3 * wall / n, "status": res.status,
+                   "retained": res.n_retained, "chi2_per_dof_after": res.chi2_after / res.dof,
+                   "model_jacobians": res.failures["model_jacobians"],
+                   "model_evaluations": res.failures["model_evaluations"]}
+            out[f"{estimator}_{n}"] = rec
+            print(f"[scaling] {estimator} {n} points: {wall:.1f} s ({rec['ms_per_point']:.1f} ms/point), "
+                  f"{res.status}, {rec['model_jacobians']} Jacobians", flush=True)
+    return out
+
+
+if __name__ == "__main__":
+    import json
+
+    print(json.dumps(run("--all" in sys.argv), indent=1))
