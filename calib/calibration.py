@@ -782,7 +782,9 @@ class Calibrator:
             return (p - self.p0) / self.scale, out.residual.reshape(-1), np.repeat(out.ok, n_ch)
 
         failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
-        mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at)
+        # the MAP estimator's result is the MAP point of the stated prior already (up to its flat priors)
+        mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at,
+                       max_iterations=0 if self.settings.estimator == "map" else 10)
         problem.n_failed_points_total = failed_before
         lay = self.field.layout
         blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
@@ -793,7 +795,7 @@ class Calibrator:
         z = mp.residual[rows] + M @ mp.x
         if fine is not None:
             at_map = last["at"]                 # map_point ends on the point it linearized last
-            if not np.array_equal(at_map.p, lin.p):     # (the MAP estimator's result is that point already)
+            if np.max(np.abs(at_map.p - lin.p) / self.scale) > 1e-9:   # (the MAP estimator's is that point)
                 fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma,
                                           problem.channel_index, at_map.ok, *self.field.seen(at_map.evaluation))
             L = grid_correlation_sqrt(fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
@@ -805,7 +807,8 @@ class Calibrator:
         check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None,
                                 field_sqrt=L_f)
         check = replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
-                         map_iterations=mp.iterations, map_converged=mp.converged)
+                         map_iterations=mp.iterations,
+                         map_converged=True if self.settings.estimator == "map" else mp.converged)
         return check.to_dict()
 
     def _curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:

@@ -28,6 +28,8 @@ Conditions-stage parameters reach the sections only through V and the pitch.
 
 from __future__ import annotations
 
+from collections import Counter
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,7 +106,7 @@ class EffectChain:
             offsets.append(len(self.parameters))
             self.parameters += list(e.parameters())
         names = [q.name for q in self.parameters]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        dup = sorted(n for n, k in Counter(names).items() if k > 1)
         if dup:
             raise InputError(f"parameter name(s) {', '.join(map(repr, dup))} appear twice in the effect chain "
                              f"({', '.join(e.name for e in effects)}); each effect may appear once",
