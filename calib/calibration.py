@@ -696,8 +696,9 @@ class Calibrator:
         LW = L @ W
         gain = (LW / (1.0 + s ** 2)) @ (lin.M @ LW).T    # p̃̂ = gain r̃: L (AᵀA + I)⁻¹ Aᵀ
         alias, _, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen, gain=gain)
+        cov_alias = np.zeros_like(cov)
         if alias is not None:   # the field between the nodes, taken up by the estimate
-            cov = cov + alias
+            cov, cov_alias = cov + alias, alias
         u_hat = np.linalg.lstsq(L, problem.scaled(lin.p), rcond=None)[0]
         c = np.linalg.norm(L @ W, axis=0)
         theta_hat = (np.where(c > 0, c, 1.0) * (W.T @ u_hat))[svd.retained]
@@ -713,7 +714,8 @@ class Calibrator:
         return self._result(problem, nominal, lin, svd, cov * D, cov_weak * D,
                             np.diag(svd.sigma_theta[svd.retained] ** 2), theta_hat, obs, status, message, wall,
                             fit_scale=fit_scale, prior_check=prior_check, multiple_roots=multiple_roots,
-                            aliasing_note=alias_note)
+                            aliasing_note=alias_note, gain=gain if alias is not None else np.zeros((0, 0)),
+                            cov_alias=cov_alias * D)
 
     # ------------------------------------------------------------------ outputs
     def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen, gain: np.ndarray | None = None

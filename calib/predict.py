@@ -187,6 +187,8 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     else:
         printer("  every point lies inside the calibration envelope (operating ranges and the angles of attack "
                 "the calibration reached at each station)")
+    if pred.representation:
+        printer(f"  intervals: {pred.representation}")
     common = [c for c in meas.channels if c in pred.channels]
     if common:
         chi = {}

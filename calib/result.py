@@ -56,6 +56,7 @@ _ARRAY_FIELDS = ("p_nominal", "p_hat", "lower", "upper", "scale", "cov_p", "std_
                  "correlation", "crb_std", "observability", "measured", "sigma", "model_before",
                  "model_after", "status_before", "status_after", "alpha_seen", "eta_seen", "noise_sigma", "prior_std", "cov_frozen",
                  "multiple_roots")
+_OPTIONAL_ARRAYS = ("gain", "cov_alias")
 
 
 def fold_sentence(fold_directions: list, conditions: dict | None = None, tsr=None) -> str:
@@ -232,6 +233,8 @@ class CalibrationResult:
     curvature: dict = field(default_factory=dict)
     prior_check: dict = field(default_factory=dict)
     fold_directions: list = field(default_factory=list)
+    gain: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    cov_alias: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     # ------------------------------------------------------------------ derived
     @property
@@ -333,7 +336,11 @@ class CalibrationResult:
         idx = [names.index(c) for c in self.channels]
         ev, G = model.jacobian(self.p_hat, conditions)
         G = G[:, idx, :]
-        var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), self.cov_p, np.nan_to_num(G))
+        rep, representation = self._field_between_nodes(model, conditions, ev, G, idx)
+        cov = self.cov_p if rep is None else self.cov_p - self.cov_alias
+        var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), cov, np.nan_to_num(G))
+        if rep is not None:
+            var = var + rep
         std = np.sqrt(np.maximum(var, 0.0))
         z = float(stats.norm.ppf(0.5 * (1 + confidence)))
         values = ev.values[:, idx]
@@ -342,7 +349,45 @@ class CalibrationResult:
         envelope = envelope_of(self.conditions, self.rotor_radius, conditions.as_dict(), extras.get("alpha_deg"),
                                extras.get("eta"), self.alpha_seen, self.eta_seen) if self.conditions else []
         return Prediction(tuple(self.channels), tuple(self.channel_units), values, std, values - z * std,
-                          values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope))
+                          values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope),
+                          representation)
+
+    def _field_between_nodes(self, model, conditions, ev, G, idx) -> tuple[np.ndarray | None, str]:
+        """The variance of each predicted output [channel unit²] from the correction field the nodes do
+        not carry (between them, and beyond their range, where it is the prior's), net of what the
+        estimate took up of it at the calibration points, and a sentence on it.
+
+        With the smooth-field prior, the field is f = Σ N_i f_i + δ, δ ~ N(0, Σ_δ) on a fine grid
+        (:mod:`calib.parametrizations.aliasing`). A predicted output y = g p + w δ and the estimate
+        p̂ = p + K(W_cal δ + noise) (K = ``gain``, the MAP's linear response to the whitened data),
+        so its error has the δ-part (g K W_cal − w) δ, of variance (gK W_cal − w) Σ_δ (gK W_cal − w)ᵀ;
+        that replaces the nodal term g Cov_alias gᵀ in g Cov(p̂) gᵀ. Beyond the nodes the hats vanish
+        and δ is the whole field: the correction reverts to the prior's band there. None when the
+        result has no gain (truncated estimator, no field) or the model cannot be refined (an FMU).
+        """
+        st = self.settings
+        if not self.gain.size or not self.prior_std.size:
+            return None, ("the bands leave out the field between and beyond the correction nodes (estimator "
+                          f"{st.get('estimator', 'truncated')!r} records no gain)")
+        if not hasattr(model, "with_grid") or not st.get("representation_error", True) \
+                or not st.get("prior_correlation", 0.0) > 0:
+            return None, "the bands leave out the field between and beyond the correction nodes (off, or not refinable)"
+        from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities
+        from calib.types import OperatingConditions
+
+        field_ = model.correction_field()
+        a_new, e_new = field_.seen(ev)
+        cal = OperatingConditions(**self.conditions)
+        a_all, e_all = np.concatenate([a_new, self.alpha_seen]), np.concatenate([e_new, self.eta_seen])
+        ok_cal = self.status_after == 0
+        ones = np.ones((len(conditions), len(idx)))
+        fs_new = fine_sensitivities(model, self.p_hat, conditions, ones, idx, ev.ok, a_all, e_all)
+        fs_cal = fine_sensitivities(model, self.p_hat, cal, self.sigma, idx, ok_cal, a_all, e_all)
+        gG = np.nan_to_num(G).reshape(-1, G.shape[-1]) * self.scale       # ∂y/∂p̃ per output row
+        A = gG @ (self.gain @ fs_cal.W) - fs_new.W
+        var = discrepancy_propagated(A, field_, fs_new, self.prior_std, float(st["prior_correlation"]), diagonal=True)
+        return var.reshape(G.shape[:2]), ("the bands include the field between and beyond the correction nodes "
+                                          "(the prior's, net of what the calibration points determined)")
 
     def rebuild_model(self):
         """The forward model rebuilt from ``model_spec``.
@@ -434,7 +479,7 @@ class CalibrationResult:
     def to_json_dict(self) -> dict:
         scalars = {}
         for f in fields(self):
-            if f.name in _ARRAY_FIELDS or f.name in ("conditions", "polar_bands", "truncation"):
+            if f.name in _ARRAY_FIELDS + _OPTIONAL_ARRAYS or f.name in ("conditions", "polar_bands", "truncation"):
                 continue
             scalars[f.name] = getattr(self, f.name)
         scalars["schema_version"] = SCHEMA_VERSION
@@ -460,7 +505,7 @@ class CalibrationResult:
                 os.fsync(f.fileno())    # the blocks are on disk before the rename makes the name final
 
         _atomic_write(jpath, write_json)
-        arrays = {k: np.asarray(getattr(self, k)) for k in _ARRAY_FIELDS}
+        arrays = {k: np.asarray(getattr(self, k)) for k in _ARRAY_FIELDS + _OPTIONAL_ARRAYS}
         arrays.update({f"conditions__{k}": np.asarray(v) for k, v in self.conditions.items()})
         arrays.update({f"polar__{k}": np.asarray(v) for k, v in self.polar_bands.items()})
         arrays.update({f"truncation__{k}": np.asarray(v) for k, v in self.truncation.items()})
@@ -491,6 +536,9 @@ class Prediction:
     envelope : tuple of str
         Per point, "" inside the calibration envelope, else what lies outside it
         (:func:`calib.envelope.envelope_of`): an extrapolation.
+    representation : str
+        Whether the intervals include the correction field between and beyond the nodes
+        (:meth:`CalibrationResult._field_between_nodes`).
     """
 
     channels: tuple
@@ -503,6 +551,7 @@ class Prediction:
     messages: tuple
     confidence: float
     envelope: tuple = ()
+    representation: str = ""
 
     @property
     def outside(self) -> np.ndarray:
@@ -560,6 +609,7 @@ def load_result(path: str | Path, stem: str = "result") -> CalibrationResult:
     with np.load(npath) as z:
         arrays = {k: z[k] for k in z.files}
     kwargs = {k: arrays[k] for k in _ARRAY_FIELDS}
+    kwargs.update({k: arrays[k] for k in _OPTIONAL_ARRAYS if k in arrays})     # (results written before them)
     kwargs["retained"] = kwargs["retained"].astype(bool)
     kwargs["conditions"] = {k.split("__", 1)[1]: v for k, v in arrays.items() if k.startswith("conditions__")}
     kwargs["polar_bands"] = {k.split("__", 1)[1]: v for k, v in arrays.items() if k.startswith("polar__")}

@@ -113,3 +113,20 @@ def test_map_covers_prior_draws_on_the_nonlinear_twin():
         dof += err.size
     lo, hi = stats.chi2.ppf([0.005, 0.995], dof)
     assert lo < nees < hi, (nees, dof, lo, hi)
+
+
+def test_a_stated_prior_in_physical_units_holds_a_nuisance_and_names_unknown_parameters():
+    model = TwinModel(channels=("power", "thrust"), nonlinearity=0.05)
+    cond = twin_conditions()
+    p0 = nominal_vector(model.parameters)
+    meas = synthesize(model, p0, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=4)
+    j = [q.name for q in model.parameters].index("pitch_offset")
+    base = dict(estimator="map", cd_min=None, prior_check=False, representation_error=False)
+    loose = Calibrator(model, meas, CalibrationSettings(**base)).run()
+    tight = Calibrator(model, meas, CalibrationSettings(prior_std={"pitch_offset": 0.05}, **base)).run()
+    assert tight.prior_std[j] == 0.05 and np.isnan(model.parameters[j].prior_std)     # the twin states none: flat
+    assert tight.std_p[j] < 0.05 < loose.std_p[j]
+    with pytest.raises(InputError, match="no parameter 'pitch_ofset' in this model; did you mean 'pitch_offset'"):
+        Calibrator(model, meas, CalibrationSettings(prior_std={"pitch_ofset": 0.3}, **base))
+    with pytest.raises(InputError, match="prior_std.pitch_offset.*must be a number > 0"):
+        CalibrationSettings(prior_std={"pitch_offset": -1.0}).validate()
