@@ -177,6 +177,12 @@ class CalibrationSettings:
         under the stated prior, and one on the fine grid). False skips it (the report says so);
         the refits of a leave-out validation and the candidate fits of the discrepancy workflow
         skip it, as their results serve predictions and comparisons only.
+    tightening : bool
+        Say, for each parameter that is not a correction node, which measurements would tighten its
+        σ most (another pitch line, points further into stall or towards runaway, a channel not
+        measured; :mod:`calib.tightening`): one model Jacobian per candidate group on the native BEM,
+        skipped for an FMU. The refits of a leave-out validation and the candidate fits of the
+        discrepancy workflow skip it.
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float
@@ -212,6 +218,7 @@ class CalibrationSettings:
     curvature_samples: int = 32
     second_start: bool = True
     prior_check: bool = True
+    tightening: bool = True
     identified_ratio: float = 0.5
     confounded_share: float = 0.75
     band_confidence: float = 0.95
@@ -245,7 +252,7 @@ class CalibrationSettings:
                 or self.curvature_samples < 0:
             bad(f"must be an integer >= 0 (prior draws; 0 leaves the term out), got {self.curvature_samples!r}",
                 "curvature_samples")
-        for key in ("representation_error", "scale_by_fit", "cv_one_se", "second_start", "prior_check"):
+        for key in ("representation_error", "scale_by_fit", "cv_one_se", "second_start", "prior_check", "tightening"):
             if not isinstance(getattr(self, key), bool):
                 bad(f"must be true or false, got {getattr(self, key)!r}", key)
         for key in ("max_relinearizations", "max_iterations", "max_noise_iterations", "cv_folds"):
@@ -856,6 +863,44 @@ class Calibrator:
             sigmas[theta] = {"sigma_before": before, "sigma_after": float(np.sqrt(max(v @ cov_ret @ v, 0.0)))}
         return cov_ret, [{**d, **sigmas[d["theta"]]} for d in fold]
 
+    def _tightening(self, problem, lin, cov_p, radius) -> dict:
+        """Which measurements would tighten the σ of each parameter that is not a correction node
+        (:mod:`calib.tightening`); {} without such parameters, without a rotor radius, or for a model
+        whose every probe is a simulation (one that cannot be refined, e.g. an FMU)."""
+        field_cols = set()
+        if self.field is not None:
+            lay = self.field.layout
+            field_cols = set(lay.lift_index[lay.lift_index >= 0].ravel()) | set(lay.drag_index[lay.drag_index >= 0].ravel())
+        names = [q.name for j, q in enumerate(self.parameters) if j not in field_cols]
+        if not self.settings.tightening or not names or radius is None \
+                or not isinstance(self.model, RefinableFieldModel):
+            return {}
+        from calib.tightening import tightening
+
+        m = self.measurements
+        y = np.abs(lin.evaluation.values[:, self.channel_index])
+        rel = {c: float(np.median((problem.sigma[:, i] / np.maximum(y[:, i], 1e-300))[lin.ok]))
+               for i, c in enumerate(m.channels) if lin.ok.any()}
+        field_variance = None
+        st = self.settings
+        if self.field is not None and self.field.grid is not None and st.representation_error \
+                and st.prior_correlation > 0:
+            from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities
+
+            a_cal, e_cal = self.field.seen(lin.evaluation)
+
+            def field_variance(cond, cols, ev):
+                a, e = self.field.seen(ev)
+                fs = fine_sensitivities(self.model, lin.p, cond, np.ones((len(cond), len(cols))), cols, ev.ok,
+                                        np.concatenate([a, a_cal]), np.concatenate([e, e_cal]))
+                var = discrepancy_propagated(fs.W, self.field, fs, self.prior_std, st.prior_correlation, diagonal=True)
+                return var.reshape(len(cond), len(cols))
+        try:
+            return tightening(self.model, lin.p, cov_p / np.outer(self.scale, self.scale), self.scale, m.conditions,
+                              radius, list(m.channels), rel, names, field_variance=field_variance)
+        except (InputError, np.linalg.LinAlgError, ValueError) as exc:     # advice, not the result
+            return {"failed": f"{type(exc).__name__}: {exc}"}
+
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
 
@@ -942,6 +987,7 @@ class Calibrator:
             and st.retain != "all" else {}
         if truncation and self._second_start_record:
             truncation.update(self._second_start_record)
+        extra.setdefault("tightening", self._tightening(problem, lin, cov_p, radius))
         res = CalibrationResult(
             parameters=[asdict(q) for q in self.parameters], channels=list(m.channels),
             channel_units=self.channel_units, conditions=m.conditions.as_dict(), settings=settings,

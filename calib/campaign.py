@@ -304,7 +304,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
             sigma=None if measurements.sigma is None else measurements.sigma[~test])
         try:
             # a fold's result serves its prediction only: no prior check
-            res = Calibrator(make_model(), train, dataclasses.replace(settings, prior_check=False),
+            res = Calibrator(make_model(), train, dataclasses.replace(settings, prior_check=False, tightening=False),
                              name=f"fold {i + 1}").run()
             pred = res.predict(measurements.conditions.subset(test), model=make_model(),
                                confidence=validation.confidence)

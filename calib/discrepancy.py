@@ -410,7 +410,7 @@ def _fit_task(task: dict) -> dict:
     """
     model = task["model"]
     meas = task["measurements"]
-    st = dataclasses.replace(task["settings"], prior_check=False)   # the comparison needs no prior check
+    st = dataclasses.replace(task["settings"], prior_check=False, tightening=False)   # a comparison: no advice
     names = [c.name for c in model.channels]
     cols = [names.index(c) for c in meas.channels]
 

@@ -233,6 +233,7 @@ class CalibrationResult:
     curvature: dict = field(default_factory=dict)
     prior_check: dict = field(default_factory=dict)
     fold_directions: list = field(default_factory=list)
+    tightening: dict = field(default_factory=dict)
     gain: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     cov_alias: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 

@@ -17,6 +17,7 @@ from calib.report.atomic import atomic_write_text
 from calib.parametrizations.correction_field import drag_floor_values
 from calib.prior_check import PriorCheck
 from calib.result import CalibrationResult, fold_sentence, second_start_sentence
+from calib.tightening import sentence as tightening_sentence
 
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -183,6 +184,9 @@ def _sentences(r: CalibrationResult) -> list[str]:
             if v.get("confounded_with"):
                 line += f" (most with {v['confounded_with']})"
         out.append(line + ".")
+        advice = tightening_sentence(v["name"], (r.tightening or {}).get(v["name"], {}), v["unit"])
+        if advice:
+            out.append(advice)
     fail = r.failures
     if fail.get("total_failed_point_evaluations", 0):
         out.append(f"{fail['total_failed_point_evaluations']} point evaluations failed over the run "

@@ -1,0 +1,206 @@
+"""Predictions by extrapolation: calibrate on one band of wind speed, predict the other (issue 26).
+
+Three families of data, each split both ways at the median wind speed (``[validation] split =
+"band"``, :mod:`calib.campaign`), each calibrated with both estimators:
+
+- **out of family**: the committed CCBlade data sets of ``tests/data/oof`` (WISDEM CCBlade on
+  the NREL 5-MW with its own polars; a control and three hidden effects written in CCBlade's
+  world: rotational augmentation, Reynolds following, leading-edge erosion; rigid and tilted
+  set-ups; 63 points, power, thrust, torque, hub flap moment, 1 % noise stated per point).
+  The calibrated model: the native BEM with the set-up the data state, a correction field on
+  automatic α nodes × 4 η nodes and a pitch offset;
+- **measured**: the NREL Phase VI sequence of ``workflows/phase_vi.toml`` (its two stages);
+- **prior draws**: the wind-tunnel twin (d) of ``bench_coverage.py`` (a truth drawn from the
+  smooth-field prior on a 1° × 0.025 grid), split at λ 5 (calibrate at low λ and predict high,
+  and the reverse), ``n_seeds`` draws.
+
+Per split: held-back χ²/N against the measurements with the noise alone, calibrated and nominal
+(is the calibrated model better than the nominal one where it was not fitted?), the fraction of
+held-back measurements inside the 95 % interval (noise² + prediction variance), and points that
+failed to evaluate.
+
+Run: ``python benchmarks/bench_prediction.py [n_seeds]`` (default 12; part of ``make validate``).
+Writes ``bench_output/prediction.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: A statistical study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
+ROOT = Path(__file__).resolve().parent.parent
+OOF = ROOT / "tests" / "data" / "oof"
+OUT = ROOT / "bench_output" / "prediction"
+ESTIMATORS = ("map", "truncated")
+
+
+def _split_figures(rows: list) -> dict:
+    """Per fold direction: χ²/N (noise only) calibrated and nominal, inside the interval, failed."""
+    out = {}
+    for fold in sorted({r["fold"] for r in rows}):
+        rr = [r for r in rows if r["fold"] == fold]
+        ok = [r for r in rr if r["status"] == "converged" and np.isfinite(r["predicted"])]
+        cal = float(np.mean([((r["measured"] - r["predicted"]) / r["noise_std"]) ** 2 for r in ok])) if ok else np.nan
+        nom = float(np.mean([((r["measured"] - r["nominal"]) / r["noise_std"]) ** 2 for r in ok])) if ok else np.nan
+        out["low to high" if "at or below" not in fold else "high to low"] = {
+            "chi2_per_n_calibrated": cal, "chi2_per_n_nominal": nom, "better_than_nominal": bool(cal <= nom),
+            "inside": int(sum(bool(r["inside"]) for r in ok)), "rows": len(rr), "failed": len(rr) - len(ok)}
+    return out
+
+
+def _workflow_text(name: str, data: Path, model_lines: str, estimator: str, channels: list) -> str:
+    return f"""name = "{name}"
+[rotor]
+name = "nrel5mw"
+[model]
+{model_lines}
+nuisance = ["pitch_offset"]
+[grid]
+alpha_nodes_deg = "auto"
+eta_nodes = [0.25, 0.5, 0.75, 1.0]
+[measurements]
+file = "{data}"
+[calibration]
+noise = "known"
+cd_min = 0.003
+estimator = "{estimator}"
+[validation]
+leave_out = "wind_speed"
+split = "band"
+[[stages]]
+name = "loads"
+channels = {json.dumps(channels)}
+"""
+
+
+def out_of_family(estimator: str, say=print) -> dict:
+    """The committed CCBlade data sets, both set-ups, band split on wind speed."""
+    from calib.workflow import run_workflow
+
+    out = {}
+    for setup in ("rigid", "tilted"):
+        cfg = (OOF / f"config_{setup}.toml").read_text()
+        model = re.search(r"\[model\]\n(.*?)\n\n", cfg, re.S).group(1)
+        for csv in sorted(OOF.glob(f"{setup}_*.csv")):
+            name = csv.stem
+            work = OUT / estimator / name
+            work.mkdir(parents=True, exist_ok=True)
+            wf = work / "workflow.toml"
+            wf.write_text(_workflow_text(name, csv.resolve(), model, estimator,
+                                         ["power", "thrust", "torque", "hub_flap_moment"]))
+            t = time.perf_counter()
+            run_workflow(wf, work / "out", progress=False, force=True, history=False)
+            rows = json.loads((work / "out" / "stage1_loads" / "validation.json").read_text())["rows"]
+            out[name] = _split_figures(rows)
+            say(f"[prediction] {estimator} {name}: {out[name]} ({time.perf_counter() - t:.0f} s)")
+    return out
+
+
+def phase_vi(estimator: str, say=print) -> dict:
+    """The Phase VI workflow's two stages with a band split on wind speed."""
+    from calib.workflow import run_workflow
+
+    text = (ROOT / "workflows" / "phase_vi.toml").read_text()
+    text = re.sub(r'^estimator = ".*"$', f'estimator = "{estimator}"', text, flags=re.M)
+    text = text.replace('leave_out = "wind_speed"', 'leave_out = "wind_speed"\nsplit = "band"')
+    # relative paths of the workflow resolve against its folder: write the copy beside it
+    wf = ROOT / "workflows" / f".bench_prediction_phase_vi_{estimator}.toml"
+    wf.write_text(text)
+    try:
+        outcomes = run_workflow(wf, OUT / estimator / "phase_vi", progress=False, force=True, history=False)
+    finally:
+        wf.unlink()
+    out = {}
+    for k, o in enumerate(outcomes):
+        folder = next((OUT / estimator / "phase_vi").glob(f"stage{k + 1}_*"))
+        rows = json.loads((folder / "validation.json").read_text())["rows"]
+        out[folder.name] = _split_figures(rows)
+        say(f"[prediction] {estimator} Phase VI {folder.name}: {out[folder.name]}")
+    return out
+
+
+def prior_draws(estimator: str, n_seeds: int, say=print) -> dict:
+    """Twin (d) of bench_coverage, split at λ 5, both ways."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_coverage import _fine_prior_draw, _setup
+
+    from calib.calibration import CalibrationSettings, Calibrator
+    from calib.measurements import synthesize
+    from calib.workflow import truth_model
+
+    cfg, rotor, settings, channels, cond, grid, model = _setup()
+    rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
+    tmodel, _ = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
+    lam = cond.tip_speed_ratio(rotor.rotor_radius)
+    idx = [[c.name for c in model.channels].index(c) for c in channels]
+    out = {"low to high": [], "high to low": []}
+    for seed in range(6000, 6000 + n_seeds):
+        p_true = _fine_prior_draw(tmodel, model, grid, cond, seed, 0.003)
+        meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=seed)
+        for label, train in (("low to high", lam <= 5.0), ("high to low", lam > 5.0)):
+            part = dataclasses.replace(meas, conditions=cond.subset(train), values=meas.values[train],
+                                       sigma=None if meas.sigma is None else meas.sigma[train])
+            res = Calibrator(model, part, CalibrationSettings(cd_min=0.003, estimator=estimator,
+                                                              tightening=False)).run()
+            test = cond.subset(~train)
+            pred = res.predict(test, model)
+            nominal = model.evaluate(res.p_nominal, test).values[:, idx]
+            noise = res.sigma[0]
+            ok = pred.status == 0
+            z = (meas.values[~train] - pred.values) / np.sqrt(noise ** 2 + pred.std ** 2)
+            out[label].append({
+                "seed": seed, "status": res.status,
+                "chi2_per_n_calibrated": float(np.mean(((meas.values[~train] - pred.values)[ok] / noise) ** 2)),
+                "chi2_per_n_nominal": float(np.mean(((meas.values[~train] - nominal)[ok] / noise) ** 2)),
+                "inside": int(np.sum(np.abs(z[ok]) <= 1.959964)), "rows": int(z.size), "failed": int((~ok).sum())})
+        say(f"[prediction] {estimator} twin (d) seed {seed}: "
+            + ", ".join(f"{k} {v[-1]['chi2_per_n_calibrated']:.3g} vs nominal {v[-1]['chi2_per_n_nominal']:.3g}"
+                        for k, v in out.items()))
+    return out
+
+
+def summary(families: dict) -> dict:
+    """Over every split of a family: how often calibrated ≤ nominal, interval coverage, failures."""
+    splits = []
+    for fam in families.values():
+        if isinstance(fam, dict) and "low to high" in fam and isinstance(fam["low to high"], list):
+            for v in fam.values():
+                splits += v
+        else:
+            for case in fam.values():
+                splits += list(case.values())
+    inside = sum(s["inside"] for s in splits)
+    rows = sum(s["rows"] - s["failed"] for s in splits)
+    return {"splits": len(splits),
+            "better_than_nominal": int(sum(s["chi2_per_n_calibrated"] <= s["chi2_per_n_nominal"] for s in splits)),
+            "coverage_95": inside / max(rows, 1), "failed_points": int(sum(s["failed"] for s in splits))}
+
+
+def run(n_seeds: int = 12) -> dict:
+    t0 = time.perf_counter()
+    out = {}
+    for est in ESTIMATORS:
+        fam = {"out_of_family": out_of_family(est), "phase_vi": phase_vi(est),
+               "prior_draws": {"twin_d": prior_draws(est, n_seeds)}}
+        out[est] = {"families": fam, "summary": {k: summary({k: v}) for k, v in fam.items()}}
+        out[est]["summary"]["all"] = summary(fam)
+    out["wall_seconds"] = time.perf_counter() - t0
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    (OUT.parent / "prediction.json").write_text(json.dumps(out, indent=1))
+    return out
+
+
+if __name__ == "__main__":
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    result = run(int(args[0]) if args else 12)
+    print(json.dumps({k: v["summary"] for k, v in result.items() if k in ESTIMATORS}, indent=1))
