@@ -4,10 +4,9 @@ computed; no file under a final name is ever half-written; a changed input is re
 
 from __future__ import annotations
 
-
 import json
-import re
 import os
+import re
 import signal
 import subprocess
 import sys
