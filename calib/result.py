@@ -239,6 +239,11 @@ class CalibrationResult:
 
     # ------------------------------------------------------------------ derived
     @property
+    def estimator(self) -> str:
+        """``"map"`` or ``"truncated"`` (results written before the setting existed: truncated)."""
+        return str(self.settings.get("estimator", "truncated"))
+
+    @property
     def n_params(self) -> int:
         return int(self.p_hat.size)
 
@@ -454,8 +459,12 @@ class CalibrationResult:
         counts = self.verdict_counts()
         how = (f"chosen by {self.truncation.get('criterion', 'K-fold')} cross-validation over operating points"
                if self.truncation else "set")
-        lines = [f"{self.name}: {self.status} ({self.message})",
-                 f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {self.sigma_bar:.3g}, {how})",
+        if self.estimator == "map":
+            kept = (f"  parameters {self.n_params}, MAP estimate under the stated prior; the data determine "
+                    f"{self.n_retained} directions better than the prior (s > 1)")
+        else:
+            kept = f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {self.sigma_bar:.3g}, {how})"
+        lines = [f"{self.name}: {self.status} ({self.message})", kept,
                  f"  chi2/dof before {self.chi2_per_dof_before:.3g} (dof {self.dof_before}), after "
                  f"{self.chi2_per_dof_after:.3g} (dof {self.dof})",
                  "  verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()),

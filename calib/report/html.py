@@ -56,8 +56,16 @@ def _captions(r: CalibrationResult) -> dict[str, str]:
     _, xlabel, reason = fit_abscissa(r)
     grouping = "Correction nodes grouped by block and α node; other parameters by name." if _has_field(r) else \
         "Parameters by name."
-    every = f"All {r.n_retained} retained eigenshapes are drawn, on the α and η range of the correction nodes."
-    return {"singular_values": f"{r.n_retained} of {r.n_params} directions retained.",
+    if r.estimator == "map":
+        every = (f"The {r.n_retained} directions the data determine better than the prior are drawn, on the α and "
+                 f"η range of the correction nodes.")
+        spectrum = (f"Singular values of the prior-whitened sensitivities: {r.n_retained} of {r.n_params} directions "
+                    f"above 1, where the data determine the field better than the prior; the estimate moves every "
+                    f"direction, each as far as the data outweigh the prior.")
+    else:
+        every = f"All {r.n_retained} retained eigenshapes are drawn, on the α and η range of the correction nodes."
+        spectrum = f"{r.n_retained} of {r.n_params} directions retained."
+    return {"singular_values": spectrum,
             "eigenshapes_lift": every, "eigenshapes_drag": every,
             "fit": f"Against {xlabel.split(' [')[0]} ({reason}); under each channel the whitened residual after "
                    f"calibration.",
