@@ -453,7 +453,9 @@ class Calibrator:
                 # one ML factor on the stated σ of every channel, with N − k degrees of freedom
                 from calib.noise import ml_scale
                 n_res = int(lin.ok.sum()) * len(self.channel_index)
-                k_hat = ml_scale(float(np.sum(lin.residual[lin.ok] ** 2)), n_res, svd.n_retained)
+                fitted = float(np.sum(svd.singular_values ** 2 / (1.0 + svd.singular_values ** 2))) \
+                    if st.estimator == "map" else svd.n_retained     # the MAP's effective number of parameters
+                k_hat = ml_scale(float(np.sum(lin.residual[lin.ok] ** 2)), n_res, fitted)
                 new_sigma = problem.sigma * k_hat
             else:
                 resid = m.values - lin.evaluation.values[:, self.channel_index]
