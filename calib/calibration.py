@@ -1,7 +1,19 @@
-"""The Calibrator: ML estimation in the identifiable subspace, re-linearized until stable.
+"""The Calibrator: the MAP estimate under the stated prior, or ML in the identifiable subspace.
 
-Procedure (Bottasso, Cacciola & Iriarte 2014; DESIGN §5)
---------------------------------------------------------
+MAP (``estimator = "map"``, the default)
+----------------------------------------
+1. Noise R as below.
+2. The maximum a posteriori estimate under the stated prior P (the correction nodes' smooth-field
+   prior; each parameter's stated ``prior_std``; flat where none is stated) by bounded Gauss–Newton
+   in prior-whitened coordinates (:meth:`Calibrator._fit_map`).
+3. At the estimate, the SVD of the prior-whitened sensitivities R^(−½) G̃ L = U S Wᵀ (P = L Lᵀ): the
+   directions L w_i are statistically independent, s_i > 1 where the data determine them better
+   than the prior; their eigenshapes and verdicts as below. The Laplace covariance
+   L W (I + S²/k)⁻¹ (L W)ᵀ (k the fit scale), plus the field between the nodes through the
+   estimate's gain (:mod:`calib.parametrizations.aliasing`).
+
+Truncated ML (``estimator = "truncated"``; Bottasso, Cacciola & Iriarte 2014)
+-----------------------------------------------------------------------------
 1. Noise R: known (σ from the table or the settings), from repeated records, or
    estimated by iterated ML (R = (1/N) Σ r_k r_kᵀ, diagonal, alternating with step 2-4).
 2. Linearize at the current estimate: whitened scaled sensitivities M = R^(−½) G D,
@@ -32,6 +44,7 @@ counted in the result.
 
 from __future__ import annotations
 
+import difflib
 import time
 from dataclasses import asdict, dataclass, replace
 from typing import Callable
@@ -356,8 +369,6 @@ class Calibrator:
         names = [q.name for q in self.parameters]
         for name in stated:
             if name not in names:
-                import difflib
-
                 close = difflib.get_close_matches(name, names, 1)
                 raise InputError(f"no parameter {name!r} in this model" + (f"; did you mean {close[0]!r}?" if close
                                                                             else f"; parameters: {', '.join(names)}"),
