@@ -46,8 +46,9 @@ study's stage 2) and on the analytic twin of ``tests/twin_model.py`` (56 points,
 
 Also, per twin: the NEES of the whole scaled parameter vector against the truth at the nodes
 with the stated covariance, and the in-sample predictive check: measured against predicted at
-the calibration points with σ² = noise² + prediction variance (χ² per row and the fraction of
-rows inside the 95 % interval; far below 1 means bands wider than the data justify).
+the calibration points with σ² = noise² + prediction variance (χ² per row, χ² per degree of freedom, i.e. over the rows
+less the parameters the fit used, and the fraction of rows inside the 95 % interval; far below 1
+means bands wider than the data justify).
 
 Run: ``python benchmarks/bench_coverage.py [n_seeds] [--no-held-back] [--estimator=map|truncated]`` (a few seconds per
 calibration here; 30 seeds about 5–10 min, the held-back part about as long).
@@ -185,7 +186,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
         hits = {"lift": [0, 0], "drag": [0, 0]}
         nees, nees_noise, dims, stable, kept, failed = [], [], [], [], [], 0
         prior_checks, second, fold_runs = [], [0, 0], 0
-        full_nees, pred_chi2, pred_cover, pred_rows = [], 0.0, 0, 0
+        full_nees, pred_chi2, pred_cover, pred_rows, pred_dof = [], 0.0, 0, 0, 0.0
         t0 = time.perf_counter()
         for k in range(n_seeds):
             if p_fixed is not None:
@@ -230,6 +231,11 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             sd = np.sqrt(res.sigma ** 2 + pred.std ** 2)[ok]
             zz = ((meas.values - pred.values)[ok] / sd).ravel()
             pred_chi2 += float(np.sum(zz ** 2))
+            # degrees of freedom: rows less the parameters the fit used (the MAP's effective number
+            # Σ s²/(1 + s²), the truncated estimate's retained count)
+            s_ = res.singular_values
+            fitted = float(np.sum(s_ ** 2 / (1.0 + s_ ** 2))) if res.estimator == "map" else res.n_retained
+            pred_dof += zz.size - fitted
             pred_cover += int(np.sum(np.abs(zz) <= stats.norm.ppf(0.975)))
             pred_rows += zz.size
             dims.append(err.size)
@@ -277,6 +283,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                     "nees_full_vector_sum": float(np.sum(full_nees)), "nees_full_vector_dof": n_seeds * len(res.p_hat),
                     "nees_full_vector_band": [float(lo), float(hi)],
                     "in_sample_predictive_chi2_per_row": pred_chi2 / max(pred_rows, 1),
+                    "in_sample_predictive_chi2_per_dof": pred_chi2 / max(pred_dof, 1.0),
                     "in_sample_predictive_coverage_95": pred_cover / max(pred_rows, 1)})
         fig.update({"retained_min_max": [int(min(kept)), int(max(kept))], "not_converged": failed,
                     "runs_with_fold_directions": fold_runs,
