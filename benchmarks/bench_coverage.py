@@ -46,9 +46,9 @@ study's stage 2) and on the analytic twin of ``tests/twin_model.py`` (56 points,
 
 Also, per twin: the NEES of the whole scaled parameter vector against the truth at the nodes
 with the stated covariance, and the in-sample predictive check: measured against predicted at
-the calibration points with σ² = noise² + prediction variance (χ² per row, χ² per degree of freedom, i.e. over the rows
-less the parameters the fit used, and the fraction of rows inside the 95 % interval; far below 1
-means bands wider than the data justify).
+the calibration points with σ² = noise² + prediction variance (χ² per row, χ² per degree of
+freedom, i.e. over the rows less the parameters the fit used, and the fraction of rows inside the
+95 % interval; far below 1 means bands wider than the data justify).
 
 Run: ``python benchmarks/bench_coverage.py [n_seeds] [--no-held-back] [--estimator=map|truncated]`` (a few seconds per
 calibration here; 30 seeds about 5–10 min, the held-back part about as long).

@@ -883,7 +883,7 @@ class Calibrator:
         field_cols = set()
         if self.field is not None:
             lay = self.field.layout
-            field_cols = set(lay.lift_index[lay.lift_index >= 0].ravel()) | set(lay.drag_index[lay.drag_index >= 0].ravel())
+            field_cols = {int(j) for idx in (lay.lift_index, lay.drag_index) for j in idx[idx >= 0].ravel()}
         names = [q.name for j, q in enumerate(self.parameters) if j not in field_cols]
         if not self.settings.tightening or not names or radius is None \
                 or not isinstance(self.model, RefinableFieldModel):

@@ -462,7 +462,8 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         history.append(rec)
         if callback:
             callback(rec)
-        if decrease <= max(tolerance * (1.0 + cost_trial), decrease_tolerance) or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
+        if decrease <= max(tolerance * (1.0 + cost_trial), decrease_tolerance) \
+                or step <= step_tolerance * (1.0 + np.linalg.norm(theta)):
             if sol.success or (step <= step_tolerance * (1.0 + np.linalg.norm(theta)) and
                                "Search_Direction_Becomes_Too_Small" in sol.message):
                 # CasADi's SQP reports a vanishing search direction as a failure; at a step below

@@ -79,9 +79,9 @@ MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
 #: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force`` and
 #: ``strict_units``.
 CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
-                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict, "prior_std": dict,
-                                              "cd_min": NUM,
-                                              "max_retained": int, "band_eta": list}),
+                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict,
+                                              "prior_std": dict, "cd_min": NUM, "max_retained": int,
+                                              "band_eta": list}),
                     "force": (bool, False), "strict_units": (bool, False)}
 
 # schema: section -> key -> (accepted types, required)
