@@ -23,7 +23,7 @@ from scipy import stats
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.discrepancy import NAMEABLE, DiagnosisSettings
-from calib.errors import CalibError, InputError
+from calib.errors import CalibError, InputError, unknown_key
 from calib.measurements import Measurements
 
 #: [diagnosis] keys of a workflow: the DiagnosisSettings fields, plus the channels it uses.
@@ -43,8 +43,8 @@ def diagnosis_settings(table: dict, source: str, valid=NAMEABLE) -> tuple[Diagno
         raise InputError(f"'diagnosis' must be a table, got {table!r:.60}", source, field="diagnosis")
     bad = [k for k in table if k not in DIAGNOSIS_KEYS]
     if bad:
-        raise InputError(f"unknown key 'diagnosis.{bad[0]}'; valid keys here: {', '.join(sorted(DIAGNOSIS_KEYS))}",
-                         source, field=f"diagnosis.{bad[0]}")
+        raise InputError(unknown_key(bad[0], sorted(DIAGNOSIS_KEYS), "diagnosis."), source,
+                         field=f"diagnosis.{bad[0]}")
     kw = {k: v for k, v in table.items() if k != "channels"}
     if isinstance(kw.get("candidates"), list):
         kw["candidates"] = tuple(kw["candidates"])
@@ -88,8 +88,8 @@ class ValidationSettings:
     def from_table(cls, table: dict, source: str) -> "ValidationSettings":
         bad = [k for k in table if k not in VALIDATION_KEYS]
         if bad:
-            raise InputError(f"unknown key 'validation.{bad[0]}'; valid keys here: {', '.join(VALIDATION_KEYS)}",
-                             source, field=f"validation.{bad[0]}")
+            raise InputError(unknown_key(bad[0], VALIDATION_KEYS, "validation."), source,
+                             field=f"validation.{bad[0]}")
         leave = table.get("leave_out", "wind_speed")
         if leave not in LEAVE_OUT:
             raise InputError(f"must be one of {', '.join(LEAVE_OUT)}, got {leave!r}", source,

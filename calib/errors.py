@@ -7,7 +7,9 @@ a traceback.
 
 from __future__ import annotations
 
+import difflib
 from pathlib import Path
+from typing import Iterable
 
 
 class CalibError(Exception):
@@ -48,3 +50,13 @@ class InputError(CalibError, ValueError):
 
 class ModelError(CalibError, RuntimeError):
     """A forward model could not be set up or evaluated (not a per-point failure)."""
+
+
+def unknown_key(key: str, valid: Iterable[str], where: str = "", label: str = "valid keys here") -> str:
+    """The message for a key that is not one of ``valid``: the key, the valid ones, and the
+    closest valid key when one is close (``difflib``), e.g. "unknown key 'calibration.sigam';
+    valid keys here: ... (did you mean 'sigma'?)"."""
+    valid = list(valid)
+    close = difflib.get_close_matches(str(key), valid, n=2, cutoff=0.6)
+    hint = f" (did you mean {' or '.join(repr(where + c) for c in close)}?)" if close else ""
+    return f"unknown key '{where}{key}'; {label}: {', '.join(valid)}{hint}"

@@ -24,7 +24,7 @@ import numpy as np
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
-from calib.errors import CalibError, InputError
+from calib.errors import CalibError, InputError, unknown_key
 from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
 from calib.models.base import FieldModel
 from calib.types import OperatingConditions, nominal_vector
@@ -121,8 +121,7 @@ def _check_table(table: dict, section: str, source: str) -> None:
         raise InputError(f"'{section}' must be a table, got {table!r:.60}", source, field=section or None)
     for key, value in table.items():
         if key not in spec:
-            raise InputError(f"unknown key '{where}{key}'; valid keys here: {', '.join(sorted(spec))}",
-                             source, field=f"{where}{key}")
+            raise InputError(unknown_key(key, sorted(spec), where), source, field=f"{where}{key}")
         types, _ = spec[key]
         ok = isinstance(value, types) and not (types in (int, NUM) and isinstance(value, bool))
         if types is NUM and isinstance(value, bool):

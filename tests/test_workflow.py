@@ -49,7 +49,10 @@ def write(tmp_path, text):
 
 
 @pytest.mark.parametrize("edit, field, words", [
-    (("[grid]", "[grid]\nalpha_nodes = [1.0]"), "grid.alpha_nodes", "unknown key"),
+    (("[grid]", "[grid]\nalpha_nodes = [1.0]"), "grid.alpha_nodes",
+     "(did you mean 'grid.n_alpha_nodes' or 'grid.alpha_nodes_deg'?)"),
+    (("[noise]", "[calibration]\nestimater = \"map\"\n[noise]"), "calibration.estimater",
+     "(did you mean 'calibration.estimator'?)"),
     (('name = "small"', 'name = "small"\noptimiser = "x"'), "optimiser", "unknown key"),
     (("rotor_speed = 10.0", 'rotor_speed = "fast"'), "conditions.rotor_speed", "must be a number"),
     (("seed = 3", "seed = 3.5"), "noise.seed", "must be an integer"),

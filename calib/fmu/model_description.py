@@ -23,7 +23,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
-from calib.errors import InputError
+from calib.errors import InputError, unknown_key
 
 KINDS = ("input", "tunable", "fixed", "output")
 TYPES = ("Real", "Integer", "Boolean")
@@ -96,7 +96,8 @@ class VariantSpec:
 def _check_keys(table: dict, allowed: set, where: str):
     unknown = sorted(set(table) - allowed)
     if unknown:
-        raise InputError(f"unknown key(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}", where)
+        raise InputError(unknown_key(unknown[0], sorted(allowed), label="allowed")
+                         + (f" (also unknown: {', '.join(unknown[1:])})" if len(unknown) > 1 else ""), where)
 
 
 def load_spec(path: Path, core_ids: dict[str, int], *, n_nodes: int, alpha_nodes, eta_nodes,

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.errors import InputError
+from calib.errors import InputError, unknown_key
 from calib.tomlfile import read_toml
 from calib.types import CONDITION_FIELDS, ParameterKind
 
@@ -85,8 +85,7 @@ def _check(table, allowed: dict, where: str, source: str) -> None:
         raise InputError(f"'{where}' must be a table, got {table!r}", source, field=where)
     for key, value in table.items():
         if key not in allowed:
-            raise InputError(f"unknown key '{where}.{key}'; valid keys here: {', '.join(sorted(allowed))}",
-                             source, field=f"{where}.{key}")
+            raise InputError(unknown_key(key, sorted(allowed), f"{where}."), source, field=f"{where}.{key}")
         types, _ = allowed[key]
         ok = isinstance(value, types)
         if ok and isinstance(value, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
@@ -376,8 +375,7 @@ def load_mapping(path) -> Mapping:
     data = read_toml(path, "mapping file", finite=True)  # no value is NaN/inf (leave a key out for "the FMU's")
     for key in data:
         if key not in _TOP_KEYS:
-            raise InputError(f"unknown key '{key}'; valid keys here: {', '.join(sorted(_TOP_KEYS))}", src,
-                             field=key)
+            raise InputError(unknown_key(key, sorted(_TOP_KEYS)), src, field=key)
     if data.get("schema") != SCHEMA:
         raise InputError(f"'schema' must be \"{SCHEMA}\", got {data.get('schema')!r}", src, field="schema")
     for key in ("variant", "fmi_version", "model_identifier", "fmu_file", "description"):

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from calib.errors import InputError
+from calib.errors import InputError, unknown_key
 
 _NUM = (int, float)
 FMU_KEYS = {"kind": str, "fmu": str, "variant": str, "mapping": str, "parameters": list, "corrections": bool,
@@ -51,8 +51,7 @@ def _check(table, spec: dict, section: str, source: str) -> None:
         raise InputError(f"[{section}] must be a table", source, field=section)
     for key, value in table.items():
         if key not in spec:
-            raise InputError(f"unknown key '{section}.{key}'; valid keys here: {', '.join(sorted(spec))}", source,
-                             field=f"{section}.{key}")
+            raise InputError(unknown_key(key, sorted(spec), f"{section}."), source, field=f"{section}.{key}")
         t = spec[key]
         if not isinstance(value, t) or (isinstance(value, bool) and t is not bool):
             raise InputError(f"'{section}.{key}' must be {_TYPE_NAMES[t]}, got {value!r}", source,

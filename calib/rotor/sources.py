@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.errors import InputError
+from calib.errors import InputError, unknown_key
 from calib.measurements import sha256_of
 from calib.rotor.aerodyn import read_aerodyn_main, rotor_from_aerodyn
 from calib.rotor.geometry import Rotor
@@ -153,7 +153,7 @@ def _check_keys(table: dict, source: str) -> str:
         raise InputError(f"expected a table, got {type(table).__name__}", source, None, "rotor")
     for key in table:
         if key not in VALID_KEYS:
-            raise InputError(f"unknown key {key!r}; valid keys: {', '.join(VALID_KEYS)}", source, None, _key(key))
+            raise InputError(unknown_key(key, VALID_KEYS, label="valid keys"), source, None, _key(key))
     given = [k for k in SOURCE_KEYS if k in table]
     if "airfoils" in table and "aerodyn_blade" not in table:
         raise InputError("'airfoils' needs 'aerodyn_blade' (the AeroDyn blade file they belong to)", source, None,
