@@ -268,5 +268,7 @@ def test_report_states_the_counts_and_embeds_svg_when_no_png(result, tmp_path):
     paths = F.write_figures(result, tmp_path, formats=("svg",))
     text = write_report(tmp_path / "report.html", results={"twin": result}, figures={"twin": paths}).read_text()
     assert text.count("data:image/svg+xml;base64,") == len(paths) and "data:image/png" not in text
-    assert f"All {result.n_retained} retained eigenshapes are drawn" in text
+    assert result.estimator == "map"
+    assert f"The {result.n_retained} directions the data determine better than the prior are drawn" in text
+    assert f"{result.n_retained} of {result.n_params} directions above 1" in text
     assert "Against wind speed (rotor speed varies between the points)" in text
