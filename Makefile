@@ -17,7 +17,7 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/calib demo --out demo_output
 
-# real data: the NREL Phase VI, measured sequence H (README "Real data")
+# real data: the NREL Phase VI, measured sequence H (docs/validation/phase_vi.md)
 phase_vi: $(STAMP)
 	$(VENV)/bin/calib run workflows/phase_vi.toml --out phase_vi_output
 

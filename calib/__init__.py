@@ -1,6 +1,6 @@
 """calib: calibrate wind-turbine lifting-line (blade element momentum) models from rotor loads.
 
-The package is organised along the physics (see ``DESIGN.md`` of the project):
+The package is organised along the physics (docs/theory.md, Architecture):
 
 - :mod:`calib.rotor`        rotor geometry, airfoil polars, file readers, embedded rotors
 - :mod:`calib.bem`          native steady BEM with exact sensitivities

@@ -168,7 +168,7 @@ class CalibrationSettings:
         χ²/(N − n_retained): the misfit left is evidence that the stated noise undercounts what
         the data carry (the Birge ratio; Particle Data Group's scale factor). The frozen
         directions' prior part is not scaled. With the ML noise models χ²/dof is 1 by
-        construction. Default true (measured in ``benchmarks/bench_coverage.py``, README).
+        construction. Default true (measured in ``benchmarks/bench_coverage.py``, docs/user_guide/calibration.md).
     curvature_samples : int
         Prior draws of the frozen directions propagated through the model to the retained θ
         (:func:`calib.identifiability.frozen_curvature_covariance`): where the model is not
@@ -183,7 +183,7 @@ class CalibrationSettings:
         criterion, each at its own final linearization, is lower by more than its standard error
         (the fewer θ otherwise). The choice made from the nominal linearization can settle on few
         θ because that linearization understates what a re-linearized fit with more θ achieves
-        (README). Costs a second loop only for such fits; the report says which start was kept.
+        (docs/user_guide/calibration.md). Costs a second loop only for such fits; the report says which start was kept.
     prior_check : bool
         Estimate the correction field's prior amplitude from the data and say whether the stated
         prior is consistent with it (:mod:`calib.prior_check`; about six model Jacobians to the MAP
@@ -494,7 +494,7 @@ class Calibrator:
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
         # never more θ than the data determine better than the prior: beyond that the CV curve of
         # a rough truth can dip again at 50+ θ with σ(θ) of tens of prior units, where the estimate
-        # leaves the range over which the linearization holds (README, coverage twin (d))
+        # leaves the range over which the linearization holds (docs/user_guide/calibration.md, coverage twin (d))
         limit = prior_limit(lin.M, self._prior_cov_scaled(), np.repeat(lin.ok, n_ch))
         curve = cv_curve(lin.M, pseudo, n_ch, lin.ok, st.cv_folds, st.max_retained, one_se=st.cv_one_se,
                          max_choice=limit)
@@ -918,7 +918,7 @@ class Calibrator:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
 
         The χ² that the field between the nodes adds on average (``aliasing_chi2``) is not
-        subtracted: measured on the coverage twins (README), subtracting it left the prior-draw
+        subtracted: measured on the coverage twins (docs/user_guide/calibration.md), subtracting it left the prior-draw
         twin (c) overconfident (NEES 573.8 for 426) where the plain factor gave 444.9."""
         st = self.settings
         if not st.scale_by_fit or st.noise in ("ml", "relative_ml"):

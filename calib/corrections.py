@@ -102,7 +102,7 @@ class CorrectionGrid:
     eta_nodes : array_like, shape (n_eta,)
         Spanwise nodes η = r/R [-], strictly increasing.
     cl_scale, cd_scale : float
-        Typical magnitude of a lift / drag correction [-] (SVD scaling, DESIGN §5).
+        Typical magnitude of a lift / drag correction [-] (SVD scaling, docs/theory.md, Estimation).
     cl_bound, cd_bound : float
         Symmetric bounds on each nodal correction [-].
     cd_floor : float

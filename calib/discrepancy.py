@@ -1,5 +1,5 @@
 """The discrepancy workflow: find where model and measurements disagree, name the missing
-effect, add it, show the gap shrink (DESIGN §6).
+effect, add it, show the gap shrink (docs/theory.md, Discrepancy workflow).
 
 Steps
 -----

@@ -1,4 +1,4 @@
-"""Whether a predicted point lies where the calibration's data were (DESIGN §5, predictions).
+"""Whether a predicted point lies where the calibration's data were (docs/theory.md, Predictions).
 
 A calibrated model is trusted where its data were: at tip-speed ratios, pitch angles and wind
 speeds inside the ranges of the calibration's operating points, and where each blade

@@ -209,7 +209,7 @@ def frozen_aware_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np
     .. math::  Cov(p̃̂) = V_{ID}\,diag(σ(θ_{ID})^2)\,V_{ID}^T
                         + V_{NID} (V_{NID}^T P V_{NID}) V_{NID}^T
 
-    (DESIGN §5, option b). In a linear model the two parts are exact and uncorrelated:
+    (docs/theory.md, Uncertainty). In a linear model the two parts are exact and uncorrelated:
     the retained θ̂ are unbiased whatever the frozen components are, because U_ID ⟂ U_NID.
     Where the data say nothing the band is as wide as the prior. A model that is not linear
     over the prior's range adds :func:`frozen_curvature_covariance`.
@@ -269,7 +269,7 @@ def frozen_curvature_covariance(residual_at, r0: np.ndarray, ok0: np.ndarray, M:
     here by Monte Carlo. Quadratic in δ to leading order, n is uncorrelated with δ for a
     Gaussian prior, so this term adds to the two of :func:`frozen_aware_covariance` without
     a cross term. The term is largest where few θ are retained and the frozen part of the
-    truth carries signal the linearization does not see (DESIGN §5; on the bias that a
+    truth carries signal the linearization does not see (docs/theory.md, Uncertainty; on the bias that a
     model's curvature gives least-squares estimates: M.J. Box, Bias in nonlinear estimation,
     J. R. Stat. Soc. B 33 (1971) 171-201; Seber & Wild, *Nonlinear Regression*, Wiley 1989,
     ch. 4).
@@ -358,7 +358,7 @@ def fold_dominated_directions(M: np.ndarray, n_channels: int, V_retained: np.nda
     carried at most 38 % of any retained direction in the eight runs of the same twin (seeds
     8300–8329, default truncation) that had such points. Adding the prior variance widens the
     direction the point determines; it does not repair the rest of a fit the point pulled (that
-    run's NEES went to 163.6, README).
+    run's NEES went to 163.6, docs/user_guide/calibration.md).
 
     Parameters
     ----------

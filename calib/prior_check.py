@@ -2,7 +2,7 @@ r"""Is the stated prior what the data say? The prior amplitude by type-II maximu
 
 Notes
 -----
-The bands of the directions the truncation froze are the stated prior's (DESIGN §5), so the
+The bands of the directions the truncation froze are the stated prior's (docs/theory.md, Uncertainty), so the
 prior's amplitude sets their width. The data carry a check of it. Linearized at a point
 p̃ (the MAP under the stated prior, see below), the whitened pseudo-data
 (:mod:`calib.truncation`) are z̃ = Z_f f + Z_n n + ε with ε ~ N(0, I) (the stated noise),

@@ -118,7 +118,7 @@ class CalibrationResult:
     prior_std : (n,)
         Prior 1-σ of each parameter [parameter unit].
     singular_values, V, sigma_theta, retained : (n,), (n, n), (n,), (n,) bool
-        SVD of the whitened scaled sensitivities at p̂ (DESIGN §5).
+        SVD of the whitened scaled sensitivities at p̂ (docs/theory.md, Estimation).
     theta_hat, cov_theta : (r,), (r, r)
         Retained θ = V_IDᵀ p̃ and their covariance [scale units].
     correlation, crb_std : (n, n), (n,)
@@ -317,7 +317,7 @@ class CalibrationResult:
         """Model outputs at new conditions with intervals from the estimate's covariance.
 
         The variance of each output is g Cov(p̂) gᵀ with g its row of the model Jacobian at p̂
-        and Cov(p̂) the covariance including the frozen directions (DESIGN §5): an interval of
+        and Cov(p̂) the covariance including the frozen directions (docs/theory.md, Predictions): an interval of
         the *model output*, not of a new measurement (add the noise σ for that).
 
         Parameters

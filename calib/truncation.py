@@ -3,7 +3,7 @@ r"""Choosing the number of retained θ by estimated predictive error.
 Notes
 -----
 Truncating the SVD is a regularization; how many θ to keep is a bias–variance choice
-that the data can make (DESIGN §5). At the current estimate p̂ the model is linearized,
+that the data can make (docs/theory.md, Estimation). At the current estimate p̂ the model is linearized,
 y(p̃) ≈ y(p̂) + G D (p̃ − p̃̂), so in whitened units the residual is r(p̃) ≈ z̃ − M p̃ with the
 *pseudo-data* z̃ = r̂ + M p̃̂ (r̂ the whitened residual at p̂, M = R^(−½) G D = U S Vᵀ).
 Keeping the first k singular directions gives the fit ẑ_k = U_k U_kᵀ z̃ and hat matrix
@@ -41,7 +41,7 @@ seeds was 918 for 552 degrees of freedom (overconfident); with the rule, 114 for
 but over 30 seeds (``benchmarks/bench_coverage.py``, seeds 5000–5029) 660.6 for 443 (95 % band
 387–503), of which the 27 calibrations that ended "converged" 421.4 for 386 (band 333–442;
 368.6 with ``scale_by_fit``): one of the three ``not_stable`` ones carries 198 for 19, pulled by
-a point with several BEM roots at a section (README). Held-back χ²/dof there (every
+a point with several BEM roots at a section (docs/user_guide/calibration.md). Held-back χ²/dof there (every
 third point held back: on the workflows' grids two whole pitch lines, a harder test than the
 interleaved folds; on the twin interleaved), the rule against
 the best σ̄ of a sweep 0.1–5: wind tunnel (workflow seed) 2.23 against 1.84 (ratio 1.21),

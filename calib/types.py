@@ -3,7 +3,7 @@ operating conditions and evaluations.
 
 Nothing here imports from the rest of the package except :mod:`calib.errors`, so
 ``bem/``, ``corrections``, ``parametrizations/``, ``models/`` and the calibrator can all
-import it without an import running back up (DESIGN §2).
+import it without an import running back up (docs/theory.md, Architecture).
 """
 
 

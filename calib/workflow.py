@@ -772,8 +772,10 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
             hist.event("stage_done", run=name, folder=stage_dir.name, status=res.status,
                        model_evaluations=res.failures.get("model_evaluations"),
                        model_jacobians=res.failures.get("model_jacobians"))
-        echo(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {res.n_retained} of "
-             f"{res.n_params} retained; chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g}; "
+        kept = (f"the data beat the prior in {res.n_retained} of {res.n_params} directions" if res.estimator == "map"
+                else f"{res.n_retained} of {res.n_params} retained")
+        echo(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {kept}; "
+             f"chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g}; "
              f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}")
         for label, text in res.checks.items():
             echo(f"[calib run] {name}: {label}: {text}")

@@ -1,4 +1,4 @@
-"""Twin experiments of the calibrator (Bottasso, Cacciola & Iriarte 2014, DESIGN §5).
+"""Twin experiments of the calibrator (Bottasso, Cacciola & Iriarte 2014; docs/theory.md, Estimation).
 
 Truth inside the span of the shape functions, known Gaussian noise:
 - each retained θ lies within 3σ of the truth;

@@ -15,7 +15,7 @@ from twin_model import TwinModel, twin_conditions
 
 class TrappedAtOne(Calibrator):
     """A first start that settles on one θ, as the loop from nominal did on coverage twin (d)
-    seed 8319 (7 θ at χ²/dof 9.1; README); the second start chooses as usual."""
+    seed 8319 (7 θ at χ²/dof 9.1; docs/user_guide/calibration.md); the second start chooses as usual."""
 
     in_second = False
 

@@ -464,7 +464,7 @@ def test_auto_truncation_on_the_shipped_workflows_held_back(workflow, stage):
     """The shipped localization study, every third operating point held back: the automatic
     truncation predicts the held-back measurements within 20 % of the best σ̄ of a sweep
     0.1 … 5. (The wind-tunnel study sits at the limit, ratio 1.20: ``bench_coverage.held_back``
-    and the README; it is not asserted here.)"""
+    and docs/user_guide/calibration.md; it is not asserted here.)"""
     from pathlib import Path
 
     from calib.workflow import _conditions, load_workflow, prepare, truth_model
@@ -542,7 +542,7 @@ def test_polar_bands_cover_the_truth_in_the_coverage_twins(coverage_twins):
     pytest.param("c_prior_draws", marks=pytest.mark.xfail(
         reason="issue 7: on these seeds (c) covers ΔC_L at 99.7 % and ΔC_D at 99.6 % (seeds 5000-5029: 98.8 %, "
                "97.7 %; tuning seeds 8300-8329: 98.7 %, 96.8 %): the default bands budget a field between the nodes "
-               "that truths in the span lack (NEES 50.0 for 170, README)",
+               "that truths in the span lack (NEES 50.0 for 170, docs/user_guide/calibration.md)",
         strict=False)),
     "d_prior_draws_outside_span"])
 def test_polar_bands_are_not_wider_than_needed_for_truths_drawn_from_the_prior(coverage_twins, name):
@@ -553,7 +553,7 @@ def test_polar_bands_are_not_wider_than_needed_for_truths_drawn_from_the_prior(c
 @pytest.mark.statistics
 @pytest.mark.xfail(reason="a fixed truth that is zero where the data say little: the bands there are the prior's and "
                           "cover 99.98-100 % of the reached points in twins (a) and (b) (bench_coverage, seeds "
-                          "5000-5029); see README", strict=False)
+                          "5000-5029); see docs/user_guide/calibration.md", strict=False)
 @pytest.mark.parametrize("name", ["a_inside_span", "b_outside_span"])
 def test_polar_bands_are_not_wider_than_needed_for_the_workflow_truth(coverage_twins, name):
     fig = coverage_twins[name]
@@ -578,7 +578,7 @@ def test_nees_of_the_retained_theta_in_its_chi2_band(coverage_twins, name):
 def test_nees_of_the_retained_theta_is_not_overconfident_for_truths_in_the_span(coverage_twins, name):
     """Truths exactly in the span of the hat functions: the stated covariance carries the
     aliasing of a field between the nodes that these truths lack, so the NEES is below its
-    dimension (conservative, README); it must not exceed the band's upper end."""
+    dimension (conservative, docs/user_guide/calibration.md); it must not exceed the band's upper end."""
     fig = coverage_twins[name]
     assert fig["nees_converged_sum"] <= fig["nees_converged_band"][1], fig
 
@@ -615,7 +615,7 @@ def test_nees_in_its_chi2_band_for_prior_draws_stated_to_lie_in_the_span(coverag
 def test_nees_is_not_overconfident_for_the_workflow_truth_stated_to_lie_in_the_span(coverage_twins_stated_in_span):
     """Twin (a), the workflow's fixed truth at the nodes, is zero where the data say little, so
     the prior-sized frozen part that the curvature term budgets for is larger than this
-    truth's: its NEES may fall below the band (README) but must not exceed it."""
+    truth's: its NEES may fall below the band (docs/user_guide/calibration.md) but must not exceed it."""
     fig = coverage_twins_stated_in_span["a_inside_span"]
     assert fig["nees_sum"] <= fig["nees_band"][1], fig
 
@@ -626,7 +626,7 @@ def test_nees_is_not_overconfident_for_the_workflow_truth_stated_to_lie_in_the_s
         reason="issue 7: ratio 1.209 since the estimator no longer stops on a round-off step across a C_D bound: "
                "the sweep's σ̄ = 5 (40 θ) now reaches held-back χ²/dof 1.845 (its best was 1.858 at σ̄ = 0.5); the "
                "automatic choice is unchanged (12 θ, 2.229); on six tuning draws (8240-8245) the ratio is 1.07-1.79, "
-               "so the target is not met in general (README)", strict=False)),
+               "so the target is not met in general (docs/user_guide/calibration.md)", strict=False)),
     "twin"])
 def test_auto_truncation_held_back_on_the_shipped_data(name):
     """As the localization test above, on the wind-tunnel study's own noise seed and on another

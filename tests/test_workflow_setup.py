@@ -154,7 +154,8 @@ def test_workflow_and_api_give_identical_results(tmp_path):
 
 
 def test_shipped_own_turbine_workflow_runs(tmp_path, capsys):
-    """The README's own-turbine example: OpenFAST deck + spreadsheet export, end to end."""
+    """The own-turbine example (README, docs/user_guide/own_turbine.md): OpenFAST deck + spreadsheet
+    export, end to end."""
     wf = Path(__file__).resolve().parents[1] / "workflows" / "own_turbine.toml"
     outcomes = run_workflow(wf, tmp_path, progress=True)
     out = capsys.readouterr().out

@@ -69,7 +69,7 @@ class SectionGeometry:
 
 
 def prandtl_factors(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
-    """Prandtl's tip and hub loss factors (F_tip, F_hub) [-], 1.0 where switched off (DESIGN §3)."""
+    """Prandtl's tip and hub loss factors (F_tip, F_hub) [-], 1.0 where switched off (docs/theory.md, Native BEM)."""
     s = dl.absolute(dl.sin(phi))
     B = geo.n_blades
     tip = hub = 1.0
@@ -83,7 +83,7 @@ def prandtl_factors(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
 
 
 def loss_factor(phi, geo: SectionGeometry, tip_loss: bool, hub_loss: bool):
-    """Prandtl tip and hub loss factor F = F_tip F_hub [-] (DESIGN §3; Ning 2014 eq. 5)."""
+    """Prandtl tip and hub loss factor F = F_tip F_hub [-] (docs/theory.md, Native BEM; Ning 2014 eq. 5)."""
     tip, hub = prandtl_factors(phi, geo, tip_loss, hub_loss)
     if not tip_loss:
         return hub

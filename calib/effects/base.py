@@ -11,7 +11,7 @@ An effect declares
 - ``apply(theta, state, ctx)``: the stage's state modified for parameter values ``theta``
   (one per parameter), written with :mod:`calib.bem.dual` so that the same code gives
   values inside the root search and exact derivatives in the solver's dual pass;
-- ``fingerprint``: how the effect shows in measured rotor loads (DESIGN §6), for reports.
+- ``fingerprint``: how the effect shows in measured rotor loads (docs/theory.md, Discrepancy workflow), for reports.
 
 and nothing else: no I/O, no state between calls. Options (variants, model constants)
 are keyword arguments of the constructor, listed with their defaults in ``OPTIONS`` and

@@ -25,7 +25,7 @@ from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditi
 
 @runtime_checkable
 class ForwardModel(Protocol):
-    """The adapter contract (DESIGN §2.1)."""
+    """The adapter contract (docs/theory.md, Architecture)."""
 
     @property
     def parameters(self) -> tuple[Parameter, ...]: ...

@@ -32,7 +32,7 @@ Jacobians are central differences with steps ``relative_step`` × each parameter
 or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
 every perturbed run restores it, sets the perturbed parameters and settles only
 ``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
-(DESIGN §7). That is exact when a parameter step acts at once (quasi-steady physics) and
+(docs/theory.md, FMUs). That is exact when a parameter step acts at once (quasi-steady physics) and
 wrong by the lag where the FMU filters it (dynamic inflow): the bundled mappings keep it off
 and say why. A point's runs are one executor task, so the state never leaves its worker
 except serialized, to resume after a fault. FMI directional derivatives are not used: co-simulation FMUs give them for

@@ -1,4 +1,4 @@
-"""Parametrizations a forward model may offer the calibrator (DESIGN §2, §4).
+"""Parametrizations a forward model may offer the calibrator (docs/theory.md, Architecture and Correction field).
 
 A parametrization knows what a block of the parameter vector *means*: where correction
 nodes sit on the (α, η) plane, how to map them to a field, which bounds keep the polars
