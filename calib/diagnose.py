@@ -121,7 +121,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     set_up = statement(setup, wf, meas)
     for line in statement_lines(set_up):
         printer(f"[calib diagnose] set-up in force: {line}")
-    grid = setup.grid(meas.conditions)
+    grid = setup.grid(meas.conditions, prefix="[calib diagnose]")
     hist = None
     if history or resume:
         Path(out).mkdir(parents=True, exist_ok=True)

@@ -386,10 +386,12 @@ class WorkflowSetup:
             return f"the mapping file {Path(self.base_dir) / self.fmu_table['mapping']}"
         return f"the bundled variant {self.fmu_table.get('variant', '?')}'s mapping file"
 
-    def grid(self, conditions: OperatingConditions, progress: bool = False) -> CorrectionGrid:
+    def grid(self, conditions: OperatingConditions, progress: bool = False,
+             prefix: str = "[calib run]") -> CorrectionGrid:
         """The correction grid; ``alpha_nodes_deg = "auto"`` places the α nodes over the angles of
-        attack the nominal model reaches at ``conditions`` (loaded stations, converged points).
-        None for an FMU given as a file: its correction nodes, if any, come from its mapping."""
+        attack the nominal model reaches at ``conditions`` (loaded stations, converged points), and
+        says where under the command's ``prefix``. None for an FMU given as a file: its correction
+        nodes, if any, come from its mapping."""
         if not self.uses_grid:
             return None
         g, src = self.grid_table, self.source
@@ -415,7 +417,7 @@ class WorkflowSetup:
             alpha = np.round(np.linspace(lo, hi, n), 2)
             self.notes.append(f"alpha nodes from the data ({lo_q:g}th-{hi_q:g}th percentile of the nominal "
                               f"model's angles of attack): {', '.join(f'{x:g}' for x in alpha)} deg")
-            say(log, f"[calib run] set-up: {self.notes[-1]}", progress)
+            say(log, f"{prefix} set-up: {self.notes[-1]}", progress)
         else:
             alpha = _numbers(alpha, "grid.alpha_nodes_deg", src)
         eta = _numbers(g["eta_nodes"], "grid.eta_nodes", src)

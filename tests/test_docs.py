@@ -56,3 +56,29 @@ def test_the_readme_python_example_runs(tmp_path):
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]
     assert "chi2/dof before" in out.stdout
+
+
+def test_each_command_speaks_under_its_own_prefix(tmp_path):
+    """``calib diagnose`` with automatic α nodes says where it put them as ``[calib diagnose]``,
+    never as ``[calib run]`` (the committed CCBlade control, rigid set-up)."""
+    import logging
+
+    from calib.diagnose import run_diagnose
+    from calib.logs import command_logging
+
+    data = ROOT / "tests" / "data" / "oof"
+    config = tmp_path / "config.toml"
+    config.write_text((data / "config_rigid.toml").read_text()
+                      + '\n[grid]\nalpha_nodes_deg = "auto"\neta_nodes = [0.3, 0.6, 1.0]\n')
+    lines = []
+    with command_logging(tmp_path / "out"):
+        handler = logging.Handler()
+        handler.emit = lambda record: lines.append(record.getMessage())
+        logging.getLogger("calib").addHandler(handler)
+        try:
+            run_diagnose("nrel5mw", str(data / "rigid_control.csv"), str(tmp_path / "out"), config=str(config),
+                         history=False, printer=lines.append)
+        finally:
+            logging.getLogger("calib").removeHandler(handler)
+    assert any(line.startswith("[calib diagnose] set-up: alpha nodes from the data") for line in lines), lines[:20]
+    assert not [line for line in lines if line.startswith("[calib run]")]
