@@ -217,12 +217,6 @@ class CorrectionGrid:
                         description=f"additive C_{letter} correction at alpha={a:g} deg, eta={e:g}"))
         return tuple(out)
 
-    def field_on(self, p, alpha_deg, eta):
-        """ΔC_L and ΔC_D on a mesh: ``alpha_deg`` (n_a,), ``eta`` (n_e,) -> two (n_e, n_a) arrays."""
-        A, E = np.meshgrid(np.asarray(alpha_deg, float), np.asarray(eta, float))
-        dcl, dcd, _, _ = self.evaluate(p, A, E)
-        return dcl, dcd
-
     def to_dict(self) -> dict:
         return {"alpha_nodes_deg": self.alpha_nodes_deg.tolist(), "eta_nodes": self.eta_nodes.tolist(),
                 "cl_scale": self.cl_scale, "cd_scale": self.cd_scale,

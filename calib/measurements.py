@@ -69,10 +69,10 @@ from calib.errors import InputError
 from calib.openfast_out import CHANNELS as OPENFAST_CHANNELS
 from calib.openfast_out import (MAX_TITLE_LINES, TIME_SERIES_MODES, ChannelMap, average, channel_row,
                                 map_channels, missing_hint, refuse_binary, time_rows)
-from calib.types import CONDITION_FIELDS, OperatingConditions
+from calib.types import CONDITION_FIELDS, STANDARD_AIR_DENSITY, OperatingConditions
 
 REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
-CONDITION_DEFAULTS = {"air_density": 1.225, "yaw": 0.0}
+CONDITION_DEFAULTS = {"air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
 
 #: Accepted units per physical quantity: unit -> factor to SI. The first unit of each
 #: quantity is the SI unit of the ForwardModel contract.

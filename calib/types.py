@@ -104,6 +104,8 @@ class Channel:
 
 
 CONDITION_FIELDS = ("wind_speed", "rotor_speed", "pitch", "air_density", "yaw")
+STANDARD_AIR_DENSITY = 1.225
+"""Air density of the ISA at sea level, 15 °C [kg/m^3]: the default of every condition table."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,7 +129,7 @@ class OperatingConditions:
     wind_speed: np.ndarray
     rotor_speed: np.ndarray
     pitch: np.ndarray
-    air_density: np.ndarray | float = 1.225
+    air_density: np.ndarray | float = STANDARD_AIR_DENSITY
     yaw: np.ndarray | float = 0.0
 
     def __post_init__(self):

@@ -27,7 +27,8 @@ from calib.corrections import CorrectionGrid
 from calib.errors import CalibError, InputError, unknown_key
 from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
 from calib.models.base import FieldModel
-from calib.types import OperatingConditions, nominal_vector
+from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
+from calib.types import STANDARD_AIR_DENSITY, OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.sources import absolute_table, file_provenance, rotor_from_table
 from calib.tomlfile import read_toml
@@ -303,7 +304,7 @@ class StageOutcome:
     out_dir: Path
 
 
-def _conditions(cfg: dict, rotor, src: str, density: float = 1.225, yaw: float = 0.0) -> OperatingConditions:
+def _conditions(cfg: dict, rotor, src: str, density: float = STANDARD_AIR_DENSITY, yaw: float = 0.0) -> OperatingConditions:
     tsr = _numbers(cfg["tsr"], "conditions.tsr", src)
     pitch = _numbers(cfg["pitch"], "conditions.pitch", src)
     if np.any(tsr <= 0):
@@ -317,7 +318,7 @@ def _conditions(cfg: dict, rotor, src: str, density: float = 1.225, yaw: float =
                                float(cfg.get("yaw", yaw)))
 
 
-AIR = {"density": 1.225, "kinematic_viscosity": 1.81e-5 / 1.225}
+AIR = {"density": STANDARD_AIR_DENSITY, "kinematic_viscosity": AIR_KINEMATIC_VISCOSITY}
 #: [model] keys a rotor file may set (AeroDyn TipLoss/HubLoss/AIDrag/TIDrag/TanInd, InflowWind PLExp).
 FILE_SETUP = {"tip_loss": "tip_loss", "hub_loss": "hub_loss", "drag_in_axial_induction": "drag_in_axial_induction",
               "drag_in_tangential_induction": "drag_in_tangential_induction", "wake_rotation": "tangential_induction",

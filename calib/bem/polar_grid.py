@@ -16,6 +16,7 @@ from scipy.interpolate import PchipInterpolator, RectBivariateSpline
 
 from calib.rotor.geometry import Rotor
 from calib.rotor.polar import PolarTable
+from calib.types import STANDARD_AIR_DENSITY
 
 GRID_STEP_DEG = 0.25
 
@@ -27,7 +28,7 @@ def _full_circle(table: PolarTable) -> PolarTable:
     return extrapolate_viterna(table)
 
 
-AIR_KINEMATIC_VISCOSITY = 1.81e-5 / 1.225
+AIR_KINEMATIC_VISCOSITY = 1.81e-5 / STANDARD_AIR_DENSITY
 """Kinematic viscosity of air at 15 °C and 1.225 kg/m^3 [m^2/s]."""
 
 

@@ -17,7 +17,7 @@ from calib.bem import dual as dl
 from calib.bem.chain import BoundChain, EffectChain
 from calib.bem.jacobian import Block, SectionSensitivities, project
 from calib.bem.kinematics import curvature
-from calib.bem.polar_grid import SectionPolars, station_reynolds
+from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY, SectionPolars, station_reynolds
 from calib.bem.sections import RESIDUAL_TOL, build_sections, eliminate_phi, find_roots, section_pass
 from calib.bem.stages import Inflow, PointContext, ProbeMap, RotorData
 from calib.errors import InputError
@@ -83,7 +83,7 @@ class BemSettings:
     use_tilt: bool = True
     max_iter: int = 100
     search_multiple_roots: bool = True
-    kinematic_viscosity: float = 1.81e-5 / 1.225
+    kinematic_viscosity: float = AIR_KINEMATIC_VISCOSITY
     polar_smoothing: tuple | None = None
 
     def sectors_for(self, rotor: Rotor, conditions: OperatingConditions) -> int:

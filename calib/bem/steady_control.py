@@ -15,7 +15,7 @@ import numpy as np
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemResult, BemSettings, solve_bem
 from calib.errors import InputError
-from calib.types import OperatingConditions, Status
+from calib.types import STANDARD_AIR_DENSITY, OperatingConditions, Status
 from calib.rotor.geometry import Rotor
 
 
@@ -36,7 +36,7 @@ class PowerCurve:
     result: BemResult
 
 
-def steady_power_curve(rotor: Rotor, wind_speed, settings: BemSettings | None = None, air_density=1.225,
+def steady_power_curve(rotor: Rotor, wind_speed, settings: BemSettings | None = None, air_density=STANDARD_AIR_DENSITY,
                        polars: SectionPolars | None = None, pitch_tol=1e-3) -> PowerCurve:
     """Power curve of ``rotor`` under its :class:`~calib.rotor.geometry.OperatingSchedule`.
 
@@ -79,7 +79,7 @@ def steady_power_curve(rotor: Rotor, wind_speed, settings: BemSettings | None = 
 
 
 def cp_surface(rotor: Rotor, tsr, pitch, rotor_speed_rpm: float | None = None, settings=None,
-               air_density=1.225, polars: SectionPolars | None = None):
+               air_density=STANDARD_AIR_DENSITY, polars: SectionPolars | None = None):
     """C_P, C_T on a tip-speed-ratio × pitch grid.
 
     Parameters

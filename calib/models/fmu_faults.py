@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from calib.models.fmu_worker import (HEALTHY_WALLS_KEPT, QUARANTINE_FAULTS, RETRY_DISTANCE, TIMEOUT_FLOOR,
+from calib.models.fmu_worker import (DEFAULT_TIMEOUT, HEALTHY_WALLS_KEPT, QUARANTINE_FAULTS, RETRY_DISTANCE, TIMEOUT_FLOOR,
                                      TIMEOUT_MULTIPLE, PointResult, PointTask, RunOutcome, TimeoutPolicy)
 from calib.types import CONDITION_FIELDS, Status
 
@@ -99,7 +99,7 @@ class FaultLedger:
     :func:`adaptive_timeout` of them.
     """
 
-    def __init__(self, names, scales, configured: float, start_timeout: float = 60.0, label: str = "FMU",
+    def __init__(self, names, scales, configured: float, start_timeout: float = DEFAULT_TIMEOUT, label: str = "FMU",
                  multiple: float = TIMEOUT_MULTIPLE, floor: float = TIMEOUT_FLOOR,
                  retry_distance: float = RETRY_DISTANCE):
         self.names = tuple(names)

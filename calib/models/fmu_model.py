@@ -64,12 +64,12 @@ from calib.models import fmu_worker as fw
 from calib.models.fmu_mapping import Mapping, load_mapping
 from calib.models.fmu_faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
-from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditions, Parameter, Status,
-                         check_parameter_vector)
+from calib.types import (CONDITION_FIELDS, STANDARD_AIR_DENSITY, Channel, Evaluation, OperatingConditions, Parameter,
+                         Status, check_parameter_vector)
 
 HARMONIC_SUFFIXES = {f"_{n}p": n for n in fw.HARMONIC_ORDERS}
 NOT_CHANNELS = ("azimuth", "aero_failures")
-CONDITION_DEFAULTS = {"pitch": 0.0, "air_density": 1.225, "yaw": 0.0}
+CONDITION_DEFAULTS = {"pitch": 0.0, "air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
 STATE_MAGIC = "calib-fmu-settled-states/1"
 
 
@@ -179,7 +179,6 @@ class _Writer:
         self.model = model
         self.slots: dict[str, _Slot] = {}
         self.base: list[float] = []
-        self.kind = None
 
     def slot(self, var, where: str) -> _Slot:
         if var.name not in self.slots:
@@ -282,8 +281,8 @@ class FmuModel:
     def __init__(self, fmu, mapping, channels: Sequence[str] | None = None,
                  parameters: Sequence[str] | None = None, corrections: bool = True,
                  switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
-                 jacobian: dict | None = None, executor=None, timeout: float = 60.0, isolate: bool = True,
-                 build: dict | None = None, progress=None, start_timeout: float = 60.0):
+                 jacobian: dict | None = None, executor=None, timeout: float = fw.DEFAULT_TIMEOUT, isolate: bool = True,
+                 build: dict | None = None, progress=None, start_timeout: float = fw.DEFAULT_TIMEOUT):
         import fmpy
         from fmpy.model_description import read_model_description
 
@@ -731,7 +730,6 @@ class FmuModel:
             e = m.outputs["aero_failures"]
             var = self._vars[e.variable]
             counters.append(fw.Counter("aero_failures", var.valueReference, _type_class(var)))
-        self._signal_keys = keys
         plan = fw.SimulationPlan(
             key="", fmi_version=self.model_description.fmiVersion,
             model_identifier=self.model_description.coSimulation.modelIdentifier, guid=self.guid,

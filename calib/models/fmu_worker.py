@@ -50,6 +50,8 @@ REAL_TYPES = ("Real", "Float64")
 INTEGER_TYPES = ("Integer", "Int32", "Enumeration")
 BOOLEAN_TYPES = ("Boolean",)
 
+#: Time a simulation (and a worker's start) may take before it counts as hung [s], unless configured
+DEFAULT_TIMEOUT = 60.0
 #: Adaptive timeout: this multiple of the median wall time of healthy base runs [-] ...
 TIMEOUT_MULTIPLE = 10.0
 #: ... but never below this [s] (and never above the configured timeout)
@@ -300,7 +302,7 @@ class TimeoutPolicy:
     multiple: float = TIMEOUT_MULTIPLE
     floor: float = TIMEOUT_FLOOR
     walls: tuple = ()
-    start_timeout: float = 60.0
+    start_timeout: float = DEFAULT_TIMEOUT
 
     def timeout(self, more=()) -> float:
         """The simulation timeout [s] from ``walls`` and ``more`` (a worker's own measurements)."""
@@ -826,7 +828,7 @@ class WorkerProcess:
         instance to be created [s] (default: the policy's, 60 s).
     """
 
-    def __init__(self, plan: SimulationPlan, timeout=60.0, start_timeout: float | None = None):
+    def __init__(self, plan: SimulationPlan, timeout=DEFAULT_TIMEOUT, start_timeout: float | None = None):
         self.plan = plan
         policy = _policy(timeout)
         if start_timeout is not None:
@@ -1015,7 +1017,7 @@ class WorkerProcess:
 _WORKERS: dict = {}
 
 
-def worker_for(plan: SimulationPlan, isolate: bool = True, timeout=60.0):
+def worker_for(plan: SimulationPlan, isolate: bool = True, timeout=DEFAULT_TIMEOUT):
     """The worker of this process for ``plan`` (created once, reused by later tasks).
 
     ``timeout`` (float [s] or :class:`TimeoutPolicy`) is handed to the worker at every call:

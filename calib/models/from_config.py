@@ -131,6 +131,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         return BemModel(rotor, grid, list(channels), settings, tuple(cfg.get("nuisance", ["pitch_offset"])),
                         rotor_source=dict(rotor_table))
     _check(cfg, FMU_KEYS, "model", source)
+    from calib.models import fmu_worker as fw
     from calib.models.fmu_model import FmuModel
 
     if ("fmu" in cfg) == ("variant" in cfg):
@@ -160,7 +161,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         raise InputError("'model.parameters' must be an array of names", source, field="model.parameters")
     return FmuModel(fmu, mapping, list(channels), parameters=params, corrections=cfg.get("corrections", True),
                     switches=cfg.get("switches"), settings=cfg.get("settings"), steady=cfg.get("steady"),
-                    jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", 60.0)),
+                    jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", fw.DEFAULT_TIMEOUT)),
                     isolate=cfg.get("isolate", True), build=build)
 
 

@@ -182,8 +182,3 @@ class Rotor:
     def swept_area(self) -> float:
         """Swept area π R² [m^2] with R = :attr:`rotor_radius`."""
         return float(np.pi * self.rotor_radius ** 2)
-
-    def with_stations(self, **changes) -> "Rotor":
-        """A copy with some fields replaced (validated again)."""
-        from dataclasses import replace
-        return replace(self, **changes)
