@@ -276,6 +276,13 @@ class Measurements:
             raise KeyError(f"no channel {name!r}; measured channels are: {', '.join(self.channels)}")
         return self.values[:, self.channels.index(name)]
 
+    @classmethod
+    def from_dataframe(cls, df, channels: Sequence[str] | None = None, **options) -> "Measurements":
+        """Measurements from a pandas DataFrame, with the checks of the CSV reader
+        (:func:`calib.frames.measurements_from_dataframe`: ``units=``, ``source=`` ...)."""
+        from calib.frames import measurements_from_dataframe
+        return measurements_from_dataframe(df, channels, **options)
+
     def select_channels(self, names: Sequence[str]) -> "Measurements":
         """A copy restricted to ``names`` (in that order); notes and metadata are kept."""
         missing = [n for n in names if n not in self.channels]
@@ -917,9 +924,16 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
         ``time_series``.
     """
     path = Path(path)
-    src = str(path)
-    _check_time_series_options(time_series, average_from, src)
+    _check_time_series_options(time_series, average_from, str(path))
     text, notes = _read_text(path)
+    return _measurements_from_text(text, path, notes, sha256_of(path), channels, drop_incomplete_rows,
+                                   allow_no_channels, time_series, average_from)
+
+
+def _measurements_from_text(text: str, path: Path, notes: list, sha256: str, channels, drop_incomplete_rows: bool,
+                            allow_no_channels: bool, time_series, average_from) -> Measurements:
+    """The body of :func:`read_measurements` on text already read (``path`` names it in errors)."""
+    src = str(path)
     table = _read_table(text, path, notes)
     _check_columns(table)
     if not table.lines:
@@ -970,7 +984,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
     values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(line_of), 0))
     sigma = np.column_stack([col[s] for s in sig_cols]) if sig_cols else None
-    return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256_of(path),
+    return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256,
                         metadata=metadata, notes=tuple(notes))
 
 

@@ -238,6 +238,16 @@ class CalibrationResult:
     cov_alias: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     # ------------------------------------------------------------------ derived
+    def parameters_frame(self):
+        """The parameters, estimates, σ, priors and verdicts as a DataFrame (:func:`calib.frames.parameters_frame`)."""
+        from calib.frames import parameters_frame
+        return parameters_frame(self)
+
+    def points_frame(self):
+        """Per point: measured, nominal, calibrated, residual, as a DataFrame (:func:`calib.frames.points_frame`)."""
+        from calib.frames import points_frame
+        return points_frame(self)
+
     @property
     def estimator(self) -> str:
         """``"map"`` or ``"truncated"`` (results written before the setting existed: truncated)."""
@@ -562,6 +572,11 @@ class Prediction:
     confidence: float
     envelope: tuple = ()
     representation: str = ""
+
+    def to_dataframe(self, conditions):
+        """One row per point with its ``conditions`` (:func:`calib.frames.prediction_frame`)."""
+        from calib.frames import prediction_frame
+        return prediction_frame(conditions, self)
 
     @property
     def outside(self) -> np.ndarray:

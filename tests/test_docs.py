@@ -82,3 +82,15 @@ def test_each_command_speaks_under_its_own_prefix(tmp_path):
             logging.getLogger("calib").removeHandler(handler)
     assert any(line.startswith("[calib diagnose] set-up: alpha nodes from the data") for line in lines), lines[:20]
     assert not [line for line in lines if line.startswith("[calib run]")]
+
+
+def test_the_python_page_example_runs(tmp_path):
+    """docs/user_guide/python.md: the pandas example, run from the repository root."""
+    pytest.importorskip("pandas")
+    block = re.search(r"```python\n(.*?)```", (ROOT / "docs" / "user_guide" / "python.md").read_text(), re.S).group(1)
+    script = tmp_path / "example.py"
+    script.write_text(block + "\nprint(result.parameters_frame().loc['pitch_offset', 'verdict'])\n"
+                      "print(prediction.to_dataframe(meas.conditions).shape)\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "(30, " in out.stdout
