@@ -71,6 +71,7 @@ from calib.measurements import Measurements
 from calib.models.bem_model import BemModel
 from calib.separation import envelope_words, probe_conditions, separating_probes
 from calib.types import CONDITION_FIELDS, OperatingConditions
+from calib.words import p_is
 
 #: Effects the native BEM can name (the correction field is the localizer, not a candidate).
 NAMEABLE = tuple(n for n in EFFECTS if n != "correction_field")
@@ -636,7 +637,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
     before = gap(meas.values, y0, sigma, channels)
     findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
-    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} (p = {before['p_value']:.2g})")
+    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} ({p_is(before['p_value'])})")
 
     # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand),
     # against the noise plus the model-form tolerance
@@ -737,7 +738,7 @@ class _Namer:
         what = ("within the model-form tolerance (it misses the noise alone, but not the noise plus the "
                 "tolerance)" if within_tolerance else "consistent with the noise")
         reason = (f"the nominal model is {what} (χ²/dof {before['chi2_per_dof']:.3g} over {before['dof']} "
-                  f"residuals, p = {before['p_value']:.2g} ≥ significance {self.dset.significance:g}): no effect is "
+                  f"residuals, {p_is(before['p_value'])} ≥ significance {self.dset.significance:g}): no effect is "
                   "looked for")
         self.rounds.append({"base": [], "candidates": [], "verdict": "none", "reason": reason})
         self.say(f"name: {reason}")
@@ -778,7 +779,7 @@ class _Namer:
                       self.family.n_parameters(self.base_effects))
         if fit_now["p_value"] >= self.dset.significance:
             self.say(f"name: with {', '.join(self.named)} the model is consistent with the noise (χ²/dof "
-                     f"{fit_now['chi2_per_dof']:.3g}, p = {fit_now['p_value']:.2g}); no further effect is looked for")
+                     f"{fit_now['chi2_per_dof']:.3g}, {p_is(fit_now['p_value'])}); no further effect is looked for")
             return True
         return False
 
@@ -862,8 +863,8 @@ class _Namer:
                     f"({small[0].effect_text}) is within the model-form tolerance" if small else "")
             rnd.update(verdict="none", reason=(
                 f"no candidate improves the fit significantly (likelihood ratio at family-wise level "
-                f"{dset.significance:g}); best {fits[0].name}: Λ = {fits[0].lr_statistic:.3g}, p = "
-                f"{fits[0].p_value:.2g}" + _bound_suffix(fits[0]) + tail))
+                f"{dset.significance:g}); best {fits[0].name}: Λ = {fits[0].lr_statistic:.3g}, "
+                f"{p_is(fits[0].p_value)}" + _bound_suffix(fits[0]) + tail))
             self.say(f"name: {rnd['reason']}")
             return rnd, None
         best = sig[0]
@@ -890,7 +891,7 @@ class _Namer:
                 return rnd, None
         nxt = fits[1] if len(fits) > 1 else None
         rnd.update(verdict=best.effect, reason=(
-            f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), p = {best.p_value:.2g}; "
+            f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), {p_is(best.p_value)}; "
             f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
             f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
             f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best) + pattern_note))

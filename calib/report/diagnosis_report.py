@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 
 from calib.report.atomic import atomic_path, atomic_write_text  # noqa: E402
 from calib.result import _jsonable  # noqa: E402
+from calib.words import p_is, p_text
 
 
 def plot_gap(d) -> plt.Figure:
@@ -67,7 +68,7 @@ def plot_candidates(d) -> plt.Figure:
     colors = ["C0" if (f.effect == named and f is fits[0]) else ("0.6" if f.significant else "0.85") for f in fits]
     ax.barh(range(len(fits)), dbic + 0.5, color=colors)
     for k, f in enumerate(fits):
-        ax.text(dbic[k] + 0.6, k, f"p = {f.p_value:.1g}, weight {f.weight:.2f}", va="center", fontsize=7)
+        ax.text(dbic[k] + 0.6, k, f"{p_is(f.p_value)}, weight {f.weight:.2f}", va="center", fontsize=7)
     ax.set_yticks(range(len(fits)), names, fontsize=8)
     ax.invert_yaxis()
     ax.set_xscale("symlog", linthresh=10)
@@ -105,7 +106,7 @@ def _candidate_rows(d) -> list[tuple]:
             if getattr(f, "at_bound", None):
                 status += f"; at bound: {', '.join(f.at_bound)}"
             rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
-                         f"{f.lr_statistic:.4g}", f"{f.p_value:.2g}", "yes" if f.significant else "no",
+                         f"{f.lr_statistic:.4g}", f"{p_text(f.p_value)}", "yes" if f.significant else "no",
                          f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}", html.escape(f.effect_text),
                          html.escape("; ".join(_parameter_text(q) for q in f.parameters)), html.escape(status)))
     return rows
@@ -134,7 +135,7 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
         return f'<img alt="{p.stem}" src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
 
     rows = _candidate_rows(d)
-    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{g['p_value']:.2g}",
+    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{p_text(g['p_value'])}",
                  html.escape(", ".join(f"{c} {v:.4g}" for c, v in g["rms"].items())))
                 for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
                                                          d.with_effects),

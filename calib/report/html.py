@@ -18,6 +18,7 @@ from calib.parametrizations.correction_field import drag_floor_values
 from calib.prior_check import PriorCheck
 from calib.result import CalibrationResult, fold_sentence, second_start_sentence
 from calib.tightening import sentence as tightening_sentence
+from calib.words import p_is, p_text
 
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -132,9 +133,9 @@ def _sentences(r: CalibrationResult) -> list[str]:
         out.append(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
                    f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")
     out.append(f"Before calibration χ²/dof = {gof['chi2_per_dof_before']:.3g} over {gof['dof_before']} residuals "
-               f"(nothing fitted, p = {gof['p_value_before']:.2g}); after, χ²/dof = "
+               f"(nothing fitted, {p_is(gof['p_value_before'])}); after, χ²/dof = "
                f"{gof['chi2_per_dof_after']:.3g} with {gof['dof_after']} degrees of freedom "
-               f"(p = {gof['p_value_after']:.2g}" + ("; the model is consistent with the noise)." if
+               f"({p_is(gof['p_value_after'])}" + ("; the model is consistent with the noise)." if
                                                       gof["p_value_after"] > 0.01 else
                                                       "; the fit is worse than the stated noise explains)."))
     if r.aliasing_chi2 > 0:
