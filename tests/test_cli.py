@@ -21,7 +21,10 @@ def test_demo_writes_figures_and_summary(tmp_path, capsys):
     diagnosis = json.loads((tmp_path / "diagnosis" / "diagnosis.json").read_text())
     assert diagnosis["effect"] == "rotational_augmentation"
     assert diagnosis["before"]["chi2_per_dof"] >= 5 and diagnosis["after"]["chi2_per_dof"] <= 1.5
-    assert (tmp_path / "diagnosis" / "report.html").is_file()
+    report = (tmp_path / "diagnosis" / "report.html").read_text()
+    # the report explains its statistics where they appear and gives units
+    assert "How to read the table" in report and "BIC weight</b> is the" in report
+    assert "RMS per channel (measured − model)" in report and " W, thrust " in report
     assert "report.html" in capsys.readouterr().out
 
 

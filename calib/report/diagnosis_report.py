@@ -135,8 +135,9 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
         return f'<img alt="{p.stem}" src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
 
     rows = _candidate_rows(d)
+    units = dict(zip(d.localization.channels, d.localization.channel_units)) if d.localization is not None else {}
     gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{p_text(g['p_value'])}",
-                 html.escape(", ".join(f"{c} {v:.4g}" for c, v in g["rms"].items())))
+                 html.escape(", ".join(f"{c} {v:.4g} {units.get(c, '')}".rstrip() for c, v in g["rms"].items())))
                 for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
                                                          d.with_effects),
                                  ("after recalibration" if d.recalibration is not None
@@ -158,15 +159,33 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
              _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
                      "pattern agreement", "effect size", "fitted parameters (1σ)", "fit status"],
                     rows, wrap=(1, 10, 11, 12)),
+             "<p class='explain'>How to read the table: <b>χ²</b> is the misfit of the candidate's fit, "
+             "whitened by the noise; <b>k</b> its number of fitted parameters. <b>Λ</b> (likelihood ratio) is "
+             "how much the candidate lowers χ² against the model without it; <b>p</b> is how likely so large a "
+             "drop is by chance if the candidate were not there (χ² with k degrees of freedom), and "
+             "<b>significant</b> compares it with the significance level shared among the candidates. "
+             "<b>BIC</b> = χ² + k ln N charges each parameter; lower is better, and the <b>BIC weight</b> is the "
+             "candidate's share of the evidence among all candidates and no effect (1 = all of it). The "
+             "<b>pattern agreement</b> is the correlation between how the candidate changes the outputs and "
+             "how the free correction field changes them (1 = the same shape, 0 = unrelated). A fitted value "
+             "at its bound is flagged: it is the bound the data push against, not an estimate.</p>",
              img(figs["candidates"]),
              "<h2>Where the gap is</h2>",
              _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
                      "corr. with wind speed", "corr. with load level"], trend_rows),
              img(figs["gap"]),
              "<h2>How much it shrank</h2>",
-             _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel"], gap_rows, wrap=(4,)),
+             _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel (measured − model)"], gap_rows,
+                    wrap=(4,)),
+             "<p class='explain'>χ²/dof near 1 means the model explains the measurements to within their noise; "
+             "the p-value is the chance of a misfit at least this large if it did.</p>",
              f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
-             f"{d.localization.chi2_per_dof_after:.3g}.</p>"]
+             f"{d.localization.chi2_per_dof_after:.3g} (a θ is one combination of polar corrections the data "
+             f"determine; its eigenshape says where on the (α, r/R) plane it acts).</p>"]
+    rec = d.recalibration
+    if rec is not None and rec.n_retained == 0:
+        body.append("<p>The recalibration retained 0 θ: nothing is left that the correction field explains "
+                    "beyond the named effect(s).</p>")
     if d.notes:
         body.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in d.notes) + "</ul>")
     if d.setup:
