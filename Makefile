@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-browser bench validate venv clean phase_vi
+.PHONY: demo test test-browser bench validate venv clean phase_vi docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,5 +37,9 @@ bench: $(STAMP)
 validate: $(STAMP)
 	$(PY) benchmarks/run_all.py --suite validate
 
+# the documentation site (MkDocs-Material, API reference from the docstrings) into site/; warnings are errors
+docs: $(STAMP)
+	$(PY) -m mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) .bench-venv demo_output bench_output phase_vi_output .calib_cache
+	rm -rf $(VENV) .bench-venv demo_output bench_output phase_vi_output .calib_cache site

@@ -154,6 +154,9 @@ class CalibrationSettings:
     cd_min : float or None
         Lower bound on C_D at the correction nodes [-] (needs ``model.nominal_coefficients``).
     max_relinearizations, max_iterations, max_noise_iterations : int
+        Most re-linearizations of the truncated estimator's retained set, Gauss–Newton iterations
+        of one estimate, and iterations between the noise estimate and the fit (``ml`` and
+        ``relative_ml`` noise).
     tolerance : float
         Relative cost decrease that ends a Gauss–Newton iteration.
     stability_cosine : float
