@@ -17,14 +17,17 @@ def _demo(args) -> int:
 
     log = logging.getLogger("calib.demo")
     with command_logging(args.out, args.verbose, args.quiet):
-        run_demo(args.out, args.rotor)
+        summary = run_demo(args.out, args.rotor)
+        diag = None
         if args.rotor == "nrel5mw" and not args.no_diagnosis:
             from calib.diagnose import run_diagnose
             campaign = Path(__file__).resolve().parent / "data" / "demo_campaign" / "nrel5mw_campaign.csv"
             log.info(f"[calib demo] discrepancy workflow on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
                      f"effect in the data)")
-            run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
-                         printer=lambda s: log.info(s.replace("[calib diagnose]", "[calib demo]")))
+            diag = run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
+                                printer=lambda s: log.info(s.replace("[calib diagnose]", "[calib demo]")))
+        from calib.demo import write_demo_report
+        log.info(f"[calib demo] report: {write_demo_report(args.out, summary, diag)}")
     return 0
 
 

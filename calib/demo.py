@@ -99,3 +99,40 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
     say(log, f"[calib demo] max C_P = {summary['cp_max']:.4f} at λ = {summary['tsr_at_cp_max']:.2f}, "
           f"β = {summary['pitch_at_cp_max']:.1f} deg; figures in {out}/")
     return summary
+
+
+#: What the embedded demo campaign hides (calib/data/demo_campaign/PROVENANCE.txt).
+DEMO_HIDDEN = ("rotational augmentation (stall delay) in the Du & Selig (1998) form, strength 1 "
+               "(stall_delay_strength = 1), which the nominal model lacks; 1 % noise")
+
+
+def write_demo_report(out_dir: str | Path, summary: dict, diagnosis=None) -> Path:
+    """``out_dir/report.html``: the C_P surface and power curve, what the demo data hide and how
+    strong, and the diagnosis's decision with a link to its own report."""
+    import base64
+    import html
+
+    out = Path(out_dir)
+
+    def img(name):
+        path = out / name
+        return (f'<img alt="{path.stem}" style="max-width:100%" '
+                f'src="data:image/png;base64,{base64.b64encode(path.read_bytes()).decode()}">')
+
+    body = [f"<h1>calib demo: {html.escape(summary['rotor'])}</h1>",
+            f"<p>Maximum C_P {summary['cp_max']:.4f} at λ {summary['tsr_at_cp_max']:.2f} and pitch "
+            f"{summary['pitch_at_cp_max']:.1f}° ({summary['surface_points']} points, {summary['surface_failed']} "
+            f"failed); rated wind speed {summary['rated_wind_speed']:.1f} m/s.</p>",
+            img("cp_surface.png"), img("power_curve.png")]
+    if diagnosis is not None:
+        from calib.report.diagnosis_report import decision_words
+        body += ["<h2>The diagnosis of the embedded test campaign</h2>",
+                 f"<p>The campaign's data hide {html.escape(DEMO_HIDDEN)}.</p>",
+                 f"<p><b>{html.escape(decision_words(diagnosis))}</b></p>",
+                 '<p>The evidence, the candidates and the gap before and after: '
+                 '<a href="diagnosis/report.html">diagnosis/report.html</a>.</p>']
+    page = ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>calib demo</title><style>body{font-family:"
+            "system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}</style></head><body>"
+            + "".join(body) + "</body></html>")
+    atomic_write_text(out / "report.html", page)
+    return out / "report.html"

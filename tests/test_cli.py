@@ -25,6 +25,10 @@ def test_demo_writes_figures_and_summary(tmp_path, capsys):
     # the report explains its statistics where they appear and gives units
     assert "How to read the table" in report and "BIC weight</b> is the" in report
     assert "RMS per channel (measured − model)" in report and " W, thrust " in report
+    # the demo's own report: the surface, the power curve, what the data hide and the decision
+    demo = (tmp_path / "report.html").read_text()
+    assert demo.count("data:image/png;base64,") == 2 and "Du &amp; Selig (1998) form, strength 1" in demo
+    assert "best explanation: rotational_augmentation" in demo and 'href="diagnosis/report.html"' in demo
     assert "report.html" in capsys.readouterr().out
 
 

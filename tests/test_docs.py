@@ -76,12 +76,16 @@ def test_each_command_speaks_under_its_own_prefix(tmp_path):
         handler.emit = lambda record: lines.append(record.getMessage())
         logging.getLogger("calib").addHandler(handler)
         try:
-            run_diagnose("nrel5mw", str(data / "rigid_control.csv"), str(tmp_path / "out"), config=str(config),
-                         history=False, printer=lines.append)
+            diag = run_diagnose("nrel5mw", str(data / "rigid_control.csv"), str(tmp_path / "out"),
+                                config=str(config), history=False, printer=lines.append)
         finally:
             logging.getLogger("calib").removeHandler(handler)
     assert any(line.startswith("[calib diagnose] set-up: alpha nodes from the data") for line in lines), lines[:20]
     assert not [line for line in lines if line.startswith("[calib run]")]
+    # the report's first sentence on a control: nothing named, and why
+    from calib.report.diagnosis_report import decision_words
+    assert diag.effect == "none" and decision_words(diag).startswith("No effect is named: the nominal model is consistent")
+    assert "No effect is named" in (tmp_path / "out" / "report.html").read_text()
 
 
 def test_the_python_page_example_runs(tmp_path):

@@ -94,6 +94,64 @@ def _parameter_text(q: dict) -> str:
     return text + (f" (at {q['at_bound']} bound)" if q.get("at_bound") else "")
 
 
+def gap_words(d) -> str:
+    """Where the nominal model misses, in engineering terms: the channel whose measured-minus-model
+    gap is largest relative to the model (on max(|y|, 0.1 max|y|), so that a point of small load
+    does not dominate), its sign, how large at most, and the tip-speed-ratio range of the points
+    that miss beyond twice their noise; "" when the nominal model passes the χ² test (a few points
+    beyond 2σ are then chance) or no point misses."""
+    if d.before.get("p_value", 0.0) >= 0.01:
+        return ""
+    meas, nom, sig = np.asarray(d.measured, float), np.asarray(d.model_before, float), np.asarray(d.sigma, float)
+    lam = np.asarray(d.find.get("tip_speed_ratio", []), float)
+    best = None
+    for j, c in enumerate(d.channels):
+        ok = np.isfinite(nom[:, j])
+        miss = ok & (np.abs(meas[:, j] - nom[:, j]) > 2.0 * sig[:, j])
+        if not miss.any():
+            continue
+        size = np.maximum(np.abs(nom[:, j]), 0.1 * np.max(np.abs(nom[ok, j])))
+        rel = (meas[:, j] - nom[:, j]) / np.where(ok & (size > 0), size, np.inf)
+        k = int(np.flatnonzero(miss)[np.argmax(np.abs(rel[miss]))])
+        if best is None or abs(rel[k]) > abs(best[1]):
+            best = (c, float(rel[k]), miss)
+    if best is None:
+        return ""
+    c, rel, miss = best
+    where = ""
+    if lam.size == miss.size:
+        lo, hi, all_lo, all_hi = lam[miss].min(), lam[miss].max(), lam.min(), lam.max()
+        where = (" at every tip-speed ratio" if np.isclose(lo, all_lo) and np.isclose(hi, all_hi) else
+                 f" below λ {hi:.2g}" if np.isclose(lo, all_lo) else f" above λ {lo:.2g}" if np.isclose(hi, all_hi)
+                 else f" at λ {lo:.2g}–{hi:.2g}")
+    verb = "exceeds" if rel > 0 else "falls short of"
+    return f"Measured {c.replace('_', ' ')} {verb} the model by up to {100 * abs(rel):.0f} %{where}"
+
+
+def decision_words(d) -> str:
+    """The decision first, in engineering terms: where the model misses, the best explanation with
+    its fitted strength, and the runner-up's distance; or why nothing was named."""
+    gap = gap_words(d)
+    last = d.rounds[-1] if d.rounds else {}
+    fits = sorted(last.get("candidates", []), key=lambda f: f.bic)
+    if d.effect == "none" or not fits:
+        text = ((gap + "; " if gap else "") + "no effect is named: " +
+                (last.get("reason", "the nominal model is consistent with the noise") if last else
+                 "the nominal model is consistent with the noise"))
+        return text[0].upper() + text[1:].rstrip(".") + "."
+    named = [f for f in fits if f.name in (d.effects or [d.effect])] or fits[:1]
+    f = named[0]
+    strength = "; ".join(f"{q['name']} {q['value']:.3g} ± {q['std']:.2g}"
+                         + ("" if q.get("unit") in ("", "-", None) else f" {q['unit']}") for q in f.parameters)
+    rival = next((g for g in fits if g is not f), None)
+    text = (gap + "; " if gap else "") + (
+        f"ambiguous between {' and '.join(d.effects)}" if d.effect == "ambiguous" else f"best explanation: {f.name}")
+    text += f" ({strength})" if strength else ""
+    if rival is not None and d.effect != "ambiguous":
+        text += f"; runner-up {rival.name}, ΔBIC {rival.bic - f.bic:.3g}"
+    return text + "."
+
+
 def _candidate_rows(d) -> list[tuple]:
     """One row of the candidate table per candidate of every round (HTML-escaped)."""
     rows = []
@@ -147,7 +205,8 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
                    f"{t['corr_tip_speed_ratio']:+.2f}", f"{t['corr_pitch']:+.2f}", f"{t['corr_wind_speed']:+.2f}",
                    f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
     failure = getattr(d, "failure", "")
-    body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>"]
+    body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>",
+            f"<p class='decision'><b>{html.escape(decision_words(d))}</b></p>"]
     if failure:
         body.append(f'<p class="failed"><b>Stopped early:</b> {html.escape(failure)}. What the rounds before '
                     "found is reported below.</p>")
