@@ -20,7 +20,8 @@ held-back measurements inside the 95 % interval (noise² + prediction variance),
 failed to evaluate.
 
 Run: ``python benchmarks/bench_prediction.py [n_seeds]`` (default 12; part of ``make validate``).
-Writes ``bench_output/prediction.json``.
+Writes ``bench_output/prediction.json``, and the figures the documentation's validation page
+renders, with the date and the commit, to ``docs/validation/data/prediction.json``.
 """
 
 from __future__ import annotations
@@ -194,6 +195,27 @@ def summary(family) -> dict:
             "coverage_95": inside / max(rows, 1), "failed_points": int(sum(s["failed"] for s in splits))}
 
 
+def publish(out: dict, n_seeds: int) -> Path:
+    """Write the figures for the documentation (``docs/validation/data/prediction.json``) with the date,
+    the commit and the command, so that the validation page's tables come from this run."""
+    import datetime
+    import subprocess
+
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=ROOT, timeout=10).stdout.strip() or "unknown"
+    except OSError:
+        commit = "unknown"
+    path = ROOT / "docs" / "validation" / "data" / "prediction.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"date": datetime.date.today().isoformat(), "commit": commit,
+                                "command": f"python benchmarks/bench_prediction.py {n_seeds}",
+                                "summary": {e: out[e]["summary"] for e in ESTIMATORS},
+                                "out_of_family": {e: out[e]["families"]["out_of_family"] for e in ESTIMATORS},
+                                "wall_seconds": out.get("wall_seconds")}, indent=1))
+    return path
+
+
 def run(n_seeds: int = 12) -> dict:
     t0 = time.perf_counter()
     out = {}
@@ -207,6 +229,7 @@ def run(n_seeds: int = 12) -> dict:
     out["wall_seconds"] = time.perf_counter() - t0
     OUT.parent.mkdir(parents=True, exist_ok=True)
     (OUT.parent / "prediction.json").write_text(json.dumps(out, indent=1))
+    publish(out, n_seeds)
     return out
 
 

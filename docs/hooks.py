@@ -1,7 +1,9 @@
-"""MkDocs hook: the settings reference is generated from the settings dataclasses at build time.
+"""MkDocs hook: tables generated at build time, so that they cannot drift.
 
-A line ``<!-- settings: module.Class section -->`` in a page becomes the table of that
-dataclass's fields, defaults and documented meaning (:func:`calib.settings_doc.settings_markdown`).
+- ``<!-- settings: module.Class section -->`` becomes the table of that settings dataclass's fields,
+  defaults and documented meaning (:func:`calib.settings_doc.settings_markdown`);
+- ``<!-- bench: NAME -->`` becomes the tables of the benchmark output ``docs/validation/data/NAME.json``,
+  which the benchmark writes with its date, commit and command.
 """
 
 import importlib
@@ -17,4 +19,50 @@ def on_page_markdown(markdown, page, config, files):
         cls = getattr(importlib.import_module(m.group(1)), m.group(2))
         return settings_markdown(cls, m.group(3))
 
-    return MARKER.sub(table, markdown)
+    return _bench(MARKER.sub(table, markdown), config)
+
+
+BENCH = re.compile(r"^<!-- bench: (\w+) -->$", re.M)
+
+
+def _prediction_tables(data: dict) -> str:
+    """The extrapolation benchmark's tables (benchmarks/bench_prediction.py)."""
+    out = [f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`"
+           + (f"; {data['note']}" if data.get("note") else "") + ".*", "",
+           "| family (splits) | MAP: calibrated ≤ nominal | within 2√(2/N) | inside 95 % | "
+           "truncated: ≤ nominal | within | inside |", "|---|---|---|---|---|---|---|"]
+    labels = {"out_of_family": "CCBlade, out of family", "phase_vi": "Phase VI, measured",
+              "prior_draws": "twin (d), prior draws", "all": "all"}
+    for key, label in labels.items():
+        m, t = data["summary"]["map"][key], data["summary"]["truncated"][key]
+        out.append(f"| {label} ({m['splits']}) | {m['better_than_nominal']} | {m['not_worse_beyond_scatter']} | "
+                   f"{100 * m['coverage_95']:.1f} % | {t['better_than_nominal']} | {t['not_worse_beyond_scatter']} | "
+                   f"{100 * t['coverage_95']:.1f} % |")
+    failed = sum(data["summary"][e]["all"]["failed_points"] for e in ("map", "truncated"))
+    out += ["", f"Held-back points that failed to evaluate: {failed}.", "",
+            "Held-back χ²/N (noise only), calibrated / nominal, per CCBlade data set:", "",
+            "| data set | MAP, low → high | MAP, high → low | truncated, low → high | truncated, high → low |",
+            "|---|---|---|---|---|"]
+    for name in data["out_of_family"]["map"]:
+        cells = []
+        for est in ("map", "truncated"):
+            case = data["out_of_family"][est][name]
+            for direction in ("low to high", "high to low"):
+                c = case[direction]
+                cells.append(f"{c['chi2_per_n_calibrated']:.3g} / {c['chi2_per_n_nominal']:.3g}")
+        out.append(f"| {name.replace('_', ' ')} | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
+RENDERERS = {"prediction": _prediction_tables}
+
+
+def _bench(markdown: str, config) -> str:
+    import json
+    from pathlib import Path
+
+    def table(m):
+        path = Path(config["docs_dir"]) / "validation" / "data" / f"{m.group(1)}.json"
+        return RENDERERS[m.group(1)](json.loads(path.read_text()))
+
+    return BENCH.sub(table, markdown)
