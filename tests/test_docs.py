@@ -111,6 +111,10 @@ def test_the_documentation_site_builds_without_warnings(tmp_path):
     assert (tmp_path / "site" / "api" / "calibration" / "index.html").stat().st_size > 50_000
     assert "CalibrationSettings" in (tmp_path / "site" / "api" / "calibration" / "index.html").read_text()
     assert "calibration.prior_std" in (tmp_path / "site" / "reference" / "settings" / "index.html").read_text()
+    # the examples ran during the build: their pages hold the code's output
+    demo = (tmp_path / "site" / "examples" / "diagnose_demo" / "index.html").read_text()
+    assert "best explanation: rotational_augmentation" in demo
+    assert "To tighten pitch_offset" in (tmp_path / "site" / "examples" / "own_turbine" / "index.html").read_text()
 
 
 def test_every_setting_is_documented_where_the_reference_is_generated_from():
