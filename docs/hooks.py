@@ -54,6 +54,40 @@ def _prediction_tables(data: dict) -> str:
     return "\n".join(out) + "\n"
 
 
+def _coverage_tables(docs_dir) -> str:
+    """The coverage twins (c) and (d), both estimators (benchmarks/bench_coverage.py)."""
+    import json
+    from pathlib import Path
+
+    runs = {e: json.loads((Path(docs_dir) / "validation" / "data" / f"coverage_{e}.json").read_text())
+            for e in ("map", "truncated")}
+    cols = [(t, e) for t in ("c_prior_draws", "d_prior_draws_outside_span") for e in ("map", "truncated")]
+    out = [f"*{e}: from `{r['command']}`, {r['date']}, commit `{r['commit']}`, {r['n_seeds']} seeds.*"
+           for e, r in runs.items()]
+    out += ["", "| | " + " | ".join(f"({t[0]}) {e}" for t, e in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+
+    def row(label, fmt):
+        cells = []
+        for t, e in cols:
+            v = runs[e]["twins"].get(t, {})
+            try:
+                cells.append(fmt(v))
+            except (KeyError, TypeError):
+                cells.append("not measured")
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+
+    row("95 % band coverage, ΔC_L / ΔC_D", lambda v: f"{100 * v['coverage_lift_mean']:.1f} % / "
+                                                     f"{100 * v['coverage_drag_mean']:.1f} %")
+    row("NEES of the whole vector (its 95 % band)", lambda v: f"{v['nees_full_vector_sum']:.0f} "
+        f"({v['nees_full_vector_band'][0]:.0f}–{v['nees_full_vector_band'][1]:.0f})")
+    row("in-sample predictive χ² per row", lambda v: f"{v['in_sample_predictive_chi2_per_row']:.2f}")
+    row("in-sample predictive χ² per degree of freedom", lambda v: f"{v['in_sample_predictive_chi2_per_dof']:.2f}")
+    row("rows inside the 95 % predictive interval", lambda v: f"{100 * v['in_sample_predictive_coverage_95']:.1f} %")
+    row("calibrations not converged / not stable", lambda v: f"{v['not_converged']}")
+    row("seconds per calibration", lambda v: f"{v['seconds_per_calibration']:.1f}")
+    return "\n".join(out) + "\n"
+
+
 RENDERERS = {"prediction": _prediction_tables}
 
 
@@ -62,6 +96,8 @@ def _bench(markdown: str, config) -> str:
     from pathlib import Path
 
     def table(m):
+        if m.group(1) == "coverage":
+            return _coverage_tables(config["docs_dir"])
         path = Path(config["docs_dir"]) / "validation" / "data" / f"{m.group(1)}.json"
         return RENDERERS[m.group(1)](json.loads(path.read_text()))
 
