@@ -227,19 +227,25 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
     parts.append("<ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in _sentences(r)) + "".join(
         f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>" for k, v in (checks or {}).items()) + "</ul>")
     counts = r.verdict_counts()
-    key = [("operating points", r.n_points), ("channels", ", ".join(r.channels)),
-           ("parameters", r.n_params), ("retained θ", r.n_retained),
-           ("truncation", f"{r.truncation.get('criterion', 'K-fold')} cross-validation" if r.truncation
-            else "threshold σ̄"),
-           ("σ̄ [scale units]", r.sigma_bar),
-           ("χ²/dof before (dof = N)", gof["chi2_per_dof_before"]), ("N", gof["dof_before"]),
-           ("χ²/dof after (dof = N − retained)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
-           ("p-value after", gof["p_value_after"]),
+    if r.estimator == "map":
+        how = [("estimator", "MAP under the stated prior"),
+               ("directions the data determine better than the prior (s > 1)", r.n_retained)]
+    else:
+        how = [("estimator", "truncated ML"), ("retained θ", r.n_retained),
+               ("truncation", f"{r.truncation.get('criterion', 'K-fold')} cross-validation" if r.truncation
+                else "threshold σ̄"), ("σ̄ [scale units]", r.sigma_bar)]
+    key = [("operating points", r.n_points), ("channels", ", ".join(r.channels)), ("parameters", r.n_params)] + how
+    key += [("χ²/dof before (dof = N)", gof["chi2_per_dof_before"]), ("N", gof["dof_before"]),
+           ("χ²/dof after (dof = N − fitted directions)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
+           ("p-value after", p_text(gof["p_value_after"])),
            ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise")),
            ("prior σ of correction nodes [scale units]" if _has_field(r) else "prior σ [scale units]",
             r.settings.get("prior_sigma"))]
     key += [(f"verdict: {k}", v) for k, v in counts.items()]
     parts.append(_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]))
+    parts.append("<p class='explain'>χ²/dof is the mean squared misfit in units of the noise: near 1 the model "
+                 "explains the measurements to within their noise, far above 1 it misses them. The p-value is the "
+                 "chance of a misfit at least this large if the model were right and the noise as stated.</p>")
     fail = r.failures
     fail_cls = "bad" if fail.get("final", 0) or fail.get("total_failed_point_evaluations", 0) else "ok"
     parts.append(f'<p class="{fail_cls}">Failed model points: nominal {fail.get("nominal", 0)}, final '
@@ -253,7 +259,7 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
           _fmt(gof["per_channel"][c]["rms_after"]))
          for c, u, s in zip(r.channels, r.channel_units, r.noise_sigma)]))
     parts.append("<h3>Worst points after calibration</h3>" + _table(
-        ["point", "channel", "whitened residual", "conditions"],
+        ["point", "channel", "whitened residual [σ]", "conditions"],
         [(w["point"], html.escape(w["channel"]), _fmt(w["whitened_residual"], 3),
           html.escape(", ".join(f"{k} {v:.4g}" for k, v in w["conditions"].items())))
          for w in gof["worst"]]))
@@ -262,7 +268,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
         if v["kind"] in ("lift_correction", "drag_correction") and v["verdict"] == "poorly observable" \
                 and not v["note"]:
             continue
-        rows.append((html.escape(v["name"]), html.escape(v["verdict"]), _fmt(v["nominal"]), _fmt(v["value"]),
+        rows.append((html.escape(v["name"]), html.escape(v["verdict"]), html.escape(v.get("unit", "") or "-"),
+                     _fmt(v["nominal"]), _fmt(v["value"]),
                      _fmt(v["std"]), _fmt(v["prior_std"]), _fmt(v["std_ratio"], 2),
                      html.escape(v.get("note", "")), html.escape(v.get("confounded_with", ""))))
     n_hidden = len(r.verdicts) - len(rows)
@@ -270,8 +277,14 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
              f"than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are not listed (their bands are as "
              f"wide as the prior)." if _has_field(r) else "Every parameter of the model.")
     parts.append(f"<h3>Verdicts</h3><p>{which}</p>" +
-                 _table(["parameter", "verdict", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
-                         "note", "confounded with"], rows, left=2))
+                 _table(["parameter", "verdict", "unit", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
+                         "note", "confounded with"], rows, left=3) +
+                 "<p class='explain'>σ is the standard deviation of the estimate (1σ); σ/prior compares it with "
+                 "the prior's: <b>identified</b> when the data halve it at least, <b>poorly observable</b> when "
+                 "the band stays close to the prior's width, <b>at bound</b> when the estimate sits on a bound "
+                 "(its value is the bound, not an estimate), <b>confounded</b> when a nuisance shares most of "
+                 "its information with the correction field (read it with its σ, not as a measurement of that "
+                 "quantity alone).</p>")
     if figures:
         parts.append("<h3>Figures</h3>")
         captions = _captions(r)
