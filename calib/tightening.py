@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.types import OperatingConditions
+from calib.types import CONDITION_FIELDS, OperatingConditions
 
 #: Candidate points per group: tip-speed ratios on a line, pitch lines.
 LINE_POINTS = 6
@@ -120,18 +120,25 @@ def tightening(model, p_hat: np.ndarray, cov_scaled: np.ndarray, scale: np.ndarr
     groups = candidate_groups(conditions, radius, all_channels, measured)
     out = {n: {"sigma": float(np.sqrt(max(cov_scaled[index[n], index[n]], 0.0)) * scale[index[n]]), "groups": []}
            for n in wanted}
-    for what, cond, chans in groups:
-        ev, G = model.jacobian(p_hat, cond)
+    # every group's points in one batch: one model Jacobian and one field-variance call for all of them
+    sizes = [len(cond) for _, cond, _ in groups]
+    batch = OperatingConditions(*(np.concatenate([np.broadcast_to(getattr(c, f), (len(c),)) for _, c, _ in groups])
+                                  for f in CONDITION_FIELDS))
+    ev_all, G_all = model.jacobian(p_hat, batch)
+    every = list(range(len(all_channels)))
+    var_all = field_variance(batch, every, ev_all) if field_variance is not None else None
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    for (what, cond, chans), a, b in zip(groups, starts[:-1], starts[1:]):
         cols = [all_channels.index(c) for c in chans]
-        y = ev.values[:, cols]
-        ok = ev.ok & np.all(np.isfinite(y), axis=1) & np.all(np.isfinite(G[:, cols, :]), axis=(1, 2))
+        y, G = ev_all.values[a:b, cols], G_all[a:b][:, cols, :]
+        ok = ev_all.ok[a:b] & np.all(np.isfinite(y), axis=1) & np.all(np.isfinite(G), axis=(1, 2))
         if not ok.any():
             continue
-        y, Gs = y[ok], G[ok][:, cols, :] * scale                      # ∂y/∂p̃
+        y, Gs = y[ok], G[ok] * scale                                   # ∂y/∂p̃
         floor = FLOOR * np.max(np.abs(y), axis=0)
         sig = np.array([relative_noise.get(c, rho_default) for c in chans]) * np.maximum(np.abs(y), floor)
-        if field_variance is not None:
-            sig = np.sqrt(sig ** 2 + field_variance(cond, cols, ev)[ok])
+        if var_all is not None:
+            sig = np.sqrt(sig ** 2 + var_all[a:b][:, cols][ok])
         Gw = (Gs / np.where(sig > 0, sig, np.inf)[:, :, None]).reshape(-1, Gs.shape[-1])
         CG = cov_scaled @ Gw.T
         S = np.eye(Gw.shape[0]) + Gw @ CG
