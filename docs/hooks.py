@@ -88,7 +88,44 @@ def _coverage_tables(docs_dir) -> str:
     return "\n".join(out) + "\n"
 
 
-RENDERERS = {"prediction": _prediction_tables}
+def _speed_tables(data: dict) -> str:
+    """``make bench``'s figures (benchmarks/run_all.py, speed suite)."""
+    m = data["machine"]
+    out = [f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`, on {m['cpu_count']} cores "
+           f"({m['platform']}, Python {m['python']}); ratios are measured within the one run.*", "",
+           "| benchmark | ratio | detail | target |", "|---|---|---|---|"]
+    for r in data["ratios"]:
+        if r.get("value") is None:
+            continue
+        cells = [r["name"], f"{r['value']:.3g}", r["detail"], r.get("target", "")]
+        out.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
+    cal = data.get("calibration", {})
+    if cal:
+        out += ["", f"Paper-size calibration ({cal.get('calibration_params')} parameters, "
+                    f"{cal.get('calibration_points')} points, 4 channels, native BEM): MAP "
+                    f"{cal['calibration_map_seconds']:.2f} s ({cal.get('calibration_map_model_jacobians')} Jacobians), "
+                    f"truncated at σ̄ 0.5 {cal['calibration_seconds']:.2f} s (target for the default: ≤ 0.5 s)."]
+    sc = data.get("scaling", {})
+    if sc:
+        out += ["", "Cost against the campaign's size (the wind-tunnel study on denser grids, `bench_scaling.py`; "
+                    "target: 2592 points in ≤ 30 s):", "",
+                "| estimator | points | seconds | ms per point | model Jacobians | status |", "|---|---|---|---|---|---|"]
+        for key, r in sc.items():
+            out.append(f"| {key.split('_')[0]} | {r['points']} | {r['seconds']:.1f} | {r['ms_per_point']:.1f} | "
+                       f"{r['model_jacobians']} | {r['status']} |")
+    cc = data.get("ccblade", {})
+    if "smoothed_native_max_abs_dcp" in cc:
+        out += ["", f"With the native polars smoothed as CCBlade's CCAirfoil spline smooths them, the two C_P "
+                    f"surfaces agree to max |ΔC_P| {cc['smoothed_native_max_abs_dcp']:.2g} (median "
+                    f"{cc['smoothed_native_median_abs_dcp']:.2g})."]
+    fmu = data.get("fmu", {})
+    if fmu:
+        out += ["", "Turbine FMUs (NREL 5-MW, all effects on): " + ", ".join(
+            f"variant {k.split('_')[1]} {v:.0f}× real time" for k, v in sorted(fmu.items())) + "."]
+    return "\n".join(out) + "\n"
+
+
+RENDERERS = {"prediction": _prediction_tables, "speed": _speed_tables}
 
 
 def _bench(markdown: str, config) -> str:
