@@ -381,27 +381,15 @@ def run(n_seeds: int = 30, with_held_back: bool = True, estimator: str | None = 
 
 
 def publish(out: dict, estimator: str, n_seeds: int, command: str) -> str:
-    """Write the twins' figures for the documentation (``docs/validation/data/coverage_<estimator>.json``)
-    with the date, the commit and the command; the validation page renders them."""
-    import datetime
-    import json
-    import subprocess
+    """Write the twins' figures for the documentation (``docs/validation/data/coverage_<estimator>.json``,
+    with the date, the commit and the command: :mod:`publish`); the validation page renders them."""
+    from publish import publish as write
 
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=ROOT, timeout=10).stdout.strip() or "unknown"
-    except OSError:
-        commit = "unknown"
     keep = ("coverage_lift_mean", "coverage_drag_mean", "nees_full_vector_sum", "nees_full_vector_dof",
             "nees_full_vector_band", "in_sample_predictive_chi2_per_row", "in_sample_predictive_chi2_per_dof",
             "in_sample_predictive_coverage_95", "not_converged", "retained_min_max", "seconds_per_calibration")
     twins = {k: {f: v[f] for f in keep if f in v} for k, v in out.items() if k != "held_back"}
-    path = os.path.join(ROOT, "docs", "validation", "data", f"coverage_{estimator}.json")
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump({"date": datetime.date.today().isoformat(), "commit": commit, "command": command,
-                   "estimator": estimator, "n_seeds": n_seeds, "twins": twins}, fh, indent=1)
-    return path
+    return write(f"coverage_{estimator}", {"estimator": estimator, "n_seeds": n_seeds, "twins": twins}, command)
 
 
 if __name__ == "__main__":

@@ -195,25 +195,16 @@ def summary(family) -> dict:
             "coverage_95": inside / max(rows, 1), "failed_points": int(sum(s["failed"] for s in splits))}
 
 
-def publish(out: dict, n_seeds: int) -> Path:
-    """Write the figures for the documentation (``docs/validation/data/prediction.json``) with the date,
-    the commit and the command, so that the validation page's tables come from this run."""
-    import datetime
-    import subprocess
+def publish(out: dict, n_seeds: int) -> str:
+    """Write the figures for the documentation (``docs/validation/data/prediction.json``, with the date,
+    the commit and the command: :mod:`publish`), so that the validation page's tables come from this run."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from publish import publish as write
 
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=ROOT, timeout=10).stdout.strip() or "unknown"
-    except OSError:
-        commit = "unknown"
-    path = ROOT / "docs" / "validation" / "data" / "prediction.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"date": datetime.date.today().isoformat(), "commit": commit,
-                                "command": f"python benchmarks/bench_prediction.py {n_seeds}",
-                                "summary": {e: out[e]["summary"] for e in ESTIMATORS},
+    return write("prediction", {"summary": {e: out[e]["summary"] for e in ESTIMATORS},
                                 "out_of_family": {e: out[e]["families"]["out_of_family"] for e in ESTIMATORS},
-                                "wall_seconds": out.get("wall_seconds")}, indent=1))
-    return path
+                                "wall_seconds": out.get("wall_seconds")},
+                 f"python benchmarks/bench_prediction.py {n_seeds}")
 
 
 def run(n_seeds: int = 12) -> dict:

@@ -269,31 +269,21 @@ def _jsonable(v):
 
 
 def publish_speed(doc: dict) -> str:
-    """The speed figures the documentation renders (``docs/validation/data/speed.json``), with the date,
-    the commit, the command and the machine: the ratios, and the calibration's times per size."""
-    import datetime
-    import subprocess
+    """The speed figures the documentation renders (``docs/validation/data/speed.json``, with the date,
+    the commit and the command: :mod:`publish`), with the machine: the ratios, and the calibration's
+    times per size."""
+    from publish import publish
 
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=ROOT, timeout=10).stdout.strip() or "unknown"
-    except OSError:
-        commit = "unknown"
     res = doc["results"]
     cal, scaling = res.get("bench_calibration", {}), res.get("bench_scaling", {})
-    out = {"date": datetime.date.today().isoformat(), "commit": commit, "command": "make bench",
-           "machine": doc["machine"], "ratios": doc["ratios"],
-           "calibration": {k: cal[k] for k in ("calibration_map_seconds", "calibration_map_model_jacobians",
-                                               "calibration_seconds", "calibration_model_jacobians",
-                                               "calibration_params", "calibration_points") if k in cal},
-           "scaling": {k: v for k, v in scaling.items() if isinstance(v, dict)},
-           "ccblade": {k: v for k, v in res.get("bench_ccblade", {}).items() if k.startswith("smoothed_native_")},
-           "fmu": {k: v for k, v in res.get("bench_fmu", {}).items() if k.endswith("_realtime_factor")}}
-    path = os.path.join(ROOT, "docs", "validation", "data", "speed.json")
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump(_jsonable(out), fh, indent=1)
-    return path
+    figures = {"machine": doc["machine"], "ratios": doc["ratios"],
+               "calibration": {k: cal[k] for k in ("calibration_map_seconds", "calibration_map_model_jacobians",
+                                                   "calibration_seconds", "calibration_model_jacobians",
+                                                   "calibration_params", "calibration_points") if k in cal},
+               "scaling": {k: v for k, v in scaling.items() if isinstance(v, dict)},
+               "ccblade": {k: v for k, v in res.get("bench_ccblade", {}).items() if k.startswith("smoothed_native_")},
+               "fmu": {k: v for k, v in res.get("bench_fmu", {}).items() if k.endswith("_realtime_factor")}}
+    return publish("speed", _jsonable(figures), "make bench")
 
 
 def main(argv=None) -> int:

@@ -54,13 +54,9 @@ def _prediction_tables(data: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def _coverage_tables(docs_dir) -> str:
+def _coverage_tables(load) -> str:
     """The coverage twins (c) and (d), both estimators (benchmarks/bench_coverage.py)."""
-    import json
-    from pathlib import Path
-
-    runs = {e: json.loads((Path(docs_dir) / "validation" / "data" / f"coverage_{e}.json").read_text())
-            for e in ("map", "truncated")}
+    runs = {e: load(f"coverage_{e}") for e in ("map", "truncated")}
     cols = [(t, e) for t in ("c_prior_draws", "d_prior_draws_outside_span") for e in ("map", "truncated")]
     out = [f"*{e}: from `{r['command']}`, {r['date']}, commit `{r['commit']}`, {r['n_seeds']} seeds.*"
            for e, r in runs.items()]
@@ -125,17 +121,17 @@ def _speed_tables(data: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-RENDERERS = {"prediction": _prediction_tables, "speed": _speed_tables}
+#: NAME of ``<!-- bench: NAME -->`` -> renderer of the published files (``load(name)`` reads one)
+RENDERERS = {"prediction": lambda load: _prediction_tables(load("prediction")),
+             "speed": lambda load: _speed_tables(load("speed")),
+             "coverage": _coverage_tables}
 
 
 def _bench(markdown: str, config) -> str:
     import json
     from pathlib import Path
 
-    def table(m):
-        if m.group(1) == "coverage":
-            return _coverage_tables(config["docs_dir"])
-        path = Path(config["docs_dir"]) / "validation" / "data" / f"{m.group(1)}.json"
-        return RENDERERS[m.group(1)](json.loads(path.read_text()))
+    def load(name):
+        return json.loads((Path(config["docs_dir"]) / "validation" / "data" / f"{name}.json").read_text())
 
-    return BENCH.sub(table, markdown)
+    return BENCH.sub(lambda m: RENDERERS[m.group(1)](load), markdown)

@@ -7,6 +7,7 @@ import pytest
 
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements
+from floats import assert_same_numbers
 
 pd = pytest.importorskip("pandas")
 
@@ -21,13 +22,13 @@ def test_a_dataframe_reads_as_the_same_table_in_a_csv_file(tmp_path):
     pd.DataFrame(TABLE).rename(columns={"power": "power [kW]", "thrust": "thrust [kN]"}).to_csv(path, index=False)
     ref = read_measurements(path)
     assert m.channels == ref.channels == ("power", "thrust")
-    np.testing.assert_array_equal(m.values, ref.values)
-    np.testing.assert_array_equal(m.values[:, 0], np.array(TABLE["power"]) * 1e3)     # kW -> W
-    np.testing.assert_array_equal(m.conditions.pitch, ref.conditions.pitch)
+    assert_same_numbers(m.values, ref.values)
+    assert_same_numbers(m.values[:, 0], np.array(TABLE["power"]) * 1e3)     # kW -> W
+    assert_same_numbers(m.conditions.pitch, ref.conditions.pitch)
     assert m.source == "DataFrame"
     # units in the column names work too, and give the same numbers
     named = Measurements.from_dataframe(df.rename(columns={"power": "power [kW]", "thrust": "thrust [kN]"}))
-    np.testing.assert_array_equal(named.values, m.values)
+    assert_same_numbers(named.values, m.values)
 
 
 @pytest.mark.parametrize("change, words", [
@@ -69,6 +70,7 @@ def test_results_and_predictions_as_dataframes():
     params = res.parameters_frame()
     assert list(params.index) == [q.name for q in model.parameters]
     assert params.loc["pitch_offset", "unit"] == "deg" and params.loc["pitch_offset", "kind"] == "nuisance"
+    # the frame holds the result's own arrays (a copy, no arithmetic): equal bit for bit
     np.testing.assert_array_equal(params["value"].to_numpy(), res.p_hat)
     np.testing.assert_array_equal(params["std"].to_numpy(), res.std_p)
     points = res.points_frame()

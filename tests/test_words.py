@@ -1,6 +1,5 @@
 """Numbers in words (calib.words): p-values below the float floor are never printed as 0."""
 
-import numpy as np
 
 from calib.words import p_is, p_text
 
@@ -29,7 +28,6 @@ def test_the_calibration_report_writes_no_zero_p_value():
     text = " ".join(_sentences(res))
     assert "(nothing fitted, p < 1e-16)" in text, text[:400]
     assert "p = 0 " not in text and "p = 0)" not in text and "p = 0;" not in text
-    assert np.isfinite(res.chi2_before)
     # the report section: units and a plain sentence for every statistic it tabulates
     from calib.report.html import result_section
     section = result_section(res)
