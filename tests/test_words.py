@@ -1,6 +1,5 @@
 """Numbers in words (calib.words): p-values below the float floor are never printed as 0."""
 
-
 from calib.words import p_is, p_text
 
 
