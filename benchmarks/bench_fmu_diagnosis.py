@@ -24,7 +24,8 @@ control, the data set's parameter (or ``ambiguous`` with it) on the others.
 
 ``python benchmarks/bench_fmu_diagnosis.py [n_seeds]`` (default 1); under ``make validate``
 ``run(n_seeds=1)``: 47.6 min on the shared 2-core machine (2026-11-25; 2-3 min per control,
-7-15 min per named effect), every verdict right, variant B's figures equal to A's. Writes ``bench_output/fmu_diagnosis.json`` and ``.md``; two worker
+7-15 min per named effect), every verdict right, variant B's figures equal to A's. Writes ``bench_output/fmu_diagnosis.json`` and ``.md`` and publishes the table for the validation page
+(``docs/validation/data/diagnosis_fmu.json``); two worker
 processes per diagnosis.
 """
 
@@ -176,6 +177,11 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                      f"{r['chi2_per_dof_before_median']:.3g} | {r['seconds_per_diagnosis']:.0f} |")
     OUT_MD.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    from publish import command_line, publish
+
+    publish("diagnosis_fmu", {k: v for k, v in out.items() if k != "verdicts"}, command_line(),
+            f"{n_seeds} noise seed(s) per data set, {out['wall_seconds'] / 60:.1f} min in all.\n\n"
+            + "\n".join(lines[2:]) + "\n")
     return out
 
 

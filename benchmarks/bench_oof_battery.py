@@ -105,7 +105,21 @@ def run(n_seeds: int = 20, workers: int = runner.MAX_WORKERS, tolerance: str | N
           "[%]\n\n" + agreement_markdown(gen["agreement"]))
     out_md.write_text(md)
     print(md, flush=True)
+    if tolerance is None:
+        publish_figures(figures, md.split("\n", 2)[2])
     return figures
+
+
+def publish_figures(figures: dict, tables: str) -> str:
+    """The battery's tables for the validation page (``docs/validation/data/diagnosis_out_of_family.json``)."""
+    from publish import command_line, publish
+
+    keep = ("n_seeds", "seeds", "n_diagnoses", "workers", "battery_wall_seconds", "agreement_pct",
+            "model_form_tolerance_default", "table", "versions")
+    head = (f"{figures['n_diagnoses']} diagnoses ({figures['n_seeds']} noise seeds per data set, seeds "
+            f"{figures['seeds']}) in {figures['battery_wall_seconds'] / 60:.1f} min on {figures['workers']} "
+            "processes.\n\n")
+    return publish("diagnosis_out_of_family", {k: figures[k] for k in keep}, command_line(), head + tables)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,13 @@ models:
 - ``relative`` without the ML factor (the stated fractions taken as the truth);
 - ``ml``: one ML σ per channel (started from the stated fractions).
 
-``python benchmarks/bench_phase_vi.py`` (about 1-2 min per noise model here).
+First it runs the shipped workflow itself (``calib run workflows/phase_vi.toml``) and records
+what the validation page states of it: the named effect and its statistics, per stage the
+noise σ the ML factor gives, the directions the data inform, the stall-delay strength and the
+leave-one-wind-speed-out figures of torque and thrust. Everything is published for the page
+(``docs/validation/data/phase_vi.json``).
+
+``python benchmarks/bench_phase_vi.py`` (about 1-2 min per noise model here, plus the workflow).
 """
 
 from __future__ import annotations
@@ -28,8 +34,9 @@ sys.path.insert(0, ROOT)
 
 from calib.campaign import ValidationSettings, leave_one_out, named_effect_specs  # noqa: E402
 from calib.discrepancy import diagnose  # noqa: E402
+from calib.words import p_text  # noqa: E402
 from calib.measurements import read_measurements  # noqa: E402
-from calib.workflow import load_workflow, prepare  # noqa: E402
+from calib.workflow import load_workflow, prepare, run_workflow  # noqa: E402
 
 #: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
 SUITE = "validate"
@@ -45,7 +52,96 @@ MODELS = {
 }
 
 
+def workflow_figures(out_dir: str) -> dict:
+    """Run the shipped workflow into ``out_dir``; the figures its validation page states."""
+    import json
+
+    import numpy as np
+
+    from calib.campaign import INFORMED_LEVEL
+    from calib.result import load_result
+
+    t0 = time.perf_counter()
+    outcomes = run_workflow(WORKFLOW, out_dir, progress=False)
+    seconds = time.perf_counter() - t0
+    with open(os.path.join(out_dir, "diagnosis", "diagnosis.json")) as fh:
+        diag = json.load(fh)
+    first = diag["rounds"][0]["candidates"]
+    best = first[0]
+    runner = first[1] if len(first) > 1 else None
+    figures = {"workflow_seconds": seconds, "named": diag["effect"], "effects": diag["effects"],
+               "best": {k: best[k] for k in ("name", "lr_statistic", "p_value", "weight", "bic", "n_params")},
+               "runner_up": None if runner is None else {"name": runner["name"], "delta_bic": runner["bic"] - best["bic"]},
+               "chi2_per_dof": {k: diag[k]["chi2_per_dof"] for k in ("before", "with_effects", "after")},
+               "stages": {}}
+    for o in outcomes:
+        stage = os.path.basename(o.out_dir)
+        res = load_result(o.out_dir)
+        names = [q["name"] for q in res.parameters]
+        i = names.index("stall_delay_strength")
+        rms = np.sqrt(np.mean(res.measured ** 2, axis=0))
+        sig = np.broadcast_to(res.noise_sigma, res.measured.shape)[0]
+        with open(os.path.join(o.out_dir, "validation.json")) as fh:
+            val = json.load(fh)
+        figures["stages"][stage] = {
+            "estimator": res.estimator, "retained": int(np.sum(res.retained)),
+            "informed": int(np.sum(res.singular_values >= INFORMED_LEVEL)),
+            "noise_percent_of_rms": {ch: float(100 * sig[k] / rms[k]) for k, ch in enumerate(res.channels)
+                                     if ch in ("torque", "thrust")},
+            "stall_delay_strength": {"value": float(res.p_hat[i]), "std": float(res.std_p[i]),
+                                     "verdict": res.verdicts[i]["verdict"]},
+            "leave_one_out": {s_["channel"]: s_ for s_ in val["summary"]}}
+    return figures
+
+
+def markdown(wf: dict, noise: dict) -> str:
+    """The page's tables: the workflow's findings and the noise-model sensitivity."""
+    b, r = wf["best"], wf["runner_up"]
+    c = wf["chi2_per_dof"]
+    runner = "" if r is None else f"; runner-up {r['name']} at ΔBIC {r['delta_bic']:.1f}"
+    lines = [f"**Named:** `{wf['named']}` (first candidate {b['name']}: Λ = {b['lr_statistic']:.3g} for "
+             f"{b['n_params']} parameter(s), p = {p_text(b['p_value'])}, BIC weight {b['weight']:.2f}{runner}); "
+             f"χ²/dof {c['before']:.3g} nominal → {c['with_effects']:.3g} with the effect → {c['after']:.3g} "
+             "recalibrated.", "",
+             "| stage | estimator | noise σ, % of RMS torque / thrust | directions kept / informed (s ≥ 0.5) | "
+             "stall-delay strength | held-out torque: mean \\|error\\| calibrated / nominal [N m], inside 95 % | "
+             "held-out thrust [N], inside |", "|---|---|---|---|---|---|---|"]
+    for stage, st in wf["stages"].items():
+        n = st["noise_percent_of_rms"]
+        sd = st["stall_delay_strength"]
+        cells = [stage.replace("_", " "), st["estimator"], f"{n.get('torque', float('nan')):.1f} / "
+                 f"{n.get('thrust', float('nan')):.1f}", f"{st['retained']} / {st['informed']}",
+                 f"{sd['value']:.3g} ± {sd['std']:.2g} ({sd['verdict']})"]
+        for ch in ("torque", "thrust"):
+            v = st["leave_one_out"][ch]
+            cells.append(f"{v['mean_abs_error_calibrated']:.0f} / {v['mean_abs_error_nominal']:.0f}, "
+                         f"{v['inside']} of {v['folds']}")
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "Sensitivity to the noise model (the discrepancy workflow on all channels, then the hub-load "
+                  "calibration with the named effect, one wind speed left out at a time):", "",
+              "| noise model | named | Λ (first round) | held-out torque: mean \\|error\\| calibrated / nominal "
+              "[N m] | inside 95 % |", "|---|---|---|---|---|"]
+    for label, v in noise.items():
+        named = ", ".join(v["effects"]) or v["named"]
+        lines.append(f"| {label} | {named} | {v['lambda_first']:.3g} | {v['torque_mae_calibrated']:.0f} / "
+                     f"{v['torque_mae_nominal']:.0f} | {v['inside']} of {v['folds']} |")
+    return "\n".join(lines) + "\n"
+
+
 def run() -> dict:
+    """The workflow, then the noise models; published for the validation page."""
+    import tempfile
+
+    from publish import command_line, publish
+
+    with tempfile.TemporaryDirectory() as tmp:
+        wf = workflow_figures(os.path.join(tmp, "phase_vi"))
+    noise = noise_models()
+    publish("phase_vi", {"workflow": wf, "noise_models": noise}, command_line(), markdown(wf, noise))
+    return {"workflow": wf, "noise_models": noise}
+
+
+def noise_models() -> dict:
     cfg = load_workflow(WORKFLOW)
     setup = prepare(cfg)
     file = os.path.join(cfg["_dir"], cfg["measurements"]["file"])

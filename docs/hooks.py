@@ -3,7 +3,8 @@
 - ``<!-- settings: module.Class section -->`` becomes the table of that settings dataclass's fields,
   defaults and documented meaning (:func:`calib.settings_doc.settings_markdown`);
 - ``<!-- bench: NAME -->`` becomes the tables of the benchmark output ``docs/validation/data/NAME.json``,
-  which the benchmark writes with its date, commit and command.
+  which the benchmark writes with its date, commit and command: through a renderer of :data:`RENDERERS`,
+  or, for the others, the tables the benchmark wrote into the file's ``markdown``.
 """
 
 import importlib
@@ -127,6 +128,12 @@ RENDERERS = {"prediction": lambda load: _prediction_tables(load("prediction")),
              "coverage": _coverage_tables}
 
 
+def _published_markdown(data: dict) -> str:
+    """A benchmark's own tables (``publish(..., markdown=...)``) under its run's date, commit and command."""
+    return (f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`.*\n\n"
+            + data["markdown"].strip() + "\n")
+
+
 def _bench(markdown: str, config) -> str:
     import json
     from pathlib import Path
@@ -134,4 +141,10 @@ def _bench(markdown: str, config) -> str:
     def load(name):
         return json.loads((Path(config["docs_dir"]) / "validation" / "data" / f"{name}.json").read_text())
 
-    return BENCH.sub(lambda m: RENDERERS[m.group(1)](load), markdown)
+    def render(m):
+        name = m.group(1)
+        if name in RENDERERS:
+            return RENDERERS[name](load)
+        return _published_markdown(load(name))
+
+    return BENCH.sub(render, markdown)

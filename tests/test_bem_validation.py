@@ -60,21 +60,25 @@ def test_iea34_reproduces_ccblade_table(capsys):
     assert np.median(np.abs(rel["root_flap_moment"])) > 0.03
 
 
-def test_nrel5mw_against_openfast_steady_table():
+def nrel5mw_comparison():
+    """The native BEM at OpenFAST's steady operating points (5 m/s and above): the relative differences
+    in aerodynamic power (Ω × shaft torque) and thrust, the wind speeds and the region-2 mask."""
     rotor = load_rotor("nrel5mw")
     with open(reference_path("NREL5MW_Oper_openfast_sim.csv"), newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if float(r["WS_[m/s]"]) >= 5.0]
     col = lambda k: np.array([float(r[k]) for r in rows])  # noqa: E731
     cond = OperatingConditions(col("WS_[m/s]"), col("RotSpeed_[rpm]"), col("BldPitch_[deg]"))
     res = solve_bem(rotor, cond, BemSettings())
-    assert res.n_failed == 0
     # aerodynamic power from the shaft torque (steady: no acceleration) and the aero thrust; the
     # table's RtAeroCp uses the disc-averaged relative wind, so C_P is not compared directly
     power_ref = col("RotTorq_[kN-m]") * 1e3 * cond.rotor_speed * np.pi / 30
     thrust_ref = col("RtAeroFxh_[kN]") * 1e3
-    dp = res.power / power_ref - 1
-    dt = res.thrust / thrust_ref - 1
-    region2 = col("BldPitch_[deg]") < 0.5
+    return res, res.power / power_ref - 1, res.thrust / thrust_ref - 1, cond.wind_speed, col("BldPitch_[deg]") < 0.5
+
+
+def test_nrel5mw_against_openfast_steady_table():
+    res, dp, dt, _, region2 = nrel5mw_comparison()
+    assert res.n_failed == 0
     # region 2: the rigid steady BEM is 1-3 % above OpenFAST in power, within 1.5 % in thrust
     assert np.all(np.abs(dp[region2]) < 0.03)
     assert np.all(np.abs(dt[region2]) < 0.015)
@@ -84,11 +88,17 @@ def test_nrel5mw_against_openfast_steady_table():
     assert np.all((dt[~region2] > 0) & (dt[~region2] < 0.05))
 
 
-def test_phase_vi_two_dimensional_polars_underpredict_stalled_torque(capsys):
+def phase_vi_comparison():
+    """The native BEM with the 2-D S809 polars at sequence H's operating points: the solution and the
+    measured performance table (``lss_torque`` [N m])."""
     rotor = load_rotor("phase_vi")
     meas = load_phase_vi_measurements()["performance"]
     cond = OperatingConditions(meas["wind_speed"], meas["rotor_speed"], 3.0, meas["air_density"], 0.0)
-    res = solve_bem(rotor, cond, BemSettings(use_tilt=False))
+    return solve_bem(rotor, cond, BemSettings(use_tilt=False)), meas
+
+
+def test_phase_vi_two_dimensional_polars_underpredict_stalled_torque(capsys):
+    res, meas = phase_vi_comparison()
     assert res.n_failed == 0
     ratio = res.torque / meas["lss_torque"]
     with capsys.disabled():
