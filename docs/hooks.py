@@ -143,6 +143,9 @@ def _bench(markdown: str, config) -> str:
 
     def render(m):
         name = m.group(1)
+        if not (Path(config["docs_dir"]) / "validation" / "data" / f"{name}.json").is_file():
+            return (f"*Not published yet: no run of the benchmark that writes `docs/validation/data/{name}.json` "
+                    "is on record in this version.*\n")
         if name in RENDERERS:
             return RENDERERS[name](load)
         return _published_markdown(load(name))

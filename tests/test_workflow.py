@@ -1,6 +1,7 @@
 """Workflow TOML files: schema errors name file and key; the method's two studies run."""
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -108,6 +109,19 @@ def test_shipped_workflows_validate():
     for path in sorted(WORKFLOWS.glob("*.toml")):
         cfg = load_workflow(path)
         assert cfg["stages"]
+
+
+def test_the_bundled_fmu_workflow_runs_as_the_readme_says(tmp_path):
+    """README's FMU job: `calib run workflows/bundled_fmu.toml` calibrates the bundled FMU (built from C
+    source on first use) to data of the native BEM, a model of another code path, and its bands cover
+    the known truth."""
+    [stage] = run_workflow(WORKFLOWS / "bundled_fmu.toml", tmp_path, progress=False)
+    res = stage.result
+    assert res.status == "converged" and res.failures["total_failed_point_evaluations"] == 0
+    assert res.chi2_before / res.dof > 5 and res.chi2_after / res.dof < 1.5
+    coverage = res.checks["coverage of the known truth"]
+    lift, drag = (float(x) for x in re.findall(r"at ([0-9.]+) %", coverage))
+    assert lift >= 90 and drag >= 90, coverage
 
 
 def test_wind_tunnel_study_improves_fit_from_hub_loads(tmp_path):
