@@ -34,3 +34,8 @@ def test_the_calibration_report_writes_no_zero_p_value():
     assert "χ²/dof is the mean squared misfit in units of the noise" in section
     assert "<b>identified</b> when the data halve it at least" in section
     assert "directions the data determine better than the prior (s &gt; 1)" in section
+    assert "s &gt; 1 means the measurements pin it down better than the prior did" in section
+    assert ">RMS misfit after [unit]<" in section and ">noise σ [unit]<" in section
+    # the truncated estimator's words say what θ and σ̄ are
+    from calib.report.html import _directions_words
+    assert "σ̄ is the largest standard deviation a retained θ may have" in _directions_words("truncated")

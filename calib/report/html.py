@@ -212,6 +212,18 @@ def _sentences(r: CalibrationResult) -> list[str]:
     return out
 
 
+def _directions_words(estimator: str) -> str:
+    """One plain sentence on what the key table's directions (or θ and σ̄) mean for the user."""
+    if estimator == "map":
+        return ("A direction is one statistically independent combination of the parameters (from the SVD of "
+                "the prior-whitened sensitivities); s > 1 means the measurements pin it down better than the "
+                "prior did, the others stay close to the prior.")
+    return ("θ are the statistically independent combinations of the parameters (from the SVD of the Fisher "
+            "information); the retained θ are those the measurements determine with confidence, the others stay "
+            "at nominal. σ̄ is the largest standard deviation a retained θ may have, in units of the parameters' "
+            "scales.")
+
+
 def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str, Path]] | None = None,
                    checks: Mapping[str, str] | None = None) -> str:
     """HTML of one calibration: statements, key numbers, verdicts, fit, failures, figures.
@@ -243,7 +255,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
             r.settings.get("prior_sigma"))]
     key += [(f"verdict: {k}", v) for k, v in counts.items()]
     parts.append(_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]))
-    parts.append("<p class='explain'>χ²/dof is the mean squared misfit in units of the noise: near 1 the model "
+    parts.append("<p class='explain'>" + html.escape(_directions_words(r.estimator)) +
+                 " χ²/dof is the mean squared misfit in units of the noise: near 1 the model "
                  "explains the measurements to within their noise, far above 1 it misses them. The p-value is the "
                  "chance of a misfit at least this large if the model were right and the noise as stated.</p>")
     fail = r.failures
@@ -253,7 +266,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
                  f'({fail.get("model_evaluations", 0)} evaluations, {fail.get("model_jacobians", 0)} '
                  f"Jacobians).</p>")
     parts.append("<h3>Fit per channel</h3>" + _table(
-        ["channel", "unit", "noise σ", "χ²/point before", "χ²/point after", "RMS before", "RMS after"],
+        ["channel", "unit", "noise σ [unit]", "χ²/point before [-]", "χ²/point after [-]", "RMS misfit before [unit]",
+         "RMS misfit after [unit]"],
         [(html.escape(c), html.escape(u), _fmt(float(s)), _fmt(gof["per_channel"][c]["chi2_per_point_before"]),
           _fmt(gof["per_channel"][c]["chi2_per_point_after"]), _fmt(gof["per_channel"][c]["rms_before"]),
           _fmt(gof["per_channel"][c]["rms_after"]))
