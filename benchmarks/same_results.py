@@ -1,0 +1,123 @@
+"""Same results before and after a refactoring: every shipped workflow, ``calib demo`` and Phase VI.
+
+``python benchmarks/same_results.py snapshot DIR`` runs ``calib demo`` and ``calib run`` of every
+workflow in ``workflows/`` (Phase VI included) into ``DIR``; ``python benchmarks/same_results.py
+compare OLD NEW`` compares two snapshots: every number of every ``result.json``, ``result.npz``,
+``diagnosis.json``, ``validation.json`` and ``summary.json`` (timings, dates, versions and paths
+left out) within ``--rtol`` (default 1e-10) relative, and the key sets (a name that disappeared or
+appeared is listed). Exit status 1 when anything differs. A development tool for the architecture
+steps, not a test: its baseline is the code's own output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SKIP = ("seconds", "time", "wall", "versions", "date", "path", "file", "dir", "elapsed", "timeout", "hash",
+        "sha256", "inputs", "source", "command", "log", "median healthy")
+
+
+def snapshot(out: Path) -> int:
+    out.mkdir(parents=True, exist_ok=True)
+    calib = str(Path(sys.executable).with_name("calib"))
+    runs = [("demo", [calib, "demo", "--out", str(out / "demo")])]
+    runs += [(p.stem, [calib, "run", str(p), "--out", str(out / p.stem), "-q", "--no-history"])
+             for p in sorted((ROOT / "workflows").glob("*.toml"))]
+    status = 0
+    for name, cmd in runs:
+        proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+        print(f"[same results] {name}: exit {proc.returncode}", flush=True)
+        if proc.returncode:
+            print(proc.stderr[-2000:])
+            status = 1
+    return status
+
+
+def _skip(key: str) -> bool:
+    k = key.lower()
+    return any(s in k for s in SKIP)
+
+
+def _leaves(x, prefix=""):
+    """The numeric leaves of a JSON document, by dotted key path (skipped keys left out)."""
+    if isinstance(x, dict):
+        for k, v in x.items():
+            if not _skip(str(k)):
+                yield from _leaves(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(x, list):
+        for i, v in enumerate(x):
+            yield from _leaves(v, f"{prefix}[{i}]")
+    elif isinstance(x, bool) or x is None or isinstance(x, str):
+        yield prefix, x
+    elif isinstance(x, (int, float)):
+        yield prefix, float(x)
+
+
+def _close(a, b, rtol: float) -> bool:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.shape != b.shape:
+        return False
+    scale = max(float(np.nanmax(np.abs(a))) if a.size and np.isfinite(a).any() else 0.0, 1e-300)
+    same_nan = np.array_equal(np.isnan(a), np.isnan(b))
+    ok = np.abs(a - b) <= rtol * np.maximum(np.abs(a), 1e-6 * scale)
+    return bool(same_nan and np.all(ok | np.isnan(a)))
+
+
+def compare(old: Path, new: Path, rtol: float) -> int:
+    problems, checked = [], 0
+    for f in sorted(old.rglob("*")):
+        rel = f.relative_to(old)
+        g = new / rel
+        if f.suffix == ".json" and f.name in ("result.json", "diagnosis.json", "validation.json", "summary.json"):
+            if not g.exists():
+                problems.append(f"{rel}: missing in the new snapshot")
+                continue
+            a, b = dict(_leaves(json.loads(f.read_text()))), dict(_leaves(json.loads(g.read_text())))
+            for k in sorted(set(a) ^ set(b)):
+                problems.append(f"{rel}: key {k} only in the {'old' if k in a else 'new'} snapshot")
+            for k in sorted(set(a) & set(b)):
+                checked += 1
+                x, y = a[k], b[k]
+                if isinstance(x, float) and isinstance(y, float):
+                    if not _close(x, y, rtol):
+                        problems.append(f"{rel}: {k} {x!r} -> {y!r}")
+                elif x != y:
+                    problems.append(f"{rel}: {k} {x!r} -> {y!r}")
+        elif f.suffix == ".npz":
+            if not g.exists():
+                problems.append(f"{rel}: missing in the new snapshot")
+                continue
+            with np.load(f, allow_pickle=False) as za, np.load(g, allow_pickle=False) as zb:
+                for k in sorted(set(za.files) ^ set(zb.files)):
+                    problems.append(f"{rel}: array {k} only in the {'old' if k in za.files else 'new'} snapshot")
+                for k in sorted(set(za.files) & set(zb.files)):
+                    checked += 1
+                    if za[k].dtype.kind in "fiub" and zb[k].dtype.kind in "fiub":
+                        if not _close(za[k], zb[k], rtol):
+                            problems.append(f"{rel}: array {k} differs beyond rtol {rtol:g}")
+                    elif not np.array_equal(za[k], zb[k]):
+                        problems.append(f"{rel}: array {k} differs")
+    print(f"[same results] {checked} numbers and arrays compared at rtol {rtol:g}: {len(problems)} differ")
+    for p in problems[:200]:
+        print("  " + p)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("snapshot")
+    s.add_argument("dir", type=Path)
+    c = sub.add_parser("compare")
+    c.add_argument("old", type=Path)
+    c.add_argument("new", type=Path)
+    c.add_argument("--rtol", type=float, default=1e-10)
+    args = ap.parse_args()
+    sys.exit(snapshot(args.dir) if args.cmd == "snapshot" else compare(args.old, args.new, args.rtol))
