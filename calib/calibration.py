@@ -58,7 +58,6 @@ from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_
                                    frozen_aware_covariance, frozen_curvature_covariance, observability,
                                    parameter_verdicts, subspace_cosines, svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
-from calib.models.base import FieldModel, RebuildableModel, RefinableFieldModel
 from calib.parametrizations.aliasing import FineSensitivities
 from calib.prior_check import psd_sqrt
 from calib.result import CalibrationResult
@@ -359,7 +358,7 @@ class Calibrator:
             j = int(np.flatnonzero(~(self.scale > 0))[0])
             raise InputError(f"parameter scale must be > 0, got {self.scale[j]!r}", "model.parameters",
                              field=self.parameters[j].name)
-        self.field = model.correction_field() if isinstance(model, FieldModel) else None
+        self.field = model.correction_field() if model.capabilities.correction_field else None
         self.lower, self.upper = self._effective_bounds()
         self.start = None
         if start is not None:
@@ -763,8 +762,8 @@ class Calibrator:
             return None, 0.0, (f"prior_correlation = 0 (independent nodes) defines no field between the nodes to "
                                f"propagate: {left_out}; the field's variance at each reached point is in the "
                                f"bands."), None
-        if not isinstance(self.model, RefinableFieldModel):
-            return None, 0.0, (f"the model ({type(self.model).__name__}) cannot be rebuilt on a finer correction "
+        if not self.model.capabilities.refinable:
+            return None, 0.0, (f"the model ({self.model.capabilities.name}) cannot be rebuilt on a finer correction "
                                f"grid (no with_grid, e.g. an FMU): {left_out}."), None
         lay = self.field.layout
         if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
@@ -892,7 +891,7 @@ class Calibrator:
             field_cols = {int(j) for idx in (lay.lift_index, lay.drag_index) for j in idx[idx >= 0].ravel()}
         names = [q.name for j, q in enumerate(self.parameters) if j not in field_cols]
         if not self.settings.tightening or not names or radius is None \
-                or not isinstance(self.model, RefinableFieldModel):
+                or not self.model.capabilities.refinable:
             return {}
         from calib.tightening import tightening
 
@@ -989,7 +988,7 @@ class Calibrator:
         verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
                                       conf, st.identified_ratio, st.confounded_share)
         spec, radius = None, None
-        if isinstance(self.model, RebuildableModel):
+        if self.model.capabilities.rebuildable:
             radius = self.model.rotor_radius
             try:
                 spec = self.model.spec()
@@ -999,7 +998,7 @@ class Calibrator:
                     "total_failed_point_evaluations": problem.n_failed_points_total,
                     "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
         settings = asdict(st)
-        settings["model"] = type(self.model).__name__
+        settings["model"] = self.model.capabilities.name
         settings["lower_effective"] = self.lower.tolist()
         inputs = {m.source: m.sha256} if m.sha256 else {}
         truncation = self._curve.to_dict() if self._curve is not None and st.sigma_bar == "auto" \

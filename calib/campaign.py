@@ -368,7 +368,7 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
 
 def diagnosis_sentence(diag) -> str:
     """One line for a result's checks: what the discrepancy workflow named, with its evidence."""
-    failed = f"; stopped early: {diag.failure}" if getattr(diag, "failure", "") else ""
+    failed = f"; stopped early: {diag.failure}" if diag.failure else ""
     if not diag.rounds:
         return f"no candidate could be fitted; named {diag.effect}{failed}"
     reasons = "; ".join(r["reason"] for r in diag.rounds)

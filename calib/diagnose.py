@@ -139,7 +139,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     family, executor, chunk = None, None, None
     if is_fmu:
         family, executor = _fmu_family(setup, grid, list(meas.channels), dset, src)
-        chunk = max(int(getattr(executor, "workers", 1) or 1), 1)   # a kill loses at most one chunk of simulations
+        chunk = max(int(executor.workers), 1)   # a kill loses at most one chunk of simulations
 
     def wrap(model, label):
         return recorded(model, hist, label, chunk, progress=progress_line)

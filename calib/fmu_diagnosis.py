@@ -106,9 +106,8 @@ class FmuFamily:
         try:
             ev = model.evaluate(p, conditions)
         finally:
-            close = getattr(model, "close", None)
-            if close is not None:
-                close()
+            if model.capabilities.closes:
+                model.close()
         return ev.values, [c.unit for c in model.channels]
 
     def fingerprint(self, name: str) -> str:

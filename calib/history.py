@@ -330,13 +330,12 @@ def _short(value) -> str:
 # ----------------------------------------------------------------------------- recorded model calls
 def _identity(model, label: str) -> str:
     """Hash of what makes a model's outputs what they are (type, parameters, channels, spec)."""
-    desc = {"label": label, "type": type(model).__name__,
+    desc = {"label": label, "type": model.capabilities.name,
             "parameters": [(q.name, q.nominal, q.lower, q.upper, q.scale) for q in model.parameters],
             "channels": [c.name for c in model.channels]}
-    spec = getattr(model, "spec", None)
-    if callable(spec):
+    if model.capabilities.rebuildable:
         try:
-            desc["spec"] = spec()
+            desc["spec"] = model.spec()
         except InputError:
             pass
     text = json.dumps(_jsonable(desc), sort_keys=True)
@@ -366,8 +365,8 @@ class RecordedModel:
     ``evaluate`` and ``jacobian`` look up each call (or chunk of points) by a hash of
     (the model's identity, the call kind, ``p``'s bytes, the conditions' bytes); a stored
     call is read back bit for bit, any other is computed by the wrapped model and recorded.
-    Everything else (``parameters``, ``channels``, ``correction_field``, ``spec``, ...) is
-    the wrapped model's, so the calibrator sees the same protocols.
+    Everything else (``parameters``, ``channels``, ``capabilities`` and the calls they
+    declare) is the wrapped model's, so the calibrator sees the same model.
 
     Parameters
     ----------
@@ -406,16 +405,33 @@ class RecordedModel:
     def channels(self):
         return self._model.channels
 
-    def __getattr__(self, name):
-        # optional protocols (correction_field, spec, rotor_radius, ...) are the wrapped model's
-        if name.startswith("__") or name in ("_model",):
-            raise AttributeError(name)
-        return getattr(self._model, name)
+    # -- the wrapped model's declared capabilities and their calls ----------------------------
+    @property
+    def capabilities(self):
+        """The wrapped model's (its name included, so results are the same with and without a history)."""
+        return self._model.capabilities
 
-    def __reduce__(self):
-        # the class is made per wrapped type (see ``recorded``); a terminal display does not travel
-        state = {**self.__dict__, "_progress": None}
-        return _rebuild, (type(self).__name__, state)
+    def correction_field(self):
+        return self._model.correction_field()
+
+    def with_grid(self, grid):
+        """The wrapped model on another grid (not recorded: it serves the uncertainty's fine grid)."""
+        return self._model.with_grid(grid)
+
+    def spec(self) -> dict:
+        return self._model.spec()
+
+    @property
+    def rotor_radius(self):
+        return self._model.rotor_radius
+
+    def close(self) -> None:
+        if self._model.capabilities.closes:
+            self._model.close()
+
+    def __getstate__(self):
+        # a terminal display does not travel to another process
+        return {**self.__dict__, "_progress": None}
 
     def _key(self, kind: str, p: np.ndarray, conditions: OperatingConditions) -> str:
         h = hashlib.sha256()
@@ -501,27 +517,7 @@ def _load_call(path: Path, channels, kind: str):
 
 def recorded(model, history: History | None, label: str, chunk_points: int | None = None,
              progress: Callable | None = None):
-    """``model`` wrapped in a :class:`RecordedModel` (``model`` itself when ``history`` is None).
-
-    The wrapper's class carries the wrapped model's class name, so results that record the
-    model's type (``settings["model"]``) are the same with and without a history.
-    """
+    """``model`` wrapped in a :class:`RecordedModel` (``model`` itself when ``history`` is None)."""
     if history is None:
         return model
-    cls = _named_wrapper(type(model).__name__)
-    return cls(model, history, label, chunk_points, progress)
-
-
-_WRAPPERS: dict[str, type] = {}
-
-
-def _rebuild(name: str, state: dict) -> RecordedModel:
-    obj = _named_wrapper(name).__new__(_named_wrapper(name))
-    obj.__dict__.update(state)
-    return obj
-
-
-def _named_wrapper(name: str) -> type:
-    if name not in _WRAPPERS:
-        _WRAPPERS[name] = type(name, (RecordedModel,), {"__module__": __name__, "__qualname__": f"_recorded.{name}"})
-    return _WRAPPERS[name]
+    return RecordedModel(model, history, label, chunk_points, progress)

@@ -169,9 +169,8 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     result = load_result(result_dir)
     meas = calibration_fluid(read_measurements(data, None, allow_no_channels=True), result.conditions, printer)
     model = result.rebuild_model()
-    rotor = getattr(model, "rotor", None)
-    for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data),
-                            getattr(rotor, "name", None)):
+    rotor_name = ((result.model_spec or {}).get("rotor_data") or {}).get("name")   # the native BEM's rotor, if any
+    for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data), rotor_name):
         printer(line)
     pred = result.predict(meas.conditions, model=model, confidence=confidence)
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})

@@ -361,7 +361,7 @@ class CalibrationResult:
         z = float(stats.norm.ppf(0.5 * (1 + confidence)))
         values = ev.values[:, idx]
         std = np.where(ev.ok[:, None], std, np.nan)
-        extras = getattr(ev, "extras", None) or {}
+        extras = ev.extras or {}
         envelope = envelope_of(self.conditions, self.rotor_radius, conditions.as_dict(), extras.get("alpha_deg"),
                                extras.get("eta"), self.alpha_seen, self.eta_seen) if self.conditions else []
         return Prediction(tuple(self.channels), tuple(self.channel_units), values, std, values - z * std,
@@ -385,7 +385,7 @@ class CalibrationResult:
         if not self.gain.size or not self.prior_std.size:
             return None, ("the bands leave out the field between and beyond the correction nodes (estimator "
                           f"{st.get('estimator', 'truncated')!r} records no gain)")
-        if not hasattr(model, "with_grid") or not st.get("representation_error", True) \
+        if not model.capabilities.refinable or not st.get("representation_error", True) \
                 or not st.get("prior_correlation", 0.0) > 0:
             return None, "the bands leave out the field between and beyond the correction nodes (off, or not refinable)"
         from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities

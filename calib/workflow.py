@@ -26,7 +26,6 @@ from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.errors import CalibError, InputError, unknown_key
 from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
-from calib.models.base import FieldModel
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
 from calib.types import STANDARD_AIR_DENSITY, OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
@@ -275,7 +274,7 @@ def truth_checks(model, result, truth: dict) -> dict[str, str]:
     the report draws (frozen-direction prior and representation variance included).
     """
     out = {}
-    if isinstance(model, FieldModel) and result.alpha_seen.size:
+    if model.capabilities.correction_field and result.alpha_seen.size:
         field = model.correction_field()
         a, e = result.alpha_seen, result.eta_seen
         tl, td = smooth_field(truth["bumps"], a, e)
@@ -661,7 +660,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         say(log, line, progress)
 
     # an FMU's calls are recorded in chunks of points (a kill loses at most one chunk of simulations)
-    chunk = max(int(getattr(executor, "workers", 1) or 1), 1) if setup.fmu_table is not None else None
+    chunk = max(int(executor.workers if executor is not None else 1), 1) if setup.fmu_table is not None else None
 
     src = cfg["_source"]
     rotor, settings, nuisance = setup.rotor, setup.settings, setup.nuisance

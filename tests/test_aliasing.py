@@ -8,7 +8,6 @@ import pytest
 
 from calib.bem import BemSettings
 from calib.corrections import CorrectionGrid
-from calib.models.base import RefinableFieldModel
 from calib.models.bem_model import BemModel
 from calib.parametrizations.aliasing import (discrepancy_correlation, interpolation_matrix, refined_grid,
                                              refined_nodes)
@@ -69,7 +68,7 @@ def test_the_fine_model_jacobian_carries_the_coarse_one():
     reproduces the coarse estimate; the outputs agree too."""
     rotor = load_rotor("phase_vi")
     model = BemModel(rotor, COARSE, ("power", "thrust"), BemSettings(use_tilt=False), ("pitch_offset",))
-    assert isinstance(model, RefinableFieldModel)
+    assert model.capabilities.refinable and model.capabilities.correction_field
     cond = OperatingConditions(np.array([7.0, 10.0, 13.0]), np.full(3, 72.0), np.array([3.0, 3.0, 3.0]))
     rng = np.random.default_rng(7402)
     p = nominal_vector(model.parameters)

@@ -20,6 +20,7 @@ from calib.discrepancy import DiagnosisSettings, diagnose
 from calib.effects import make_effect
 from calib.errors import InputError
 from calib.measurements import synthesize
+from calib.models.base import Capabilities
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions
@@ -307,6 +308,7 @@ class _ProductModel:
         self.parameters = (Parameter("a", 0.0, -3.0, 3.0, 0.5, "-", "effect"),
                            Parameter("b", 0.0, -3.0, 3.0, 0.5, "-", "effect"))
         self.channels = (Channel("power", "W"), Channel("thrust", "N"))
+        self.capabilities = Capabilities("ProductModel", derivatives="exact")
 
     def _parts(self, conditions):
         lam = conditions.rotor_speed * np.pi / 30.0 * 60.0 / conditions.wind_speed / 7.0

@@ -5,7 +5,7 @@ import pytest
 
 from calib.errors import InputError
 from calib.estimation import OPTIMIZERS, LeastSquaresProblem, estimate, get_optimizer
-from calib.models.base import Channel, Evaluation, OperatingConditions, Parameter
+from calib.models.base import Capabilities, Channel, Evaluation, OperatingConditions, Parameter
 
 
 class LinearModel:
@@ -22,6 +22,7 @@ class LinearModel:
 
     parameters = property(lambda self: self._params)
     channels = property(lambda self: self._channels)
+    capabilities = Capabilities("LinearModel", derivatives="exact")
 
     def _A(self, cond):
         basis = np.column_stack([np.ones(len(cond)), cond.wind_speed / 10, cond.pitch / 5])  # (k, 3)
@@ -168,6 +169,7 @@ def test_an_infeasible_start_is_pulled_back_inside_the_bounds():
     class Box:
         parameters = (Parameter("a", 0.0, -1.0, 1.0, 1.0), Parameter("b", 0.0, -1.0, 1.0, 1.0))
         channels = (Channel("y", "-"),)
+        capabilities = Capabilities("Box", derivatives="exact")
 
         def evaluate(self, p, cond):
             calls.append(np.array(p))

@@ -10,7 +10,7 @@ import pytest
 from calib.bem.solver import BemSettings
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements, synthesize
-from calib.models.base import Evaluation, OperatingConditions, Status, nominal_vector
+from calib.models.base import Capabilities, Evaluation, OperatingConditions, Status, nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 from calib.unit_check import check_units
@@ -181,6 +181,7 @@ class FailingAbove:
     def __init__(self, model, limit):
         self.model, self.limit = model, limit
         self.parameters, self.channels = model.parameters, model.channels
+        self.capabilities = Capabilities("FailingAbove")
 
     def evaluate(self, p, conditions):
         ev = self.model.evaluate(p, conditions)

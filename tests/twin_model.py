@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from calib.corrections import CorrectionGrid
+from calib.models.base import Capabilities
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, Status
 
@@ -39,6 +40,9 @@ class TwinModel:
         self.nuisance = tuple(nuisance)
         units = {"power": "W", "thrust": "N", "root_flap_moment": "N m"}
         self._channels = tuple(Channel(c, units.get(c, "-")) for c in channels)
+
+    #: a correction field (no other grid, no spec): what the calibrator may ask of it
+    capabilities = Capabilities("TwinModel", correction_field=True, derivatives="exact")
 
     @property
     def parameters(self):

@@ -66,7 +66,7 @@ class ChainEntry:
 
     @property
     def probed(self) -> bool:
-        return int(getattr(self.effect, "n_probes", 0) or 0) > 0
+        return self.effect.n_probes > 0
 
     def theta(self, p) -> tuple:
         return tuple(float(v) for v in p[self.offset:self.offset + self.n_params])
@@ -77,8 +77,8 @@ class EffectChain:
 
     Parameters
     ----------
-    effects : sequence
-        Effects in parameter order: ``p`` is the concatenation of their ``parameters()``.
+    effects : sequence of calib.effects.base.Effect
+        Effects (their declared ``stage``, ``order``, ``n_probes``, ``reads_thrust``, ``uses_flow``) in parameter order: ``p`` is the concatenation of their ``parameters()``.
         They are applied stage by stage (:data:`~calib.bem.stages.STAGES`), within a stage by
         ``order`` and then by their position here.
 
@@ -94,13 +94,13 @@ class EffectChain:
         self.parameters = []
         offsets = []
         for e in effects:
-            stage = getattr(e, "stage", None)
+            stage = e.stage
             if stage not in STAGES:
-                raise InputError(f"effect {getattr(e, 'name', e)!r} has stage {stage!r}; valid stages: "
+                raise InputError(f"effect {e.name!r} has stage {stage!r}; valid stages: "
                                  f"{', '.join(STAGES)}", "EffectChain", field="stage")
-            if int(getattr(e, "n_probes", 0) or 0) and stage == "conditions":
+            if e.n_probes and stage == "conditions":
                 raise InputError(f"effect {e.name!r}: probes are for section stages only", "EffectChain")
-            if getattr(e, "reads_thrust", False) and stage != "conditions":
+            if e.reads_thrust and stage != "conditions":
                 raise InputError(f"effect {e.name!r}: only conditions-stage effects may read the thrust",
                                  "EffectChain")
             offsets.append(len(self.parameters))
@@ -114,7 +114,7 @@ class EffectChain:
         self.parameters = tuple(self.parameters)
         self.effects = effects
         order = sorted(range(len(effects)), key=lambda i: (STAGES.index(effects[i].stage),
-                                                           int(getattr(effects[i], "order", 0)), i))
+                                                           effects[i].order, i))
         entries = [None] * len(effects)
         point_col, section_col = 0, N_BASE_COLUMNS
         for i in order:      # columns in application order
@@ -124,7 +124,7 @@ class EffectChain:
                 entries[i] = ChainEntry(e, offsets[i], n, point_col, n)
                 point_col += n
             else:
-                nc = int(getattr(e, "n_probes", 0) or 0) or n
+                nc = e.n_probes or n
                 entries[i] = ChainEntry(e, offsets[i], n, section_col, nc)
                 section_col += nc
         self.entries = tuple(entries)
@@ -143,11 +143,11 @@ class EffectChain:
 
     @property
     def reads_thrust(self) -> bool:
-        return any(getattr(e.effect, "reads_thrust", False) for e in self.stage("conditions"))
+        return any(e.effect.reads_thrust for e in self.stage("conditions"))
 
     @property
     def polar_uses_flow(self) -> bool:
-        return any(getattr(e.effect, "uses_flow", False) for e in self.stage("polar"))
+        return any(e.effect.uses_flow for e in self.stage("polar"))
 
     def nominal(self) -> np.ndarray:
         return np.array([q.nominal for q in self.parameters], float)

@@ -11,7 +11,9 @@ An effect declares
 - ``apply(theta, state, ctx)``: the stage's state modified for parameter values ``theta``
   (one per parameter), written with :mod:`calib.bem.dual` so that the same code gives
   values inside the root search and exact derivatives in the solver's dual pass;
-- ``fingerprint``: how the effect shows in measured rotor loads (docs/theory.md, Discrepancy workflow), for reports.
+- ``fingerprint``: how the effect shows in measured rotor loads (docs/theory.md, Discrepancy workflow), for reports;
+- ``n_probes``, ``reads_thrust``, ``uses_flow``, ``order``: what the effect chain must provide (defaults:
+  none of it), declared as attributes so that the chain never probes an effect.
 
 and nothing else: no I/O, no state between calls. Options (variants, model constants)
 are keyword arguments of the constructor, listed with their defaults in ``OPTIONS`` and
@@ -54,6 +56,12 @@ class Effect:
     stage: ClassVar[str] = ""
     fingerprint: ClassVar[str] = ""
     order: ClassVar[int] = 0
+    #: declared capabilities (the chain reads them; it never probes): section probes the effect
+    #: tabulates its θ-derivatives on (section stages only), whether it reads the rotor thrust
+    #: (conditions stage only) and whether its polar depends on the local flow (Re, chord/r)
+    n_probes: int = 0
+    reads_thrust: bool = False
+    uses_flow: bool = False
     OPTIONS: ClassVar[dict] = {}
     CHOICES: ClassVar[dict] = {}
     PARAMETERS: ClassVar[tuple] = ()

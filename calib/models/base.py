@@ -15,6 +15,7 @@ flagged, never silently NaN.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -23,9 +24,60 @@ from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditi
                          ParameterKind, Status, StatusCounts, check_parameter_vector, nominal_vector)
 
 
+#: how a model's ``jacobian`` is computed: analytic sensitivities, or finite differences of simulations
+DERIVATIVE_KINDS = ("exact", "finite_difference")
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a model offers beyond ``evaluate`` and ``jacobian``: declared by the model, never probed.
+
+    Attributes
+    ----------
+    name : str
+        The model's name in results and reports (e.g. ``"BemModel"``); a wrapper (the history's
+        :class:`~calib.history.RecordedModel`) passes its model's on, so results are the same with and
+        without it.
+    correction_field : bool
+        ``correction_field()`` returns the model's additive polar-correction field
+        (:class:`~calib.parametrizations.correction_field.CorrectionField`): eigenshapes, the C_D floor,
+        polar bands.
+    refinable : bool
+        ``with_grid(grid)`` returns the same model on another correction grid (the field between the
+        nodes, :mod:`calib.parametrizations.aliasing`; the tightening advice).
+    rebuildable : bool
+        ``spec()`` describes the model as a JSON-able dict that :func:`calib.models.registry.build_model`
+        rebuilds (``calib predict``), and ``rotor_radius`` [m] (or None) gives reports the tip-speed ratio.
+    derivatives : {"exact", "finite_difference"}
+        How ``jacobian`` is computed.
+    closes : bool
+        ``close()`` releases worker processes or files; a caller that built the model calls it.
+    """
+
+    name: str
+    correction_field: bool = False
+    refinable: bool = False
+    rebuildable: bool = False
+    derivatives: str = "finite_difference"
+    closes: bool = False
+
+    def __post_init__(self):
+        if self.derivatives not in DERIVATIVE_KINDS:
+            raise ValueError(f"derivatives must be one of {DERIVATIVE_KINDS}, got {self.derivatives!r}")
+        if self.refinable and not self.correction_field:
+            raise ValueError("a refinable model must have a correction field")
+
+
 @runtime_checkable
 class ForwardModel(Protocol):
-    """The adapter contract (docs/theory.md, Architecture)."""
+    """The adapter contract (docs/theory.md, Architecture).
+
+    ``capabilities`` declares the optional calls the model offers (:class:`Capabilities`); the
+    calibrator, the workflow and the history ask it, never the model's attributes.
+    """
+
+    @property
+    def capabilities(self) -> Capabilities: ...
 
     @property
     def parameters(self) -> tuple[Parameter, ...]: ...
@@ -40,10 +92,9 @@ class ForwardModel(Protocol):
 
 @runtime_checkable
 class FieldModel(Protocol):
-    """Optional: a model whose parameters include an additive polar-correction field.
+    """The calls of a model whose ``capabilities.correction_field`` is true.
 
-    The calibrator asks through this protocol (never by probing attributes) for what
-    only a correction field has: eigenshapes, the C_D ≥ C_D,min bound, polar bands.
+    What only a correction field has: eigenshapes, the C_D ≥ C_D,min bound, polar bands.
     """
 
     def correction_field(self) -> "CorrectionField": ...
@@ -51,7 +102,7 @@ class FieldModel(Protocol):
 
 @runtime_checkable
 class RefinableFieldModel(Protocol):
-    """Optional: a field model that can be rebuilt on another correction grid.
+    """The calls of a model whose ``capabilities.refinable`` is true: rebuilt on another correction grid.
 
     The calibrator uses it for the part of the field between the nodes that the data see
     (:mod:`calib.parametrizations.aliasing`); a field model without it gets bands without
@@ -65,7 +116,8 @@ class RefinableFieldModel(Protocol):
 
 @runtime_checkable
 class RebuildableModel(Protocol):
-    """Optional: a model that can describe itself so a saved result can rebuild it.
+    """The calls of a model whose ``capabilities.rebuildable`` is true: it describes itself so a saved
+    result can rebuild it.
 
     ``spec()`` returns a JSON-able dict with a ``kind`` key understood by
     :func:`calib.models.registry.build_model`; ``rotor_radius`` [m] (or ``None``) lets

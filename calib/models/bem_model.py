@@ -17,6 +17,7 @@ from calib.effects import Effect, effect_from_spec, make_effect
 from calib.effects.correction_field import CorrectionField as CorrectionFieldEffect
 from calib.errors import InputError
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
+from calib.models.base import Capabilities
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 from calib.rotor.geometry import Rotor
 from calib.rotor.serialize import rotor_from_dict
@@ -161,14 +162,19 @@ class BemModel:
         G[~res.ok] = np.nan
         return ev, G
 
-    # -- optional protocols (FieldModel, RebuildableModel) -----------------
+    # -- declared capabilities and their calls --------------------------------
+    @property
+    def capabilities(self) -> Capabilities:
+        """A correction field (empty layout without a grid) on any grid, rebuildable, exact derivatives."""
+        return Capabilities("BemModel", correction_field=True, refinable=True, rebuildable=True, derivatives="exact")
+
     def correction_field(self) -> CorrectionField:
         """The correction field of this model's parameters (empty layout without a grid)."""
         return CorrectionField(self._parameters, self.nominal_coefficients, seen_from_extras)
 
     def with_grid(self, grid: CorrectionGrid) -> "BemModel":
         """The same model (rotor, channels, settings, nuisance, effects) on another correction
-        grid (:class:`calib.models.base.RefinableFieldModel`)."""
+        grid (``capabilities.refinable``)."""
         return BemModel(self.rotor, grid, [c.name for c in self.channels], self.settings, self.nuisance,
                         self.rotor_source, self.effects)
 

@@ -62,6 +62,7 @@ from calib.errors import InputError, ModelError
 from calib.measurements import sha256_of
 from calib.models import fmu_worker as fw
 from calib.models.fmu_mapping import Mapping, load_mapping
+from calib.models.base import Capabilities
 from calib.models.fmu_faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import (CONDITION_FIELDS, STANDARD_AIR_DENSITY, Channel, Evaluation, OperatingConditions, Parameter,
@@ -268,15 +269,6 @@ class FmuModel:
     (:class:`calib.models.fmu_faults.FaultLedger` says why). :meth:`fault_summary` reports
     the timeout in force, the quarantined points and the errors.
     """
-
-    def __new__(cls, fmu=None, mapping=None, *args, **kwargs):
-        # a mapping with correction nodes (and corrections calibrated) makes a FieldModel
-        corrections = kwargs.get("corrections", args[2] if len(args) > 2 else True)
-        if cls is FmuModel and corrections and mapping is not None:
-            m = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
-            if m.corrections is not None:
-                cls = FmuFieldModel
-        return super().__new__(cls)
 
     def __init__(self, fmu, mapping, channels: Sequence[str] | None = None,
                  parameters: Sequence[str] | None = None, corrections: bool = True,
@@ -951,7 +943,31 @@ class FmuModel:
         ev = Evaluation(values, status, tuple(messages), ev.channels, ev.extras)
         return ev, G
 
-    # ------------------------------------------------------------------ optional protocols
+    # ------------------------------------------------------------------ declared capabilities
+    @property
+    def has_correction_field(self) -> bool:
+        """The mapping maps correction nodes and this model calibrates them (``corrections=True``)."""
+        return bool(self._options["corrections"]) and self.mapping.corrections is not None
+
+    @property
+    def capabilities(self) -> Capabilities:
+        """Rebuildable from its spec, finite-difference Jacobians, workers to close; a correction field
+        when :attr:`has_correction_field` (named ``FmuFieldModel`` in results then), never refinable (the
+        nodes are the FMU's own)."""
+        field = self.has_correction_field
+        return Capabilities("FmuFieldModel" if field else "FmuModel", correction_field=field, rebuildable=True,
+                            derivatives="finite_difference", closes=True)
+
+    def correction_field(self) -> CorrectionField:
+        """The correction field of ``[corrections]`` (when :attr:`has_correction_field`).
+
+        Nominal C_L, C_D are not known outside the FMU, so the C_D ≥ C_D,min bound and
+        the corrected polars are not available; the ΔC bands and eigenshapes are.
+        """
+        if not self.has_correction_field:
+            raise ModelError(f"{self.fmu_path.name}: its mapping maps no correction field (or corrections = false)")
+        return CorrectionField(self._parameters, None, seen_from_extras)
+
     @property
     def rotor_radius(self) -> float | None:
         """Rotor radius [m] from the mapping's ``[rotor]`` (None without it)."""
@@ -1047,20 +1063,3 @@ class FmuModel:
     def __repr__(self) -> str:
         return (f"{type(self).__name__}({self.fmu_path.name!r}, mapping={Path(self.mapping.source).name!r}, "
                 f"{len(self._parameters)} parameters, channels={[c.name for c in self._channels]})")
-
-
-class FmuFieldModel(FmuModel):
-    """An :class:`FmuModel` whose mapping maps correction nodes: also a FieldModel.
-
-    ``FmuModel(...)`` returns one when the mapping has ``[corrections]`` and
-    ``corrections=True``; a model without a correction field has no ``correction_field``
-    at all, so the calibrator treats it as a generic model.
-    """
-
-    def correction_field(self) -> CorrectionField:
-        """The correction field of ``[corrections]`` (FieldModel protocol).
-
-        Nominal C_L, C_D are not known outside the FMU, so the C_D ≥ C_D,min bound and
-        the corrected polars are not available; the ΔC bands and eigenshapes are.
-        """
-        return CorrectionField(self._parameters, None, seen_from_extras)

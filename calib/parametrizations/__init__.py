@@ -3,7 +3,7 @@
 A parametrization knows what a block of the parameter vector *means*: where correction
 nodes sit on the (α, η) plane, how to map them to a field, which bounds keep the polars
 physical, and how to draw eigenshapes and bands. The calibrator asks a model for it
-through the small protocol :class:`calib.models.base.FieldModel`; a model without one
+when the model declares one (``capabilities.correction_field``, :class:`calib.models.base.Capabilities`); a model without one
 (e.g. an FMU with a few scalar tuning parameters) still gets everything generic.
 """
 

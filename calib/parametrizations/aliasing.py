@@ -180,7 +180,7 @@ def aliasing_covariance(model, p: np.ndarray, conditions, sigma: np.ndarray, cha
     Parameters
     ----------
     model : BemModel-like
-        A :class:`calib.models.base.FieldModel` that also offers ``with_grid(grid)``.
+        A model whose capabilities are ``correction_field`` and ``refinable`` (``with_grid(grid)``).
     p : ndarray, shape (n_params,)
         The estimate.
     conditions : OperatingConditions
