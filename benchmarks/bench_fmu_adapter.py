@@ -1,4 +1,4 @@
-"""The FMU adapter (calib.models.fmu_model.FmuModel): Jacobian warm start, overhead, parallelism.
+"""The FMU adapter (calib.fmu.model.FmuModel): Jacobian warm start, overhead, parallelism.
 
 Figures (variant A, NREL 5-MW, a 3 x 2 correction grid: 12 parameters; best of repeats):
 
@@ -58,7 +58,7 @@ def _setup():
 
 def _model(path, switches, steady=None, warm=False, executor=None, isolate=False):
     from calib.fmu.build import mapping_path
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
     return FmuModel(path, mapping_path("A"), CHANNELS, parameters=[], switches=switches, steady=steady or {},
                     jacobian=dict(warm_start=warm), executor=executor, isolate=isolate)
 
@@ -91,7 +91,7 @@ def overhead(path, cond) -> dict:
     import fmpy
     from fmpy.fmi2 import FMU2Slave
     from calib.fmu.build import mapping_path
-    from calib.models.fmu_mapping import load_mapping
+    from calib.fmu.mapping import load_mapping
 
     m = load_mapping(mapping_path("A"))
     md = fmpy.read_model_description(str(path))
@@ -208,7 +208,7 @@ def modestpy() -> dict:
 
     from calib.calibration import calibrate
     from calib.measurements import Measurements
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
     from calib.types import OperatingConditions
 
     venv = ROOT / ".bench-venv-modestpy"

@@ -20,7 +20,7 @@ Figures: wall times [s] of each phase and run, their difference (the cost of the
 the ratio faulty / clean (acceptance: <= ``ACCEPT_RATIO``), the simulations that met each
 fault (counted by the FMU itself through
 ``$FAULTY_ROTOR_LOG``, in total and per operating point), the model's
-:meth:`~calib.models.fmu_model.FmuModel.fault_summary` (timeout in force, quarantined
+:meth:`~calib.fmu.model.FmuModel.fault_summary` (timeout in force, quarantined
 points), and the largest difference of the estimates, faulty - clean, in clean standard
 deviations (the faulty run has 45 usable points, the clean one 48).
 
@@ -73,7 +73,7 @@ def _conditions():
 
 
 def _model(fmu: Path, settings: dict):
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")            # PythonFMU's empty InitialUnknowns: a finding, not a fault
         return FmuModel(fmu, DATA / "faulty_rotor_mapping.toml", ["power", "thrust"], settings=settings)

@@ -4,7 +4,7 @@ Two runs of variant A (NREL 5-MW, the mapping's default physics and steady windo
 16 parameters: 3 pitch offsets, the stall-delay strength and a 3 x 2 correction grid):
 
 - ``one_worker``: ``n_evaluations`` evaluations of one operating point each, one after
-  the other, through :class:`~calib.models.fmu_model.FmuModel` with the serial executor
+  the other, through :class:`~calib.fmu.model.FmuModel` with the serial executor
   and an isolated FMU worker process (the default): the calling process drives, one child
   process holds the FMU instance and simulates.
 - ``dask``: the same number of evaluations through
@@ -111,7 +111,7 @@ def _fmu():
 
 def _model(path, fast: bool, executor=None):
     from calib.fmu.build import mapping_path
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
     opts = dict(switches=FAST_SWITCHES, settings=FAST_SETTINGS, steady=FAST_WINDOW) if fast else {}
     return FmuModel(path, mapping_path("A"), CHANNELS, executor=executor, **opts)
 

@@ -152,7 +152,7 @@ def normalize_name(name: str) -> str:
 
 _PER_BLADE = re.compile(r"^(root_flap_moment|root_edge_moment)_blade[1-3]$")
 # azimuth harmonics of a channel over whole revolutions: amplitude `<channel>_1p` (the channel's
-# quantity) and phase `<channel>_1p_phase` (an angle), orders 1, 2, 3 (calib.models.fmu_model)
+# quantity) and phase `<channel>_1p_phase` (an angle), orders 1, 2, 3 (calib.fmu.model)
 _HARMONIC = re.compile(r"^(?P<base>.+)_(?P<order>[123])p(?P<phase>_phase)?$")
 
 

@@ -814,14 +814,14 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
 
 def _fault_checks(model) -> dict[str, str]:
     """An FMU stage's report lines on its simulations' faults: the timeout in force, the points
-    quarantined and those with an error status (:func:`calib.models.fmu_faults.fault_sentences`);
+    quarantined and those with an error status (:func:`calib.fmu.faults.fault_sentences`);
     nothing for the native BEM."""
     from calib.models.bem_model import BemModel
 
     if isinstance(model, BemModel):
         return {}
-    from calib.models.fmu_faults import fault_sentences
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.faults import fault_sentences
+    from calib.fmu.model import FmuModel
 
     return fault_sentences(model.fault_summary()) if isinstance(model, FmuModel) else {}
 

@@ -175,7 +175,7 @@ def test_hidden_effect_in_fmu_data_is_named(effect):
     averaging, i.e. model-form differences from the native BEM) with one effect switched on,
     1 % noise; the native-BEM diagnosis names it."""
     from calib.fmu.build import build_fmu, mapping_path
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
 
     rotor = load_rotor("nrel5mw")
     switches = dict(FMU_QUIET, tip_loss=True, hub_loss=True)

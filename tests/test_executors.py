@@ -36,7 +36,7 @@ def test_unknown_executor_names_the_valid_ones():
 @pytest.fixture(scope="module")
 def small_model():
     from calib.fmu.build import build_fmu, mapping_path
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
     from calib.rotor.library import load_rotor
     from test_fmu_model import CHANNELS, FAST, GRID, QUIET, WINDOW, conditions
 

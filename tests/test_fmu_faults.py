@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.models import fmu_worker as fw
-from calib.models.fmu_faults import FaultLedger
-from calib.models.fmu_model import FmuModel
+from calib.fmu import plan as fp
+from calib.fmu import worker as fw
+from calib.fmu.faults import FaultLedger
+from calib.fmu.model import FmuModel
 from calib.types import OperatingConditions, Status
 from pythonfmu_export import export_fmu
 
@@ -163,15 +164,15 @@ def test_after_a_fatal_status_the_process_is_replaced_and_later_points_are_unhar
     ([0.5, 0.7], 60.0, 4.0, 1.0, 2.4),               # another multiple and floor
 ])
 def test_adaptive_timeout_rule(walls, configured, multiple, floor, expected):
-    assert fw.adaptive_timeout(walls, configured, multiple, floor) == pytest.approx(expected, rel=1e-12)
+    assert fp.adaptive_timeout(walls, configured, multiple, floor) == pytest.approx(expected, rel=1e-12)
 
 
 def test_timeout_policy_defaults_and_worker_measurements():
-    assert (fw.TIMEOUT_MULTIPLE, fw.TIMEOUT_FLOOR) == (10.0, 5.0)
-    policy = fw.TimeoutPolicy(60.0, walls=(1.0, 1.0))
+    assert (fp.TIMEOUT_MULTIPLE, fp.TIMEOUT_FLOOR) == (10.0, 5.0)
+    policy = fp.TimeoutPolicy(60.0, walls=(1.0, 1.0))
     assert policy.timeout() == pytest.approx(10.0)
     assert policy.timeout([3.0, 3.0, 3.0]) == pytest.approx(30.0)     # the worker's own runs count too
-    assert fw.TimeoutPolicy(60.0).timeout() == 60.0
+    assert fp.TimeoutPolicy(60.0).timeout() == 60.0
 
 
 @pytest.mark.slow
@@ -181,11 +182,11 @@ def test_worker_adapts_its_timeout_after_one_healthy_run(faulty_fmu):
     m = model(faulty_fmu)
     cond = conditions([5.0, FAULTS["hang"]])
     _, tasks, _ = m._tasks(scaled(m, [0, 0, 0, 0]), cond, perturb=False)
-    worker = fw.WorkerProcess(m._plan, fw.TimeoutPolicy(60.0))
+    worker = fw.WorkerProcess(m._plan, fp.TimeoutPolicy(60.0))
     try:
         assert worker.timeout == 60.0
         healthy = worker.run_point(tasks[0])
-        assert healthy.base.ok and worker.timeout == fw.TIMEOUT_FLOOR
+        assert healthy.base.ok and worker.timeout == fp.TIMEOUT_FLOOR
         t0 = time.perf_counter()
         hung = worker.run_point(tasks[1])
         wall = time.perf_counter() - t0
@@ -194,7 +195,7 @@ def test_worker_adapts_its_timeout_after_one_healthy_run(faulty_fmu):
         m.close()
     assert hung.base.status == Status.TIMEOUT and hung.base.fault == "timeout" and hung.restarts == 1
     assert "timeout of 5 s" in hung.base.message
-    assert fw.TIMEOUT_FLOOR <= wall < fw.TIMEOUT_FLOOR + 10.0, wall
+    assert fp.TIMEOUT_FLOOR <= wall < fp.TIMEOUT_FLOOR + 10.0, wall
 
 
 def test_model_records_the_timeout_in_force(faulty_fmu):
@@ -206,20 +207,20 @@ def test_model_records_the_timeout_in_force(faulty_fmu):
     finally:
         m.close()
     assert t["healthy_runs"] == WIND.size and t["median_healthy_s"] > 0
-    assert t["in_force_s"] == pytest.approx(fw.adaptive_timeout([t["median_healthy_s"]], 60.0))
+    assert t["in_force_s"] == pytest.approx(fp.adaptive_timeout([t["median_healthy_s"]], 60.0))
     assert t["changes"] and t["changes"][0]["timeout_s"] == t["in_force_s"]
 
 
 # ------------------------------------------------------------------ (c) keyed by operating point
 def _task(k, wind, rpm, pitch):
-    return fw.PointTask(k, (fw.Assignment("real", (0, 1, 2), (wind, rpm, pitch)),), (), (), rpm)
+    return fp.PointTask(k, (fp.Assignment("real", (0, 1, 2), (wind, rpm, pitch)),), (), (), rpm)
 
 
 def _result(task, fault=""):
     if not fault:
-        return fw.PointResult(task.index, fw.RunOutcome.failed(2, Status.CONVERGED, "", 0.01), [])
+        return fp.PointResult(task.index, fp.RunOutcome.failed(2, Status.CONVERGED, "", 0.01), [])
     status = Status.TIMEOUT if fault == "timeout" else Status.SIMULATION_FAILED
-    return fw.PointResult(task.index, fw.RunOutcome.failed(2, status, f"a {fault}", 0.01, fault), [])
+    return fp.PointResult(task.index, fp.RunOutcome.failed(2, status, f"a {fault}", 0.01, fault), [])
 
 
 def _ledger_call(ledger, points, p, faults=None):

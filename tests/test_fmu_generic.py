@@ -11,7 +11,7 @@ import pytest
 
 from calib.calibration import calibrate
 from calib.measurements import synthesize
-from calib.models.fmu_model import FmuModel
+from calib.fmu.model import FmuModel
 from calib.types import OperatingConditions
 from pythonfmu_export import export_fmu
 

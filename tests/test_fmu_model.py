@@ -1,4 +1,4 @@
-"""The FMU adapter (calib.models.fmu_model.FmuModel): load-time checks with messages naming file
+"""The FMU adapter (calib.fmu.model.FmuModel): load-time checks with messages naming file
 and item, steady values and harmonics, fault survival, settled states, specs, workflow tables.
 
 The bundled rotor FMUs are built with a small correction grid and driven with quasi-steady
@@ -20,7 +20,7 @@ from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.fmu.build import build_fmu, mapping_path
 from calib.models.bem_model import BemModel
-from calib.models.fmu_model import FmuModel
+from calib.fmu.model import FmuModel
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions, Status
 
@@ -118,7 +118,7 @@ def test_parameter_that_is_not_tunable_is_refused(tmp_path, small_fmus):
      "outputs.power.gain"),
 ])
 def test_mapping_with_an_unknown_key_is_refused(tmp_path, old, new, field):
-    from calib.models.fmu_mapping import load_mapping
+    from calib.fmu.mapping import load_mapping
     mapping = edited_mapping(tmp_path, "A", old, new)
     with pytest.raises(InputError, match="unknown key") as err:
         load_mapping(mapping)
@@ -329,7 +329,8 @@ def test_fault_in_a_perturbed_run_keeps_the_others(small_fmus, rotor, fault, sta
     skipped). The fault is provoked by a perturbed run that also raises the wind speed input above
     the debug threshold."""
     import dataclasses
-    from calib.models import fmu_worker as fw
+    from calib.fmu import worker as fw
+    from calib.fmu.simulator import Simulator
 
     cond = OperatingConditions([8.0], [10.0], [0.0])
     p = np.zeros(GRID.n_params)
@@ -341,7 +342,7 @@ def test_fault_in_a_perturbed_run_keeps_the_others(small_fmus, rotor, fault, sta
     runs = list(task.perturbations)
     runs[5] = runs[5] + windy                       # the 6th perturbed run sets wind 12 m/s: fault
     task = dataclasses.replace(task, perturbations=tuple(runs))
-    ref = fw.Simulator(clean._plan).run_point(task_clean)
+    ref = Simulator(clean._plan).run_point(task_clean)
     worker = fw.WorkerProcess(faulty._plan, timeout=3.0)
     try:
         res = worker.run_point(task)

@@ -16,7 +16,7 @@ import pytest
 import fmpy  # noqa: E402  (a core dependency: a missing install must fail, not skip)
 
 from calib.fmu.build import FmuBuildError, build_fmu, mapping_path  # noqa: E402
-from calib.models.fmu_mapping import load_mapping  # noqa: E402
+from calib.fmu.mapping import load_mapping  # noqa: E402
 from calib.fmu.resources import default_grid, tabulated_polars  # noqa: E402
 from calib.rotor.library import load_rotor  # noqa: E402
 
@@ -42,7 +42,7 @@ def adapter(fmu, variant, channels, switches=None, settings=None, settle=1, revo
     """The package's FMU adapter on a bundled variant (mapping of the variant, no calibrated
     scalar parameters), with the quiet switches, shaft tilt 0 and a window of ``settle`` +
     ``revolutions`` whole revolutions."""
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
     return FmuModel(fmu, mapping_path(variant), channels, parameters=[], switches=dict(QUIET, **(switches or {})),
                     settings={"shaft_tilt": 0.0, **(settings or {})},
                     steady=dict(settle_revolutions=settle, average_revolutions=revolutions))
@@ -53,10 +53,10 @@ def simulate(fmu, variant, *, wind_speed, rotor_speed, pitch=0.0, yaw=0.0, air_d
              step_size=None):
     """Run an FMU through its mapping; return TIME SERIES in package units.
 
-    The adapter (:class:`calib.models.fmu_model.FmuModel`) reduces a run to window means and
+    The adapter (:class:`calib.fmu.model.FmuModel`) reduces a run to window means and
     azimuth harmonics; the effect tests below look at the time series themselves (where in
     azimuth a dip sits, how a window's start shifts a mean), so this helper keeps them, using
-    the package's mapping loader (:func:`calib.models.fmu_mapping.load_mapping`) for names and
+    the package's mapping loader (:func:`calib.fmu.mapping.load_mapping`) for names and
     conversions and its window rule (:meth:`SteadyRule.window`). ``step_size`` [s] instead
     imposes a step and rounds the windows to whole steps (to show what that costs).
 

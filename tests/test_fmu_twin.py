@@ -19,7 +19,7 @@ from calib.calibration import calibrate
 from calib.fmu.build import build_fmu, mapping_path
 from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
-from calib.models.fmu_model import FmuModel
+from calib.fmu.model import FmuModel
 from calib.types import nominal_vector
 from synthetic import synthetic_rotor
 from test_fmu_model import BEM_SETTINGS, CHANNELS, FAST, GRID, QUIET, WINDOW, conditions

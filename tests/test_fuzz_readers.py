@@ -39,7 +39,7 @@ from hypothesis import strategies as st
 
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements
-from calib.models.fmu_mapping import load_mapping
+from calib.fmu.mapping import load_mapping
 from calib.rotor.aerodyn import read_aerodyn_blade, read_aerodyn_main, read_aerodyn_polar
 from calib.rotor.geometry import Rotor
 from calib.rotor.openfast import read_elastodyn, read_openfast

@@ -16,7 +16,7 @@ import pytest
 from calib.cli import main
 from calib.errors import InputError
 from calib.measurements import synthesize
-from calib.models.fmu_model import FmuModel
+from calib.fmu.model import FmuModel
 from calib.result import load_result
 from calib.types import OperatingConditions
 from calib.workflow import load_workflow, prepare

@@ -1,17 +1,22 @@
-"""Builder of the bundled test FMUs: the rotor FMUs compiled from ``fmu_models/`` (C sources).
+"""FMUs: any vendor's co-simulation FMU as a ForwardModel, and the bundled test FMUs.
 
-- :func:`calib.fmu.build.build_fmu` builds (or fetches from the cache) variant ``"A"``
-  (FMI 2.0) or ``"B"`` (FMI 3.0) for a calib rotor and correction grid.
-- :func:`calib.fmu.build.mapping_path` gives the variant's declarative mapping file.
-- :mod:`calib.fmu.resources` writes the rotor data the FMU reads at instantiation.
+The adapter, from the archive to the model:
 
-This package only *builds* FMUs (for tests, benchmarks and demonstrations). The adapter
-that drives any vendor's FMU as a ForwardModel lives with the other models:
-:class:`calib.models.fmu_model.FmuModel`, with the mapping loader
-:mod:`calib.models.fmu_mapping` and the worker processes :mod:`calib.models.fmu_worker`.
+- :mod:`calib.fmu.archive`      zip checks, the extraction cache, the platform binary;
+- :mod:`calib.fmu.mapping`      the declarative mapping file (inputs, outputs, parameters, nodes);
+- :mod:`calib.fmu.binding`      the mapping bound to the model description: variables, types, sizes;
+- :mod:`calib.fmu.plan`         picklable plans, tasks and outcomes; the adaptive timeout rule;
+- :mod:`calib.fmu.windows`      steady-window statistics (mean, halves, azimuth harmonics);
+- :mod:`calib.fmu.simulator`    one FMU instance driven in this process through fmpy;
+- :mod:`calib.fmu.worker`       worker processes, their pipe protocol, the per-process cache;
+- :mod:`calib.fmu.faults`       the fault ledger: quarantine and healthy wall times;
+- :mod:`calib.fmu.states`       settled FMU states saved to and read from files;
+- :mod:`calib.fmu.model`        :class:`~calib.fmu.model.FmuModel`, the thin adapter;
+- :mod:`calib.fmu.bundled`      the bundled FMU of a workflow (``[model] variant``), built on demand.
+
+The bundled FMUs' builder: :mod:`calib.fmu.build` (compiles ``fmu_models/``),
+:mod:`calib.fmu.model_description` and :mod:`calib.fmu.resources`.
+
+Nothing is imported here, so a worker process (``python -m calib.fmu.worker``) loads fmpy and
+numpy only, not the calibration stack.
 """
-
-from calib.fmu.build import FmuBuildError, build_fmu, cache_dir, mapping_path
-from calib.fmu.resources import default_grid
-
-__all__ = ["FmuBuildError", "build_fmu", "cache_dir", "default_grid", "mapping_path"]

@@ -63,30 +63,6 @@ def _path(value: str, base_dir) -> Path:
     return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
 
 
-def build_variant(build: dict, source: str = "model", base_dir=None) -> Path:
-    """Build (or fetch from the cache) a bundled FMU variant for a rotor table and grid.
-
-    Parameters
-    ----------
-    build : dict
-        ``variant`` ("A" | "B"), ``rotor`` (a workflow ``[rotor]`` table, optional: NREL 5-MW),
-        ``grid`` (:meth:`calib.corrections.CorrectionGrid.to_dict`, optional: the default grid).
-    """
-    from calib.corrections import CorrectionGrid
-    from calib.fmu.build import VARIANTS, build_fmu
-
-    variant = str(build.get("variant", "")).upper()
-    if variant not in VARIANTS:
-        raise InputError(f"unknown FMU variant {build.get('variant')!r}; valid: {', '.join(VARIANTS)}", source,
-                         field="model.variant")
-    rotor = None
-    if build.get("rotor"):
-        from calib.rotor.sources import rotor_from_table
-        rotor = rotor_from_table(dict(build["rotor"]), source, base_dir).rotor
-    grid = CorrectionGrid(**build["grid"]) if build.get("grid") else None
-    return Path(build_fmu(variant, rotor, grid))
-
-
 def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: str, base_dir=None, *,
                         grid=None, executor=None):
     """The ForwardModel of a workflow's ``[model]`` table.
@@ -131,8 +107,8 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         return BemModel(rotor, grid, list(channels), settings, tuple(cfg.get("nuisance", ["pitch_offset"])),
                         rotor_source=dict(rotor_table))
     _check(cfg, FMU_KEYS, "model", source)
-    from calib.models import fmu_worker as fw
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu import plan as fp
+    from calib.fmu.model import FmuModel
 
     if ("fmu" in cfg) == ("variant" in cfg):
         raise InputError("[model] kind = \"fmu\" needs either fmu = \"PATH\" or variant = \"A\" | \"B\"", source,
@@ -140,6 +116,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
     build = None
     if "variant" in cfg:
         from calib.fmu.build import mapping_path
+        from calib.fmu.bundled import build_variant
         from calib.rotor.sources import absolute_table
 
         build = {"variant": cfg["variant"].upper(), "rotor": absolute_table(rotor_table or {}, base_dir),
@@ -161,7 +138,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         raise InputError("'model.parameters' must be an array of names", source, field="model.parameters")
     return FmuModel(fmu, mapping, list(channels), parameters=params, corrections=cfg.get("corrections", True),
                     switches=cfg.get("switches"), settings=cfg.get("settings"), steady=cfg.get("steady"),
-                    jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", fw.DEFAULT_TIMEOUT)),
+                    jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", fp.DEFAULT_TIMEOUT)),
                     isolate=cfg.get("isolate", True), build=build)
 
 

@@ -14,7 +14,7 @@ def _bem(spec, base_dir, source):
 
 
 def _fmu(spec, base_dir, source):
-    from calib.models.fmu_model import FmuModel
+    from calib.fmu.model import FmuModel
 
     check_fmu_files(spec, base_dir, source)
     return FmuModel.from_spec(spec, base_dir)
@@ -27,7 +27,7 @@ MODEL_KINDS = {"bem": _bem, "fmu": _fmu}
 def check_fmu_files(spec: dict, base_dir=None, source: str = "model spec") -> None:
     """Refuse an FMU spec whose recorded FMU or mapping file is missing or changed.
 
-    Paths resolve as :meth:`calib.models.fmu_model.FmuModel.from_spec` resolves them
+    Paths resolve as :meth:`calib.fmu.model.FmuModel.from_spec` resolves them
     (absolute, else relative to ``base_dir``). The FMU must exist unless the spec names a
     bundled variant to build again (``build``: then its bytes are not checked, a compiler may
     build it again differently); where ``fmu_sha256`` (``mapping_sha256``) is recorded, the file

@@ -1,10 +1,10 @@
 """The planner's record of an FMU's faults: quarantine of points that crash or hang.
 
-:class:`FaultLedger` lives with the model (:class:`calib.models.fmu_model.FmuModel`), where
+:class:`FaultLedger` lives with the model (:class:`calib.fmu.model.FmuModel`), where
 tasks are planned, so that what is simulated does not depend on the executor: a point
 whose simulation crashed the FMU process, hung or got a fatal status is not simulated again
 (retried once at most, when the parameters have moved far), and the healthy runs' wall
-times set the adaptive timeout (:func:`calib.models.fmu_worker.adaptive_timeout`).
+times set the adaptive timeout (:func:`calib.fmu.worker.adaptive_timeout`).
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from calib.models.fmu_worker import (DEFAULT_TIMEOUT, HEALTHY_WALLS_KEPT, QUARANTINE_FAULTS, RETRY_DISTANCE, TIMEOUT_FLOOR,
+from calib.fmu.plan import (DEFAULT_TIMEOUT, HEALTHY_WALLS_KEPT, QUARANTINE_FAULTS, RETRY_DISTANCE, TIMEOUT_FLOOR,
                                      TIMEOUT_MULTIPLE, PointResult, PointTask, RunOutcome, TimeoutPolicy)
 from calib.types import CONDITION_FIELDS, Status
 
-log = logging.getLogger("calib.models.fmu_worker")
+log = logging.getLogger("calib.fmu.worker")
 
 
 def point_key(task: PointTask) -> tuple:

@@ -1,0 +1,541 @@
+"""Any vendor's co-simulation FMU behind the ForwardModel contract.
+
+:class:`FmuModel` is built from an FMU file and a mapping file
+(:mod:`calib.fmu.mapping`). At load time it checks, and refuses with
+:class:`~calib.errors.InputError` naming the file and the item:
+
+- the file is a zip archive whose entries all stay inside the extraction folder
+  (no absolute paths, no ``..``, no links);
+- the model description parses and offers co-simulation; a binary for this platform exists;
+- every mapped variable exists, inputs are inputs, outputs are outputs, calibrated
+  parameters and correction nodes are *tunable* parameters, settings and switches are
+  parameters, array elements are inside their arrays, setting values inside the FMU's range;
+- non-fatal findings of ``fmpy``'s validation are issued as warnings.
+
+It extracts the FMU once (cached by the file's SHA-256), and hands workers a picklable
+:class:`~calib.fmu.worker.SimulationPlan` (paths and value references, never an
+instance). Simulations run through :func:`calib.fmu.worker.run_point` on the
+model's executor (serial by default), in worker processes with a per-simulation timeout
+that adapts to the measured cost of healthy runs; a point that crashed or hung is
+quarantined by the model (planned here, whatever the executor): see
+:class:`calib.fmu.faults.FaultLedger` and :meth:`FmuModel.fault_summary`.
+
+Steady outputs: settle ``settle_revolutions``, then average ``average_revolutions`` whole
+revolutions (``[steady]`` of the mapping); the status of a point says whether the two
+halves of the window agree, whether the FMU failed, crashed or hung. Besides the means,
+every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p``
+(amplitude, unit of x) and ``x_1p_phase`` ... (deg), with x ≈ mean + Σ A_n cos(nψ + φ_n)
+and ψ the azimuth of blade 1 (0 = up).
+
+Jacobians are central differences with steps ``relative_step`` × each parameter's
+``scale`` (one-sided inside a bound). With ``warm_start`` (``[jacobian]`` of the mapping,
+or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
+every perturbed run restores it, sets the perturbed parameters and settles only
+``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
+(docs/theory.md, FMUs). That is exact when a parameter step acts at once (quasi-steady physics) and
+wrong by the lag where the FMU filters it (dynamic inflow): the bundled mappings keep it off
+and say why. A point's runs are one executor task, so the state never leaves its worker
+except serialized, to resume after a fault. FMI directional derivatives are not used: co-simulation FMUs give them for
+inputs and states at one instant, not for the steady window averages with respect to
+parameters; whether the FMU offers them is reported by :attr:`FmuModel.jacobian_method`
+(the bundled FMUs and PythonFMU's do not).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from calib.errors import InputError, ModelError
+from calib.measurements import sha256_of
+from calib.fmu import plan as fp
+from calib.fmu import worker as fw
+from calib.fmu.archive import FmuInputError, check_archive, extract_once, platform_binary
+from calib.fmu.binding import (HARMONIC_SUFFIXES, NOT_CHANNELS, PlanSite, Variables, bind_inputs, bind_parameters,
+                               channel_specs, check_mapped_variables, fixed_assignments, make_plan)
+from calib.fmu.mapping import Mapping, load_mapping
+from calib.fmu.states import read_states, write_states
+from calib.models.base import Capabilities
+from calib.fmu.faults import FaultLedger
+from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
+from calib.types import (Channel, Evaluation, OperatingConditions, Parameter,
+                         Status, check_parameter_vector)
+
+
+
+class FmuModel:
+    """A co-simulation FMU (FMI 2.0 or 3.0) as a ForwardModel.
+
+    Parameters
+    ----------
+    fmu : str or Path
+        The ``.fmu`` file.
+    mapping : str, Path or Mapping
+        Its mapping file (:func:`calib.fmu.mapping.load_mapping`).
+    channels : sequence of str, optional
+        Output channels: mapped outputs (``power`` [W], ``thrust`` [N], moments [N m] ...),
+        spanwise ``fn@<r/R>`` [N/m] (r/R of the FMU's output station, two decimals), and
+        harmonics ``<output>_1p``, ``_2p``, ``_3p`` (amplitude) and ``<output>_1p_phase``
+        ... [deg]. Default: ``power`` and ``thrust`` (those mapped).
+    parameters : sequence of str, optional
+        Mapped scalar parameters to calibrate (``[parameters]`` names); default all.
+        The others keep the FMU's value.
+    corrections : bool
+        Calibrate the correction field of ``[corrections]`` (its node parameters come first,
+        lift block then drag block, named as :meth:`calib.corrections.CorrectionGrid.parameters`).
+    switches : dict, optional
+        Effect -> ``True``/``False`` or a named model (``stall_delay = "snel"``), written at
+        instantiation through ``[switches]``; unnamed effects keep the FMU's default.
+    settings : dict, optional
+        ``[settings]`` name -> value [package units], overriding the mapping's ``value``.
+    steady, jacobian : dict, optional
+        Overrides of the mapping's ``[steady]`` and ``[jacobian]`` tables.
+    executor : Executor, optional
+        Where simulations run (:mod:`calib.executors`); default serial.
+    timeout : float
+        Longest wall time of one simulation [s] (worker killed and rebuilt beyond it). Once
+        healthy runs are measured the timeout in force adapts: 10 x their median wall time,
+        at least 5 s, never above this (:func:`calib.fmu.worker.adaptive_timeout`).
+    start_timeout : float
+        Longest wall time for a worker process to start and for an FMU instance to be
+        created [s] (timed apart from the simulations).
+    isolate : bool
+        Simulate in worker processes (default). ``False`` simulates in the calling
+        process: faster to start, but a crash of the FMU ends the process and a hang is
+        never interrupted.
+    build : dict, optional
+        How the FMU was built (``{"variant": "A", "rotor": {...}, "grid": {...}}``), kept in
+        :meth:`spec` so that a saved result can rebuild the FMU.
+    progress : callable(done, total), optional
+        Called as operating points finish.
+
+    Notes
+    -----
+    Faults: a point whose simulation crashed the FMU process, hung or got a fatal status is
+    quarantined, not simulated again by later calls, retried once at most when a parameter
+    has moved one scale from where it failed; an error status is not quarantined
+    (:class:`calib.fmu.faults.FaultLedger` says why). :meth:`fault_summary` reports
+    the timeout in force, the quarantined points and the errors.
+    """
+
+    def __init__(self, fmu, mapping, channels: Sequence[str] | None = None,
+                 parameters: Sequence[str] | None = None, corrections: bool = True,
+                 switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
+                 jacobian: dict | None = None, executor=None, timeout: float = fp.DEFAULT_TIMEOUT, isolate: bool = True,
+                 build: dict | None = None, progress=None, start_timeout: float = fp.DEFAULT_TIMEOUT):
+        from fmpy.model_description import read_model_description
+
+        self.fmu_path = Path(fmu).resolve()
+        src = str(self.fmu_path)
+        self.mapping: Mapping = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
+        msrc = self.mapping.source
+        names = check_archive(self.fmu_path)
+        try:
+            md = read_model_description(src, validate=False)
+        except Exception as exc:  # noqa: BLE001 - fmpy raises several kinds
+            raise FmuInputError(f"modelDescription.xml cannot be read: {exc}", src, field="modelDescription.xml") \
+                from None
+        if md.coSimulation is None:
+            raise FmuInputError("the FMU has no co-simulation interface (model exchange only); calib drives "
+                                "co-simulation FMUs", src, field="modelDescription.xml")
+        self.model_description = md
+        self.binary = platform_binary(md, names, src)
+        self._validation_warnings(src)
+        m = self.mapping
+        if m.fmi_version and m.fmi_version != md.fmiVersion:
+            raise FmuInputError(f"the mapping is for FMI {m.fmi_version}, the FMU {self.fmu_path.name} is FMI "
+                                f"{md.fmiVersion}", msrc, field="fmi_version")
+        ident = md.coSimulation.modelIdentifier
+        if m.model_identifier and m.model_identifier != ident:
+            raise FmuInputError(f"the mapping is for model identifier {m.model_identifier!r}, the FMU "
+                                f"{self.fmu_path.name} is {ident!r}", msrc, field="model_identifier")
+        self.sha256 = sha256_of(self.fmu_path)
+        self.unzip_dir = extract_once(self.fmu_path, self.sha256)
+        self._variables = Variables(md, self.fmu_path.name, msrc)
+        self.guid = md.guid if md.fmiVersion.startswith("2") else md.instantiationToken
+        cs = md.coSimulation
+        self.can_get_state = bool(getattr(cs, "canGetAndSetFMUstate", False))
+        self.can_serialize = bool(getattr(cs, "canSerializeFMUstate", False))
+        self.offers_directional_derivatives = bool(getattr(cs, "providesDirectionalDerivative", False))
+
+        steady_rule = m.steady.replace(**(steady or {})) if steady else m.steady
+        jac = dict(vars(m.jacobian))
+        for key, value in (jacobian or {}).items():
+            if key not in jac:
+                raise InputError(f"unknown jacobian option {key!r}; valid: {', '.join(jac)}", "FmuModel",
+                                 field="jacobian")
+            jac[key] = value
+        self.relative_step = float(jac["relative_step"])
+        self.warm_start = bool(jac["warm_start"])
+        self.steady = steady_rule
+        self.timeout = float(timeout)
+        self.isolate = bool(isolate)
+        self.build = build
+        self.progress = progress
+        self._options = {"parameters": None if parameters is None else list(parameters),
+                         "corrections": bool(corrections), "switches": dict(switches or {}),
+                         "settings": dict(settings or {}), "steady": dict(steady or {}),
+                         "jacobian": dict(jacobian or {}), "timeout": self.timeout, "isolate": self.isolate}
+        if executor is None:
+            from calib.executors import SerialExecutor
+            executor = SerialExecutor()
+        self.executor = executor
+
+        check_mapped_variables(m, self._variables)
+        self._site = PlanSite(md.fmiVersion, ident, self.guid, self.unzip_dir, self.sha256,
+                              fixed_assignments(m, self._variables, switches or {}, settings or {}), steady_rule,
+                              self.can_get_state, self.can_serialize)
+        self._params = bind_parameters(m, self._variables, parameters, corrections, self.unzip_dir)
+        self.grid = self._params.grid
+        self._parameters = self._params.parameters
+        self._inputs = bind_inputs(m, self._variables)
+        self._probed: dict | None = None
+        self._channel_specs = channel_specs(m, channels, self._spanwise_eta, self.available_channels,
+                                            self.fmu_path.name)
+        self._channels = tuple(Channel(n, u) for n, _, _, _, u in self._channel_specs)
+        self._plan, self._keys_for_values = make_plan(m, self._variables, self._site, self._channel_specs, self.grid)
+        self.start_timeout = float(start_timeout)
+        self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
+                                      self.timeout, self.start_timeout, self.fmu_path.name)
+
+    # ------------------------------------------------------------------ load-time checks
+    def _validation_warnings(self, src: str) -> None:
+        try:
+            from fmpy.validation import validate_fmu
+            problems = validate_fmu(src)
+        except Exception as exc:  # noqa: BLE001 - a validator crash is itself only a finding
+            problems = [f"fmpy validation could not run: {exc}"]
+        for problem in problems or []:
+            warnings.warn(f"{src}: fmpy validate: {problem}", stacklevel=3)
+
+    # ------------------------------------------------------------------ channels
+    def _probe(self) -> dict:
+        """Rotor radius and output-station radii, read from an initialized instance (once)."""
+        if self._probed is not None:
+            return self._probed
+        m, vs = self.mapping, self._variables
+        reads = []
+        for sp in m.spanwise.values():
+            if sp.radius_variables:
+                reads += [(vs.by_name[v].valueReference, 1) for v in sp.radius_variables]
+            elif sp.radius_variable:
+                var = vs.by_name[sp.radius_variable]
+                reads.append((var.valueReference, vs.size(var)))
+        if m.rotor_radius is not None and not isinstance(m.rotor_radius, float):
+            reads.append((vs.by_name[m.rotor_radius.variable].valueReference, 1))
+        values = []
+        if reads:
+            plan, _ = make_plan(m, vs, self._site, [], self.grid, signals_only=True)
+            worker = fw.worker_for(plan, self.isolate, self.timeout)
+            try:
+                values = worker.probe(reads)
+            except Exception as exc:  # noqa: BLE001
+                raise ModelError(f"{self.fmu_path.name}: could not initialize the FMU to read radii: {exc}") from None
+            finally:
+                fw.close_workers(plan.key)
+        k = 0
+        radii = {}
+        for name, sp in m.spanwise.items():
+            if sp.radius_variables:
+                radii[name] = np.array([values[k + i][0] for i in range(len(sp.radius_variables))])
+                k += len(sp.radius_variables)
+            elif sp.radius_variable:
+                radii[name] = np.array(values[k])
+                k += 1
+        if m.rotor_radius is None:
+            radius = None
+        elif isinstance(m.rotor_radius, float):
+            radius = m.rotor_radius
+        else:
+            radius = float(m.rotor_radius.to_package(values[k][0]))
+        self._probed = {"radii": radii, "rotor_radius": radius}
+        return self._probed
+
+    def _spanwise_eta(self, name: str) -> np.ndarray | None:
+        pr = self._probe()
+        if name not in pr["radii"] or pr["rotor_radius"] is None:
+            return None
+        return pr["radii"][name] / pr["rotor_radius"]
+
+    def available_channels(self) -> list[str]:
+        """Channel names this FMU offers through its mapping (harmonics as patterns)."""
+        base = [n for n in self.mapping.outputs if n not in NOT_CHANNELS]
+        if "normal_force" in self.mapping.spanwise and self.mapping.rotor_radius is not None:
+            eta = self._spanwise_eta("normal_force")
+            if eta is not None:
+                base += [f"fn@{e:.2f}" for e in eta]
+        return base + [f"<output>{s}" for s in HARMONIC_SUFFIXES] + [f"<output>{s}_phase" for s in HARMONIC_SUFFIXES]
+
+    # ------------------------------------------------------------------ contract
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        return self._parameters
+
+    @property
+    def channels(self) -> tuple[Channel, ...]:
+        return self._channels
+
+    @property
+    def jacobian_method(self) -> str:
+        """How :meth:`jacobian` differentiates, and why."""
+        dd = ("the FMU offers directional derivatives, but of instantaneous outputs with respect to inputs and "
+              "states, not of steady window averages with respect to parameters: not used"
+              if self.offers_directional_derivatives else "the FMU offers no directional derivatives")
+        warm = ("warm-started from the settled base state" if self.warm_start and self.can_get_state
+                else "each perturbed run settled from scratch")
+        return f"central differences, steps {self.relative_step:g} x parameter scale, {warm}; {dd}"
+
+    def _fmu_parameter_values(self, p: np.ndarray) -> tuple:
+        return self._params.assignments(p)
+
+    def _fmu_inputs(self, conditions: OperatingConditions) -> list[tuple]:
+        return self._inputs.assignments(self.mapping, conditions)
+
+    def _run(self, tasks: list, p, conditions) -> list:
+        """Results of ``tasks`` at ``p``: quarantined points are not simulated (the ledger
+        fills their results), the others run on the executor with the adaptive timeout."""
+        run, results = self._faults.plan(tasks, p, len(self._plan.signals))
+        policy = self._faults.policy()
+        jobs = [(self._plan, tasks[k], self.isolate, policy) for k in run]
+        done = self.executor.map(fw.run_point, jobs, self.progress) if jobs else []
+        for k, r in zip(run, done):
+            results[k] = r
+        self._faults.record(tasks, results, run, p, conditions)
+        return results
+
+    def fault_summary(self) -> dict:
+        """Faults met by this model's simulations so far, as a plain (JSON-able) dict.
+
+        Returns
+        -------
+        dict
+            ``timeout``: ``configured_s``, ``start_timeout_s``, ``multiple`` [-], ``floor_s``,
+            ``in_force_s`` (the adaptive timeout now), ``median_healthy_s`` (None before any
+            healthy run), ``healthy_runs``, ``changes`` (list of ``{call, timeout_s,
+            median_healthy_s, healthy_runs}``, one per notable change, > 20 %);
+            ``quarantine``: one dict per quarantined point: ``index`` (its position in the
+            call where it failed), ``conditions`` (package units), ``status``,
+            ``status_name``, ``fault`` ("crash", "timeout", "fatal"), ``run`` (which run failed),
+            ``message``, ``p`` (parameters then), ``call``, ``timeout`` [s], ``faults``
+            (simulations that faulted), ``skipped`` (calls that did not simulate it),
+            ``retried``, ``retry_call``, ``retry_outcome`` (None, "failed again",
+            "recovered"), ``active`` (still quarantined);
+            ``errors``: points with an error status (fault "error": not quarantined; or
+            "fatal": also quarantined): ``conditions``,
+            ``count``, ``status``, ``status_name``, ``fault``, ``run``, ``message``, ``call``;
+            ``counts``: ``calls``, ``points_simulated``, ``points_skipped``, ``crashes``,
+            ``timeouts``, ``start_timeouts``, ``errors``, ``fatal`` (runs that met each),
+            ``retries``;
+            ``rules``: the quarantined fault kinds and the retry distance [parameter scales].
+        """
+        return {"fmu": self.fmu_path.name, **self._faults.summary()}
+
+    def clear_quarantine(self) -> None:
+        """Simulate quarantined points again from now on (e.g. a new stage with another
+        model setting); the timeout statistics are kept."""
+        self._faults.clear()
+
+    def _values(self, outcomes: list) -> np.ndarray:
+        """Channel values (n, n_channels) from run outcomes."""
+        mean = np.array([o.mean for o in outcomes])
+        harm = np.array([o.harmonics for o in outcomes])
+        out = np.empty((len(outcomes), len(self._channel_specs)))
+        for c, (_, key, kind, order, _) in enumerate(self._channel_specs):
+            i = self._keys_for_values[key]
+            if kind == "mean":
+                out[:, c] = mean[:, i]
+            elif kind == "amplitude":
+                out[:, c] = np.abs(harm[:, i, order - 1])
+            else:
+                out[:, c] = np.degrees(np.angle(harm[:, i, order - 1]))
+        return out
+
+    def _extras(self, outcomes: list, results: list) -> dict:
+        extras = {"restarts": np.array([r.restarts for r in results], int),
+                  "wall_time": np.array([sum(o.wall for o in [r.base, *[x for x in r.perturbations if x]] if o)
+                                         for r in results])}
+        if self.grid is not None and "angle_of_attack" in self.mapping.spanwise:
+            eta = self._spanwise_eta("angle_of_attack")
+            keys = sorted((k for k in self._keys_for_values if k[0] == "span" and k[1] == "angle_of_attack"),
+                          key=lambda k: k[2])
+            idx = [self._keys_for_values[k] for k in keys]
+            if eta is not None and idx:
+                alpha = np.array([o.mean[idx] for o in outcomes])
+                extras["alpha_deg"], extras["eta"] = alpha, eta
+        return extras
+
+    def _tasks(self, p, conditions, perturb: bool, start_states=None):
+        p = check_parameter_vector(p, self._parameters, "FmuModel parameter vector")
+        base = self._fmu_parameter_values(p)
+        inputs = self._fmu_inputs(conditions)
+        perturbations, steps = (), None
+        if perturb:
+            lower = np.array([q.lower for q in self._parameters])
+            upper = np.array([q.upper for q in self._parameters])
+            h = self.relative_step * np.array([q.scale for q in self._parameters])
+            plus, minus = np.minimum(p + h, upper), np.maximum(p - h, lower)
+            runs = []
+            for j in range(p.size):
+                for x in (plus[j], minus[j]):
+                    q = p.copy()
+                    q[j] = x
+                    runs.append(self._fmu_parameter_values(q))
+            perturbations, steps = tuple(runs), plus - minus
+        if start_states is not None and len(start_states) != len(conditions):
+            raise InputError(f"{len(start_states)} start states for {len(conditions)} operating points", "FmuModel",
+                             field="start_states")
+        tasks = [fp.PointTask(k, inputs[k], base, perturbations, float(conditions.rotor_speed[k]),
+                              self.warm_start, start_state=None if start_states is None else start_states[k])
+                 for k in range(len(conditions))]
+        return p, tasks, steps
+
+    def _evaluation(self, results, conditions) -> Evaluation:
+        outcomes = [r.base for r in results]
+        values = self._values(outcomes)
+        status = np.array([o.status for o in outcomes], int)
+        messages = [o.message for o in outcomes]
+        needs_harmonics = any(kind != "mean" for _, _, kind, _, _ in self._channel_specs)
+        if needs_harmonics:
+            for k in np.flatnonzero((conditions.rotor_speed <= 0) & (status == Status.CONVERGED)):
+                status[k] = Status.INVALID_INPUT
+                messages[k] = "azimuth harmonics need a turning rotor (rotor speed 0)"
+        values[status != Status.CONVERGED] = np.nan
+        return Evaluation(values, status, tuple(messages), self._channels, self._extras(outcomes, results))
+
+    def evaluate(self, p, conditions: OperatingConditions, start_states=None) -> Evaluation:
+        """Steady channel values (n_points, n_channels) and a status per point at ``p``.
+
+        ``start_states`` (from :meth:`load_states`, one per point or None) start each base
+        run from a settled state of this build instead of from scratch: it then settles only
+        ``perturbation_settle_revolutions``.
+        """
+        p, tasks, _ = self._tasks(p, conditions, perturb=False, start_states=start_states)
+        return self._evaluation(self._run(tasks, p, conditions), conditions)
+
+    def jacobian(self, p, conditions: OperatingConditions, start_states=None):
+        """Central-difference sensitivities ``G[k, c, j] = d y[k, c] / d p[j]``.
+
+        Returns
+        -------
+        evaluation : Evaluation
+            At ``p`` (the base runs). A point whose perturbed run failed gets that run's
+            status and message (and NaN values): its sensitivities are unknown.
+        G : ndarray, shape (n_points, n_channels, n_params)
+            NaN on failed points.
+        """
+        p, tasks, steps = self._tasks(p, conditions, perturb=True, start_states=start_states)
+        results = self._run(tasks, p, conditions)
+        ev = self._evaluation(results, conditions)
+        n_par = p.size
+        n_ch = len(self._channels)
+        G = np.full((len(tasks), n_ch, n_par), np.nan)
+        status, messages = ev.status.copy(), list(ev.messages)
+        phase = np.array([kind == "phase" for _, _, kind, _, _ in self._channel_specs])
+        for k, r in enumerate(results):
+            if status[k] != Status.CONVERGED:
+                continue
+            runs = r.perturbations
+            bad = [j for j, o in enumerate(runs) if o is None or not o.ok]
+            if bad:
+                j = bad[0]
+                o = runs[j]
+                status[k] = o.status if o is not None else Status.SIMULATION_FAILED
+                sign = "+" if j % 2 == 0 else "-"
+                messages[k] = (f"perturbed run ({sign}{self._parameters[j // 2].name}) failed: "
+                               f"{o.message if o is not None else 'not run'}")
+                continue
+            y = self._values(runs)                      # (2 n_par, n_ch)
+            d = y[0::2] - y[1::2]
+            d[:, phase] = (d[:, phase] + 180.0) % 360.0 - 180.0
+            G[k] = (d / steps[:, None]).T
+        values = ev.values.copy()
+        values[status != Status.CONVERGED] = np.nan
+        ev = Evaluation(values, status, tuple(messages), ev.channels, ev.extras)
+        return ev, G
+
+    # ------------------------------------------------------------------ declared capabilities
+    @property
+    def has_correction_field(self) -> bool:
+        """The mapping maps correction nodes and this model calibrates them (``corrections=True``)."""
+        return bool(self._options["corrections"]) and self.mapping.corrections is not None
+
+    @property
+    def capabilities(self) -> Capabilities:
+        """Rebuildable from its spec, finite-difference Jacobians, workers to close; a correction field
+        when :attr:`has_correction_field` (named ``FmuFieldModel`` in results then), never refinable (the
+        nodes are the FMU's own)."""
+        field = self.has_correction_field
+        return Capabilities("FmuFieldModel" if field else "FmuModel", correction_field=field, rebuildable=True,
+                            derivatives="finite_difference", closes=True)
+
+    def correction_field(self) -> CorrectionField:
+        """The correction field of ``[corrections]`` (when :attr:`has_correction_field`).
+
+        Nominal C_L, C_D are not known outside the FMU, so the C_D ≥ C_D,min bound and
+        the corrected polars are not available; the ΔC bands and eigenshapes are.
+        """
+        if not self.has_correction_field:
+            raise ModelError(f"{self.fmu_path.name}: its mapping maps no correction field (or corrections = false)")
+        return CorrectionField(self._parameters, None, seen_from_extras)
+
+    @property
+    def rotor_radius(self) -> float | None:
+        """Rotor radius [m] from the mapping's ``[rotor]`` (None without it)."""
+        if self.mapping.rotor_radius is None:
+            return None
+        return self._probe()["rotor_radius"]
+
+    def spec(self) -> dict:
+        """JSON-able description; :func:`calib.models.registry.build_model` rebuilds the model."""
+        mapping = Path(self.mapping.source).resolve()
+        return {"kind": "fmu", "fmu": str(self.fmu_path), "fmu_sha256": self.sha256,
+                "mapping": str(mapping), "mapping_sha256": sha256_of(mapping) if mapping.is_file() else None,
+                "build": self.build, "channels": [c.name for c in self._channels], **self._options}
+
+    @classmethod
+    def from_spec(cls, spec: dict, base_dir=None) -> "FmuModel":
+        """Rebuild from :meth:`spec` (rebuilding a bundled variant when its file is gone)."""
+        def resolve(p):
+            q = Path(p)
+            return q if q.is_absolute() or base_dir is None else Path(base_dir) / q
+        fmu = resolve(spec["fmu"]) if spec.get("fmu") else None
+        if (fmu is None or not fmu.is_file()) and spec.get("build"):
+            from calib.fmu.bundled import build_variant
+            fmu = build_variant(spec["build"], "model spec", base_dir)
+        if fmu is None:
+            raise InputError("the spec names no FMU file", "model spec", field="fmu")
+        opts = {k: spec[k] for k in ("parameters", "corrections", "switches", "settings", "steady", "jacobian",
+                                     "timeout", "isolate") if k in spec}
+        return cls(fmu, resolve(spec["mapping"]), spec.get("channels"), build=spec.get("build"), **opts)
+
+    # ------------------------------------------------------------------ settled states
+    def settled_states(self, p, conditions: OperatingConditions) -> list[bytes | None]:
+        """Serialized settled base states, one per point (None where the run failed).
+
+        With :meth:`save_states` they let a later run (the same FMU build) skip settling.
+        """
+        if not (self.can_get_state and self.can_serialize):
+            raise ModelError(f"{self.fmu_path.name} cannot serialize its state")
+        p, tasks, _ = self._tasks(p, conditions, perturb=False)
+        results = self._run([replace(t, keep_state=True) for t in tasks], p, conditions)
+        return [r.base_state if r.base is not None and r.base.ok else None for r in results]
+
+    def save_states(self, path, states: list, conditions: OperatingConditions) -> Path:
+        """Write settled states with this build's identity (GUID / token and SHA-256): :func:`calib.fmu.states.write_states`."""
+        return write_states(path, states, conditions, self.guid, self.sha256, self.fmu_path)
+
+    def load_states(self, path) -> tuple[list, OperatingConditions]:
+        """Read :meth:`save_states` output, refusing states of another FMU build (:func:`calib.fmu.states.read_states`)."""
+        return read_states(path, self.guid, self.sha256, self.fmu_path.name)
+
+    def close(self) -> None:
+        """Stop this model's worker processes in this process (workers elsewhere end with their executor)."""
+        fw.close_workers(self._plan.key)
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}({self.fmu_path.name!r}, mapping={Path(self.mapping.source).name!r}, "
+                f"{len(self._parameters)} parameters, channels={[c.name for c in self._channels]})")
