@@ -62,13 +62,19 @@ def _leaves(x, prefix=""):
 
 
 def _close(a, b, rtol: float) -> bool:
+    """Equal within ``rtol`` relative (of the value, or of 1e-6 of the array's largest finite value), with
+    NaN and infinities where the other has the same."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     if a.shape != b.shape:
         return False
-    scale = max(float(np.nanmax(np.abs(a))) if a.size and np.isfinite(a).any() else 0.0, 1e-300)
-    same_nan = np.array_equal(np.isnan(a), np.isnan(b))
-    ok = np.abs(a - b) <= rtol * np.maximum(np.abs(a), 1e-6 * scale)
-    return bool(same_nan and np.all(ok | np.isnan(a)))
+    finite = np.isfinite(a) & np.isfinite(b)
+    if not np.array_equal(a[~finite], b[~finite], equal_nan=True):
+        return False
+    if not finite.any():
+        return True
+    x, y = a[finite], b[finite]
+    scale = float(np.max(np.abs(x)))
+    return bool(np.all(np.abs(x - y) <= rtol * np.maximum(np.abs(x), 1e-6 * scale)))
 
 
 def compare(old: Path, new: Path, rtol: float) -> int:

@@ -22,38 +22,35 @@ import numpy as np
 from scipy import stats
 
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.config import NUM, Key, check_table, in_open_unit_interval, names_list
 from calib.discrepancy import NAMEABLE, DiagnosisSettings
-from calib.errors import CalibError, InputError, unknown_key
+from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
 
-#: [diagnosis] keys of a workflow: the DiagnosisSettings fields, plus the channels it uses.
-DIAGNOSIS_KEYS = tuple(f.name for f in dataclasses.fields(DiagnosisSettings)) + ("channels",)
-#: [validation] keys of a workflow.
-VALIDATION_KEYS = ("leave_out", "split", "band_at", "channels", "confidence")
+#: [diagnosis] keys of a workflow: the DiagnosisSettings fields (their types checked by its validate()), plus
+#: the channels it uses.
+DIAGNOSIS_SCHEMA = {**{f.name: Key(object) for f in dataclasses.fields(DiagnosisSettings)},
+                    "channels": Key(list, check=lambda v: None if v and names_list(v) is None
+                                    else "must be a non-empty array of channel names")}
 #: How held-back points are chosen: one value of the condition at a time, or two bands of it.
 SPLITS = ("one", "band")
 #: Operating conditions a validation may leave out one value of at a time ("point": each point).
 LEAVE_OUT = ("wind_speed", "rotor_speed", "pitch", "point")
+#: [validation] keys of a workflow (:func:`calib.config.check_table`).
+VALIDATION_SCHEMA = {"leave_out": Key(str, choices=LEAVE_OUT), "split": Key(str, choices=SPLITS),
+                     "band_at": Key(NUM), "channels": Key(list, check=names_list),
+                     "confidence": Key(NUM, check=in_open_unit_interval)}
 
 
 def diagnosis_settings(table: dict, source: str, valid=NAMEABLE) -> tuple[DiagnosisSettings, list | None]:
     """The :class:`DiagnosisSettings` and channel list of a ``[diagnosis]`` table (of a workflow
     or of ``calib diagnose --config``); ``valid``: the candidate names of the model family."""
-    if not isinstance(table, dict):
-        raise InputError(f"'diagnosis' must be a table, got {table!r:.60}", source, field="diagnosis")
-    bad = [k for k in table if k not in DIAGNOSIS_KEYS]
-    if bad:
-        raise InputError(unknown_key(bad[0], sorted(DIAGNOSIS_KEYS), "diagnosis."), source,
-                         field=f"diagnosis.{bad[0]}")
+    check_table(table, DIAGNOSIS_SCHEMA, "diagnosis", source)
     kw = {k: v for k, v in table.items() if k != "channels"}
     if isinstance(kw.get("candidates"), list):
         kw["candidates"] = tuple(kw["candidates"])
     dset = DiagnosisSettings(**kw)      # the keys are checked above, the types by validate()
     channels = table.get("channels")
-    if channels is not None and (not isinstance(channels, list) or not channels
-                                 or not all(isinstance(c, str) for c in channels)):
-        raise InputError(f"must be a non-empty array of channel names, got {channels!r}", source,
-                         field="diagnosis.channels")
     return dset.validate(source, "diagnosis.", valid=valid), channels
 
 
@@ -86,29 +83,17 @@ class ValidationSettings:
 
     @classmethod
     def from_table(cls, table: dict, source: str) -> "ValidationSettings":
-        bad = [k for k in table if k not in VALIDATION_KEYS]
-        if bad:
-            raise InputError(unknown_key(bad[0], VALIDATION_KEYS, "validation."), source,
-                             field=f"validation.{bad[0]}")
+        check_table(table, VALIDATION_SCHEMA, "validation", source)
         leave = table.get("leave_out", "wind_speed")
-        if leave not in LEAVE_OUT:
-            raise InputError(f"must be one of {', '.join(LEAVE_OUT)}, got {leave!r}", source,
-                             field="validation.leave_out")
         conf = table.get("confidence", 0.95)
-        if isinstance(conf, bool) or not isinstance(conf, (int, float)) or not 0 < conf < 1:
-            raise InputError(f"must be a number in (0, 1), got {conf!r}", source, field="validation.confidence")
         chans = table.get("channels")
-        if chans is not None and (not isinstance(chans, list) or not all(isinstance(c, str) for c in chans)):
-            raise InputError(f"must be an array of channel names, got {chans!r}", source, field="validation.channels")
         split = table.get("split", "one")
-        if split not in SPLITS:
-            raise InputError(f"must be one of {', '.join(SPLITS)}, got {split!r}", source, field="validation.split")
         if split == "band" and leave == "point":
             raise InputError("a band split needs a condition (wind_speed, rotor_speed or pitch), not 'point'", source,
                              field="validation.leave_out")
         at = table.get("band_at")
-        if at is not None and (split != "band" or isinstance(at, bool) or not isinstance(at, (int, float))):
-            raise InputError(f"must be a number, with split = \"band\"; got {at!r}", source, field="validation.band_at")
+        if at is not None and split != "band":
+            raise InputError(f"must be given with split = \"band\" only; got {at!r}", source, field="validation.band_at")
         return cls(leave, tuple(chans) if chans else None, float(conf), split, None if at is None else float(at))
 
     def folds(self, groups: np.ndarray, source: str) -> list[tuple[str, np.ndarray]]:

@@ -112,10 +112,10 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     for key in ("model", "fluid", "calibration", "executor"):
         if key in cfg:
             wf[key] = cfg[key]
-    from calib.workflow import _check_table
+    from calib.workflow import check_section
     for key in ("model", "fluid", "grid", "calibration"):
         if key in wf and not (key == "model" and is_fmu):   # an FMU's [model]: checked by calib.models.from_config
-            _check_table(wf[key], key, src)
+            check_section(wf[key], key, src)
     setup = prepare(wf)
     meas = _fill_conditions(meas, setup)
     set_up = statement(setup, wf, meas)

@@ -23,12 +23,14 @@ import numpy as np
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.config import AUTO_OR_NUM, NUM, check_table, schema_of
 from calib.corrections import CorrectionGrid
-from calib.errors import CalibError, InputError, unknown_key
+from calib.errors import CalibError, InputError
 from calib.measurements import Measurements, read_measurements, sha256_of, synthesize
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
 from calib.types import STANDARD_AIR_DENSITY, OperatingConditions, nominal_vector
 from calib.models.bem_model import BemModel
+from calib.models.registry import MODEL_KINDS
 from calib.rotor.sources import absolute_table, file_provenance, rotor_from_table
 from calib.tomlfile import read_toml
 from calib.setup_statement import statement, statement_html, statement_lines
@@ -37,48 +39,16 @@ from calib.logs import add_output_arguments, say
 
 log = logging.getLogger("calib.workflow")
 
-NUM = (int, float)
-AUTO_OR_NUM = (int, float, str)
-
-
-def _toml_type(default, override=None):
-    """The TOML type of a dataclass field from its default value."""
-    if override is not None:
-        return override
-    if isinstance(default, bool):
-        return bool
-    if isinstance(default, int):
-        return int
-    if isinstance(default, float):
-        return NUM
-    if isinstance(default, str):
-        return str
-    if isinstance(default, (tuple, list)):
-        return list
-    return None
-
-
-def _schema_from(cls, exclude=(), overrides=None) -> dict:
-    """Workflow keys of a settings dataclass: one definition, so API and TOML defaults cannot drift."""
-    overrides = overrides or {}
-    out = {}
-    for f in dataclasses.fields(cls):
-        if f.name in exclude:
-            continue
-        default = f.default if f.default is not dataclasses.MISSING else None
-        out[f.name] = (_toml_type(default, overrides.get(f.name)), False)
-    return out
-
 
 #: [model] keys of the native BEM: every BemSettings field (same name, same default) except the fluid's
 #: viscosity (in [fluid]), plus rotor overrides and the nuisance list.
-MODEL_KEYS = {**_schema_from(BemSettings, exclude=("kinematic_viscosity",),
+MODEL_KEYS = {**schema_of(BemSettings, exclude=("kinematic_viscosity",),
                              overrides={"n_sectors": int, "polar_smoothing": list}),
               "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
               "nuisance": (list, False)}
 #: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force`` and
 #: ``strict_units``.
-CALIBRATION_KEYS = {**_schema_from(CalibrationSettings, exclude=("verbose",),
+CALIBRATION_KEYS = {**schema_of(CalibrationSettings, exclude=("verbose",),
                                    overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict,
                                               "prior_std": dict, "cd_min": NUM, "max_retained": int,
                                               "band_eta": list}),
@@ -110,28 +80,9 @@ SCHEMA = {
     "calibration": CALIBRATION_KEYS,
     "stages": {"name": (str, True), "channels": (list, True), "retain": (str, False)},
 }
-TYPE_NAMES = {str: "a string", dict: "a table", list: "an array", bool: "true/false", int: "an integer",
-              NUM: "a number", AUTO_OR_NUM: "\"auto\" or a number", (list, str): "an array or \"auto\""}
-
-
-def _check_table(table: dict, section: str, source: str) -> None:
-    spec = SCHEMA[section]
-    where = (section + ".") if section else ""
-    if not isinstance(table, dict):
-        raise InputError(f"'{section}' must be a table, got {table!r:.60}", source, field=section or None)
-    for key, value in table.items():
-        if key not in spec:
-            raise InputError(unknown_key(key, sorted(spec), where), source, field=f"{where}{key}")
-        types, _ = spec[key]
-        ok = isinstance(value, types) and not (types in (int, NUM) and isinstance(value, bool))
-        if types is NUM and isinstance(value, bool):
-            ok = False
-        if not ok:
-            raise InputError(f"'{where}{key}' must be {TYPE_NAMES.get(types, types)}, got {value!r}",
-                             source, field=f"{where}{key}")
-    for key, (_, required) in spec.items():
-        if required and key not in table:
-            raise InputError(f"missing required key '{where}{key}'", source, field=f"{where}{key}")
+def check_section(table: dict, section: str, source: str) -> None:
+    """Check a workflow table against :data:`SCHEMA` (:func:`calib.config.check_table`)."""
+    check_table(table, SCHEMA[section], section, source)
 
 
 def _numbers(value, key: str, source: str) -> np.ndarray:
@@ -156,16 +107,16 @@ def load_workflow(path: str | Path) -> dict:
     path = Path(path)
     src = str(path)
     data = read_toml(path, "workflow file", finite=True)  # no workflow setting is NaN or inf
-    _check_table(data, "", src)
+    check_section(data, "", src)
     for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
         if section == "model" and data.get("model", {}).get("kind") == "fmu":
             continue  # an FMU's [model] table is validated by calib.models.from_config.model_from_workflow
         if section in data:
-            _check_table(data[section], section, src)
+            check_section(data[section], section, src)
     for k, bump in enumerate(data.get("truth", {}).get("bumps", [])):
         if not isinstance(bump, dict):
             raise InputError("each truth.bumps entry must be a table", src, field=f"truth.bumps[{k}]")
-        _check_table(bump, "truth.bumps", src)
+        check_section(bump, "truth.bumps", src)
         if bump["block"] not in ("lift", "drag"):
             raise InputError(f"block must be 'lift' or 'drag', got {bump['block']!r}", src,
                              field=f"truth.bumps[{k}].block")
@@ -189,7 +140,7 @@ def load_workflow(path: str | Path) -> dict:
     for k, stage in enumerate(data["stages"]):
         if not isinstance(stage, dict):
             raise InputError("each stages entry must be a table", src, field=f"stages[{k}]")
-        _check_table(stage, "stages", src)
+        check_section(stage, "stages", src)
     has_file = "measurements" in data
     has_synth = "truth" in data or "noise" in data or "conditions" in data
     if has_file == has_synth:
@@ -446,8 +397,8 @@ def prepare(cfg: dict) -> WorkflowSetup:
     rotor = rsrc.rotor if rsrc is not None else None
     mcfg = dict(cfg.get("model", {}))
     kind = mcfg.pop("kind", "bem")
-    if kind not in ("bem", "fmu"):
-        raise InputError(f"unknown model kind {kind!r}; valid: bem, fmu", src, field="model.kind")
+    if kind not in MODEL_KINDS:
+        raise InputError(f"unknown model kind {kind!r}; valid: {', '.join(MODEL_KINDS)}", src, field="model.kind")
     fmu_table = None
     if kind == "fmu":
         fmu_table, mcfg = {"kind": "fmu", **mcfg}, {}

@@ -951,9 +951,9 @@ def test_workflow_nan_is_refused_with_its_key(tmp_path):
 
 
 def test_workflow_table_of_wrong_type_names_it(tmp_path):
-    from calib.workflow import _check_table
+    from calib.workflow import check_section
     with pytest.raises(InputError, match="'grid' must be a table") as exc:
-        _check_table(3.0, "grid", "w.toml")
+        check_section(3.0, "grid", "w.toml")
     assert exc.value.field == "grid"
 
 

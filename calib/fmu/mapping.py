@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.config import NUM as _NUM, NUM_OR_BOOL, check_table
 from calib.errors import InputError, unknown_key
 from calib.tomlfile import read_toml
 from calib.types import CONDITION_FIELDS, ParameterKind
@@ -39,13 +40,12 @@ SPANWISE_OUTPUTS = {"normal_force": ("fn", "N/m"), "angle_of_attack": (None, "de
 SWITCH_EFFECTS = ("tip_loss", "hub_loss", "tower_shadow", "shear", "yaw", "skewed_wake", "dynamic_inflow",
                   "flexible_blades", "gravity", "stall_delay")
 
-_NUM = (int, float)
 _TOP_KEYS = {"schema", "variant", "fmi_version", "model_identifier", "fmu_file", "description", "inputs",
              "outputs", "corrections", "parameters", "switches", "settings", "steady", "jacobian", "rotor"}
 _ENTRY_KEYS = {"variable": (str, True), "element": (int, False), "unit": (str, False), "scale": (_NUM, False),
                "offset": (_NUM, False), "sign": (int, False), "wrap": (_NUM, False), "description": (str, False)}
 _OUTPUT_KEYS = {**_ENTRY_KEYS, "channel_unit": (str, False)}
-_SETTING_KEYS = {**_ENTRY_KEYS, "value": ((int, float, bool), False)}
+_SETTING_KEYS = {**_ENTRY_KEYS, "value": (NUM_OR_BOOL, False)}
 _PARAMETER_KEYS = {**{k: v for k, v in _ENTRY_KEYS.items() if k != "scale"}, "conversion_scale": (_NUM, False),
                    "kind": (str, False), "nominal": (_NUM, False), "lower": (_NUM, False), "upper": (_NUM, False),
                    "scale": (_NUM, True), "prior_std": (_NUM, False), "package_unit": (str, False)}
@@ -56,7 +56,7 @@ _CORRECTION_KEYS = {"grid": (str, False), "alpha_nodes_deg": (list, False), "eta
                     "layout": (str, True), "lift": (str, True), "drag": (str, True), "scale": (_NUM, False),
                     "cl_scale": (_NUM, False), "cd_scale": (_NUM, False), "cl_bound": (_NUM, False),
                     "cd_bound": (_NUM, False)}
-_SWITCH_KEYS = {"variable": (str, True), "on": ((int, float, bool), True), "off": ((int, float, bool), True),
+_SWITCH_KEYS = {"variable": (str, True), "on": (NUM_OR_BOOL, True), "off": (NUM_OR_BOOL, True),
                 "values": (dict, False), "description": (str, False)}
 _STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int, True),
                 "average_revolutions": (int, True), "standstill_step_size": (_NUM, False),
@@ -66,10 +66,6 @@ _STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int,
 _STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
                "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
 _JACOBIAN_KEYS = {"relative_step": (_NUM, False), "warm_start": (bool, False)}
-_TYPE_NAMES = {str: "a string", int: "an integer", _NUM: "a number", list: "an array", dict: "a table",
-               bool: "true/false", (int, float, bool): "a number or true/false"}
-
-
 def _check_list(values, kind, where: str, source: str) -> None:
     """Every element of the array ``values`` is of ``kind`` (str, or numbers)."""
     numbers = kind is not str
@@ -81,21 +77,7 @@ def _check_list(values, kind, where: str, source: str) -> None:
 
 
 def _check(table, allowed: dict, where: str, source: str) -> None:
-    if not isinstance(table, dict):
-        raise InputError(f"'{where}' must be a table, got {table!r}", source, field=where)
-    for key, value in table.items():
-        if key not in allowed:
-            raise InputError(unknown_key(key, sorted(allowed), f"{where}."), source, field=f"{where}.{key}")
-        types, _ = allowed[key]
-        ok = isinstance(value, types)
-        if ok and isinstance(value, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
-            ok = False
-        if not ok:
-            raise InputError(f"'{where}.{key}' must be {_TYPE_NAMES.get(types, types)}, got {value!r}", source,
-                             field=f"{where}.{key}")
-    for key, (_, required) in allowed.items():
-        if required and key not in table:
-            raise InputError(f"missing required key '{where}.{key}'", source, field=f"{where}.{key}")
+    check_table(table, allowed, where, source, table_label=f"'{where}'")
 
 
 @dataclass(frozen=True)

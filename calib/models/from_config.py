@@ -33,29 +33,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from calib.errors import InputError, unknown_key
+from calib.config import NUM, check_table
+from calib.errors import InputError
+from calib.models.registry import MODEL_KINDS
 
-_NUM = (int, float)
 FMU_KEYS = {"kind": str, "fmu": str, "variant": str, "mapping": str, "parameters": list, "corrections": bool,
-            "switches": dict, "settings": dict, "steady": dict, "jacobian": dict, "timeout": _NUM, "isolate": bool}
-BEM_KEYS = {"kind": str, "nuisance": list, "use_tilt": bool, "n_sectors": int, "shear_exponent": _NUM,
+            "switches": dict, "settings": dict, "steady": dict, "jacobian": dict, "timeout": NUM, "isolate": bool}
+BEM_KEYS = {"kind": str, "nuisance": list, "use_tilt": bool, "n_sectors": int, "shear_exponent": NUM,
             "tip_loss": bool, "hub_loss": bool}
 EXECUTOR_KEYS = {"kind": str, "workers": int, "address": str}
-MODEL_KINDS = ("bem", "fmu")
-_TYPE_NAMES = {str: "a string", list: "an array", bool: "true/false", dict: "a table", _NUM: "a number",
-               int: "an integer"}
 
 
 def _check(table, spec: dict, section: str, source: str) -> None:
-    if not isinstance(table, dict):
-        raise InputError(f"[{section}] must be a table", source, field=section)
-    for key, value in table.items():
-        if key not in spec:
-            raise InputError(unknown_key(key, sorted(spec), f"{section}."), source, field=f"{section}.{key}")
-        t = spec[key]
-        if not isinstance(value, t) or (isinstance(value, bool) and t is not bool):
-            raise InputError(f"'{section}.{key}' must be {_TYPE_NAMES[t]}, got {value!r}", source,
-                             field=f"{section}.{key}")
+    check_table(table, spec, section, source, table_label=f"[{section}]")
 
 
 def _path(value: str, base_dir) -> Path:
