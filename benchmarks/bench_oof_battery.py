@@ -114,11 +114,11 @@ def publish_figures(figures: dict, tables: str) -> str:
     """The battery's tables for the validation page (``docs/validation/data/diagnosis_out_of_family.json``)."""
     from publish import command_line, publish
 
-    keep = ("n_seeds", "seeds", "n_diagnoses", "workers", "battery_wall_seconds", "agreement_pct",
+    keep = ("n_seeds", "seeds", "n_diagnoses", "workers", "diagnosis_cpu_seconds", "agreement_pct",
             "model_form_tolerance_default", "table", "versions")
     head = (f"{figures['n_diagnoses']} diagnoses ({figures['n_seeds']} noise seeds per data set, seeds "
-            f"{figures['seeds']}) in {figures['battery_wall_seconds'] / 60:.1f} min on {figures['workers']} "
-            "processes.\n\n")
+            f"{figures['seeds']}), {figures['diagnosis_cpu_seconds'] / 60:.1f} min of diagnosis time in all "
+            f"({figures['workers']} processes; a killed battery resumes from its recorded verdicts).\n\n")
     return publish("diagnosis_out_of_family", {k: figures[k] for k in keep}, command_line(), head + tables)
 
 

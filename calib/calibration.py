@@ -61,12 +61,10 @@ from calib.measurements import Measurements, check_channels, ml_noise, noise_fro
 from calib.parametrizations.aliasing import FineSensitivities
 from calib.prior_check import psd_sqrt
 from calib.result import CalibrationResult
-from calib.truncation import cv_curve, prior_limit
+from calib.truncation import AutoTruncation
 from calib.types import nominal_vector
 
 NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
-AUTO_CHOICES = 4
-"""Most linearizations at which ``sigma_bar = "auto"`` chooses the retained count (see ``_svd``)."""
 FLAT_PRIOR = 1e3
 """Prior 1-σ [scale units] the MAP estimator gives a parameter without a stated prior (no
 ``Parameter.prior_std``, not in ``prior_std``, not a correction node): flat for any data that
@@ -384,10 +382,8 @@ class Calibrator:
             for idx in (lay.lift_index, lay.drag_index):
                 self.prior_stated[idx[idx >= 0]] = True
         self.history: list[dict] = []
-        self._curve = None
-        self._auto_choices: list[tuple[float, int]] = []
-        self._auto_frozen: int | None = None
-        self._start_at_limit = False
+        st = self.settings
+        self.truncation = AutoTruncation(st.cv_folds, st.max_retained, st.cv_one_se)
         self._second_start_record: dict = {}
 
     # ------------------------------------------------------------------ setup
@@ -492,34 +488,12 @@ class Calibrator:
             return svd_analysis(lin.M, np.inf, st.max_retained)
         if st.sigma_bar != "auto":
             return svd_analysis(lin.M, float(st.sigma_bar), st.max_retained)
-        n_ch = len(self.channel_index)
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
-        # never more θ than the data determine better than the prior: beyond that the CV curve of
-        # a rough truth can dip again at 50+ θ with σ(θ) of tens of prior units, where the estimate
-        # leaves the range over which the linearization holds (docs/user_guide/calibration.md, coverage twin (d))
-        limit = prior_limit(lin.M, self._prior_cov_scaled(), np.repeat(lin.ok, n_ch))
-        curve = cv_curve(lin.M, pseudo, n_ch, lin.ok, st.cv_folds, st.max_retained, one_se=st.cv_one_se,
-                         max_choice=limit)
-        # the count is chosen afresh at each linearization until two consecutive choices agree
-        # or AUTO_CHOICES were made; then the choice with the smallest criterion (each on its own
-        # linearization's curve) is kept, so that the re-linearization loop converges on a
-        # subspace instead of chasing a count that moves with the linearization point
-        if self._start_at_limit:      # the second start's first estimate (see _second_start)
-            self._start_at_limit = False
-            curve = replace(curve, chosen=min(limit, int(curve.n_retained[-1])))
-        if self._auto_frozen is None:
-            self._auto_choices.append((float(curve.cv[curve.chosen]), curve.chosen))
-            agree = len(self._auto_choices) >= 2 and self._auto_choices[-1][1] == self._auto_choices[-2][1]
-            if agree or len(self._auto_choices) >= AUTO_CHOICES:
-                self._auto_frozen = min(self._auto_choices)[1]
-                curve = replace(curve, chosen=min(self._auto_frozen, limit, int(curve.n_retained[-1])))
-        else:
-            curve = replace(curve, chosen=min(self._auto_frozen, limit, int(curve.n_retained[-1])))
-        self._curve = curve
+        chosen = self.truncation.choose(lin.M, pseudo, len(self.channel_index), lin.ok, self._prior_cov_scaled())
         svd = svd_analysis(lin.M, np.inf)
         retained = np.zeros_like(svd.retained)
-        retained[:curve.chosen] = svd.retained[:curve.chosen]
-        return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, curve.sigma_bar, retained)
+        retained[:chosen] = svd.retained[:chosen]
+        return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, self.truncation.curve.sigma_bar, retained)
 
     def _prior_cov_scaled(self) -> np.ndarray:
         """The stated prior covariance of the scaled parameters [scale units²]: ``prior_std``
@@ -545,7 +519,7 @@ class Calibrator:
         st = self.settings
         if st.estimator == "map":
             return self._fit_map(problem, p)
-        first = st.sigma_bar == "auto" and st.retain != "all" and self._auto_frozen is None
+        first = st.sigma_bar == "auto" and st.retain != "all" and self.truncation.frozen is None
         lin0 = problem.linearize(p)
         out = self._relinearize_loop(problem, p, lin0)
         if not (first and st.second_start and st.noise not in ("ml", "relative_ml")) or out[3] == "failed":
@@ -574,16 +548,13 @@ class Calibrator:
         p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
         if p_value >= SECOND_START_P:
             return first
-        state1 = (self._curve, self._auto_choices, self._auto_frozen)
-        self._auto_choices, self._auto_frozen, self._start_at_limit = [], None, True
+        policy1 = self.truncation
+        self.truncation = policy1.restarted_at_limit()
         self._emit({"stage": "second_start", "chi2": chi2, "dof": dof, "p_value": p_value,
                     "first_n_retained": svd1.n_retained})
         problem.remember(lin0)        # the same first linearization, no model call repeated
-        try:
-            second = self._relinearize_loop(problem, p0.copy(), lin0)
-        finally:
-            self._start_at_limit = False
-        c1, c2 = state1[0], self._curve
+        second = self._relinearize_loop(problem, p0.copy(), lin0)
+        c1, c2 = policy1.curve, self.truncation.curve
         k1, k2 = svd1.n_retained, second[1].n_retained
         cv1, cv2 = float(c1.cv[k1]), float(c2.cv[k2])
         se1, se2 = float(c1.cv_se[k1]), float(c2.cv_se[k2])
@@ -595,7 +566,7 @@ class Calibrator:
         self._emit({"stage": "second_start_done", **self._second_start_record})
         if keep_second:
             return second
-        self._curve, self._auto_choices, self._auto_frozen = state1
+        self.truncation = policy1
         problem.remember(lin1)
         return first
 
@@ -937,14 +908,10 @@ class Calibrator:
         return float(np.sum(lin.residual[lin.ok] ** 2)), dof
 
     def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
-        st = self.settings
-        m = self.measurements
         B = svd.basis
-        F = fisher_matrix(lin.M)
         # B holds right singular vectors of M at this linearization, so Bᵀ F B = diag(s²) and
         # Cov(θ̂) = diag(σ(θ)²) exactly, without inverting a possibly ill-conditioned matrix
         cov_theta = np.diag(svd.sigma_theta[svd.retained] ** 2)
-        prior_scaled = self.prior_std / self.scale
         prior_cov = self._prior_cov_scaled()
         cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
@@ -1001,7 +968,8 @@ class Calibrator:
         settings["model"] = self.model.capabilities.name
         settings["lower_effective"] = self.lower.tolist()
         inputs = {m.source: m.sha256} if m.sha256 else {}
-        truncation = self._curve.to_dict() if self._curve is not None and st.sigma_bar == "auto" \
+        curve = self.truncation.curve
+        truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" \
             and st.retain != "all" else {}
         if truncation and self._second_start_record:
             truncation.update(self._second_start_record)

@@ -59,7 +59,7 @@ P.C. Hansen, Rank-Deficient and Discrete Ill-Posed Problems, SIAM (1998), ch. 7.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -227,3 +227,61 @@ def cv_curve(M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray | Non
     return TruncationCurve(np.array(ks), cv, np.array(fit), np.array(sv), chosen, se,
                            None, "loo_points" if n_folds is None else f"{K}-fold", np.array(folds),
                            None if max_choice is None else limit)
+
+
+#: Most linearizations at which the automatic choice chooses the retained count (:class:`AutoTruncation`).
+AUTO_CHOICES = 4
+
+
+class AutoTruncation:
+    """The automatic choice of the retained count over a calibration's re-linearizations (``sigma_bar = "auto"``).
+
+    It owns its state: the choices made so far and the count it froze on. The count is chosen
+    afresh at each linearization (:func:`cv_curve`, never beyond :func:`prior_limit`) until two
+    consecutive choices agree or :data:`AUTO_CHOICES` were made; then the choice with the smallest
+    criterion (each on its own linearization's curve) is kept, so that the re-linearization loop
+    converges on a subspace instead of chasing a count that moves with the linearization point.
+
+    Parameters
+    ----------
+    cv_folds, max_retained, one_se
+        As :func:`cv_curve`.
+    start_at_limit : bool
+        The first choice is the prior limit's count (the second start of
+        :meth:`calib.calibration.Calibrator._second_start`), the later ones as usual.
+    """
+
+    def __init__(self, cv_folds: int, max_retained: int | None, one_se: bool, start_at_limit: bool = False):
+        self.cv_folds, self.max_retained, self.one_se = cv_folds, max_retained, one_se
+        self.choices: list[tuple[float, int]] = []
+        self.frozen: int | None = None
+        self.curve: TruncationCurve | None = None
+        self._at_limit = start_at_limit
+
+    def restarted_at_limit(self) -> "AutoTruncation":
+        """A fresh policy whose first choice is the prior limit's count."""
+        return AutoTruncation(self.cv_folds, self.max_retained, self.one_se, start_at_limit=True)
+
+    def choose(self, M: np.ndarray, z: np.ndarray, n_channels: int, ok: np.ndarray, prior_cov: np.ndarray) -> int:
+        """The retained count at this linearization (``M``, pseudo-data ``z``, rows ``ok``); the curve is
+        kept in :attr:`curve` with that count as its choice."""
+        # never more θ than the data determine better than the prior: beyond that the CV curve of a
+        # rough truth can dip again at 50+ θ with σ(θ) of tens of prior units, where the estimate
+        # leaves the range over which the linearization holds (coverage twin (d))
+        limit = prior_limit(M, prior_cov, np.repeat(ok, n_channels))
+        curve = cv_curve(M, z, n_channels, ok, self.cv_folds, self.max_retained, one_se=self.one_se,
+                         max_choice=limit)
+        top = int(curve.n_retained[-1])
+        if self._at_limit:
+            self._at_limit = False
+            curve = replace(curve, chosen=min(limit, top))
+        if self.frozen is None:
+            self.choices.append((float(curve.cv[curve.chosen]), curve.chosen))
+            agree = len(self.choices) >= 2 and self.choices[-1][1] == self.choices[-2][1]
+            if agree or len(self.choices) >= AUTO_CHOICES:
+                self.frozen = min(self.choices)[1]
+                curve = replace(curve, chosen=min(self.frozen, limit, top))
+        else:
+            curve = replace(curve, chosen=min(self.frozen, limit, top))
+        self.curve = curve
+        return curve.chosen

@@ -25,7 +25,7 @@ class TrappedAtOne(Calibrator):
 
     def _svd(self, problem, lin):
         if not self.in_second:
-            self._auto_frozen = 1
+            self.truncation.frozen = 1
         return super()._svd(problem, lin)
 
 
