@@ -770,14 +770,14 @@ class Calibrator:
         last = {}
 
         def linearize_at(x):
-            p = np.clip(self.p0 + self.scale * x, self.lower, self.upper)
+            p = problem.unscaled(x, clip=True)
             last["at"] = at = problem.linearize(p)
-            return (p - self.p0) / self.scale, at.residual.reshape(-1), np.repeat(at.ok, n_ch), at.M
+            return problem.scaled(p), at.residual.reshape(-1), np.repeat(at.ok, n_ch), at.M
 
         def evaluate_at(x):
-            p = np.clip(self.p0 + self.scale * x, self.lower, self.upper)
+            p = problem.unscaled(x, clip=True)
             out = problem.evaluate(p)
-            return (p - self.p0) / self.scale, out.residual.reshape(-1), np.repeat(out.ok, n_ch)
+            return problem.scaled(p), out.residual.reshape(-1), np.repeat(out.ok, n_ch)
 
         failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
         # the MAP estimator's result is the MAP point of the stated prior already (up to its flat priors)

@@ -132,6 +132,11 @@ class LeastSquaresProblem:
         """p̃ = (p − p₀)/scale."""
         return (np.asarray(p, float) - self.p0) / self.scale
 
+    def unscaled(self, x: np.ndarray, clip: bool = False) -> np.ndarray:
+        """p = p₀ + scale · x (the inverse of :meth:`scaled`), held inside the bounds when ``clip``."""
+        p = self.p0 + self.scale * np.asarray(x, float)
+        return np.clip(p, self.lower, self.upper) if clip else p
+
     def _residual(self, ev: Evaluation):
         y = ev.values[:, self.channel_index]
         ok = ev.ok & np.all(np.isfinite(y), axis=1)
@@ -417,6 +422,9 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
     if n_theta == 0:
         return EstimationOutcome(theta, lin.p, total(lin, theta), 0, "converged", "nothing to estimate", lin, history)
     mu = 1e-6
+    # a damped trial is only evaluated when the model's Jacobian costs simulations of its own (finite
+    # differences: 2 n more per point); with exact derivatives the Jacobian comes with the values
+    linearize_trials = problem.model.capabilities.derivatives == "exact"
     status, message = "max_iterations", f"stopped after {max_iterations} iterations"
     it = 0
     for it in range(1, max_iterations + 1):
@@ -433,7 +441,8 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
                 status, message = "qp_failed", f"{optimizer}: {sol.message}"
                 break
             x = _feasible_step(basis, theta, sol.x, lb, ub)
-            trial = problem.linearize(problem.p_of(basis, theta + x))
+            p_trial = problem.p_of(basis, theta + x)
+            trial = problem.linearize(p_trial) if linearize_trials else problem.evaluate(p_trial)
             predicted = -(g @ x + 0.5 * x @ H @ x)
             cost_trial = total(trial, theta + x)
             if trial.n_failed <= lin.n_failed and cost_trial <= cost_now:
@@ -445,14 +454,16 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         if status == "qp_failed":
             break
         if not accepted:
-            # linearization cache may hold the last rejected trial: restore
-            problem._cache = lin
+            problem.remember(lin)       # the cache may hold the last rejected trial
             if float(np.linalg.norm(x)) <= step_tolerance * (1.0 + np.linalg.norm(theta)):
                 # even a step below the tolerance does not decrease the cost: a stationary point
                 status, message = "converged", f"converged in {it - 1} iterations (no smaller step decreases the cost)"
             else:
                 status, message = "stalled", "no step decreased the cost (damping exhausted)"
             break
+        if trial.M is None:             # the accepted trial's sensitivities
+            trial = problem.linearize(trial.p)
+            cost_trial = total(trial, theta + x)
         decrease = cost_now - cost_trial
         theta = theta + x
         step = float(np.linalg.norm(x))
@@ -473,5 +484,5 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
             else:  # no progress because the subproblem solver gave up: not a converged estimate
                 status, message = "qp_failed", f"{optimizer} made no progress: {sol.message}"
             break
-    problem._cache = lin
+    problem.remember(lin)
     return EstimationOutcome(theta, lin.p, total(lin, theta), it, status, message, lin, history)

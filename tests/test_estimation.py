@@ -239,3 +239,43 @@ def test_sqpmethod_vanishing_search_direction_is_accepted_only_at_an_improving_p
     monkeypatch.undo()
     sol = CasadiQp("sqpmethod")(H, g, A, lb, ub)
     assert sol.success and np.allclose(sol.x, exact, atol=1e-8)
+
+
+class _Quadratic(LinearModel):
+    """y = u + u³ with u = A p: nonlinear (so damped Gauss–Newton rejects some trial steps) and monotone in u
+    (so the truth is the one minimum)."""
+
+    def evaluate(self, p, cond):
+        ev = super().evaluate(p, cond)
+        return Evaluation(ev.values + ev.values ** 3, ev.status, ev.messages, self._channels)
+
+    def jacobian(self, p, cond):
+        A = self._A(cond)
+        u = A @ np.asarray(p, float)
+        return self.evaluate(p, cond), A * (1.0 + 3.0 * u ** 2)[..., None]
+
+
+@pytest.mark.parametrize("derivatives", ["exact", "finite_difference"])
+def test_damped_trials_are_evaluated_when_the_jacobian_costs_simulations(derivatives):
+    """A finite-difference model's rejected trial costs one evaluation, not a Jacobian (2 n more
+    simulations per point): Jacobians are taken at the start and at accepted steps only. With exact
+    derivatives a trial is linearized at once (the sensitivities come with the values). Both take
+    the same steps to the same estimate."""
+    model = _Quadratic(seed=3)
+    model.capabilities = Capabilities("Quadratic", derivatives=derivatives)
+    p_true = np.array([0.6, -0.5, 0.7, 0.4])
+    cond = _conditions()
+    z = model.evaluate(p_true, cond).values
+    qs = model.parameters
+    prob = LeastSquaresProblem(model, cond, z, np.full(z.shape, 1e-3), [0, 1], np.full(model.n, -0.9),
+                               np.array([q.scale for q in qs]), np.array([q.lower for q in qs]),
+                               np.array([q.upper for q in qs]))
+    out = estimate(prob, np.eye(model.n), np.zeros(model.n), max_iterations=60)
+    assert out.converged, out.message
+    np.testing.assert_allclose(out.p, p_true, atol=1e-6)
+    accepted = len(out.history)
+    if derivatives == "finite_difference":
+        assert prob.n_jacobians == accepted + 1
+        assert prob.n_evaluations > accepted          # some trials were rejected, each one evaluation
+    else:
+        assert prob.n_evaluations == 0 and prob.n_jacobians > accepted + 1
