@@ -46,14 +46,15 @@ from __future__ import annotations
 
 import difflib
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from typing import Callable
 
 import numpy as np
 from scipy import stats
 
+from calib.calibration_settings import ESTIMATORS, NOISE_MODES, CalibrationSettings
 from calib.errors import InputError
-from calib.estimation import LeastSquaresProblem, estimate, get_optimizer
+from calib.estimation import LeastSquaresProblem, estimate
 from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, fold_dominated_directions,
                                    frozen_aware_covariance, frozen_curvature_covariance, observability,
                                    parameter_verdicts, subspace_cosines, svd_analysis)
@@ -64,7 +65,8 @@ from calib.result import CalibrationResult
 from calib.truncation import AutoTruncation
 from calib.types import nominal_vector
 
-NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
+__all__ = ["CalibrationSettings", "Calibrator", "calibrate", "NOISE_MODES", "ESTIMATORS"]
+
 FLAT_PRIOR = 1e3
 """Prior 1-σ [scale units] the MAP estimator gives a parameter without a stated prior (no
 ``Parameter.prior_std``, not in ``prior_std``, not a correction node): flat for any data that
@@ -77,221 +79,6 @@ wind-tunnel coverage twin (c) (seed 5003) the Gauss–Newton converges linearly 
 at a relative decrease of 1e-9 the calibration made 15 model Jacobians in all, with this rule 9."""
 SECOND_START_P = 0.01
 """χ² p-value of the first fit below which ``second_start`` runs (see ``Calibrator._second_start``)."""
-RETAIN_MODES = ("threshold", "all")
-ESTIMATORS = ("map", "truncated")
-
-
-@dataclass(frozen=True)
-class CalibrationSettings:
-    """Settings of a calibration.
-
-    Parameters
-    ----------
-    estimator : {"map", "truncated"}
-        ``"map"``: the maximum a posteriori estimate under the stated prior (``prior_sigma``,
-        ``prior_std``, ``prior_correlation``) and its Laplace covariance; every parameter moves,
-        held by the prior where the data say little, and the SVD of the prior-whitened
-        sensitivities gives the directions where the data beat the prior (s_i > 1), their
-        eigenshapes and verdicts (:meth:`Calibrator._fit_map`). ``"truncated"``: the truncated
-        ML estimate of Bottasso et al. (2014), re-linearized until the retained set is stable,
-        with the frozen directions' prior and the added terms below (``sigma_bar``, ``cv_*``,
-        ``second_start``, ``curvature_samples``, ``representation_error``'s aliasing term).
-    sigma_bar : float or "auto"
-        ``"auto"`` (default): retain the number of θ chosen by the K-fold cross-validated
-        prediction error over operating points (:func:`calib.truncation.cv_curve`), among the
-        leading directions the data determine better than the prior
-        (:func:`calib.truncation.prior_limit`). A number: retain θ_i with
-        σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
-        (see :func:`calib.identifiability.sigma_bar_for`).
-    cv_folds : int
-        K of the K-fold cross-validation over operating points that ``sigma_bar = "auto"`` uses.
-    cv_one_se : bool
-        Keep the fewest θ within one standard error of the minimum criterion (default) rather
-        than the minimum: measured on the wind-tunnel twin, the minimum retains about 40 % more
-        θ and their NEES is 1.7× its dimension (overconfident); with the rule it is 0.99×.
-    prior_sigma : float
-        Prior 1-σ of every parameter without its own ``prior_std``, in units of its scale [-]
-        (default 1: a correction node is believed to be within about ±1 scale of nominal,
-        ±0.1 on C_L and ±0.01 on C_D with the default scales). It sets the width of the bands
-        in the directions the truncation froze.
-    prior_std : dict parameter -> float, optional
-        Prior 1-σ of named parameters in their own units (e.g. ``{pitch_offset = 0.3}`` [deg]),
-        replacing the parameter's default (``Parameter.prior_std``) or ``prior_sigma`` × scale.
-        A nuisance with a stated prior cannot absorb what the data do not show: under the MAP
-        estimator it moves only as far as the data outweigh that prior, and its variance enters
-        every prediction through the covariance.
-    prior_correlation : float
-        Correlation length of the smooth-field prior on the correction nodes, in node spacings
-        [-] (:meth:`calib.parametrizations.CorrectionField.node_correlation`): neighbouring
-        nodes of a block are correlated as samples of a field the chosen grid resolves
-        (ρ = exp(−½) = 0.61 at one spacing). It sets the prior covariance of the frozen
-        directions and the representation variance between the nodes; 0 gives independent
-        nodes and the roughest field between them. On the wind-tunnel twins (10 noise seeds
-        each, truth inside and outside the span) the marginal likelihood of the data, with
-        the prior scale at its type-II ML value, was highest at 1 among 0, 1, 1.5, 2 and 3.
-    retain : {"threshold", "all"}
-        ``"all"`` gives the full nodal ML estimate (every direction with s_i > 0).
-    max_retained : int, optional
-        Cap on the number of retained parameters.
-    optimizer : str
-        ``sqpmethod``, ``ipopt``, ``slsqp`` or ``trust-constr``.
-    noise : {"known", "ml", "repeats", "relative", "relative_ml"}
-        Where R comes from: the table's ``_sigma`` columns or ``sigma`` (known), the residuals
-        (ml, per channel), repeated records (repeats), a stated fraction of each channel's
-        RMS (relative, :mod:`calib.noise`), or that with one common factor estimated by
-        maximum likelihood from the calibrated fit's residuals with N − k degrees of
-        freedom (relative_ml: the stated fractions fix the channels' relative weights, the
-        data their overall level). With ``ml``, ``relative_sigma`` (if given) is the start
-        of the iteration instead of the nominal residual.
-    relative_sigma : dict channel-or-group -> float, optional
-        The fractions of ``noise = "relative"`` [-], e.g. ``{"torque": 0.03, "cn": 0.05}``
-        (``cn`` covers every ``cn@<r/R>`` channel).
-    sigma : dict channel -> float, optional
-        Absolute 1-σ noise per channel [channel unit]; overrides the table's σ.
-    cd_min : float or None
-        Lower bound on C_D at the correction nodes [-] (needs ``model.nominal_coefficients``).
-    max_relinearizations, max_iterations, max_noise_iterations : int
-        Most re-linearizations of the truncated estimator's retained set, Gauss–Newton iterations
-        of one estimate, and iterations between the noise estimate and the fit (``ml`` and
-        ``relative_ml`` noise).
-    tolerance : float
-        Relative cost decrease that ends a Gauss–Newton iteration.
-    stability_cosine : float
-        Principal-angle cosine above which two retained subspaces count as equal.
-    representation_error : bool
-        Add to the polar bands the variance of the true field between the nodes that the
-        hat functions cannot carry
-        (:meth:`calib.parametrizations.CorrectionField.representation_variance`).
-    scale_by_fit : bool
-        When χ² after exceeds its degrees of freedom (with noise ``known``, ``relative`` or
-        ``repeats``), multiply the covariance of the retained θ (noise and aliasing) by
-        χ²/(N − n_retained): the misfit left is evidence that the stated noise undercounts what
-        the data carry (the Birge ratio; Particle Data Group's scale factor). The frozen
-        directions' prior part is not scaled. With the ML noise models χ²/dof is 1 by
-        construction. Default true (measured in ``benchmarks/bench_coverage.py``, docs/user_guide/calibration.md).
-    curvature_samples : int
-        Prior draws of the frozen directions propagated through the model to the retained θ
-        (:func:`calib.identifiability.frozen_curvature_covariance`): where the model is not
-        linear over the prior's range, the frozen part of the truth biases the retained θ, and
-        this adds that bias's second moment to their covariance (not scaled by the fit). Costs
-        that many model evaluations per calibration; 0 leaves the term out (the report says so).
-    second_start : bool
-        With ``sigma_bar = "auto"`` and a stated noise (``known``, ``relative``, ``repeats``):
-        when the fit's χ² rejects the stated noise at the 1 % level, run the re-linearization
-        loop again from a first estimate with every direction the data determine better than the
-        prior (:func:`calib.truncation.prior_limit`) and keep the result whose cross-validated
-        criterion, each at its own final linearization, is lower by more than its standard error
-        (the fewer θ otherwise). The choice made from the nominal linearization can settle on few
-        θ because that linearization understates what a re-linearized fit with more θ achieves
-        (docs/user_guide/calibration.md). Costs a second loop only for such fits; the report says which start was kept.
-    prior_check : bool
-        Estimate the correction field's prior amplitude from the data and say whether the stated
-        prior is consistent with it (:mod:`calib.prior_check`; about six model Jacobians to the MAP
-        under the stated prior, and one on the fine grid). False skips it (the report says so);
-        the refits of a leave-out validation and the candidate fits of the discrepancy workflow
-        skip it, as their results serve predictions and comparisons only.
-    tightening : bool
-        Say, for each parameter that is not a correction node, which measurements would tighten its
-        σ most (another pitch line, points further into stall or towards runaway, a channel not
-        measured; :mod:`calib.tightening`): one model Jacobian per candidate group on the native BEM,
-        skipped for an FMU. The refits of a leave-out validation and the candidate fits of the
-        discrepancy workflow skip it.
-    identified_ratio : float
-        Verdict "identified" when posterior σ <= this × prior σ.
-    confounded_share : float
-        Verdict "confounded" for a non-field parameter sharing at least this fraction of its
-        information with the others.
-    band_confidence : float
-        Confidence level of the polar bands.
-    band_eta : tuple of float, optional
-        Spanwise positions of the polar bands (default: the η nodes).
-    """
-
-    estimator: str = "map"
-    sigma_bar: float | str = "auto"
-    prior_sigma: float = 1.0
-    prior_std: dict | None = None
-    prior_correlation: float = 1.0
-    cv_folds: int = 10
-    cv_one_se: bool = True
-    retain: str = "threshold"
-    max_retained: int | None = None
-    optimizer: str = "sqpmethod"
-    noise: str = "known"
-    sigma: dict | None = None
-    relative_sigma: dict | None = None
-    cd_min: float | None = 0.0
-    max_relinearizations: int = 6
-    max_iterations: int = 30
-    max_noise_iterations: int = 10
-    tolerance: float = 1e-9
-    stability_cosine: float = 0.98
-    representation_error: bool = True
-    scale_by_fit: bool = True
-    curvature_samples: int = 32
-    second_start: bool = True
-    prior_check: bool = True
-    tightening: bool = True
-    identified_ratio: float = 0.5
-    confounded_share: float = 0.75
-    band_confidence: float = 0.95
-    band_eta: tuple | None = None
-    verbose: bool = False
-
-    def validate(self, source: str = "CalibrationSettings", prefix: str = "") -> "CalibrationSettings":
-        """Check every setting; errors name ``source`` and the key as ``prefix + name``
-        (e.g. ``calibration.noise`` for a workflow file)."""
-        def bad(message, key):
-            raise InputError(message, source, field=f"{prefix}{key}")
-
-        if self.noise not in NOISE_MODES:
-            bad(f"unknown noise mode {self.noise!r}; valid: {', '.join(NOISE_MODES)}", "noise")
-        if self.estimator not in ESTIMATORS:
-            bad(f"unknown estimator {self.estimator!r}; valid: {', '.join(ESTIMATORS)}", "estimator")
-        if self.retain not in RETAIN_MODES:
-            bad(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", "retain")
-        if isinstance(self.sigma_bar, str) and self.sigma_bar != "auto" or \
-                not isinstance(self.sigma_bar, str) and not self.sigma_bar > 0:
-            bad(f"must be \"auto\" or a number > 0, got {self.sigma_bar!r}", "sigma_bar")
-        for key in ("prior_sigma", "tolerance"):
-            if not getattr(self, key) > 0:
-                bad(f"must be > 0, got {getattr(self, key)!r}", key)
-        for key in ("band_confidence", "stability_cosine", "identified_ratio", "confounded_share"):
-            if not 0 < getattr(self, key) <= 1:
-                bad(f"must be in (0, 1], got {getattr(self, key)!r}", key)
-        if not self.prior_correlation >= 0:
-            bad(f"must be >= 0 (node spacings), got {self.prior_correlation!r}", "prior_correlation")
-        if isinstance(self.curvature_samples, bool) or not isinstance(self.curvature_samples, int) \
-                or self.curvature_samples < 0:
-            bad(f"must be an integer >= 0 (prior draws; 0 leaves the term out), got {self.curvature_samples!r}",
-                "curvature_samples")
-        for key in ("representation_error", "scale_by_fit", "cv_one_se", "second_start", "prior_check", "tightening"):
-            if not isinstance(getattr(self, key), bool):
-                bad(f"must be true or false, got {getattr(self, key)!r}", key)
-        for key in ("max_relinearizations", "max_iterations", "max_noise_iterations", "cv_folds"):
-            if not getattr(self, key) >= 1:
-                bad(f"must be >= 1, got {getattr(self, key)!r}", key)
-        if self.max_retained is not None and self.max_retained < 0:
-            bad(f"must be >= 0, got {self.max_retained!r}", "max_retained")
-        for c, v in (self.prior_std or {}).items():
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0 or not np.isfinite(v):
-                bad(f"must be a number > 0 (prior 1-σ in the parameter's unit), got {v!r}", f"prior_std.{c}")
-        if self.sigma is not None:
-            for c, v in self.sigma.items():
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-                    bad(f"must be a number > 0 (absolute 1-σ in SI units), got {v!r}", f"sigma.{c}")
-        if self.noise in ("relative", "relative_ml") and not self.relative_sigma:
-            bad(f"noise = \"{self.noise}\" needs relative_sigma = {{channel or group = fraction, ...}} "
-                "(e.g. {torque = 0.03, thrust = 0.03, cn = 0.05})", "relative_sigma")
-        for c, v in (self.relative_sigma or {}).items():
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 10:
-                bad(f"must be a fraction > 0 (of the channel's RMS), got {v!r}", f"relative_sigma.{c}")
-        try:
-            get_optimizer(self.optimizer)
-        except InputError as exc:
-            bad(exc.message, "optimizer")
-        return self
-
 
 def _progress_printer(rec: dict) -> None:
     keys = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rec.items()
