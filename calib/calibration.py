@@ -56,13 +56,14 @@ from calib.calibration_settings import ESTIMATORS, NOISE_MODES, CalibrationSetti
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate
 from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, fold_dominated_directions,
-                                   frozen_aware_covariance, frozen_curvature_covariance, observability,
+                                   frozen_curvature_covariance, observability,
                                    parameter_verdicts, subspace_cosines, svd_analysis)
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.parametrizations.aliasing import FineSensitivities
 from calib.prior_check import psd_sqrt
 from calib.result import CalibrationResult
 from calib.truncation import AutoTruncation
+from calib.uncertainty import truncated_covariance
 from calib.types import nominal_vector
 
 __all__ = ["CalibrationSettings", "Calibrator", "calibrate", "NOISE_MODES", "ESTIMATORS"]
@@ -622,22 +623,14 @@ class Calibrator:
         ratio = np.diag(cov) / svd.sigma_theta[r] ** 2
         return cov, {**info, "variance_ratio_mean": float(np.mean(ratio)), "variance_ratio_max": float(np.max(ratio))}
 
-    def _fold_directions(self, lin, svd, multiple_roots, cov_ret, prior_cov):
+    def _fold_directions(self, lin, svd, multiple_roots) -> list:
         """Retained directions that points with several roots of the BEM equations determine
-        (:func:`calib.identifiability.fold_dominated_directions`): their stated covariance gets
-        the prior variance along them added, so their σ is at least the prior's. Returns the
-        covariance and one record per (point, direction) with the σ along it before and after
-        [scale units]."""
+        (:func:`calib.identifiability.fold_dominated_directions`): one record per (point, direction);
+        their stated covariance gets the prior variance along them added (:func:`calib.uncertainty.fold_inflation`),
+        so their σ is at least the prior's."""
         Vr = svd.V[:, svd.retained]
-        fold = fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
+        return fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
                                          multiple_roots, lin.ok)
-        sigmas = {}
-        for theta in sorted({d["theta"] for d in fold}):
-            v = Vr[:, theta - 1]
-            before = float(np.sqrt(max(v @ cov_ret @ v, 0.0)))
-            cov_ret = cov_ret + float(v @ prior_cov @ v) * np.outer(v, v)
-            sigmas[theta] = {"sigma_before": before, "sigma_after": float(np.sqrt(max(v @ cov_ret @ v, 0.0)))}
-        return cov_ret, [{**d, **sigmas[d["theta"]]} for d in fold]
 
     def _tightening(self, problem, lin, cov_p, radius) -> dict:
         """Which measurements would tighten the σ of each parameter that is not a correction node
@@ -700,7 +693,6 @@ class Calibrator:
         # Cov(θ̂) = diag(σ(θ)²) exactly, without inverting a possibly ill-conditioned matrix
         cov_theta = np.diag(svd.sigma_theta[svd.retained] ** 2)
         prior_cov = self._prior_cov_scaled()
-        cov_ret, cov_frz = frozen_aware_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov)
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
         alias, alias_misfit, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
@@ -708,19 +700,16 @@ class Calibrator:
             prior_check = self._prior_check(problem, lin, fine)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a check, not the result
             prior_check = {"failed": f"{type(exc).__name__}: {exc}"}
-        if alias is not None:  # the field between the nodes, taken up by the retained θ
-            Vr = svd.V[:, svd.retained]
-            cov_ret = cov_ret + Vr @ alias @ Vr.T
         fit_scale = self._fit_scale(lin, svd)
-        cov_ret, cov_theta = cov_ret * fit_scale, cov_theta * fit_scale
+        cov_theta = cov_theta * fit_scale
         curvature_cov, curvature = self._curvature(problem, lin, svd, prior_cov)
-        if curvature_cov is not None:  # the frozen part of the truth, through the model's curvature
-            Vr = svd.V[:, svd.retained]
-            cov_ret = cov_ret + Vr @ curvature_cov @ Vr.T
         multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
-        cov_ret, fold = self._fold_directions(lin, svd, multiple_roots, cov_ret, prior_cov)
+        fold = self._fold_directions(lin, svd, multiple_roots)
+        parts, sigmas = truncated_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov, alias, fit_scale,
+                                             curvature_cov, [d["theta"] for d in fold])
+        fold = [{**d, **sigmas[d["theta"]]} for d in fold]
         D = np.outer(self.scale, self.scale)
-        return self._result(problem, nominal, lin, svd, (cov_ret + cov_frz) * D, cov_frz * D, cov_theta,
+        return self._result(problem, nominal, lin, svd, parts.total * D, parts.frozen * D, cov_theta,
                             B.T @ problem.scaled(lin.p), observability(svd.V, svd.retained), status, message, wall,
                             fit_scale=fit_scale, aliasing_chi2=alias_misfit, aliasing_note=alias_note,
                             curvature=curvature, prior_check=prior_check, multiple_roots=multiple_roots,
