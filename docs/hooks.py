@@ -130,8 +130,8 @@ RENDERERS = {"prediction": lambda load: _prediction_tables(load("prediction")),
 
 def _published_markdown(data: dict) -> str:
     """A benchmark's own tables (``publish(..., markdown=...)``) under its run's date, commit and command."""
-    return (f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`.*\n\n"
-            + data["markdown"].strip() + "\n")
+    body = re.sub(r"^## ", "### ", data["markdown"].strip(), flags=re.M)    # the page owns the sections
+    return f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`.*\n\n" + body + "\n"
 
 
 def _bench(markdown: str, config) -> str:
