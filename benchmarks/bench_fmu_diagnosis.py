@@ -124,7 +124,7 @@ def truth_values(variant: str, values: dict, folder: Path):
 
 def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures."""
-    from calib.diagnose import run_diagnose
+    from calib.diagnosis.command import run_diagnose
     from calib.measurements import Measurements
     t_start = time.perf_counter()
     WORK.mkdir(parents=True, exist_ok=True)

@@ -32,8 +32,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from calib.campaign import ValidationSettings, leave_one_out, named_effect_specs  # noqa: E402
-from calib.discrepancy import diagnose  # noqa: E402
+from calib.diagnosis.in_workflow import named_effect_specs  # noqa: E402
+from calib.validation import ValidationSettings, leave_one_out  # noqa: E402
+from calib.diagnosis.core import diagnose  # noqa: E402
 from calib.words import p_text  # noqa: E402
 from calib.measurements import read_measurements  # noqa: E402
 from calib.workflow import load_workflow, prepare, run_workflow  # noqa: E402
@@ -58,7 +59,7 @@ def workflow_figures(out_dir: str) -> dict:
 
     import numpy as np
 
-    from calib.campaign import INFORMED_LEVEL
+    from calib.validation import INFORMED_LEVEL
     from calib.result import load_result
 
     t0 = time.perf_counter()

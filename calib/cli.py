@@ -20,7 +20,7 @@ def _demo(args) -> int:
         summary = run_demo(args.out, args.rotor)
         diag = None
         if args.rotor == "nrel5mw" and not args.no_diagnosis:
-            from calib.diagnose import run_diagnose
+            from calib.diagnosis.command import run_diagnose
             campaign = Path(__file__).resolve().parent / "data" / "demo_campaign" / "nrel5mw_campaign.csv"
             log.info(f"[calib demo] discrepancy workflow on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
                      f"effect in the data)")
@@ -43,7 +43,7 @@ def _predict(args) -> int:
 
 
 def _diagnose(args) -> int:
-    from calib.diagnose import diagnose_from_args
+    from calib.diagnosis.command import diagnose_from_args
     return diagnose_from_args(args)
 
 
@@ -118,7 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "shrink. Writes DIR/diagnosis.json and DIR/report.html; exits 0 whatever it finds.")
     p.add_argument("--rotor", default=None, help="embedded rotor name (see 'calib rotors') or a rotor file: .fst "
                    "(OpenFAST deck), .yaml (windIO), .dat (AeroDyn15 main file); or give [rotor] in --config")
-    from calib.diagnose import add_diagnose_arguments
+    from calib.diagnosis.command import add_diagnose_arguments
     add_diagnose_arguments(p)
     p.set_defaults(func=_diagnose)
     p = sub.add_parser("fmu", help="FMU tools (calib fmu build)",

@@ -1,7 +1,7 @@
 """Logging and progress of the ``calib`` commands.
 
 Every message goes through the standard :mod:`logging` package under the ``calib``
-logger (``calib.workflow``, ``calib.diagnose``, ``calib.history`` ...), so a program that
+logger (``calib.workflow``, ``calib.diagnosis.command``, ``calib.history`` ...), so a program that
 imports calib configures it as it likes. The commands (``calib run``, ``calib diagnose``,
 ``calib demo``) call :func:`command_logging`, which for the duration of the command
 

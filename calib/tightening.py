@@ -13,7 +13,7 @@ schedule: another pitch line over the measured tip-speed ratios, the measured pi
 further into stall (lower λ) or towards runaway (higher λ), and each channel the campaign did
 not measure at the measured points. Their noise is the campaign's: each channel's median
 relative σ (σ/|y|) where measured, else the median over the measured channels, on
-max(|y|, 0.1 max|y|) as in :mod:`calib.separation`, plus the variance the correction field the
+max(|y|, 0.1 max|y|) as in :mod:`calib.diagnosis.separation`, plus the variance the correction field the
 nodes do not carry gives those outputs (the prior's, beyond the nodes): a candidate in a region
 the field is free to explain informs a nuisance only through that freedom.
 

@@ -301,7 +301,7 @@ class WorkflowSetup:
     base_dir: str = "."
     yaw: float = 0.0
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
-    validation: object = None             # calib.campaign.ValidationSettings of [validation]
+    validation: object = None             # calib.validation.ValidationSettings of [validation]
     strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
     rotor_files: dict | None = None       # provenance of the rotor files read (calib.rotor.sources.file_provenance)
     origins: dict = dataclasses.field(default_factory=dict)   # set-up key -> where its value came from
@@ -477,7 +477,8 @@ def prepare(cfg: dict) -> WorkflowSetup:
             notes.append("[rotor] is not used by the FMU (it carries its own rotor); only stated")
     elif not isinstance(g["alpha_nodes_deg"], str):
         setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
-    from calib.campaign import ValidationSettings, diagnosis_settings
+    from calib.diagnosis.in_workflow import diagnosis_settings
+    from calib.validation import ValidationSettings
     if "diagnosis" in cfg:
         if fmu_table is not None:
             raise InputError("a workflow's [diagnosis] runs on the native BEM only; remove [diagnosis], use "
@@ -658,11 +659,12 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
     echo(f"[calib run] {cfg['name']}: {setup.model_name()}, {meas.n_points} operating points, "
          f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
 
-    from calib import campaign
+    from calib import validation
+    from calib.diagnosis import in_workflow
 
     effects, diag, validations = [], None, {}
     if setup.diagnosis is not None:   # the discrepancy workflow first; its named effects join every stage
-        effects, diag = campaign.run_diagnosis(setup, meas, grid, out, executor, echo, hist)
+        effects, diag = in_workflow.run_diagnosis(setup, meas, grid, out, executor, echo, hist)
     outcomes = []
     for k, stage in enumerate(cfg["stages"]):
         name = stage["name"]
@@ -702,10 +704,10 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         if truth_p is not None:
             res.checks.update(truth_checks(model, res, cfg["truth"]))
         if diag is not None:
-            res.checks["discrepancy workflow"] = campaign.diagnosis_sentence(diag)
+            res.checks["discrepancy workflow"] = in_workflow.diagnosis_sentence(diag)
         if setup.validation is not None:
             kind = "leave-one-out" if setup.validation.split == "one" else "band split"
-            val = campaign.leave_one_out(
+            val = validation.leave_one_out(
                 lambda _c=tuple(stage["channels"]): setup.model(grid, list(_c), executor, effects),
                 meas.select_channels(stage["channels"]), st, setup.validation,
                 progress=lambda line, _n=name, _k=kind: echo(f"[calib run] {_n}: {_k}: {line}"))
@@ -716,7 +718,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         t_rep = time.perf_counter()
         res.save(stage_dir)
         if name in validations:
-            campaign.write_validation(validations[name], stage_dir)
+            validation.write_validation(validations[name], stage_dir)
         truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if truth_p is not None else None
         figs = write_figures(res, stage_dir, truth=truth, progress=lambda line: echo(f"[calib run] {line}"))
         t_rep = time.perf_counter() - t_rep
@@ -742,11 +744,11 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         for key, chans, what in (("loads_vs_wind_speed", rotor_ch, "rotor loads"),
                                  ("cn_vs_wind_speed", span_ch, "normal-force coefficient at the pressure taps")):
             if chans:
-                fig = campaign.campaign_figure(setup, meas, grid, outcomes, diag, validations, effects, chans,
+                fig = validation.campaign_figure(setup, meas, grid, outcomes, diag, validations, effects, chans,
                                                f"{cfg['name']}: {what}, measured and modelled", executor)
                 extra[key] = save_figure(fig, out, key)
         for k, o in enumerate(outcomes):
-            fig = campaign.informed_eigenshapes(o.result)
+            fig = validation.informed_eigenshapes(o.result)
             if fig is not None:
                 extra[f"informed_eigenshapes_stage{k + 1}"] = save_figure(fig, out, f"informed_eigenshapes_stage{k + 1}")
     intro = cfg.get("description", "")
@@ -754,7 +756,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
                  "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
     report = write_report(out / "report.html", title=f"calib: {cfg['name']}",
-                          sections=[statement_html(set_up)] + ([campaign.section_html(diag, validations)]
+                          sections=[statement_html(set_up)] + ([validation.section_html(diag, validations)]
                                                                if (diag or validations) else []),
                           results={o.name: o.result for o in outcomes},
                           figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra,

@@ -95,7 +95,7 @@ def test_negative_drag_is_reported_and_the_correction_field_cannot_cause_it():
     positive drag); the correction field itself holds the drag at its floor, so the same
     downward field evaluates."""
     from calib.corrections import CorrectionGrid
-    from calib.effects import CorrectionField
+    from calib.effects import CorrectionFieldEffect
     from calib.effects.base import Effect
 
     class DragSink(Effect):
@@ -114,7 +114,7 @@ def test_negative_drag_is_reported_and_the_correction_field_cannot_cause_it():
     grid = CorrectionGrid([-10.0, 0.0, 10.0, 20.0], [0.0, 0.5, 1.0])
     p = np.zeros(grid.n_params)
     p[grid.n_lift:] = -0.5            # would drive C_D negative everywhere without the floor
-    res = solve_bem(rotor, cond, effects=[CorrectionField(grid)], p=p)
+    res = solve_bem(rotor, cond, effects=[CorrectionFieldEffect(grid)], p=p)
     assert res.status[0] == Status.CONVERGED, res.messages[0]
 
 

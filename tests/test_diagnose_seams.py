@@ -11,9 +11,9 @@ import json
 import numpy as np
 import pytest
 
-from calib import discrepancy
+from calib.diagnosis import core as discrepancy
 from calib.cli import main as cli_main
-from calib.discrepancy import CandidateFit
+from calib.diagnosis.core import CandidateFit
 from calib.effects import EFFECTS, make_effect
 from calib.errors import InputError, ModelError
 
@@ -233,7 +233,7 @@ def test_diagnosis_channels_restrict_the_diagnosis(tmp_path, lift_data, capsys):
 def test_fluid_density_fills_a_table_without_air_density(tmp_path, lift_data, monkeypatch):
     """As in ``calib run``: ``[fluid] density`` is the air density of points whose table has no
     ``air_density`` column (diagnose read 1.225 kg/m^3 whatever the config said)."""
-    import calib.diagnose
+    import calib.diagnosis.command
 
     lines = [ln.split(",") for ln in lift_data.read_text().splitlines() if not ln.startswith("#")]
     keep = [j for j, h in enumerate(lines[0]) if not h.startswith("air_density")]
@@ -249,11 +249,11 @@ def test_fluid_density_fills_a_table_without_air_density(tmp_path, lift_data, mo
         seen["density"] = np.asarray(meas.conditions.air_density, float)
         raise Stop
 
-    monkeypatch.setattr(calib.diagnose, "diagnose", capture)
+    monkeypatch.setattr(calib.diagnosis.command, "diagnose", capture)
     cfg = tmp_path / "c.toml"
     cfg.write_text(CONFIG + "[fluid]\ndensity = 1.1\n")
     with pytest.raises(Stop):
-        calib.diagnose.run_diagnose("nrel5mw", str(data), str(tmp_path / "out"), str(cfg), printer=lambda s: None)
+        calib.diagnosis.command.run_diagnose("nrel5mw", str(data), str(tmp_path / "out"), str(cfg), printer=lambda s: None)
     np.testing.assert_allclose(seen["density"], 1.1, rtol=1e-12)
 
 
@@ -274,7 +274,7 @@ def test_diagnose_states_the_set_up_in_force(tmp_path, lift_data):
 
 def test_a_failing_candidate_fit_leaves_the_others_compared(tmp_path, lift_data, monkeypatch):
     """One candidate whose fit raises is left out with a note; the round still names from the rest."""
-    import calib.discrepancy as D
+    import calib.diagnosis.core as D
     from calib.errors import ModelError
 
     real = D.Calibrator

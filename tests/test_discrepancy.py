@@ -16,7 +16,7 @@ from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings
 from calib.cli import main as cli_main
 from calib.corrections import CorrectionGrid
-from calib.discrepancy import DiagnosisSettings, diagnose
+from calib.diagnosis.core import DiagnosisSettings, diagnose
 from calib.effects import make_effect
 from calib.errors import InputError
 from calib.measurements import synthesize
@@ -231,7 +231,7 @@ def test_a_nominal_model_that_passes_the_global_test_gets_no_effect():
 def test_a_recalibration_that_ends_above_its_start_is_not_kept(monkeypatch):
     """The nominal field is inside the recalibration's search space: a recalibration that ends with
     a larger χ² than the model with the named effect (forced here) is rejected with a note."""
-    import calib.discrepancy as D
+    import calib.diagnosis.core as D
 
     real = D.Calibrator
 
@@ -257,7 +257,7 @@ def test_a_recalibration_that_ends_above_its_start_is_not_kept(monkeypatch):
     (-0.03, 0.0, 0.03, True, "-3 % power at 8 m/s"),
 ])
 def test_effect_size_against_the_model_form_tolerance(change, tolerance, size, exceeds, text):
-    from calib.discrepancy import effect_size
+    from calib.diagnosis.core import effect_size
 
     base = np.array([[1.0e6, 5.0e5], [2.0e6, 6.0e5], [1.0e3, 7.0e5]])    # the last power is below 10 % of the largest
     values = base.copy()
@@ -332,7 +332,7 @@ class _ProductModel:
 def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again_away_from_it():
     """Gauss-Newton cannot leave a point where every derivative vanishes: the candidate fit ends
     on its start, is started again one scale away, and the second start (kept) finds the truth."""
-    from calib.discrepancy import _fit_task, away_start
+    from calib.diagnosis.core import _fit_task, away_start
     model = _ProductModel()
     J = model.jacobian(np.zeros(2), campaign(load_rotor("nrel5mw")))[1]
     assert np.all(J == 0.0)
@@ -355,7 +355,7 @@ def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again
 
 def _namer(monkeypatch, ambiguity_pattern=0.1):
     """A naming step with nothing but settings (for the verdict rules alone)."""
-    from calib import discrepancy as D
+    from calib.diagnosis import core as D
     monkeypatch.setattr(D, "_separation_of", lambda namer, a, b: {"text": f"separate {a.effect} from {b.effect}"})
 
     class Family:
@@ -367,7 +367,7 @@ def _namer(monkeypatch, ambiguity_pattern=0.1):
 
 
 def _fit(name, bic, agreement):
-    from calib.discrepancy import CandidateFit
+    from calib.diagnosis.core import CandidateFit
     return CandidateFit(name, [], bic - 2.0, 1, -0.5 * bic, bic, 100.0 - bic, 1e-9, True, pattern_agreement=agreement,
                         status="converged", effect=name, effect_text="+3 % power")
 
@@ -392,7 +392,7 @@ def test_two_candidates_equal_by_bic_are_told_apart_by_their_pattern_or_called_a
 
 
 def test_the_separating_probe_is_where_the_two_predictions_differ_most_against_the_noise():
-    from calib.separation import probe_conditions, separating_probes
+    from calib.diagnosis.separation import probe_conditions, separating_probes
     measured = OperatingConditions(np.array([8.0, 10.0]), np.array([10.0, 12.0]), np.array([0.0, 0.0]))
     probes = probe_conditions(measured, 63.0)
     lam = probes.tip_speed_ratio(63.0)

@@ -63,7 +63,7 @@ def test_each_command_speaks_under_its_own_prefix(tmp_path):
     never as ``[calib run]`` (the committed CCBlade control, rigid set-up)."""
     import logging
 
-    from calib.diagnose import run_diagnose
+    from calib.diagnosis.command import run_diagnose
     from calib.logs import command_logging
 
     data = ROOT / "tests" / "data" / "oof"
@@ -122,8 +122,8 @@ def test_every_setting_is_documented_where_the_reference_is_generated_from():
     field without a description would reach the page as "(undocumented)"."""
     from calib.bem import BemSettings
     from calib.calibration import CalibrationSettings
-    from calib.campaign import ValidationSettings
-    from calib.discrepancy import DiagnosisSettings
+    from calib.validation import ValidationSettings
+    from calib.diagnosis.core import DiagnosisSettings
     from calib.settings_doc import parameter_docs, settings_markdown, undocumented_fields
 
     for cls in (CalibrationSettings, BemSettings, DiagnosisSettings, ValidationSettings):

@@ -49,7 +49,7 @@ def test_a_calibrated_twin_flags_its_extrapolations_in_the_prediction_and_the_cs
 def test_a_band_split_calibrates_on_one_band_and_predicts_the_other_with_the_nominal_beside_it():
     import pytest
 
-    from calib.campaign import ValidationSettings, leave_one_out
+    from calib.validation import ValidationSettings, leave_one_out
     from calib.errors import InputError
     model = TwinModel(channels=("power", "thrust"))
     p_true = nominal_vector(model.parameters)

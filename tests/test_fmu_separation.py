@@ -8,7 +8,7 @@ output its mapping maps, name a load on one blade (its root moment, its spanwise
 
 import json
 
-from calib.diagnose import run_diagnose
+from calib.diagnosis.command import run_diagnose
 from test_resume import FMU_CONFIG, fmu_campaign
 
 CHANNELS = ["power", "thrust"]

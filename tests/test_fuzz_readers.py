@@ -715,7 +715,7 @@ DIAGNOSE_BYTES = _diagnose_seeds()
 
 
 class _Prepared(Exception):
-    """The configuration passed every check of calib.diagnose; the model set-up is not run here."""
+    """The configuration passed every check of calib.diagnosis.command; the model set-up is not run here."""
 
 
 @pytest.fixture(scope="module")
@@ -726,8 +726,8 @@ def diagnose_ready(work_dir):
 
 
 def _run_diagnose_checks(work_dir, data: bytes) -> None:
-    """calib.diagnose.run_diagnose up to the model set-up (prepare), which is not run here."""
-    from calib.diagnose import run_diagnose
+    """calib.diagnosis.command.run_diagnose up to the model set-up (prepare), which is not run here."""
+    from calib.diagnosis.command import run_diagnose
 
     path = work_dir / "diagnose_config.toml"
     path.write_bytes(data)
@@ -1140,8 +1140,8 @@ def test_mapping_setting_that_is_not_a_table_is_named(tmp_path):
 
 
 def test_diagnosis_table_of_the_wrong_type_is_named(tmp_path):
-    from calib.campaign import diagnosis_settings
-    from calib.discrepancy import DiagnosisSettings
+    from calib.diagnosis.in_workflow import diagnosis_settings
+    from calib.diagnosis.core import DiagnosisSettings
 
     with pytest.raises(InputError) as exc:
         DiagnosisSettings(significance=[1]).validate("c.toml", "diagnosis.")

@@ -1,5 +1,5 @@
 """Stated noise models (calib.noise, noise = "relative" / "relative_ml") and the workflow's
-[diagnosis] / [validation] tables (calib.campaign)."""
+[diagnosis] / [validation] tables (calib.validation)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.campaign import ValidationSettings, diagnosis_settings, leave_one_out
+from calib.diagnosis.in_workflow import diagnosis_settings
+from calib.validation import ValidationSettings, leave_one_out
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import synthesize

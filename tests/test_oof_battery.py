@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.diagnose import run_diagnose
+from calib.diagnosis.command import run_diagnose
 from calib.measurements import read_measurements
 
 ROOT = Path(__file__).resolve().parents[1]

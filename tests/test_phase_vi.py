@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.campaign import INFORMED_LEVEL as INFORMED   # s_i >= this: informed by the data (σ_θ <= 2 prior units)
+from calib.validation import INFORMED_LEVEL as INFORMED   # s_i >= this: informed by the data (σ_θ <= 2 prior units)
 from calib.result import load_result
 from calib.workflow import run_workflow
 

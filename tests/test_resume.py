@@ -299,7 +299,7 @@ def test_killed_fmu_diagnosis_resumes_to_the_uninterrupted_result(tmp_path):
     localization, then ``calib diagnose --resume DIR``: the same diagnosis, and no chunk of
     simulations the killed run completed is simulated again."""
     from calib.cli import main
-    from calib.diagnose import run_diagnose
+    from calib.diagnosis.command import run_diagnose
 
     config, data = fmu_campaign(tmp_path)
     full_dir, cut_dir = tmp_path / "full", tmp_path / "cut"

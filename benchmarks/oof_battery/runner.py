@@ -1,6 +1,6 @@
 """Runner of the out-of-family battery: calib's diagnosis on every data set, verdicts tabulated.
 
-For each (set-up, data set, seed) CSV of ``generate.py``, ``calib.diagnose.run_diagnose``
+For each (set-up, data set, seed) CSV of ``generate.py``, ``calib.diagnosis.command.run_diagnose``
 (the code of ``calib diagnose --rotor nrel5mw --data CSV --config config_<set-up>.toml --out
 DIR --no-history``) runs in one of at most two worker processes (each with one BLAS thread);
 its ``diagnosis.json`` gives the verdict. A record per diagnosis is appended to
@@ -69,7 +69,7 @@ def diagnose_job(job: dict) -> dict:
         ``chi2_per_dof_before``, ``p_before``, ``chi2_per_dof_with_effects``, ``failure``,
         ``seconds``; or ``error`` when the diagnosis raised.
     """
-    from calib.diagnose import run_diagnose
+    from calib.diagnosis.command import run_diagnose
 
     rec = {k: job[k] for k in ("setup", "data_set", "seed", "csv", "config")}
     rec["sha256"], rec["config_sha256"] = _sha256(job["csv"]), _sha256(job["config"])

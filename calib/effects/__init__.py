@@ -12,7 +12,7 @@ difference test of its derivatives and one fingerprint test (``tests/test_effect
 from __future__ import annotations
 
 from calib.effects.base import Effect
-from calib.effects.correction_field import CorrectionField
+from calib.effects.correction_field import CorrectionFieldEffect
 from calib.effects.leading_edge_erosion import LeadingEdgeErosion
 from calib.effects.lift_offset import LiftOffset
 from calib.effects.pitch_offset import PitchOffset
@@ -25,7 +25,7 @@ from calib.errors import InputError
 
 #: Registry name -> effect class.
 EFFECTS = {
-    "correction_field": CorrectionField,
+    "correction_field": CorrectionFieldEffect,
     "pitch_offset": PitchOffset,
     "wind_speed_scale": WindSpeedScale,
     "rotational_augmentation": RotationalAugmentation,
@@ -81,4 +81,4 @@ def describe_effects() -> list[dict]:
     return out
 
 
-__all__ = ["EFFECTS", "CorrectionField", "Effect", "describe_effects", "effect_from_spec", "make_effect"]
+__all__ = ["EFFECTS", "CorrectionFieldEffect", "Effect", "describe_effects", "effect_from_spec", "make_effect"]

@@ -34,8 +34,12 @@ def floor_drag(cd, cd0, cd_floor: float):
     return dl.where(dl.value(cd) >= dl.value(floor), cd, floor)
 
 
-class CorrectionField(Effect):
+class CorrectionFieldEffect(Effect):
     """Additive corrections of C_L and C_D on hat functions of (α, η) (polar stage).
+
+    One concept, three types: the nodes and hat functions are :class:`calib.corrections.CorrectionGrid`;
+    this class applies the field inside the BEM; the calibrator's view of the same field (layout,
+    eigenshapes, bounds, bands) is :class:`calib.parametrizations.correction_field.CorrectionField`.
 
     Parameters
     ----------

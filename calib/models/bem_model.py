@@ -14,7 +14,7 @@ from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemSettings, integration_weights, interior_stations, solve_bem
 from calib.corrections import CorrectionGrid
 from calib.effects import Effect, effect_from_spec, make_effect
-from calib.effects.correction_field import CorrectionField as CorrectionFieldEffect
+from calib.effects.correction_field import CorrectionFieldEffect
 from calib.errors import InputError
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.models.base import Capabilities

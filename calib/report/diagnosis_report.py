@@ -1,4 +1,4 @@
-"""Figures and the HTML report of a diagnosis (:func:`calib.discrepancy.diagnose`).
+"""Figures and the HTML report of a diagnosis (:func:`calib.diagnosis.core.diagnose`).
 
 - where the gap is: whitened residuals of each channel against tip-speed ratio (or wind
   speed), nominal / with the named effect(s) / after the recalibration;
@@ -7,7 +7,7 @@
 - how much the gap shrank: χ²/dof and per-channel RMS before and after.
 
 Every candidate's fit status is shown, and a fitted parameter at a bound
-(:func:`calib.discrepancy.bound_side`) is marked "at lower/upper bound"; a diagnosis that
+(:func:`calib.diagnosis.core.bound_side`) is marked "at lower/upper bound"; a diagnosis that
 stopped early (``Diagnosis.failure``) says so at the top of the page.
 """
 

@@ -1,4 +1,4 @@
-"""The discrepancy workflow on an FMU (:func:`calib.discrepancy.diagnose` with an :class:`FmuFamily`).
+"""The discrepancy workflow on an FMU (:func:`calib.diagnosis.core.diagnose` with an :class:`FmuFamily`).
 
 A vendor's FMU offers no effect library: what it lets the engineer change are the scalar
 parameters its mapping file maps (``[parameters]``: pitch offsets, a stall-delay strength,
@@ -7,7 +7,7 @@ parameters its mapping file maps (``[parameters]``: pitch offsets, a stall-delay
 - *localize* calibrates the FMU's correction field (the mapping must map one);
 - the *candidates* are the mapped scalar parameters, each fitted on its own on top of the
   parameters already named (which are fitted again with it, so the models stay nested and
-  the likelihood-ratio test of :mod:`calib.discrepancy` applies unchanged);
+  the likelihood-ratio test of :mod:`calib.diagnosis.core` applies unchanged);
 - *recalibrate* calibrates the correction field with the named parameters free.
 
 Everything else (χ² test, likelihood ratio, BIC weights, pattern agreement, ambiguity,
@@ -36,7 +36,7 @@ class MappedParameter:
 
 
 class FmuFamily:
-    """The models of a diagnosis on an FMU (the calls :func:`calib.discrepancy.diagnose` uses).
+    """The models of a diagnosis on an FMU (the calls :func:`calib.diagnosis.core.diagnose` uses).
 
     Parameters
     ----------

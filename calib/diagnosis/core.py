@@ -69,7 +69,7 @@ from calib.effects import EFFECTS, make_effect
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
 from calib.models.bem_model import BemModel
-from calib.separation import envelope_words, probe_conditions, separating_probes
+from calib.diagnosis.separation import envelope_words, probe_conditions, separating_probes
 from calib.types import CONDITION_FIELDS, OperatingConditions
 from calib.words import p_is
 
@@ -118,7 +118,7 @@ class DiagnosisSettings:
     ambiguity_pattern : float
         ... nor by their pattern when their agreements with the localized correction differ
         by less than this [-]; then the verdict is ``ambiguous``, with the measurement that
-        would separate them (:mod:`calib.separation`). When the patterns differ by more, the
+        would separate them (:mod:`calib.diagnosis.separation`). When the patterns differ by more, the
         candidate whose pattern agrees better is named.
     recalibrate : bool
         Re-run the correction-field calibration on top of the named effects.
@@ -504,7 +504,7 @@ class BemFamily:
     :data:`calib.effects.EFFECTS` switched into a :class:`~calib.models.bem_model.BemModel`.
 
     Every family offers the same few calls, so :func:`diagnose` runs unchanged on another
-    kind of model (:class:`calib.fmu_diagnosis.FmuFamily`).
+    kind of model (:class:`calib.diagnosis.fmu.FmuFamily`).
     """
 
     def __init__(self, rotor, channels, grid, settings, rotor_source=None):
@@ -547,7 +547,7 @@ class BemFamily:
 
     def probe_channels(self, measured: list) -> list:
         """Channels the separation probes predict: the measured ones, the rotor loads and the
-        normal force per length at four spanwise stations (:mod:`calib.separation`)."""
+        normal force per length at four spanwise stations (:mod:`calib.diagnosis.separation`)."""
         extra = ["power", "thrust", "root_flap_moment"] + [f"fn@{eta:.2f}" for eta in PROBE_STATIONS]
         return list(measured) + [c for c in extra if c not in measured]
 
@@ -596,7 +596,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         Called as the candidate fits of a round finish.
     family : optional
         The models to calibrate (default :class:`BemFamily` of ``rotor``, ``grid``,
-        ``settings``); e.g. :class:`calib.fmu_diagnosis.FmuFamily` for an FMU.
+        ``settings``); e.g. :class:`calib.diagnosis.fmu.FmuFamily` for an FMU.
     on_iteration : callable(dict), optional
         Receives every optimizer iteration record of the localization and the recalibration
         (:class:`~calib.calibration.Calibrator` records with ``run`` added).
@@ -900,7 +900,7 @@ class _Namer:
 
 
 def _separation_of(namer: "_Namer", a: CandidateFit, b: CandidateFit) -> dict:
-    """The measurement that would tell ``a`` from ``b`` (:mod:`calib.separation`): {"text", "probes",
+    """The measurement that would tell ``a`` from ``b`` (:mod:`calib.diagnosis.separation`): {"text", "probes",
     "envelope", "fingerprints"}; a probe that cannot be evaluated is said, never raised."""
     fam, meas = namer.family, namer.meas
     names = (a.effect, b.effect)

@@ -5,7 +5,7 @@ windIO, ``.dat`` AeroDyn15 main file), the measurement table and, optionally, th
 ``[rotor]``, ``[model]``, ``[fluid]``, ``[grid]``, ``[calibration]`` and ``[diagnosis]``
 tables of a workflow-style TOML file; checks the measurements' units against the nominal
 model as ``calib run`` does (:func:`calib.unit_check.apply_unit_check`: a unit factor that
-explains the data stops it unless ``--force``); runs :func:`calib.discrepancy.diagnose`;
+explains the data stops it unless ``--force``); runs :func:`calib.diagnosis.core.diagnose`;
 writes ``DIR/diagnosis.json`` and ``DIR/report.html``. A naming round or the recalibration
 that fails ends the diagnosis early: what the rounds before it found is still written, with
 the failure stated, and the command exits 0.
@@ -17,8 +17,8 @@ import json
 import logging
 from pathlib import Path
 
-from calib.campaign import diagnosis_settings
-from calib.discrepancy import diagnose
+from calib.diagnosis.in_workflow import diagnosis_settings
+from calib.diagnosis.core import diagnose
 from calib.errors import CalibError, InputError
 from calib.logs import add_output_arguments, say
 from calib.tomlfile import read_toml
@@ -28,7 +28,7 @@ from calib.setup_statement import statement, statement_lines
 CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis", "executor")
 DEFAULT_GRID = {"alpha_nodes_deg": "auto", "eta_nodes": [0.25, 0.5, 0.75, 1.0]}
 
-log = logging.getLogger("calib.diagnose")
+log = logging.getLogger("calib.diagnosis.command")
 
 
 def _rotor_table(rotor: str) -> dict:
@@ -69,7 +69,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         Also stop when the nominal model misses the data and no unit factor explains it
         (``--strict-units``, or ``[calibration] strict_units = true``).
     printer : callable(str), optional
-        Receives the progress lines (default: logged under ``calib.diagnose`` and printed
+        Receives the progress lines (default: logged under ``calib.diagnosis.command`` and printed
         unless a command console is active, :func:`calib.logs.say`).
     resume : bool
         Continue the killed diagnosis whose history is in ``out`` (:mod:`calib.history`);
@@ -232,7 +232,7 @@ def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool,
 
 def _fmu_family(setup, grid, channels: list, dset, src: str):
     """The FMU family of a ``[model] kind = "fmu"`` config and the executor its simulations run on."""
-    from calib.fmu_diagnosis import FmuFamily
+    from calib.diagnosis.fmu import FmuFamily
     from calib.models.from_config import executor_from_table, model_from_workflow
 
     executor = executor_from_table(setup.executor_table, src)

@@ -1,7 +1,7 @@
 """What measurement would tell two candidate effects apart, when the data cannot (docs/theory.md, Discrepancy workflow).
 
 When two candidates of different physics explain a campaign about equally (an ``ambiguous``
-verdict of :mod:`calib.discrepancy`), both fitted models agree where the campaign measured.
+verdict of :mod:`calib.diagnosis.core`), both fitted models agree where the campaign measured.
 Where they disagree is found by asking them: both are evaluated on *probes*, operating
 points around and beyond the measured envelope (other tip-speed ratios, pitch angles and
 wind speeds at the same tip-speed ratio, which change only the Reynolds number) and channels

@@ -58,7 +58,7 @@ def plot_campaign(channels, measured: np.ndarray, wind: np.ndarray, nominal: np.
     effect_label : str
     stages : mapping stage name -> (values, half_width), each (n_points, n_channels)
         Calibrated predictions with the half-width of their 95 % interval.
-    validations : mapping stage name -> calib.campaign.Validation, optional
+    validations : mapping stage name -> calib.validation.Validation, optional
         Leave-one-out predictions drawn as error bars (prediction intervals).
     units : mapping channel -> unit
 
