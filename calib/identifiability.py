@@ -434,7 +434,6 @@ def confounding(F: np.ndarray, prior_std: np.ndarray, parameters: Sequence[Param
         ``shared_information`` (with all others), ``shared_with_field``, ``region`` (text,
         "" without a field) and ``correlated_nodes`` (names).
     """
-    n = F.shape[0]
     A = F + np.diag(1.0 / prior_std ** 2)
     C = np.linalg.inv(A)
     field_idx = np.array([j for j, q in enumerate(parameters)
