@@ -23,7 +23,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.measurements import Measurements, _measurements_from_text
+from calib.measurements import Measurements
+from calib.measurements.reader import _measurements_from_text
 from calib.types import CONDITION_FIELDS, Status
 
 CONDITION_UNITS = {"wind_speed": "m/s", "rotor_speed": "rpm", "pitch": "deg", "air_density": "kg/m^3", "yaw": "deg"}

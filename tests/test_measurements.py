@@ -45,7 +45,7 @@ def test_round_trip_through_write_csv(tmp_path):
 def test_write_csv_puts_the_bytes_on_disk_before_the_rename(tmp_path, monkeypatch):
     """The temporary file is fsynced, complete, before ``os.replace`` makes it the file: a crash
     after the rename cannot leave an empty or half-written table."""
-    import calib.measurements as mm
+    import calib.measurements.data as mm      # where Measurements.write_csv lives
 
     m = read_measurements(write(tmp_path, GOOD), ["power", "thrust"])
     events = []

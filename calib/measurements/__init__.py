@@ -1,0 +1,18 @@
+"""Measurement tables: the contract's names and units, and the files they are read from.
+
+- :mod:`calib.measurements.data`    :class:`Measurements`, names and units, noise helpers, synthetic data;
+- :mod:`calib.measurements.reader`  :func:`read_measurements`: CSV and OpenFAST text output, with the
+  checks and notes its docstring lists.
+
+Everything public of both is importable from here.
+"""
+
+from calib.measurements.data import (CONDITION_DEFAULTS, MISSING_CELLS, REQUIRED_CONDITIONS, UNIT_ALIASES, UNITS,
+                                     Measurements, canonical_unit, check_channels, condition_groups, is_channel_name,
+                                     ml_noise, noise_from_repeats, normalize_name, quantity_of, sha256_of, si_unit,
+                                     synthesize)
+from calib.measurements.reader import read_measurements
+
+__all__ = ["CONDITION_DEFAULTS", "MISSING_CELLS", "REQUIRED_CONDITIONS", "UNITS", "UNIT_ALIASES", "Measurements",
+           "canonical_unit", "check_channels", "condition_groups", "is_channel_name", "ml_noise", "noise_from_repeats",
+           "normalize_name", "quantity_of", "read_measurements", "sha256_of", "si_unit", "synthesize"]

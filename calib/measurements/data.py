@@ -1,0 +1,415 @@
+"""Measurements in the contract's units: names, units and the measurement table of a campaign.
+
+:class:`Measurements` holds the operating conditions, the measured channels (SI units of the
+ForwardModel contract), their 1-σ where stated, and what was done on reading (``notes``). The
+names and units a file may use (:data:`UNITS`, :func:`quantity_of`, :func:`canonical_unit`) are
+defined here; reading files is :mod:`calib.measurements.reader`. Also: channel checks against a
+model, groups of repeated conditions, noise from repeats or by maximum likelihood, and synthetic
+measurements from a model (:func:`synthesize`).
+"""
+
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import os
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from calib.errors import InputError
+from calib.types import CONDITION_FIELDS, STANDARD_AIR_DENSITY, OperatingConditions
+
+REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
+CONDITION_DEFAULTS = {"air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
+
+#: Accepted units per physical quantity: unit -> factor to SI. The first unit of each
+#: quantity is the SI unit of the ForwardModel contract.
+UNITS: dict[str, dict[str, float]] = {
+    "speed": {"m/s": 1.0, "km/h": 1.0 / 3.6},
+    "rotor_speed": {"rpm": 1.0, "rad/s": 30.0 / np.pi},          # SI of the contract is rpm
+    "angle": {"deg": 1.0, "rad": 180.0 / np.pi},                  # contract angles are in deg
+    "density": {"kg/m^3": 1.0, "kg/m3": 1.0},
+    "power": {"W": 1.0, "kW": 1e3, "MW": 1e6},
+    "force": {"N": 1.0, "kN": 1e3, "MN": 1e6},
+    "moment": {"N m": 1.0, "Nm": 1.0, "kN m": 1e3, "kNm": 1e3, "MN m": 1e6, "MNm": 1e6},
+    "coefficient": {"-": 1.0, "1": 1.0},
+    "force_per_length": {"N/m": 1.0, "kN/m": 1e3},
+}
+
+#: Further spellings, per quantity: key after :func:`_unit_key` -> unit of :data:`UNITS`.
+UNIT_ALIASES: dict[str, dict[str, str]] = {
+    "speed": {"ms1": "m/s", "kmh": "km/h", "kph": "km/h", "km/hr": "km/h", "kmh1": "km/h"},
+    "rotor_speed": {"r/min": "rpm", "1/min": "rpm", "min1": "rpm", "rads1": "rad/s"},
+    "angle": {"°": "deg", "degree": "deg", "degrees": "deg", "radian": "rad", "radians": "rad"},
+    "density": {"kgm3": "kg/m^3", "kg/m³": "kg/m^3"},
+    "power": {},
+    "force": {},
+    "moment": {},
+    "coefficient": {"": "-"},
+    "force_per_length": {"nm1": "N/m", "knm1": "kN/m"},
+}
+
+#: Cell texts that mean "no value" (compared lower-case, after stripping blanks).
+MISSING_CELLS = frozenset({"", "nan", "na", "n/a", "#n/a", "null", "none"})
+
+#: the quantity of each fixed column name (the others: spanwise and per-blade patterns)
+FIXED_QUANTITY = {
+    "wind_speed": "speed", "rotor_speed": "rotor_speed", "pitch": "angle", "yaw": "angle",
+    "air_density": "density", "power": "power", "thrust": "force", "torque": "moment",
+    "root_flap_moment": "moment", "root_edge_moment": "moment", "hub_flap_moment": "moment",
+}
+_SPANWISE = re.compile(r"^(cn|ct|fn|ft)@([0-9]*\.?[0-9]+)$")
+
+
+
+def _unit_key(unit: str) -> str:
+    """Spelling-insensitive key of a unit: lower case, without blanks, '·', '*', '-', '.', '^'."""
+    u = unit.strip().lower()
+    if u in ("-", "1"):
+        return u
+    for ch in (" ", "·", "*", "-", ".", "^"):
+        u = u.replace(ch, "")
+    return u.replace("³", "3")
+
+
+def canonical_unit(quantity: str, unit: str) -> str | None:
+    """The :data:`UNITS` spelling of ``unit`` for ``quantity`` (``None`` if not accepted).
+
+    Matching ignores case, blanks and the separators ``·``, ``*``, ``-``, ``.`` and ``^``,
+    so ``kN-m`` (OpenFAST), ``KNm`` and ``kN·m`` all give ``kN m``.
+    """
+    key = _unit_key(unit)
+    for u in UNITS[quantity]:
+        if _unit_key(u) == key:
+            return u
+    return UNIT_ALIASES.get(quantity, {}).get(key)
+
+
+def normalize_name(name: str) -> str:
+    """Column name as the loader compares it: lower case, blanks and hyphens as ``_``."""
+    n = re.sub(r"[\s\-]+", "_", name.strip().lower())
+    return n.strip("_")
+
+
+_PER_BLADE = re.compile(r"^(root_flap_moment|root_edge_moment)_blade[1-3]$")
+# azimuth harmonics of a channel over whole revolutions: amplitude `<channel>_1p` (the channel's
+# quantity) and phase `<channel>_1p_phase` (an angle), orders 1, 2, 3 (calib.fmu.model)
+_HARMONIC = re.compile(r"^(?P<base>.+)_(?P<order>[123])p(?P<phase>_phase)?$")
+
+
+def quantity_of(column: str) -> str | None:
+    """Physical quantity of a column name (``None`` if unknown).
+
+    Known: the conditions, the hub channels, per-blade root moments
+    ``root_flap_moment_blade1`` .. ``_blade3``, spanwise ``<q>@<r/R>``, azimuth harmonics
+    of any of these channels (``root_flap_moment_1p`` has the channel's quantity,
+    ``root_flap_moment_1p_phase`` is an angle), and ``<name>_sigma`` of each.
+    """
+    base = column[:-6] if column.endswith("_sigma") else column
+    quantity = _channel_quantity(base)
+    if quantity is not None:
+        return quantity
+    h = _HARMONIC.match(base)
+    if h and h.group("base") not in CONDITION_FIELDS:
+        # a harmonic of a channel, not of a harmonic: no recursion on names like power_1p_1p_1p...
+        quantity = _channel_quantity(h.group("base"))
+        if quantity is not None:
+            return "angle" if h.group("phase") else quantity
+    return None
+
+
+def _channel_quantity(name: str) -> str | None:
+    """Quantity of a condition, hub channel, per-blade moment or spanwise channel (no harmonics, no σ)."""
+    if name in FIXED_QUANTITY:
+        return FIXED_QUANTITY[name]
+    if _PER_BLADE.match(name):
+        return "moment"
+    m = _SPANWISE.match(name)
+    if m:
+        return "coefficient" if m.group(1) in ("cn", "ct") else "force_per_length"
+    return None
+
+
+def si_unit(quantity: str) -> str:
+    """The SI unit of a quantity in the ForwardModel contract (``rpm`` and ``deg`` included)."""
+    return next(iter(UNITS[quantity]))
+
+
+def is_channel_name(name: str) -> bool:
+    """True for a known output-channel name (hub loads or spanwise ``q@r/R``)."""
+    return name not in CONDITION_FIELDS and quantity_of(name) is not None and not name.endswith("_sigma")
+
+
+def sha256_of(path: str | Path) -> str:
+    """SHA-256 hex digest of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 16), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """Measured outputs at a batch of operating points.
+
+    Attributes
+    ----------
+    conditions : OperatingConditions
+        n_points operating conditions.
+    channels : tuple of str
+        Names of the measured channels, length n_channels.
+    values : ndarray, shape (n_points, n_channels)
+        Measured values in SI units of the channels.
+    sigma : ndarray, shape (n_points, n_channels), or None
+        1-σ noise of each value (same units), when known.
+    source : str
+        File it came from, or a description (``"synthetic"``).
+    sha256 : str
+        SHA-256 of the file (empty for in-memory data).
+    metadata : dict
+        Free-form; :func:`read_measurements` stores ``units`` (column -> unit as declared in
+        the header or the units row, in :data:`UNITS` spelling, ``None`` where none was given),
+        ``delimiter``, ``decimal_comma``, ``units_row`` (its line, or ``None``), ``format``
+        (``"csv"`` or ``"openfast"``), ``lines`` (file line of each point; of the first averaged
+        row for an averaged time series) and, for OpenFAST output, ``openfast_channels`` (calib
+        name -> OpenFAST name) and, when averaged, ``time_window`` [s] and ``time_rows``.
+    notes : tuple of str
+        What the reader did that a user should know (delimiter detected, columns
+        ignored, rows dropped ...), one sentence each.
+    """
+
+    conditions: OperatingConditions
+    channels: tuple[str, ...]
+    values: np.ndarray
+    sigma: np.ndarray | None = None
+    source: str = "memory"
+    sha256: str = ""
+    metadata: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        v = np.asarray(self.values, dtype=float)
+        if v.ndim == 1:
+            v = v[:, None]
+        object.__setattr__(self, "values", v)
+        object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        if v.shape != (len(self.conditions), len(self.channels)):
+            raise InputError(f"values have shape {v.shape}, expected "
+                             f"({len(self.conditions)}, {len(self.channels)})", self.source)
+        if self.sigma is not None:
+            s = np.broadcast_to(np.asarray(self.sigma, dtype=float), v.shape).copy()
+            bad = np.argwhere(~(s > 0))
+            if bad.size:
+                k, c = bad[0]
+                raise InputError(f"noise sigma must be > 0, got {s[k, c]!r} (row {k + 1})",
+                                 self.source, field=f"{self.channels[c]}_sigma")
+            object.__setattr__(self, "sigma", s)
+
+    @property
+    def n_points(self) -> int:
+        return len(self.conditions)
+
+    def channel(self, name: str) -> np.ndarray:
+        """Values of one channel, shape (n_points,)."""
+        if name not in self.channels:
+            raise KeyError(f"no channel {name!r}; measured channels are: {', '.join(self.channels)}")
+        return self.values[:, self.channels.index(name)]
+
+    @classmethod
+    def from_dataframe(cls, df, channels: Sequence[str] | None = None, **options) -> "Measurements":
+        """Measurements from a pandas DataFrame, with the checks of the CSV reader
+        (:func:`calib.frames.measurements_from_dataframe`: ``units=``, ``source=`` ...)."""
+        from calib.frames import measurements_from_dataframe
+        return measurements_from_dataframe(df, channels, **options)
+
+    def select_channels(self, names: Sequence[str]) -> "Measurements":
+        """A copy restricted to ``names`` (in that order); notes and metadata are kept."""
+        missing = [n for n in names if n not in self.channels]
+        if missing:
+            raise InputError(f"channel(s) {', '.join(missing)} not measured; measured channels are: "
+                             f"{', '.join(self.channels)}", self.source, field=missing[0])
+        idx = [self.channels.index(n) for n in names]
+        return replace(self, channels=tuple(names), values=self.values[:, idx],
+                       sigma=None if self.sigma is None else self.sigma[:, idx])
+
+    def with_sigma(self, sigma) -> "Measurements":
+        """A copy with noise ``sigma`` (scalar, (n_channels,) or (n_points, n_channels))."""
+        s = np.broadcast_to(np.asarray(sigma, dtype=float), self.values.shape).copy()
+        return replace(self, sigma=s)
+
+    def write_csv(self, path: str | Path) -> Path:
+        """Write the table as CSV in SI units, each column header with its unit.
+
+        ``_sigma`` columns are written when the noise is known. The source and the
+        :attr:`notes` are written as ``#`` comment lines above the header (reading the
+        file back gives fresh notes about the written file). The file is written to a
+        temporary name and renamed, so an interruption never leaves a truncated table.
+        """
+        path = Path(path)
+
+        def header(name: str) -> str:
+            q = quantity_of(name)
+            return f"{name} [{si_unit(q)}]" if q is not None else name
+
+        cols = list(CONDITION_FIELDS) + list(self.channels)
+        data = [getattr(self.conditions, f) for f in CONDITION_FIELDS] + list(self.values.T)
+        if self.sigma is not None:
+            cols += [f"{c}_sigma" for c in self.channels]
+            data += list(self.sigma.T)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+        try:
+            with open(tmp, "w", newline="", encoding="utf-8") as f:
+                f.write(f"# written by calib from {self.source}\n")
+                for note in self.notes:
+                    f.write("# note: " + " ".join(note.splitlines()) + "\n")
+                w = csv.writer(f)
+                w.writerow([header(c) for c in cols])
+                for row in np.column_stack(data):
+                    w.writerow([repr(float(x)) for x in row])
+                f.flush()
+                os.fsync(f.fileno())  # on disk before the rename makes it the file (a crash keeps the old one)
+            os.replace(tmp, path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+        return path
+
+
+# ----------------------------------------------------------------------------- reading
+def check_channels(measurements: Measurements, model_channels: Sequence[str]) -> None:
+    """Raise :class:`InputError` if a measured channel is not an output of the model."""
+    missing = [c for c in measurements.channels if c not in model_channels]
+    if missing:
+        raise InputError(f"channel(s) {', '.join(missing)} not provided by the model; the model's "
+                         f"channels are: {', '.join(model_channels)}", measurements.source,
+                         field=missing[0])
+
+
+# ----------------------------------------------------------------------------- noise
+def condition_groups(conditions: OperatingConditions, decimals: int = 6) -> np.ndarray:
+    """Group index of each point; points with identical (rounded) conditions share a group.
+
+    Returns
+    -------
+    ndarray of int, shape (n_points,)
+    """
+    key = np.column_stack([np.round(getattr(conditions, f), decimals) for f in CONDITION_FIELDS])
+    _, inverse = np.unique(key, axis=0, return_inverse=True)
+    return inverse.reshape(-1)
+
+
+def noise_from_repeats(measurements: Measurements) -> np.ndarray:
+    """Per-channel 1-σ noise pooled over repeated records at the same conditions.
+
+    Notes
+    -----
+    The pooled variance is σ_c² = Σ_g Σ_{k∈g} (z_kc − z̄_gc)² / (N − G), with G groups of
+    repeated conditions and N records (unbiased, one mean per group).
+
+    Returns
+    -------
+    ndarray, shape (n_channels,)
+
+    Raises
+    ------
+    InputError
+        If no condition is repeated.
+    """
+    groups = condition_groups(measurements.conditions)
+    n_groups = groups.max() + 1
+    dof = measurements.n_points - n_groups
+    if dof <= 0:
+        raise InputError("noise 'from repeats' needs repeated records at the same conditions; "
+                         "every row has different conditions", measurements.source)
+    z = measurements.values
+    means = np.zeros((n_groups, z.shape[1]))
+    np.add.at(means, groups, z)
+    means /= np.bincount(groups, minlength=n_groups)[:, None]
+    var = ((z - means[groups]) ** 2).sum(axis=0) / dof
+    if np.any(var <= 0):
+        c = int(np.flatnonzero(var <= 0)[0])
+        raise InputError("repeated records are identical: cannot estimate the noise",
+                         measurements.source, field=measurements.channels[c])
+    return np.sqrt(var)
+
+
+def ml_noise(residuals: np.ndarray, mask: np.ndarray | None = None, floor: float = 1e-12) -> np.ndarray:
+    """Maximum-likelihood per-channel noise from residuals: σ_c² = mean_k r_kc².
+
+    Parameters
+    ----------
+    residuals : ndarray, shape (n_points, n_channels)
+    mask : ndarray of bool, shape (n_points,), optional
+        Points to use (e.g. converged ones).
+
+    Notes
+    -----
+    For a diagonal R this is the closed-form update R = (1/N) Σ r_k r_kᵀ of
+    Bottasso et al. (2014), restricted to the diagonal.
+    """
+    r = residuals if mask is None else residuals[mask]
+    return np.sqrt(np.maximum(np.mean(r ** 2, axis=0), floor))
+
+
+# ----------------------------------------------------------------------------- synthetic
+def synthesize(model, p_true, conditions: OperatingConditions, sigma: Mapping[str, float] | None = None,
+               relative_sigma: Mapping[str, float] | None = None, channels: Sequence[str] | None = None,
+               seed: int = 0, repeats: int = 1, source: str = "synthetic") -> Measurements:
+    """Synthetic measurements from a (truth) forward model plus Gaussian noise.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        Truth model.
+    p_true : array_like, shape (n_params,)
+        Truth parameter vector of ``model``.
+    conditions : OperatingConditions
+    sigma : mapping channel -> float, optional
+        Absolute 1-σ noise per channel [channel unit].
+    relative_sigma : mapping channel -> float, optional
+        Noise as a fraction of the channel's RMS truth value over all points [-].
+    channels : sequence of str, optional
+        Channels to keep (default: all of the model).
+    seed : int
+        Seed of the noise generator.
+    repeats : int
+        Records per condition (repeated records allow :func:`noise_from_repeats`).
+
+    Raises
+    ------
+    ModelError
+        If the truth model fails at any point (synthetic data must be complete).
+    """
+    from calib.errors import ModelError
+
+    names = [c.name for c in model.channels]
+    channels = list(channels or names)
+    ev = model.evaluate(np.asarray(p_true, float), conditions)
+    if ev.n_failed:
+        raise ModelError(f"truth model failed: {ev.failure_summary()}")
+    idx = [names.index(c) for c in channels]
+    y = ev.values[:, idx]
+    s = np.zeros(len(channels))
+    for i, c in enumerate(channels):
+        if sigma and c in sigma:
+            s[i] = float(sigma[c])
+        elif relative_sigma and c in relative_sigma:
+            s[i] = float(relative_sigma[c]) * float(np.sqrt(np.mean(y[:, i] ** 2)))
+        else:
+            raise InputError(f"no noise level given for channel '{c}'", source, field=c)
+    rng = np.random.default_rng(seed)
+    if repeats > 1:
+        rep = np.repeat(np.arange(len(conditions)), repeats)
+        conditions = conditions.subset(rep)
+        y = y[rep]
+    z = y + rng.standard_normal(y.shape) * s
+    return Measurements(conditions, tuple(channels), z, np.broadcast_to(s, z.shape).copy(),
+                        source=source, metadata={"truth": np.asarray(p_true, float).tolist(), "seed": seed})
