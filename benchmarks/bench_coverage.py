@@ -70,7 +70,7 @@ from calib.corrections import CorrectionGrid
 from calib.measurements import Measurements, synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.workflow import _conditions, load_workflow, prepare, smooth_field, truth_model
+from calib.workflow import synthetic_conditions, load_workflow, prepare, smooth_field, truth_model
 
 #: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
 SUITE = "validate"
@@ -86,7 +86,7 @@ def _setup():
     rotor = load_rotor(cfg["rotor"]["name"])
     settings = BemSettings(use_tilt=False)
     channels = list(cfg["stages"][0]["channels"])
-    cond = _conditions(cfg["conditions"], rotor, WORKFLOW)
+    cond = synthetic_conditions(cfg["conditions"], rotor, WORKFLOW)
     g = cfg["grid"]
     grid = CorrectionGrid(g["alpha_nodes_deg"], g["eta_nodes"])
     model = BemModel(rotor, grid, channels, settings, ("pitch_offset",))
@@ -325,7 +325,7 @@ def _held_back_case(name: str, seed: int | None = None):
                        "localization": ("blade_loads_localization.toml", 1)}[name]
     cfg = load_workflow(os.path.join(ROOT, "workflows", workflow))
     setup = prepare(cfg)
-    cond = _conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
+    cond = synthetic_conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
     channels = cfg["stages"][stage]["channels"]
     tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, cfg["truth"], setup.nuisance)
     rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}

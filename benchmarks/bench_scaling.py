@@ -25,7 +25,7 @@ from calib.corrections import CorrectionGrid
 from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.workflow import _conditions, load_workflow, truth_model
+from calib.workflow import synthetic_conditions, load_workflow, truth_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 WORKFLOW = "workflows/wind_tunnel_hub_loads.toml"
@@ -40,7 +40,7 @@ def _case(n_tsr: int, n_pitch: int):
     c = dict(cfg["conditions"])
     c["tsr"] = np.linspace(min(c["tsr"]), max(c["tsr"]), n_tsr).tolist()
     c["pitch"] = np.linspace(min(c["pitch"]), max(c["pitch"]), n_pitch).tolist()
-    cond = _conditions(c, rotor, WORKFLOW)
+    cond = synthetic_conditions(c, rotor, WORKFLOW)
     g = cfg["grid"]
     model = BemModel(rotor, CorrectionGrid(g["alpha_nodes_deg"], g["eta_nodes"]), channels, settings,
                      nuisance=("pitch_offset",))

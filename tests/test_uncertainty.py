@@ -467,11 +467,11 @@ def test_auto_truncation_on_the_shipped_workflows_held_back(workflow, stage):
     and docs/user_guide/calibration.md; it is not asserted here.)"""
     from pathlib import Path
 
-    from calib.workflow import _conditions, load_workflow, prepare, truth_model
+    from calib.workflow import synthetic_conditions, load_workflow, prepare, truth_model
 
     cfg = load_workflow(Path(__file__).resolve().parents[1] / "workflows" / workflow)
     setup = prepare(cfg)
-    cond = _conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
+    cond = synthetic_conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
     grid = setup.grid(cond)
     channels = cfg["stages"][stage]["channels"]
     tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, cfg["truth"], setup.nuisance)
