@@ -334,6 +334,142 @@ def _steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
     return rule
 
 
+def _inputs(data: dict, src: str):
+    """``[inputs]``: the operating conditions the FMU takes (wind and rotor speed required)."""
+    inputs = {}
+    _check(data["inputs"], {f: (dict, False) for f in CONDITION_FIELDS}, "inputs", src)
+    for name, e in data["inputs"].items():
+        inputs[name] = _entry(Entry, name, e, f"inputs.{name}", src, _ENTRY_KEYS)
+    for req in ("wind_speed", "rotor_speed"):
+        if req not in inputs:
+            raise InputError(f"missing required key 'inputs.{req}' (the steady window needs the rotor speed, "
+                             "every operating point a wind speed)", src, field=f"inputs.{req}")
+    return inputs
+
+
+def _outputs(data: dict, src: str):
+    """``[outputs]``: scalar outputs, and spanwise ones (``normal_force``, ``angle_of_attack``)."""
+    outputs, spanwise = {}, {}
+    for name, e in data["outputs"].items():
+        where = f"outputs.{name}"
+        if name in SPANWISE_OUTPUTS:
+            _check(e, _SPANWISE_KEYS, where, src)
+            if ("variables" in e) == ("variable" in e):
+                raise InputError(f"'{where}' needs either 'variables' (scalars) or 'variable' (an array)", src,
+                                 field=where)
+            if "variables" in e and not all(isinstance(v, str) for v in e["variables"]):
+                raise InputError(f"'{where}.variables' must be an array of names", src, field=f"{where}.variables")
+            if "radius_variables" in e:
+                _check_list(e["radius_variables"], str, f"{where}.radius_variables", src)
+            spanwise[name] = SpanwiseOutput(name, tuple(e.get("variables", ())), e.get("variable"),
+                                            tuple(e.get("radius_variables", ())), e.get("radius_variable"),
+                                            float(e.get("scale", 1.0)), float(e.get("offset", 0.0)),
+                                            e.get("unit", ""))
+            continue
+        if not isinstance(e, dict) or "variable" not in e:
+            _check(e, _OUTPUT_KEYS, where, src)
+        unit = e.get("channel_unit", OUTPUT_UNITS.get(name, "-"))
+        outputs[name] = _entry(OutputEntry, name, e, where, src, _OUTPUT_KEYS, channel_unit=unit)
+    return outputs, spanwise
+
+
+def _corrections(data: dict, src: str):
+    """``[corrections]``: the correction nodes the FMU exposes (None without the table)."""
+    corrections = None
+    if "corrections" in data:
+        c = data["corrections"]
+        _check(c, _CORRECTION_KEYS, "corrections", src)
+        if c["layout"] not in ("scalar", "array"):
+            raise InputError(f"'corrections.layout' must be \"scalar\" or \"array\", got {c['layout']!r}", src,
+                             field="corrections.layout")
+        if ("grid" in c) == ("alpha_nodes_deg" in c or "eta_nodes" in c):
+            raise InputError("'corrections' needs either 'grid' (a JSON file inside the FMU) or 'alpha_nodes_deg' "
+                             "and 'eta_nodes'", src, field="corrections.grid")
+        if c["layout"] == "scalar":
+            for block in ("lift", "drag"):
+                if "{i}" not in c[block] or "{j}" not in c[block]:
+                    raise InputError(f"'corrections.{block}' must be a name template with {{i}} (alpha node) and "
+                                     f"{{j}} (eta node) for layout \"scalar\", got {c[block]!r}", src,
+                                     field=f"corrections.{block}")
+        for key in ("alpha_nodes_deg", "eta_nodes"):
+            if key in c:
+                _check_list(c[key], float, f"corrections.{key}", src)
+        options = {k: float(c[k]) for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in c}
+        corrections = Corrections(c["layout"], c["lift"], c["drag"], float(c.get("scale", 1.0)), c.get("grid"),
+                                  tuple(c["alpha_nodes_deg"]) if "alpha_nodes_deg" in c else None,
+                                  tuple(c["eta_nodes"]) if "eta_nodes" in c else None, options)
+    return corrections
+
+
+def _parameters(data: dict, src: str):
+    """``[parameters]``: the tunable scalars, with nominal, bounds, scale, kind and prior."""
+    parameters = {}
+    for name, e in data.get("parameters", {}).items():
+        where = f"parameters.{name}"
+        _check(e, _PARAMETER_KEYS, where, src)
+        kind = e.get("kind", "tuning")
+        valid = [k.value for k in ParameterKind if k.value not in ("lift_correction", "drag_correction")]
+        if kind not in valid:
+            raise InputError(f"'{where}.kind' must be one of {', '.join(valid)}, got {kind!r}", src,
+                             field=f"{where}.kind")
+        if not e["scale"] > 0:
+            raise InputError(f"'{where}.scale' (typical magnitude of a change, package units) must be > 0", src,
+                             field=f"{where}.scale")
+        parameters[name] = _entry(ParameterEntry, name, e, where, src, _PARAMETER_KEYS, kind=kind,
+                                  nominal=float(e.get("nominal", np.nan)), lower=float(e.get("lower", np.nan)),
+                                  upper=float(e.get("upper", np.nan)), typical=float(e["scale"]),
+                                  prior_std=float(e.get("prior_std", np.nan)),
+                                  package_unit=e.get("package_unit", e.get("unit", "-")))
+    return parameters
+
+
+def _switches(data: dict, src: str):
+    """``[switches]``: effect switches and the FMU values that mean on, off or a model."""
+    switches = {}
+    for name, e in data.get("switches", {}).items():
+        where = f"switches.{name}"
+        _check(e, _SWITCH_KEYS, where, src)
+        for model, value in e.get("values", {}).items():
+            if not isinstance(value, (int, float, bool)):
+                raise InputError(f"'{where}.values.{model}' must be a number or true/false (the FMU value of that "
+                                 f"model), got {value!r}", src, field=f"{where}.values.{model}")
+        switches[name] = Switch(name, e["variable"], e["on"], e["off"], dict(e.get("values", {})))
+    return switches
+
+
+def _settings(data: dict, src: str):
+    """``[settings]``: fixed FMU parameters with their default values."""
+    settings = {}
+    for name, e in data.get("settings", {}).items():
+        _check(e, _SETTING_KEYS, f"settings.{name}", src)
+        settings[name] = _entry(SettingEntry, name, e, f"settings.{name}", src, _SETTING_KEYS, value=e.get("value"))
+    return settings
+
+
+def _jacobian(data: dict, src: str):
+    """``[jacobian]``: the finite-difference rule."""
+    jac = data.get("jacobian", {})
+    _check(jac, _JACOBIAN_KEYS, "jacobian", src)
+    jacobian = JacobianRule(**jac)
+    if not 0 < jacobian.relative_step <= 0.5:
+        raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
+                         field="jacobian.relative_step")
+    return jacobian
+
+
+def _rotor_radius(data: dict, src: str):
+    """``[rotor] radius``: a number [m] or an output entry (None without the table)."""
+    radius = None
+    if "rotor" in data:
+        _check(data["rotor"], {"radius": ((int, float, dict), True)}, "rotor", src)
+        r = data["rotor"]["radius"]
+        radius = (float(r) if not isinstance(r, dict) else
+                  _entry(Entry, "rotor_radius", r, "rotor.radius", src, _ENTRY_KEYS))
+        if isinstance(radius, float) and not radius > 0:
+            raise InputError(f"'rotor.radius' must be > 0 m, got {radius!r}", src, field="rotor.radius")
+    return radius
+
+
 def load_mapping(path) -> Mapping:
     """Read and validate a mapping file.
 
@@ -374,111 +510,9 @@ def load_mapping(path) -> Mapping:
         if table in data and not isinstance(data[table], dict):
             raise InputError(f"[{table}] must be a table, got {data[table]!r:.60}", src, field=table)
 
-    inputs = {}
-    _check(data["inputs"], {f: (dict, False) for f in CONDITION_FIELDS}, "inputs", src)
-    for name, e in data["inputs"].items():
-        inputs[name] = _entry(Entry, name, e, f"inputs.{name}", src, _ENTRY_KEYS)
-    for req in ("wind_speed", "rotor_speed"):
-        if req not in inputs:
-            raise InputError(f"missing required key 'inputs.{req}' (the steady window needs the rotor speed, "
-                             "every operating point a wind speed)", src, field=f"inputs.{req}")
-
-    outputs, spanwise = {}, {}
-    for name, e in data["outputs"].items():
-        where = f"outputs.{name}"
-        if name in SPANWISE_OUTPUTS:
-            _check(e, _SPANWISE_KEYS, where, src)
-            if ("variables" in e) == ("variable" in e):
-                raise InputError(f"'{where}' needs either 'variables' (scalars) or 'variable' (an array)", src,
-                                 field=where)
-            if "variables" in e and not all(isinstance(v, str) for v in e["variables"]):
-                raise InputError(f"'{where}.variables' must be an array of names", src, field=f"{where}.variables")
-            if "radius_variables" in e:
-                _check_list(e["radius_variables"], str, f"{where}.radius_variables", src)
-            spanwise[name] = SpanwiseOutput(name, tuple(e.get("variables", ())), e.get("variable"),
-                                            tuple(e.get("radius_variables", ())), e.get("radius_variable"),
-                                            float(e.get("scale", 1.0)), float(e.get("offset", 0.0)),
-                                            e.get("unit", ""))
-            continue
-        if not isinstance(e, dict) or "variable" not in e:
-            _check(e, _OUTPUT_KEYS, where, src)
-        unit = e.get("channel_unit", OUTPUT_UNITS.get(name, "-"))
-        outputs[name] = _entry(OutputEntry, name, e, where, src, _OUTPUT_KEYS, channel_unit=unit)
-
-    corrections = None
-    if "corrections" in data:
-        c = data["corrections"]
-        _check(c, _CORRECTION_KEYS, "corrections", src)
-        if c["layout"] not in ("scalar", "array"):
-            raise InputError(f"'corrections.layout' must be \"scalar\" or \"array\", got {c['layout']!r}", src,
-                             field="corrections.layout")
-        if ("grid" in c) == ("alpha_nodes_deg" in c or "eta_nodes" in c):
-            raise InputError("'corrections' needs either 'grid' (a JSON file inside the FMU) or 'alpha_nodes_deg' "
-                             "and 'eta_nodes'", src, field="corrections.grid")
-        if c["layout"] == "scalar":
-            for block in ("lift", "drag"):
-                if "{i}" not in c[block] or "{j}" not in c[block]:
-                    raise InputError(f"'corrections.{block}' must be a name template with {{i}} (alpha node) and "
-                                     f"{{j}} (eta node) for layout \"scalar\", got {c[block]!r}", src,
-                                     field=f"corrections.{block}")
-        for key in ("alpha_nodes_deg", "eta_nodes"):
-            if key in c:
-                _check_list(c[key], float, f"corrections.{key}", src)
-        options = {k: float(c[k]) for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in c}
-        corrections = Corrections(c["layout"], c["lift"], c["drag"], float(c.get("scale", 1.0)), c.get("grid"),
-                                  tuple(c["alpha_nodes_deg"]) if "alpha_nodes_deg" in c else None,
-                                  tuple(c["eta_nodes"]) if "eta_nodes" in c else None, options)
-
-    parameters = {}
-    for name, e in data.get("parameters", {}).items():
-        where = f"parameters.{name}"
-        _check(e, _PARAMETER_KEYS, where, src)
-        kind = e.get("kind", "tuning")
-        valid = [k.value for k in ParameterKind if k.value not in ("lift_correction", "drag_correction")]
-        if kind not in valid:
-            raise InputError(f"'{where}.kind' must be one of {', '.join(valid)}, got {kind!r}", src,
-                             field=f"{where}.kind")
-        if not e["scale"] > 0:
-            raise InputError(f"'{where}.scale' (typical magnitude of a change, package units) must be > 0", src,
-                             field=f"{where}.scale")
-        parameters[name] = _entry(ParameterEntry, name, e, where, src, _PARAMETER_KEYS, kind=kind,
-                                  nominal=float(e.get("nominal", np.nan)), lower=float(e.get("lower", np.nan)),
-                                  upper=float(e.get("upper", np.nan)), typical=float(e["scale"]),
-                                  prior_std=float(e.get("prior_std", np.nan)),
-                                  package_unit=e.get("package_unit", e.get("unit", "-")))
-
-    switches = {}
-    for name, e in data.get("switches", {}).items():
-        where = f"switches.{name}"
-        _check(e, _SWITCH_KEYS, where, src)
-        for model, value in e.get("values", {}).items():
-            if not isinstance(value, (int, float, bool)):
-                raise InputError(f"'{where}.values.{model}' must be a number or true/false (the FMU value of that "
-                                 f"model), got {value!r}", src, field=f"{where}.values.{model}")
-        switches[name] = Switch(name, e["variable"], e["on"], e["off"], dict(e.get("values", {})))
-
-    settings = {}
-    for name, e in data.get("settings", {}).items():
-        _check(e, _SETTING_KEYS, f"settings.{name}", src)
-        settings[name] = _entry(SettingEntry, name, e, f"settings.{name}", src, _SETTING_KEYS, value=e.get("value"))
-
-    steady = _steady_rule(data["steady"], src)
-    jac = data.get("jacobian", {})
-    _check(jac, _JACOBIAN_KEYS, "jacobian", src)
-    jacobian = JacobianRule(**jac)
-    if not 0 < jacobian.relative_step <= 0.5:
-        raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
-                         field="jacobian.relative_step")
-
-    radius = None
-    if "rotor" in data:
-        _check(data["rotor"], {"radius": ((int, float, dict), True)}, "rotor", src)
-        r = data["rotor"]["radius"]
-        radius = (float(r) if not isinstance(r, dict) else
-                  _entry(Entry, "rotor_radius", r, "rotor.radius", src, _ENTRY_KEYS))
-        if isinstance(radius, float) and not radius > 0:
-            raise InputError(f"'rotor.radius' must be > 0 m, got {radius!r}", src, field="rotor.radius")
-
-    return Mapping(src, data.get("fmi_version"), data.get("model_identifier"), data.get("variant"), inputs,
-                   outputs, spanwise, corrections, parameters, switches, settings, steady, jacobian, radius,
-                   str(path.parent), data)
+    inputs = _inputs(data, src)              # the tables in this order: the first error found is reported
+    outputs, spanwise = _outputs(data, src)
+    return Mapping(src, data.get("fmi_version"), data.get("model_identifier"), data.get("variant"),
+                   inputs, outputs, spanwise, _corrections(data, src), _parameters(data, src),
+                   _switches(data, src), _settings(data, src), _steady_rule(data["steady"], src), _jacobian(data, src),
+                   _rotor_radius(data, src), str(path.parent), data)
