@@ -89,9 +89,9 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
 
 
 def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
-    from calib.history import recorded
-    from calib.logs import progress_line
-    from calib.report.figures import plot_spectra, save_figure, write_figures
+    """The workflow's steps: its measurements, the diagnosis, each stage (calibration, validation, results,
+    figures) and the report; returns the stages' :class:`StageOutcome`."""
+    from calib.diagnosis import in_workflow
     from calib.report.html import write_report
 
     def echo(line):
@@ -99,120 +99,163 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
 
     # an FMU's calls are recorded in chunks of points (a kill loses at most one chunk of simulations)
     chunk = max(int(executor.workers if executor is not None else 1), 1) if setup.fmu_table is not None else None
-
-    src = cfg["_source"]
-    rotor, settings, nuisance = setup.rotor, setup.settings, setup.nuisance
-    all_channels, calib_cfg = setup.channels, setup.calibration
-    t0 = time.perf_counter()
-    unit_notes = {}
-    if "measurements" in cfg:
-        file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
-        meas = measurements_of(cfg, all_channels)
-        if "air_density" not in meas.metadata.get("units", {}):
-            meas = dataclasses.replace(meas, conditions=dataclasses.replace(
-                meas.conditions, air_density=np.full(meas.n_points, setup.density)))
-        if "yaw" not in meas.metadata.get("units", {}) and setup.yaw != 0.0:
-            meas = dataclasses.replace(meas, conditions=dataclasses.replace(
-                meas.conditions, yaw=np.full(meas.n_points, setup.yaw)))
-        truth_p = None
-        for note in meas.notes:
-            echo(f"[calib run] {file.name}: {note}")
-        set_up = statement(setup, cfg, meas)
-        for line in statement_lines(set_up):
-            echo(f"[calib run] set-up in force: {line}")
-        grid = setup.grid(meas.conditions, progress)
-        check_model = recorded(setup.model(grid, all_channels, executor), hist, "unit check", chunk, progress_line)
-        _, unit_notes = apply_unit_check(check_model, nominal_vector(check_model.parameters), meas,
-                                         sigma=calib_cfg.get("sigma"), force=force,
-                                         strict=strict or setup.strict_units, source=str(file),
-                                         printer=echo, model_units=setup.model_units())
-    else:
-        cond = synthetic_conditions(cfg["conditions"], rotor, src, setup.density, setup.yaw)
-        grid = setup.grid(cond, progress)
-        noise = cfg["noise"]
-        rel = noise["relative"]
-        missing = [c for c in all_channels if c not in rel]
-        if missing:
-            raise InputError(f"no noise level for channel(s) {', '.join(missing)}", src,
-                             field=f"noise.relative.{missing[0]}")
-        set_up = statement(setup, cfg)
-        for line in statement_lines(set_up):
-            echo(f"[calib run] set-up in force: {line}")
-        tmodel, truth_p = truth_model(rotor, all_channels, settings, cfg["truth"], nuisance)
-        meas = synthesize(tmodel, truth_p, cond, relative_sigma={c: float(rel[c]) for c in all_channels},
-                          channels=all_channels, seed=int(noise.get("seed", 0)), source=f"synthetic ({src})")
-        meas.write_csv(out / "measurements.csv")
-    echo(f"[calib run] {cfg['name']}: {setup.model_name()}, {meas.n_points} operating points, "
-         f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
-
-    from calib import validation
-    from calib.diagnosis import in_workflow
-
-    effects, diag, validations = [], None, {}
+    run = _Run(cfg, setup, out, executor, hist, echo, chunk)
+    run.measurements(progress, force, strict)
     if setup.diagnosis is not None:   # the discrepancy workflow first; its named effects join every stage
-        effects, diag = in_workflow.run_diagnosis(setup, meas, grid, out, executor, echo, hist)
-    outcomes = []
-    for k, stage in enumerate(cfg["stages"]):
-        name = stage["name"]
-        raw_model = setup.model(grid, stage["channels"], executor, effects)
-        model = recorded(raw_model, hist, f"stage {k + 1}: {name}", chunk, progress_line)
-        st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
-                                                                            setup.calibration_settings.retain))
-        st.validate(src, f"stages[{k}].")
-        def callback(rec, _name=name):
+        run.effects, run.diag = in_workflow.run_diagnosis(setup, run.meas, run.grid, out, executor, echo, hist)
+    outcomes = [run.stage(k, stage) for k, stage in enumerate(cfg["stages"])]
+    intro = cfg.get("description", "")
+    if run.truth_p is not None:
+        intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
+                 "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
+    from calib import validation
+
+    sections = [statement_html(run.set_up)] + ([validation.section_html(run.diag, run.validations)]
+                                              if (run.diag or run.validations) else [])
+    report = write_report(out / "report.html", title=f"calib: {cfg['name']}", sections=sections,
+                          results={o.name: o.result for o in outcomes},
+                          figures={o.name: o.figures for o in outcomes}, intro=intro,
+                          extra_figures=run.study_figures(outcomes),
+                          checks={o.name: o.result.checks for o in outcomes})
+    echo(f"[calib run] report: {report}")
+    return outcomes
+
+
+class _Run:
+    """One run of a workflow: what its steps share (measurements, grid, named effects, validations)."""
+
+    def __init__(self, cfg, setup, out, executor, hist, echo, chunk):
+        self.cfg, self.setup, self.out, self.executor, self.hist, self.echo, self.chunk = \
+            cfg, setup, out, executor, hist, echo, chunk
+        self.src = cfg["_source"]
+        self.effects, self.diag, self.validations = [], None, {}
+        self.unit_notes, self.truth_p = {}, None
+
+    def measurements(self, progress, force, strict) -> None:
+        """The measured table (with the set-up's density and yaw, checked against the model's units) or the
+        synthetic one of ``[truth]``; the correction grid; the set-up in force."""
+        from calib.history import recorded
+        from calib.logs import progress_line
+
+        cfg, setup, echo, src = self.cfg, self.setup, self.echo, self.src
+        all_channels = setup.channels
+        t0 = time.perf_counter()
+        if "measurements" in cfg:
+            file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
+            meas = measurements_of(cfg, all_channels)
+            if "air_density" not in meas.metadata.get("units", {}):
+                meas = dataclasses.replace(meas, conditions=dataclasses.replace(
+                    meas.conditions, air_density=np.full(meas.n_points, setup.density)))
+            if "yaw" not in meas.metadata.get("units", {}) and setup.yaw != 0.0:
+                meas = dataclasses.replace(meas, conditions=dataclasses.replace(
+                    meas.conditions, yaw=np.full(meas.n_points, setup.yaw)))
+            for note in meas.notes:
+                echo(f"[calib run] {file.name}: {note}")
+            self.set_up = statement(setup, cfg, meas)
+            for line in statement_lines(self.set_up):
+                echo(f"[calib run] set-up in force: {line}")
+            self.grid = setup.grid(meas.conditions, progress)
+            check_model = recorded(setup.model(self.grid, all_channels, self.executor), self.hist, "unit check",
+                                   self.chunk, progress_line)
+            _, self.unit_notes = apply_unit_check(check_model, nominal_vector(check_model.parameters), meas,
+                                                  sigma=setup.calibration.get("sigma"), force=force,
+                                                  strict=strict or setup.strict_units, source=str(file),
+                                                  printer=echo, model_units=setup.model_units())
+        else:
+            cond = synthetic_conditions(cfg["conditions"], setup.rotor, src, setup.density, setup.yaw)
+            self.grid = setup.grid(cond, progress)
+            noise = cfg["noise"]
+            rel = noise["relative"]
+            missing = [c for c in all_channels if c not in rel]
+            if missing:
+                raise InputError(f"no noise level for channel(s) {', '.join(missing)}", src,
+                                 field=f"noise.relative.{missing[0]}")
+            self.set_up = statement(setup, cfg)
+            for line in statement_lines(self.set_up):
+                echo(f"[calib run] set-up in force: {line}")
+            tmodel, self.truth_p = truth_model(setup.rotor, all_channels, setup.settings, cfg["truth"],
+                                               setup.nuisance)
+            meas = synthesize(tmodel, self.truth_p, cond, relative_sigma={c: float(rel[c]) for c in all_channels},
+                              channels=all_channels, seed=int(noise.get("seed", 0)), source=f"synthetic ({src})")
+            meas.write_csv(self.out / "measurements.csv")
+        self.meas = meas
+        echo(f"[calib run] {cfg['name']}: {setup.model_name()}, {meas.n_points} operating points, "
+             f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
+
+    def callback(self, name: str):
+        """The calibration's progress: to the history, and the steps a user follows to the terminal."""
+        hist, echo = self.hist, self.echo
+
+        def callback(rec):
             if hist is not None:
-                hist.event("iteration", run=_name, **rec)
+                hist.event("iteration", run=name, **rec)
             if rec.get("stage") == "relinearize":
-                echo(f"[calib run] {_name}: re-linearization {rec.get('iteration')}: "
+                echo(f"[calib run] {name}: re-linearization {rec.get('iteration')}: "
                      f"{rec.get('n_retained')} retained, cost {rec.get('cost', float('nan')):.4g}")
             elif rec.get("stage") == "map_done":
-                echo(f"[calib run] {_name}: MAP estimate {rec['status']} after {rec['iterations']} iteration(s), "
+                echo(f"[calib run] {name}: MAP estimate {rec['status']} after {rec['iterations']} iteration(s), "
                      f"cost {rec['cost']:.4g}; the data determine {rec['data_beat_prior']} direction(s) better "
                      "than the prior")
             elif rec.get("stage") == "second_start":
-                echo(f"[calib run] {_name}: χ² {rec['chi2']:.4g} over {rec['dof']} rejects the stated noise "
+                echo(f"[calib run] {name}: χ² {rec['chi2']:.4g} over {rec['dof']} rejects the stated noise "
                      f"(p = {rec['p_value']:.2g}): the automatic choice starts again from the prior limit's count")
             elif rec.get("stage") == "second_start_done":
-                echo(f"[calib run] {_name}: {rec['first_retained']} θ from nominal ({rec['first_status']}), "
+                echo(f"[calib run] {name}: {rec['first_retained']} θ from nominal ({rec['first_status']}), "
                      f"{rec['second_retained']} θ from the limit ({rec['second_status']}); kept the "
                      f"{'second' if rec['second_kept'] else 'first'}")
             else:
-                log.debug("%s: %s", _name, ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else f"{k} = {v}"
-                                                       for k, v in rec.items() if k != "qp"))
-        cal = Calibrator(model, meas.select_channels(stage["channels"]), st, callback, name=name)
+                log.debug("%s: %s", name, ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else f"{k} = {v}"
+                                                      for k, v in rec.items() if k != "qp"))
+        return callback
+
+    def stage(self, k: int, stage: dict) -> StageOutcome:
+        """One stage: calibrate, validate, write its result and figures, say what it found."""
+        from calib import validation
+        from calib.diagnosis import in_workflow
+        from calib.history import recorded
+        from calib.logs import progress_line
+        from calib.report.figures import write_figures
+
+        cfg, setup, echo, src, grid, meas = self.cfg, self.setup, self.echo, self.src, self.grid, self.meas
+        name = stage["name"]
+        raw_model = setup.model(grid, stage["channels"], self.executor, self.effects)
+        model = recorded(raw_model, self.hist, f"stage {k + 1}: {name}", self.chunk, progress_line)
+        st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
+                                                                            setup.calibration_settings.retain))
+        st.validate(src, f"stages[{k}].")
+        cal = Calibrator(model, meas.select_channels(stage["channels"]), st, self.callback(name), name=name)
         t_cal = time.perf_counter()
         res = cal.run()
         t_cal = time.perf_counter() - t_cal
         res.inputs[src] = sha256_of(src)
         res.inputs["workflow"] = cfg["name"]
-        res.checks.update(unit_notes)
+        res.checks.update(self.unit_notes)
         res.checks.update(_fault_checks(raw_model))
-        if truth_p is not None:
+        if self.truth_p is not None:
             res.checks.update(truth_checks(model, res, cfg["truth"]))
-        if diag is not None:
-            res.checks["discrepancy workflow"] = in_workflow.diagnosis_sentence(diag)
+        if self.diag is not None:
+            res.checks["discrepancy workflow"] = in_workflow.diagnosis_sentence(self.diag)
         if setup.validation is not None:
             kind = "leave-one-out" if setup.validation.split == "one" else "band split"
             val = validation.leave_one_out(
-                lambda _c=tuple(stage["channels"]): setup.model(grid, list(_c), executor, effects),
+                lambda _c=tuple(stage["channels"]): setup.model(grid, list(_c), self.executor, self.effects),
                 meas.select_channels(stage["channels"]), st, setup.validation,
                 progress=lambda line, _n=name, _k=kind: echo(f"[calib run] {_n}: {_k}: {line}"))
-            validations[name] = val
+            self.validations[name] = val
             res.checks.update({f"{kind} ({c})": val.sentence(c) for c in val.channels()})
-        stage_dir = out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
+        stage_dir = self.out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
         stage_dir.mkdir(exist_ok=True)
         t_rep = time.perf_counter()
         res.save(stage_dir)
-        if name in validations:
-            validation.write_validation(validations[name], stage_dir)
-        truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if truth_p is not None else None
+        if name in self.validations:
+            validation.write_validation(self.validations[name], stage_dir)
+        truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if self.truth_p is not None else None
         figs = write_figures(res, stage_dir, truth=truth, progress=lambda line: echo(f"[calib run] {line}"))
         t_rep = time.perf_counter() - t_rep
-        outcomes.append(StageOutcome(name, res, figs, stage_dir))
-        if hist is not None:
-            hist.event("stage_done", run=name, folder=stage_dir.name, status=res.status,
-                       model_evaluations=res.failures.get("model_evaluations"),
-                       model_jacobians=res.failures.get("model_jacobians"))
+        if self.hist is not None:
+            self.hist.event("stage_done", run=name, folder=stage_dir.name, status=res.status,
+                            model_evaluations=res.failures.get("model_evaluations"),
+                            model_jacobians=res.failures.get("model_jacobians"))
         kept = (f"the data beat the prior in {res.n_retained} of {res.n_params} directions" if res.estimator == "map"
                 else f"{res.n_retained} of {res.n_params} retained")
         echo(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {kept}; "
@@ -220,35 +263,34 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
              f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}")
         for label, text in res.checks.items():
             echo(f"[calib run] {name}: {label}: {text}")
-    extra = {}
-    if len(outcomes) > 1:
-        fig = plot_spectra({o.name: o.result for o in outcomes})
-        extra["singular_value_spectra"] = save_figure(fig, out, "singular_value_spectra")
-    if "measurements" in cfg and (diag is not None or validations):
-        rotor_ch = [c for c in all_channels if "@" not in c]
-        span_ch = [c for c in all_channels if c.startswith("cn@")]
-        for key, chans, what in (("loads_vs_wind_speed", rotor_ch, "rotor loads"),
-                                 ("cn_vs_wind_speed", span_ch, "normal-force coefficient at the pressure taps")):
-            if chans:
-                fig = validation.campaign_figure(setup, meas, grid, outcomes, diag, validations, effects, chans,
-                                               f"{cfg['name']}: {what}, measured and modelled", executor)
-                extra[key] = save_figure(fig, out, key)
-        for k, o in enumerate(outcomes):
-            fig = validation.informed_eigenshapes(o.result)
-            if fig is not None:
-                extra[f"informed_eigenshapes_stage{k + 1}"] = save_figure(fig, out, f"informed_eigenshapes_stage{k + 1}")
-    intro = cfg.get("description", "")
-    if truth_p is not None:
-        intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
-                 "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
-    report = write_report(out / "report.html", title=f"calib: {cfg['name']}",
-                          sections=[statement_html(set_up)] + ([validation.section_html(diag, validations)]
-                                                               if (diag or validations) else []),
-                          results={o.name: o.result for o in outcomes},
-                          figures={o.name: o.figures for o in outcomes}, intro=intro, extra_figures=extra,
-                          checks={o.name: o.result.checks for o in outcomes})
-    echo(f"[calib run] report: {report}")
-    return outcomes
+        return StageOutcome(name, res, figs, stage_dir)
+
+    def study_figures(self, outcomes) -> dict:
+        """The figures across stages: the singular-value spectra, and with measured data and a diagnosis or a
+        validation the loads against wind speed and the informed eigenshapes."""
+        from calib import validation
+        from calib.report.figures import plot_spectra, save_figure
+
+        cfg, out, extra = self.cfg, self.out, {}
+        if len(outcomes) > 1:
+            fig = plot_spectra({o.name: o.result for o in outcomes})
+            extra["singular_value_spectra"] = save_figure(fig, out, "singular_value_spectra")
+        if "measurements" in cfg and (self.diag is not None or self.validations):
+            rotor_ch = [c for c in self.setup.channels if "@" not in c]
+            span_ch = [c for c in self.setup.channels if c.startswith("cn@")]
+            for key, chans, what in (("loads_vs_wind_speed", rotor_ch, "rotor loads"),
+                                     ("cn_vs_wind_speed", span_ch, "normal-force coefficient at the pressure taps")):
+                if chans:
+                    fig = validation.campaign_figure(self.setup, self.meas, self.grid, outcomes, self.diag,
+                                                     self.validations, self.effects, chans,
+                                                     f"{cfg['name']}: {what}, measured and modelled", self.executor)
+                    extra[key] = save_figure(fig, out, key)
+            for k, o in enumerate(outcomes):
+                fig = validation.informed_eigenshapes(o.result)
+                if fig is not None:
+                    extra[f"informed_eigenshapes_stage{k + 1}"] = save_figure(
+                        fig, out, f"informed_eigenshapes_stage{k + 1}")
+        return extra
 
 
 def _fault_checks(model) -> dict[str, str]:
