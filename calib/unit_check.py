@@ -347,6 +347,80 @@ def _corrected(conditions: OperatingConditions, name: str, factor: float) -> Ope
     return OperatingConditions(**values)
 
 
+def _condition_hypotheses(evaluate, measurements: Measurements, conditions, z, kw: dict, notes: list) -> list:
+    """The fits with each condition's unit factors applied (:data:`CONDITION_FACTORS`); a condition that is 0
+    everywhere, or a hypothesis the model cannot evaluate, is a note instead."""
+    fits = []
+    for name in conditions:
+        if np.all(getattr(measurements.conditions, name) == 0):
+            notes.append(f"{name} is 0 at every point: a unit mistake in it cannot be seen")
+            continue
+        for factor in CONDITION_FACTORS[name]:
+            label = _hypothesis_label(name, factor)
+            try:
+                y, ok, status, sig = evaluate(_corrected(measurements.conditions, name, factor))
+            except CalibError as e:
+                notes.append(f"hypothesis {label} could not be evaluated: {e}")
+                continue
+            fit = _fit(label, y, ok, z, sig, **kw)
+            fit.condition, fit.condition_factor, fit.status_summary = name, factor, status
+            fits.append(fit)
+    return fits
+
+
+def _findings(chosen: "_Fit", base: "_Fit", measurements: Measurements, units: dict, model_units: str | None,
+              chi2_threshold: float, model_error: float) -> list:
+    """What the chosen hypothesis says: a condition's unit factor, a channel's factor or sign, a misfit no
+    factor explains (gross when beyond any polar correction), the model failing at most points."""
+    findings = []
+    if chosen.condition is not None:
+        name, factor = chosen.condition, chosen.condition_factor
+        quantity = _CONDITION_SI[name]
+        head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, None), factor)
+        how = f"divided by {factor:.4g}" if factor > 1 else f"multiplied by {1 / factor:.4g}"
+        findings.append(UnitFinding(
+            "condition", name, factor,
+            f"{head}: suspected factor {_factor_words(factor)}; with {name} {how} the nominal model matches the "
+            f"data (χ²/dof {chosen.misfit:.3g} instead of {base.misfit:.3g} as read){fix}"))
+    for c, name in enumerate(measurements.channels):
+        f = chosen.factors[c]
+        if f == 1.0:
+            continue
+        ratio = f"measured/model ≈ {chosen.ratios[c]:.4g} (median over {chosen.n_ratio[c]} points)"
+        if f == -1.0:
+            findings.append(UnitFinding("sign", name, f, f"{name} has the opposite sign of the model's: {ratio}; "
+                                                         "check its sign convention"))
+            continue
+        quantity = quantity_of(name)
+        head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, units.get(name)), f)
+        findings.append(UnitFinding("channel", name, f, f"{head}: {ratio}, suspected factor {_factor_words(f)}{fix}"
+                                                        f"{_model_side(name, model_units)}"))
+    for c, name in enumerate(measurements.channels):
+        if chosen.chi2_per_dof[c] > chi2_threshold:
+            after = " after the correction above" if chosen is not base or chosen.factors[c] != 1.0 else ""
+            ratio = abs(chosen.ratios[c] / chosen.factors[c])
+            if not 1 / GROSS_RATIO <= ratio <= GROSS_RATIO:      # beyond what any polar correction gives
+                findings.append(UnitFinding(
+                    "gross", name, float("nan"),
+                    f"{name} is {chosen.ratios[c]:.3g} times the nominal model's (median over the points), χ²/dof = "
+                    f"{chosen.chi2_per_dof[c]:.3g}{after}: no unit factor explains it exactly, but no calibration "
+                    f"of the polars can either (outside 1/{GROSS_RATIO:g} to {GROSS_RATIO:g}); check the unit in the "
+                    f"header, what the channel measures and the rotor{_model_side(name, model_units)}"))
+                continue
+            findings.append(UnitFinding(
+                "misfit", name, float("nan"),
+                f"{name} disagrees with the nominal model beyond what noise and a {model_error:.0%} model error "
+                f"explain: χ²/dof = {chosen.chi2_per_dof[c]:.3g}{after} (threshold {chi2_threshold:g}), "
+                f"measured/model ≈ {chosen.ratios[c]:.3g}, and no unit factor explains it; check the unit in "
+                f"the header, what the channel measures (e.g. electrical or aerodynamic power) and the rotor"
+                f"{_model_side(name, model_units)}"))
+    if chosen.n_failed > 0.5 * measurements.n_points:
+        findings.append(UnitFinding("failures", "", float("nan"),
+                                    f"the nominal model fails at {chosen.n_failed} of {measurements.n_points} "
+                                    f"measured points ({chosen.status_summary}): check the conditions' units"))
+    return findings
+
+
 def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, float] | None = None,
                 chi2_threshold: float = 25.0, model_error: float = 0.10, relative_sigma: float = 0.05,
                 factor_tolerance: float = 0.25,
@@ -434,72 +508,13 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
     as_read = _fit("as read", y0, ok0, z, sig0, search_factors=False, **kw)
     base = _fit("as read", y0, ok0, z, sig0, **kw)
     base.status_summary = status0
-    fits = [base]
-    for name in conditions:
-        if np.all(getattr(measurements.conditions, name) == 0):
-            notes.append(f"{name} is 0 at every point: a unit mistake in it cannot be seen")
-            continue
-        for factor in CONDITION_FACTORS[name]:
-            label = _hypothesis_label(name, factor)
-            try:
-                y, ok, status, sig = evaluate(_corrected(measurements.conditions, name, factor))
-            except CalibError as e:
-                notes.append(f"hypothesis {label} could not be evaluated: {e}")
-                continue
-            fit = _fit(label, y, ok, z, sig, **kw)
-            fit.condition, fit.condition_factor, fit.status_summary = name, factor, status
-            fits.append(fit)
+    fits = [base] + _condition_hypotheses(evaluate, measurements, conditions, z, kw, notes)
     best = min(fits, key=lambda f: f.misfit)
     explained = (best is not base and base.misfit > 1.0 and best.misfit <= chi2_threshold
                  and best.misfit * _EXPLAIN_GAIN <= base.misfit)
     chosen = best if explained else base
 
-    findings = []
-    if chosen.condition is not None:
-        name, factor = chosen.condition, chosen.condition_factor
-        quantity = _CONDITION_SI[name]
-        head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, None), factor)
-        how = f"divided by {factor:.4g}" if factor > 1 else f"multiplied by {1 / factor:.4g}"
-        findings.append(UnitFinding(
-            "condition", name, factor,
-            f"{head}: suspected factor {_factor_words(factor)}; with {name} {how} the nominal model matches the "
-            f"data (χ²/dof {chosen.misfit:.3g} instead of {base.misfit:.3g} as read){fix}"))
-    for c, name in enumerate(measurements.channels):
-        f = chosen.factors[c]
-        if f == 1.0:
-            continue
-        ratio = f"measured/model ≈ {chosen.ratios[c]:.4g} (median over {chosen.n_ratio[c]} points)"
-        if f == -1.0:
-            findings.append(UnitFinding("sign", name, f, f"{name} has the opposite sign of the model's: {ratio}; "
-                                                         "check its sign convention"))
-            continue
-        quantity = quantity_of(name)
-        head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, units.get(name)), f)
-        findings.append(UnitFinding("channel", name, f, f"{head}: {ratio}, suspected factor {_factor_words(f)}{fix}"
-                                                        f"{_model_side(name, model_units)}"))
-    for c, name in enumerate(measurements.channels):
-        if chosen.chi2_per_dof[c] > chi2_threshold:
-            after = " after the correction above" if chosen is not base or chosen.factors[c] != 1.0 else ""
-            ratio = abs(chosen.ratios[c] / chosen.factors[c])
-            if not 1 / GROSS_RATIO <= ratio <= GROSS_RATIO:      # beyond what any polar correction gives
-                findings.append(UnitFinding(
-                    "gross", name, float("nan"),
-                    f"{name} is {chosen.ratios[c]:.3g} times the nominal model's (median over the points), χ²/dof = "
-                    f"{chosen.chi2_per_dof[c]:.3g}{after}: no unit factor explains it exactly, but no calibration "
-                    f"of the polars can either (outside 1/{GROSS_RATIO:g} to {GROSS_RATIO:g}); check the unit in the "
-                    f"header, what the channel measures and the rotor{_model_side(name, model_units)}"))
-                continue
-            findings.append(UnitFinding(
-                "misfit", name, float("nan"),
-                f"{name} disagrees with the nominal model beyond what noise and a {model_error:.0%} model error "
-                f"explain: χ²/dof = {chosen.chi2_per_dof[c]:.3g}{after} (threshold {chi2_threshold:g}), "
-                f"measured/model ≈ {chosen.ratios[c]:.3g}, and no unit factor explains it; check the unit in "
-                f"the header, what the channel measures (e.g. electrical or aerodynamic power) and the rotor"
-                f"{_model_side(name, model_units)}"))
-    if chosen.n_failed > 0.5 * measurements.n_points:
-        findings.append(UnitFinding("failures", "", float("nan"),
-                                    f"the nominal model fails at {chosen.n_failed} of {measurements.n_points} "
-                                    f"measured points ({chosen.status_summary}): check the conditions' units"))
+    findings = _findings(chosen, base, measurements, units, model_units, chi2_threshold, model_error)
     return UnitCheckReport(
         findings=tuple(findings),
         ratios={c: float(as_read.ratios[k]) for k, c in enumerate(measurements.channels)},
