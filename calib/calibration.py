@@ -61,7 +61,7 @@ from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_
 from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
 from calib.parametrizations.aliasing import FineSensitivities
 from calib.prior_check import psd_sqrt
-from calib.result import CalibrationResult
+from calib.result import CalibrationResult, Estimate, Fit, Identifiability, Provenance, Uncertainty
 from calib.truncation import AutoTruncation
 from calib.uncertainty import truncated_covariance
 from calib.types import nominal_vector
@@ -718,62 +718,77 @@ class Calibrator:
     def _result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
                 wall, **extra) -> CalibrationResult:
         """The :class:`CalibrationResult` of either estimator from its covariance [parameter units²]
-        and its directions; ``extra`` are the estimator's own result fields."""
-        st = self.settings
+        and its directions; ``extra`` are the estimator's own fields of the result's parts."""
         m = self.measurements
-        ev = lin.evaluation
-        F = fisher_matrix(lin.M)
-        prior_scaled = self.prior_std / self.scale
-        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
-        _, crb_std_scaled, corr = cramer_rao(F)
-        conf = confounding(F, prior_scaled, self.parameters)
-        verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
-                                      conf, st.identified_ratio, st.confounded_share)
-        spec, radius = None, None
-        if self.model.capabilities.rebuildable:
-            radius = self.model.rotor_radius
-            try:
-                spec = self.model.spec()
-            except InputError:
-                spec = None
-        failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
-                    "total_failed_point_evaluations": problem.n_failed_points_total,
-                    "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
-        settings = asdict(st)
-        settings["model"] = self.model.capabilities.name
-        settings["lower_effective"] = self.lower.tolist()
-        inputs = {m.source: m.sha256} if m.sha256 else {}
-        curve = self.truncation.curve
-        truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" \
-            and st.retain != "all" else {}
-        if truncation and self._second_start_record:
-            truncation.update(self._second_start_record)
+        radius, spec = self._model_record()
+        fit = self._fit_part(problem, nominal, lin)     # the failures counted before the tightening's probes
         extra.setdefault("tightening", self._tightening(problem, lin, cov_p, radius))
         res = CalibrationResult(
             parameters=[asdict(q) for q in self.parameters], channels=list(m.channels),
-            channel_units=self.channel_units, conditions=m.conditions.as_dict(), settings=settings,
-            p_nominal=self.p0, p_hat=lin.p, lower=self.lower, upper=self.upper, scale=self.scale,
-            cov_p=cov_p, std_p=std_p, singular_values=svd.singular_values, V=svd.V,
-            sigma_theta=svd.sigma_theta, retained=svd.retained, theta_hat=theta_hat,
-            cov_theta=cov_theta, theta_nominal_linearization=np.zeros(0), correlation=corr,
-            crb_std=crb_std_scaled * self.scale, observability=obs, measured=m.values, sigma=problem.sigma,
-            model_before=nominal.evaluation.values[:, self.channel_index],
-            model_after=ev.values[:, self.channel_index], status_before=nominal.evaluation.status,
-            status_after=ev.status, alpha_seen=alpha_seen, eta_seen=eta_seen, noise_sigma=problem.sigma[0],
-            sigma_bar=float(svd.sigma_bar), verdicts=verdicts, history=self.history, status=status,
-            message=message, failures=failures,
-            chi2_before=float(np.sum(((m.values - nominal.evaluation.values[:, self.channel_index])[nominal.ok]
-                                      / problem.sigma[nominal.ok]) ** 2)),
-            chi2_after=float(np.sum(lin.residual[lin.ok] ** 2)), rotor_radius=radius, inputs=inputs,
-            wall_time=wall, name=self.name, prior_std=self.prior_std, cov_frozen=cov_frozen,
-            truncation=truncation, model_spec=spec, confounding=conf, **extra)
+            channel_units=self.channel_units, conditions=m.conditions.as_dict(),
+            estimate=Estimate(self.p0, lin.p, self.lower, self.upper, self.scale, theta_hat, status, message,
+                              self.history),
+            identifiability=self._identifiability(lin, svd, cov_p, obs),
+            uncertainty=Uncertainty(cov_p, np.sqrt(np.maximum(np.diag(cov_p), 0.0)), cov_theta, self.prior_std,
+                                    cov_frozen),
+            fit=fit,
+            provenance=Provenance(self._settings_record(), spec, radius, wall_time=wall,
+                                  inputs={m.source: m.sha256} if m.sha256 else {}),
+            name=self.name).replace(**extra)
+        st = self.settings
         if self.field is not None and self.field.grid is not None:
-            res.polar_bands = self.field.bands(lin.p, cov_p, cov_frozen, eta=st.band_eta,
-                                               confidence=st.band_confidence,
-                                               prior_std=self.prior_std if st.representation_error else None,
-                                               correlation_length=st.prior_correlation, cd_min=st.cd_min)
+            res.uncertainty.polar_bands = self.field.bands(
+                lin.p, cov_p, cov_frozen, eta=st.band_eta, confidence=st.band_confidence,
+                prior_std=self.prior_std if st.representation_error else None,
+                correlation_length=st.prior_correlation, cd_min=st.cd_min)
         return res
+
+    def _identifiability(self, lin, svd, cov_p, obs) -> Identifiability:
+        """The result's identifiability part: the directions, the Cramér–Rao figures, the verdicts
+        and the truncation curve (empty for an explicit σ̄ or with every parameter kept)."""
+        st = self.settings
+        F = fisher_matrix(lin.M)
+        _, crb_std_scaled, corr = cramer_rao(F)
+        conf = confounding(F, self.prior_std / self.scale, self.parameters)
+        std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
+        verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
+                                      conf, st.identified_ratio, st.confounded_share)
+        curve = self.truncation.curve
+        truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" and st.retain != "all" else {}
+        if truncation and self._second_start_record:
+            truncation.update(self._second_start_record)
+        return Identifiability(svd.singular_values, svd.V, svd.sigma_theta, svd.retained, float(svd.sigma_bar),
+                               corr, crb_std_scaled * self.scale, obs, verdicts, conf, truncation)
+
+    def _fit_part(self, problem, nominal, lin) -> Fit:
+        """The result's fit part: the model before and after against the measurements, χ², failures."""
+        m = self.measurements
+        before = nominal.evaluation.values[:, self.channel_index]
+        ev = lin.evaluation
+        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
+        failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
+                    "total_failed_point_evaluations": problem.n_failed_points_total,
+                    "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
+        return Fit(m.values, problem.sigma, before, ev.values[:, self.channel_index], nominal.evaluation.status,
+                   ev.status, problem.sigma[0],
+                   float(np.sum(((m.values - before)[nominal.ok] / problem.sigma[nominal.ok]) ** 2)),
+                   float(np.sum(lin.residual[lin.ok] ** 2)), alpha_seen, eta_seen, failures=failures)
+
+    def _model_record(self) -> tuple[float | None, dict | None]:
+        """The rotor radius [m] and the spec that rebuilds the model, (None, None) when it cannot be rebuilt."""
+        if not self.model.capabilities.rebuildable:
+            return None, None
+        try:
+            return self.model.rotor_radius, self.model.spec()
+        except InputError:
+            return self.model.rotor_radius, None
+
+    def _settings_record(self) -> dict:
+        """The settings as the result records them: the model's name and the effective lower bounds added."""
+        settings = asdict(self.settings)
+        settings["model"] = self.model.capabilities.name
+        settings["lower_effective"] = self.lower.tolist()
+        return settings
 
 
 def calibrate(model, measurements: Measurements, **settings) -> CalibrationResult:

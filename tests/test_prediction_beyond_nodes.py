@@ -10,7 +10,6 @@ linearized formula :meth:`calib.result.CalibrationResult._field_between_nodes` u
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -50,7 +49,7 @@ def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
     alpha, eta = model.correction_field().seen(ev)
     assert np.min(alpha[eta > 0.35]) > 8.0 + 4.0            # every outboard section beyond the last hat
     assert "include the field between and beyond" in pred.representation
-    without = dataclasses.replace(res, gain=np.zeros((0, 0))).predict(far, model)
+    without = res.replace(gain=np.zeros((0, 0))).predict(far, model)
     assert np.all(without.std[0] < 0.2 * pred.std[0])       # the nodes alone say the nominal polar is exact there
 
     # Monte Carlo: fields drawn from the prior on the fine grid, through the nonlinear model
@@ -87,5 +86,5 @@ def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
 
 def test_a_result_without_gain_says_its_bands_leave_the_field_out(calibrated):
     model, res, far = calibrated
-    pred = dataclasses.replace(res, gain=np.zeros((0, 0))).predict(far, model)
+    pred = res.replace(gain=np.zeros((0, 0))).predict(far, model)
     assert "leave out the field between and beyond" in pred.representation

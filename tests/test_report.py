@@ -86,7 +86,6 @@ def test_html_report_is_self_contained_with_key_numbers(result, figure_paths, tm
 def test_report_says_where_the_drag_band_starts_at_cd_min(result):
     """The sentence counts the polar figure's points where the ΔC_D band starts at C_D,min and
     is absent where none does (and for a result saved before the bounded bands)."""
-    import dataclasses
 
     from calib.report.html import _sentences
 
@@ -96,10 +95,10 @@ def test_report_says_where_the_drag_band_starts_at_cd_min(result):
     lower = np.asarray(pb["dcd_lower"], float).copy()
     lower.flat[:7] = floor.flat[:7]                              # seven points cut by the bound
     pb["dcd_lower"] = lower
-    cut = dataclasses.replace(result, polar_bands=pb, settings={**result.settings, "cd_min": cd_min})
+    cut = result.replace(polar_bands=pb, settings={**result.settings, "cd_min": cd_min})
     [text] = [t for t in _sentences(cut) if "C_D,min" in t]
     assert text.startswith(f"The ΔC_D band starts at C_D,min = 0.004 at 7 of the {lower.size} points")
-    none = dataclasses.replace(cut, polar_bands={**pb, "dcd_lower": floor - 1e-3})
+    none = cut.replace(polar_bands={**pb, "dcd_lower": floor - 1e-3})
     assert not [t for t in _sentences(none) if "C_D,min" in t]
-    old = dataclasses.replace(cut, polar_bands={k: v for k, v in pb.items() if k != "dcd_lower"})
+    old = cut.replace(polar_bands={k: v for k, v in pb.items() if k != "dcd_lower"})
     assert not [t for t in _sentences(old) if "C_D,min" in t]

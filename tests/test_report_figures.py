@@ -1,7 +1,6 @@
 """What the report figures show: every retained eigenshape, α on the node range, residual
 panels, the fit's abscissa, parameter-labelled correlations, a known truth, progress."""
 
-import dataclasses
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -40,7 +39,7 @@ def _map_titles(fig) -> list[str]:
 
 def test_every_retained_eigenshape_is_drawn_and_counted(result):
     # more retained directions than the 12 the old figure drew
-    many = dataclasses.replace(result, retained=np.ones(result.n_params, bool))
+    many = result.replace(retained=np.ones(result.n_params, bool))
     assert many.n_retained > 12
     for block in ("lift", "drag"):
         fig = F.plot_eigenshapes(many, block)
@@ -55,7 +54,7 @@ def test_every_retained_eigenshape_is_drawn_and_counted(result):
 def test_eigenshape_maps_stay_on_the_node_range(result):
     grid = result.layout.grid
     # the data see α beyond the last node (up to 80 deg here): they are counted, not drawn
-    wide = dataclasses.replace(result, alpha_seen=np.concatenate([result.alpha_seen, [50.0, 65.0, 80.0]]),
+    wide = result.replace(alpha_seen=np.concatenate([result.alpha_seen, [50.0, 65.0, 80.0]]),
                                eta_seen=np.concatenate([result.eta_seen, [0.5, 0.6, 0.7]]))
     a_in, e_in, n_out = seen_inside(wide)
     assert n_out >= 3 and a_in.max() <= grid.alpha_nodes_deg[-1]
@@ -80,7 +79,7 @@ def _lines(fig, kind):
 
 
 def test_polar_axes_cover_the_node_range_only(result):
-    wide = dataclasses.replace(result, alpha_seen=np.concatenate([result.alpha_seen, [80.0]]),
+    wide = result.replace(alpha_seen=np.concatenate([result.alpha_seen, [80.0]]),
                                eta_seen=np.concatenate([result.eta_seen, [0.6]]))
     fig = F.plot_polars(wide)
     n = min(5, wide.layout.grid.eta_nodes.size)
@@ -130,13 +129,13 @@ def test_fit_abscissa_follows_the_rotor_speed(result):
     # constant rotor speed and a known radius -> tip-speed ratio
     cond = dict(result.conditions)
     cond["rotor_speed"] = np.full_like(cond["wind_speed"], 20.0)
-    sweep = dataclasses.replace(result, conditions=cond, rotor_radius=RADIUS)
+    sweep = result.replace(conditions=cond, rotor_radius=RADIUS)
     x, label, _ = fit_abscissa(sweep)
     np.testing.assert_allclose(x, 20.0 * np.pi / 30 * RADIUS / cond["wind_speed"])
     assert label.startswith("tip-speed ratio")
     assert _xlabel(F.plot_fit(sweep)).startswith("tip-speed ratio")
     # constant rotor speed, radius unknown -> wind speed, and the reason says why
-    x, label, reason = fit_abscissa(dataclasses.replace(sweep, rotor_radius=None))
+    x, label, reason = fit_abscissa(sweep.replace(rotor_radius=None))
     assert label.startswith("wind speed") and "radius unknown" in reason
 
 
@@ -182,7 +181,7 @@ def test_polar_bands_drawn_are_the_bounded_bands_and_older_results_fall_back_to_
     pb = dict(result.polar_bands)
     # ends that are not ± the half width (as where C_D,min cuts the drag band)
     pb["dcd_lower"] = np.asarray(pb["dcd"]) - 0.3 * np.asarray(pb["dcd_half_width"])
-    result = dataclasses.replace(result, polar_bands=pb)
+    result = result.replace(polar_bands=pb)
     cols = station_columns(np.asarray(pb["eta"]), 5)
     drawn = _bands(F.plot_polars(result))
     assert sorted(drawn) == [(r, c) for r in (0, 1) for c in range(cols.size)]
@@ -191,7 +190,7 @@ def test_polar_bands_drawn_are_the_bounded_bands_and_older_results_fall_back_to_
         base = np.asarray(pb[f"{letter}0"])[j]
         assert lo == pytest.approx(np.min(base + np.asarray(pb[f"d{letter}_lower"])[j]))
         assert hi == pytest.approx(np.max(base + np.asarray(pb[f"d{letter}_upper"])[j]))
-    old = dataclasses.replace(result, polar_bands={k: v for k, v in pb.items()
+    old = result.replace(polar_bands={k: v for k, v in pb.items()
                                                    if not k.endswith(("_lower", "_upper"))})
     for (row, col), (lo, hi) in _bands(F.plot_polars(old)).items():
         j, letter = cols[col], ("cl", "cd")[row]

@@ -1,0 +1,147 @@
+"""A calibrated model's outputs at new conditions, with intervals: :class:`Prediction`.
+
+:func:`predict_outputs` is what :meth:`calib.result.CalibrationResult.predict` runs; the
+command ``calib predict`` (:mod:`calib.predict`) writes its table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.envelope import envelope_of
+from calib.errors import InputError
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """Model outputs at new conditions with their intervals.
+
+    Attributes
+    ----------
+    channels, units : tuple of str
+    values, std, lower, upper : ndarray, shape (n_points, n_channels)
+        Prediction, its 1-σ and the two-sided interval at ``confidence`` [channel units];
+        NaN where ``status != 0``.
+    status : ndarray of int, shape (n_points,)
+    messages : tuple of str
+    confidence : float
+    envelope : tuple of str
+        Per point, "" inside the calibration envelope, else what lies outside it
+        (:func:`calib.envelope.envelope_of`): an extrapolation.
+    representation : str
+        Whether the intervals include the correction field between and beyond the nodes
+        (:func:`field_between_nodes`).
+    """
+
+    channels: tuple
+    units: tuple
+    values: np.ndarray
+    std: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    status: np.ndarray
+    messages: tuple
+    confidence: float
+    envelope: tuple = ()
+    representation: str = ""
+
+    def to_dataframe(self, conditions):
+        """One row per point with its ``conditions`` (:func:`calib.frames.prediction_frame`)."""
+        from calib.frames import prediction_frame
+        return prediction_frame(conditions, self)
+
+    @property
+    def outside(self) -> np.ndarray:
+        """True where the point lies outside the calibration envelope."""
+        return np.array([bool(e) for e in self.envelope], bool) if self.envelope else \
+            np.zeros(self.values.shape[0], bool)
+
+
+def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Prediction:
+    """Model outputs at new conditions with intervals from the estimate's covariance.
+
+    The variance of each output is g Cov(p̂) gᵀ with g its row of the model Jacobian at p̂
+    and Cov(p̂) the covariance including the frozen directions (docs/theory.md, Predictions): an
+    interval of the *model output*, not of a new measurement (add the noise σ for that).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    conditions : OperatingConditions
+    model : ForwardModel
+        The calibrated model (:meth:`calib.result.CalibrationResult.rebuild_model`).
+    confidence : float
+        Two-sided confidence of the intervals [-].
+
+    Returns
+    -------
+    Prediction
+    """
+    from scipy import stats
+
+    names = [c.name for c in model.channels]
+    missing = [c for c in result.channels if c not in names]
+    if missing:
+        raise InputError(f"model lacks channel(s) {', '.join(missing)}", result.name, field="channels")
+    idx = [names.index(c) for c in result.channels]
+    ev, G = model.jacobian(result.estimate.p_hat, conditions)
+    G = G[:, idx, :]
+    rep, representation = field_between_nodes(result, model, conditions, ev, G, idx)
+    unc = result.uncertainty
+    cov = unc.cov_p if rep is None else unc.cov_p - unc.cov_alias
+    var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), cov, np.nan_to_num(G))
+    if rep is not None:
+        var = var + rep
+    std = np.sqrt(np.maximum(var, 0.0))
+    z = float(stats.norm.ppf(0.5 * (1 + confidence)))
+    values = ev.values[:, idx]
+    std = np.where(ev.ok[:, None], std, np.nan)
+    extras = ev.extras or {}
+    fit = result.fit
+    envelope = envelope_of(result.conditions, result.provenance.rotor_radius, conditions.as_dict(),
+                           extras.get("alpha_deg"), extras.get("eta"), fit.alpha_seen,
+                           fit.eta_seen) if result.conditions else []
+    return Prediction(tuple(result.channels), tuple(result.channel_units), values, std, values - z * std,
+                      values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope),
+                      representation)
+
+
+def field_between_nodes(result, model, conditions, ev, G, idx) -> tuple[np.ndarray | None, str]:
+    """The variance of each predicted output [channel unit²] from the correction field the nodes do
+    not carry (between them, and beyond their range, where it is the prior's), net of what the
+    estimate took up of it at the calibration points, and a sentence on it.
+
+    With the smooth-field prior, the field is f = Σ N_i f_i + δ, δ ~ N(0, Σ_δ) on a fine grid
+    (:mod:`calib.parametrizations.aliasing`). A predicted output y = g p + w δ and the estimate
+    p̂ = p + K(W_cal δ + noise) (K = ``gain``, the MAP's linear response to the whitened data),
+    so its error has the δ-part (g K W_cal − w) δ, of variance (gK W_cal − w) Σ_δ (gK W_cal − w)ᵀ;
+    that replaces the nodal term g Cov_alias gᵀ in g Cov(p̂) gᵀ. Beyond the nodes the hats vanish
+    and δ is the whole field: the correction reverts to the prior's band there. None when the
+    result has no gain (truncated estimator, no field) or the model cannot be refined (an FMU).
+    """
+    st = result.provenance.settings
+    unc, fit, est = result.uncertainty, result.fit, result.estimate
+    if not unc.gain.size or not unc.prior_std.size:
+        return None, ("the bands leave out the field between and beyond the correction nodes (estimator "
+                      f"{st.get('estimator', 'truncated')!r} records no gain)")
+    if not model.capabilities.refinable or not st.get("representation_error", True) \
+            or not st.get("prior_correlation", 0.0) > 0:
+        return None, "the bands leave out the field between and beyond the correction nodes (off, or not refinable)"
+    from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities
+    from calib.types import OperatingConditions
+
+    field_ = model.correction_field()
+    a_new, e_new = field_.seen(ev)
+    cal = OperatingConditions(**result.conditions)
+    a_all, e_all = np.concatenate([a_new, fit.alpha_seen]), np.concatenate([e_new, fit.eta_seen])
+    ok_cal = fit.status_after == 0
+    ones = np.ones((len(conditions), len(idx)))
+    fs_new = fine_sensitivities(model, est.p_hat, conditions, ones, idx, ev.ok, a_all, e_all)
+    fs_cal = fine_sensitivities(model, est.p_hat, cal, fit.sigma, idx, ok_cal, a_all, e_all)
+    gG = np.nan_to_num(G).reshape(-1, G.shape[-1]) * est.scale       # ∂y/∂p̃ per output row
+    A = gG @ (unc.gain @ fs_cal.W) - fs_new.W
+    var = discrepancy_propagated(A, field_, fs_new, unc.prior_std, float(st["prior_correlation"]), diagonal=True)
+    return var.reshape(G.shape[:2]), ("the bands include the field between and beyond the correction nodes "
+                                      "(the prior's, net of what the calibration points determined)")
