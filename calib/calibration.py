@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import difflib
 import time
-from dataclasses import asdict, replace
 from typing import Callable
 
 import numpy as np
@@ -55,15 +54,15 @@ from scipy import stats
 from calib.calibration_settings import ESTIMATORS, NOISE_MODES, CalibrationSettings
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate
-from calib.identifiability import (SvdAnalysis, confounding, cramer_rao, fisher_matrix, fold_dominated_directions,
-                                   frozen_curvature_covariance, observability,
-                                   parameter_verdicts, subspace_cosines, svd_analysis)
-from calib.measurements import Measurements, check_channels, ml_noise, noise_from_repeats
-from calib.parametrizations.aliasing import FineSensitivities
+from calib.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
+from calib.measurements import Measurements, check_channels, ml_noise
+from calib.noise import initial_sigma
 from calib.prior_check import psd_sqrt
-from calib.result import CalibrationResult, Estimate, Fit, Identifiability, Provenance, Uncertainty
-from calib.truncation import AutoTruncation
-from calib.uncertainty import truncated_covariance
+from calib.result import CalibrationResult
+from calib.result_assembly import assemble_result
+from calib.truncation import AutoTruncation, keep_second_start
+from calib.uncertainty_terms import ModelTerms
+from calib.uncertainty import laplace_covariance, map_fit_scale, map_gain, prior_whitened_svd, truncated_covariance
 from calib.types import nominal_vector
 
 __all__ = ["CalibrationSettings", "Calibrator", "calibrate", "NOISE_MODES", "ESTIMATORS"]
@@ -85,23 +84,6 @@ def _progress_printer(rec: dict) -> None:
     keys = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rec.items()
                     if k not in ("stage", "qp"))
     print(f"[calib {rec.get('stage', '')}] {keys}", flush=True)
-
-
-def keep_second_start(first: tuple, second: tuple) -> bool:
-    """Whether the automatic choice keeps its second start (:meth:`Calibrator._second_start`).
-
-    Each start is (retained count, criterion at it, its standard error, status). The default
-    is the start whose retained set settled (status ``converged``) when only one did, else the
-    one with fewer θ, else (equal counts) the first; the other is kept only if its criterion is
-    lower than the default's by more than its own standard error. A failed second start, or
-    one without a finite criterion, is never kept.
-    """
-    (k1, cv1, se1, s1), (k2, cv2, se2, s2) = first, second
-    if s2 == "failed" or not np.isfinite(cv2):
-        return False
-    settled1, settled2 = s1 == "converged", s2 == "converged"
-    default_second = settled2 if settled1 != settled2 else k2 < k1
-    return not cv1 < cv2 - se1 if default_second else cv2 < cv1 - se2
 
 
 class Calibrator:
@@ -173,6 +155,8 @@ class Calibrator:
         st = self.settings
         self.truncation = AutoTruncation(st.cv_folds, st.max_retained, st.cv_one_se)
         self._second_start_record: dict = {}
+        self.terms = ModelTerms(model, self.field, st, measurements, self.parameters, self.channel_index,
+                                self.prior_std, self.scale, self.lower, self.upper)
 
     # ------------------------------------------------------------------ setup
     def _effective_bounds(self):
@@ -187,47 +171,13 @@ class Calibrator:
         for cb in self._callbacks:
             cb(rec)
 
-    def _initial_sigma(self) -> np.ndarray:
-        m = self.measurements
-        shape = m.values.shape
-        s = self.settings
-        if s.noise == "repeats":
-            return np.broadcast_to(noise_from_repeats(m), shape).copy()
-        if s.noise in ("relative", "relative_ml") or (s.noise == "ml" and s.relative_sigma):
-            # ml: the stated model is the start of the iteration (instead of the nominal residual)
-            from calib.noise import relative_noise
-            return relative_noise(m.values, m.channels, s.relative_sigma, m.source)
-        if s.sigma:
-            unknown = [c for c in s.sigma if c not in m.channels]
-            if unknown:
-                raise InputError(f"sigma given for unmeasured channel(s) {', '.join(unknown)}; measured: "
-                                 f"{', '.join(m.channels)}", "settings", field="sigma")
-            missing = [c for c in m.channels if c not in s.sigma]
-            if not missing:
-                sig = np.array([float(s.sigma[c]) for c in m.channels])
-                if np.any(~(sig > 0)):
-                    raise InputError("sigma must be > 0", "settings", field="sigma")
-                return np.broadcast_to(sig, shape).copy()
-            if m.sigma is None and s.noise == "known":
-                raise InputError(f"no sigma for channel(s) {', '.join(missing)}", "settings", field="sigma")
-        if m.sigma is not None:
-            return m.sigma.copy()
-        if s.noise == "known":
-            raise InputError(
-                "noise = 'known' needs the 1-σ noise of every channel, but the table has no _sigma columns ("
-                + ", ".join(f"{c}_sigma" for c in m.channels) + ") and no sigma is set: set [calibration] sigma = {"
-                + ", ".join(f"{c} = ..." for c in m.channels) + "} (absolute, SI units: W, N, N m), add the _sigma "
-                "columns, or choose [calibration] noise = \"ml\" (from the residuals) or \"repeats\" (from "
-                "repeated records); in Python: CalibrationSettings(sigma={...})", m.source, field="calibration.sigma")
-        return None  # ml: from the nominal residual
-
     # ------------------------------------------------------------------ run
     def run(self) -> CalibrationResult:
         """Calibrate; returns a :class:`CalibrationResult`."""
         t0 = time.perf_counter()
         st = self.settings
         m = self.measurements
-        sigma = self._initial_sigma()
+        sigma = initial_sigma(self.measurements, self.settings)
         problem = LeastSquaresProblem(self.model, m.conditions, m.values,
                                       sigma if sigma is not None else np.ones_like(m.values),
                                       self.channel_index, self.p0, self.scale, self.lower, self.upper)
@@ -284,13 +234,8 @@ class Calibrator:
         return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, self.truncation.curve.sigma_bar, retained)
 
     def _prior_cov_scaled(self) -> np.ndarray:
-        """The stated prior covariance of the scaled parameters [scale units²]: ``prior_std``
-        per parameter, neighbouring field nodes correlated by the smooth-field prior."""
-        prior_scaled = self.prior_std / self.scale
-        prior_cov = np.outer(prior_scaled, prior_scaled)
-        if self.field is not None:
-            prior_cov = prior_cov * self.field.node_correlation(self.settings.prior_correlation)
-        return prior_cov
+        """The stated prior covariance of the scaled parameters [scale units²] (:meth:`ModelTerms.prior_cov_scaled`)."""
+        return self.terms.prior_cov_scaled()
 
     def _map_prior_cov_scaled(self) -> np.ndarray:
         """The prior of the MAP estimator [scale units²]: the stated prior, and ``FLAT_PRIOR`` for
@@ -430,56 +375,33 @@ class Calibrator:
         status = {"qp_failed": "failed"}.get(out.status, out.status)
         lin = out.linearization
         sv, W, L = self._map_decomposition(lin)
-        analysis = self._map_analysis(sv, L @ W)[0]
+        analysis = laplace_covariance(sv, L @ W).directions
         self._emit({"stage": "map_done", "status": status, "cost": out.cost, "iterations": out.iterations,
                     "data_beat_prior": analysis.n_retained, "n_failed": lin.n_failed})
         return out.p, analysis, lin, status, out.message
 
     def _map_decomposition(self, lin):
-        """The SVD of the prior-whitened sensitivities A = R^(−½) G̃ L = U S Wᵀ at ``lin`` (P = L Lᵀ
-        the MAP's prior): s (descending), W and L."""
+        """The SVD of the prior-whitened sensitivities at ``lin`` (:func:`calib.uncertainty.prior_whitened_svd`,
+        P = L Lᵀ the MAP's prior): s (descending), W and L."""
         L = psd_sqrt(self._map_prior_cov_scaled())
-        A = lin.M @ L
-        lam, W = np.linalg.eigh(A.T @ A)
-        order = np.argsort(lam)[::-1]
-        return np.sqrt(np.clip(lam[order], 0.0, None)), W[:, order], L
-
-    @staticmethod
-    def _map_analysis(s, LW, fit_scale: float = 1.0):
-        """The Laplace covariance of the scaled parameters from :meth:`_map_decomposition`,
-        (G̃ᵀR⁻¹G̃/k + P⁻¹)⁻¹ = L W (I + S²/k)⁻¹ (L W)ᵀ with k = ``fit_scale``.
-
-        Returns the analysis in the result's terms (directions p̃ ∝ L w_i as unit columns of V,
-        s_i, σ of each direction's coordinate [scale units], "retained" = s_i > 1: the data
-        determine that direction better than the prior), the covariance [scale units²] and
-        its part along the directions where the prior dominates (s_i ≤ 1).
-        """
-        shrink = 1.0 / (1.0 + s ** 2 / fit_scale)
-        cov = (LW * shrink) @ LW.T
-        weak = s <= 1.0
-        cov_weak = (LW[:, weak] * shrink[weak]) @ LW[:, weak].T
-        c = np.linalg.norm(LW, axis=0)
-        c = np.where(c > 0, c, 1.0)
-        return SvdAnalysis(s, LW / c, c * np.sqrt(shrink), 1.0, ~weak), cov, cov_weak
+        return (*prior_whitened_svd(lin.M, L), L)
 
     def _finish_map(self, problem, nominal, lin, status, message, wall) -> CalibrationResult:
         """The result of ``estimator = "map"``: the Laplace covariance at the estimate, widened by
         the fit scale (the noise variance multiplied by max(1, χ²/(N − n_eff)), n_eff = Σ s²/(1+s²)
         the effective number of parameters; MacKay 1992) with a stated noise and ``scale_by_fit``."""
         st = self.settings
-        n_rows = int(lin.ok.sum()) * len(self.channel_index)
         s, W, L = self._map_decomposition(lin)
         LW = L @ W
-        n_eff = float(np.sum(s ** 2 / (1.0 + s ** 2)))
-        chi2 = float(np.sum(lin.residual[lin.ok] ** 2))
-        fit_scale = 1.0
-        if st.scale_by_fit and st.noise not in ("ml", "relative_ml") and n_rows > n_eff:
-            fit_scale = max(1.0, chi2 / (n_rows - n_eff))
-        svd, cov, cov_weak = self._map_analysis(s, LW, fit_scale)
+        fit_scale, n_eff = map_fit_scale(float(np.sum(lin.residual[lin.ok] ** 2)),
+                                         int(lin.ok.sum()) * len(self.channel_index), s,
+                                         st.scale_by_fit and st.noise not in ("ml", "relative_ml"))
+        laplace = laplace_covariance(s, LW, fit_scale)
+        svd, cov, cov_weak = laplace.directions, laplace.total, laplace.weak
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        gain = (LW / (1.0 + s ** 2)) @ (lin.M @ LW).T    # p̃̂ = gain r̃: L (AᵀA + I)⁻¹ Aᵀ
-        alias, _, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen, gain=gain)
+        gain = map_gain(LW, s, lin.M)
+        alias, _, alias_note, fine = self.terms.aliasing(problem, lin, svd, alpha_seen, eta_seen, gain=gain)
         cov_alias = np.zeros_like(cov)
         if alias is not None:   # the field between the nodes, taken up by the estimate
             cov, cov_alias = cov + alias, alias
@@ -489,7 +411,7 @@ class Calibrator:
         prior_var = np.diag(self._map_prior_cov_scaled())
         obs = np.clip(1.0 - np.diag(cov) / np.where(prior_var > 0, prior_var, 1.0), 0.0, 1.0)
         try:
-            prior_check = self._prior_check(problem, lin, fine)
+            prior_check = self.terms.prior_check(problem, lin, fine)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a check, not the result
             prior_check = {"failed": f"{type(exc).__name__}: {exc}"}
         multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
@@ -502,174 +424,6 @@ class Calibrator:
                             cov_alias=cov_alias * D)
 
     # ------------------------------------------------------------------ outputs
-    def _aliasing(self, problem, lin, svd, alpha_seen, eta_seen, gain: np.ndarray | None = None
-                  ) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:
-        """Cov of the retained θ from the field between the nodes (scale units²), the χ² it adds
-        to the residuals on average, why it is left out ('' when it is in, or when there is
-        no correction field or nothing for it to act on; :mod:`calib.parametrizations.aliasing`),
-        and the fine-grid sensitivities it used (None when left out). With ``gain`` (the MAP
-        estimate's linear response to the whitened data, p̃ per row [scale units]) the covariance is
-        that of the whole scaled vector, gain W Σ_δ Wᵀ gainᵀ, and the χ² is not computed (0)."""
-        st = self.settings
-        if self.field is None or self.field.grid is None or not svd.retained.any() or not alpha_seen.size:
-            return None, 0.0, "", None
-        left_out = ("the bands leave out how a field varying between the correction nodes biases the retained θ, "
-                    "so they can be too narrow for polars that vary between the nodes")
-        if not st.representation_error:
-            return None, 0.0, f"representation_error = false: {left_out}.", None
-        if st.prior_correlation <= 0:
-            return None, 0.0, (f"prior_correlation = 0 (independent nodes) defines no field between the nodes to "
-                               f"propagate: {left_out}; the field's variance at each reached point is in the "
-                               f"bands."), None
-        if not self.model.capabilities.refinable:
-            return None, 0.0, (f"the model ({self.model.capabilities.name}) cannot be rebuilt on a finer correction "
-                               f"grid (no with_grid, e.g. an FMU): {left_out}."), None
-        lay = self.field.layout
-        if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
-            return None, 0.0, f"the correction field does not carry both lift and drag at every node: {left_out}.", None
-        from calib.parametrizations.aliasing import aliasing_covariance, fine_sensitivities
-
-        r = svd.retained
-        fine = fine_sensitivities(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
-                                  lin.ok, alpha_seen, eta_seen)
-        if gain is not None:
-            from calib.parametrizations.aliasing import discrepancy_propagated
-
-            return (discrepancy_propagated(gain @ fine.W, self.field, fine, self.prior_std, st.prior_correlation),
-                    0.0, "", fine)
-        cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
-                                        lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
-                                        st.prior_correlation, alpha_seen, eta_seen, sensitivities=fine)
-        return cov, chi2, "", fine
-
-    def _prior_check(self, problem, lin, fine) -> dict:
-        """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`),
-        linearized at the MAP under the stated prior (:func:`calib.prior_check.map_point`, from the
-        estimate): on the fine grid of the aliasing term when it was computed (``fine`` given),
-        else on the calibration nodes; {} without a correction field or with ``prior_check`` off."""
-        if self.field is None or self.field.grid is None or not self.settings.prior_check:
-            return {}
-        from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
-        from calib.prior_check import map_point, prior_amplitude
-
-        n_ch = len(self.channel_index)
-        P = self._prior_cov_scaled()
-
-        last = {}
-
-        def linearize_at(x):
-            p = problem.unscaled(x, clip=True)
-            last["at"] = at = problem.linearize(p)
-            return problem.scaled(p), at.residual.reshape(-1), np.repeat(at.ok, n_ch), at.M
-
-        def evaluate_at(x):
-            p = problem.unscaled(x, clip=True)
-            out = problem.evaluate(p)
-            return problem.scaled(p), out.residual.reshape(-1), np.repeat(out.ok, n_ch)
-
-        failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
-        # the MAP estimator's result is the MAP point of the stated prior already (up to its flat priors)
-        mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at,
-                       max_iterations=0 if self.settings.estimator == "map" else 10)
-        problem.n_failed_points_total = failed_before
-        lay = self.field.layout
-        blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
-        field_cols = np.concatenate(blocks)
-        other = np.setdiff1d(np.arange(len(self.parameters)), field_cols)
-        rows = mp.ok_rows
-        M = mp.M[rows]
-        z = mp.residual[rows] + M @ mp.x
-        if fine is not None:
-            at_map = last["at"]                 # map_point ends on the point it linearized last
-            if np.max(np.abs(at_map.p - lin.p) / self.scale) > 1e-9:   # (the MAP estimator's is that point)
-                fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma,
-                                          problem.channel_index, at_map.ok, *self.field.seen(at_map.evaluation))
-            L = grid_correlation_sqrt(fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
-            sd = [float(np.sqrt(np.mean(self.prior_std[b] ** 2))) for b in blocks]
-            Z_f, K_f = fine.W[rows], None
-            L_f = np.block([[sd[0] * L, np.zeros_like(L)], [np.zeros_like(L), sd[1] * L]])
-        else:
-            Z_f, K_f, L_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)], None
-        check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None,
-                                field_sqrt=L_f)
-        check = replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
-                         map_iterations=mp.iterations,
-                         map_converged=True if self.settings.estimator == "map" else mp.converged)
-        return check.to_dict()
-
-    def _curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:
-        """The retained θ's covariance from the frozen directions' prior through the model's
-        curvature (:func:`calib.identifiability.frozen_curvature_covariance`) [scale units²],
-        and what it adds relative to the noise part (``result.curvature``); (None, {}) when
-        there is nothing to propagate, (None, {"samples": 0}) when the term is switched off."""
-        st = self.settings
-        r = svd.retained
-        if not r.any() or r.all():
-            return None, {}
-        if st.curvature_samples == 0:
-            return None, {"samples": 0}
-        n_ch = len(self.channel_index)
-
-        def residual_at(step):
-            p = np.clip(lin.p + self.scale * step, self.lower, self.upper)
-            out = problem.evaluate(p)
-            return out.residual.reshape(-1), np.repeat(out.ok, n_ch), (p - lin.p) / self.scale
-
-        failed_before = problem.n_failed_points_total   # prior draws are not the fit's failures
-        cov, info = frozen_curvature_covariance(residual_at, lin.residual.reshape(-1), np.repeat(lin.ok, n_ch),
-                                                lin.M, svd.V, svd.sigma_theta, r, prior_cov, st.curvature_samples)
-        problem.n_failed_points_total = failed_before
-        # its size against the noise part, per retained θ: tr(S² C)/k and the largest ratio
-        ratio = np.diag(cov) / svd.sigma_theta[r] ** 2
-        return cov, {**info, "variance_ratio_mean": float(np.mean(ratio)), "variance_ratio_max": float(np.max(ratio))}
-
-    def _fold_directions(self, lin, svd, multiple_roots) -> list:
-        """Retained directions that points with several roots of the BEM equations determine
-        (:func:`calib.identifiability.fold_dominated_directions`): one record per (point, direction);
-        their stated covariance gets the prior variance along them added (:func:`calib.uncertainty.fold_inflation`),
-        so their σ is at least the prior's."""
-        Vr = svd.V[:, svd.retained]
-        return fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
-                                         multiple_roots, lin.ok)
-
-    def _tightening(self, problem, lin, cov_p, radius) -> dict:
-        """Which measurements would tighten the σ of each parameter that is not a correction node
-        (:mod:`calib.tightening`); {} without such parameters, without a rotor radius, or for a model
-        whose every probe is a simulation (one that cannot be refined, e.g. an FMU)."""
-        field_cols = set()
-        if self.field is not None:
-            lay = self.field.layout
-            field_cols = {int(j) for idx in (lay.lift_index, lay.drag_index) for j in idx[idx >= 0].ravel()}
-        names = [q.name for j, q in enumerate(self.parameters) if j not in field_cols]
-        if not self.settings.tightening or not names or radius is None \
-                or not self.model.capabilities.refinable:
-            return {}
-        from calib.tightening import tightening
-
-        m = self.measurements
-        y = np.abs(lin.evaluation.values[:, self.channel_index])
-        rel = {c: float(np.median((problem.sigma[:, i] / np.maximum(y[:, i], 1e-300))[lin.ok]))
-               for i, c in enumerate(m.channels) if lin.ok.any()}
-        field_variance = None
-        st = self.settings
-        if self.field is not None and self.field.grid is not None and st.representation_error \
-                and st.prior_correlation > 0:
-            from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities
-
-            a_cal, e_cal = self.field.seen(lin.evaluation)
-
-            def field_variance(cond, cols, ev):
-                a, e = self.field.seen(ev)
-                fs = fine_sensitivities(self.model, lin.p, cond, np.ones((len(cond), len(cols))), cols, ev.ok,
-                                        np.concatenate([a, a_cal]), np.concatenate([e, e_cal]))
-                var = discrepancy_propagated(fs.W, self.field, fs, self.prior_std, st.prior_correlation, diagonal=True)
-                return var.reshape(len(cond), len(cols))
-        try:
-            return tightening(self.model, lin.p, cov_p / np.outer(self.scale, self.scale), self.scale, m.conditions,
-                              radius, list(m.channels), rel, names, field_variance=field_variance)
-        except (InputError, np.linalg.LinAlgError, ValueError) as exc:     # advice, not the result
-            return {"failed": f"{type(exc).__name__}: {exc}"}
-
     def _fit_scale(self, lin, svd) -> float:
         """max(1, χ²/(N − n_retained)) with ``scale_by_fit`` and a stated noise, else 1.
 
@@ -695,16 +449,16 @@ class Calibrator:
         prior_cov = self._prior_cov_scaled()
         ev = lin.evaluation
         alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        alias, alias_misfit, alias_note, fine = self._aliasing(problem, lin, svd, alpha_seen, eta_seen)
+        alias, alias_misfit, alias_note, fine = self.terms.aliasing(problem, lin, svd, alpha_seen, eta_seen)
         try:
-            prior_check = self._prior_check(problem, lin, fine)
+            prior_check = self.terms.prior_check(problem, lin, fine)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a check, not the result
             prior_check = {"failed": f"{type(exc).__name__}: {exc}"}
         fit_scale = self._fit_scale(lin, svd)
         cov_theta = cov_theta * fit_scale
-        curvature_cov, curvature = self._curvature(problem, lin, svd, prior_cov)
+        curvature_cov, curvature = self.terms.curvature(problem, lin, svd, prior_cov)
         multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
-        fold = self._fold_directions(lin, svd, multiple_roots)
+        fold = self.terms.fold_directions(lin, svd, multiple_roots)
         parts, sigmas = truncated_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov, alias, fit_scale,
                                              curvature_cov, [d["theta"] for d in fold])
         fold = [{**d, **sigmas[d["theta"]]} for d in fold]
@@ -717,78 +471,9 @@ class Calibrator:
 
     def _result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
                 wall, **extra) -> CalibrationResult:
-        """The :class:`CalibrationResult` of either estimator from its covariance [parameter units²]
-        and its directions; ``extra`` are the estimator's own fields of the result's parts."""
-        m = self.measurements
-        radius, spec = self._model_record()
-        fit = self._fit_part(problem, nominal, lin)     # the failures counted before the tightening's probes
-        extra.setdefault("tightening", self._tightening(problem, lin, cov_p, radius))
-        res = CalibrationResult(
-            parameters=[asdict(q) for q in self.parameters], channels=list(m.channels),
-            channel_units=self.channel_units, conditions=m.conditions.as_dict(),
-            estimate=Estimate(self.p0, lin.p, self.lower, self.upper, self.scale, theta_hat, status, message,
-                              self.history),
-            identifiability=self._identifiability(lin, svd, cov_p, obs),
-            uncertainty=Uncertainty(cov_p, np.sqrt(np.maximum(np.diag(cov_p), 0.0)), cov_theta, self.prior_std,
-                                    cov_frozen),
-            fit=fit,
-            provenance=Provenance(self._settings_record(), spec, radius, wall_time=wall,
-                                  inputs={m.source: m.sha256} if m.sha256 else {}),
-            name=self.name).replace(**extra)
-        st = self.settings
-        if self.field is not None and self.field.grid is not None:
-            res.uncertainty.polar_bands = self.field.bands(
-                lin.p, cov_p, cov_frozen, eta=st.band_eta, confidence=st.band_confidence,
-                prior_std=self.prior_std if st.representation_error else None,
-                correlation_length=st.prior_correlation, cd_min=st.cd_min)
-        return res
-
-    def _identifiability(self, lin, svd, cov_p, obs) -> Identifiability:
-        """The result's identifiability part: the directions, the Cramér–Rao figures, the verdicts
-        and the truncation curve (empty for an explicit σ̄ or with every parameter kept)."""
-        st = self.settings
-        F = fisher_matrix(lin.M)
-        _, crb_std_scaled, corr = cramer_rao(F)
-        conf = confounding(F, self.prior_std / self.scale, self.parameters)
-        std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
-        verdicts = parameter_verdicts(self.parameters, lin.p, self.lower, self.upper, std_p, self.prior_std, obs,
-                                      conf, st.identified_ratio, st.confounded_share)
-        curve = self.truncation.curve
-        truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" and st.retain != "all" else {}
-        if truncation and self._second_start_record:
-            truncation.update(self._second_start_record)
-        return Identifiability(svd.singular_values, svd.V, svd.sigma_theta, svd.retained, float(svd.sigma_bar),
-                               corr, crb_std_scaled * self.scale, obs, verdicts, conf, truncation)
-
-    def _fit_part(self, problem, nominal, lin) -> Fit:
-        """The result's fit part: the model before and after against the measurements, χ², failures."""
-        m = self.measurements
-        before = nominal.evaluation.values[:, self.channel_index]
-        ev = lin.evaluation
-        alpha_seen, eta_seen = self.field.seen(ev) if self.field is not None else (np.zeros(0), np.zeros(0))
-        failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
-                    "total_failed_point_evaluations": problem.n_failed_points_total,
-                    "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
-        return Fit(m.values, problem.sigma, before, ev.values[:, self.channel_index], nominal.evaluation.status,
-                   ev.status, problem.sigma[0],
-                   float(np.sum(((m.values - before)[nominal.ok] / problem.sigma[nominal.ok]) ** 2)),
-                   float(np.sum(lin.residual[lin.ok] ** 2)), alpha_seen, eta_seen, failures=failures)
-
-    def _model_record(self) -> tuple[float | None, dict | None]:
-        """The rotor radius [m] and the spec that rebuilds the model, (None, None) when it cannot be rebuilt."""
-        if not self.model.capabilities.rebuildable:
-            return None, None
-        try:
-            return self.model.rotor_radius, self.model.spec()
-        except InputError:
-            return self.model.rotor_radius, None
-
-    def _settings_record(self) -> dict:
-        """The settings as the result records them: the model's name and the effective lower bounds added."""
-        settings = asdict(self.settings)
-        settings["model"] = self.model.capabilities.name
-        settings["lower_effective"] = self.lower.tolist()
-        return settings
+        """The result of either estimator (:func:`calib.result_assembly.assemble_result`)."""
+        return assemble_result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,
+                               status, message, wall, **extra)
 
 
 def calibrate(model, measurements: Measurements, **settings) -> CalibrationResult:

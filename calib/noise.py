@@ -79,3 +79,54 @@ def ml_scale(chi2: float, n_residuals: int, n_fitted: float) -> float:
     """
     dof = max(n_residuals - n_fitted, 1.0)
     return float(np.sqrt(chi2 / dof))
+
+
+def initial_sigma(m, s) -> np.ndarray | None:
+    """The noise 1-σ per point and channel the calibration starts from [channel units].
+
+    From repeated records (``noise = "repeats"``), relative to the values (``relative``,
+    ``relative_ml``, or ``ml`` with ``relative_sigma``), the settings' ``sigma`` or the table's
+    ``_sigma`` columns; None for ``ml`` without them (the calibrator starts from the nominal residual).
+
+    Parameters
+    ----------
+    m : Measurements
+    s : CalibrationSettings
+
+    Raises
+    ------
+    InputError
+        ``sigma`` for an unmeasured channel, a σ ≤ 0, or ``noise = "known"`` without a σ for every
+        channel (the message says where to state it).
+    """
+    shape = m.values.shape
+    if s.noise == "repeats":
+        from calib.measurements import noise_from_repeats
+
+        return np.broadcast_to(noise_from_repeats(m), shape).copy()
+    if s.noise in ("relative", "relative_ml") or (s.noise == "ml" and s.relative_sigma):
+        # ml: the stated model is the start of the iteration (instead of the nominal residual)
+        return relative_noise(m.values, m.channels, s.relative_sigma, m.source)
+    if s.sigma:
+        unknown = [c for c in s.sigma if c not in m.channels]
+        if unknown:
+            raise InputError(f"sigma given for unmeasured channel(s) {', '.join(unknown)}; measured: "
+                             f"{', '.join(m.channels)}", "settings", field="sigma")
+        missing = [c for c in m.channels if c not in s.sigma]
+        if not missing:
+            sig = np.array([float(s.sigma[c]) for c in m.channels])
+            if np.any(~(sig > 0)):
+                raise InputError("sigma must be > 0", "settings", field="sigma")
+            return np.broadcast_to(sig, shape).copy()
+        if m.sigma is None and s.noise == "known":
+            raise InputError(f"no sigma for channel(s) {', '.join(missing)}", "settings", field="sigma")
+    if m.sigma is not None:
+        return m.sigma.copy()
+    if s.noise == "known":
+        raise InputError(
+            "noise = 'known' needs the 1-σ noise of every channel, but the table has no _sigma columns ("
+            + ", ".join(f"{c}_sigma" for c in m.channels) + ") and no sigma is set: set [calibration] sigma = {"
+            + ", ".join(f"{c} = ..." for c in m.channels) + "} (absolute, SI units: W, N, N m), add the _sigma "
+            "columns, or choose [calibration] noise = \"ml\" (from the residuals) or \"repeats\" (from "
+            "repeated records); in Python: CalibrationSettings(sigma={...})", m.source, field="calibration.sigma")
+    return None  # ml: from the nominal residual

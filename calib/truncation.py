@@ -285,3 +285,20 @@ class AutoTruncation:
             curve = replace(curve, chosen=min(self.frozen, limit, top))
         self.curve = curve
         return curve.chosen
+
+
+def keep_second_start(first: tuple, second: tuple) -> bool:
+    """Whether the automatic choice keeps its second start (:meth:`Calibrator._second_start`).
+
+    Each start is (retained count, criterion at it, its standard error, status). The default
+    is the start whose retained set settled (status ``converged``) when only one did, else the
+    one with fewer θ, else (equal counts) the first; the other is kept only if its criterion is
+    lower than the default's by more than its own standard error. A failed second start, or
+    one without a finite criterion, is never kept.
+    """
+    (k1, cv1, se1, s1), (k2, cv2, se2, s2) = first, second
+    if s2 == "failed" or not np.isfinite(cv2):
+        return False
+    settled1, settled2 = s1 == "converged", s2 == "converged"
+    default_second = settled2 if settled1 != settled2 else k2 < k1
+    return not cv1 < cv2 - se1 if default_second else cv2 < cv1 - se2

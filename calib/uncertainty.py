@@ -1,4 +1,8 @@
-"""The truncated estimator's covariance, assembled from named parts (pure functions, no model calls).
+"""The estimators' covariances, assembled from named parts (pure functions, no model calls).
+
+The truncated estimator's :func:`truncated_covariance`; the MAP estimator's Laplace covariance
+from the SVD of the prior-whitened sensitivities (:func:`prior_whitened_svd`,
+:func:`laplace_covariance`, :func:`map_fit_scale`, :func:`map_gain`).
 
 The terms that need the model (the field between the nodes, the frozen directions through the
 model's curvature, the fold-dominated directions) are computed by the calibrator; this module puts
@@ -11,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.identifiability import frozen_aware_covariance
+from calib.identifiability import SvdAnalysis, frozen_aware_covariance
 
 
 @dataclass(frozen=True)
@@ -88,3 +92,58 @@ def truncated_covariance(V: np.ndarray, sigma_theta: np.ndarray, retained: np.nd
     before_fold = (noise + aliasing) * fit_scale + curvature
     fold, sigmas = fold_inflation(Vr, fold_thetas, before_fold, prior_cov)
     return TruncatedCovariance(noise, aliasing, fit_scale, curvature, fold, frozen), sigmas
+
+
+def prior_whitened_svd(M: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The SVD of the prior-whitened sensitivities A = M L = U S Wᵀ (M the whitened scaled
+    sensitivities, P = L Lᵀ the prior of p̃): the singular values s (descending) and W."""
+    A = M @ L
+    lam, W = np.linalg.eigh(A.T @ A)
+    order = np.argsort(lam)[::-1]
+    return np.sqrt(np.clip(lam[order], 0.0, None)), W[:, order]
+
+
+@dataclass(frozen=True)
+class LaplaceCovariance:
+    """The MAP estimate's Laplace covariance of p̃, by parts [scale units²].
+
+    Attributes
+    ----------
+    directions : SvdAnalysis
+        The directions p̃ ∝ L w_i as unit columns of V, s_i, the σ of each direction's coordinate
+        [scale units], and "retained" = s_i > 1: the data determine that direction better than the prior.
+    total : ndarray, shape (n, n)
+        (G̃ᵀR⁻¹G̃/k + P⁻¹)⁻¹ = L W (I + S²/k)⁻¹ (L W)ᵀ.
+    weak : ndarray, shape (n, n)
+        Its part along the directions where the prior dominates (s_i ≤ 1).
+    """
+
+    directions: SvdAnalysis
+    total: np.ndarray
+    weak: np.ndarray
+
+
+def laplace_covariance(s: np.ndarray, LW: np.ndarray, fit_scale: float = 1.0) -> LaplaceCovariance:
+    """The Laplace covariance of the scaled parameters from :func:`prior_whitened_svd` (``LW`` = L W)
+    with the noise variance multiplied by ``fit_scale`` = k (MacKay 1992; Rasmussen & Williams
+    2006, ch. 3)."""
+    shrink = 1.0 / (1.0 + s ** 2 / fit_scale)
+    cov = (LW * shrink) @ LW.T
+    weak = s <= 1.0
+    cov_weak = (LW[:, weak] * shrink[weak]) @ LW[:, weak].T
+    c = np.linalg.norm(LW, axis=0)
+    c = np.where(c > 0, c, 1.0)
+    return LaplaceCovariance(SvdAnalysis(s, LW / c, c * np.sqrt(shrink), 1.0, ~weak), cov, cov_weak)
+
+
+def map_fit_scale(chi2: float, n_rows: int, s: np.ndarray, enabled: bool) -> tuple[float, float]:
+    """The MAP's fit scale max(1, χ²/(N − n_eff)) (1 when not ``enabled`` or N ≤ n_eff) and
+    n_eff = Σ s²/(1+s²), the effective number of parameters (MacKay 1992) [-]."""
+    n_eff = float(np.sum(s ** 2 / (1.0 + s ** 2)))
+    return (max(1.0, chi2 / (n_rows - n_eff)) if enabled and n_rows > n_eff else 1.0), n_eff
+
+
+def map_gain(LW: np.ndarray, s: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """The MAP estimate's linear response to the whitened data, p̃̂ = gain r̃ with
+    gain = L (AᵀA + I)⁻¹ Aᵀ, A = M L [scale units]."""
+    return (LW / (1.0 + s ** 2)) @ (M @ LW).T

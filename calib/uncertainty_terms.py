@@ -1,0 +1,229 @@
+"""The uncertainty terms that need the model, at an estimate: :class:`ModelTerms`.
+
+The field between the correction nodes (:mod:`calib.parametrizations.aliasing`), the data's
+check of the field's prior amplitude (:mod:`calib.prior_check`), the frozen directions' prior
+through the model's curvature, the retained directions that fold points determine
+(:mod:`calib.identifiability`), and which measurements would tighten the non-field parameters
+(:mod:`calib.tightening`). Each calls the model; :mod:`calib.uncertainty` assembles what they
+return into the covariance, and :class:`calib.calibration.Calibrator` orchestrates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from calib.calibration_settings import CalibrationSettings
+from calib.errors import InputError
+from calib.identifiability import fold_dominated_directions, frozen_curvature_covariance
+from calib.measurements import Measurements
+from calib.parametrizations.aliasing import FineSensitivities
+
+
+@dataclass(frozen=True, eq=False)
+class ModelTerms:
+    """The model-derived uncertainty terms of one calibration problem.
+
+    Parameters
+    ----------
+    model : ForwardModel
+    field : CorrectionField or None
+        The model's correction field (None without one).
+    settings : CalibrationSettings
+    measurements : Measurements
+    parameters : tuple of Parameter
+    channel_index : list of int
+        The model channel of each measured channel.
+    prior_std, scale, lower, upper : ndarray, shape (n_params,)
+        Prior 1-σ, scales and effective bounds [parameter units].
+    """
+
+    model: object
+    field: object
+    settings: CalibrationSettings
+    measurements: Measurements
+    parameters: tuple
+    channel_index: list
+    prior_std: np.ndarray
+    scale: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+    def prior_cov_scaled(self) -> np.ndarray:
+        """The stated prior covariance of the scaled parameters [scale units²]: ``prior_std``
+        per parameter, neighbouring field nodes correlated by the smooth-field prior."""
+        prior_scaled = self.prior_std / self.scale
+        prior_cov = np.outer(prior_scaled, prior_scaled)
+        if self.field is not None:
+            prior_cov = prior_cov * self.field.node_correlation(self.settings.prior_correlation)
+        return prior_cov
+
+    def aliasing(self, problem, lin, svd, alpha_seen, eta_seen, gain: np.ndarray | None = None
+                  ) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:
+        """Cov of the retained θ from the field between the nodes (scale units²), the χ² it adds
+        to the residuals on average, why it is left out ('' when it is in, or when there is
+        no correction field or nothing for it to act on; :mod:`calib.parametrizations.aliasing`),
+        and the fine-grid sensitivities it used (None when left out). With ``gain`` (the MAP
+        estimate's linear response to the whitened data, p̃ per row [scale units]) the covariance is
+        that of the whole scaled vector, gain W Σ_δ Wᵀ gainᵀ, and the χ² is not computed (0)."""
+        st = self.settings
+        if self.field is None or self.field.grid is None or not svd.retained.any() or not alpha_seen.size:
+            return None, 0.0, "", None
+        left_out = ("the bands leave out how a field varying between the correction nodes biases the retained θ, "
+                    "so they can be too narrow for polars that vary between the nodes")
+        if not st.representation_error:
+            return None, 0.0, f"representation_error = false: {left_out}.", None
+        if st.prior_correlation <= 0:
+            return None, 0.0, (f"prior_correlation = 0 (independent nodes) defines no field between the nodes to "
+                               f"propagate: {left_out}; the field's variance at each reached point is in the "
+                               f"bands."), None
+        if not self.model.capabilities.refinable:
+            return None, 0.0, (f"the model ({self.model.capabilities.name}) cannot be rebuilt on a finer correction "
+                               f"grid (no with_grid, e.g. an FMU): {left_out}."), None
+        lay = self.field.layout
+        if (lay.lift_index < 0).any() or (lay.drag_index < 0).any():
+            return None, 0.0, f"the correction field does not carry both lift and drag at every node: {left_out}.", None
+        from calib.parametrizations.aliasing import aliasing_covariance, fine_sensitivities
+
+        r = svd.retained
+        fine = fine_sensitivities(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+                                  lin.ok, alpha_seen, eta_seen)
+        if gain is not None:
+            from calib.parametrizations.aliasing import discrepancy_propagated
+
+            return (discrepancy_propagated(gain @ fine.W, self.field, fine, self.prior_std, st.prior_correlation),
+                    0.0, "", fine)
+        cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+                                        lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
+                                        st.prior_correlation, alpha_seen, eta_seen, sensitivities=fine)
+        return cov, chi2, "", fine
+
+    def prior_check(self, problem, lin, fine) -> dict:
+        """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`),
+        linearized at the MAP under the stated prior (:func:`calib.prior_check.map_point`, from the
+        estimate): on the fine grid of the aliasing term when it was computed (``fine`` given),
+        else on the calibration nodes; {} without a correction field or with ``prior_check`` off."""
+        if self.field is None or self.field.grid is None or not self.settings.prior_check:
+            return {}
+        from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
+        from calib.prior_check import map_point, prior_amplitude
+
+        n_ch = len(self.channel_index)
+        P = self.prior_cov_scaled()
+
+        last = {}
+
+        def linearize_at(x):
+            p = problem.unscaled(x, clip=True)
+            last["at"] = at = problem.linearize(p)
+            return problem.scaled(p), at.residual.reshape(-1), np.repeat(at.ok, n_ch), at.M
+
+        def evaluate_at(x):
+            p = problem.unscaled(x, clip=True)
+            out = problem.evaluate(p)
+            return problem.scaled(p), out.residual.reshape(-1), np.repeat(out.ok, n_ch)
+
+        failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
+        # the MAP estimator's result is the MAP point of the stated prior already (up to its flat priors)
+        mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at,
+                       max_iterations=0 if self.settings.estimator == "map" else 10)
+        problem.n_failed_points_total = failed_before
+        lay = self.field.layout
+        blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
+        field_cols = np.concatenate(blocks)
+        other = np.setdiff1d(np.arange(len(self.parameters)), field_cols)
+        rows = mp.ok_rows
+        M = mp.M[rows]
+        z = mp.residual[rows] + M @ mp.x
+        if fine is not None:
+            at_map = last["at"]                 # map_point ends on the point it linearized last
+            if np.max(np.abs(at_map.p - lin.p) / self.scale) > 1e-9:   # (the MAP estimator's is that point)
+                fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma,
+                                          problem.channel_index, at_map.ok, *self.field.seen(at_map.evaluation))
+            L = grid_correlation_sqrt(fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
+            sd = [float(np.sqrt(np.mean(self.prior_std[b] ** 2))) for b in blocks]
+            Z_f, K_f = fine.W[rows], None
+            L_f = np.block([[sd[0] * L, np.zeros_like(L)], [np.zeros_like(L), sd[1] * L]])
+        else:
+            Z_f, K_f, L_f = M[:, field_cols], P[np.ix_(field_cols, field_cols)], None
+        check = prior_amplitude(z, Z_f, K_f, M[:, other], P[np.ix_(other, other)], between_nodes=fine is not None,
+                                field_sqrt=L_f)
+        check = replace(check, chi2_map=mp.chi2, chi2_estimate=float(np.sum(lin.residual[lin.ok] ** 2)),
+                         map_iterations=mp.iterations,
+                         map_converged=True if self.settings.estimator == "map" else mp.converged)
+        return check.to_dict()
+
+    def curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:
+        """The retained θ's covariance from the frozen directions' prior through the model's
+        curvature (:func:`calib.identifiability.frozen_curvature_covariance`) [scale units²],
+        and what it adds relative to the noise part (``result.curvature``); (None, {}) when
+        there is nothing to propagate, (None, {"samples": 0}) when the term is switched off."""
+        st = self.settings
+        r = svd.retained
+        if not r.any() or r.all():
+            return None, {}
+        if st.curvature_samples == 0:
+            return None, {"samples": 0}
+        n_ch = len(self.channel_index)
+
+        def residual_at(step):
+            p = np.clip(lin.p + self.scale * step, self.lower, self.upper)
+            out = problem.evaluate(p)
+            return out.residual.reshape(-1), np.repeat(out.ok, n_ch), (p - lin.p) / self.scale
+
+        failed_before = problem.n_failed_points_total   # prior draws are not the fit's failures
+        cov, info = frozen_curvature_covariance(residual_at, lin.residual.reshape(-1), np.repeat(lin.ok, n_ch),
+                                                lin.M, svd.V, svd.sigma_theta, r, prior_cov, st.curvature_samples)
+        problem.n_failed_points_total = failed_before
+        # its size against the noise part, per retained θ: tr(S² C)/k and the largest ratio
+        ratio = np.diag(cov) / svd.sigma_theta[r] ** 2
+        return cov, {**info, "variance_ratio_mean": float(np.mean(ratio)), "variance_ratio_max": float(np.max(ratio))}
+
+    def fold_directions(self, lin, svd, multiple_roots) -> list:
+        """Retained directions that points with several roots of the BEM equations determine
+        (:func:`calib.identifiability.fold_dominated_directions`): one record per (point, direction);
+        their stated covariance gets the prior variance along them added (:func:`calib.uncertainty.fold_inflation`),
+        so their σ is at least the prior's."""
+        Vr = svd.V[:, svd.retained]
+        return fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
+                                         multiple_roots, lin.ok)
+
+    def tightening(self, problem, lin, cov_p, radius) -> dict:
+        """Which measurements would tighten the σ of each parameter that is not a correction node
+        (:mod:`calib.tightening`); {} without such parameters, without a rotor radius, or for a model
+        whose every probe is a simulation (one that cannot be refined, e.g. an FMU)."""
+        field_cols = set()
+        if self.field is not None:
+            lay = self.field.layout
+            field_cols = {int(j) for idx in (lay.lift_index, lay.drag_index) for j in idx[idx >= 0].ravel()}
+        names = [q.name for j, q in enumerate(self.parameters) if j not in field_cols]
+        if not self.settings.tightening or not names or radius is None \
+                or not self.model.capabilities.refinable:
+            return {}
+        from calib.tightening import tightening
+
+        m = self.measurements
+        y = np.abs(lin.evaluation.values[:, self.channel_index])
+        rel = {c: float(np.median((problem.sigma[:, i] / np.maximum(y[:, i], 1e-300))[lin.ok]))
+               for i, c in enumerate(m.channels) if lin.ok.any()}
+        field_variance = None
+        st = self.settings
+        if self.field is not None and self.field.grid is not None and st.representation_error \
+                and st.prior_correlation > 0:
+            from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities
+
+            a_cal, e_cal = self.field.seen(lin.evaluation)
+
+            def field_variance(cond, cols, ev):
+                a, e = self.field.seen(ev)
+                fs = fine_sensitivities(self.model, lin.p, cond, np.ones((len(cond), len(cols))), cols, ev.ok,
+                                        np.concatenate([a, a_cal]), np.concatenate([e, e_cal]))
+                var = discrepancy_propagated(fs.W, self.field, fs, self.prior_std, st.prior_correlation, diagonal=True)
+                return var.reshape(len(cond), len(cols))
+        try:
+            return tightening(self.model, lin.p, cov_p / np.outer(self.scale, self.scale), self.scale, m.conditions,
+                              radius, list(m.channels), rel, names, field_variance=field_variance)
+        except (InputError, np.linalg.LinAlgError, ValueError) as exc:     # advice, not the result
+            return {"failed": f"{type(exc).__name__}: {exc}"}
+
