@@ -4,9 +4,10 @@ Every table a user writes (a workflow's sections, a ``calib diagnose`` configura
 ``[model]`` of the native BEM or of an FMU, ``[executor]``, ``[validation]``, a mapping file's
 tables) is checked by :func:`check_table` against a schema: a dict key -> :class:`Key` (accepted
 types, required, choices, a value check). A schema of a settings dataclass is derived from its
-fields and defaults by :func:`schema_of`, so the Python API and the TOML keys cannot drift. Every
-error is an :class:`~calib.errors.InputError` naming the file and the key path (``section.key``),
-with "did you mean" for an unknown key.
+fields and defaults by :func:`schema_of`, so the Python API and the TOML keys cannot drift, and
+:func:`settings_from_table` builds the typed settings object from the checked table. Every error
+is an :class:`~calib.errors.InputError` naming the file and the key path (``section.key``), with
+"did you mean" for an unknown key.
 """
 
 from __future__ import annotations
@@ -142,6 +143,53 @@ def schema_of(cls, exclude=(), overrides: dict | None = None) -> dict[str, Key]:
         default = f.default if f.default is not dataclasses.MISSING else None
         out[f.name] = Key(toml_type(default, overrides.get(f.name)))
     return out
+
+
+def _field_value(annotation: str, value):
+    """A TOML value as a settings field of ``annotation`` holds it: an array as a tuple where the
+    field is a tuple, an integer as a float where the field is a float."""
+    kinds = {part.strip() for part in str(annotation).split("|")}
+    if isinstance(value, list) and any(k == "tuple" or k.startswith("tuple[") for k in kinds):
+        return tuple(value)
+    if isinstance(value, int) and not isinstance(value, bool) and kinds <= {"float", "None"} and "float" in kinds:
+        return float(value)
+    return value
+
+
+def settings_from_table(cls, table, section: str, source: str, schema: dict | None = None):
+    """The settings dataclass ``cls`` built from a TOML table, checked first.
+
+    Parameters
+    ----------
+    cls : type
+        A settings dataclass; each of its fields is the TOML key of the same name.
+    table : dict
+        The table as read (its keys the user's).
+    section : str
+        The table's key path, which prefixes every key in the errors.
+    source : str
+        The file (or the API call) the table came from.
+    schema : dict, optional
+        The table's keys (:func:`check_table`); default :func:`schema_of` ``(cls)``. Keys of the
+        schema that are not fields of ``cls`` are checked and left to the caller.
+
+    Returns
+    -------
+    The ``cls`` instance; arrays become tuples and integers floats where the field says so
+    (its own ``validate``, where it has one, is the caller's to run with its context).
+
+    Raises
+    ------
+    InputError
+        As :func:`check_table`; or the settings refused the values (the section named).
+    """
+    check_table(table, schema_of(cls) if schema is None else schema, section, source)
+    annotations = {f.name: f.type for f in dataclasses.fields(cls)}
+    kwargs = {k: _field_value(annotations[k], v) for k, v in table.items() if k in annotations}
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"[{section}]: {exc}", source, field=section or None) from None
 
 
 def in_open_unit_interval(value) -> str | None:

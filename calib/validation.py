@@ -18,7 +18,7 @@ import numpy as np
 from scipy import stats
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.config import NUM, Key, check_table, in_open_unit_interval, names_list
+from calib.config import NUM, Key, in_open_unit_interval, names_list, settings_from_table
 from calib.diagnosis.in_workflow import diagnosis_sentence
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
@@ -62,18 +62,15 @@ class ValidationSettings:
 
     @classmethod
     def from_table(cls, table: dict, source: str) -> "ValidationSettings":
-        check_table(table, VALIDATION_SCHEMA, "validation", source)
-        leave = table.get("leave_out", "wind_speed")
-        conf = table.get("confidence", 0.95)
-        chans = table.get("channels")
-        split = table.get("split", "one")
-        if split == "band" and leave == "point":
+        """The settings of a ``[validation]`` table (:func:`calib.config.settings_from_table`), checked."""
+        settings = settings_from_table(cls, table, "validation", source, VALIDATION_SCHEMA)
+        if settings.split == "band" and settings.leave_out == "point":
             raise InputError("a band split needs a condition (wind_speed, rotor_speed or pitch), not 'point'", source,
                              field="validation.leave_out")
-        at = table.get("band_at")
-        if at is not None and split != "band":
-            raise InputError(f"must be given with split = \"band\" only; got {at!r}", source, field="validation.band_at")
-        return cls(leave, tuple(chans) if chans else None, float(conf), split, None if at is None else float(at))
+        if settings.band_at is not None and settings.split != "band":
+            raise InputError(f"must be given with split = \"band\" only; got {table['band_at']!r}", source,
+                             field="validation.band_at")
+        return settings if settings.channels else dataclasses.replace(settings, channels=None)
 
     def folds(self, groups: np.ndarray, source: str) -> list[tuple[str, np.ndarray]]:
         """(label, held-back mask) of every fold over the condition values ``groups``."""

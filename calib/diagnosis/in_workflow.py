@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable
 
-from calib.config import Key, check_table, names_list
+from calib.config import Key, names_list, settings_from_table
 from calib.diagnosis.core import NAMEABLE, DiagnosisSettings
 from calib.measurements import Measurements
 
@@ -28,11 +28,8 @@ DIAGNOSIS_SCHEMA = {**{f.name: Key(object) for f in dataclasses.fields(Diagnosis
 def diagnosis_settings(table: dict, source: str, valid=NAMEABLE) -> tuple[DiagnosisSettings, list | None]:
     """The :class:`DiagnosisSettings` and channel list of a ``[diagnosis]`` table (of a workflow
     or of ``calib diagnose --config``); ``valid``: the candidate names of the model family."""
-    check_table(table, DIAGNOSIS_SCHEMA, "diagnosis", source)
-    kw = {k: v for k, v in table.items() if k != "channels"}
-    if isinstance(kw.get("candidates"), list):
-        kw["candidates"] = tuple(kw["candidates"])
-    dset = DiagnosisSettings(**kw)      # the keys are checked above, the types by validate()
+    # the keys are checked here, the values' types by validate()
+    dset = settings_from_table(DiagnosisSettings, table, "diagnosis", source, DIAGNOSIS_SCHEMA)
     channels = table.get("channels")
     return dset.validate(source, "diagnosis.", valid=valid), channels
 
