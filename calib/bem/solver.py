@@ -17,6 +17,8 @@ from calib.bem import dual as dl
 from calib.bem.chain import BoundChain, EffectChain
 from calib.bem.jacobian import Block, SectionSensitivities, project
 from calib.bem.kinematics import curvature
+from calib.bem.point_status import INDUCTION_LIMIT  # noqa: F401 (re-exported)
+from calib.bem.point_status import _check_conditions, _check_inflow, _section_fields, _status_per_point
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY, SectionPolars, station_reynolds
 from calib.bem.sections import RESIDUAL_TOL, build_sections, eliminate_phi, find_roots, section_pass
 from calib.bem.stages import Inflow, PointContext, ProbeMap, RotorData
@@ -32,9 +34,6 @@ FIXED_POINT_TOL = 1e-12
 
 FIXED_POINT_MAX_ITER = 30
 """Most solves of a thrust-dependent inflow (the secant iteration takes about 5-7)."""
-
-INDUCTION_LIMIT = 2.0
-"""Largest |a| accepted at a converged section [-] (see :func:`solve_bem`, Notes)."""
 
 
 @dataclass(frozen=True)
@@ -190,26 +189,6 @@ def integration_weights(rotor: Rotor, interior: np.ndarray | None = None) -> dic
             "flap_hub": ds * z}
 
 
-def _check_conditions(conditions: OperatingConditions):
-    """Per-point validity of the operating conditions: (bad mask, messages)."""
-    n = len(conditions)
-    msgs = [""] * n
-    bad = np.zeros(n, bool)
-    checks = (("wind_speed", conditions.wind_speed, lambda v: v > 0, "wind speed must be > 0 m/s"),
-              ("rotor_speed", conditions.rotor_speed, lambda v: v > 0,
-               "rotor speed must be > 0 rpm (parked rotors are outside the steady BEM)"),
-              ("pitch", conditions.pitch, lambda v: np.abs(v) <= 180, "pitch must lie in [-180, 180] deg"),
-              ("air_density", conditions.air_density, lambda v: v > 0, "air density must be > 0 kg/m^3"),
-              ("yaw", conditions.yaw, lambda v: np.abs(v) < 90, "yaw must lie in (-90, 90) deg"))
-    for name, v, ok, text in checks:
-        with np.errstate(invalid="ignore"):
-            fail = ~np.isfinite(v) | ~ok(v)
-        for k in np.flatnonzero(fail & ~bad):
-            msgs[k] = f"invalid input: {name} = {v[k]!r}; {text}"
-        bad |= fail
-    return bad, msgs
-
-
 def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings | None = None,
               effects=(), p=None, sensitivities: bool = False,
               polars: SectionPolars | None = None) -> BemResult:
@@ -268,6 +247,53 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     M.L. Buhl, NREL/TP-500-36834 (2005) (range of the high-induction relation).
     """
     settings = settings or BemSettings()
+    solve, pctx, bad_pt, msgs, w = _set_up(rotor, conditions, settings, effects, p, polars)
+    inflow, bad_all, msgs, sec, roots, values, unsettled = solve.to_fixed_point(pctx, bad_pt, msgs, sensitivities)
+
+    sections = _section_fields(sec, roots, values)
+    status, msgs, multiple, n_multiple = _status_per_point(sec, roots, values, sections["a"], bad_all, msgs,
+                                                           unsettled, rotor.eta)
+    outs = _rotor_quantities(rotor, conditions, sections, w, solve.n_sec, status != Status.CONVERGED)
+    omega = conditions.rotor_speed * np.pi / 30.0
+
+    sens = None
+    if sensitivities:
+        sens = _sensitivities(solve.chain, values, roots, sec, pctx, solve.thrust_weights)
+    return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
+                     omega=omega, n_sectors=solve.n_sec, multiple_roots=multiple, n_multiple_root_sections=n_multiple,
+                     rotor=rotor, sensitivities=sens,
+                     inflow_wind_speed=np.where(bad_all, np.nan, inflow.wind_speed),
+                     inflow_pitch=np.where(bad_all, np.nan, inflow.pitch))
+
+
+def _set_up(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings, effects, p,
+            polars: SectionPolars | None) -> tuple[_Solve, PointContext, np.ndarray, list, dict]:
+    """Everything a batch's solve needs before its conditions stage (see :func:`solve_bem`).
+
+    Parameters
+    ----------
+    rotor, conditions, settings, effects, p, polars
+        As :func:`solve_bem` (``settings`` not None).
+
+    Returns
+    -------
+    solve : _Solve
+        Polars, bound effect chain, number of sectors, interior stations and thrust weights
+        of the batch.
+    pctx : PointContext
+        The measured conditions [m/s], [rpm], [deg], [kg/m^3] and the swept area [m^2].
+    bad_pt : ndarray of bool, shape (n_points,)
+        Points whose operating conditions are invalid.
+    msgs : list of str
+        Why, per point.
+    w : dict of ndarray, shape (n_stations,)
+        :func:`integration_weights` of the rotor.
+
+    Raises
+    ------
+    InputError
+        ``n_sectors`` < 1, or wind shear with a hub height that is not finite.
+    """
     polars = polars or SectionPolars.from_rotor(rotor, smoothing=settings.polar_smoothing,
                                                 kinematic_viscosity=settings.kinematic_viscosity)
     chain = (effects if isinstance(effects, EffectChain) else EffectChain(effects)).bind(p)
@@ -286,25 +312,7 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
                 wake_rotation=settings.wake_rotation)
     thrust_weights = rotor.n_blades * w["thrust"] / n_sec
     solve = _Solve(rotor, conditions, settings, chain, polars, opts, n_sec, interior, rotor_data, thrust_weights)
-    inflow, bad_all, msgs, sec, roots, values, unsettled = solve.to_fixed_point(pctx, bad_pt, msgs, sensitivities)
-
-    sections = _section_fields(sec, roots, values)
-    flags = _section_flags(sec, roots, values)
-    status, msgs = _point_status(flags, sections["a"], bad_all, msgs, rotor.eta)
-    status[unsettled & (status == Status.CONVERGED)] = int(Status.NOT_CONVERGED)
-    multiple = flags["multiple_roots"].any(axis=(1, 2)) & ~bad_all
-    n_multiple = flags["multiple_roots"].sum(axis=(1, 2))
-    outs = _rotor_quantities(rotor, conditions, sections, w, n_sec, status != Status.CONVERGED)
-    omega = conditions.rotor_speed * np.pi / 30.0
-
-    sens = None
-    if sensitivities:
-        sens = _sensitivities(chain, values, roots, sec, pctx, thrust_weights)
-    return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
-                     omega=omega, n_sectors=n_sec, multiple_roots=multiple, n_multiple_root_sections=n_multiple,
-                     rotor=rotor, sensitivities=sens,
-                     inflow_wind_speed=np.where(bad_all, np.nan, inflow.wind_speed),
-                     inflow_pitch=np.where(bad_all, np.nan, inflow.pitch))
+    return solve, pctx, bad_pt, msgs, w
 
 
 class _Solve:
@@ -354,35 +362,6 @@ class _Solve:
             point_msgs[kpt] = (f"BEM: the inflow of the effect chain did not settle in {FIXED_POINT_MAX_ITER} "
                                f"solves (relative change of the inflow speed above {FIXED_POINT_TOL:g})")
         return inflow, bad, point_msgs, sec, roots, values, unsettled
-
-
-def _scatter(sec, roots, v, fill=0.0, dtype=float):
-    """Section values of the active sections in a (n_points, n_sectors, n_stations) array (NaN where not converged)."""
-    out = np.full(int(np.prod(sec.shape)), fill, dtype=dtype)
-    out[sec.sel] = np.where(roots.converged, v, np.nan) if dtype is float else v
-    return out.reshape(sec.shape)
-
-
-def _section_fields(sec, roots, values) -> dict:
-    """The ``sections`` dict of :class:`BemResult`."""
-    eq = values.eq
-    fields = {"phi": roots.phi, "alpha_deg": values.alpha_deg, "cl": values.cl, "cd": values.cd,
-              "a": dl.value(eq["a"]), "ap": dl.value(eq["ap"]), "W": dl.value(values.W), "residual": roots.residual,
-              "iterations": roots.iterations.astype(float), "n_roots": roots.n_roots.astype(float)}
-    for name in ("Np", "Tp", "cn", "ct"):
-        fields[name] = dl.value(values.quantities[name])
-    return {k: _scatter(sec, roots, v) for k, v in fields.items()}
-
-
-def _section_flags(sec, roots, values) -> dict:
-    """Per-section trouble flags for :func:`_point_status`."""
-    conv = roots.converged
-    with np.errstate(invalid="ignore"):
-        wild = conv & ~(np.abs(dl.value(values.eq["a"])) <= INDUCTION_LIMIT)
-    return {"failed": _scatter(sec, roots, ~conv, False, bool),
-            "negative_drag": _scatter(sec, roots, values.cd <= 0.0, False, bool),
-            "reversed_flow": sec.reversed_flow, "wild_induction": _scatter(sec, roots, wild, False, bool),
-            "multiple_roots": _scatter(sec, roots, roots.n_roots > 1, False, bool)}
 
 
 def _rotor_quantities(rotor, conditions, sections, w, n_sec, failed) -> list:
@@ -437,17 +416,6 @@ def _inflow(chain: BoundChain, pctx: PointContext, k: int = 0) -> Inflow:
         return out
     return Inflow(np.broadcast_to(dl.value(out.wind_speed), pctx.wind_speed.shape).astype(float),
                   np.broadcast_to(dl.value(out.pitch), pctx.pitch.shape).astype(float))
-
-
-def _check_inflow(inflow: Inflow, bad_pt, msgs):
-    """Points whose inflow after the conditions stage is unusable (speed not finite and > 0)."""
-    msgs = list(msgs)
-    with np.errstate(invalid="ignore"):
-        bad = ~bad_pt & ~(np.isfinite(inflow.wind_speed) & (inflow.wind_speed > 0) & np.isfinite(inflow.pitch))
-    for kpt in np.flatnonzero(bad):
-        msgs[kpt] = (f"invalid input: the effect chain's conditions stage gives wind speed "
-                     f"{inflow.wind_speed[kpt]!r} m/s and pitch {inflow.pitch[kpt]!r} deg; the wind speed must be > 0")
-    return bad_pt | bad, msgs
 
 
 def _per_point(section_values, roots, sec, weights) -> np.ndarray:
@@ -514,46 +482,5 @@ def _scatter_probe_map(pm: ProbeMap, roots, sec) -> ProbeMap:
     index[sec.sel] = np.where(roots.converged[:, None], pm.index, 0)
     weight[sec.sel] = np.where(roots.converged[:, None], pm.weight, 0.0)
     return ProbeMap(index.reshape(sec.shape + (m,)), weight.reshape(sec.shape + (m,)), np.asarray(pm.probe))
-
-
-def _point_status(flags: dict, a_sections, bad_pt, msgs: list, eta):
-    """Status and message per point from per-section flags (n_points, n_sectors, n_stations).
-
-    ``flags``: ``failed`` (no converged root), ``negative_drag`` (C_D <= 0), ``reversed_flow``
-    (V_x <= 0), ``wild_induction`` (|a| > INDUCTION_LIMIT), ``multiple_roots`` (several roots;
-    a note only, the status is unchanged).
-    """
-    status = np.full(bad_pt.size, int(Status.CONVERGED))
-    status[bad_pt] = int(Status.INVALID_INPUT)
-    trouble = flags["failed"] | flags["negative_drag"] | flags["reversed_flow"] | flags["wild_induction"]
-    for kpt in np.flatnonzero(~bad_pt & (trouble | flags["multiple_roots"]).any(axis=(1, 2))):
-        parts = []
-        nd = int(flags["negative_drag"][kpt].sum())
-        if nd:
-            status[kpt] = int(Status.INVALID_INPUT)
-            parts.append(f"C_D <= 0 at {nd} section(s) (corrected polar; the BEM needs positive drag)")
-        elif trouble[kpt].any():
-            status[kpt] = int(Status.NOT_CONVERGED)
-        nf = int(flags["failed"][kpt].sum())
-        if nf:
-            parts.append(f"{nf} section(s) without a converged root (no sign change of the residual "
-                         f"in Ning's brackets or |R| > {RESIDUAL_TOL:g})")
-        nr = int(flags["reversed_flow"][kpt].sum())
-        if nr:
-            parts.append(f"{nr} section(s) with reversed inflow (V_x <= 0)")
-        wild = flags["wild_induction"][kpt]
-        if wild.any():
-            a = np.where(wild, a_sections[kpt], 0.0)
-            s_, i_ = np.unravel_index(np.argmax(np.abs(a)), a.shape)
-            parts.append(f"axial induction outside the physical range |a| <= {INDUCTION_LIMIT:g} at "
-                         f"{int(wild.sum())} section(s), e.g. a = {a[s_, i_]:.3g} at r/R = {eta[i_]:.3f} "
-                         f"(induced velocity above twice the wind speed: no steady momentum balance)")
-        multi = flags["multiple_roots"][kpt]
-        if multi.any():
-            where = ", ".join(f"{e:.3f}" for e in eta[np.flatnonzero(multi.any(axis=0))])
-            parts.append(f"note: {int(multi.sum())} section(s) with several roots of the residual in "
-                         f"their bracket (r/R = {where}); the root of smallest |φ| (least stalled) is used")
-        msgs[kpt] = "BEM: " + "; ".join(parts)
-    return status, msgs
 
 

@@ -26,16 +26,16 @@ Relative paths are relative to ``base_dir`` (the folder of the workflow file). E
 is an :class:`~calib.errors.InputError` naming the workflow file and the key
 (``rotor.hub_radius``), or the rotor file, its line and its keyword.
 
-Provenance: every file a table's rotor was read from is remembered with its SHA-256 (taken
-when read) and its path relative to the workflow's folder (:func:`recorded_rotor_files`,
-which a model's ``spec()`` records in a result). A result written without its rotor data
-rebuilds the rotor from those files (:func:`rotor_from_recorded_files`), refusing any that
-is missing or changed since the run.
+Provenance (:mod:`calib.rotor.provenance`, whose public names are importable from here too):
+every file a table's rotor was read from is remembered with its SHA-256 (taken when read) and
+its path relative to the workflow's folder (:func:`recorded_rotor_files`, which a model's
+``spec()`` records in a result). A result written without its rotor data rebuilds the rotor
+from those files (:func:`rotor_from_recorded_files`), refusing any that is missing or changed
+since the run.
 """
 
 from __future__ import annotations
 
-import os
 import reprlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,11 +43,12 @@ from pathlib import Path
 import numpy as np
 
 from calib.errors import InputError, unknown_key
-from calib.measurements import sha256_of
 from calib.rotor.aerodyn import read_aerodyn_main, rotor_from_aerodyn
 from calib.rotor.geometry import Rotor
 from calib.rotor.library import ROTORS, load_rotor
 from calib.rotor.openfast import read_openfast
+from calib.rotor.provenance import FILE_KEYS, absolute_table, file_provenance, recorded_rotor_files  # noqa: F401 (re-exported)
+from calib.rotor.provenance import _check_files_read, _check_followed_files, _located_table, _records_by_path
 from calib.rotor.windio import load_windio, read_windio
 
 SOURCE_KEYS = ("name", "openfast", "aerodyn", "aerodyn_blade", "windio")
@@ -221,62 +222,93 @@ def _read(table: dict, src: str, base: Path | None) -> RotorSource:
     setup = {k: _setup_value(table, k, src) for k in SETUP_KEYS if k in table}
 
     if kind == "name":
-        name = table["name"]
-        if not isinstance(name, str) or name.strip().lower() not in ROTORS:
-            raise InputError(f"unknown rotor {name!r}; valid names: {', '.join(ROTORS)}", src, None, _key("name"))
-        return RotorSource(rotor=load_rotor(name))
+        return _from_name(table, src)
 
     if kind == "openfast":
-        deck = read_openfast(_path(table, "openfast", src, base))
-        ad, inflow = deck.aerodyn, deck.inflow
-        return RotorSource(rotor=deck.rotor(), tip_loss=ad.tip_loss, hub_loss=ad.hub_loss,
-                           tangential_induction=ad.tangential_induction,
-                           drag_in_axial_induction=ad.drag_in_axial_induction,
-                           drag_in_tangential_induction=ad.drag_in_tangential_induction,
-                           air_density=deck.air_density, kinematic_viscosity=deck.kinematic_viscosity,
-                           shear_exponent=None if inflow is None else inflow.shear_exponent,
-                           reference_height=None if inflow is None else inflow.reference_height,
-                           files=deck.files, notes=deck.notes)
+        return _from_openfast(table, src, base)
 
     geometry = dict(hub_radius=setup.get("hub_radius"), n_blades=setup.get("n_blades"),
                     precone_deg=setup.get("precone"),
                     tilt_deg=setup.get("tilt"), hub_height=setup.get("hub_height"))
 
     if kind == "aerodyn":
-        path = _path(table, "aerodyn", src, base)
-        ad = read_aerodyn_main(path)
-        notes = tuple(f"{ad.source} line {ad.lines[key]}: {key} = \"default\" (given by the OpenFAST .fst, "
-                      "not read here): not known" for key, value in
-                      (("AirDens", ad.air_density), ("KinVisc", ad.kinematic_viscosity)) if value is None)
-        rotor = rotor_from_aerodyn(ad.blade_file, ad.airfoil_files, name=path.stem,
-                                   source=f"AeroDyn 15 {path} + [rotor] of {src}", **geometry)
-        return RotorSource(rotor=rotor, tip_loss=ad.tip_loss, hub_loss=ad.hub_loss,
-                           tangential_induction=ad.tangential_induction,
-                           drag_in_axial_induction=ad.drag_in_axial_induction,
-                           drag_in_tangential_induction=ad.drag_in_tangential_induction,
-                           air_density=ad.air_density, kinematic_viscosity=ad.kinematic_viscosity,
-                           files=(path, ad.blade_file, *ad.airfoil_files), notes=notes)
+        return _from_aerodyn(table, src, base, geometry)
 
     if kind == "aerodyn_blade":
-        blade = _path(table, "aerodyn_blade", src, base)
-        names = table["airfoils"]
-        if isinstance(names, str) or not isinstance(names, (list, tuple)) or not names:
-            raise InputError(f"expected a non-empty list of airfoil files in BlAFID order, got {names!r}", src,
-                             None, _key("airfoils"))
-        airfoils = []
-        for k, name in enumerate(names):
-            if not isinstance(name, str) or not name.strip():
-                raise InputError(f"entry {k + 1}: expected a file name, got {name!r}", src, None, _key("airfoils"))
-            path = _resolve(name, base, src, _key("airfoils"))
-            if not path.is_file():
-                raise InputError(f"entry {k + 1}: file not found: {name!r} (looked for {path})", src, None,
-                                 _key("airfoils"))
-            airfoils.append(path)
-        rotor = rotor_from_aerodyn(blade, airfoils, name=blade.stem,
-                                   source=f"AeroDyn 15 blade {blade} + [rotor] of {src}", **geometry)
-        return RotorSource(rotor=rotor, files=(blade, *airfoils))
+        return _from_aerodyn_blade(table, src, base, geometry)
 
-    # windio
+    return _from_windio(table, src, base)
+
+
+def _from_name(table: dict, src: str) -> RotorSource:
+    """An embedded rotor (:data:`calib.rotor.library.ROTORS`), by its ``name``."""
+    name = table["name"]
+    if not isinstance(name, str) or name.strip().lower() not in ROTORS:
+        raise InputError(f"unknown rotor {name!r}; valid names: {', '.join(ROTORS)}", src, None, _key("name"))
+    return RotorSource(rotor=load_rotor(name))
+
+
+def _from_openfast(table: dict, src: str, base: Path | None) -> RotorSource:
+    """The rotor, BEM set-up, fluid and shear of the OpenFAST deck named by ``openfast``."""
+    deck = read_openfast(_path(table, "openfast", src, base))
+    ad, inflow = deck.aerodyn, deck.inflow
+    return RotorSource(rotor=deck.rotor(), tip_loss=ad.tip_loss, hub_loss=ad.hub_loss,
+                       tangential_induction=ad.tangential_induction,
+                       drag_in_axial_induction=ad.drag_in_axial_induction,
+                       drag_in_tangential_induction=ad.drag_in_tangential_induction,
+                       air_density=deck.air_density, kinematic_viscosity=deck.kinematic_viscosity,
+                       shear_exponent=None if inflow is None else inflow.shear_exponent,
+                       reference_height=None if inflow is None else inflow.reference_height,
+                       files=deck.files, notes=deck.notes)
+
+
+def _from_aerodyn(table: dict, src: str, base: Path | None, geometry: dict) -> RotorSource:
+    """The rotor, BEM set-up and fluid of the AeroDyn 15 main file named by ``aerodyn``.
+
+    ``geometry``: hub radius [m], n_blades, precone [deg], tilt [deg] and hub height [m] of
+    the ``[rotor]`` table, as keywords of :func:`~calib.rotor.aerodyn.rotor_from_aerodyn`.
+    """
+    path = _path(table, "aerodyn", src, base)
+    ad = read_aerodyn_main(path)
+    notes = tuple(f"{ad.source} line {ad.lines[key]}: {key} = \"default\" (given by the OpenFAST .fst, "
+                  "not read here): not known" for key, value in
+                  (("AirDens", ad.air_density), ("KinVisc", ad.kinematic_viscosity)) if value is None)
+    rotor = rotor_from_aerodyn(ad.blade_file, ad.airfoil_files, name=path.stem,
+                               source=f"AeroDyn 15 {path} + [rotor] of {src}", **geometry)
+    return RotorSource(rotor=rotor, tip_loss=ad.tip_loss, hub_loss=ad.hub_loss,
+                       tangential_induction=ad.tangential_induction,
+                       drag_in_axial_induction=ad.drag_in_axial_induction,
+                       drag_in_tangential_induction=ad.drag_in_tangential_induction,
+                       air_density=ad.air_density, kinematic_viscosity=ad.kinematic_viscosity,
+                       files=(path, ad.blade_file, *ad.airfoil_files), notes=notes)
+
+
+def _from_aerodyn_blade(table: dict, src: str, base: Path | None, geometry: dict) -> RotorSource:
+    """The rotor of the AeroDyn 15 blade file ``aerodyn_blade`` and its ``airfoils`` (BlAFID order).
+
+    ``geometry`` as for :func:`_from_aerodyn`.
+    """
+    blade = _path(table, "aerodyn_blade", src, base)
+    names = table["airfoils"]
+    if isinstance(names, str) or not isinstance(names, (list, tuple)) or not names:
+        raise InputError(f"expected a non-empty list of airfoil files in BlAFID order, got {names!r}", src,
+                         None, _key("airfoils"))
+    airfoils = []
+    for k, name in enumerate(names):
+        if not isinstance(name, str) or not name.strip():
+            raise InputError(f"entry {k + 1}: expected a file name, got {name!r}", src, None, _key("airfoils"))
+        path = _resolve(name, base, src, _key("airfoils"))
+        if not path.is_file():
+            raise InputError(f"entry {k + 1}: file not found: {name!r} (looked for {path})", src, None,
+                             _key("airfoils"))
+        airfoils.append(path)
+    rotor = rotor_from_aerodyn(blade, airfoils, name=blade.stem,
+                               source=f"AeroDyn 15 blade {blade} + [rotor] of {src}", **geometry)
+    return RotorSource(rotor=rotor, files=(blade, *airfoils))
+
+
+def _from_windio(table: dict, src: str, base: Path | None) -> RotorSource:
+    """The rotor and the ``environment`` (air density [kg/m^3], viscosity, shear) of the windIO file ``windio``."""
     path = _path(table, "windio", src, base)
     rotor = read_windio(path)
     env = load_windio(path).get("environment") or {}
@@ -299,97 +331,7 @@ def _read(table: dict, src: str, base: Path | None) -> RotorSource:
     return RotorSource(rotor=rotor, air_density=rho, kinematic_viscosity=nu, shear_exponent=shear, files=(path,))
 
 
-# ----------------------------------------------------------------------------- provenance
-FILE_KEYS = ("openfast", "aerodyn", "aerodyn_blade", "windio")
-
-
-def absolute_table(table: dict, base_dir) -> dict:
-    """The ``[rotor]`` table with its file paths absolute and resolved (relative ones against
-    ``base_dir``), the form a result records."""
-    out = dict(table)
-    base = Path(base_dir) if base_dir is not None else Path()
-    for key in FILE_KEYS:
-        if isinstance(out.get(key), str):
-            out[key] = str((base / out[key]).resolve())
-    if isinstance(out.get("airfoils"), list):
-        out["airfoils"] = [str((base / a).resolve()) if isinstance(a, str) else a for a in out["airfoils"]]
-    return out
-
-
-def file_provenance(files, base_dir) -> dict:
-    """Provenance of the files a rotor was read from (:attr:`RotorSource.files`), for a result.
-
-    Parameters
-    ----------
-    files : sequence of path
-        Every file read, in reading order (an OpenFAST deck's ElastoDyn, AeroDyn, blade and
-        airfoil files too).
-    base_dir : str or Path or None
-        The workflow's folder, that relative paths are given against.
-
-    Returns
-    -------
-    dict
-        ``{"workflow_dir", "all_files_read": True, "files": [{"path", "relative", "sha256"}, ...]}``:
-        absolute path, path relative to ``base_dir`` and SHA-256 of each file.
-    """
-    wdir = None if base_dir is None else str(Path(base_dir).resolve())
-    out = []
-    for f in files:
-        path = str(Path(f).resolve())
-        try:
-            rel = os.path.relpath(path, wdir) if wdir is not None else None
-        except ValueError:          # another drive (Windows)
-            rel = None
-        out.append({"path": path, "relative": rel, "sha256": sha256_of(path) if Path(path).is_file() else None})
-    return {"workflow_dir": wdir, "all_files_read": True, "files": out}
-
-
-def _named_files(table: dict) -> list[tuple[str, str]]:
-    """(key, path) of the files a table names itself, in table order."""
-    out = [(f"rotor.{k}", table[k]) for k in FILE_KEYS if isinstance(table.get(k), str)]
-    if isinstance(table.get("airfoils"), list):
-        out += [(f"rotor.airfoils[{i}]", a) for i, a in enumerate(table["airfoils"]) if isinstance(a, str)]
-    return out
-
-
-def recorded_rotor_files(table: dict | None, read: dict | None = None) -> dict | None:
-    """Provenance of the files behind a rotor table, for a result to record.
-
-    Parameters
-    ----------
-    table : dict or None
-        A ``[rotor]`` table with absolute paths (as :func:`absolute_table` gives it).
-    read : dict, optional
-        The provenance taken when the rotor was read (:func:`file_provenance`): every file
-        read, hashed then, with paths relative to the workflow's folder.
-
-    Returns
-    -------
-    dict or None
-        None for an embedded rotor (no files); ``read`` when given; otherwise the files the
-        table names, hashed now (``sha256`` None for one that is missing), with
-        ``relative`` and ``workflow_dir`` None and ``all_files_read`` false.
-    """
-    if not isinstance(table, dict):
-        return None
-    named = _named_files(table)
-    if not named:
-        return None
-    if read is not None:
-        return read
-    files = []
-    for _, value in named:
-        path = Path(value).expanduser().resolve()
-        files.append({"path": str(path), "relative": None, "sha256": sha256_of(path) if path.is_file() else None})
-    return {"workflow_dir": None, "all_files_read": False, "files": files}
-
-
-def _changed(path, recorded: str, now: str, source: str, key: str) -> InputError:
-    return InputError(f"rotor file {path} changed since the run (SHA-256 {recorded[:12]}... recorded, {now[:12]}... "
-                      "now); restore the file the run read, or run the calibration again", source, None, key)
-
-
+# ----------------------------------------------------------------------------- recorded rotors
 def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, source: str) -> RotorSource:
     """Rebuild a recorded rotor from its files, refusing any that is missing or changed.
 
@@ -422,60 +364,15 @@ def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, 
         Naming the file: missing (with the places looked at) or changed since the run (both
         digests shortened); or any error of :func:`rotor_from_table`.
     """
-    records = {}
-    for rec in (provenance or {}).get("files") or []:
-        if isinstance(rec, dict) and isinstance(rec.get("path"), str):
-            records[rec["path"]] = rec
+    records = _records_by_path(provenance)
     rdir = None if result_dir is None else Path(result_dir).resolve()
-    relocated = False
-
-    def locate(value: str, key: str) -> str:
-        nonlocal relocated
-        rec = records.get(value) or records.get(str(Path(value).resolve())) or {}
-        candidates = [Path(value)]
-        if rdir is not None:
-            if isinstance(rec.get("relative"), str):
-                candidates.append(rdir / rec["relative"])
-            candidates.append(rdir / Path(value).name)
-        found = next((c for c in candidates if c.is_file()), None)
-        if found is None:
-            also = "".join(f", {c}" for c in candidates[1:])
-            raise InputError(f"rotor file {value} is missing (looked at {candidates[0]}{also}); this result records "
-                             "no rotor data of its own, so its model needs the files the run read", source, None, key)
-        relocated |= found != candidates[0]
-        if isinstance(rec.get("sha256"), str):
-            now = sha256_of(found)
-            if now != rec["sha256"]:
-                raise _changed(found, rec["sha256"], now, source, key)
-        return str(found.resolve())
-
     if not isinstance(table, dict):
         raise InputError(f"expected the recorded [rotor] table, got {table!r}", source, None, "rotor")
-    new = dict(table)
-    for key in FILE_KEYS:
-        if isinstance(new.get(key), str):
-            new[key] = locate(new[key], f"rotor.{key}")
-    if isinstance(new.get("airfoils"), list):
-        new["airfoils"] = [locate(a, f"rotor.airfoils[{i}]") if isinstance(a, str) else a
-                           for i, a in enumerate(new["airfoils"])]
+    new, relocated = _located_table(table, records, rdir, source)
     if provenance and provenance.get("all_files_read") and not relocated:
         # the files the readers follow, checked before reading where they were
-        for rec in records.values():
-            path = Path(rec["path"])
-            if isinstance(rec.get("sha256"), str) and path.is_file():
-                now = sha256_of(path)
-                if now != rec["sha256"]:
-                    raise _changed(path, rec["sha256"], now, source, "rotor")
+        _check_followed_files(records, source)
     out = rotor_from_table(new, source, None)
     if provenance and provenance.get("all_files_read"):
-        recorded = [r for r in provenance.get("files") or [] if isinstance(r, dict)]
-        if len(recorded) != len(out.files):
-            raise InputError(f"the rotor files now lead to {len(out.files)} files, the run read {len(recorded)} "
-                             f"({', '.join(str(r.get('path')) for r in recorded)}): changed since the run", source,
-                             None, "rotor")
-        for rec, path in zip(recorded, out.files):
-            if isinstance(rec.get("sha256"), str):
-                now = sha256_of(path)
-                if now != rec["sha256"]:
-                    raise _changed(path, rec["sha256"], now, source, "rotor")
+        _check_files_read(provenance, out.files, source)
     return out

@@ -8,6 +8,8 @@ full-circle tables that have too few rows (cylinder tables with 2 or 3 rows).
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from calib.errors import InputError
@@ -24,6 +26,9 @@ FLAT_PLATE_CD_MAX = 2.0
 # Pitching moment near +-180 deg, AirfoilPrep v2 fixed table [deg] -> [-].
 _CM_TAIL_ALPHA = np.array([-180.0, -175.0, -170.0, -165.0, 165.0, 170.0, 175.0, 180.0])
 _CM_TAIL_VALUE = np.array([0.0, 0.2, 0.4, 0.35, -0.4, -0.5, -0.25, 0.0])
+
+# The matched Viterna model: ``vit(alpha_rad, cl_adj) -> (cl, cd)`` [-].
+_ViternaModel = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 
 def cd_max_from_aspect_ratio(aspect_ratio: float) -> float:
@@ -109,6 +114,36 @@ def extrapolate_viterna(table: PolarTable, cd_max: float | None = None, aspect_r
     """
     if table.covers_full_circle:
         return table
+    _check_matching_range(table)
+    if cd_max is None:
+        cd_max = FLAT_PLATE_CD_MAX if aspect_ratio is None else cd_max_from_aspect_ratio(aspect_ratio)
+    cd_max = max(float(cd_max), float(np.max(table.cd)))
+    coef_a, coef_b = _viterna_coefficients(table, cd_max)
+    vit = lambda a, s: _viterna(a, cd_max, coef_a, coef_b, s)  # noqa: E731
+    alpha_new, cl_new, cd_new = _full_circle(table, vit, cd_min, n_alpha)
+    # drop points that collide with table rows after the degree round trip
+    keep = np.concatenate([[True], np.diff(alpha_new) > 1e-9])
+    cm_new = None
+    if table.cm is not None:
+        cm_new = _extrapolate_cm(table, alpha_new, cl_new, cd_new)
+    return PolarTable(alpha_new[keep], cl_new[keep], cd_new[keep],
+                      None if cm_new is None else cm_new[keep], table.reynolds,
+                      source=f"{table.source} (Viterna extrapolation, cd_max={cd_max:.4g})")
+
+
+def _check_matching_range(table: PolarTable) -> None:
+    """Refuse a table :func:`extrapolate_viterna` cannot match.
+
+    Parameters
+    ----------
+    table : PolarTable
+        Its last angle, alpha_high, must lie in (0, 90] deg; its first above -90 deg.
+
+    Raises
+    ------
+    InputError
+        Naming the table's source and ``alpha``.
+    """
     src = table.source
     alpha = table.alpha_deg
     a_high, a_low = float(alpha[-1]), float(alpha[0])
@@ -118,23 +153,91 @@ def extrapolate_viterna(table: PolarTable, cd_max: float | None = None, aspect_r
     if a_low <= -90.0:
         raise InputError(f"Viterna extrapolation needs the first angle above -90 deg, got {a_low:g} deg",
                          src, field="alpha")
-    if cd_max is None:
-        cd_max = FLAT_PLATE_CD_MAX if aspect_ratio is None else cd_max_from_aspect_ratio(aspect_ratio)
-    cd_max = max(float(cd_max), float(np.max(table.cd)))
+
+
+def _viterna_coefficients(table: PolarTable, cd_max: float) -> tuple[float, float]:
+    """Viterna's A and B matching the model to the table's last row.
+
+    Parameters
+    ----------
+    table : PolarTable
+        The last row (α_h [deg], C_L,h, C_D,h [-]) is the matching point.
+    cd_max : float
+        Flat-plate drag coefficient at 90 deg [-].
+
+    Returns
+    -------
+    coef_a, coef_b : float
+        A and B of :func:`extrapolate_viterna`, Notes [-]; both 0 when α_h = 90 deg (the model
+        reduces to the flat plate).
+
+    References
+    ----------
+    L.A. Viterna, R.D. Corrigan, NASA CP-2230 (1982).
+    """
     cl_h, cd_h = float(table.cl[-1]), float(table.cd[-1])
-    cl_l, cd_l = float(table.cl[0]), float(table.cd[0])
-    ah = np.radians(a_high)
-    al = np.radians(a_low)
+    ah = np.radians(float(table.alpha_deg[-1]))
     sa, ca = np.sin(ah), np.cos(ah)
     if ca < 1e-9:  # matching at 90 deg: the model reduces to the flat plate
-        coef_a, coef_b = 0.0, 0.0
-    else:
-        coef_a = (cl_h - cd_max * sa * ca) * sa / ca ** 2
-        coef_b = (cd_h - cd_max * sa * sa) / ca
+        return 0.0, 0.0
+    coef_a = (cl_h - cd_max * sa * ca) * sa / ca ** 2
+    coef_b = (cd_h - cd_max * sa * sa) / ca
+    return coef_a, coef_b
+
+
+def _full_circle(table: PolarTable, vit: _ViternaModel, cd_min: float,
+                 n_alpha: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The table with the extrapolated segments on both sides, -180..180 deg.
+
+    Parameters
+    ----------
+    table : PolarTable
+        The table over a limited range.
+    vit : callable
+        ``vit(alpha_rad, cl_adj) -> (cl, cd)``, the matched Viterna model.
+    cd_min : float
+        Lower bound on the extrapolated drag [-].
+    n_alpha : int
+        Points per extrapolated segment.
+
+    Returns
+    -------
+    alpha_deg, cl, cd : ndarray
+        Angle of attack [deg] from exactly -180 to 180, C_L and C_D [-]; the table's rows
+        verbatim in between (rows that collide after the degree round trip not yet dropped).
+    """
+    a_hi, cl_hi, cd_hi = _segments_above(table, vit, n_alpha)
+    a_lo, cl_lo, cd_lo = _segments_below(table, vit, n_alpha)
+    alpha_new = np.concatenate([np.degrees(a_lo), table.alpha_deg, np.degrees(a_hi)])
+    cl_new = np.concatenate([cl_lo, table.cl, cl_hi])
+    cd_new = np.concatenate([np.maximum(cd_lo, cd_min), table.cd, np.maximum(cd_hi, cd_min)])
+    alpha_new[0], alpha_new[-1] = -180.0, 180.0  # exact ends despite round-off
+    return alpha_new, cl_new, cd_new
+
+
+def _segments_above(table: PolarTable, vit: _ViternaModel,
+                    n_alpha: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The extrapolation from the table's last angle alpha_high to 180 deg (that angle excluded).
+
+    Parameters
+    ----------
+    table : PolarTable
+    vit : callable
+        ``vit(alpha_rad, cl_adj) -> (cl, cd)``, the matched Viterna model.
+    n_alpha : int
+        Points per segment.
+
+    Returns
+    -------
+    alpha_rad, cl, cd : ndarray
+        Angle of attack [rad], C_L and C_D [-] (drag not yet bounded below): the model on
+        alpha_high..90 deg, the model at 180-α with C_L scaled by -0.7 on 90..180-alpha_high,
+        C_L falling linearly to 0 at 180 deg (AirfoilPrep / CCBlade).
+    """
+    ah = np.radians(float(table.alpha_deg[-1]))
+    cl_h = float(table.cl[-1])
     adj = LIFT_ADJUSTMENT
     pi = np.pi
-    vit = lambda a, s: _viterna(a, cd_max, coef_a, coef_b, s)  # noqa: E731
-
     # alpha_high .. 90
     a1 = np.linspace(ah, pi / 2, n_alpha)[1:]
     cl1, cd1 = vit(a1, 1.0)
@@ -145,6 +248,34 @@ def extrapolate_viterna(table: PolarTable, cd_max: float | None = None, aspect_r
     a3 = np.linspace(pi - ah, pi, n_alpha)[1:]
     _, cd3 = vit(pi - a3, 1.0)
     cl3 = (a3 - pi) / ah * cl_h * adj
+    return np.concatenate([a1, a2, a3]), np.concatenate([cl1, cl2, cl3]), np.concatenate([cd1, cd2, cd3])
+
+
+def _segments_below(table: PolarTable, vit: _ViternaModel,
+                    n_alpha: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The extrapolation from -180 deg to the table's first angle alpha_low (that angle excluded).
+
+    Parameters
+    ----------
+    table : PolarTable
+    vit : callable
+        ``vit(alpha_rad, cl_adj) -> (cl, cd)``, the matched Viterna model.
+    n_alpha : int
+        Points per segment.
+
+    Returns
+    -------
+    alpha_rad, cl, cd : ndarray
+        Angle of attack [rad], C_L and C_D [-] (drag not yet bounded below): C_L rising
+        linearly from 0 at -180 deg, the model with C_L scaled by +0.7 on -180+alpha_high..-90
+        and by -0.7 on -90..-alpha_high, and a linear bridge from -alpha_high to alpha_low
+        (if any) (AirfoilPrep / CCBlade).
+    """
+    ah, al = np.radians(float(table.alpha_deg[-1])), np.radians(float(table.alpha_deg[0]))
+    cl_h, cd_h = float(table.cl[-1]), float(table.cd[-1])
+    cl_l, cd_l = float(table.cl[0]), float(table.cd[0])
+    adj = LIFT_ADJUSTMENT
+    pi = np.pi
     # -alpha_high .. alpha_low: linear bridge
     if al <= -ah:
         a4 = cl4 = cd4 = np.empty(0)
@@ -165,22 +296,7 @@ def extrapolate_viterna(table: PolarTable, cd_max: float | None = None, aspect_r
     _, cd7 = vit(a7 + pi, 1.0)
     cl7 = (a7 + pi) / ah * cl_h * adj
 
-    new_lo = np.concatenate([a7, a6, a5, a4])
-    new_hi = np.concatenate([a1, a2, a3])
-    alpha_new = np.concatenate([np.degrees(new_lo), alpha, np.degrees(new_hi)])
-    cl_new = np.concatenate([cl7, cl6, cl5, cl4, table.cl, cl1, cl2, cl3])
-    cd_ext_lo = np.maximum(np.concatenate([cd7, cd6, cd5, cd4]), cd_min)
-    cd_ext_hi = np.maximum(np.concatenate([cd1, cd2, cd3]), cd_min)
-    cd_new = np.concatenate([cd_ext_lo, table.cd, cd_ext_hi])
-    alpha_new[0], alpha_new[-1] = -180.0, 180.0  # exact ends despite round-off
-    # drop points that collide with table rows after the degree round trip
-    keep = np.concatenate([[True], np.diff(alpha_new) > 1e-9])
-    cm_new = None
-    if table.cm is not None:
-        cm_new = _extrapolate_cm(table, alpha_new, cl_new, cd_new)
-    return PolarTable(alpha_new[keep], cl_new[keep], cd_new[keep],
-                      None if cm_new is None else cm_new[keep], table.reynolds,
-                      source=f"{src} (Viterna extrapolation, cd_max={cd_max:.4g})")
+    return np.concatenate([a7, a6, a5, a4]), np.concatenate([cl7, cl6, cl5, cl4]), np.concatenate([cd7, cd6, cd5, cd4])
 
 
 def _extrapolate_cm(table: PolarTable, alpha_deg, cl, cd) -> np.ndarray:
