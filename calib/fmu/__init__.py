@@ -4,13 +4,17 @@ The adapter, from the archive to the model:
 
 - :mod:`calib.fmu.archive`      zip checks, the extraction cache, the platform binary;
 - :mod:`calib.fmu.mapping`      the declarative mapping file (inputs, outputs, parameters, nodes);
+- :mod:`calib.fmu.rules`        its ``[steady]`` and ``[jacobian]`` tables: the run and difference rules;
 - :mod:`calib.fmu.binding`      the mapping bound to the model description: variables, types, sizes;
+- :mod:`calib.fmu.channels`     channel names -> mapped signals, run outcomes -> channel values;
+- :mod:`calib.fmu.stations`     which variables give the output-station and rotor radii, and the radii;
 - :mod:`calib.fmu.plan`         picklable plans, tasks and outcomes; the adaptive timeout rule;
 - :mod:`calib.fmu.windows`      steady-window statistics (mean, halves, azimuth harmonics);
 - :mod:`calib.fmu.simulator`    one FMU instance driven in this process through fmpy;
 - :mod:`calib.fmu.worker`       worker processes, their pipe protocol, the per-process cache;
 - :mod:`calib.fmu.faults`       the fault ledger: quarantine and healthy wall times;
 - :mod:`calib.fmu.states`       settled FMU states saved to and read from files;
+- :mod:`calib.fmu.differences`  central differences: perturbed parameter vectors, sensitivities;
 - :mod:`calib.fmu.model`        :class:`~calib.fmu.model.FmuModel`, the thin adapter;
 - :mod:`calib.fmu.bundled`      the bundled FMU of a workflow (``[model] variant``), built on demand.
 

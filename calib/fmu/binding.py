@@ -5,7 +5,8 @@ module checks every mapped variable (it exists; its causality, variability and t
 array elements lie inside their arrays; setting values inside the FMU's range) and builds what a
 simulation needs: the fixed assignments of settings and switches (:func:`fixed_assignments`), the
 calibrated parameters with their writers and unit conversions (:func:`bind_parameters`), the
-operating-condition inputs (:func:`bind_inputs`), the channels (:func:`channel_specs`) and the
+operating-condition inputs (:func:`bind_inputs`), the channels (:func:`channel_specs`, which lives in
+:mod:`calib.fmu.channels` with :func:`signal_of`, and is importable from here) and the
 :class:`~calib.fmu.plan.SimulationPlan` (:func:`make_plan`). Nothing here runs the FMU: the radii of
 spanwise stations, which only an initialized FMU knows, come in as a function.
 """
@@ -16,7 +17,6 @@ import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -24,13 +24,10 @@ from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.fmu import plan as fp
 from calib.fmu.archive import FmuInputError
+from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, signal_of  # noqa: F401 (re-exported)
 from calib.fmu.mapping import Mapping
 from calib.types import CONDITION_FIELDS, STANDARD_AIR_DENSITY, Parameter
 
-#: azimuth-harmonic channel suffixes -> harmonic order
-HARMONIC_SUFFIXES = {f"_{n}p": n for n in fp.HARMONIC_ORDERS}
-#: mapped outputs that are not channels
-NOT_CHANNELS = ("azimuth", "aero_failures")
 #: operating conditions an FMU without that input must see at this value
 CONDITION_DEFAULTS = {"pitch": 0.0, "air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
 
@@ -373,60 +370,6 @@ def bind_inputs(m: Mapping, vs: Variables) -> InputBinding:
         fields.append(name)
     return InputBinding(tuple(fields), w, np.array(idx, int), np.array(conv, float).reshape(-1, 3),
                         np.array(w.base, float))
-
-
-def signal_of(m: Mapping, base: str, spanwise_eta: Callable) -> tuple:
-    """(signal key, unit) of a base output name ((None, None) when the mapping offers none)."""
-    if base in m.outputs and base not in NOT_CHANNELS:
-        return ("out", base), m.outputs[base].channel_unit
-    if base.startswith("fn@") and "normal_force" in m.spanwise:
-        eta = spanwise_eta("normal_force")
-        if eta is not None:
-            labels = [f"{e:.2f}" for e in eta]
-            label = base[3:]
-            try:
-                label = f"{float(label):.2f}"
-            except ValueError:
-                pass
-            if label in labels:
-                return ("span", "normal_force", labels.index(label)), "N/m"
-    return None, None
-
-
-def channel_specs(m: Mapping, channels, spanwise_eta: Callable, available: Callable, fmu_name: str) -> list:
-    """Per channel: (name, signal key, kind "mean" / "amplitude" / "phase", harmonic order, unit).
-
-    ``spanwise_eta(name)``: the r/R of a spanwise output's stations (None when unknown);
-    ``available()``: the channel names offered, for the error.
-    """
-    if channels is None:
-        channels = [c for c in ("power", "thrust") if c in m.outputs] or \
-                   [c for c in m.outputs if c not in NOT_CHANNELS][:1]
-    if isinstance(channels, str):
-        channels = [channels]
-    if not channels:
-        raise InputError("at least one channel is needed", "FmuModel", field="channels")
-    specs = []
-    for name in channels:
-        base, kind, order = name, "mean", 0
-        if name.endswith("_phase"):
-            stem = name[: -len("_phase")]
-            for suf, n in HARMONIC_SUFFIXES.items():
-                if stem.endswith(suf):
-                    base, kind, order = stem[: -len(suf)], "phase", n
-        else:
-            for suf, n in HARMONIC_SUFFIXES.items():
-                if name.endswith(suf) and name[: -len(suf)]:
-                    cand = name[: -len(suf)]
-                    if signal_of(m, cand, spanwise_eta)[0] is not None:
-                        base, kind, order = cand, "amplitude", n
-        key, unit = signal_of(m, base, spanwise_eta)
-        if key is None:
-            raise InputError(f"channel {name!r} is not provided by {fmu_name} through "
-                             f"{Path(m.source).name}; available: {', '.join(available())}",
-                             m.source, field="outputs")
-        specs.append((name, key, kind, order, "deg" if kind == "phase" else unit))
-    return specs
 
 
 def make_plan(m: Mapping, vs: Variables, site: PlanSite, specs: list, grid, signals_only: bool = False) -> tuple:

@@ -10,14 +10,15 @@ names, per package quantity, the FMI variable that carries it and the conversion
 with ``scale`` a, ``offset`` b, ``sign`` s = ±1 and ``wrap`` w. Loading validates the whole
 file against the schema: an unknown table or key, a missing required key or a value of the
 wrong type is refused with :class:`~calib.errors.InputError` naming the file and the key.
-Whether the named variables exist in an FMU, with the right causality and variability, is
-checked by :class:`calib.fmu.model.FmuModel` at load time (it has the FMU).
+The ``[steady]`` and ``[jacobian]`` tables are read by :mod:`calib.fmu.rules` (their classes
+:class:`SteadyRule` and :class:`JacobianRule` are importable from here too). Whether the named
+variables exist in an FMU, with the right causality and variability, is checked by
+:class:`calib.fmu.model.FmuModel` at load time (it has the FMU).
 """
 
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,6 +26,7 @@ import numpy as np
 
 from calib.config import NUM as _NUM, NUM_OR_BOOL, check_table
 from calib.errors import InputError, unknown_key
+from calib.fmu.rules import JacobianRule, SteadyRule, jacobian_rule, steady_rule
 from calib.tomlfile import read_toml
 from calib.types import CONDITION_FIELDS, ParameterKind
 
@@ -58,14 +60,8 @@ _CORRECTION_KEYS = {"grid": (str, False), "alpha_nodes_deg": (list, False), "eta
                     "cd_bound": (_NUM, False)}
 _SWITCH_KEYS = {"variable": (str, True), "on": (NUM_OR_BOOL, True), "off": (NUM_OR_BOOL, True),
                 "values": (dict, False), "description": (str, False)}
-_STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int, True),
-                "average_revolutions": (int, True), "standstill_step_size": (_NUM, False),
-                "convergence_rtol": (_NUM, False), "perturbation_settle_revolutions": (int, False),
-                "perturbation_average_revolutions": (int, False)}
-#: upper bounds of the step counts: a larger one is a typo, and would run the FMU for days
-_STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
-               "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
-_JACOBIAN_KEYS = {"relative_step": (_NUM, False), "warm_start": (bool, False)}
+
+
 def _check_list(values, kind, where: str, source: str) -> None:
     """Every element of the array ``values`` is of ``kind`` (str, or numbers)."""
     numbers = kind is not str
@@ -211,56 +207,6 @@ class Corrections:
 
 
 @dataclass(frozen=True)
-class SteadyRule:
-    """Steady averages over whole revolutions (``fmu_models/README.md``, "[steady]")."""
-
-    steps_per_revolution: int
-    settle_revolutions: int
-    average_revolutions: int
-    standstill_step_size: float = 0.05
-    convergence_rtol: float = 2e-3
-    perturbation_settle_revolutions: int | None = None
-    perturbation_average_revolutions: int | None = None
-
-    def __post_init__(self):
-        # a perturbed run restored from the settled base state settles and averages like the base
-        # run unless the mapping says that less is enough for this FMU
-        if self.perturbation_settle_revolutions is None:
-            object.__setattr__(self, "perturbation_settle_revolutions", self.settle_revolutions)
-        if self.perturbation_average_revolutions is None:
-            object.__setattr__(self, "perturbation_average_revolutions", self.average_revolutions)
-
-    def perturbation_window(self, rotor_speed: float) -> tuple[float, int, int]:
-        """Step [s], settling and averaging step counts of a run restored from the base state."""
-        step, _, _ = self.window(rotor_speed)
-        n = self.steps_per_revolution
-        return step, self.perturbation_settle_revolutions * n, self.perturbation_average_revolutions * n
-
-    def window(self, rotor_speed: float) -> tuple[float, int, int]:
-        """Communication step [s], settling and averaging step counts at ``rotor_speed`` [rpm].
-
-        One revolution is exactly ``steps_per_revolution`` steps, so both windows are whole
-        revolutions; at standstill the same counts of ``standstill_step_size`` are used.
-        """
-        n = self.steps_per_revolution
-        step = 60.0 / (rotor_speed * n) if rotor_speed > 0 else float(self.standstill_step_size)
-        return step, self.settle_revolutions * n, self.average_revolutions * n
-
-    def replace(self, **changes) -> "SteadyRule":
-        """A copy with some fields changed (validated)."""
-        data = {k: getattr(self, k) for k in self.__dataclass_fields__} | changes
-        return _steady_rule(data, "steady settings", "steady")
-
-
-@dataclass(frozen=True)
-class JacobianRule:
-    """How the adapter differentiates: central differences and their warm start."""
-
-    relative_step: float = 1e-2
-    warm_start: bool = True
-
-
-@dataclass(frozen=True)
 class Mapping:
     """A validated mapping file (see the module docstring)."""
 
@@ -307,31 +253,6 @@ def _entry(cls, name: str, e: dict, where: str, source: str, allowed: dict, **ex
     return cls(name=name, variable=e["variable"], element=e.get("element"), scale=scale,
                offset=float(e.get("offset", 0.0)), sign=sign, wrap=float(wrap) if wrap else None,
                unit=e.get("unit", ""), description=e.get("description", ""), **extra)
-
-
-def _steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
-    _check(s, _STEADY_KEYS, where, source)
-    rule = SteadyRule(**{k: v for k, v in s.items()})
-    positive = {"steps_per_revolution": 1, "average_revolutions": 1, "perturbation_average_revolutions": 1}
-    for key in _STEADY_KEYS:
-        value = getattr(rule, key)
-        low = positive.get(key, 0)
-        high = _STEADY_MAX.get(key, float("inf"))
-        if not (math.isfinite(value) and low <= value <= high):
-            raise InputError(f"'{where}.{key}' must be in [{low}, {high:g}], got {value!r}", source,
-                             field=f"{where}.{key}")
-    if not rule.standstill_step_size > 0 or not rule.convergence_rtol > 0:
-        raise InputError(f"'{where}.standstill_step_size' and '{where}.convergence_rtol' must be > 0", source,
-                         field=where)
-    if rule.average_revolutions % 2:
-        raise InputError(f"'{where}.average_revolutions' must be even (the convergence check compares two halves "
-                         f"of whole revolutions), got {rule.average_revolutions}", source,
-                         field=f"{where}.average_revolutions")
-    if rule.steps_per_revolution < 8:
-        raise InputError(f"'{where}.steps_per_revolution' must be >= 8 (3P harmonics need more than 6 samples "
-                         f"per revolution), got {rule.steps_per_revolution}", source,
-                         field=f"{where}.steps_per_revolution")
-    return rule
 
 
 def _inputs(data: dict, src: str):
@@ -446,17 +367,6 @@ def _settings(data: dict, src: str):
     return settings
 
 
-def _jacobian(data: dict, src: str):
-    """``[jacobian]``: the finite-difference rule."""
-    jac = data.get("jacobian", {})
-    _check(jac, _JACOBIAN_KEYS, "jacobian", src)
-    jacobian = JacobianRule(**jac)
-    if not 0 < jacobian.relative_step <= 0.5:
-        raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
-                         field="jacobian.relative_step")
-    return jacobian
-
-
 def _rotor_radius(data: dict, src: str):
     """``[rotor] radius``: a number [m] or an output entry (None without the table)."""
     radius = None
@@ -514,5 +424,5 @@ def load_mapping(path) -> Mapping:
     outputs, spanwise = _outputs(data, src)
     return Mapping(src, data.get("fmi_version"), data.get("model_identifier"), data.get("variant"),
                    inputs, outputs, spanwise, _corrections(data, src), _parameters(data, src),
-                   _switches(data, src), _settings(data, src), _steady_rule(data["steady"], src), _jacobian(data, src),
-                   _rotor_radius(data, src), str(path.parent), data)
+                   _switches(data, src), _settings(data, src), steady_rule(data["steady"], src),
+                   jacobian_rule(data, src), _rotor_radius(data, src), str(path.parent), data)

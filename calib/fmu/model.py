@@ -27,8 +27,8 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 (amplitude, unit of x) and ``x_1p_phase`` ... (deg), with x ≈ mean + Σ A_n cos(nψ + φ_n)
 and ψ the azimuth of blade 1 (0 = up).
 
-Jacobians are central differences with steps ``relative_step`` × each parameter's
-``scale`` (one-sided inside a bound). With ``warm_start`` (``[jacobian]`` of the mapping,
+Jacobians are central differences (:mod:`calib.fmu.differences`) with steps ``relative_step`` ×
+each parameter's ``scale`` (one-sided inside a bound). With ``warm_start`` (``[jacobian]`` of the mapping,
 or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
 every perturbed run restores it, sets the perturbed parameters and settles only
 ``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
@@ -55,10 +55,13 @@ from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
 from calib.fmu.archive import FmuInputError, check_archive, extract_once, platform_binary
-from calib.fmu.binding import (HARMONIC_SUFFIXES, NOT_CHANNELS, PlanSite, Variables, bind_inputs, bind_parameters,
-                               channel_specs, check_mapped_variables, fixed_assignments, make_plan)
+from calib.fmu.binding import (PlanSite, Variables, bind_inputs, bind_parameters, check_mapped_variables,
+                               fixed_assignments, make_plan)
+from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, channel_values
+from calib.fmu.differences import perturbed_vectors, sensitivities
 from calib.fmu.mapping import Mapping, load_mapping
 from calib.fmu.states import read_states, write_states
+from calib.fmu.stations import radii_from_reads, radius_reads
 from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
@@ -217,19 +220,10 @@ class FmuModel:
         """Rotor radius and output-station radii, read from an initialized instance (once)."""
         if self._probed is not None:
             return self._probed
-        m, vs = self.mapping, self._variables
-        reads = []
-        for sp in m.spanwise.values():
-            if sp.radius_variables:
-                reads += [(vs.by_name[v].valueReference, 1) for v in sp.radius_variables]
-            elif sp.radius_variable:
-                var = vs.by_name[sp.radius_variable]
-                reads.append((var.valueReference, vs.size(var)))
-        if m.rotor_radius is not None and not isinstance(m.rotor_radius, float):
-            reads.append((vs.by_name[m.rotor_radius.variable].valueReference, 1))
+        reads = radius_reads(self.mapping, self._variables)
         values = []
         if reads:
-            plan, _ = make_plan(m, vs, self._site, [], self.grid, signals_only=True)
+            plan, _ = make_plan(self.mapping, self._variables, self._site, [], self.grid, signals_only=True)
             worker = fw.worker_for(plan, self.isolate, self.timeout)
             try:
                 values = worker.probe(reads)
@@ -237,22 +231,7 @@ class FmuModel:
                 raise ModelError(f"{self.fmu_path.name}: could not initialize the FMU to read radii: {exc}") from None
             finally:
                 fw.close_workers(plan.key)
-        k = 0
-        radii = {}
-        for name, sp in m.spanwise.items():
-            if sp.radius_variables:
-                radii[name] = np.array([values[k + i][0] for i in range(len(sp.radius_variables))])
-                k += len(sp.radius_variables)
-            elif sp.radius_variable:
-                radii[name] = np.array(values[k])
-                k += 1
-        if m.rotor_radius is None:
-            radius = None
-        elif isinstance(m.rotor_radius, float):
-            radius = m.rotor_radius
-        else:
-            radius = float(m.rotor_radius.to_package(values[k][0]))
-        self._probed = {"radii": radii, "rotor_radius": radius}
+        self._probed = radii_from_reads(self.mapping, values)
         return self._probed
 
     def _spanwise_eta(self, name: str) -> np.ndarray | None:
@@ -340,19 +319,8 @@ class FmuModel:
         self._faults.clear()
 
     def _values(self, outcomes: list) -> np.ndarray:
-        """Channel values (n, n_channels) from run outcomes."""
-        mean = np.array([o.mean for o in outcomes])
-        harm = np.array([o.harmonics for o in outcomes])
-        out = np.empty((len(outcomes), len(self._channel_specs)))
-        for c, (_, key, kind, order, _) in enumerate(self._channel_specs):
-            i = self._keys_for_values[key]
-            if kind == "mean":
-                out[:, c] = mean[:, i]
-            elif kind == "amplitude":
-                out[:, c] = np.abs(harm[:, i, order - 1])
-            else:
-                out[:, c] = np.degrees(np.angle(harm[:, i, order - 1]))
-        return out
+        """Channel values (n, n_channels) from run outcomes (:func:`calib.fmu.channels.channel_values`)."""
+        return channel_values(outcomes, self._channel_specs, self._keys_for_values)
 
     def _extras(self, outcomes: list, results: list) -> dict:
         extras = {"restarts": np.array([r.restarts for r in results], int),
@@ -374,17 +342,8 @@ class FmuModel:
         inputs = self._fmu_inputs(conditions)
         perturbations, steps = (), None
         if perturb:
-            lower = np.array([q.lower for q in self._parameters])
-            upper = np.array([q.upper for q in self._parameters])
-            h = self.relative_step * np.array([q.scale for q in self._parameters])
-            plus, minus = np.minimum(p + h, upper), np.maximum(p - h, lower)
-            runs = []
-            for j in range(p.size):
-                for x in (plus[j], minus[j]):
-                    q = p.copy()
-                    q[j] = x
-                    runs.append(self._fmu_parameter_values(q))
-            perturbations, steps = tuple(runs), plus - minus
+            vectors, steps = perturbed_vectors(p, self._parameters, self.relative_step)
+            perturbations = tuple(self._fmu_parameter_values(q) for q in vectors)
         if start_states is not None and len(start_states) != len(conditions):
             raise InputError(f"{len(start_states)} start states for {len(conditions)} operating points", "FmuModel",
                              field="start_states")
@@ -429,33 +388,8 @@ class FmuModel:
         """
         p, tasks, steps = self._tasks(p, conditions, perturb=True, start_states=start_states)
         results = self._run(tasks, p, conditions)
-        ev = self._evaluation(results, conditions)
-        n_par = p.size
-        n_ch = len(self._channels)
-        G = np.full((len(tasks), n_ch, n_par), np.nan)
-        status, messages = ev.status.copy(), list(ev.messages)
-        phase = np.array([kind == "phase" for _, _, kind, _, _ in self._channel_specs])
-        for k, r in enumerate(results):
-            if status[k] != Status.CONVERGED:
-                continue
-            runs = r.perturbations
-            bad = [j for j, o in enumerate(runs) if o is None or not o.ok]
-            if bad:
-                j = bad[0]
-                o = runs[j]
-                status[k] = o.status if o is not None else Status.SIMULATION_FAILED
-                sign = "+" if j % 2 == 0 else "-"
-                messages[k] = (f"perturbed run ({sign}{self._parameters[j // 2].name}) failed: "
-                               f"{o.message if o is not None else 'not run'}")
-                continue
-            y = self._values(runs)                      # (2 n_par, n_ch)
-            d = y[0::2] - y[1::2]
-            d[:, phase] = (d[:, phase] + 180.0) % 360.0 - 180.0
-            G[k] = (d / steps[:, None]).T
-        values = ev.values.copy()
-        values[status != Status.CONVERGED] = np.nan
-        ev = Evaluation(values, status, tuple(messages), ev.channels, ev.extras)
-        return ev, G
+        return sensitivities(results, self._evaluation(results, conditions), steps, self._channel_specs,
+                             self._keys_for_values, [q.name for q in self._parameters])
 
     # ------------------------------------------------------------------ declared capabilities
     @property

@@ -119,75 +119,18 @@ def load_spec(path: Path, core_ids: dict[str, int], *, n_nodes: int, alpha_nodes
     rotor_facts : dict
         Values for ``start = "@rotor.<name>"``.
     """
-    with open(path, "rb") as fh:
-        try:
-            doc = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"invalid TOML: {exc}", path) from None
-    _check_keys(doc, {"fmu", "variable"}, str(path))
-    fmu = doc.get("fmu", {})
-    _check_keys(fmu, {"fmi_version", "model_identifier", "model_name", "wrapper", "description"},
-                f"{path} [fmu]")
-    for key in ("fmi_version", "model_identifier", "model_name", "wrapper"):
-        if key not in fmu:
-            raise InputError(f"[fmu] needs '{key}'", path, field=key)
-    if fmu["fmi_version"] not in ("2.0", "3.0"):
-        raise InputError(f"fmi_version must be '2.0' or '3.0', got {fmu['fmi_version']!r}", path,
-                         field="fmi_version")
-    allowed = {"name", "core", "kind", "type", "unit", "scale", "offset", "wrap360", "start",
-               "description", "expand", "array", "min", "max"}
+    doc, fmu = _read_spec_file(path)
     counts = {"nodes": n_nodes, "blades": MAX_BLADES, "out_stations": len(out_radius)}
     out: list[FmuVariable] = []
     vr = 1
     for k, v in enumerate(doc.get("variable", [])):
         where = f"{path} variable #{k + 1} ({v.get('name', '?')})"
-        _check_keys(v, allowed, where)
-        for key in ("name", "core", "kind"):
-            if key not in v:
-                raise InputError(f"missing '{key}'", where, field=key)
-        if v["core"] not in core_ids:
-            raise InputError(f"unknown core variable {v['core']!r}; valid: {', '.join(core_ids)}",
-                             where, field="core")
-        if v["kind"] not in KINDS:
-            raise InputError(f"kind must be one of {', '.join(KINDS)}", where, field="kind")
-        vtype = v.get("type", "Real")
-        if vtype not in TYPES:
-            raise InputError(f"type must be one of {', '.join(TYPES)}", where, field="type")
-        unit = v.get("unit")
-        if unit is not None and unit not in UNITS:
-            raise InputError(f"unknown unit {unit!r}; known: {', '.join(UNITS)}", where, field="unit")
-        start = v.get("start")
-        if v["kind"] != "output" and start is None:
-            raise InputError("inputs and parameters need a start value", where, field="start")
-        if isinstance(start, str):
-            if not start.startswith("@rotor.") or start[7:] not in rotor_facts:
-                raise InputError(f"start {start!r}: use a number or @rotor.<{'|'.join(rotor_facts)}>",
-                                 where, field="start")
-            start = rotor_facts[start[7:]]
-        if isinstance(start, bool):
-            start = float(start)
-        vmin, vmax = _range(v, vtype, start, where)
-        common = dict(core=v["core"], kind=v["kind"], type=vtype, unit=unit,
-                      scale=float(v.get("scale", 1.0)), offset=float(v.get("offset", 0.0)),
-                      wrap360=bool(v.get("wrap360", False)), min=vmin, max=vmax)
-        expand, array = v.get("expand"), v.get("array")
-        if expand and array:
-            raise InputError("use either 'expand' or 'array'", where)
-        if (expand or array) and (expand or array) not in EXPANSIONS:
-            raise InputError(f"expand/array must be one of {', '.join(EXPANSIONS)}", where)
-        if array and fmu["fmi_version"] != "3.0":
-            raise InputError("array variables need FMI 3.0", where, field="array")
+        common, start = _checked_fields(v, core_ids, rotor_facts, where)
+        expand, array = _layout(v, fmu["fmi_version"], where)
         desc = v.get("description", "")
         if expand:
             for e in range(counts[expand]):
-                labels = {}
-                if expand == "nodes":
-                    i, j = divmod(e, len(eta_nodes))
-                    labels = dict(i=i, j=j, alpha=f"{alpha_nodes[i]:g}", eta=f"{eta_nodes[j]:g}")
-                elif expand == "blades":
-                    labels = dict(n=e + 1)
-                else:
-                    labels = dict(k=e + 1, r=f"{out_radius[e]:.3f}", eta=f"{out_eta[e]:.3f}")
+                labels = _labels(expand, e, alpha_nodes, eta_nodes, out_radius, out_eta)
                 out.append(FmuVariable(name=v["name"].format(**labels), vr=vr, index=e, count=1,
                                        start=[] if start is None else [start],
                                        description=desc.format(**labels), **common))
@@ -206,6 +149,139 @@ def load_spec(path: Path, core_ids: dict[str, int], *, n_nodes: int, alpha_nodes
         raise InputError(f"duplicate variable names: {', '.join(dup)}", path)
     return VariantSpec(fmu["fmi_version"], fmu["model_identifier"], fmu["model_name"], fmu["wrapper"],
                        fmu.get("description", ""), out)
+
+
+def _read_spec_file(path: Path) -> tuple[dict, dict]:
+    """The TOML content of a ``variables.toml`` and its checked ``[fmu]`` table.
+
+    Parameters
+    ----------
+    path : Path
+        The spec file.
+
+    Returns
+    -------
+    doc : dict
+        The whole file (only ``[fmu]`` and ``[[variable]]`` allowed).
+    fmu : dict
+        ``[fmu]``, with ``fmi_version`` ("2.0" or "3.0"), ``model_identifier``, ``model_name``, ``wrapper``.
+    """
+    with open(path, "rb") as fh:
+        try:
+            doc = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"invalid TOML: {exc}", path) from None
+    _check_keys(doc, {"fmu", "variable"}, str(path))
+    fmu = doc.get("fmu", {})
+    _check_keys(fmu, {"fmi_version", "model_identifier", "model_name", "wrapper", "description"},
+                f"{path} [fmu]")
+    for key in ("fmi_version", "model_identifier", "model_name", "wrapper"):
+        if key not in fmu:
+            raise InputError(f"[fmu] needs '{key}'", path, field=key)
+    if fmu["fmi_version"] not in ("2.0", "3.0"):
+        raise InputError(f"fmi_version must be '2.0' or '3.0', got {fmu['fmi_version']!r}", path,
+                         field="fmi_version")
+    return doc, fmu
+
+
+def _checked_fields(v: dict, core_ids: dict[str, int], rotor_facts: dict,
+                    where: str) -> tuple[dict, float | None]:
+    """The fields every expansion of one ``[[variable]]`` shares, and its start value, checked.
+
+    Parameters
+    ----------
+    v : dict
+        The ``[[variable]]`` table.
+    core_ids : dict
+        Core variable ids (:func:`core_variable_ids`).
+    rotor_facts : dict
+        Values for ``start = "@rotor.<name>"``.
+    where : str
+        The variable in messages.
+
+    Returns
+    -------
+    common : dict
+        ``core``, ``kind``, ``type``, ``unit``, ``scale``, ``offset`` (FMU = scale · core + offset),
+        ``wrap360``, ``min``, ``max`` [FMU units] of :class:`FmuVariable`.
+    start : float or None
+        Start value [FMU units] (None for an output without one).
+    """
+    allowed = {"name", "core", "kind", "type", "unit", "scale", "offset", "wrap360", "start",
+               "description", "expand", "array", "min", "max"}
+    _check_keys(v, allowed, where)
+    for key in ("name", "core", "kind"):
+        if key not in v:
+            raise InputError(f"missing '{key}'", where, field=key)
+    if v["core"] not in core_ids:
+        raise InputError(f"unknown core variable {v['core']!r}; valid: {', '.join(core_ids)}",
+                         where, field="core")
+    if v["kind"] not in KINDS:
+        raise InputError(f"kind must be one of {', '.join(KINDS)}", where, field="kind")
+    vtype = v.get("type", "Real")
+    if vtype not in TYPES:
+        raise InputError(f"type must be one of {', '.join(TYPES)}", where, field="type")
+    unit = v.get("unit")
+    if unit is not None and unit not in UNITS:
+        raise InputError(f"unknown unit {unit!r}; known: {', '.join(UNITS)}", where, field="unit")
+    start = _start_value(v, rotor_facts, where)
+    vmin, vmax = _range(v, vtype, start, where)
+    common = dict(core=v["core"], kind=v["kind"], type=vtype, unit=unit,
+                  scale=float(v.get("scale", 1.0)), offset=float(v.get("offset", 0.0)),
+                  wrap360=bool(v.get("wrap360", False)), min=vmin, max=vmax)
+    return common, start
+
+
+def _start_value(v: dict, rotor_facts: dict, where: str) -> float | None:
+    """The ``start`` of a variable [FMU units]: a number, or ``"@rotor.<name>"`` from ``rotor_facts``;
+    required for inputs and parameters (None for an output without one)."""
+    start = v.get("start")
+    if v["kind"] != "output" and start is None:
+        raise InputError("inputs and parameters need a start value", where, field="start")
+    if isinstance(start, str):
+        if not start.startswith("@rotor.") or start[7:] not in rotor_facts:
+            raise InputError(f"start {start!r}: use a number or @rotor.<{'|'.join(rotor_facts)}>",
+                             where, field="start")
+        start = rotor_facts[start[7:]]
+    if isinstance(start, bool):
+        start = float(start)
+    return start
+
+
+def _layout(v: dict, fmi_version: str, where: str) -> tuple[str | None, str | None]:
+    """``expand`` (one scalar per node, blade or output station) or ``array`` (one FMI 3 array) of a
+    variable, at most one of them (None, None: one scalar)."""
+    expand, array = v.get("expand"), v.get("array")
+    if expand and array:
+        raise InputError("use either 'expand' or 'array'", where)
+    if (expand or array) and (expand or array) not in EXPANSIONS:
+        raise InputError(f"expand/array must be one of {', '.join(EXPANSIONS)}", where)
+    if array and fmi_version != "3.0":
+        raise InputError("array variables need FMI 3.0", where, field="array")
+    return expand, array
+
+
+def _labels(expand: str, e: int, alpha_nodes, eta_nodes, out_radius, out_eta) -> dict:
+    """Name and description fields of the ``e``-th expansion of a variable.
+
+    Parameters
+    ----------
+    expand : str
+        ``"nodes"`` (fields ``i``, ``j``, ``alpha`` [deg], ``eta`` [-]), ``"blades"`` (``n``) or
+        ``"out_stations"`` (``k``, ``r`` [m], ``eta`` [-]).
+    e : int
+        0-based expansion index (node ``e`` runs over eta fastest).
+    alpha_nodes, eta_nodes : sequence of float
+        Node locations [deg], [-].
+    out_radius, out_eta : sequence of float
+        Radii [m] and r/R [-] of the spanwise output stations.
+    """
+    if expand == "nodes":
+        i, j = divmod(e, len(eta_nodes))
+        return dict(i=i, j=j, alpha=f"{alpha_nodes[i]:g}", eta=f"{eta_nodes[j]:g}")
+    if expand == "blades":
+        return dict(n=e + 1)
+    return dict(k=e + 1, r=f"{out_radius[e]:.3f}", eta=f"{out_eta[e]:.3f}")
 
 
 def _range(v: dict, vtype: str, start, where: str) -> tuple[float | None, float | None]:

@@ -103,7 +103,7 @@ class SimulationPlan:
     azimuth: int | None
     checked: tuple[int, ...]
     counters: tuple[Counter, ...]
-    steady: object            # calib.fmu.mapping.SteadyRule
+    steady: object            # calib.fmu.rules.SteadyRule
     can_get_state: bool
     can_serialize: bool
     instance_name: str = "calib"

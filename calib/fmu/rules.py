@@ -1,0 +1,113 @@
+"""How the FMU adapter runs and differentiates an FMU: the ``[steady]`` and ``[jacobian]`` tables.
+
+:class:`SteadyRule` says how long a run settles and averages (whole revolutions, the windows at a
+rotor speed) and :class:`JacobianRule` how the adapter takes central differences. Both are read and
+validated here (:func:`steady_rule`, :func:`jacobian_rule`) for :func:`calib.fmu.mapping.load_mapping`,
+which refuses a wrong key or value with :class:`~calib.errors.InputError` naming the file and the key;
+both are importable from :mod:`calib.fmu.mapping` too. A :class:`SteadyRule` travels to the worker
+processes inside each :class:`~calib.fmu.plan.SimulationPlan`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from calib.config import NUM, check_table
+from calib.errors import InputError
+
+_STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int, True),
+                "average_revolutions": (int, True), "standstill_step_size": (NUM, False),
+                "convergence_rtol": (NUM, False), "perturbation_settle_revolutions": (int, False),
+                "perturbation_average_revolutions": (int, False)}
+#: upper bounds of the step counts: a larger one is a typo, and would run the FMU for days
+_STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
+               "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
+_JACOBIAN_KEYS = {"relative_step": (NUM, False), "warm_start": (bool, False)}
+
+
+@dataclass(frozen=True)
+class SteadyRule:
+    """Steady averages over whole revolutions (``fmu_models/README.md``, "[steady]")."""
+
+    steps_per_revolution: int
+    settle_revolutions: int
+    average_revolutions: int
+    standstill_step_size: float = 0.05
+    convergence_rtol: float = 2e-3
+    perturbation_settle_revolutions: int | None = None
+    perturbation_average_revolutions: int | None = None
+
+    def __post_init__(self):
+        # a perturbed run restored from the settled base state settles and averages like the base
+        # run unless the mapping says that less is enough for this FMU
+        if self.perturbation_settle_revolutions is None:
+            object.__setattr__(self, "perturbation_settle_revolutions", self.settle_revolutions)
+        if self.perturbation_average_revolutions is None:
+            object.__setattr__(self, "perturbation_average_revolutions", self.average_revolutions)
+
+    def perturbation_window(self, rotor_speed: float) -> tuple[float, int, int]:
+        """Step [s], settling and averaging step counts of a run restored from the base state."""
+        step, _, _ = self.window(rotor_speed)
+        n = self.steps_per_revolution
+        return step, self.perturbation_settle_revolutions * n, self.perturbation_average_revolutions * n
+
+    def window(self, rotor_speed: float) -> tuple[float, int, int]:
+        """Communication step [s], settling and averaging step counts at ``rotor_speed`` [rpm].
+
+        One revolution is exactly ``steps_per_revolution`` steps, so both windows are whole
+        revolutions; at standstill the same counts of ``standstill_step_size`` are used.
+        """
+        n = self.steps_per_revolution
+        step = 60.0 / (rotor_speed * n) if rotor_speed > 0 else float(self.standstill_step_size)
+        return step, self.settle_revolutions * n, self.average_revolutions * n
+
+    def replace(self, **changes) -> "SteadyRule":
+        """A copy with some fields changed (validated)."""
+        data = {k: getattr(self, k) for k in self.__dataclass_fields__} | changes
+        return steady_rule(data, "steady settings", "steady")
+
+
+@dataclass(frozen=True)
+class JacobianRule:
+    """How the adapter differentiates: central differences and their warm start."""
+
+    relative_step: float = 1e-2
+    warm_start: bool = True
+
+
+def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
+    """The validated ``[steady]`` table ``s`` (``where``: its name in messages; ``source``: the file)."""
+    check_table(s, _STEADY_KEYS, where, source, table_label=f"'{where}'")
+    rule = SteadyRule(**{k: v for k, v in s.items()})
+    positive = {"steps_per_revolution": 1, "average_revolutions": 1, "perturbation_average_revolutions": 1}
+    for key in _STEADY_KEYS:
+        value = getattr(rule, key)
+        low = positive.get(key, 0)
+        high = _STEADY_MAX.get(key, float("inf"))
+        if not (math.isfinite(value) and low <= value <= high):
+            raise InputError(f"'{where}.{key}' must be in [{low}, {high:g}], got {value!r}", source,
+                             field=f"{where}.{key}")
+    if not rule.standstill_step_size > 0 or not rule.convergence_rtol > 0:
+        raise InputError(f"'{where}.standstill_step_size' and '{where}.convergence_rtol' must be > 0", source,
+                         field=where)
+    if rule.average_revolutions % 2:
+        raise InputError(f"'{where}.average_revolutions' must be even (the convergence check compares two halves "
+                         f"of whole revolutions), got {rule.average_revolutions}", source,
+                         field=f"{where}.average_revolutions")
+    if rule.steps_per_revolution < 8:
+        raise InputError(f"'{where}.steps_per_revolution' must be >= 8 (3P harmonics need more than 6 samples "
+                         f"per revolution), got {rule.steps_per_revolution}", source,
+                         field=f"{where}.steps_per_revolution")
+    return rule
+
+
+def jacobian_rule(data: dict, src: str) -> JacobianRule:
+    """``[jacobian]`` of the mapping file's content ``data``: the finite-difference rule."""
+    jac = data.get("jacobian", {})
+    check_table(jac, _JACOBIAN_KEYS, "jacobian", src, table_label="'jacobian'")
+    jacobian = JacobianRule(**jac)
+    if not 0 < jacobian.relative_step <= 0.5:
+        raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
+                         field="jacobian.relative_step")
+    return jacobian
