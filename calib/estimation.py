@@ -369,6 +369,10 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
              stage: str = "estimate", prior: bool = False, decrease_tolerance: float = 0.0) -> EstimationOutcome:
     """Constrained ML (or MAP) estimate of θ in p = p₀ + D B θ by damped Gauss–Newton.
 
+    Why one function: each iteration's trial steps, their acceptance, the damping update and
+    the stop rules read and change the same state (θ, the linearization, the damping μ, the
+    status), so split apart they would hand most of it back and forth.
+
     Parameters
     ----------
     problem : LeastSquaresProblem

@@ -1,4 +1,6 @@
-"""Identifiability: Fisher matrix, Cramér–Rao bound, whitened SVD, eigenshapes, verdicts.
+"""Identifiability: Fisher matrix, Cramér–Rao bound, whitened SVD, eigenshapes, verdicts (the
+retained directions that a point near a fold of the BEM equations determines are found by
+:mod:`calib.fold_directions`).
 
 Notes
 -----
@@ -30,6 +32,7 @@ import numpy as np
 from scipy import stats
 
 from calib.errors import InputError
+from calib.fold_directions import FOLD_SHARE, fold_dominated_directions  # noqa: F401  (importable from here)
 from calib.parametrizations.correction_field import (NodeLayout, eigenshapes, field_basis,  # noqa: F401
                                                      node_layout)
 from calib.types import Parameter, ParameterKind
@@ -315,10 +318,37 @@ def frozen_curvature_covariance(residual_at, r0: np.ndarray, ok0: np.ndarray, M:
     root = Vn @ (Q * np.sqrt(np.clip(w, 0.0, None)))
     # Δθ = −S⁻² V_IDᵀ Mᵀ n: the rows of A = S⁻² V_IDᵀ Mᵀ map a whitened misfit to the retained θ
     A = (V[:, retained] * sigma_theta[retained] ** 2).T @ M.T
+    acc = _sum_curvature_shifts(residual_at, r0, np.asarray(ok0, bool), M, A, root, int(n_samples), seed, info)
+    return (acc / info["used"] if info["used"] else acc), info
+
+
+def _sum_curvature_shifts(residual_at, r0: np.ndarray, ok0: np.ndarray, M: np.ndarray, A: np.ndarray,
+                          root: np.ndarray, n_samples: int, seed: int, info: dict) -> np.ndarray:
+    """Σ Δθ Δθᵀ over prior draws of the frozen components (the Monte Carlo of
+    :func:`frozen_curvature_covariance`).
+
+    Parameters
+    ----------
+    residual_at, r0, ok0, M
+        As in :func:`frozen_curvature_covariance` (``ok0`` a bool array).
+    A : ndarray, shape (n_retained, n_rows)
+        S⁻² V_IDᵀ Mᵀ: maps a whitened misfit to the retained θ [scale units].
+    root : ndarray, shape (n_params, n_frozen)
+        Draws δ = ``root`` z with z ~ N(0, I) have the frozen components' prior covariance
+        [scale units].
+    n_samples, seed : int
+        Prior draws and their seed.
+    info : dict
+        Its ``used`` and ``samples_with_failed_points`` are counted up, draw by draw.
+
+    Returns
+    -------
+    ndarray, shape (n_retained, n_retained)
+        The sum over the draws used [scale units²].
+    """
     rng = np.random.default_rng(seed)
-    ok0 = np.asarray(ok0, bool)
-    acc = np.zeros((k, k))
-    for _ in range(int(n_samples)):
+    acc = np.zeros((A.shape[0], A.shape[0]))
+    for _ in range(n_samples):
         r, ok, step = residual_at(root @ rng.standard_normal(root.shape[1]))
         rows = ok0 & np.asarray(ok, bool)
         if not rows.all():
@@ -329,78 +359,7 @@ def frozen_curvature_covariance(residual_at, r0: np.ndarray, ok0: np.ndarray, M:
         d = A @ n
         acc += np.outer(d, d)
         info["used"] += 1
-    return (acc / info["used"] if info["used"] else acc), info
-
-
-FOLD_SHARE = 0.5
-"""A retained direction whose information comes more than this fraction from points with
-several roots of the model's equations is stated with its prior variance
-(:func:`fold_dominated_directions`) [-]."""
-
-
-def fold_dominated_directions(M: np.ndarray, n_channels: int, V_retained: np.ndarray, s_retained: np.ndarray,
-                              flagged: np.ndarray, ok: np.ndarray | None = None,
-                              share: float = FOLD_SHARE) -> list[dict]:
-    r"""Retained directions that a point with several roots of the model's equations determines.
-
-    The information of the retained θ_i is s_i² = ‖M v_i‖², a sum over operating points of
-    ‖M_j v_i‖². A point where the BEM residual has several roots at a section
-    (:mod:`calib.bem.multiple_roots`) sits near a fold of that residual: the root the solver
-    keeps can vanish or jump to another branch under a small change of the polar, and near
-    the fold its sensitivity dφ/dp ∝ 1/R'(φ) grows without bound. A direction that such a
-    point alone determines then has a σ(θ_i) = 1/s_i that holds only on a ridge far narrower
-    than the model's range of validity, and the likelihood can have another mode along it.
-    On coverage twin (d), tuning seed 8301, with the minimum of the cross-validated curve
-    (24 θ), the point at λ = 2, pitch −2° (several roots at the tip) carried 99.5 % of the
-    leading direction (s_1 = 609 where the next was 64, its whitened sensitivity 608 against
-    at most 33 at the other points): the estimate sat 8.9 stated σ from the truth along it,
-    and that run's NEES was 175.8 for 24. Points with several roots that are not near a fold
-    carried at most 38 % of any retained direction in the eight runs of the same twin (seeds
-    8300–8329, default truncation) that had such points. Adding the prior variance widens the
-    direction the point determines; it does not repair the rest of a fit the point pulled (that
-    run's NEES went to 163.6, docs/user_guide/calibration.md).
-
-    Parameters
-    ----------
-    M : ndarray, shape (n_points * n_channels, n_params)
-        Whitened scaled sensitivities at the estimate, rows point-major.
-    n_channels : int
-        Rows per operating point.
-    V_retained : ndarray, shape (n_params, k)
-        Retained right singular vectors of ``M``.
-    s_retained : ndarray, shape (k,)
-        Their singular values [1/scale units].
-    flagged : ndarray of bool, shape (n_points,)
-        Points where the model reported several roots.
-    ok : ndarray of bool, shape (n_points,), optional
-        Points that take part (default: all).
-    share : float
-        Fraction of a direction's information above which it is reported [-].
-
-    Returns
-    -------
-    list of dict
-        One entry per (point, direction) with ``point`` (0-based row of the conditions),
-        ``theta`` (1-based index of the retained θ), ``share`` (of s_i²) and
-        ``sensitivity_ratio`` (the point's ‖M_j‖ over the median of the other points).
-    """
-    flagged = np.asarray(flagged, bool)
-    if V_retained.shape[1] == 0 or not flagged.any():
-        return []
-    n_points = M.shape[0] // n_channels
-    ok = np.ones(n_points, bool) if ok is None else np.asarray(ok, bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        U = (M @ V_retained) / np.asarray(s_retained, float)
-    energy = (np.nan_to_num(U) ** 2).reshape(n_points, n_channels, -1).sum(axis=1)   # (points, k)
-    norms = np.linalg.norm(M.reshape(n_points, n_channels, -1), axis=(1, 2))
-    out = []
-    for j in np.flatnonzero(flagged & ok):
-        others = norms[ok & (np.arange(n_points) != j)]
-        ref = float(np.median(others)) if others.size else float("nan")
-        for i in np.flatnonzero(energy[j] > share):
-            out.append({"point": int(j), "theta": int(i) + 1, "share": float(energy[j, i]),
-                        "sensitivity_ratio": float(norms[j] / ref) if ref > 0 else float("inf")})
-    return out
+    return acc
 
 
 def _ranges(values: np.ndarray) -> str:

@@ -1,6 +1,13 @@
 """The discrepancy workflow: find where model and measurements disagree, name the missing
 effect, add it, show the gap shrink (docs/theory.md, Discrepancy workflow).
 
+This module runs the steps (:func:`diagnose`) and the naming rounds of step 3. Beside it live
+the settings (:mod:`calib.diagnosis.settings`), the result (:mod:`calib.diagnosis.result`), the
+figures of merit (:mod:`calib.diagnosis.figures_of_merit`), the candidates of the native BEM
+(:mod:`calib.diagnosis.bem_family`) and their fitted parameters
+(:mod:`calib.diagnosis.candidate_parameters`), the statistics that rank candidates
+(:mod:`calib.diagnosis.ranking`) and the verdict of a naming round (:mod:`calib.diagnosis.verdict`).
+
 Steps
 -----
 1. **Find**: the nominal model's whitened residuals r = (z − y)/σ; the χ² test (χ²/N and its
@@ -56,514 +63,36 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
-from scipy import stats
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
-from calib.effects import EFFECTS, make_effect
+from calib.diagnosis.bem_family import BemFamily
+from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, _parameter_records, away_start
+from calib.diagnosis.figures_of_merit import effect_size, find, gap
+from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
+from calib.diagnosis.result import CandidateFit, Diagnosis
+from calib.diagnosis.settings import DiagnosisSettings
+from calib.diagnosis.verdict import _separation_of, judge_round
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
-from calib.models.bem_model import BemModel
-from calib.diagnosis.separation import envelope_words, probe_conditions, separating_probes
-from calib.types import CONDITION_FIELDS, OperatingConditions
 from calib.words import p_is
 
-#: Effects the native BEM can name (the correction field is the localizer, not a candidate).
-NAMEABLE = tuple(n for n in EFFECTS if n != "correction_field")
-
-#: A fitted parameter is "at bound" when it lies within this fraction of its scale of a bound
-#: (or beyond it by round-off): the rule of :func:`calib.identifiability.parameter_verdicts`.
-AT_BOUND_TOLERANCE = 1e-3
-
-
-#: Default model-form tolerance [-]: the RMS relative difference between calib's native BEM and an
-#: independent code, WISDEM's CCBlade 4.2.9, on the same rotor and polars (NREL 5-MW, 63 operating
-#: points of the out-of-family battery, no effect, no noise; the larger of the rigid and the
-#: tilted/coned set-up; benchmarks/bench_oof_battery.py, measured 2026-11-25), rounded up. The
-#: difference is CCBlade's smoothing spline on the polars (below 5e-5 with calib's polar_smoothing
-#: of the same spline). root_flap_moment takes the hub flap moment's (the same loads about another
-#: point); other channels not measured take the largest ("default").
-MODEL_FORM_TOLERANCE = {"power": 0.0097, "torque": 0.0097, "thrust": 0.0024, "hub_flap_moment": 0.0029,
-                        "root_flap_moment": 0.0029, "default": 0.0097}
+# moved to the step modules, importable from here as before
+from calib.diagnosis.bem_family import PROBE_STATIONS, _fixed_effect  # noqa: F401
+from calib.diagnosis.candidate_parameters import AT_BOUND_TOLERANCE, bound_side  # noqa: F401
+from calib.diagnosis.figures_of_merit import EFFECT_SIZE_USABLE  # noqa: F401
+from calib.diagnosis.settings import MODEL_FORM_TOLERANCE, NAMEABLE  # noqa: F401
+from calib.diagnosis.verdict import _bound_suffix  # noqa: F401
 
 #: Noise models whose σ the calibration estimates from the residuals (no global test against it).
 ESTIMATED_NOISE = ("ml", "relative_ml")
 
 #: Relative χ² increase a recalibration may show before it is rejected (round-off of the sums) [-].
 RECALIBRATION_SLACK = 1e-9
-
-
-@dataclass(frozen=True)
-class DiagnosisSettings:
-    """Settings of :func:`diagnose`.
-
-    Parameters
-    ----------
-    candidates : tuple of str or None
-        Effects to try (default: every effect of the registry but the correction field).
-    candidate_options : dict
-        Options per candidate, e.g. ``{"rotational_augmentation": {"variant": "snel"}}``.
-    max_effects : int
-        How many effects may be named in sequence.
-    significance : float
-        Family-wise level of the likelihood-ratio tests (Bonferroni over the candidates).
-    ambiguity_bic : float
-        Two significant candidates closer than this in BIC are not told apart by the
-        information criterion.
-    ambiguity_pattern : float
-        ... nor by their pattern when their agreements with the localized correction differ
-        by less than this [-]; then the verdict is ``ambiguous``, with the measurement that
-        would separate them (:mod:`calib.diagnosis.separation`). When the patterns differ by more, the
-        candidate whose pattern agrees better is named.
-    recalibrate : bool
-        Re-run the correction-field calibration on top of the named effects.
-    model_form_tolerance : float or dict
-        Relative model-form error allowed to the nominal model in the naming step [-]: a
-        number for every channel, or a table channel (or spanwise group ``cn``) -> fraction
-        (``"default"`` for the others). It enters the naming step's noise,
-        σ² + (tolerance · |y|)², and a candidate is named only when its change of the outputs
-        exceeds it somewhere (practical significance, reported as an effect size). 0 leaves
-        both out. Default :data:`MODEL_FORM_TOLERANCE`.
-    """
-
-    candidates: tuple | None = None
-    candidate_options: dict = field(default_factory=dict)
-    max_effects: int = 2
-    significance: float = 0.01
-    ambiguity_bic: float = 6.0
-    ambiguity_pattern: float = 0.1
-    recalibrate: bool = True
-    model_form_tolerance: float | dict = field(default_factory=lambda: dict(MODEL_FORM_TOLERANCE))
-
-    def tolerance_of(self, channels: Sequence[str]) -> np.ndarray:
-        """The model-form tolerance of each channel [-] (see the class docstring)."""
-        tol = self.model_form_tolerance
-        if not isinstance(tol, dict):
-            return np.full(len(channels), float(tol))
-        group = {c: c.split("@")[0] for c in channels}      # cn@0.30 takes "cn" when given
-        return np.array([float(tol.get(c, tol.get(group[c], tol.get("default", 0.0)))) for c in channels])
-
-    def validate(self, source: str = "DiagnosisSettings", prefix: str = "",
-                 valid: Sequence[str] = NAMEABLE) -> "DiagnosisSettings":
-        """Check every setting (``valid``: the candidate names of the model family)."""
-        def need(ok: bool, key: str, what: str):
-            if not ok:
-                raise InputError(f"must be {what}, got {getattr(self, key)!r}", source, field=f"{prefix}{key}")
-
-        def number(v):
-            return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-        need(self.candidates is None or (isinstance(self.candidates, (tuple, list))
-                                         and all(isinstance(c, str) for c in self.candidates)),
-             "candidates", "an array of effect names")
-        need(isinstance(self.candidate_options, dict) and all(isinstance(v, dict)
-                                                               for v in self.candidate_options.values()),
-             "candidate_options", "a table of tables (effect -> options)")
-        need(isinstance(self.max_effects, int) and not isinstance(self.max_effects, bool), "max_effects",
-             "an integer")
-        need(number(self.significance), "significance", "a number")
-        need(number(self.ambiguity_bic), "ambiguity_bic", "a number")
-        need(number(self.ambiguity_pattern) and 0 <= self.ambiguity_pattern <= 2, "ambiguity_pattern",
-             "a number in [0, 2] (a difference of correlations)")
-        need(isinstance(self.recalibrate, bool), "recalibrate", "true or false")
-        tol = self.model_form_tolerance
-        values = list(tol.values()) if isinstance(tol, dict) else [tol]
-        need(all(number(v) and 0 <= v < 1 for v in values), "model_form_tolerance",
-             "a fraction in [0, 1) or a table channel -> fraction")
-        names = self.candidates if self.candidates is not None else valid
-        unknown = [c for c in names if c not in valid]
-        if unknown:
-            raise InputError(f"unknown candidate effect(s) {', '.join(unknown)}; valid: {', '.join(valid)}",
-                             source, field=f"{prefix}candidates")
-        if not 0 < self.significance < 1:
-            raise InputError(f"must be in (0, 1), got {self.significance!r}", source, field=f"{prefix}significance")
-        if self.max_effects < 0:
-            raise InputError(f"must be >= 0, got {self.max_effects!r}", source, field=f"{prefix}max_effects")
-        if not self.ambiguity_bic >= 0:
-            raise InputError(f"must be >= 0, got {self.ambiguity_bic!r}", source, field=f"{prefix}ambiguity_bic")
-        return self
-
-
-@dataclass
-class CandidateFit:
-    """One candidate effect fitted by maximum likelihood on top of the current model."""
-
-    name: str
-    parameters: list          # [{name, value, std, unit, nominal}]
-    chi2: float
-    n_params: int
-    loglik: float
-    bic: float
-    lr_statistic: float
-    p_value: float
-    significant: bool
-    weight: float = 0.0
-    pattern_agreement: float = float("nan")
-    status: str = ""
-    spec: dict = field(default_factory=dict)
-    model_values: np.ndarray | None = None
-    effect: str = ""
-    at_bound: list = field(default_factory=list)    # names of the parameters at a bound
-    effect_size: float = float("nan")   # largest relative change of an output [-] (effect_size())
-    effect_text: str = ""               # the same in words: "-2.1 % power at 7.3 m/s (tolerance 1 %)"
-    start: str = ""                     # the second start, when one ran (_fit_task): "second start kept (...)"
-    p_hat: np.ndarray | None = None     # every fitted parameter (base effects' too) [parameter units]
-
-    def bound_phrase(self) -> str:
-        """The parameters at a bound in words ("" when none): their value is the bound, not an estimate."""
-        at = [q for q in self.parameters if q.get("at_bound")]
-        if not at:
-            return ""
-        unit = {q["name"]: "" if q["unit"] in ("", "-") else f" {q['unit']}" for q in at}
-        return "at bound: " + ", ".join(f"{q['name']} = {q[q['at_bound']]:.4g}{unit[q['name']]} ({q['at_bound']} bound)"
-                                        for q in at)
-
-    def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d.pop("model_values")
-        d.pop("p_hat")
-        return d
-
-
-@dataclass
-class Diagnosis:
-    """What :func:`diagnose` found (``to_dict`` is ``diagnosis.json``)."""
-
-    effect: str
-    effects: list
-    rounds: list                       # per naming round: {"candidates": [CandidateFit], "verdict": ...}
-    before: dict
-    with_effects: dict
-    after: dict
-    find: dict
-    localization: object               # CalibrationResult of the correction field alone
-    recalibration: object              # CalibrationResult on top of the named effects (or None)
-    channels: list
-    measured: np.ndarray
-    sigma: np.ndarray
-    conditions: dict
-    model_before: np.ndarray
-    model_with_effects: np.ndarray
-    model_after: np.ndarray | None
-    rotor_radius: float
-    wall_time: float = 0.0
-    notes: list = field(default_factory=list)
-    failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
-    setup: list = field(default_factory=list)   # calib.setup_statement.SetupItem: the set-up in force
-
-    @property
-    def candidates(self) -> list:
-        """The first round's candidates (the comparison against the nominal model)."""
-        return self.rounds[0]["candidates"] if self.rounds else []
-
-    def to_dict(self) -> dict:
-        return {"effect": self.effect, "effects": self.effects,
-                "candidates": [c.to_dict() for c in self.candidates],
-                "rounds": [{"base": r["base"], "verdict": r["verdict"], "reason": r["reason"],
-                            **{k: r[k] for k in ("ambiguous", "separate") if k in r},
-                            "candidates": [c.to_dict() for c in r["candidates"]]} for r in self.rounds],
-                "before": self.before, "with_effects": self.with_effects, "after": self.after,
-                "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,
-                "failure": self.failure, "setup": [i.as_dict() for i in self.setup],
-                "localization": {"n_retained": self.localization.n_retained,
-                                 "chi2_per_dof_after": self.localization.chi2_per_dof_after,
-                                 "status": self.localization.status},
-                "recalibration": None if self.recalibration is None else {
-                    "n_retained": self.recalibration.n_retained, "status": self.recalibration.status,
-                    "chi2_per_dof_after": self.recalibration.chi2_per_dof_after}}
-
-
-# ----------------------------------------------------------------------------- figures of merit
-#: Points whose |output| is at least this fraction of the channel's largest count in effect sizes.
-EFFECT_SIZE_USABLE = 0.1
-
-
-def effect_size(values: np.ndarray, base: np.ndarray, tolerance: np.ndarray, channels: Sequence[str],
-                wind_speed: np.ndarray) -> tuple[float, str, bool]:
-    """How much a candidate changes the outputs, against the model-form tolerance.
-
-    Parameters
-    ----------
-    values, base : ndarray, shape (n_points, n_channels)
-        The outputs with the candidate and without it [channel units].
-    tolerance : ndarray, shape (n_channels,)
-        Relative model-form tolerance per channel [-].
-    channels : sequence of str
-    wind_speed : ndarray, shape (n_points,)
-        Named in the words [m/s].
-
-    Returns
-    -------
-    size : float
-        The largest relative change (values − base) / |base| over the points where |base|
-        is at least :data:`EFFECT_SIZE_USABLE` of the channel's largest [-], in the channel
-        where it is largest against the tolerance.
-    words : str
-        E.g. ``"-2.1 % power at 7.3 m/s (tolerance 1 %)"`` (the wind speed of that point).
-    exceeds : bool
-        Whether that change exceeds the channel's tolerance (always, with tolerance 0 and a
-        change).
-    """
-    best = (-1.0, 0.0, "", 0.0, np.nan)
-    for j, c in enumerate(channels):
-        b = np.abs(base[:, j])
-        ok = np.isfinite(values[:, j]) & np.isfinite(base[:, j]) & (b >= EFFECT_SIZE_USABLE * np.nanmax(b, initial=0))
-        ok &= b > 0
-        if not ok.any():
-            continue
-        rel = (values[ok, j] - base[ok, j]) / b[ok]
-        k = int(np.argmax(np.abs(rel)))
-        score = abs(rel[k]) / tolerance[j] if tolerance[j] > 0 else (np.inf if rel[k] != 0 else 0.0)
-        if score > best[0]:
-            best = (score, float(rel[k]), c, float(tolerance[j]), float(wind_speed[ok][k]))
-    score, rel, c, tol, v = best
-    if score < 0:
-        return float("nan"), "no usable point", False
-    words = f"{100 * rel:+.2g} % {c} at {v:.3g} m/s" + (f" (tolerance {100 * tol:.2g} %)" if tol else "")
-    return abs(rel), words, bool(score > 1.0)
-
-
-def gap(measured: np.ndarray, model: np.ndarray, sigma: np.ndarray, channels: Sequence[str], n_fitted: int = 0) -> dict:
-    """χ², χ²/dof (dof = N − n_fitted), p-value and per-channel RMS of measured − model."""
-    ok = np.all(np.isfinite(model), axis=1)
-    w = (measured[ok] - model[ok]) / sigma[ok]
-    chi2 = float(np.sum(w ** 2))
-    dof = max(int(w.size) - int(n_fitted), 1)
-    rms = {c: float(np.sqrt(np.mean((measured[ok, j] - model[ok, j]) ** 2))) for j, c in enumerate(channels)}
-    chi2_ch = {c: float(np.mean(w[:, j] ** 2)) for j, c in enumerate(channels)}
-    return {"chi2": chi2, "dof": dof, "chi2_per_dof": chi2 / dof, "p_value": float(stats.chi2.sf(chi2, dof)),
-            "rms": rms, "chi2_per_point": chi2_ch, "n_failed": int(np.count_nonzero(~ok))}
-
-
-def find(measured, model, sigma, conditions: dict, channels, rotor_radius: float) -> dict:
-    """Where the nominal model disagrees: whitened residuals and their trends.
-
-    Returns
-    -------
-    dict
-        ``whitened`` (n_points, n_channels) list, per channel the χ²/point and the correlation
-        of its whitened residual with tip-speed ratio, pitch, wind speed and load level, and the
-        worst points.
-    """
-    w = (measured - model) / sigma
-    lam = conditions["rotor_speed"] * np.pi / 30.0 * rotor_radius / conditions["wind_speed"]
-    drivers = {"tip_speed_ratio": lam, "pitch": conditions["pitch"], "wind_speed": conditions["wind_speed"]}
-    trends = {}
-    for j, c in enumerate(channels):
-        ok = np.isfinite(w[:, j])
-        row = {"chi2_per_point": float(np.mean(w[ok, j] ** 2)), "mean_whitened": float(np.mean(w[ok, j]))}
-        for name, x in {**drivers, "load_level": measured[:, j]}.items():
-            xs = x[ok]
-            row[f"corr_{name}"] = float(np.corrcoef(xs, w[ok, j])[0, 1]) if np.ptp(xs) > 0 and np.ptp(w[ok, j]) > 0 \
-                else 0.0
-        trends[c] = row
-    order = np.argsort(-np.abs(np.nan_to_num(w)), axis=None)[:5]
-    worst = [{"point": int(k // w.shape[1]), "channel": channels[int(k % w.shape[1])],
-              "whitened_residual": float(w.flat[k])} for k in order]
-    return {"trends": trends, "worst": worst, "tip_speed_ratio": lam.tolist()}
-
-
-# ----------------------------------------------------------------------------- candidate fits
-#: An own parameter of a candidate that ends within this fraction of its scale of its start
-#: never left it: the fit is started again away from it (:func:`away_start`).
-STUCK_TOLERANCE = 1e-6
-
-
-def away_start(p: np.ndarray, lower: np.ndarray, upper: np.ndarray, scale: np.ndarray, which) -> np.ndarray:
-    """A start one scale away from ``p`` in the parameters ``which``, toward the side with more room.
-
-    Parameters
-    ----------
-    p, lower, upper, scale : ndarray
-        The point a fit ended on, the bounds and the parameters' scales [parameter units].
-    which : sequence of int
-        The parameters to move (those that never left their start).
-
-    Returns
-    -------
-    ndarray
-        ``p`` with each of ``which`` moved by one scale (at most half the room to the bound it
-        moves toward) into the interior: a candidate at zero magnitude, where the derivative
-        of a shape parameter (an onset span, a radial exponent) vanishes and Gauss-Newton
-        cannot take a step, starts where every parameter acts.
-    """
-    start = np.array(p, float)
-    for j in which:
-        up, down = upper[j] - p[j], p[j] - lower[j]
-        room = up if up >= down else -down
-        start[j] = p[j] + np.sign(room) * min(abs(scale[j]), 0.5 * abs(room))
-    return start
-
-
-def _fit_task(task: dict) -> dict:
-    """Fit one candidate (module-level so executors can ship it to other processes).
-
-    A candidate's own parameter (``task["own"]``: its indices) that ends where it started, to
-    :data:`STUCK_TOLERANCE` of its scale, may sit on a stationary point of χ² (every derivative
-    of a zero-magnitude effect's shape parameters vanishes at nominal): the fit is started
-    again from :func:`away_start` and the one with the lower χ² is kept; the fit's status says
-    which ("second start kept" / "second start not kept").
-    """
-    model = task["model"]
-    meas = task["measurements"]
-    st = dataclasses.replace(task["settings"], prior_check=False, tightening=False)   # a comparison: no advice
-    names = [c.name for c in model.channels]
-    cols = [names.index(c) for c in meas.channels]
-
-    def fit(start=None):
-        res = Calibrator(model, meas, st, name=task["name"], start=start).run()
-        values = model.evaluate(res.p_hat, meas.conditions).values[:, cols]
-        ok = np.isfinite(values).all(axis=1)
-        chi2 = float(np.sum(((meas.values - values) / meas.sigma)[ok] ** 2)) if ok.any() else float("inf")
-        return res, values, chi2
-
-    try:
-        res, values, chi2 = fit()
-    except CalibError as exc:        # this candidate failed; the others are still compared
-        return {"error": f"{type(exc).__name__}: {exc}"}
-    own = list(task.get("own", range(res.n_params)))
-    stuck = [j for j in own if abs(res.p_hat[j] - res.p_nominal[j]) <= STUCK_TOLERANCE * res.scale[j]]
-    note = ""
-    if stuck:
-        try:
-            res2, values2, chi2_2 = fit(away_start(res.p_hat, res.lower, res.upper, res.scale, stuck))
-        except CalibError as exc:
-            note = f"second start failed ({type(exc).__name__})"
-        else:
-            keep = chi2_2 < chi2
-            note = f"second start {'kept' if keep else 'not kept'} (χ² {chi2_2:.6g} against {chi2:.6g})"
-            if keep:
-                res, values = res2, values2
-    return {"result": res, "values": values, "start_note": note}
-
-
-def _variants(name: str, options: dict) -> list:
-    """(label, effect) for every variant of effect ``name`` (one entry when it has none or the
-    options fix it): the model forms of one physical effect compete among themselves, and the
-    best one names the effect."""
-    cls = EFFECTS[name]
-    choices = getattr(cls, "CHOICES", {}).get("variant")
-    if not choices or "variant" in options:
-        return [(name, make_effect(name, **options))]
-    return [(f"{name}:{v}", make_effect(name, **{**options, "variant": v})) for v in choices]
-
-
-def _candidate_model(rotor, channels, settings, base_effects, effect):
-    return BemModel(rotor, None, channels, settings, (), effects=list(base_effects) + [effect])
-
-
-def bound_side(value: float, lower: float, upper: float, scale: float,
-               tolerance: float = AT_BOUND_TOLERANCE) -> str:
-    """Which bound a fitted value sits on: ``"lower"``, ``"upper"`` or ``""`` (neither).
-
-    Parameters
-    ----------
-    value, lower, upper : float
-        The estimate and the parameter's bounds [parameter unit].
-    scale : float
-        The parameter's scale, a typical meaningful change [parameter unit].
-    tolerance : float
-        A value within ``tolerance`` × ``scale`` of a bound, or past it (round-off of the
-        optimizer's step ends an estimate a few ulp outside), is at that bound [-]. The
-        default, 10⁻³ of the scale, is far below any σ a fit gives.
-    """
-    tol = tolerance * abs(float(scale))
-    if value <= lower + tol:
-        return "lower"
-    if value >= upper - tol:
-        return "upper"
-    return ""
-
-
-def _fixed_effect(effect_spec: dict, fitted: dict):
-    """The effect of ``effect_spec`` with its fitted values as nominal (frozen in later rounds).
-
-    A fitted value is clipped into its parameter's bounds first: an estimate that ends on a
-    bound may lie a few ulp past it, which is the bound, not an invalid nominal value.
-    """
-    options = dict(effect_spec.get("options", {}))
-    bare = make_effect(effect_spec["name"], **{k: v for k, v in options.items() if k != "nominal"})
-    bounds = {q.name: (q.lower, q.upper) for q in bare.parameters()}
-    clipped = {k: float(np.clip(v, *bounds[k])) if k in bounds else v for k, v in fitted.items()}
-    options["nominal"] = {**options.get("nominal", {}), **clipped}
-    return make_effect(effect_spec["name"], **options)
-
-
-def _tagged(callback, run: str):
-    """``callback`` receiving Calibrator records with ``run`` added (None stays None)."""
-    return None if callback is None else (lambda rec: callback({"run": run, **rec}))
-
-
-class BemFamily:
-    """The models a diagnosis on the native BEM calibrates: candidates are the effects of
-    :data:`calib.effects.EFFECTS` switched into a :class:`~calib.models.bem_model.BemModel`.
-
-    Every family offers the same few calls, so :func:`diagnose` runs unchanged on another
-    kind of model (:class:`calib.diagnosis.fmu.FmuFamily`).
-    """
-
-    def __init__(self, rotor, channels, grid, settings, rotor_source=None):
-        self.rotor, self.channels, self.grid, self.settings = rotor, list(channels), grid, settings
-        self.rotor_source = rotor_source
-        self.rotor_radius = rotor.rotor_radius
-        self.names = NAMEABLE
-
-    def field_model(self, base=()):
-        """The correction field on top of the fixed ``base`` effects (localize, recalibrate)."""
-        return BemModel(self.rotor, self.grid, self.channels, self.settings, (), effects=list(base),
-                        rotor_source=self.rotor_source)
-
-    def nominal_model(self):
-        return BemModel(self.rotor, None, self.channels, self.settings, (), rotor_source=self.rotor_source)
-
-    def variants(self, name: str, options: dict) -> list:
-        return _variants(name, options)
-
-    def candidate_model(self, base, effect):
-        return _candidate_model(self.rotor, self.channels, self.settings, base, effect)
-
-    def check(self, base, effect, conditions) -> None:
-        """Raise InputError when ``effect`` cannot act on this rotor (reported not applicable)."""
-        model = self.candidate_model(base, effect)
-        model.evaluate(np.array([q.nominal for q in model.parameters]), conditions.subset(slice(0, 1)))
-
-    def n_parameters(self, base) -> int:
-        return sum(len(e.parameters()) for e in base)
-
-    def spec(self, effect) -> dict:
-        return effect.spec()
-
-    def add(self, base, best: "CandidateFit") -> list:
-        """``base`` with the named candidate added at its fitted values."""
-        return list(base) + [_fixed_effect(best.spec, {q["name"]: q["value"] for q in best.parameters})]
-
-    def names_of(self, base) -> list:
-        return [e.name for e in base]
-
-    def probe_channels(self, measured: list) -> list:
-        """Channels the separation probes predict: the measured ones, the rotor loads and the
-        normal force per length at four spanwise stations (:mod:`calib.diagnosis.separation`)."""
-        extra = ["power", "thrust", "root_flap_moment"] + [f"fn@{eta:.2f}" for eta in PROBE_STATIONS]
-        return list(measured) + [c for c in extra if c not in measured]
-
-    def predict(self, base, effect, p: np.ndarray, conditions, channels: list) -> tuple[np.ndarray, list]:
-        """A fitted candidate's outputs and their units at ``conditions``."""
-        model = BemModel(self.rotor, None, channels, self.settings, (), effects=list(base) + [effect],
-                         rotor_source=self.rotor_source)
-        ev = model.evaluate(p, conditions)
-        return ev.values, [c.unit for c in model.channels]
-
-    def fingerprint(self, name: str) -> str:
-        return getattr(EFFECTS.get(name), "fingerprint", "")
-
-
-#: Spanwise stations r/R of the normal-force probes (:meth:`BemFamily.probe_channels`).
-PROBE_STATIONS = (0.3, 0.5, 0.7, 0.9)
 
 
 def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: BemSettings | None = None,
@@ -611,47 +140,20 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     settings = settings or BemSettings()
     channels = list(measurements.channels)
     family = family or BemFamily(rotor, channels, grid, settings, rotor_source)
-    # the diagnosis's fits (localization, candidates, recalibration) use the truncated estimator:
-    # its statistics (Λ, ΔBIC, pattern agreement, the gates) were set and validated with it, in and
-    # out of family; the MAP estimator is not yet measured there
-    cal = dataclasses.replace(calibration or CalibrationSettings(), estimator="truncated").validate()
-    dset = (diagnosis or DiagnosisSettings()).validate(valid=family.names)
+    cal, dset = _fit_settings(calibration, diagnosis, family)
     say = progress or (lambda s: None)
-    candidates = tuple(dset.candidates) if dset.candidates is not None else tuple(family.names)
-    if executor is None:
-        from calib.executors import SerialExecutor
-        executor = SerialExecutor()
     wrap = wrap or (lambda model, label: model)
 
     # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
-    field_model = wrap(family.field_model(), "localization")
-    say(f"localize: correction field, {len(field_model.parameters)} parameters")
-    loc = Calibrator(field_model, measurements, cal, _tagged(on_iteration, "localization"), name="localization").run()
+    loc, meas = _localize(family, measurements, cal, wrap, on_iteration, say)
     sigma = loc.sigma
-    meas = dataclasses.replace(measurements, sigma=sigma)
-    known = dataclasses.replace(cal, noise="known", sigma=None, retain="all")
-    say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")
 
     # 1. find
-    base_model = wrap(family.nominal_model(), "nominal")
-    y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
-    before = gap(meas.values, y0, sigma, channels)
-    findings = find(meas.values, y0, sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
-    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} ({p_is(before['p_value'])})")
+    y0, before, findings = _find_disagreement(family, meas, wrap, say)
 
     # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand),
     # against the noise plus the model-form tolerance
-    tol = dset.tolerance_of(channels)
-    meas_name = dataclasses.replace(meas, sigma=np.hypot(sigma, tol * np.abs(np.nan_to_num(y0))))
-    before_name = gap(meas.values, y0, meas_name.sigma, channels)
-    namer = _Namer(family, meas_name, y0, before_name["chi2"], (loc.model_after - y0) / meas_name.sigma, dset,
-                   known, executor, wrap, fit_progress, say, tol)
-    # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
-    # localization's residuals, so the nominal model would pass against it by construction
-    if cal.noise not in ESTIMATED_NOISE and before_name["p_value"] >= dset.significance:
-        namer.consistent(before_name, within_tolerance=before["p_value"] < dset.significance)
-    else:
-        namer.run(candidates)
+    namer = _name_effects(family, meas, y0, before, loc.model_after, cal, dset, executor, wrap, fit_progress, say)
     effect, effects_named = namer.verdict()
     n_fit = family.n_parameters(namer.base_effects)
     with_effects = gap(meas.values, namer.base_values, sigma, channels, n_fit)
@@ -666,6 +168,79 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     return Diagnosis(effect, effects_named, namer.rounds, before, with_effects, after, findings, loc, recal, channels,
                      meas.values, sigma, meas.conditions.as_dict(), y0, namer.base_values, y_after,
                      family.rotor_radius, time.perf_counter() - t0, namer.notes, "; ".join(namer.failures))
+
+
+def _fit_settings(calibration: CalibrationSettings | None, diagnosis: DiagnosisSettings | None,
+                  family) -> tuple[CalibrationSettings, DiagnosisSettings]:
+    """The validated settings of the diagnosis's fits and of its naming step (``family.names``:
+    the valid candidates)."""
+    # the diagnosis's fits (localization, candidates, recalibration) use the truncated estimator:
+    # its statistics (Λ, ΔBIC, pattern agreement, the gates) were set and validated with it, in and
+    # out of family; the MAP estimator is not yet measured there
+    cal = dataclasses.replace(calibration or CalibrationSettings(), estimator="truncated").validate()
+    dset = (diagnosis or DiagnosisSettings()).validate(valid=family.names)
+    return cal, dset
+
+
+def _localize(family, measurements: Measurements, cal: CalibrationSettings, wrap: Callable, on_iteration,
+              say: Callable[[str], None]) -> tuple:
+    """Step 2: the correction field calibrated alone (a CalibrationResult), and ``measurements``
+    with the σ it used or estimated [channel units]."""
+    field_model = wrap(family.field_model(), "localization")
+    say(f"localize: correction field, {len(field_model.parameters)} parameters")
+    loc = Calibrator(field_model, measurements, cal, _tagged(on_iteration, "localization"), name="localization").run()
+    meas = dataclasses.replace(measurements, sigma=loc.sigma)
+    say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")
+    return loc, meas
+
+
+def _find_disagreement(family, meas: Measurements, wrap: Callable, say: Callable[[str], None]) -> tuple:
+    """Step 1: the nominal model's outputs y0, shape (n_points, n_channels) [channel units], its
+    gap to the measurements (:func:`gap`) and where it disagrees (:func:`find`)."""
+    channels = list(meas.channels)
+    base_model = wrap(family.nominal_model(), "nominal")
+    y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
+    before = gap(meas.values, y0, meas.sigma, channels)
+    findings = find(meas.values, y0, meas.sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
+    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} ({p_is(before['p_value'])})")
+    return y0, before, findings
+
+
+def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, field_after: np.ndarray,
+                  cal: CalibrationSettings, dset: DiagnosisSettings, executor, wrap: Callable, fit_progress,
+                  say: Callable[[str], None]) -> "_Namer":
+    """Step 3: the naming rounds, against the noise plus the model-form tolerance.
+
+    Parameters
+    ----------
+    y0, field_after : ndarray, shape (n_points, n_channels)
+        The nominal model's outputs and the localized correction's [channel units].
+    before : dict
+        The nominal model's :func:`gap` against the noise alone.
+
+    Returns
+    -------
+    _Namer
+        With the rounds, the effects named and the model with them.
+    """
+    channels = list(meas.channels)
+    candidates = tuple(dset.candidates) if dset.candidates is not None else tuple(family.names)
+    if executor is None:
+        from calib.executors import SerialExecutor
+        executor = SerialExecutor()
+    known = dataclasses.replace(cal, noise="known", sigma=None, retain="all")
+    tol = dset.tolerance_of(channels)
+    meas_name = dataclasses.replace(meas, sigma=np.hypot(meas.sigma, tol * np.abs(np.nan_to_num(y0))))
+    before_name = gap(meas.values, y0, meas_name.sigma, channels)
+    namer = _Namer(family, meas_name, y0, before_name["chi2"], (field_after - y0) / meas_name.sigma, dset,
+                   known, executor, wrap, fit_progress, say, tol)
+    # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
+    # localization's residuals, so the nominal model would pass against it by construction
+    if cal.noise not in ESTIMATED_NOISE and before_name["p_value"] >= dset.significance:
+        namer.consistent(before_name, within_tolerance=before["p_value"] < dset.significance)
+    else:
+        namer.run(candidates)
+    return namer
 
 
 def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, say, effects_named):
@@ -692,6 +267,53 @@ def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, s
         say(f"recalibrate: {namer.notes[-1]}")
         return None
     return recal
+
+
+def _tagged(callback, run: str):
+    """``callback`` receiving Calibrator records with ``run`` added (None stays None)."""
+    return None if callback is None else (lambda rec: callback({"run": run, **rec}))
+
+
+def _fit_task(task: dict) -> dict:
+    """Fit one candidate (module-level so executors can ship it to other processes).
+
+    A candidate's own parameter (``task["own"]``: its indices) that ends where it started, to
+    :data:`STUCK_TOLERANCE` of its scale, may sit on a stationary point of χ² (every derivative
+    of a zero-magnitude effect's shape parameters vanishes at nominal): the fit is started
+    again from :func:`away_start` and the one with the lower χ² is kept; the fit's status says
+    which ("second start kept" / "second start not kept").
+    """
+    model = task["model"]
+    meas = task["measurements"]
+    st = dataclasses.replace(task["settings"], prior_check=False, tightening=False)   # a comparison: no advice
+    names = [c.name for c in model.channels]
+    cols = [names.index(c) for c in meas.channels]
+
+    def fit(start=None):
+        res = Calibrator(model, meas, st, name=task["name"], start=start).run()
+        values = model.evaluate(res.p_hat, meas.conditions).values[:, cols]
+        ok = np.isfinite(values).all(axis=1)
+        chi2 = float(np.sum(((meas.values - values) / meas.sigma)[ok] ** 2)) if ok.any() else float("inf")
+        return res, values, chi2
+
+    try:
+        res, values, chi2 = fit()
+    except CalibError as exc:        # this candidate failed; the others are still compared
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    own = list(task.get("own", range(res.n_params)))
+    stuck = [j for j in own if abs(res.p_hat[j] - res.p_nominal[j]) <= STUCK_TOLERANCE * res.scale[j]]
+    note = ""
+    if stuck:
+        try:
+            res2, values2, chi2_2 = fit(away_start(res.p_hat, res.lower, res.upper, res.scale, stuck))
+        except CalibError as exc:
+            note = f"second start failed ({type(exc).__name__})"
+        else:
+            keep = chi2_2 < chi2
+            note = f"second start {'kept' if keep else 'not kept'} (χ² {chi2_2:.6g} against {chi2:.6g})"
+            if keep:
+                res, values = res2, values2
+    return {"result": res, "values": values, "start_note": note}
 
 
 class _Namer:
@@ -828,13 +450,9 @@ class _Namer:
         own = list(range(self.family.n_parameters(self.base_effects), res.n_params))
         chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
         k = len(own)
-        lr = max(self.base_chi2 - chi2, 0.0)
-        p = float(stats.chi2.sf(lr, k)) if k else 1.0
-        change = (values - self.base_values) / sigma
-        a, b = change.reshape(-1), (self.field_change - (self.base_values - self.y0) / sigma).reshape(-1)
-        good = np.isfinite(a) & np.isfinite(b)
-        agree = float(np.corrcoef(a[good], b[good])[0, 1]) if good.sum() > 2 and np.std(a[good]) > 0 and \
-            np.std(b[good]) > 0 else float("nan")
+        lr, p = likelihood_ratio(self.base_chi2, chi2, k)
+        agree = pattern_agreement((values - self.base_values) / sigma,
+                                  self.field_change - (self.base_values - self.y0) / sigma)
         params = _parameter_records(res, own)
         size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
                                            meas.conditions.wind_speed)
@@ -847,112 +465,8 @@ class _Namer:
 
     def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
         """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
-        names (None for ``none`` and ``ambiguous``)."""
-        dset = self.dset
-        bics = np.array([f.bic for f in fits] + [self.base_chi2])
-        wts = np.exp(-0.5 * (bics - bics.min()))
-        wts /= wts.sum()
-        for f, wgt in zip(fits, wts[:-1]):
-            f.weight = float(wgt)
-        fits.sort(key=lambda f: f.bic)
-        rnd = {"base": self.family.names_of(self.base_effects), "candidates": fits}
-        sig = [f for f in fits if f.significant]
-        if not sig:
-            small = [f for f in fits if f.p_value < dset.significance / max(len(fits), 1) and not f.significant]
-            tail = (f"; {small[0].name} would be significant by likelihood ratio, but its change of the outputs "
-                    f"({small[0].effect_text}) is within the model-form tolerance" if small else "")
-            rnd.update(verdict="none", reason=(
-                f"no candidate improves the fit significantly (likelihood ratio at family-wise level "
-                f"{dset.significance:g}); best {fits[0].name}: Λ = {fits[0].lr_statistic:.3g}, "
-                f"{p_is(fits[0].p_value)}" + _bound_suffix(fits[0]) + tail))
-            self.say(f"name: {rnd['reason']}")
-            return rnd, None
-        best = sig[0]
-        # variants of the same effect are not rivals: the best variant names the effect
-        rivals = [f for f in sig[1:] if f.bic - best.bic < dset.ambiguity_bic and f.effect != best.effect]
-        pattern_note = ""
-        if rivals:
-            rival = rivals[0]
-            a, b = best.pattern_agreement, rival.pattern_agreement
-            close = f"{best.effect} and {rival.effect} fit about equally well (ΔBIC = {rival.bic - best.bic:.3g} < " \
-                    f"{dset.ambiguity_bic:g})"
-            if np.isfinite(a) and np.isfinite(b) and abs(a - b) >= dset.ambiguity_pattern:
-                # the information criterion cannot tell them apart, the pattern can
-                best, other = (best, rival) if a > b else (rival, best)
-                pattern_note = (f"; {close}, but the pattern of {best.effect} agrees better with the localized "
-                                f"correction ({best.pattern_agreement:.2f} against {other.pattern_agreement:.2f}, "
-                                f"a difference of at least {dset.ambiguity_pattern:g})")
-            else:
-                separate = _separation_of(self, best, rival)
-                rnd.update(verdict="ambiguous", ambiguous=[best.effect, rival.effect], separate=separate, reason=(
-                    f"{close} and their patterns agree equally with the localized correction ({a:.2f} and {b:.2f}): "
-                    f"the data cannot tell them apart; {separate['text']}"))
-                self.say(f"name: {rnd['reason']}")
-                return rnd, None
-        nxt = fits[1] if len(fits) > 1 else None
-        rnd.update(verdict=best.effect, reason=(
-            f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), {p_is(best.p_value)}; "
-            f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
-            f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
-            f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best) + pattern_note))
+        names (None for ``none`` and ``ambiguous``): :func:`calib.diagnosis.verdict.judge_round`."""
+        rnd, best = judge_round(fits, self.base_chi2, self.family.names_of(self.base_effects), self.dset,
+                                lambda a, b: _separation_of(self, a, b))
         self.say(f"name: {rnd['reason']}")
         return rnd, best
-
-
-def _separation_of(namer: "_Namer", a: CandidateFit, b: CandidateFit) -> dict:
-    """The measurement that would tell ``a`` from ``b`` (:mod:`calib.diagnosis.separation`): {"text", "probes",
-    "envelope", "fingerprints"}; a probe that cannot be evaluated is said, never raised."""
-    fam, meas = namer.family, namer.meas
-    names = (a.effect, b.effect)
-    fingerprints = {n: fam.fingerprint(n) for n in names if fam.fingerprint(n)}
-    envelope = envelope_words(meas.conditions, fam.rotor_radius)
-    out = {"probes": [], "envelope": envelope, "fingerprints": fingerprints}
-    try:
-        probes = probe_conditions(meas.conditions, fam.rotor_radius)
-        both = OperatingConditions(*(np.concatenate([getattr(meas.conditions, f), getattr(probes, f)])
-                                     for f in CONDITION_FIELDS))
-        channels = fam.probe_channels(list(meas.channels))
-        va, units = fam.predict(namer.base_effects, namer._effects[a.name], a.p_hat, both, channels)
-        vb, _ = fam.predict(namer.base_effects, namer._effects[b.name], b.p_hat, both, channels)
-    except CalibError as exc:
-        out["text"] = f"the probes that would separate them could not be evaluated ({exc})"
-        return out
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = {c: float(np.nanmedian(np.where(namer.y0[:, j] != 0, meas.sigma[:, j] / np.abs(namer.y0[:, j]), np.nan)))
-               for j, c in enumerate(meas.channels)}
-    rel = {c: r for c, r in rel.items() if np.isfinite(r) and r > 0}
-    found = separating_probes(va, vb, both, channels, list(meas.channels), rel, len(meas.conditions),
-                              fam.rotor_radius)
-    unit = dict(zip(channels, units))
-    out["probes"] = [{**dataclasses.asdict(p), "words": p.words(names, unit[p.channel])} for p in found]
-    if not found:
-        text = "no probe could compare them"
-    elif found[0].separation > 1.0:
-        text = "to tell them apart, measure " + "; or ".join(p["words"] for p in out["probes"] if p["separation"] > 1)
-    else:
-        text = ("no probe considered separates them beyond the noise and model-form tolerance (closest: "
-                f"{out['probes'][0]['words']})")
-    text += f"; the campaign measured {envelope}"
-    if fingerprints:
-        text += "; fingerprints: " + "; ".join(f"{n}: {fp}" for n, fp in fingerprints.items())
-    out["text"] = text
-    return out
-
-
-def _bound_suffix(fit: CandidateFit) -> str:
-    """"; <fit's parameters at a bound>, ..." for a verdict ("" when none is at a bound)."""
-    phrase = fit.bound_phrase()
-    return (f"; {phrase}: the fit pushed against the bound, so the value is the bound, not an estimate (the "
-            f"effect may stand in for another one, or the data hold a gross error)") if phrase else ""
-
-
-def _parameter_records(res, own: list) -> list[dict]:
-    """{name, value, std, unit, nominal, lower, upper, at_bound} of a candidate's own parameters."""
-    out = []
-    for j in own:
-        lo, hi = float(res.lower[j]), float(res.upper[j])
-        value = float(res.p_hat[j])
-        out.append({"name": res.parameters[j]["name"], "value": value, "std": float(res.std_p[j]),
-                    "unit": res.parameters[j]["unit"], "nominal": float(res.p_nominal[j]), "lower": lo, "upper": hi,
-                    "at_bound": bound_side(value, lo, hi, float(res.scale[j]))})
-    return out

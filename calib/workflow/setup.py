@@ -179,66 +179,16 @@ def prepare(cfg: dict) -> WorkflowSetup:
     notes = []
     rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"]) if "rotor" in cfg else None
     rotor = rsrc.rotor if rsrc is not None else None
-    mcfg = dict(cfg.get("model", {}))
-    kind = mcfg.pop("kind", "bem")
-    if kind not in MODEL_KINDS:
-        raise InputError(f"unknown model kind {kind!r}; valid: {', '.join(MODEL_KINDS)}", src, field="model.kind")
-    fmu_table = None
-    if kind == "fmu":
-        fmu_table, mcfg = {"kind": "fmu", **mcfg}, {}
-        if "measurements" not in cfg:
-            notes.append("synthetic measurements come from the native BEM; the FMU is calibrated to them")
-    overrides = {}
-    for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
-        if key in mcfg:
-            value = float(mcfg.pop(key))
-            if not -30.0 <= value <= 30.0:
-                raise InputError(f"must be an angle in degrees within ±30, got {value!r}", src, field=f"model.{key}")
-            overrides[attr] = value
-            notes.append(f"{key} {value:g} deg from [model] (rotor files: {getattr(rotor, attr):g} deg)")
-    if overrides:
-        rotor = dataclasses.replace(rotor, **overrides)
+    fmu_table, mcfg = _model_kind(cfg, src, notes)
+    rotor = _angle_overrides(mcfg, rotor, src, notes)
     nuisance = tuple(mcfg.pop("nuisance", ["pitch_offset"]))
     yaw = float(mcfg.pop("yaw", 0.0))
     if not -90.0 < yaw < 90.0:
         raise InputError(f"must be a yaw misalignment in degrees within ±90, got {yaw!r}", src, field="model.yaw")
-    kwargs = {}
-    for key, value in mcfg.items():
-        kwargs[key] = tuple(value) if key == "polar_smoothing" else value
-    origins = {}
-    for key, attr in FILE_SETUP.items() if rsrc is not None else ():
-        file_value = getattr(rsrc, attr, None)
-        if key not in kwargs and file_value is not None:
-            kwargs[key] = file_value
-            origins[key] = "rotor files"
-            notes.append(f"{key} = {file_value} from the rotor files")
-    fluid_table = dict(cfg.get("fluid", {}))
-    for key, attr in (("density", "air_density"), ("kinematic_viscosity", "kinematic_viscosity")):
-        origins[key] = f"[fluid] {key}" if key in fluid_table else "rotor files" \
-            if getattr(rsrc, attr, None) else "default (air at 15 °C)"
-    fluid = dict(cfg.get("fluid", {}))
-    density = float(fluid.get("density", getattr(rsrc, "air_density", None) or AIR["density"]))
-    viscosity = float(fluid.get("kinematic_viscosity", getattr(rsrc, "kinematic_viscosity", None)
-                                or AIR["kinematic_viscosity"]))
-    for key, value in (("density", density), ("kinematic_viscosity", viscosity)):
-        if not value > 0:
-            raise InputError(f"must be > 0, got {value!r}", src, field=f"fluid.{key}")
-    try:
-        settings = BemSettings(kinematic_viscosity=viscosity, **kwargs)
-        if rotor is not None:
-            settings.sectors_for(rotor, OperatingConditions([1.0], [1.0], [0.0]))
-    except InputError as exc:
-        raise InputError(exc.message, src, field=f"model.{exc.field}") from None
-    from calib.models.bem_model import NUISANCE
-    for name in nuisance:
-        if name not in NUISANCE:
-            raise InputError(f"unknown nuisance parameter {name!r}; valid: {', '.join(NUISANCE)}", src,
-                             field="model.nuisance")
-    channels = []
-    for k, s in enumerate(cfg["stages"]):
-        if not s["channels"] or not all(isinstance(c, str) for c in s["channels"]):
-            raise InputError("channels must be a non-empty array of names", src, field=f"stages[{k}].channels")
-        channels += [c for c in s["channels"] if c not in channels]
+    kwargs, origins = _bem_options(mcfg, rsrc, notes)
+    density, viscosity = _fluid(cfg, rsrc, src, origins)
+    settings = _bem_settings(kwargs, viscosity, rotor, nuisance, src)
+    channels = _stage_channels(cfg, src)
     _check_channels(fmu_table, rotor, settings, channels, src, cfg["_dir"])
     calib_cfg = dict(cfg.get("calibration", {}))
     force = bool(calib_cfg.pop("force", False))
@@ -254,17 +204,124 @@ def prepare(cfg: dict) -> WorkflowSetup:
     setup = WorkflowSetup(rotor, rotor_spec, settings, nuisance, density,
                           channels, calib_cfg, cal, force, g, src, notes, fmu_table, cfg.get("executor"),
                           cfg["_dir"], yaw)
-    if fmu_table is not None and not setup.uses_grid:
+    _check_grid(setup, cfg)
+    _add_diagnosis_and_validation(setup, cfg)
+    setup.strict_units = strict_units
+    setup.origins = origins
+    if rsrc is not None and rsrc.files:
+        setup.rotor_files = file_provenance(rsrc.files, cfg["_dir"])
+    return setup
+
+
+def _model_kind(cfg: dict, src: str, notes: list) -> tuple[dict | None, dict]:
+    """The FMU table of ``[model] kind = "fmu"`` (None for the native BEM) and the ``[model]``
+    keys left for the native BEM (none for an FMU)."""
+    mcfg = dict(cfg.get("model", {}))
+    kind = mcfg.pop("kind", "bem")
+    if kind not in MODEL_KINDS:
+        raise InputError(f"unknown model kind {kind!r}; valid: {', '.join(MODEL_KINDS)}", src, field="model.kind")
+    fmu_table = None
+    if kind == "fmu":
+        fmu_table, mcfg = {"kind": "fmu", **mcfg}, {}
+        if "measurements" not in cfg:
+            notes.append("synthetic measurements come from the native BEM; the FMU is calibrated to them")
+    return fmu_table, mcfg
+
+
+def _angle_overrides(mcfg: dict, rotor, src: str, notes: list):
+    """``rotor`` with the tilt and precone of ``[model]`` [deg] (popped from ``mcfg``), each within ±30°."""
+    overrides = {}
+    for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
+        if key in mcfg:
+            value = float(mcfg.pop(key))
+            if not -30.0 <= value <= 30.0:
+                raise InputError(f"must be an angle in degrees within ±30, got {value!r}", src, field=f"model.{key}")
+            overrides[attr] = value
+            notes.append(f"{key} {value:g} deg from [model] (rotor files: {getattr(rotor, attr):g} deg)")
+    if overrides:
+        rotor = dataclasses.replace(rotor, **overrides)
+    return rotor
+
+
+def _bem_options(mcfg: dict, rsrc, notes: list) -> tuple[dict, dict]:
+    """The :class:`calib.bem.BemSettings` keywords of the remaining ``[model]`` keys, completed by
+    what the rotor files state (:data:`FILE_SETUP`), and the origin of those taken from the files."""
+    kwargs = {}
+    for key, value in mcfg.items():
+        kwargs[key] = tuple(value) if key == "polar_smoothing" else value
+    origins = {}
+    for key, attr in FILE_SETUP.items() if rsrc is not None else ():
+        file_value = getattr(rsrc, attr, None)
+        if key not in kwargs and file_value is not None:
+            kwargs[key] = file_value
+            origins[key] = "rotor files"
+            notes.append(f"{key} = {file_value} from the rotor files")
+    return kwargs, origins
+
+
+def _fluid(cfg: dict, rsrc, src: str, origins: dict) -> tuple[float, float]:
+    """The fluid's density [kg/m³] and kinematic viscosity [m²/s]: from ``[fluid]``, else the rotor
+    files, else air at 15 °C; where each came from is added to ``origins``."""
+    fluid_table = dict(cfg.get("fluid", {}))
+    for key, attr in (("density", "air_density"), ("kinematic_viscosity", "kinematic_viscosity")):
+        origins[key] = f"[fluid] {key}" if key in fluid_table else "rotor files" \
+            if getattr(rsrc, attr, None) else "default (air at 15 °C)"
+    fluid = dict(cfg.get("fluid", {}))
+    density = float(fluid.get("density", getattr(rsrc, "air_density", None) or AIR["density"]))
+    viscosity = float(fluid.get("kinematic_viscosity", getattr(rsrc, "kinematic_viscosity", None)
+                                or AIR["kinematic_viscosity"]))
+    for key, value in (("density", density), ("kinematic_viscosity", viscosity)):
+        if not value > 0:
+            raise InputError(f"must be > 0, got {value!r}", src, field=f"fluid.{key}")
+    return density, viscosity
+
+
+def _bem_settings(kwargs: dict, viscosity: float, rotor, nuisance: tuple, src: str) -> BemSettings:
+    """The BEM settings (checked on ``rotor`` when there is one), with the kinematic viscosity
+    [m²/s]; the nuisance parameters' names checked."""
+    try:
+        settings = BemSettings(kinematic_viscosity=viscosity, **kwargs)
+        if rotor is not None:
+            settings.sectors_for(rotor, OperatingConditions([1.0], [1.0], [0.0]))
+    except InputError as exc:
+        raise InputError(exc.message, src, field=f"model.{exc.field}") from None
+    from calib.models.bem_model import NUISANCE
+    for name in nuisance:
+        if name not in NUISANCE:
+            raise InputError(f"unknown nuisance parameter {name!r}; valid: {', '.join(NUISANCE)}", src,
+                             field="model.nuisance")
+    return settings
+
+
+def _stage_channels(cfg: dict, src: str) -> list:
+    """Every stage's channels, each once, in the order they first appear."""
+    channels = []
+    for k, s in enumerate(cfg["stages"]):
+        if not s["channels"] or not all(isinstance(c, str) for c in s["channels"]):
+            raise InputError("channels must be a non-empty array of names", src, field=f"stages[{k}].channels")
+        channels += [c for c in s["channels"] if c not in channels]
+    return channels
+
+
+def _check_grid(setup: WorkflowSetup, cfg: dict) -> None:
+    """Validate an explicit ``[grid]`` now; for an FMU given as a file, note what it does not use."""
+    g, notes = setup.grid_table, setup.notes
+    if setup.fmu_table is not None and not setup.uses_grid:
         if g is not None:
             notes.append("[grid] is not used: the FMU's correction nodes, if any, come from its mapping file")
-        if rotor is not None and "measurements" in cfg:
+        if setup.rotor is not None and "measurements" in cfg:
             notes.append("[rotor] is not used by the FMU (it carries its own rotor); only stated")
     elif not isinstance(g["alpha_nodes_deg"], str):
         setup.grid(OperatingConditions([1.0], [1.0], [0.0]))  # validate the explicit grid now
+
+
+def _add_diagnosis_and_validation(setup: WorkflowSetup, cfg: dict) -> None:
+    """The settings of ``[diagnosis]`` (native BEM with measured data only) and ``[validation]``."""
     from calib.diagnosis.in_workflow import diagnosis_settings
     from calib.validation import ValidationSettings
+    src = setup.source
     if "diagnosis" in cfg:
-        if fmu_table is not None:
+        if setup.fmu_table is not None:
             raise InputError("a workflow's [diagnosis] runs on the native BEM only; remove [diagnosis], use "
                              "[model] kind = \"bem\", or diagnose the FMU with calib diagnose --config (its "
                              "[model] kind = \"fmu\")", src, field="diagnosis")
@@ -273,11 +330,6 @@ def prepare(cfg: dict) -> WorkflowSetup:
         setup.diagnosis = diagnosis_settings(cfg["diagnosis"], src)
     if "validation" in cfg:
         setup.validation = ValidationSettings.from_table(cfg["validation"], src)
-    setup.strict_units = strict_units
-    setup.origins = origins
-    if rsrc is not None and rsrc.files:
-        setup.rotor_files = file_provenance(rsrc.files, cfg["_dir"])
-    return setup
 
 
 def _check_channels(fmu_table: dict | None, rotor, settings: BemSettings, channels: list, src: str,
