@@ -184,12 +184,19 @@ def settings_from_table(cls, table, section: str, source: str, schema: dict | No
         As :func:`check_table`; or the settings refused the values (the section named).
     """
     check_table(table, schema_of(cls) if schema is None else schema, section, source)
-    annotations = {f.name: f.type for f in dataclasses.fields(cls)}
-    kwargs = {k: _field_value(annotations[k], v) for k, v in table.items() if k in annotations}
     try:
-        return cls(**kwargs)
+        return cls(**field_values(cls, table))
+    except InputError:
+        raise
     except (TypeError, ValueError) as exc:
         raise InputError(f"[{section}]: {exc}", source, field=section or None) from None
+
+
+def field_values(cls, table: dict) -> dict:
+    """The values of a checked ``table`` that are fields of the settings dataclass ``cls``, as the
+    fields hold them (arrays as tuples, integers as floats where the field says so), by field name."""
+    annotations = {f.name: f.type for f in dataclasses.fields(cls)}
+    return {k: _field_value(annotations[k], v) for k, v in table.items() if k in annotations}
 
 
 def in_open_unit_interval(value) -> str | None:

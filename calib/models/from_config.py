@@ -15,8 +15,9 @@
     timeout = 60.0                           # optional: per-simulation timeout [s]
     isolate = true                           # optional: simulate in worker processes
 
-``kind = "bem"`` (the default) takes the native BEM keys ``nuisance``, ``use_tilt``,
-``n_sectors``, ``shear_exponent``, ``tip_loss``, ``hub_loss``.
+``kind = "bem"`` (the default) takes the keys of a workflow's native-BEM ``[model]``
+(:data:`BEM_KEYS`: every :class:`calib.bem.BemSettings` field but the fluid's viscosity, the rotor's
+``tilt`` and ``precone`` [deg] and the ``nuisance`` parameters).
 
 ``[executor]``::
 
@@ -31,16 +32,22 @@ wrong types are refused with the file and the key named.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
-from calib.config import NUM, check_table
+from calib.bem.solver import BemSettings
+from calib.config import NUM, check_table, schema_of, settings_from_table
 from calib.errors import InputError
 from calib.models.registry import MODEL_KINDS
 
 FMU_KEYS = {"kind": str, "fmu": str, "variant": str, "mapping": str, "parameters": list, "corrections": bool,
             "switches": dict, "settings": dict, "steady": dict, "jacobian": dict, "timeout": NUM, "isolate": bool}
-BEM_KEYS = {"kind": str, "nuisance": list, "use_tilt": bool, "n_sectors": int, "shear_exponent": NUM,
-            "tip_loss": bool, "hub_loss": bool}
+#: [model] keys of the native BEM: every BemSettings field (same name, same default) except the fluid's
+#: viscosity (in [fluid]), plus rotor overrides, the workflow's yaw and the nuisance list.
+BEM_KEYS = {**schema_of(BemSettings, exclude=("kinematic_viscosity",),
+                        overrides={"n_sectors": int, "polar_smoothing": list}),
+            "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
+            "nuisance": (list, False)}
 EXECUTOR_KEYS = {"kind": str, "workers": int, "address": str}
 
 
@@ -85,17 +92,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         raise InputError(f"unknown model kind {kind!r}; valid kinds: {', '.join(MODEL_KINDS)}", source,
                          field="model.kind")
     if kind == "bem":
-        _check(cfg, BEM_KEYS, "model", source)
-        from calib.bem import BemSettings
-        from calib.models.bem_model import BemModel
-        from calib.rotor.sources import rotor_from_table
-
-        rotor = rotor_from_table(dict(rotor_table), source, base_dir).rotor
-        settings = BemSettings(use_tilt=cfg.get("use_tilt", False), n_sectors=cfg.get("n_sectors"),
-                               shear_exponent=float(cfg.get("shear_exponent", 0.0)),
-                               tip_loss=cfg.get("tip_loss", True), hub_loss=cfg.get("hub_loss", True))
-        return BemModel(rotor, grid, list(channels), settings, tuple(cfg.get("nuisance", ["pitch_offset"])),
-                        rotor_source=dict(rotor_table))
+        return _bem_model(cfg, rotor_table, grid, channels, source, base_dir)
     _check(cfg, FMU_KEYS, "model", source)
     from calib.fmu import plan as fp
     from calib.fmu.model import FmuModel
@@ -130,6 +127,36 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
                     switches=cfg.get("switches"), settings=cfg.get("settings"), steady=cfg.get("steady"),
                     jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", fp.DEFAULT_TIMEOUT)),
                     isolate=cfg.get("isolate", True), build=build)
+
+
+def _bem_model(cfg: dict, rotor_table: dict, grid, channels, source: str, base_dir):
+    """The native BEM of a ``[model]`` table (:data:`BEM_KEYS`) on the rotor of ``rotor_table``."""
+    from calib.models.bem_model import BemModel
+    from calib.rotor.sources import rotor_from_table
+
+    settings = settings_from_table(BemSettings, cfg, "model", source, BEM_KEYS)
+    if "yaw" in cfg:
+        raise InputError("the yaw misalignment is a condition of a workflow's points (calib run), not of a model "
+                         "built alone", source, field="model.yaw")
+    rotor = angle_overrides(cfg, rotor_from_table(dict(rotor_table), source, base_dir).rotor, source)
+    return BemModel(rotor, grid, list(channels), settings, tuple(cfg.get("nuisance", ["pitch_offset"])),
+                    rotor_source=dict(rotor_table))
+
+
+def angle_overrides(cfg: dict, rotor, source: str, notes: list | None = None):
+    """``rotor`` with the ``tilt`` and ``precone`` of a ``[model]`` table [deg], each within ±30°;
+    a line per override is added to ``notes`` when given."""
+    overrides = {}
+    for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
+        if key in cfg:
+            value = float(cfg[key])
+            if not -30.0 <= value <= 30.0:
+                raise InputError(f"must be an angle in degrees within ±30, got {value!r}", source,
+                                 field=f"model.{key}")
+            overrides[attr] = value
+            if notes is not None:
+                notes.append(f"{key} {value:g} deg from [model] (rotor files: {getattr(rotor, attr):g} deg)")
+    return dataclasses.replace(rotor, **overrides) if overrides else rotor
 
 
 def executor_from_table(table: dict | None, source: str, progress=None):

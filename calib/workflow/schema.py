@@ -6,22 +6,18 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings
 from calib.config import AUTO_OR_NUM, NUM, check_table, schema_of
 from calib.errors import InputError
+from calib.models.from_config import BEM_KEYS
 from calib.tomlfile import read_toml
 
 
 
 
 
-#: [model] keys of the native BEM: every BemSettings field (same name, same default) except the fluid's
-#: viscosity (in [fluid]), plus rotor overrides and the nuisance list.
-MODEL_KEYS = {**schema_of(BemSettings, exclude=("kinematic_viscosity",),
-                             overrides={"n_sectors": int, "polar_smoothing": list}),
-              "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
-              "nuisance": (list, False)}
+#: [model] keys of the native BEM (:data:`calib.models.from_config.BEM_KEYS`).
+MODEL_KEYS = BEM_KEYS
 #: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force`` and
 #: ``strict_units``.
 CALIBRATION_KEYS = {**schema_of(CalibrationSettings, exclude=("verbose",),

@@ -12,16 +12,18 @@ import numpy as np
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings
+from calib.config import field_values, settings_from_table
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements, sha256_of
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
 from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
 from calib.models.bem_model import BemModel
+from calib.models.from_config import angle_overrides
 from calib.models.registry import MODEL_KINDS
 from calib.rotor.sources import absolute_table, file_provenance, rotor_from_table
 from calib.logs import say
-from calib.workflow.schema import _numbers
+from calib.workflow.schema import CALIBRATION_KEYS, _numbers
 
 log = logging.getLogger("calib.workflow")
 
@@ -180,7 +182,9 @@ def prepare(cfg: dict) -> WorkflowSetup:
     rsrc = rotor_from_table(cfg["rotor"], src, cfg["_dir"]) if "rotor" in cfg else None
     rotor = rsrc.rotor if rsrc is not None else None
     fmu_table, mcfg = _model_kind(cfg, src, notes)
-    rotor = _angle_overrides(mcfg, rotor, src, notes)
+    rotor = angle_overrides(mcfg, rotor, src, notes)
+    for key in ("tilt", "precone"):
+        mcfg.pop(key, None)
     nuisance = tuple(mcfg.pop("nuisance", ["pitch_offset"]))
     yaw = float(mcfg.pop("yaw", 0.0))
     if not -90.0 < yaw < 90.0:
@@ -193,9 +197,8 @@ def prepare(cfg: dict) -> WorkflowSetup:
     calib_cfg = dict(cfg.get("calibration", {}))
     force = bool(calib_cfg.pop("force", False))
     strict_units = bool(calib_cfg.pop("strict_units", False))
-    if "band_eta" in calib_cfg:
-        calib_cfg["band_eta"] = tuple(calib_cfg["band_eta"])
-    cal = CalibrationSettings(**calib_cfg).validate(src, "calibration.")
+    cal = settings_from_table(CalibrationSettings, calib_cfg, "calibration", src, CALIBRATION_KEYS
+                              ).validate(src, "calibration.")
     g = cfg.get("grid")
     if g is not None and isinstance(g["alpha_nodes_deg"], str) and g["alpha_nodes_deg"] != "auto":
         raise InputError(f"must be an array of angles [deg] or \"auto\", got {g['alpha_nodes_deg']!r}", src,
@@ -228,27 +231,10 @@ def _model_kind(cfg: dict, src: str, notes: list) -> tuple[dict | None, dict]:
     return fmu_table, mcfg
 
 
-def _angle_overrides(mcfg: dict, rotor, src: str, notes: list):
-    """``rotor`` with the tilt and precone of ``[model]`` [deg] (popped from ``mcfg``), each within ±30°."""
-    overrides = {}
-    for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
-        if key in mcfg:
-            value = float(mcfg.pop(key))
-            if not -30.0 <= value <= 30.0:
-                raise InputError(f"must be an angle in degrees within ±30, got {value!r}", src, field=f"model.{key}")
-            overrides[attr] = value
-            notes.append(f"{key} {value:g} deg from [model] (rotor files: {getattr(rotor, attr):g} deg)")
-    if overrides:
-        rotor = dataclasses.replace(rotor, **overrides)
-    return rotor
-
-
 def _bem_options(mcfg: dict, rsrc, notes: list) -> tuple[dict, dict]:
     """The :class:`calib.bem.BemSettings` keywords of the remaining ``[model]`` keys, completed by
     what the rotor files state (:data:`FILE_SETUP`), and the origin of those taken from the files."""
-    kwargs = {}
-    for key, value in mcfg.items():
-        kwargs[key] = tuple(value) if key == "polar_smoothing" else value
+    kwargs = field_values(BemSettings, mcfg)      # (the keys are checked by the workflow's schema)
     origins = {}
     for key, attr in FILE_SETUP.items() if rsrc is not None else ():
         file_value = getattr(rsrc, attr, None)

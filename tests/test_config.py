@@ -1,0 +1,57 @@
+"""The one configuration layer (calib.config): typed settings built from checked TOML tables."""
+
+from __future__ import annotations
+
+import pytest
+
+from calib.bem import BemSettings
+from calib.calibration import CalibrationSettings
+from calib.config import settings_from_table
+from calib.diagnosis.in_workflow import diagnosis_settings
+from calib.errors import InputError
+from calib.models.from_config import BEM_KEYS, model_from_workflow
+from calib.validation import ValidationSettings
+from calib.workflow import CALIBRATION_KEYS
+
+
+def test_tables_become_typed_settings():
+    cal = settings_from_table(CalibrationSettings, {"band_eta": [0.3, 0.7], "prior_correlation": 1, "sigma_bar": 2,
+                                                    "force": True}, "calibration", "wf.toml", CALIBRATION_KEYS)
+    assert cal.band_eta == (0.3, 0.7)                       # an array where the field holds a tuple
+    assert isinstance(cal.prior_correlation, float) and cal.prior_correlation == 1.0
+    assert cal.sigma_bar == 2 and isinstance(cal.sigma_bar, int)    # "auto" or a number: left as written
+    bem = settings_from_table(BemSettings, {"polar_smoothing": [1, 2], "n_sectors": 4, "tilt": 5.0}, "model",
+                              "wf.toml", BEM_KEYS)
+    assert bem.polar_smoothing == (1, 2) and bem.n_sectors == 4
+    val = ValidationSettings.from_table({"leave_out": "pitch", "confidence": 0.9, "channels": ["power"]}, "wf.toml")
+    assert val == ValidationSettings("pitch", ("power",), 0.9)
+    dset, channels = diagnosis_settings({"candidates": ["pitch_offset"], "significance": 0.05, "channels": ["power"]},
+                                        "wf.toml")
+    assert dset.candidates == ("pitch_offset",) and dset.significance == 0.05 and channels == ["power"]
+
+
+@pytest.mark.parametrize("cls, schema, table, field, words", [
+    (CalibrationSettings, CALIBRATION_KEYS, {"nosie": "ml"}, "calibration.nosie", "did you mean 'calibration.noise'"),
+    (CalibrationSettings, CALIBRATION_KEYS, {"prior_sigma": "1"}, "calibration.prior_sigma", "must be a number"),
+    (BemSettings, BEM_KEYS, {"n_sectors": 2.5}, "model.n_sectors", "must be an integer"),
+])
+def test_a_bad_table_is_refused_naming_file_and_key(cls, schema, table, field, words):
+    section = field.split(".")[0] if "." in field else "model"
+    with pytest.raises(InputError) as info:
+        settings_from_table(cls, table, section, "wf.toml", schema)
+    assert info.value.field == field
+    assert words in str(info.value)
+
+
+def test_the_native_bem_model_table_is_the_workflows():
+    rotor = {"name": "nrel5mw"}
+    m = model_from_workflow({"kind": "bem", "polar_smoothing": [1, 2], "tilt": 0.0, "tip_loss": False}, rotor,
+                            ["power"], "wf.toml")
+    assert m.settings.polar_smoothing == (1, 2) and m.settings.tip_loss is False
+    assert m.rotor.tilt_deg == 0.0
+    with pytest.raises(InputError) as info:
+        model_from_workflow({"kind": "bem", "yaw": 5.0}, rotor, ["power"], "wf.toml")
+    assert info.value.field == "model.yaw"
+    with pytest.raises(InputError) as info:
+        model_from_workflow({"kind": "bem", "tilt": 45.0}, rotor, ["power"], "wf.toml")
+    assert info.value.field == "model.tilt"
