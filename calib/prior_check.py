@@ -127,6 +127,10 @@ def psd_sqrt(K: np.ndarray) -> np.ndarray:
     return Q * np.sqrt(np.clip(w, 0.0, None))
 
 
+#: The log τ grid the likelihood is first scanned on (τ from 10⁻³ to 10³) [-].
+_LOG_TAU_GRID = np.linspace(np.log(1e-3), np.log(1e3), 121)
+
+
 def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | None, Z_other: np.ndarray | None = None,
                     K_other: np.ndarray | None = None, confidence: float = 0.95,
                     between_nodes: bool = False, field_sqrt: np.ndarray | None = None) -> PriorCheck:
@@ -156,7 +160,33 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
     PriorCheck
     """
     z = np.asarray(z, float).reshape(-1)
-    n = z.size
+    L_f = psd_sqrt(np.asarray(K_field, float)) if field_sqrt is None else np.asarray(field_sqrt, float)
+    minus2l, at_zero = _marginal_likelihood(z, np.asarray(Z_field, float) @ L_f, Z_other, K_other)
+    best_log, best = _maximum(minus2l, at_zero)
+    crit = float(stats.chi2.ppf(confidence, 1))
+    lower, upper = _profile_interval(minus2l, best_log, best, at_zero, crit)
+    tau_hat = float(np.exp(best_log))
+    at_stated = float(minus2l(0.0)) - best
+    verdict = "consistent" if lower <= 1.0 <= upper else ("larger" if lower > 1.0 else "smaller")
+    return PriorCheck(tau_hat, lower, upper, float(confidence), verdict, bool(between_nodes), float(at_stated))
+
+
+def _other_whitening(Z_other: np.ndarray | None, K_other: np.ndarray | None):
+    """B^(−½) as a function of a matrix, and log det B, for B = I + Z_n K_n Zₙᵀ (module notes).
+
+    Parameters
+    ----------
+    Z_other, K_other : ndarray or None
+        Whitened sensitivities to the other parameters and their prior covariance; without
+        them B = I.
+
+    Returns
+    -------
+    b_half_inv : callable
+        X ↦ B^(−½) X.
+    logdet_b : float
+        log det B [-].
+    """
     if Z_other is not None and Z_other.shape[1]:
         U_n, s_n, _ = np.linalg.svd(np.asarray(Z_other, float) @ psd_sqrt(np.asarray(K_other, float)),
                                     full_matrices=False)
@@ -170,10 +200,33 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
 
         def b_half_inv(X):
             return X
-    L_f = psd_sqrt(np.asarray(K_field, float)) if field_sqrt is None else np.asarray(field_sqrt, float)
-    G = b_half_inv(np.asarray(Z_field, float) @ L_f)
+    return b_half_inv, logdet_b
+
+
+def _marginal_likelihood(z: np.ndarray, field_scaled: np.ndarray, Z_other: np.ndarray | None,
+                         K_other: np.ndarray | None):
+    """−2ℓ as a function of log τ, exact after one SVD (module notes), and its value at τ = 0.
+
+    Parameters
+    ----------
+    z : ndarray, shape (n_rows,)
+        Whitened pseudo-data [-].
+    field_scaled : ndarray, shape (n_rows, n_r)
+        Z_f K_f^(½) [-].
+    Z_other, K_other : ndarray or None
+        As :func:`prior_amplitude`.
+
+    Returns
+    -------
+    minus2l : callable
+        log τ (scalar or array) ↦ −2ℓ [-].
+    at_zero : float
+        −2ℓ at τ = 0 exactly [-].
+    """
+    b_half_inv, logdet_b = _other_whitening(Z_other, K_other)
+    G = b_half_inv(field_scaled)
     w = b_half_inv(z[:, None])[:, 0]
-    U, s, _ = np.linalg.svd(G, full_matrices=False) if G.size else (np.zeros((n, 0)), np.zeros(0), None)
+    U, s, _ = np.linalg.svd(G, full_matrices=False) if G.size else (np.zeros((z.size, 0)), np.zeros(0), None)
     lam, c2, w2 = s ** 2, (U.T @ w) ** 2, float(w @ w)
 
     def minus2l(log_tau):
@@ -181,17 +234,33 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
         t2l = np.exp(2.0 * np.asarray(log_tau, float))[..., None] * lam
         return logdet_b + np.sum(np.log1p(t2l), -1) + w2 - np.sum(c2 * t2l / (1.0 + t2l), -1)
 
-    # a log grid, then a bounded refinement around its best point
-    grid = np.linspace(np.log(1e-3), np.log(1e3), 121)
+    return minus2l, logdet_b + w2
+
+
+def _maximum(minus2l, at_zero: float) -> tuple[float, float]:
+    """(log τ̂, −2ℓ there): the best of a log grid, refined by a bounded search around it; log τ̂ is
+    −inf when τ = 0 (−2ℓ = ``at_zero``) does better."""
+    grid = _LOG_TAU_GRID
     vals = minus2l(grid)
     i = int(np.argmin(vals))
     opt = optimize.minimize_scalar(minus2l, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]),
                                    method="bounded", options={"xatol": 1e-6})
     best_log, best = (float(opt.x), float(opt.fun)) if opt.fun <= vals[i] else (float(grid[i]), float(vals[i]))
-    at_zero = logdet_b + w2                                          # τ = 0 exactly
     if at_zero < best:
         best_log, best = -np.inf, at_zero
-    crit = float(stats.chi2.ppf(confidence, 1))
+    return best_log, best
+
+
+def _profile_interval(minus2l, best_log: float, best: float, at_zero: float, crit: float) -> tuple[float, float]:
+    """The profile-likelihood interval {τ : −2ℓ(τ) − ``best`` <= ``crit``} around log τ̂ = ``best_log``.
+
+    Returns
+    -------
+    lower, upper : float
+        Its ends [-]: ``lower`` 0 when τ = 0 (−2ℓ = ``at_zero``) is inside it, ``upper`` inf when
+        the data do not bound it.
+    """
+    grid = _LOG_TAU_GRID
 
     def excess(log_tau):
         return float(minus2l(log_tau)) - best - crit
@@ -209,11 +278,7 @@ def prior_amplitude(z: np.ndarray, Z_field: np.ndarray, K_field: np.ndarray | No
 
     lower = 0.0 if at_zero - best <= crit else (crossing(grid[grid < best_log][::-1]) or 0.0)
     upper = crossing(grid[grid > start])
-    upper = float("inf") if upper is None else upper
-    tau_hat = float(np.exp(best_log))
-    at_stated = float(minus2l(0.0)) - best
-    verdict = "consistent" if lower <= 1.0 <= upper else ("larger" if lower > 1.0 else "smaller")
-    return PriorCheck(tau_hat, lower, upper, float(confidence), verdict, bool(between_nodes), float(at_stated))
+    return lower, float("inf") if upper is None else upper
 
 
 @dataclass(frozen=True, eq=False)

@@ -46,6 +46,10 @@ read are 3.6 times the values that make the model match (km/h under an m/s heade
 Limits: a condition that is zero everywhere (pitch at fine pitch) cannot show a unit
 mistake and is said so in a note; two condition mistakes at once are not searched (the
 misfit finding still stops the run); yaw and air density are not checked.
+
+Here: the hypotheses and their fits (:func:`check_units`) and the gate before a run
+(:func:`apply_unit_check`). The unit factors, the findings in words and the report are in
+:mod:`calib.unit_findings` (and importable from here).
 """
 
 from __future__ import annotations
@@ -56,166 +60,17 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from calib.errors import CalibError, InputError
-from calib.measurements import UNITS, Measurements, check_channels, quantity_of, si_unit
+from calib.measurements import Measurements, check_channels
 from calib.types import CONDITION_FIELDS, OperatingConditions
+from calib.unit_findings import (CHANNEL_FACTORS, CONDITION_FACTORS, GROSS_RATIO, OVERRIDE_HINT, STOPPING_KINDS,
+                                 UnitCheckReport, UnitFinding, findings_of)
 
-_RPM = 30.0 / np.pi       # rpm per rad/s
-_DEG = 180.0 / np.pi      # deg per rad
+__all__ = ["CHANNEL_FACTORS", "CONDITION_FACTORS", "GROSS_RATIO", "OVERRIDE_HINT", "STOPPING_KINDS",
+           "UnitCheckReport", "UnitFinding", "apply_unit_check", "check_units"]
 
-#: Unit factors a channel may be off by (read / meant), without sign.
-CHANNEL_FACTORS = (1e3, 1e-3, 1e6, 1e-6, 3.6, 1 / 3.6, _RPM, 1 / _RPM, _DEG, 1 / _DEG)
-
-#: Unit factors (read / meant) tried per condition.
-CONDITION_FACTORS = {
-    "wind_speed": (3.6, 1 / 3.6),        # km/h read as m/s, m/s read as km/h
-    "rotor_speed": (1 / _RPM, _RPM),     # rad/s read as rpm, rpm read as rad/s
-    "pitch": (1 / _DEG, _DEG),           # rad read as deg, deg read as rad
-}
-
-#: How to override a stopped run (wired by the command line and the workflow).
-OVERRIDE_HINT = "to go on anyway, pass --force (workflow or diagnose config: [calibration] force = true)"
-
-#: Finding kinds that stop the run unless forced: a unit factor or a sign explains them, or the
-#: ratio is beyond anything a polar correction gives (``gross``).
-STOPPING_KINDS = ("condition", "channel", "sign", "gross")
-
-#: A channel whose measured/model ratio lies outside [1/GROSS_RATIO, GROSS_RATIO] is not a model
-#: misfit: no calibration of the polars moves a rotor load by a factor of 5 [-].
-GROSS_RATIO = 5.0
-
-_FACTOR_WORDS = ((1e3, "10³", "10⁻³", "a k prefix"), (1e6, "10⁶", "10⁻⁶", "an M prefix"),
-                 (3.6, "3.6", "1/3.6", "km/h ↔ m/s"), (_RPM, "30/π", "π/30", "rpm ↔ rad/s"),
-                 (_DEG, "180/π", "π/180", "deg ↔ rad"))
-_CONDITION_SI = {"wind_speed": "speed", "rotor_speed": "rotor_speed", "pitch": "angle"}
 _EXPLAIN_GAIN = 10.0       # a hypothesis must lower the misfit this many times to explain the data
 _USABLE = 0.1              # ratios from points with |model| >= this x the channel's largest |model|
 _FLOOR = 1e-3              # σ floor as a fraction of the channel's RMS model value
-
-
-@dataclass(frozen=True)
-class UnitFinding:
-    """One reason to stop before calibrating.
-
-    Attributes
-    ----------
-    kind : str
-        ``"condition"``, ``"channel"``, ``"sign"``, ``"misfit"`` or ``"failures"``.
-    name : str
-        The condition or channel (``""`` for ``failures``).
-    factor : float
-        Suspected factor, read / meant [-] (NaN for ``misfit`` and ``failures``).
-    message : str
-        The probable mistake in words, with the numbers behind it.
-    """
-
-    kind: str
-    name: str
-    factor: float
-    message: str
-
-    def as_dict(self) -> dict:
-        return {"kind": self.kind, "name": self.name,
-                "factor": None if np.isnan(self.factor) else float(self.factor), "message": self.message}
-
-
-@dataclass(frozen=True)
-class UnitCheckReport:
-    """Outcome of :func:`check_units`.
-
-    Attributes
-    ----------
-    findings : tuple of UnitFinding
-        Empty when the data look consistent with the model's units.
-    ratios : dict channel -> float
-        Median measured/model per channel, as read [-].
-    chi2_per_dof : dict channel -> float
-        χ²/dof per channel as read, with the σ of the module docstring [-].
-    chi2_threshold : float
-    hypotheses : tuple of (str, float)
-        Each hypothesis tried ("as read", "wind_speed x 3.6" ...) and its misfit [-].
-    notes : tuple of str
-        What the check could not see or assumed (σ unknown, a condition all zero ...).
-    source : str
-        Where the measurements came from.
-    n_points, n_failed : int
-        Measured points; points where the nominal model failed as read.
-    """
-
-    findings: tuple[UnitFinding, ...]
-    ratios: dict
-    chi2_per_dof: dict
-    chi2_threshold: float
-    hypotheses: tuple
-    notes: tuple[str, ...]
-    source: str
-    n_points: int
-    n_failed: int
-
-    @property
-    def ok(self) -> bool:
-        """True when nothing suggests a unit mistake or a gross misfit."""
-        return not self.findings
-
-    @property
-    def unit_findings(self) -> tuple[UnitFinding, ...]:
-        """Findings a unit factor or a sign explains (:data:`STOPPING_KINDS`)."""
-        return tuple(f for f in self.findings if f.kind in STOPPING_KINDS)
-
-    @property
-    def misfit_findings(self) -> tuple[UnitFinding, ...]:
-        """Findings no unit factor explains (gross misfit, failures): warnings, not stops."""
-        return tuple(f for f in self.findings if f.kind not in STOPPING_KINDS)
-
-    def summary(self) -> str:
-        """Lines a user reads: verdict, per-channel ratio and χ²/dof, findings, notes."""
-        head = "unit check: " + ("passed" if self.ok else f"{len(self.findings)} finding(s)")
-        per = ", ".join(f"{c} {self.ratios[c]:.3g} (χ²/dof {self.chi2_per_dof[c]:.3g})" for c in self.ratios)
-        lines = [head, f"  measured/model as read: {per}"]
-        lines += [f"  - {f.message}" for f in self.findings]
-        lines += [f"  note: {n}" for n in self.notes]
-        return "\n".join(lines)
-
-    def raise_if_failed(self, source: str | None = None, strict: bool = False) -> None:
-        """Raise :class:`~calib.errors.InputError` listing the findings a unit factor explains.
-
-        Parameters
-        ----------
-        source : str, optional
-            File named in the error (default: the measurements' source).
-        strict : bool
-            Also stop on the findings no unit factor explains (misfit, failures).
-        """
-        stop = self.findings if strict else self.unit_findings
-        if not stop:
-            return
-        body = "; ".join(f.message for f in stop)
-        what = "Fix the header or the data" if any(f.kind in STOPPING_KINDS for f in stop) else \
-            "Strict unit check (--strict-units): no unit factor explains this misfit"
-        raise InputError(f"unit check failed before calibrating: {body}. {what}; {OVERRIDE_HINT}",
-                         source or self.source, field=stop[0].name or None)
-
-    def warning_lines(self) -> list[str]:
-        """The loud line for misfits no unit factor explains (empty when there are none)."""
-        if not self.misfit_findings:
-            return []
-        names = ", ".join(f.name or "points failing" for f in self.misfit_findings)
-        return [f"WARNING: the nominal model misses {names} beyond noise and model error, and no unit factor "
-                f"explains it ({self.ratio_words()}); calibrating anyway, since such a misfit is what calibration "
-                f"is for (--strict-units stops here instead)"]
-
-    def ratio_words(self) -> str:
-        """'measured/model per channel: power 0.521 (χ²/dof 33.9), ...'."""
-        return "measured/model per channel: " + ", ".join(
-            f"{c} {self.ratios[c]:.3g} (χ²/dof {self.chi2_per_dof[c]:.3g})" for c in self.ratios)
-
-    def as_dict(self) -> dict:
-        """JSON-able form for results and reports."""
-        return {"ok": self.ok, "findings": [f.as_dict() for f in self.findings],
-                "ratios": {k: float(v) for k, v in self.ratios.items()},
-                "chi2_per_dof": {k: float(v) for k, v in self.chi2_per_dof.items()},
-                "chi2_threshold": self.chi2_threshold,
-                "hypotheses": [[h, float(m)] for h, m in self.hypotheses], "notes": list(self.notes),
-                "n_points": self.n_points, "n_failed": self.n_failed}
 
 
 # ----------------------------------------------------------------------------- fitting one hypothesis
@@ -280,62 +135,6 @@ def _fit(label: str, y: np.ndarray, ok: np.ndarray, z: np.ndarray, sigma: np.nda
     return _Fit(label, misfit, factors, ratios, chi2, n_failed, n_ratio)
 
 
-# ----------------------------------------------------------------------------- words
-def _factor_words(factor: float) -> str:
-    """'0.001 (10⁻³, a k prefix)', '9.549 (30/π, rpm ↔ rad/s)', '3.6 (km/h ↔ m/s)', '-1'."""
-    a = abs(factor)
-    text = f"{factor:.4g}"
-    for f, up, down, words in _FACTOR_WORDS:
-        for exact, name in ((abs(a / f - 1) < 1e-6, up), (abs(a * f - 1) < 1e-6, down)):
-            if exact:
-                return f"{text} ({words})" if name == text else f"{text} ({name}, {words})"
-    return text
-
-
-def _unit_meant(quantity: str | None, unit_read: str | None, factor: float) -> str | None:
-    """The unit whose numbers, read as ``unit_read``, come out ``factor`` times too large."""
-    if quantity is None or unit_read is None or quantity not in UNITS or unit_read not in UNITS[quantity]:
-        return None
-    meant = UNITS[quantity][unit_read] / abs(factor)
-    for u, f in UNITS[quantity].items():
-        if abs(f / meant - 1) < 1e-6 and u != unit_read:
-            return u
-    return None
-
-
-def _unit_read(measurements: Measurements, name: str, quantity: str | None,
-               model_unit: str | None) -> tuple[str | None, str]:
-    """(unit the values are in as read, how it is known: 'header', 'assumed' or 'memory')."""
-    units = measurements.metadata.get("units") if isinstance(measurements.metadata, dict) else None
-    if units is None:                                    # not read from a file
-        return (si_unit(quantity) if quantity is not None else model_unit), "memory"
-    if units.get(name) is not None:
-        return units[name], "header"
-    return (si_unit(quantity) if quantity is not None else model_unit), "assumed"
-
-
-def _describe(name: str, quantity: str | None, unit_read: str | None, known_by: str,
-              factor: float) -> tuple[str, str]:
-    """(headline, what to do) of a quantity whose numbers are ``factor`` times the meant ones."""
-    meant = _unit_meant(quantity, unit_read, factor)
-    if meant is None:
-        a = abs(factor)
-        size, times = ("larger", a) if a > 1 else ("smaller", 1 / a)
-        return f"{name} is {times:.4g} times {size} than the model expects", ""
-    head = f"{name} looks like {meant} read as {unit_read}"
-    if known_by == "assumed":
-        head += " (the header gives no unit, so SI was assumed)"
-    fix = f"; if the numbers are in {meant}, write the header as '{name} [{meant}]'" if known_by != "memory" else ""
-    return head, fix
-
-
-def _model_side(name: str, model_units: str | None) -> str:
-    """The model-side cause of a channel ratio, where the user sets the model's units."""
-    if model_units is None:
-        return ""
-    return f"; or the model side: the scale/unit mapped to {name!r} in {model_units}"
-
-
 def _hypothesis_label(name: str, factor: float) -> str:
     return f"{name} / {factor:.4g}" if factor > 1 else f"{name} x {1 / factor:.4g}"
 
@@ -367,58 +166,6 @@ def _condition_hypotheses(evaluate, measurements: Measurements, conditions, z, k
             fits.append(fit)
     return fits
 
-
-def _findings(chosen: "_Fit", base: "_Fit", measurements: Measurements, units: dict, model_units: str | None,
-              chi2_threshold: float, model_error: float) -> list:
-    """What the chosen hypothesis says: a condition's unit factor, a channel's factor or sign, a misfit no
-    factor explains (gross when beyond any polar correction), the model failing at most points."""
-    findings = []
-    if chosen.condition is not None:
-        name, factor = chosen.condition, chosen.condition_factor
-        quantity = _CONDITION_SI[name]
-        head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, None), factor)
-        how = f"divided by {factor:.4g}" if factor > 1 else f"multiplied by {1 / factor:.4g}"
-        findings.append(UnitFinding(
-            "condition", name, factor,
-            f"{head}: suspected factor {_factor_words(factor)}; with {name} {how} the nominal model matches the "
-            f"data (χ²/dof {chosen.misfit:.3g} instead of {base.misfit:.3g} as read){fix}"))
-    for c, name in enumerate(measurements.channels):
-        f = chosen.factors[c]
-        if f == 1.0:
-            continue
-        ratio = f"measured/model ≈ {chosen.ratios[c]:.4g} (median over {chosen.n_ratio[c]} points)"
-        if f == -1.0:
-            findings.append(UnitFinding("sign", name, f, f"{name} has the opposite sign of the model's: {ratio}; "
-                                                         "check its sign convention"))
-            continue
-        quantity = quantity_of(name)
-        head, fix = _describe(name, quantity, *_unit_read(measurements, name, quantity, units.get(name)), f)
-        findings.append(UnitFinding("channel", name, f, f"{head}: {ratio}, suspected factor {_factor_words(f)}{fix}"
-                                                        f"{_model_side(name, model_units)}"))
-    for c, name in enumerate(measurements.channels):
-        if chosen.chi2_per_dof[c] > chi2_threshold:
-            after = " after the correction above" if chosen is not base or chosen.factors[c] != 1.0 else ""
-            ratio = abs(chosen.ratios[c] / chosen.factors[c])
-            if not 1 / GROSS_RATIO <= ratio <= GROSS_RATIO:      # beyond what any polar correction gives
-                findings.append(UnitFinding(
-                    "gross", name, float("nan"),
-                    f"{name} is {chosen.ratios[c]:.3g} times the nominal model's (median over the points), χ²/dof = "
-                    f"{chosen.chi2_per_dof[c]:.3g}{after}: no unit factor explains it exactly, but no calibration "
-                    f"of the polars can either (outside 1/{GROSS_RATIO:g} to {GROSS_RATIO:g}); check the unit in the "
-                    f"header, what the channel measures and the rotor{_model_side(name, model_units)}"))
-                continue
-            findings.append(UnitFinding(
-                "misfit", name, float("nan"),
-                f"{name} disagrees with the nominal model beyond what noise and a {model_error:.0%} model error "
-                f"explain: χ²/dof = {chosen.chi2_per_dof[c]:.3g}{after} (threshold {chi2_threshold:g}), "
-                f"measured/model ≈ {chosen.ratios[c]:.3g}, and no unit factor explains it; check the unit in "
-                f"the header, what the channel measures (e.g. electrical or aerodynamic power) and the rotor"
-                f"{_model_side(name, model_units)}"))
-    if chosen.n_failed > 0.5 * measurements.n_points:
-        findings.append(UnitFinding("failures", "", float("nan"),
-                                    f"the nominal model fails at {chosen.n_failed} of {measurements.n_points} "
-                                    f"measured points ({chosen.status_summary}): check the conditions' units"))
-    return findings
 
 
 def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, float] | None = None,
@@ -472,20 +219,64 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
     See the module docstring for the method. Cost: one model evaluation, plus two per
     checked condition that is not zero everywhere (seven for the default).
     """
-    for name in conditions:
-        if name not in CONDITION_FACTORS:
-            raise InputError(f"no unit factors known for condition {name!r}; valid: "
-                             f"{', '.join(CONDITION_FACTORS)}", "check_units", field="conditions")
+    _check_condition_names(conditions)
     model_channels = [c.name for c in model.channels]
     check_channels(measurements, model_channels)
     idx = [model_channels.index(c) for c in measurements.channels]
     units = {c.name: c.unit for c in model.channels}
-    z = measurements.values
     p = np.asarray(p, float)
     notes = []
+    s = _noise(measurements, sigma, relative_sigma, notes)
+    notes.append(f"χ² allows the uncalibrated model a {model_error:.0%} error (model_error)")
+    kw = dict(relative_sigma=relative_sigma, model_error=model_error, factor_tolerance=factor_tolerance,
+              failure_cost=chi2_threshold)
+    evaluate = _evaluator(model, p, idx, s, relative_sigma)
+    as_read, base, fits, chosen = _hypotheses(evaluate, measurements, conditions, kw, chi2_threshold, notes)
+    findings = findings_of(chosen, base, measurements, units, model_units, chi2_threshold, model_error)
+    return UnitCheckReport(
+        findings=tuple(findings),
+        ratios={c: float(as_read.ratios[k]) for k, c in enumerate(measurements.channels)},
+        chi2_per_dof={c: float(as_read.chi2_per_dof[k]) for k, c in enumerate(measurements.channels)},
+        chi2_threshold=float(chi2_threshold), hypotheses=tuple((f.label, float(f.misfit)) for f in fits),
+        notes=tuple(notes), source=measurements.source, n_points=measurements.n_points,
+        n_failed=base.n_failed)
+
+
+def _check_condition_names(conditions: Sequence[str]) -> None:
+    """Raise :class:`~calib.errors.InputError` for a condition without unit factors (:data:`CONDITION_FACTORS`)."""
+    for name in conditions:
+        if name not in CONDITION_FACTORS:
+            raise InputError(f"no unit factors known for condition {name!r}; valid: "
+                             f"{', '.join(CONDITION_FACTORS)}", "check_units", field="conditions")
+
+
+def _noise(measurements: Measurements, sigma: Mapping[str, float] | None, relative_sigma: float,
+           notes: list) -> np.ndarray | None:
+    """The 1-σ noise per point and channel: the table's, overridden per channel by ``sigma``.
+
+    Parameters
+    ----------
+    measurements : Measurements
+    sigma : mapping channel -> float, optional
+        As :func:`check_units` [channel unit].
+    relative_sigma : float
+        Named in the note on channels without σ [-].
+    notes : list of str
+        Receives that note.
+
+    Returns
+    -------
+    ndarray, shape (n_points, n_channels), or None
+        NaN where no σ is known; None when none is known anywhere [channel unit].
+
+    Raises
+    ------
+    InputError
+        A σ in ``sigma`` that is not > 0.
+    """
     s = None if measurements.sigma is None else measurements.sigma.copy()
     if sigma:
-        s = np.full(z.shape, np.nan) if s is None else s
+        s = np.full(measurements.values.shape, np.nan) if s is None else s
         for name, value in sigma.items():
             if name in measurements.channels:
                 if not float(value) > 0:
@@ -494,16 +285,41 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
     unknown = [c for k, c in enumerate(measurements.channels) if s is None or np.isnan(s[:, k]).any()]
     if unknown:
         notes.append(f"no σ for {', '.join(unknown)}: {relative_sigma:.0%} of the model value used")
-    notes.append(f"χ² allows the uncalibrated model a {model_error:.0%} error (model_error)")
-    kw = dict(relative_sigma=relative_sigma, model_error=model_error, factor_tolerance=factor_tolerance,
-              failure_cost=chi2_threshold)
+    return s
 
+
+def _evaluator(model, p: np.ndarray, idx: list, s: np.ndarray | None, relative_sigma: float):
+    """``evaluate(conditions) -> (y, ok, failure summary, σ)``: the model at ``p`` on the measured channels.
+
+    ``y`` holds the model's channels ``idx`` (the measured ones, in their order); ``ok`` the points
+    that converged with finite values; σ is ``s`` with ``relative_sigma`` × |y| where it is NaN
+    (None when ``s`` is).
+    """
     def evaluate(cond):
         ev = model.evaluate(p, cond)
         y = np.asarray(ev.values, float)[:, idx]
         sig = None if s is None else np.where(np.isnan(s), relative_sigma * np.abs(y), s)  # NaN: no σ given
         return y, np.asarray(ev.ok) & np.all(np.isfinite(y), axis=1), ev.failure_summary(), sig
 
+    return evaluate
+
+
+def _hypotheses(evaluate, measurements: Measurements, conditions: Sequence[str], kw: dict,
+                chi2_threshold: float, notes: list) -> tuple[_Fit, _Fit, list, _Fit]:
+    """Fit every hypothesis and choose the one that explains the data (steps 1–4 of the module docstring).
+
+    Returns
+    -------
+    as_read : _Fit
+        The conditions and channels as read (no unit factor searched).
+    base : _Fit
+        The conditions as read, each channel divided by the unit factor its ratio is near.
+    fits : list of _Fit
+        ``base``, then every condition hypothesis.
+    chosen : _Fit
+        The best condition hypothesis where it explains the data, else ``base``.
+    """
+    z = measurements.values
     y0, ok0, status0, sig0 = evaluate(measurements.conditions)
     as_read = _fit("as read", y0, ok0, z, sig0, search_factors=False, **kw)
     base = _fit("as read", y0, ok0, z, sig0, **kw)
@@ -512,16 +328,7 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
     best = min(fits, key=lambda f: f.misfit)
     explained = (best is not base and base.misfit > 1.0 and best.misfit <= chi2_threshold
                  and best.misfit * _EXPLAIN_GAIN <= base.misfit)
-    chosen = best if explained else base
-
-    findings = _findings(chosen, base, measurements, units, model_units, chi2_threshold, model_error)
-    return UnitCheckReport(
-        findings=tuple(findings),
-        ratios={c: float(as_read.ratios[k]) for k, c in enumerate(measurements.channels)},
-        chi2_per_dof={c: float(as_read.chi2_per_dof[k]) for k, c in enumerate(measurements.channels)},
-        chi2_threshold=float(chi2_threshold), hypotheses=tuple((f.label, float(f.misfit)) for f in fits),
-        notes=tuple(notes), source=measurements.source, n_points=measurements.n_points,
-        n_failed=base.n_failed)
+    return as_read, base, fits, (best if explained else base)
 
 
 # ----------------------------------------------------------------------------- the gate before a run

@@ -77,8 +77,6 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     history : bool
         Keep ``out/history`` (every model call and iteration as it happens).
     """
-    from calib.history import content_digest, open_history, recorded
-    from calib.logs import progress_line
     from calib.report.diagnosis_report import write_diagnosis
     from calib.workflow import prepare
 
@@ -86,6 +84,57 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         def printer(line):
             say(log, line)
 
+    cfg, src, base_dir = _read_config(config, rotor)
+    is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
+    dset, channels = _diagnosis_table(cfg.pop("diagnosis", {}), src, is_fmu)
+    meas = read_measurements(data)
+    for note in meas.notes:
+        printer(f"[calib diagnose] {Path(data).name}: {note}")
+    meas = _select_channels(meas, channels, src)
+    wf = _workflow_table(cfg, list(meas.channels), src, base_dir, is_fmu)
+    setup = prepare(wf)
+    meas = _fill_conditions(meas, setup)
+    set_up = statement(setup, wf, meas)
+    for line in statement_lines(set_up):
+        printer(f"[calib diagnose] set-up in force: {line}")
+    grid = setup.grid(meas.conditions, prefix="[calib diagnose]")
+    hist = None
+    if history or resume:
+        hist = _open_history(out, rotor, data, config, force, setup, resume, printer)
+    diag, unit_notes = _checked_diagnosis(setup, grid, meas, dset, hist, is_fmu=is_fmu, src=src, data=data,
+                                          force=force or setup.force, strict=strict_units or setup.strict_units,
+                                          printer=printer)
+    diag.notes.extend(f"{key}: {text}" for key, text in unit_notes.items())
+    diag.setup = set_up
+    if diag.failure:
+        printer(f"[calib diagnose] stopped early: {diag.failure}")
+    paths = write_diagnosis(diag, out)
+    if hist is not None:
+        hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
+        printer(f"[calib diagnose] model calls: {hist.computed} computed, {hist.replayed} read back from "
+                f"{hist.folder}")
+    printer(f"[calib diagnose] named: {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else ""))
+    printer(f"[calib diagnose] report: {paths['report']}")
+    return diag
+
+
+def _read_config(config: str | None, rotor: str | None) -> tuple[dict, str, Path]:
+    """The tables of the config file with ``--rotor`` applied.
+
+    Returns
+    -------
+    cfg : dict
+        Table name -> table; always with a ``rotor`` table.
+    src : str
+        What errors name: the config file, else ``"calib diagnose"``.
+    base_dir : Path
+        Where relative paths of the config start (its folder, else the working folder).
+
+    Raises
+    ------
+    InputError
+        A table not in :data:`CONFIG_TABLES`, or no rotor from either source.
+    """
     cfg = {}
     src = "calib diagnose"
     base_dir = Path.cwd()
@@ -101,40 +150,58 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         cfg["rotor"] = _rotor_table(rotor)
     if "rotor" not in cfg:
         raise InputError("no rotor: give --rotor NAME_OR_FILE or a [rotor] table in --config", src, field="rotor")
-    is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
-    dset, channels = _diagnosis_table(cfg.pop("diagnosis", {}), src, is_fmu)
-    meas = read_measurements(data)
-    for note in meas.notes:
-        printer(f"[calib diagnose] {Path(data).name}: {note}")
-    meas = _select_channels(meas, channels, src)
+    return cfg, src, base_dir
+
+
+def _workflow_table(cfg: dict, channels: list, src: str, base_dir: Path, is_fmu: bool) -> dict:
+    """The one-stage workflow of the diagnosis (``channels`` measured), sections checked as ``calib run`` does."""
+    from calib.workflow import check_section
+
     wf = {"name": "diagnose", "rotor": cfg["rotor"], "grid": cfg.get("grid", DEFAULT_GRID),
-          "stages": [{"name": "diagnose", "channels": list(meas.channels)}], "_source": src, "_dir": str(base_dir)}
+          "stages": [{"name": "diagnose", "channels": channels}], "_source": src, "_dir": str(base_dir)}
     for key in ("model", "fluid", "calibration", "executor"):
         if key in cfg:
             wf[key] = cfg[key]
-    from calib.workflow import check_section
     for key in ("model", "fluid", "grid", "calibration"):
         if key in wf and not (key == "model" and is_fmu):   # an FMU's [model]: checked by calib.models.from_config
             check_section(wf[key], key, src)
-    setup = prepare(wf)
-    meas = _fill_conditions(meas, setup)
-    set_up = statement(setup, wf, meas)
-    for line in statement_lines(set_up):
-        printer(f"[calib diagnose] set-up in force: {line}")
-    grid = setup.grid(meas.conditions, prefix="[calib diagnose]")
-    hist = None
-    if history or resume:
-        Path(out).mkdir(parents=True, exist_ok=True)
-        # a rotor file by its absolute path, so that --resume works from any folder
-        rotor_arg = str(Path(rotor).resolve()) if rotor is not None and Path(rotor).is_file() else rotor
-        hist = open_history(out, {"command": "diagnose", "arguments": {
-            "rotor": rotor_arg, "data": str(Path(data).resolve()),
-            "config": str(Path(config).resolve()) if config else None, "force": bool(force)},
-            "inputs": {**diagnose_inputs(rotor_arg, data, config),
-                       "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
-        hist.event("start", resumed=resume, records=hist.n_records)
-        if resume:
-            printer(f"[calib diagnose] resuming from {hist.folder}: {hist.n_records} model calls on record")
+    return wf
+
+
+def _open_history(out: str, rotor: str | None, data: str, config: str | None, force: bool, setup, resume: bool,
+                  printer):
+    """Open (or, with ``resume``, continue) the history in ``out/history``, with the arguments and
+    input digests that a resumed diagnosis must match (:func:`calib.history.open_history`)."""
+    from calib.history import content_digest, open_history
+
+    Path(out).mkdir(parents=True, exist_ok=True)
+    # a rotor file by its absolute path, so that --resume works from any folder
+    rotor_arg = str(Path(rotor).resolve()) if rotor is not None and Path(rotor).is_file() else rotor
+    hist = open_history(out, {"command": "diagnose", "arguments": {
+        "rotor": rotor_arg, "data": str(Path(data).resolve()),
+        "config": str(Path(config).resolve()) if config else None, "force": bool(force)},
+        "inputs": {**diagnose_inputs(rotor_arg, data, config),
+                   "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
+    hist.event("start", resumed=resume, records=hist.n_records)
+    if resume:
+        printer(f"[calib diagnose] resuming from {hist.folder}: {hist.n_records} model calls on record")
+    return hist
+
+
+def _checked_diagnosis(setup, grid, meas, dset, hist, *, is_fmu: bool, src: str, data: str, force: bool,
+                       strict: bool, printer):
+    """The unit check, then :func:`calib.diagnosis.core.diagnose`, every model call recorded in ``hist``.
+
+    An FMU's simulations run on an executor of ``[executor]``, closed at the end.
+
+    Returns
+    -------
+    diag : Diagnosis
+    unit_notes : dict
+        What the unit check says for the report (:func:`_unit_check`).
+    """
+    from calib.history import recorded
+    from calib.logs import progress_line
 
     family, executor, chunk = None, None, None
     if is_fmu:
@@ -145,8 +212,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         return recorded(model, hist, label, chunk, progress=progress_line)
 
     try:
-        unit_notes = _unit_check(setup, family, meas, wrap, data, force or setup.force,
-                                 strict_units or setup.strict_units, printer)
+        unit_notes = _unit_check(setup, family, meas, wrap, data, force, strict, printer)
         diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
                         progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
                         wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
@@ -155,18 +221,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     finally:
         if executor is not None:
             executor.close()
-    diag.notes.extend(f"{key}: {text}" for key, text in unit_notes.items())
-    diag.setup = set_up
-    if diag.failure:
-        printer(f"[calib diagnose] stopped early: {diag.failure}")
-    paths = write_diagnosis(diag, out)
-    if hist is not None:
-        hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
-        printer(f"[calib diagnose] model calls: {hist.computed} computed, {hist.replayed} read back from "
-                f"{hist.folder}")
-    printer(f"[calib diagnose] named: {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else ""))
-    printer(f"[calib diagnose] report: {paths['report']}")
-    return diag
+    return diag, unit_notes
 
 
 def _diagnosis_table(table, src: str, is_fmu: bool):

@@ -13,6 +13,7 @@ stopped early (``Diagnosis.failure``) says so at the top of the page.
 
 from __future__ import annotations
 
+import base64
 import html
 import json
 from pathlib import Path
@@ -170,15 +171,34 @@ def _candidate_rows(d) -> list[tuple]:
     return rows
 
 
+# long text cells (fitted parameters) may break inside words, a candidate after its ":"
+# (<wbr>); a table still too wide scrolls inside its own box, never the page (checked at
+# 1280 px in tests/test_browser_report.py)
+_CSS = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
+        ".table{overflow-x:auto;max-width:100%;margin:.5em 0 1.2em}table{border-collapse:collapse}"
+        "td,th{border:1px solid #ccc;padding:3px 7px}td.w{overflow-wrap:anywhere}"
+        "th{background:#f0f0f0}img{max-width:100%;height:auto}.failed{background:#fde8e8;padding:.5em}")
+
+
 def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     """Write ``diagnosis.json``, the figures and ``report.html`` into ``out_dir`` (atomically)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    say = progress or (lambda s: None)
     paths = {}
     text = json.dumps(_jsonable(d.to_dict()), indent=1, allow_nan=True)
     atomic_write_text(out / "diagnosis.json", text)
     paths["json"] = out / "diagnosis.json"
+    figs = _write_figures(d, out, progress or (lambda s: None))
+    body = _summary_html(d) + _evidence_html(d, figs) + _gap_html(d, figs) + _closing_html(d)
+    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>calib diagnose</title><style>{_CSS}</style>"
+            f"</head><body>{''.join(body)}</body></html>")
+    atomic_write_text(out / "report.html", page)
+    paths["report"] = out / "report.html"
+    return paths
+
+
+def _write_figures(d, out: Path, say) -> dict[str, Path]:
+    """Write ``gap.png`` and ``candidates.png`` into ``out`` (atomically), telling ``say`` each name."""
     figs = {}
     for name, make in (("gap", plot_gap), ("candidates", plot_candidates)):
         say(f"figure {name}")
@@ -187,38 +207,37 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
             fig.savefig(tmp, dpi=100, format="png")
         figs[name] = out / f"{name}.png"
         plt.close(fig)
-    import base64
+    return figs
 
-    def img(p):
-        return f'<img alt="{p.stem}" src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
 
-    rows = _candidate_rows(d)
-    units = dict(zip(d.localization.channels, d.localization.channel_units)) if d.localization is not None else {}
-    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{p_text(g['p_value'])}",
-                 html.escape(", ".join(f"{c} {v:.4g} {units.get(c, '')}".rstrip() for c, v in g["rms"].items())))
-                for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
-                                                         d.with_effects),
-                                 ("after recalibration" if d.recalibration is not None
-                                  else "no recalibration (as above)", d.after))]
-    reasons = "".join(f"<li>round {k + 1}: {html.escape(r['reason'])}</li>" for k, r in enumerate(d.rounds))
-    trend_rows = [(html.escape(c), f"{t['chi2_per_point']:.3g}", f"{t['mean_whitened']:+.2f}",
-                   f"{t['corr_tip_speed_ratio']:+.2f}", f"{t['corr_pitch']:+.2f}", f"{t['corr_wind_speed']:+.2f}",
-                   f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
-    failure = getattr(d, "failure", "")
+def _img(p: Path) -> str:
+    """An ``<img>`` of the PNG file ``p``, embedded as base64."""
+    return f'<img alt="{p.stem}" src="data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}">'
+
+
+def _summary_html(d) -> list[str]:
+    """The page's title, the decision in words, an early stop, and χ²/dof through the steps."""
     body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>",
             f"<p class='decision'><b>{html.escape(decision_words(d))}</b></p>"]
+    failure = getattr(d, "failure", "")
     if failure:
         body.append(f'<p class="failed"><b>Stopped early:</b> {html.escape(failure)}. What the rounds before '
                     "found is reported below.</p>")
-    body += [f"<p>Named effect(s): <b>{html.escape(', '.join(d.effects) or d.effect)}</b>. "
-             f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal) → {d.with_effects['chi2_per_dof']:.3g} (with the "
-             f"effect) → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field). "
-             f"Wall time {d.wall_time:.1f} s.</p>",
-             f"<h2>Evidence</h2><ul>{reasons}</ul>",
-             _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
-                     "pattern agreement", "effect size", "fitted parameters (1σ)", "fit status"],
-                    rows, wrap=(1, 10, 11, 12)),
-             "<p class='explain'>How to read the table: <b>χ²</b> is the misfit of the candidate's fit, "
+    body.append(f"<p>Named effect(s): <b>{html.escape(', '.join(d.effects) or d.effect)}</b>. "
+                f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal) → {d.with_effects['chi2_per_dof']:.3g} (with the "
+                f"effect) → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field). "
+                f"Wall time {d.wall_time:.1f} s.</p>")
+    return body
+
+
+def _evidence_html(d, figs: dict[str, Path]) -> list[str]:
+    """Why each round named what it did: the reasons, the candidate table explained, its figure."""
+    reasons = "".join(f"<li>round {k + 1}: {html.escape(r['reason'])}</li>" for k, r in enumerate(d.rounds))
+    return [f"<h2>Evidence</h2><ul>{reasons}</ul>",
+            _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
+                    "pattern agreement", "effect size", "fitted parameters (1σ)", "fit status"],
+                   _candidate_rows(d), wrap=(1, 10, 11, 12)),
+            ("<p class='explain'>How to read the table: <b>χ²</b> is the misfit of the candidate's fit, "
              "whitened by the noise; <b>k</b> its number of fitted parameters. <b>Λ</b> (likelihood ratio) is "
              "how much the candidate lowers χ² against the model without it; <b>p</b> is how likely so large a "
              "drop is by chance if the candidate were not there (χ² with k degrees of freedom), and "
@@ -227,20 +246,39 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
              "candidate's share of the evidence among all candidates and no effect (1 = all of it). The "
              "<b>pattern agreement</b> is the correlation between how the candidate changes the outputs and "
              "how the free correction field changes them (1 = the same shape, 0 = unrelated). A fitted value "
-             "at its bound is flagged: it is the bound the data push against, not an estimate.</p>",
-             img(figs["candidates"]),
-             "<h2>Where the gap is</h2>",
-             _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
-                     "corr. with wind speed", "corr. with load level"], trend_rows),
-             img(figs["gap"]),
-             "<h2>How much it shrank</h2>",
-             _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel (measured − model)"], gap_rows,
-                    wrap=(4,)),
-             "<p class='explain'>χ²/dof near 1 means the model explains the measurements to within their noise; "
-             "the p-value is the chance of a misfit at least this large if it did.</p>",
-             f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
+             "at its bound is flagged: it is the bound the data push against, not an estimate.</p>"),
+            _img(figs["candidates"])]
+
+
+def _gap_html(d, figs: dict[str, Path]) -> list[str]:
+    """Where the nominal model misses (trends per channel, the residual figure) and how much the
+    misfit shrank with the named effect(s) and the recalibration."""
+    units = dict(zip(d.localization.channels, d.localization.channel_units)) if d.localization is not None else {}
+    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{p_text(g['p_value'])}",
+                 html.escape(", ".join(f"{c} {v:.4g} {units.get(c, '')}".rstrip() for c, v in g["rms"].items())))
+                for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
+                                                         d.with_effects),
+                                 ("after recalibration" if d.recalibration is not None
+                                  else "no recalibration (as above)", d.after))]
+    trend_rows = [(html.escape(c), f"{t['chi2_per_point']:.3g}", f"{t['mean_whitened']:+.2f}",
+                   f"{t['corr_tip_speed_ratio']:+.2f}", f"{t['corr_pitch']:+.2f}", f"{t['corr_wind_speed']:+.2f}",
+                   f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
+    return ["<h2>Where the gap is</h2>",
+            _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
+                    "corr. with wind speed", "corr. with load level"], trend_rows),
+            _img(figs["gap"]),
+            "<h2>How much it shrank</h2>",
+            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel (measured − model)"], gap_rows,
+                   wrap=(4,)),
+            ("<p class='explain'>χ²/dof near 1 means the model explains the measurements to within their noise; "
+             "the p-value is the chance of a misfit at least this large if it did.</p>")]
+
+
+def _closing_html(d) -> list[str]:
+    """The localization by the correction field alone, an empty recalibration, the notes and the set-up."""
+    body = [(f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
              f"{d.localization.chi2_per_dof_after:.3g} (a θ is one combination of polar corrections the data "
-             f"determine; its eigenshape says where on the (α, r/R) plane it acts).</p>"]
+             f"determine; its eigenshape says where on the (α, r/R) plane it acts).</p>")]
     rec = d.recalibration
     if rec is not None and rec.n_retained == 0:
         body.append("<p>The recalibration retained 0 θ: nothing is left that the correction field explains "
@@ -250,16 +288,4 @@ def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
     if d.setup:
         from calib.setup_statement import statement_html
         body.append(statement_html(d.setup))
-    # long text cells (fitted parameters) may break inside words, a candidate after its ":"
-    # (<wbr>); a table still too wide scrolls inside its own box, never the page (checked at
-    # 1280 px in tests/test_browser_report.py)
-    css = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
-           ".table{overflow-x:auto;max-width:100%;margin:.5em 0 1.2em}table{border-collapse:collapse}"
-           "td,th{border:1px solid #ccc;padding:3px 7px}td.w{overflow-wrap:anywhere}"
-           "th{background:#f0f0f0}img{max-width:100%;height:auto}.failed{background:#fde8e8;padding:.5em}")
-    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>calib diagnose</title><style>{css}</style>"
-            f"</head><body>{''.join(body)}</body></html>")
-    atomic_write_text(out / "report.html", page)
-    paths["report"] = out / "report.html"
-    return paths
-
+    return body

@@ -14,12 +14,14 @@ from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
+from matplotlib.image import AxesImage
 from matplotlib.patches import Rectangle
 
 from calib.report.panels import DPI, Margins, title_height, wrap_title
@@ -114,21 +116,71 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
         return None
     retained = np.flatnonzero(result.retained) if modes is None else np.asarray(modes, int)
     modes = retained if max_modes is None else retained[:max_modes]
-    a_nodes, e_nodes = layout.grid.alpha_nodes_deg, layout.grid.eta_nodes
-    n = max(len(modes), 1)
-    ncol = min(MAX_COLUMNS, n)
-    nrow = int(np.ceil(n / ncol))
-    w, h = PANEL_SIZE
     a_seen, e_seen, n_out = seen_inside(result, layout)
     kind = which or "retained θ"
     how_many = (f"all {len(retained)} {kind}" if len(modes) == len(retained)
                 else f"the first {len(modes)} of {len(retained)} {kind}")
+    fig, ax, tiles = _tile_canvas(result, block, len(modes), how_many, a_seen.size, n_out)
+    if not len(modes):
+        ax.text(0.5, -0.5, "no retained parameter", ha="center", va="center")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        return fig
+    im = _draw_tiles(ax, result, block, modes, tiles, a_seen, e_seen)
+    _label_axes(fig, ax, im, tiles, block)
+    return fig
+
+
+@dataclass(frozen=True)
+class _TileGrid:
+    """Where the tiles of the eigenshape figure sit.
+
+    Attributes
+    ----------
+    ncol, nrow : int
+        Tiles across and down; each tile is a unit square of the one axes.
+    gx, gy : float
+        Gaps between tiles [tile units].
+    width, height : float
+        Figure size [in].
+    margins : Margins
+        Of the tile grid in the figure [in].
+    """
+
+    ncol: int
+    nrow: int
+    gx: float
+    gy: float
+    width: float
+    height: float
+    margins: Margins
+
+
+def _tile_canvas(result: CalibrationResult, block: str, n_modes: int, how_many: str, n_seen: int,
+                 n_out: int) -> tuple[Figure, Axes, _TileGrid]:
+    """The titled figure, its one frameless axes spanning the tiles, and where the tiles sit.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    block : {"lift", "drag"}
+    n_modes : int
+        Maps drawn (0 gives one empty tile).
+    how_many : str
+        Which θ are drawn, in words for the title.
+    n_seen, n_out : int
+        (α, η) points seen by the data inside and outside the node range.
+    """
+    n = max(n_modes, 1)
+    ncol = min(MAX_COLUMNS, n)
+    nrow = int(np.ceil(n / ncol))
+    w, h = PANEL_SIZE
     grid_width = ncol * w + (ncol - 1) * MARGINS.wgap
     # at least MIN_WIDTH wide (a grid of one or two maps centred), so title and labels fit
     pad = max(MIN_WIDTH - (MARGINS.left + grid_width + MARGINS.right), 0.0) / 2
     width = MARGINS.left + grid_width + MARGINS.right + 2 * pad
     title = wrap_title(f"{result.name}: {block} eigenshapes ψ_i(α, η) of {how_many} ({result.n_params} "
-                       f"parameters)\ndots: {a_seen.size} (α, η) seen by the data inside the node range; {n_out} "
+                       f"parameters)\ndots: {n_seen} (α, η) seen by the data inside the node range; {n_out} "
                        f"outside it (not drawn); grid lines: correction nodes", width, 9)
     m = replace(MARGINS, top=title_height(title, 9) + 0.3, left=MARGINS.left + pad, right=MARGINS.right + pad)
     gx, gy = m.wgap / w, m.hgap / h                        # gaps in tile units
@@ -141,11 +193,32 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     for spine in ax.spines.values():
         spine.set_visible(False)
     fig.suptitle(title, fontsize=9, y=1 - 0.08 / height)
-    if not len(modes):
-        ax.text(0.5, -0.5, "no retained parameter", ha="center", va="center")
-        ax.set_xticks([])
-        ax.set_yticks([])
-        return fig
+    return fig, ax, _TileGrid(ncol, nrow, gx, gy, width, height, m)
+
+
+def _draw_tiles(ax: Axes, result: CalibrationResult, block: str, modes: np.ndarray, tiles: _TileGrid,
+                a_seen: np.ndarray, e_seen: np.ndarray) -> AxesImage:
+    """Draw one tile per θ in ``modes``: its map, node lines, frame, seen points and title.
+
+    Parameters
+    ----------
+    ax : Axes
+        The axes of :func:`_tile_canvas`.
+    result : CalibrationResult
+    block : {"lift", "drag"}
+    modes : ndarray of int
+        The θ drawn (0-based), in tile order.
+    tiles : _TileGrid
+    a_seen, e_seen : ndarray
+        (α [deg], η [-]) seen by the data inside the node range.
+
+    Returns
+    -------
+    AxesImage
+        The last map (all share one colour scale).
+    """
+    layout = result.layout
+    a_nodes, e_nodes = layout.grid.alpha_nodes_deg, layout.grid.eta_nodes
     alpha, eta = eigen_mesh(result, layout=layout)
     lift, drag = result.eigenshapes(alpha, eta, modes)
     shapes = lift if block == "lift" else drag
@@ -156,10 +229,9 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     us_e = (e_seen - e_nodes[0]) / (e_nodes[-1] - e_nodes[0])
     da, de = 0.5 / (alpha.size - 1), 0.5 / (eta.size - 1)  # half a mesh cell in tile units
     segments, frames, dots_x, dots_y, ticks = [], [], [], [], []
-    tick_x, tick_y = 0.03 / w, 0.03 / h                   # 0.03 in in tile units
     for k, i in enumerate(modes):
-        row, col = divmod(k, ncol)
-        x0, y1 = col * (1 + gx), -row * (1 + gy)
+        row, col = divmod(k, tiles.ncol)
+        x0, y1 = col * (1 + tiles.gx), -row * (1 + tiles.gy)
         y0 = y1 - 1
         im = ax.imshow(shapes[k], extent=(x0 - da, x0 + 1 + da, y0 - de, y1 + de), origin="lower", aspect="auto",
                        cmap="RdBu_r", vmin=-vmax, vmax=vmax, interpolation="nearest")
@@ -172,27 +244,87 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
         share = block_share(result.V, layout, i, block)
         ax.text(x0 + 0.5, y1 + 0.03, f"θ{i + 1}  σ={result.sigma_theta[i]:.2g}  {100 * share:.0f}% {block}",
                 ha="center", va="bottom", fontsize=7)
-        if k + ncol >= len(modes):             # lowest tile of its column: α node values under it
-            ticks += [[(x0 + u, y0), (x0 + u, y0 - tick_y)] for u in ua]
-            for u, a in zip(ua, a_nodes):
-                ax.text(x0 + u, y0 - 1.6 * tick_y, f"{a:g}", ha="center", va="top", fontsize=6)
+        if k + tiles.ncol >= len(modes):       # lowest tile of its column: α node values under it
+            ticks += _alpha_node_values(ax, x0, y0, ua, a_nodes)
         if col == 0:                           # η node values left of the first column
-            ticks += [[(x0, y0 + u), (x0 - tick_x, y0 + u)] for u in ue]
-            for u, e in zip(ue, e_nodes):
-                ax.text(x0 - 1.6 * tick_x, y0 + u, f"{e:g}", ha="right", va="center", fontsize=6)
+            ticks += _eta_node_values(ax, x0, y0, ue, e_nodes)
     ax.add_collection(LineCollection(segments, colors="0.55", linewidths=0.3))
     ax.add_collection(LineCollection(ticks, colors="k", linewidths=0.6, clip_on=False))
     ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="0.2", linewidths=0.6))
     if a_seen.size:
         ax.plot(np.concatenate(dots_x), np.concatenate(dots_y), ",", color="k", alpha=0.35, rasterized=True)
+    return im
+
+
+def _alpha_node_values(ax: Axes, x0: float, y0: float, ua: np.ndarray, a_nodes: np.ndarray) -> list:
+    """Write the α node values under the tile whose lower left corner is (x0, y0) [tile units].
+
+    Parameters
+    ----------
+    ax : Axes
+    x0, y0 : float
+        Lower left corner of the tile [tile units].
+    ua : ndarray
+        Node positions across the tile [0, 1].
+    a_nodes : ndarray
+        Node values [deg].
+
+    Returns
+    -------
+    list
+        The tick marks' segments, for one LineCollection.
+    """
+    tick_y = 0.03 / PANEL_SIZE[1]                         # 0.03 in in tile units
+    for u, a in zip(ua, a_nodes):
+        ax.text(x0 + u, y0 - 1.6 * tick_y, f"{a:g}", ha="center", va="top", fontsize=6)
+    return [[(x0 + u, y0), (x0 + u, y0 - tick_y)] for u in ua]
+
+
+def _eta_node_values(ax: Axes, x0: float, y0: float, ue: np.ndarray, e_nodes: np.ndarray) -> list:
+    """Write the η node values left of the tile whose lower left corner is (x0, y0) [tile units].
+
+    Parameters
+    ----------
+    ax : Axes
+    x0, y0 : float
+        Lower left corner of the tile [tile units].
+    ue : ndarray
+        Node positions up the tile [0, 1].
+    e_nodes : ndarray
+        Node values [-].
+
+    Returns
+    -------
+    list
+        The tick marks' segments, for one LineCollection.
+    """
+    tick_x = 0.03 / PANEL_SIZE[0]                         # 0.03 in in tile units
+    for u, e in zip(ue, e_nodes):
+        ax.text(x0 - 1.6 * tick_x, y0 + u, f"{e:g}", ha="right", va="center", fontsize=6)
+    return [[(x0, y0 + u), (x0 - tick_x, y0 + u)] for u in ue]
+
+
+def _label_axes(fig: Figure, ax: Axes, im: AxesImage, tiles: _TileGrid, block: str) -> None:
+    """Axis labels (the node values stand beside the tiles, not as ticks) and the maps' colour bar.
+
+    Parameters
+    ----------
+    fig : Figure
+    ax : Axes
+        The axes of :func:`_tile_canvas`.
+    im : AxesImage
+        A map of the shared colour scale.
+    tiles : _TileGrid
+    block : {"lift", "drag"}
+    """
     ax.set_xticks([])
     ax.set_yticks([])
     ax.set_xlabel("α [deg] (every tile; values of the α nodes under the lowest tiles)", fontsize=7, labelpad=16)
-    ax.set_ylabel("η = r/R [-] (every tile; values of the η nodes left)" if nrow > 1 else "η = r/R [-]",
+    ax.set_ylabel("η = r/R [-] (every tile; values of the η nodes left)" if tiles.nrow > 1 else "η = r/R [-]",
                   fontsize=7, labelpad=22)
+    m, width, height = tiles.margins, tiles.width, tiles.height
     cax = fig.add_axes(((width - m.right + 0.2) / width, m.bottom / height, 0.14 / width,
                         (height - m.bottom - m.top) / height))
     fig.colorbar(im, cax=cax)
     cax.tick_params(labelsize=6)
     cax.set_ylabel(f"ψ ({block}) [scale units per unit θ]", fontsize=7)
-    return fig

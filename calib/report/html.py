@@ -118,26 +118,49 @@ def _bounded_drag_points(pb: dict, cd_min: float | None) -> tuple[int, int] | No
 
 def _sentences(r: CalibrationResult) -> list[str]:
     """Plain statements generated from the numbers they describe."""
-    gof = r.goodness_of_fit()
-    out = []
+    out = _retained_sentences(r)
+    out.append(_fit_sentence(r.goodness_of_fit()))
+    out += _band_sentences(r)
+    out += _prior_check_sentences(r)
+    out += _curvature_sentences(r)
+    out += _field_sentences(r)
+    out += _parameter_sentences(r)
+    out += _solver_sentences(r)
+    if r.verdict_counts().get("confounded"):
+        out.append("A confounded parameter's estimate trades off against the correction field: read it with "
+                   "its σ, not as a measurement of that quantity alone.")
+    return out
+
+
+def _retained_sentences(r: CalibrationResult) -> list[str]:
+    """How many θ were retained and how they were chosen (cross-validation or the threshold σ̄)."""
     if r.truncation:
-        out.append(f"The number of retained θ was chosen by {r.truncation.get('criterion', 'K-fold')} cross-validation "
-                   f"over operating points (the fewest within one standard error of the minimum): "
-                   f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {r.sigma_bar:.3g} scale units; criterion "
-                   f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
-                   f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained)"
-                   + _prior_limit_clause(r) + ".")
+        out = [f"The number of retained θ was chosen by {r.truncation.get('criterion', 'K-fold')} cross-validation "
+               f"over operating points (the fewest within one standard error of the minimum): "
+               f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {r.sigma_bar:.3g} scale units; criterion "
+               f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
+               f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained)"
+               + _prior_limit_clause(r) + "."]
         if "second_retained" in r.truncation:
             out.append(second_start_sentence(r.truncation))
-    else:
-        out.append(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
-                   f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")
-    out.append(f"Before calibration χ²/dof = {gof['chi2_per_dof_before']:.3g} over {gof['dof_before']} residuals "
-               f"(nothing fitted, {p_is(gof['p_value_before'])}); after, χ²/dof = "
-               f"{gof['chi2_per_dof_after']:.3g} with {gof['dof_after']} degrees of freedom "
-               f"({p_is(gof['p_value_after'])}" + ("; the model is consistent with the noise)." if
-                                                      gof["p_value_after"] > 0.01 else
-                                                      "; the fit is worse than the stated noise explains)."))
+        return out
+    return [(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
+             f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")]
+
+
+def _fit_sentence(gof: dict) -> str:
+    """χ²/dof before and after calibration with their p-values (``gof``: the result's goodness of fit)."""
+    return (f"Before calibration χ²/dof = {gof['chi2_per_dof_before']:.3g} over {gof['dof_before']} residuals "
+            f"(nothing fitted, {p_is(gof['p_value_before'])}); after, χ²/dof = "
+            f"{gof['chi2_per_dof_after']:.3g} with {gof['dof_after']} degrees of freedom "
+            f"({p_is(gof['p_value_after'])}" + ("; the model is consistent with the noise)." if
+                                                 gof["p_value_after"] > 0.01 else
+                                                 "; the fit is worse than the stated noise explains)."))
+
+
+def _band_sentences(r: CalibrationResult) -> list[str]:
+    """What the bands include and leave out: aliasing, the C_D,min bound, the fit scale."""
+    out = []
     if r.aliasing_chi2 > 0:
         out.append(f"A field between the correction nodes of the prior's typical size would add about "
                    f"{r.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.chi2_after:.3g}); the bands include "
@@ -154,35 +177,56 @@ def _sentences(r: CalibrationResult) -> list[str]:
         out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
                    f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
+    return out
+
+
+def _prior_check_sentences(r: CalibrationResult) -> list[str]:
+    """The prior check's outcome, why it failed, or that it was not run (none without bands)."""
     if r.prior_check.get("failed"):
-        out.append(f"Prior check: could not be computed ({r.prior_check['failed']}); whether the data support the "
-                   f"stated prior was not tested.")
-    elif r.prior_check:
-        out.append(PriorCheck(**r.prior_check).sentence())
-    elif r.settings.get("prior_check") is False and r.polar_bands:
-        out.append("Prior check: not run (prior_check = false): whether the data support the stated prior, which "
-                   "sets the width of the bands in the directions the data leave to it, was not tested.")
+        return [(f"Prior check: could not be computed ({r.prior_check['failed']}); whether the data support the "
+                 f"stated prior was not tested.")]
+    if r.prior_check:
+        return [PriorCheck(**r.prior_check).sentence()]
+    if r.settings.get("prior_check") is False and r.polar_bands:
+        return [("Prior check: not run (prior_check = false): whether the data support the stated prior, which "
+                 "sets the width of the bands in the directions the data leave to it, was not tested.")]
+    return []
+
+
+def _curvature_sentences(r: CalibrationResult) -> list[str]:
+    """What the frozen directions' prior adds through the model's curvature, or that it was left out."""
     cur = r.curvature
     if cur.get("samples", 0) > 0 and "variance_ratio_mean" in cur:
-        out.append(f"The frozen directions' prior, propagated through the model's curvature ({cur['used']} of "
-                   f"{cur['samples']} draws), adds to the variance of each retained θ on average "
-                   f"{cur['variance_ratio_mean']:.2g}× (at most {cur['variance_ratio_max']:.2g}×) its noise part "
-                   f"1/s²: the bias a frozen part of the truth gives the estimate where the model is not linear.")
-    elif cur.get("samples", None) == 0:
-        out.append("Not in the bands: curvature_samples = 0, so how the frozen part of the truth biases the retained θ "
-                   "where the model is not linear over the prior's range is left out.")
-    counts = r.verdict_counts()
+        return [(f"The frozen directions' prior, propagated through the model's curvature ({cur['used']} of "
+                 f"{cur['samples']} draws), adds to the variance of each retained θ on average "
+                 f"{cur['variance_ratio_mean']:.2g}× (at most {cur['variance_ratio_max']:.2g}×) its noise part "
+                 f"1/s²: the bias a frozen part of the truth gives the estimate where the model is not linear.")]
+    if cur.get("samples", None) == 0:
+        return [("Not in the bands: curvature_samples = 0, so how the frozen part of the truth biases the retained θ "
+                 "where the model is not linear over the prior's range is left out.")]
+    return []
+
+
+def _field_sentences(r: CalibrationResult) -> list[str]:
+    """The correction nodes' verdicts counted (none without a correction field)."""
     field = [v for v in r.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
-    if field:
-        poor = [v for v in field if v["verdict"] == "poorly observable"]
-        moved = [v for v in poor if v["note"]]
-        txt = (f"Of {len(field)} correction nodes, {sum(v['verdict'] == 'identified' for v in field)} are identified "
-               f"(posterior σ at most {r.settings.get('identified_ratio', 0.5):g} × prior σ), "
-               f"{sum(v['verdict'] == 'at bound' for v in field)} at a bound and {len(poor)} poorly observable: "
-               f"their bands stay close to the prior's width")
-        txt += (f"; {len(moved)} of these nevertheless moved more than 2σ from nominal (listed below)." if moved
-                else ".")
-        out.append(txt)
+    if not field:
+        return []
+    poor = [v for v in field if v["verdict"] == "poorly observable"]
+    moved = [v for v in poor if v["note"]]
+    txt = (f"Of {len(field)} correction nodes, {sum(v['verdict'] == 'identified' for v in field)} are identified "
+           f"(posterior σ at most {r.settings.get('identified_ratio', 0.5):g} × prior σ), "
+           f"{sum(v['verdict'] == 'at bound' for v in field)} at a bound and {len(poor)} poorly observable: "
+           f"their bands stay close to the prior's width")
+    txt += (f"; {len(moved)} of these nevertheless moved more than 2σ from nominal (listed below)." if moved
+            else ".")
+    return [txt]
+
+
+def _parameter_sentences(r: CalibrationResult) -> list[str]:
+    """Each parameter other than the correction nodes: estimate, verdict, shared information, and
+    how to tighten it where there is advice."""
+    out = []
     for v in r.verdicts:
         if v["kind"] in ("lift_correction", "drag_correction"):
             continue
@@ -196,6 +240,12 @@ def _sentences(r: CalibrationResult) -> list[str]:
         advice = tightening_sentence(v["name"], (r.tightening or {}).get(v["name"], {}), v["unit"])
         if advice:
             out.append(advice)
+    return out
+
+
+def _solver_sentences(r: CalibrationResult) -> list[str]:
+    """Failed point evaluations, operating points with several BEM roots, and folds of the solution."""
+    out = []
     fail = r.failures
     if fail.get("total_failed_point_evaluations", 0):
         out.append(f"{fail['total_failed_point_evaluations']} point evaluations failed over the run "
@@ -206,9 +256,6 @@ def _sentences(r: CalibrationResult) -> list[str]:
                    f"root was chosen by the solver's documented rule and those points are flagged.")
     if r.fold_directions:
         out.append(fold_sentence(r.fold_directions, r.conditions, r.tip_speed_ratio()))
-    if counts.get("confounded"):
-        out.append("A confounded parameter's estimate trades off against the correction field: read it with "
-                   "its σ, not as a measurement of that quantity alone.")
     return out
 
 
@@ -238,7 +285,25 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
              f"Wall time {r.wall_time:.2f} s.</p>"]
     parts.append("<ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in _sentences(r)) + "".join(
         f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>" for k, v in (checks or {}).items()) + "</ul>")
-    counts = r.verdict_counts()
+    parts += _key_numbers_html(r, gof)
+    parts.append(_failures_html(r))
+    parts += _fit_tables_html(r, gof)
+    parts.append(_verdicts_html(r))
+    if figures:
+        parts.append("<h3>Figures</h3>")
+        captions = _captions(r)
+        for name, paths in figures.items():
+            parts.append(_figure_html(name, paths, captions.get(name, "")))
+    parts.append("<details><summary>Reproducibility</summary><pre>" + html.escape(
+        "\n".join([f"inputs: {r.inputs}", f"versions: {r.versions}",
+                   f"settings: { {k: v for k, v in r.settings.items() if k != 'lower_effective'} }"])) +
+        "</pre></details>")
+    return "\n".join(parts)
+
+
+def _key_numbers_html(r: CalibrationResult, gof: dict) -> list[str]:
+    """The key-number table (estimator, directions, χ² before and after, settings, verdict counts)
+    and the paragraph that explains it; ``gof`` is the result's goodness of fit."""
     if r.estimator == "map":
         how = [("estimator", "MAP under the stated prior"),
                ("directions the data determine better than the prior (s > 1)", r.n_retained)]
@@ -248,35 +313,49 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
                 else "threshold σ̄"), ("σ̄ [scale units]", r.sigma_bar)]
     key = [("operating points", r.n_points), ("channels", ", ".join(r.channels)), ("parameters", r.n_params)] + how
     key += [("χ²/dof before (dof = N)", gof["chi2_per_dof_before"]), ("N", gof["dof_before"]),
-           ("χ²/dof after (dof = N − fitted directions)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
-           ("p-value after", p_text(gof["p_value_after"])),
-           ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise")),
-           ("prior σ of correction nodes [scale units]" if _has_field(r) else "prior σ [scale units]",
-            r.settings.get("prior_sigma"))]
-    key += [(f"verdict: {k}", v) for k, v in counts.items()]
-    parts.append(_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]))
-    parts.append("<p class='explain'>" + html.escape(_directions_words(r.estimator)) +
-                 " χ²/dof is the mean squared misfit in units of the noise: near 1 the model "
-                 "explains the measurements to within their noise, far above 1 it misses them. The p-value is the "
-                 "chance of a misfit at least this large if the model were right and the noise as stated.</p>")
+            ("χ²/dof after (dof = N − fitted directions)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
+            ("p-value after", p_text(gof["p_value_after"])),
+            ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise")),
+            ("prior σ of correction nodes [scale units]" if _has_field(r) else "prior σ [scale units]",
+             r.settings.get("prior_sigma"))]
+    key += [(f"verdict: {k}", v) for k, v in r.verdict_counts().items()]
+    return [_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]),
+            "<p class='explain'>" + html.escape(_directions_words(r.estimator)) +
+            " χ²/dof is the mean squared misfit in units of the noise: near 1 the model "
+            "explains the measurements to within their noise, far above 1 it misses them. The p-value is the "
+            "chance of a misfit at least this large if the model were right and the noise as stated.</p>"]
+
+
+def _failures_html(r: CalibrationResult) -> str:
+    """The failed model points of the run, in red when any remain."""
     fail = r.failures
     fail_cls = "bad" if fail.get("final", 0) or fail.get("total_failed_point_evaluations", 0) else "ok"
-    parts.append(f'<p class="{fail_cls}">Failed model points: nominal {fail.get("nominal", 0)}, final '
-                 f'{fail.get("final", 0)}, over all evaluations {fail.get("total_failed_point_evaluations", 0)} '
-                 f'({fail.get("model_evaluations", 0)} evaluations, {fail.get("model_jacobians", 0)} '
-                 f"Jacobians).</p>")
-    parts.append("<h3>Fit per channel</h3>" + _table(
+    return (f'<p class="{fail_cls}">Failed model points: nominal {fail.get("nominal", 0)}, final '
+            f'{fail.get("final", 0)}, over all evaluations {fail.get("total_failed_point_evaluations", 0)} '
+            f'({fail.get("model_evaluations", 0)} evaluations, {fail.get("model_jacobians", 0)} '
+            f"Jacobians).</p>")
+
+
+def _fit_tables_html(r: CalibrationResult, gof: dict) -> list[str]:
+    """The fit per channel and the worst points after calibration; ``gof`` is the result's goodness of fit."""
+    per_channel = "<h3>Fit per channel</h3>" + _table(
         ["channel", "unit", "noise σ [unit]", "χ²/point before [-]", "χ²/point after [-]", "RMS misfit before [unit]",
          "RMS misfit after [unit]"],
         [(html.escape(c), html.escape(u), _fmt(float(s)), _fmt(gof["per_channel"][c]["chi2_per_point_before"]),
           _fmt(gof["per_channel"][c]["chi2_per_point_after"]), _fmt(gof["per_channel"][c]["rms_before"]),
           _fmt(gof["per_channel"][c]["rms_after"]))
-         for c, u, s in zip(r.channels, r.channel_units, r.noise_sigma)]))
-    parts.append("<h3>Worst points after calibration</h3>" + _table(
+         for c, u, s in zip(r.channels, r.channel_units, r.noise_sigma)])
+    worst = "<h3>Worst points after calibration</h3>" + _table(
         ["point", "channel", "whitened residual [σ]", "conditions"],
         [(w["point"], html.escape(w["channel"]), _fmt(w["whitened_residual"], 3),
           html.escape(", ".join(f"{k} {v:.4g}" for k, v in w["conditions"].items())))
-         for w in gof["worst"]]))
+         for w in gof["worst"]])
+    return [per_channel, worst]
+
+
+def _verdicts_html(r: CalibrationResult) -> str:
+    """The verdict table (every parameter but the poorly observable nodes within 2σ of nominal) and
+    what the verdicts mean."""
     rows = []
     for v in r.verdicts:
         if v["kind"] in ("lift_correction", "drag_correction") and v["verdict"] == "poorly observable" \
@@ -290,25 +369,15 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
     which = (f"Every non-field parameter, and every correction node that is identified, at a bound, or moved more "
              f"than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are not listed (their bands are as "
              f"wide as the prior)." if _has_field(r) else "Every parameter of the model.")
-    parts.append(f"<h3>Verdicts</h3><p>{which}</p>" +
-                 _table(["parameter", "verdict", "unit", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
-                         "note", "confounded with"], rows, left=3) +
-                 "<p class='explain'>σ is the standard deviation of the estimate (1σ); σ/prior compares it with "
-                 "the prior's: <b>identified</b> when the data halve it at least, <b>poorly observable</b> when "
-                 "the band stays close to the prior's width, <b>at bound</b> when the estimate sits on a bound "
-                 "(its value is the bound, not an estimate), <b>confounded</b> when a nuisance shares most of "
-                 "its information with the correction field (read it with its σ, not as a measurement of that "
-                 "quantity alone).</p>")
-    if figures:
-        parts.append("<h3>Figures</h3>")
-        captions = _captions(r)
-        for name, paths in figures.items():
-            parts.append(_figure_html(name, paths, captions.get(name, "")))
-    parts.append("<details><summary>Reproducibility</summary><pre>" + html.escape(
-        "\n".join([f"inputs: {r.inputs}", f"versions: {r.versions}",
-                   f"settings: { {k: v for k, v in r.settings.items() if k != 'lower_effective'} }"])) +
-        "</pre></details>")
-    return "\n".join(parts)
+    return (f"<h3>Verdicts</h3><p>{which}</p>" +
+            _table(["parameter", "verdict", "unit", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
+                    "note", "confounded with"], rows, left=3) +
+            "<p class='explain'>σ is the standard deviation of the estimate (1σ); σ/prior compares it with "
+            "the prior's: <b>identified</b> when the data halve it at least, <b>poorly observable</b> when "
+            "the band stays close to the prior's width, <b>at bound</b> when the estimate sits on a bound "
+            "(its value is the bound, not an estimate), <b>confounded</b> when a nuisance shares most of "
+            "its information with the correction field (read it with its σ, not as a measurement of that "
+            "quantity alone).</p>")
 
 
 def write_report(path: str | Path, sections: list[str] | None = None, title: str = "calib report",

@@ -13,11 +13,12 @@ figure's time in matplotlib's tick machinery.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 
+from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
@@ -47,6 +48,12 @@ def alpha_ticks(a0: float, a1: float) -> np.ndarray:
     return t[(t >= a0 - 1e-9) & (t <= a1 + 1e-9)]
 
 
+TILE_SIZE = (2.6, 2.1)     # one station's tile [in]
+TILE_GAP = 0.15            # between tiles [in]
+GAP = TILE_GAP / TILE_SIZE[0]                             # gap in tile units
+MARGINS = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, hgap=0.55)
+
+
 def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthField | None = None):
     """Corrected polars with confidence bands, lift (top row) and drag (bottom row).
 
@@ -72,17 +79,86 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
         return None
     alpha, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
     idx = station_columns(eta, max_stations)
-    n = idx.size
-    tile_w, tile_h, gap = 2.6, 2.1, 0.15                 # [in]
-    gx = gap / tile_w                                     # gap in tile units
-    margins = Margins(left=0.75, right=0.2, bottom=0.55, top=0.75, hgap=0.55)
-    row_w = n * tile_w + (n - 1) * gap
-    what = "corrected polars" + ("" if "cl0" in pb else " (corrections only)")
-    width = margins.left + row_w + margins.right
+    fig, axes = _polar_canvas(result, alpha, idx.size, truth is not None)
+    stations = _stations(result, alpha, eta, idx, truth)
+    for row, letter in enumerate(("cl", "cd")):
+        _draw_row(axes[row, 0], stations, row, letter)
+        _style_row(axes[row, 0], idx.size, row, letter)
+    settle_labels(fig)
+    return fig
+
+
+def _polar_canvas(result: CalibrationResult, alpha: np.ndarray, n: int, with_truth: bool):
+    """The titled figure with one axes per row (lift, drag), each ``n`` tiles wide.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    alpha : ndarray
+        α of the bands [deg].
+    n : int
+        Stations drawn.
+    with_truth : bool
+        A known truth is overlaid (the title says so).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray of Axes, shape (2, 1)
+    """
+    tile_w, tile_h = TILE_SIZE
+    row_w = n * tile_w + (n - 1) * TILE_GAP
+    what = "corrected polars" + ("" if "cl0" in result.polar_bands else " (corrections only)")
+    width = MARGINS.left + row_w + MARGINS.right
     title = wrap_title(f"{result.name}: {what} on the α range of the correction nodes ({alpha[0]:g}…{alpha[-1]:g}°)"
-                       + ("; dashed: known truth" if truth is not None else ""), width, 9)
-    fig, axes = panel_grid(2, 1, (row_w, tile_h), replace(margins, top=title_height(title, 9) + 0.45))
+                       + ("; dashed: known truth" if with_truth else ""), width, 9)
+    fig, axes = panel_grid(2, 1, (row_w, tile_h), replace(MARGINS, top=title_height(title, 9) + 0.45))
     fig.suptitle(title, fontsize=9, y=1 - 0.08 / fig.get_size_inches()[1])
+    return fig, axes
+
+
+@dataclass(frozen=True)
+class _Stations:
+    """What the tiles of one polar figure share.
+
+    Attributes
+    ----------
+    bands : dict
+        ``result.polar_bands``.
+    alpha : ndarray
+        α of the bands [deg].
+    eta : ndarray
+        η of every band station [-].
+    idx : ndarray of int
+        The stations drawn, as indices into ``eta``.
+    u : ndarray
+        ``alpha`` mapped onto [0, 1] (x in a tile).
+    a_ticks, ua_ticks : ndarray
+        Round α values [deg] and their x in a tile [0, 1].
+    seen : list of ndarray
+        α seen by the data near each drawn station [deg].
+    truth : list of ndarray or None
+        Known ΔC_L and ΔC_D at the drawn stations, each shape (n_drawn, n_alpha) [-].
+    confidence : float
+        Of the bands [-].
+    """
+
+    bands: dict
+    alpha: np.ndarray
+    eta: np.ndarray
+    idx: np.ndarray
+    u: np.ndarray
+    a_ticks: np.ndarray
+    ua_ticks: np.ndarray
+    seen: list
+    truth: list | None
+    confidence: float
+
+
+def _stations(result: CalibrationResult, alpha: np.ndarray, eta: np.ndarray, idx: np.ndarray,
+              truth: TruthField | None) -> _Stations:
+    """The shared quantities of :class:`_Stations` for the drawn stations ``idx``."""
+    pb = result.polar_bands
     conf = float(pb.get("confidence", 0.95))
     truth_d = None
     if truth is not None:
@@ -92,70 +168,110 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
     a_ticks = alpha_ticks(alpha[0], alpha[-1])
     ua_ticks = (a_ticks - alpha[0]) / (alpha[-1] - alpha[0])
     seen = [_seen_near(result, eta, j) for j in idx]
-    for row, letter in enumerate(("cl", "cd")):
-        ax = axes[row, 0]
-        xt = ax.get_xaxis_transform()                    # x in data, y in axes fraction
-        frames, vgrid, marks = [], [], []
-        for col, j in enumerate(idx):
-            x0 = col * (1 + gx)
-            x = x0 + u
-            first = col == 0
-            base = np.asarray(pb[f"{letter}0"])[j] if f"{letter}0" in pb else np.zeros_like(alpha)
-            d = np.asarray(pb[f"d{letter}"])[j]
-            if f"d{letter}_lower" in pb:                 # the drag band bounded by C_D,min
-                lo, hi = np.asarray(pb[f"d{letter}_lower"])[j], np.asarray(pb[f"d{letter}_upper"])[j]
-            else:                                        # a result saved before the bounded bands
-                hw = np.asarray(pb[f"d{letter}_half_width"])[j]
-                lo, hi = d - hw, d + hw
-            ax.plot(x, base, color="0.5", lw=1, label="nominal" if first else "_nolegend_", gid=f"nominal:{row}:{col}")
-            ax.fill_between(x, base + lo, base + hi, color="C0", alpha=0.25, lw=0, gid=f"band:{row}:{col}",
-                            label=f"{100 * conf:.0f}% band" if first else "_nolegend_")
-            frac_key = f"d{letter}_prior_fraction"
-            if frac_key in pb:
-                prior_dom = np.asarray(pb[frac_key])[j] > 0.5
-                if prior_dom.any():
-                    ax.fill_between(x, base + lo, base + hi, where=prior_dom, color="C1", alpha=0.25, lw=0,
-                                    label="band set by the prior (data say little)" if first else "_nolegend_")
-            ax.plot(x, base + d, color="C0", lw=1.2, label="calibrated" if first else "_nolegend_",
-                    gid=f"calibrated:{row}:{col}")
-            if truth_d is not None:
-                ax.plot(x, base + truth_d[row][col], "--", color="k", lw=1, label="truth" if first else "_nolegend_",
-                        gid=f"truth:{row}:{col}")
-            s = seen[col]
-            if s.size:
-                lo, hi = max(s.min(), alpha[0]), min(s.max(), alpha[-1])
-                if lo < hi:
-                    ulo, uhi = (np.array([lo, hi]) - alpha[0]) / (alpha[-1] - alpha[0])
-                    ax.axvspan(x0 + ulo, x0 + uhi, color="C2", alpha=0.08, lw=0,
-                               label="α seen" if first else "_nolegend_")
-            frames.append(Rectangle((x0, 0), 1, 1))
-            vgrid += [[(x0 + t, 0), (x0 + t, 1)] for t in ua_ticks]
-            if row == 0:
-                ax.text(x0 + 0.5, 1.02, f"η = {eta[j]:.2f}" + (f"; α seen {s.min():.0f}…{s.max():.0f}°" if s.size
-                                                               else "; no α seen"),
-                        transform=xt, ha="center", va="bottom", fontsize=8)
-            else:
-                marks += [[(x0 + t, 0), (x0 + t, -0.02)] for t in ua_ticks]
-                for t, a in zip(ua_ticks, a_ticks):
-                    ax.text(x0 + t, -0.035, f"{a:g}", transform=xt, ha="center", va="top", fontsize=7)
-                ax.text(x0 + 0.5, -0.13, "α [deg]", transform=xt, ha="center", va="top", fontsize=8)
-        for k in range(n - 1):                           # white gaps between tiles, over the y grid
-            ax.axvspan(k * (1 + gx) + 1, (k + 1) * (1 + gx), color="white", lw=0, zorder=0.8)
-        ax.add_collection(LineCollection(vgrid, colors="0.85", linewidths=0.6, transform=xt, zorder=0.7))
-        ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="k", linewidths=0.8, transform=xt,
-                                          zorder=2.5))
-        if marks:
-            ax.add_collection(LineCollection(marks, colors="k", linewidths=0.8, transform=xt, clip_on=False))
-        for spine in ax.spines.values():
-            spine.set_visible(False)
-        ax.set_xlim(0, n + (n - 1) * gx)
-        ax.set_xticks([])
-        ax.yaxis.set_major_locator(MaxNLocator(5))
-        ax.yaxis.grid(True, color="0.85", lw=0.6)
-        ax.set_axisbelow(True)
-        ax.tick_params(axis="y", labelsize=7)
-        ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
+    return _Stations(pb, alpha, eta, idx, u, a_ticks, ua_ticks, seen, truth_d, conf)
+
+
+def _draw_row(ax: Axes, st: _Stations, row: int, letter: str) -> None:
+    """Draw one row's tiles (lift: ``letter`` "cl", drag: "cd"), framed, with their labels.
+
+    The top row titles each tile with its η and the α seen; the bottom row writes the α values
+    under each tile.
+
+    Parameters
+    ----------
+    ax : Axes
+        The row's axes.
+    st : _Stations
+    row : int
+        0 (lift) or 1 (drag).
+    letter : {"cl", "cd"}
+    """
+    xt = ax.get_xaxis_transform()                    # x in data, y in axes fraction
+    frames, vgrid, marks = [], [], []
+    for col, j in enumerate(st.idx):
+        x0 = col * (1 + GAP)
+        _draw_curves(ax, st, row, col, letter)
+        s = st.seen[col]
+        _shade_seen(ax, st, x0, s, col == 0)
+        frames.append(Rectangle((x0, 0), 1, 1))
+        vgrid += [[(x0 + t, 0), (x0 + t, 1)] for t in st.ua_ticks]
         if row == 0:
-            ax.legend(fontsize=6, loc="lower right", bbox_to_anchor=(1.0, 0.02), bbox_transform=xt)
-    settle_labels(fig)
-    return fig
+            ax.text(x0 + 0.5, 1.02, f"η = {st.eta[j]:.2f}" + (f"; α seen {s.min():.0f}…{s.max():.0f}°" if s.size
+                                                              else "; no α seen"),
+                    transform=xt, ha="center", va="bottom", fontsize=8)
+        else:
+            marks += [[(x0 + t, 0), (x0 + t, -0.02)] for t in st.ua_ticks]
+            for t, a in zip(st.ua_ticks, st.a_ticks):
+                ax.text(x0 + t, -0.035, f"{a:g}", transform=xt, ha="center", va="top", fontsize=7)
+            ax.text(x0 + 0.5, -0.13, "α [deg]", transform=xt, ha="center", va="top", fontsize=8)
+    n = st.idx.size
+    for k in range(n - 1):                           # white gaps between tiles, over the y grid
+        ax.axvspan(k * (1 + GAP) + 1, (k + 1) * (1 + GAP), color="white", lw=0, zorder=0.8)
+    ax.add_collection(LineCollection(vgrid, colors="0.85", linewidths=0.6, transform=xt, zorder=0.7))
+    ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="k", linewidths=0.8, transform=xt,
+                                      zorder=2.5))
+    if marks:
+        ax.add_collection(LineCollection(marks, colors="k", linewidths=0.8, transform=xt, clip_on=False))
+
+
+def _draw_curves(ax: Axes, st: _Stations, row: int, col: int, letter: str) -> None:
+    """Nominal, band (shaded again where the prior sets it), calibrated and any known truth of one tile.
+
+    Parameters
+    ----------
+    ax : Axes
+    st : _Stations
+    row, col : int
+        Row (0 lift, 1 drag) and tile of the station drawn.
+    letter : {"cl", "cd"}
+    """
+    pb, j, first = st.bands, st.idx[col], col == 0
+    x = col * (1 + GAP) + st.u
+    base = np.asarray(pb[f"{letter}0"])[j] if f"{letter}0" in pb else np.zeros_like(st.alpha)
+    d = np.asarray(pb[f"d{letter}"])[j]
+    if f"d{letter}_lower" in pb:                 # the drag band bounded by C_D,min
+        lo, hi = np.asarray(pb[f"d{letter}_lower"])[j], np.asarray(pb[f"d{letter}_upper"])[j]
+    else:                                        # a result saved before the bounded bands
+        hw = np.asarray(pb[f"d{letter}_half_width"])[j]
+        lo, hi = d - hw, d + hw
+    ax.plot(x, base, color="0.5", lw=1, label="nominal" if first else "_nolegend_", gid=f"nominal:{row}:{col}")
+    ax.fill_between(x, base + lo, base + hi, color="C0", alpha=0.25, lw=0, gid=f"band:{row}:{col}",
+                    label=f"{100 * st.confidence:.0f}% band" if first else "_nolegend_")
+    frac_key = f"d{letter}_prior_fraction"
+    if frac_key in pb:
+        prior_dom = np.asarray(pb[frac_key])[j] > 0.5
+        if prior_dom.any():
+            ax.fill_between(x, base + lo, base + hi, where=prior_dom, color="C1", alpha=0.25, lw=0,
+                            label="band set by the prior (data say little)" if first else "_nolegend_")
+    ax.plot(x, base + d, color="C0", lw=1.2, label="calibrated" if first else "_nolegend_",
+            gid=f"calibrated:{row}:{col}")
+    if st.truth is not None:
+        ax.plot(x, base + st.truth[row][col], "--", color="k", lw=1, label="truth" if first else "_nolegend_",
+                gid=f"truth:{row}:{col}")
+
+
+def _shade_seen(ax: Axes, st: _Stations, x0: float, seen: np.ndarray, first: bool) -> None:
+    """Shade the part of the tile at ``x0`` [tile units] whose α [deg] the data reach (``seen``)."""
+    alpha = st.alpha
+    if seen.size:
+        lo, hi = max(seen.min(), alpha[0]), min(seen.max(), alpha[-1])
+        if lo < hi:
+            ulo, uhi = (np.array([lo, hi]) - alpha[0]) / (alpha[-1] - alpha[0])
+            ax.axvspan(x0 + ulo, x0 + uhi, color="C2", alpha=0.08, lw=0,
+                       label="α seen" if first else "_nolegend_")
+
+
+def _style_row(ax: Axes, n: int, row: int, letter: str) -> None:
+    """Axis limits, y grid and label of a row of ``n`` tiles; the legend in the top row."""
+    xt = ax.get_xaxis_transform()
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    ax.set_xlim(0, n + (n - 1) * GAP)
+    ax.set_xticks([])
+    ax.yaxis.set_major_locator(MaxNLocator(5))
+    ax.yaxis.grid(True, color="0.85", lw=0.6)
+    ax.set_axisbelow(True)
+    ax.tick_params(axis="y", labelsize=7)
+    ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
+    if row == 0:
+        ax.legend(fontsize=6, loc="lower right", bbox_to_anchor=(1.0, 0.02), bbox_transform=xt)
