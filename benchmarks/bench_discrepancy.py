@@ -1,6 +1,6 @@
-"""How often the discrepancy workflow names the right effect, over noise seeds (statistics).
+"""How often the diagnosis names the right effect, over noise seeds (statistics).
 
-For every effect of the library (truth values of ``tests/test_discrepancy.py``) and for a
+For every effect of the library (truth values of ``tests/test_diagnosis.py``) and for a
 control without effect: NREL 5-MW, 36 operating points (λ 3–11 × pitch −1…8 deg), power,
 thrust, root flap moment and the normal force per length at r/R = 0.95, 1 % noise; seeds
 9500 + k (none used by the tests). Figures: the fraction named right (``none`` for the
@@ -21,8 +21,8 @@ from collections import Counter
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(HERE), "tests"))
 
-from test_discrepancy import TRUTH, campaign, hidden  # noqa: E402
-from test_discrepancy import run as diagnose_data  # noqa: E402
+from test_diagnosis import TRUTH, campaign, hidden  # noqa: E402
+from test_diagnosis import run as diagnose_data  # noqa: E402
 
 from calib.rotor.library import load_rotor  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""The discrepancy workflow on the bundled FMUs (issue 25, item 5): the same rules, an unsteady truth.
+"""The diagnosis on the bundled FMUs (issue 25, item 5): the same rules, an unsteady truth.
 
 Truth: the bundled rotor FMU (variants A, FMI 2.0, SI, and B, FMI 3.0, kW/kN and rad/s:
 each read through its own mapping) on the NREL 5-MW with the periodic physics on (tower

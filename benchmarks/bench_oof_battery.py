@@ -1,4 +1,4 @@
-"""Out-of-family battery of the discrepancy workflow (issue 25, item 1): truth from WISDEM's CCBlade.
+"""Out-of-family battery of the diagnosis (issue 25, item 1): truth from WISDEM's CCBlade.
 
 Data from an independent BEM code (CCBlade, in ``.bench-venv``) on calib's embedded NREL 5-MW
 with its own polars, 63 operating points, power, thrust, torque and the flap moment about the

@@ -1,6 +1,6 @@
 """How the Phase VI conclusions depend on the noise model (real data, ``workflows/phase_vi.toml``).
 
-For each noise model: what the discrepancy workflow names from all channels (with its
+For each noise model: what the diagnosis names from all channels (with its
 likelihood-ratio statistic Λ), and the leave-one-wind-speed-out validation of the hub-load
 calibration with the named effect (torque: mean |error| calibrated vs nominal at the
 held-out wind speeds, held-out measurements inside the 95 % prediction intervals). Noise
@@ -118,7 +118,7 @@ def markdown(wf: dict, noise: dict) -> str:
             cells.append(f"{v['mean_abs_error_calibrated']:.0f} / {v['mean_abs_error_nominal']:.0f}, "
                          f"{v['inside']} of {v['folds']}")
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Sensitivity to the noise model (the discrepancy workflow on all channels, then the hub-load "
+    lines += ["", "Sensitivity to the noise model (the diagnosis on all channels, then the hub-load "
                   "calibration with the named effect, one wind speed left out at a time):", "",
               "| noise model | named | Λ (first round) | held-out torque: mean \\|error\\| calibrated / nominal "
               "[N m] | inside 95 % |", "|---|---|---|---|---|"]

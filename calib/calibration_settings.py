@@ -122,14 +122,14 @@ class CalibrationSettings:
         Estimate the correction field's prior amplitude from the data and say whether the stated
         prior is consistent with it (:mod:`calib.prior_check`; about six model Jacobians to the MAP
         under the stated prior, and one on the fine grid). False skips it (the report says so);
-        the refits of a leave-out validation and the candidate fits of the discrepancy workflow
+        the refits of a leave-out validation and the candidate fits of the diagnosis
         skip it, as their results serve predictions and comparisons only.
     tightening : bool
         Say, for each parameter that is not a correction node, which measurements would tighten its
         σ most (another pitch line, points further into stall or towards runaway, a channel not
         measured; :mod:`calib.tightening`): one model Jacobian per candidate group on the native BEM,
         skipped for an FMU. The refits of a leave-out validation and the candidate fits of the
-        discrepancy workflow skip it.
+        diagnosis skip it.
     identified_ratio : float
         Verdict "identified" when posterior σ <= this × prior σ.
     confounded_share : float

@@ -22,7 +22,7 @@ def _demo(args) -> int:
         if args.rotor == "nrel5mw" and not args.no_diagnosis:
             from calib.diagnosis.command import run_diagnose
             campaign = Path(__file__).resolve().parent / "data" / "demo_campaign" / "nrel5mw_campaign.csv"
-            log.info(f"[calib demo] discrepancy workflow on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
+            log.info(f"[calib demo] diagnosis on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
                      f"effect in the data)")
             diag = run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
                                 printer=lambda s: log.info(s.replace("[calib diagnose]", "[calib demo]")))
@@ -81,11 +81,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="C_P surface, power curve and a diagnosis of an embedded campaign",
                        description="The embedded default job: C_P(lambda, beta) surface and power curve of an "
-                                   "embedded rotor, then (NREL 5-MW) the discrepancy workflow on an embedded test "
+                                   "embedded rotor, then (NREL 5-MW) the diagnosis on an embedded test "
                                    "campaign with a hidden effect; figures and report.html in the output folder.")
     p.add_argument("--out", default="demo_output", help="output folder (default: demo_output)")
     p.add_argument("--rotor", default="nrel5mw", help="embedded rotor name (default: nrel5mw)")
-    p.add_argument("--no-diagnosis", action="store_true", help="skip the discrepancy workflow on the embedded "
+    p.add_argument("--no-diagnosis", action="store_true", help="skip the diagnosis on the embedded "
                    "NREL 5-MW campaign (run by default with the nrel5mw rotor)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("-v", "--verbose", action="store_true", help="also print debug lines (the log file "
@@ -111,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--confidence", type=float, default=0.95, help="two-sided interval level (default 0.95)")
     p.set_defaults(func=_predict)
     p = sub.add_parser("diagnose", help="find, name and add the effect the model misses",
-                       description="The discrepancy workflow: find where the nominal model and the measurements "
+                       description="The diagnosis: find where the nominal model and the measurements "
                                    "disagree, name the missing physical effect (rotational augmentation, erosion, "
                                    "pitch offset, Reynolds number, tip loss, tunnel blockage, wind-speed scale) by "
                                    "likelihood ratio and BIC, add it, recalibrate the polars on top and show the gap "

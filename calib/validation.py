@@ -306,12 +306,12 @@ def campaign_figure(setup, measurements: Measurements, grid, outcomes, diag, val
 
 
 def section_html(diag, validations: dict) -> str:
-    """HTML of the discrepancy workflow's verdict and the leave-one-out tables."""
+    """HTML of the diagnosis's verdict and the leave-one-out tables."""
     import html
 
     parts = []
     if diag is not None:
-        parts.append("<h2>Discrepancy workflow</h2><p>" + html.escape(diagnosis_sentence(diag))
+        parts.append("<h2>Diagnosis</h2><p>" + html.escape(diagnosis_sentence(diag))
                      + ' <a href="diagnosis/report.html">Full diagnosis report</a>.</p>')
     for name, val in validations.items():
         kind = "Leave-one-out validation" if val.split == "one" else "Validation by extrapolation (band split)"

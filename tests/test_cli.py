@@ -17,7 +17,7 @@ def test_demo_writes_figures_and_summary(tmp_path, capsys):
     assert 6.5 < summary["tsr_at_cp_max"] < 8.5
     assert summary["surface_failed"] == 0 and summary["power_curve_failed"] == 0
     assert 10.5 < summary["rated_wind_speed"] < 12.5
-    # the discrepancy workflow on the embedded campaign names its hidden effect (stall delay)
+    # the diagnosis on the embedded campaign names its hidden effect (stall delay)
     diagnosis = json.loads((tmp_path / "diagnosis" / "diagnosis.json").read_text())
     assert diagnosis["effect"] == "rotational_augmentation"
     assert diagnosis["before"]["chi2_per_dof"] >= 5 and diagnosis["after"]["chi2_per_dof"] <= 1.5

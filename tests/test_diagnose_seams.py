@@ -17,7 +17,7 @@ from calib.diagnosis.core import CandidateFit
 from calib.effects import EFFECTS, make_effect
 from calib.errors import InputError, ModelError
 
-from test_discrepancy import campaign, hidden
+from test_diagnosis import campaign, hidden
 
 # in family (the library's own effects on its own BEM): no model-form tolerance
 CONFIG = ('[model]\nuse_tilt = false\n[grid]\nalpha_nodes_deg = "auto"\neta_nodes = [0.3, 0.6, 1.0]\n'

@@ -1,10 +1,10 @@
 """``lift_offset``: derivatives, no effect at nominal, acts in attached flow only; and in the
-discrepancy workflow, a pitch offset and a uniform lift shift are ``ambiguous`` on data that
+diagnosis, a pitch offset and a uniform lift shift are ``ambiguous`` on data that
 stay in attached flow and told apart on data that reach stall."""
 
 import numpy as np
 
-from test_discrepancy import hidden, run
+from test_diagnosis import hidden, run
 from test_effects_chain import check_effect_derivatives, check_nominal_is_no_effect, relative_change, tsr_sweep
 
 from calib.rotor.library import load_rotor

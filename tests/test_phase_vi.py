@@ -1,6 +1,6 @@
 """Real data: the NREL Phase VI workflow (``workflows/phase_vi.toml``) on the measured sequence H.
 
-One run of the workflow (discrepancy workflow, two calibrations, leave-one-wind-speed-out
+One run of the workflow (diagnosis, two calibrations, leave-one-wind-speed-out
 validation of each, figures, report) is shared by the tests; the assertions are the
 acceptance of the real-data issue: the physics expects rotational augmentation (stall
 delay) inboard; the calibrated model predicts the torque at held-out wind speeds better
@@ -57,7 +57,7 @@ def test_the_discrepancy_workflow_names_stall_delay(run):
     for stage in (HUB, TAPS):
         res = load_result(out / stage)
         assert [e["name"] for e in res.model_spec["effects"]] == ["rotational_augmentation"]
-        assert "named rotational_augmentation" in res.checks["discrepancy workflow"]
+        assert "named rotational_augmentation" in res.checks["diagnosis"]
         assert "stall_delay_strength" in [q["name"] for q in res.parameters]
 
 

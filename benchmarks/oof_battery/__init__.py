@@ -1,4 +1,4 @@
-"""Out-of-family battery of calib's discrepancy workflow (issue 25, item 1).
+"""Out-of-family battery of calib's diagnosis (issue 25, item 1).
 
 calib's diagnosis (``calib diagnose``) was validated in family only: data from its own BEM
 and its own effect models. This battery makes the data with another code and other forms of

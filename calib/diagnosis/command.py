@@ -56,7 +56,7 @@ def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
 
 def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
                  resume: bool = False, history: bool = True, force: bool = False, strict_units: bool = False):
-    """Run the discrepancy workflow from the command line's arguments; returns the Diagnosis.
+    """Run the diagnosis from the command line's arguments; returns the Diagnosis.
 
     Parameters
     ----------

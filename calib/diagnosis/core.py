@@ -1,5 +1,5 @@
-"""The discrepancy workflow: find where model and measurements disagree, name the missing
-effect, add it, show the gap shrink (docs/theory.md, Discrepancy workflow).
+"""The diagnosis: find where model and measurements disagree, name the missing
+effect, add it, show the gap shrink (docs/theory.md, Diagnosis).
 
 This module runs the steps (:func:`diagnose`) and the naming rounds of step 3. Beside it live
 the settings (:mod:`calib.diagnosis.settings`), the result (:mod:`calib.diagnosis.result`), the
@@ -100,7 +100,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
              executor=None, progress: Callable[[str], None] | None = None, rotor_source: dict | None = None,
              wrap: Callable | None = None, fit_progress: Callable[[int, int], None] | None = None,
              family=None, on_iteration: Callable[[dict], None] | None = None) -> Diagnosis:
-    """Run the discrepancy workflow on the native BEM (see the module notes).
+    """Run the diagnosis on the native BEM (see the module notes).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Figures of merit of the discrepancy workflow: the gap between measurements and a model
+"""Figures of merit of the diagnosis: the gap between measurements and a model
 (:func:`gap`: χ², χ²/dof, p-value, per-channel RMS), where the nominal model disagrees
 (:func:`find`: whitened residuals and their trends) and how much a candidate effect changes
 the outputs against the model-form tolerance (:func:`effect_size`).

@@ -1,4 +1,4 @@
-"""The discrepancy workflow on an FMU (:func:`calib.diagnosis.core.diagnose` with an :class:`FmuFamily`).
+"""The diagnosis on an FMU (:func:`calib.diagnosis.core.diagnose` with an :class:`FmuFamily`).
 
 A vendor's FMU offers no effect library: what it lets the engineer change are the scalar
 parameters its mapping file maps (``[parameters]``: pitch offsets, a stall-delay strength,

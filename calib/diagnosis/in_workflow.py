@@ -99,7 +99,7 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
 
 
 def diagnosis_sentence(diag) -> str:
-    """One line for a result's checks: what the discrepancy workflow named, with its evidence."""
+    """One line for a result's checks: what the diagnosis named, with its evidence."""
     failed = f"; stopped early: {diag.failure}" if diag.failure else ""
     if not diag.rounds:
         return f"no candidate could be fitted; named {diag.effect}{failed}"

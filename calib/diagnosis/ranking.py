@@ -1,5 +1,5 @@
 """The statistics that rank candidate effects against the model without them (docs/theory.md,
-Discrepancy workflow): the likelihood ratio and its p-value (:func:`likelihood_ratio`), the BIC
+Diagnosis): the likelihood ratio and its p-value (:func:`likelihood_ratio`), the BIC
 weights (:func:`set_bic_weights`) and the agreement of a candidate's pattern with the localized
 correction (:func:`pattern_agreement`).
 

@@ -1,4 +1,4 @@
-"""What measurement would tell two candidate effects apart, when the data cannot (docs/theory.md, Discrepancy workflow).
+"""What measurement would tell two candidate effects apart, when the data cannot (docs/theory.md, Diagnosis).
 
 When two candidates of different physics explain a campaign about equally (an ``ambiguous``
 verdict of :mod:`calib.diagnosis.core`), both fitted models agree where the campaign measured.

@@ -1,4 +1,4 @@
-"""Settings of the discrepancy workflow (:class:`DiagnosisSettings`): which candidate effects
+"""Settings of the diagnosis (:class:`DiagnosisSettings`): which candidate effects
 are tried, how many may be named, the significance and ambiguity thresholds, and the
 model-form tolerance (:data:`MODEL_FORM_TOLERANCE`) the naming step allows the nominal model.
 """

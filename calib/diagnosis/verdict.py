@@ -1,4 +1,4 @@
-"""The verdict of a naming round (docs/theory.md, Discrepancy workflow): which candidate effect
+"""The verdict of a naming round (docs/theory.md, Diagnosis): which candidate effect
 the round names, or ``none``, or ``ambiguous`` with the measurement that would tell the two
 rivals apart (:func:`judge_round`), and the reason in words.
 

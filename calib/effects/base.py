@@ -11,7 +11,7 @@ An effect declares
 - ``apply(theta, state, ctx)``: the stage's state modified for parameter values ``theta``
   (one per parameter), written with :mod:`calib.bem.dual` so that the same code gives
   values inside the root search and exact derivatives in the solver's dual pass;
-- ``fingerprint``: how the effect shows in measured rotor loads (docs/theory.md, Discrepancy workflow), for reports;
+- ``fingerprint``: how the effect shows in measured rotor loads (docs/theory.md, Diagnosis), for reports;
 - ``n_probes``, ``reads_thrust``, ``uses_flow``, ``order``: what the effect chain must provide (defaults:
   none of it), declared as attributes so that the chain never probes an effect.
 

@@ -2,9 +2,11 @@
 
 - :mod:`calib.measurements.data`    :class:`Measurements`, names and units, noise helpers, synthetic data;
 - :mod:`calib.measurements.reader`  :func:`read_measurements`: CSV and OpenFAST text output, with the
-  checks and notes its docstring lists.
+  checks and notes its docstring lists;
+- :mod:`calib.measurements.table`   a file split into header, units row and data lines;
+- :mod:`calib.measurements.cells`   cells, headers and units: decoding, delimiters, numbers.
 
-Everything public of both is importable from here.
+Everything public of data and reader is importable from here.
 """
 
 from calib.measurements.data import (CONDITION_DEFAULTS, MISSING_CELLS, REQUIRED_CONDITIONS, UNIT_ALIASES, UNITS,

@@ -77,10 +77,10 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
     pb = result.polar_bands
     if not pb:
         return None
-    alpha, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
+    alpha_deg, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
     idx = station_columns(eta, max_stations)
-    fig, axes = _polar_canvas(result, alpha, idx.size, truth is not None)
-    stations = _stations(result, alpha, eta, idx, truth)
+    fig, axes = _polar_canvas(result, alpha_deg, idx.size, truth is not None)
+    stations = _stations(result, alpha_deg, eta, idx, truth)
     for row, letter in enumerate(("cl", "cd")):
         _draw_row(axes[row, 0], stations, row, letter)
         _style_row(axes[row, 0], idx.size, row, letter)
@@ -88,13 +88,13 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
     return fig
 
 
-def _polar_canvas(result: CalibrationResult, alpha: np.ndarray, n: int, with_truth: bool):
+def _polar_canvas(result: CalibrationResult, alpha_deg: np.ndarray, n: int, with_truth: bool):
     """The titled figure with one axes per row (lift, drag), each ``n`` tiles wide.
 
     Parameters
     ----------
     result : CalibrationResult
-    alpha : ndarray
+    alpha_deg : ndarray
         α of the bands [deg].
     n : int
         Stations drawn.
@@ -110,7 +110,8 @@ def _polar_canvas(result: CalibrationResult, alpha: np.ndarray, n: int, with_tru
     row_w = n * tile_w + (n - 1) * TILE_GAP
     what = "corrected polars" + ("" if "cl0" in result.polar_bands else " (corrections only)")
     width = MARGINS.left + row_w + MARGINS.right
-    title = wrap_title(f"{result.name}: {what} on the α range of the correction nodes ({alpha[0]:g}…{alpha[-1]:g}°)"
+    span = f"{alpha_deg[0]:g}…{alpha_deg[-1]:g}°"
+    title = wrap_title(f"{result.name}: {what} on the α range of the correction nodes ({span})"
                        + ("; dashed: known truth" if with_truth else ""), width, 9)
     fig, axes = panel_grid(2, 1, (row_w, tile_h), replace(MARGINS, top=title_height(title, 9) + 0.45))
     fig.suptitle(title, fontsize=9, y=1 - 0.08 / fig.get_size_inches()[1])
@@ -125,14 +126,14 @@ class _Stations:
     ----------
     bands : dict
         ``result.polar_bands``.
-    alpha : ndarray
+    alpha_deg : ndarray
         α of the bands [deg].
     eta : ndarray
         η of every band station [-].
     idx : ndarray of int
         The stations drawn, as indices into ``eta``.
     u : ndarray
-        ``alpha`` mapped onto [0, 1] (x in a tile).
+        ``alpha_deg`` mapped onto [0, 1] (x in a tile).
     a_ticks, ua_ticks : ndarray
         Round α values [deg] and their x in a tile [0, 1].
     seen : list of ndarray
@@ -144,7 +145,7 @@ class _Stations:
     """
 
     bands: dict
-    alpha: np.ndarray
+    alpha_deg: np.ndarray
     eta: np.ndarray
     idx: np.ndarray
     u: np.ndarray
@@ -155,20 +156,20 @@ class _Stations:
     confidence: float
 
 
-def _stations(result: CalibrationResult, alpha: np.ndarray, eta: np.ndarray, idx: np.ndarray,
+def _stations(result: CalibrationResult, alpha_deg: np.ndarray, eta: np.ndarray, idx: np.ndarray,
               truth: TruthField | None) -> _Stations:
     """The shared quantities of :class:`_Stations` for the drawn stations ``idx``."""
     pb = result.polar_bands
     conf = float(pb.get("confidence", 0.95))
     truth_d = None
     if truth is not None:
-        A, E = np.meshgrid(alpha, eta[idx])
+        A, E = np.meshgrid(alpha_deg, eta[idx])
         truth_d = [np.broadcast_to(np.asarray(t, float), A.shape) for t in truth(A, E)]
-    u = (alpha - alpha[0]) / (alpha[-1] - alpha[0])
-    a_ticks = alpha_ticks(alpha[0], alpha[-1])
-    ua_ticks = (a_ticks - alpha[0]) / (alpha[-1] - alpha[0])
+    u = (alpha_deg - alpha_deg[0]) / (alpha_deg[-1] - alpha_deg[0])
+    a_ticks = alpha_ticks(alpha_deg[0], alpha_deg[-1])
+    ua_ticks = (a_ticks - alpha_deg[0]) / (alpha_deg[-1] - alpha_deg[0])
     seen = [_seen_near(result, eta, j) for j in idx]
-    return _Stations(pb, alpha, eta, idx, u, a_ticks, ua_ticks, seen, truth_d, conf)
+    return _Stations(pb, alpha_deg, eta, idx, u, a_ticks, ua_ticks, seen, truth_d, conf)
 
 
 def _draw_row(ax: Axes, st: _Stations, row: int, letter: str) -> None:
@@ -227,7 +228,7 @@ def _draw_curves(ax: Axes, st: _Stations, row: int, col: int, letter: str) -> No
     """
     pb, j, first = st.bands, st.idx[col], col == 0
     x = col * (1 + GAP) + st.u
-    base = np.asarray(pb[f"{letter}0"])[j] if f"{letter}0" in pb else np.zeros_like(st.alpha)
+    base = np.asarray(pb[f"{letter}0"])[j] if f"{letter}0" in pb else np.zeros_like(st.alpha_deg)
     d = np.asarray(pb[f"d{letter}"])[j]
     if f"d{letter}_lower" in pb:                 # the drag band bounded by C_D,min
         lo, hi = np.asarray(pb[f"d{letter}_lower"])[j], np.asarray(pb[f"d{letter}_upper"])[j]
@@ -252,11 +253,11 @@ def _draw_curves(ax: Axes, st: _Stations, row: int, col: int, letter: str) -> No
 
 def _shade_seen(ax: Axes, st: _Stations, x0: float, seen: np.ndarray, first: bool) -> None:
     """Shade the part of the tile at ``x0`` [tile units] whose α [deg] the data reach (``seen``)."""
-    alpha = st.alpha
+    alpha_deg = st.alpha_deg
     if seen.size:
-        lo, hi = max(seen.min(), alpha[0]), min(seen.max(), alpha[-1])
+        lo, hi = max(seen.min(), alpha_deg[0]), min(seen.max(), alpha_deg[-1])
         if lo < hi:
-            ulo, uhi = (np.array([lo, hi]) - alpha[0]) / (alpha[-1] - alpha[0])
+            ulo, uhi = (np.array([lo, hi]) - alpha_deg[0]) / (alpha_deg[-1] - alpha_deg[0])
             ax.axvspan(x0 + ulo, x0 + uhi, color="C2", alpha=0.08, lw=0,
                        label="α seen" if first else "_nolegend_")
 

@@ -101,7 +101,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
     chunk = max(int(executor.workers if executor is not None else 1), 1) if setup.fmu_table is not None else None
     run = _Run(cfg, setup, out, executor, hist, echo, chunk)
     run.measurements(progress, force, strict)
-    if setup.diagnosis is not None:   # the discrepancy workflow first; its named effects join every stage
+    if setup.diagnosis is not None:   # the diagnosis first; its named effects join every stage
         run.effects, run.diag = in_workflow.run_diagnosis(setup, run.meas, run.grid, out, executor, echo, hist)
     outcomes = [run.stage(k, stage) for k, stage in enumerate(cfg["stages"])]
     intro = cfg.get("description", "")
@@ -234,7 +234,7 @@ class _Run:
         if self.truth_p is not None:
             res.checks.update(truth_checks(model, res, cfg["truth"]))
         if self.diag is not None:
-            res.checks["discrepancy workflow"] = in_workflow.diagnosis_sentence(self.diag)
+            res.checks["diagnosis"] = in_workflow.diagnosis_sentence(self.diag)
         if setup.validation is not None:
             kind = "leave-one-out" if setup.validation.split == "one" else "band split"
             val = validation.leave_one_out(

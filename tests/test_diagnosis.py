@@ -1,4 +1,4 @@
-"""The discrepancy workflow on data with hidden effects (seeds 9000+, used nowhere else).
+"""The diagnosis on data with hidden effects (seeds 9000+, used nowhere else).
 
 The default suite runs the control (no effect -> ``none``), the two confusable pairs (named
 ``ambiguous`` when the data cannot separate them, the right one when they can) and the CLI;
