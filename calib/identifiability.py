@@ -408,8 +408,10 @@ def confounding(F: np.ndarray, prior_std: np.ndarray, parameters: Sequence[Param
             sub = np.concatenate([[j], field_idx])
             Cs = np.linalg.inv(A[np.ix_(sub, sub)])
             entry["shared_with_field"] = 1.0 - 1.0 / float(Cs[0, 0] * A[j, j])
-            rho = C[j, field_idx] / np.sqrt(C[j, j] * np.diag(C)[field_idx])
-            strong = np.abs(rho) >= correlation_fraction * np.max(np.abs(rho))
+            # an ill-conditioned A can give a variance ≤ 0 by round-off: no correlation stated there
+            var = C[j, j] * np.diag(C)[field_idx]
+            rho = np.where(var > 0, C[j, field_idx] / np.sqrt(np.where(var > 0, var, 1.0)), 0.0)
+            strong = np.abs(rho) >= correlation_fraction * np.max(np.abs(rho)) if np.any(rho) else rho != 0
             parts = []
             for kind, label in ((ParameterKind.LIFT_CORRECTION, "lift"), (ParameterKind.DRAG_CORRECTION, "drag")):
                 sel = [int(field_idx[k]) for k in np.flatnonzero(strong) if parameters[field_idx[k]].kind == kind]

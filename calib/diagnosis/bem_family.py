@@ -26,7 +26,7 @@ def _variants(name: str, options: dict) -> list:
     options fix it): the model forms of one physical effect compete among themselves, and the
     best one names the effect."""
     cls = EFFECTS[name]
-    choices = getattr(cls, "CHOICES", {}).get("variant")
+    choices = cls.CHOICES.get("variant")
     if not choices or "variant" in options:
         return [(name, make_effect(name, **options))]
     return [(f"{name}:{v}", make_effect(name, **{**options, "variant": v})) for v in choices]
@@ -110,4 +110,4 @@ class BemFamily:
         return ev.values, [c.unit for c in model.channels]
 
     def fingerprint(self, name: str) -> str:
-        return getattr(EFFECTS.get(name), "fingerprint", "")
+        return EFFECTS[name].fingerprint if name in EFFECTS else ""

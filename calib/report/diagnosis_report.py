@@ -160,9 +160,9 @@ def _candidate_rows(d) -> list[tuple]:
         for f in rnd["candidates"]:
             name = html.escape(f.name).replace(":", ":<wbr>")        # may break after "effect:"
             status = f.status or "?"
-            if getattr(f, "start", ""):
+            if f.start:
                 status += f"; {f.start}"
-            if getattr(f, "at_bound", None):
+            if f.at_bound:
                 status += f"; at bound: {', '.join(f.at_bound)}"
             rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
                          f"{f.lr_statistic:.4g}", f"{p_text(f.p_value)}", "yes" if f.significant else "no",
@@ -219,7 +219,7 @@ def _summary_html(d) -> list[str]:
     """The page's title, the decision in words, an early stop, and χ²/dof through the steps."""
     body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>",
             f"<p class='decision'><b>{html.escape(decision_words(d))}</b></p>"]
-    failure = getattr(d, "failure", "")
+    failure = d.failure
     if failure:
         body.append(f'<p class="failed"><b>Stopped early:</b> {html.escape(failure)}. What the rounds before '
                     "found is reported below.</p>")
