@@ -237,7 +237,7 @@ def _bem_options(mcfg: dict, rsrc, notes: list) -> tuple[dict, dict]:
     kwargs = field_values(BemSettings, mcfg)      # (the keys are checked by the workflow's schema)
     origins = {}
     for key, attr in FILE_SETUP.items() if rsrc is not None else ():
-        file_value = getattr(rsrc, attr, None)
+        file_value = getattr(rsrc, attr)
         if key not in kwargs and file_value is not None:
             kwargs[key] = file_value
             origins[key] = "rotor files"
@@ -248,14 +248,13 @@ def _bem_options(mcfg: dict, rsrc, notes: list) -> tuple[dict, dict]:
 def _fluid(cfg: dict, rsrc, src: str, origins: dict) -> tuple[float, float]:
     """The fluid's density [kg/m³] and kinematic viscosity [m²/s]: from ``[fluid]``, else the rotor
     files, else air at 15 °C; where each came from is added to ``origins``."""
-    fluid_table = dict(cfg.get("fluid", {}))
-    for key, attr in (("density", "air_density"), ("kinematic_viscosity", "kinematic_viscosity")):
-        origins[key] = f"[fluid] {key}" if key in fluid_table else "rotor files" \
-            if getattr(rsrc, attr, None) else "default (air at 15 °C)"
     fluid = dict(cfg.get("fluid", {}))
-    density = float(fluid.get("density", getattr(rsrc, "air_density", None) or AIR["density"]))
-    viscosity = float(fluid.get("kinematic_viscosity", getattr(rsrc, "kinematic_viscosity", None)
-                                or AIR["kinematic_viscosity"]))
+    stated = {"density": None if rsrc is None else rsrc.air_density,
+              "kinematic_viscosity": None if rsrc is None else rsrc.kinematic_viscosity}
+    for key, value in stated.items():
+        origins[key] = f"[fluid] {key}" if key in fluid else "rotor files" if value else "default (air at 15 °C)"
+    density = float(fluid.get("density", stated["density"] or AIR["density"]))
+    viscosity = float(fluid.get("kinematic_viscosity", stated["kinematic_viscosity"] or AIR["kinematic_viscosity"]))
     for key, value in (("density", density), ("kinematic_viscosity", viscosity)):
         if not value > 0:
             raise InputError(f"must be > 0, got {value!r}", src, field=f"fluid.{key}")
