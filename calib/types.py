@@ -106,6 +106,8 @@ class Channel:
 CONDITION_FIELDS = ("wind_speed", "rotor_speed", "pitch", "air_density", "yaw")
 STANDARD_AIR_DENSITY = 1.225
 """Air density of the ISA at sea level, 15 °C [kg/m^3]: the default of every condition table."""
+CONDITION_DEFAULTS = {"air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
+"""The operating conditions a table may leave out, and their values then [kg/m^3], [deg]."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,10 +26,11 @@ from calib.fmu import plan as fp
 from calib.fmu.archive import FmuInputError
 from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, signal_of  # noqa: F401 (re-exported)
 from calib.fmu.mapping import Mapping
-from calib.types import CONDITION_FIELDS, STANDARD_AIR_DENSITY, Parameter
+from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, Parameter
 
-#: operating conditions an FMU without that input must see at this value
-CONDITION_DEFAULTS = {"pitch": 0.0, "air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
+#: operating conditions an FMU without that input must see at this value: a table's defaults, and zero
+#: pitch (an FMU without a pitch input runs with its blades at zero pitch)
+IMPLICIT_CONDITIONS = {**CONDITION_DEFAULTS, "pitch": 0.0}
 
 
 class Variables:
@@ -183,7 +184,7 @@ class InputBinding:
             if name in m.inputs:
                 continue
             values = getattr(conditions, name)
-            default = CONDITION_DEFAULTS.get(name)
+            default = IMPLICIT_CONDITIONS.get(name)
             if default is None or np.any(values != default):
                 raise InputError(f"the operating conditions set {name} (e.g. {values[values != default][0]:g}) but "
                                  f"the mapping maps no input for it; add inputs.{name} or drop it from the data",

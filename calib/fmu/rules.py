@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from calib.config import NUM, check_table
+from calib.config import NUM, settings_from_table
 from calib.errors import InputError
 
 _STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int, True),
@@ -78,8 +78,7 @@ class JacobianRule:
 
 def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
     """The validated ``[steady]`` table ``s`` (``where``: its name in messages; ``source``: the file)."""
-    check_table(s, _STEADY_KEYS, where, source, table_label=f"'{where}'")
-    rule = SteadyRule(**{k: v for k, v in s.items()})
+    rule = settings_from_table(SteadyRule, s, where, source, _STEADY_KEYS)
     positive = {"steps_per_revolution": 1, "average_revolutions": 1, "perturbation_average_revolutions": 1}
     for key in _STEADY_KEYS:
         value = getattr(rule, key)
@@ -105,8 +104,7 @@ def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
 def jacobian_rule(data: dict, src: str) -> JacobianRule:
     """``[jacobian]`` of the mapping file's content ``data``: the finite-difference rule."""
     jac = data.get("jacobian", {})
-    check_table(jac, _JACOBIAN_KEYS, "jacobian", src, table_label="'jacobian'")
-    jacobian = JacobianRule(**jac)
+    jacobian = settings_from_table(JacobianRule, jac, "jacobian", src, _JACOBIAN_KEYS)
     if not 0 < jacobian.relative_step <= 0.5:
         raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
                          field="jacobian.relative_step")

@@ -22,10 +22,10 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.types import CONDITION_FIELDS, STANDARD_AIR_DENSITY, OperatingConditions
+from calib.types import CONDITION_DEFAULTS  # noqa: F401 (re-exported: the defaults a table may omit)
+from calib.types import CONDITION_FIELDS, OperatingConditions
 
 REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
-CONDITION_DEFAULTS = {"air_density": STANDARD_AIR_DENSITY, "yaw": 0.0}
 
 #: Accepted units per physical quantity: unit -> factor to SI. The first unit of each
 #: quantity is the SI unit of the ForwardModel contract.
