@@ -134,14 +134,19 @@ def toml_type(default, override=None):
 
 
 def schema_of(cls, exclude=(), overrides: dict | None = None) -> dict[str, Key]:
-    """The keys of a settings dataclass: one per field (same name), typed by its default or ``overrides``."""
+    """The keys of a settings dataclass: one per field (same name), typed by its default or ``overrides``
+    (a type, or a whole :class:`Key` with its rule)."""
     overrides = overrides or {}
     out = {}
     for f in dataclasses.fields(cls):
         if f.name in exclude:
             continue
+        override = overrides.get(f.name)
+        if isinstance(override, Key):         # a type with a rule
+            out[f.name] = override
+            continue
         default = f.default if f.default is not dataclasses.MISSING else None
-        out[f.name] = Key(toml_type(default, overrides.get(f.name)))
+        out[f.name] = Key(toml_type(default, override))
     return out
 
 
@@ -156,7 +161,8 @@ def _field_value(annotation: str, value):
     return value
 
 
-def settings_from_table(cls, table, section: str, source: str, schema: dict | None = None):
+def settings_from_table(cls, table, section: str, source: str, schema: dict | None = None, *,
+                        table_label: str | None = None):
     """The settings dataclass ``cls`` built from a TOML table, checked first.
 
     Parameters
@@ -172,6 +178,8 @@ def settings_from_table(cls, table, section: str, source: str, schema: dict | No
     schema : dict, optional
         The table's keys (:func:`check_table`); default :func:`schema_of` ``(cls)``. Keys of the
         schema that are not fields of ``cls`` are checked and left to the caller.
+    table_label : str, optional
+        How to call the table in the "must be a table" error (:func:`check_table`).
 
     Returns
     -------
@@ -183,7 +191,7 @@ def settings_from_table(cls, table, section: str, source: str, schema: dict | No
     InputError
         As :func:`check_table`; or the settings refused the values (the section named).
     """
-    check_table(table, schema_of(cls) if schema is None else schema, section, source)
+    check_table(table, schema_of(cls) if schema is None else schema, section, source, table_label=table_label)
     try:
         return cls(**field_values(cls, table))
     except InputError:

@@ -9,7 +9,7 @@ from calib.calibration import CalibrationSettings
 from calib.config import settings_from_table
 from calib.diagnosis.in_workflow import diagnosis_settings
 from calib.errors import InputError
-from calib.models.from_config import BEM_KEYS, model_from_workflow
+from calib.models.from_config import BEM_KEYS, executor_from_table, model_from_workflow
 from calib.validation import ValidationSettings
 from calib.workflow import CALIBRATION_KEYS
 
@@ -55,3 +55,37 @@ def test_the_native_bem_model_table_is_the_workflows():
     with pytest.raises(InputError) as info:
         model_from_workflow({"kind": "bem", "tilt": 45.0}, rotor, ["power"], "wf.toml")
     assert info.value.field == "model.tilt"
+
+
+@pytest.mark.parametrize("table, field, words", [
+    ({"kind": "fmu", "parameters": [1]}, "model.parameters", "array of names"),
+    ({"kind": "fmu", "timeout": "60"}, "model.timeout", "must be a number"),
+    ({"kind": "fmu", "fmu": "rotor.fmu", "isolate": "yes"}, "model.isolate", "true/false"),
+    ({"kind": "fmu", "mappping": "m.toml"}, "model.mappping", "did you mean 'model.mapping'"),
+    ({"kind": "fmu"}, "model.fmu", "either fmu"),
+    ({"kind": "fmu", "fmu": "rotor.fmu"}, "model.mapping", "needs mapping"),
+])
+def test_an_fmu_model_table_is_checked_before_anything_is_built(table, field, words):
+    with pytest.raises(InputError) as info:
+        model_from_workflow(table, {"name": "nrel5mw"}, ["power"], "wf.toml")
+    assert info.value.field == field and words in str(info.value)
+
+
+@pytest.mark.parametrize("table, field, words", [
+    ({"kind": "process", "workers": 0}, "executor.workers", "must be >= 1"),
+    ({"kind": "process", "address": "tcp://x:8786"}, "executor.address", "kind = \"dask\" only"),
+    ({"kind": "mpi"}, "executor.kind", "valid: serial, process, dask"),
+    ({"kind": "process", "worker": 2}, "executor.worker", "did you mean 'executor.workers'"),
+])
+def test_an_executor_table_is_checked(table, field, words):
+    with pytest.raises(InputError) as info:
+        executor_from_table(table, "wf.toml")
+    assert info.value.field == field and words in str(info.value)
+
+
+def test_an_executor_table_becomes_its_executor():
+    from calib.executors.base import SerialExecutor
+
+    ex = executor_from_table({"kind": "serial"}, "wf.toml")
+    assert isinstance(ex, SerialExecutor) and ex.map(lambda x: 2 * x, [1, 2]) == [2, 4]
+    ex.close()

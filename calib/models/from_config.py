@@ -33,26 +33,77 @@ wrong types are refused with the file and the key named.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 
 from calib.bem.solver import BemSettings
-from calib.config import NUM, check_table, schema_of, settings_from_table
+from calib.config import NUM, Key, names_list, schema_of, settings_from_table
 from calib.errors import InputError
+from calib.fmu.plan import DEFAULT_TIMEOUT
 from calib.models.registry import MODEL_KINDS
 
-FMU_KEYS = {"kind": str, "fmu": str, "variant": str, "mapping": str, "parameters": list, "corrections": bool,
-            "switches": dict, "settings": dict, "steady": dict, "jacobian": dict, "timeout": NUM, "isolate": bool}
+@dataclass(frozen=True)
+class FmuModelTable:
+    """A ``[model] kind = "fmu"`` table (the module docstring shows one).
+
+    Parameters
+    ----------
+    kind : str
+        ``"fmu"``.
+    fmu, variant : str, optional
+        The FMU file, or the bundled variant (``"A"`` or ``"B"``) to build for the workflow's rotor; one of the two.
+    mapping : str, optional
+        The mapping file (required with ``fmu``; a variant has its own).
+    parameters : tuple of str, optional
+        Mapped scalar parameters to calibrate (default: every one the mapping declares).
+    corrections : bool
+        Calibrate the correction field.
+    switches, settings, steady, jacobian : dict, optional
+        Effect switches, ``[settings]`` values (package units), and overrides of the mapping's
+        ``[steady]`` and ``[jacobian]``.
+    timeout : float
+        Per-simulation timeout [s].
+    isolate : bool
+        Simulate in worker processes.
+    """
+
+    kind: str = "fmu"
+    fmu: str | None = None
+    variant: str | None = None
+    mapping: str | None = None
+    parameters: tuple | None = None
+    corrections: bool = True
+    switches: dict | None = None
+    settings: dict | None = None
+    steady: dict | None = None
+    jacobian: dict | None = None
+    timeout: float = DEFAULT_TIMEOUT
+    isolate: bool = True
+
+
+@dataclass(frozen=True)
+class ExecutorSettings:
+    """An ``[executor]`` table: ``kind`` (:data:`calib.executors.registry.EXECUTORS`), ``workers``
+    (processes, >= 1) and ``address`` (a Dask scheduler; ``kind = "dask"`` only)."""
+
+    kind: str = "serial"
+    workers: int | None = None
+    address: str | None = None
+
+
+FMU_KEYS = schema_of(FmuModelTable, overrides={
+    "fmu": str, "variant": str, "mapping": str, "switches": dict, "settings": dict, "steady": dict, "jacobian": dict,
+    "parameters": Key(list, check=names_list)})
+"""[model] keys of an FMU: the :class:`FmuModelTable` fields."""
 #: [model] keys of the native BEM: every BemSettings field (same name, same default) except the fluid's
 #: viscosity (in [fluid]), plus rotor overrides, the workflow's yaw and the nuisance list.
 BEM_KEYS = {**schema_of(BemSettings, exclude=("kinematic_viscosity",),
                         overrides={"n_sectors": int, "polar_smoothing": list}),
             "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
             "nuisance": (list, False)}
-EXECUTOR_KEYS = {"kind": str, "workers": int, "address": str}
-
-
-def _check(table, spec: dict, section: str, source: str) -> None:
-    check_table(table, spec, section, source, table_label=f"[{section}]")
+EXECUTOR_KEYS = schema_of(ExecutorSettings, overrides={
+    "workers": Key(int, check=lambda v: None if v >= 1 else "must be >= 1"), "address": str})
+"""[executor] keys: the :class:`ExecutorSettings` fields."""
 
 
 def _path(value: str, base_dir) -> Path:
@@ -93,40 +144,35 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
                          field="model.kind")
     if kind == "bem":
         return _bem_model(cfg, rotor_table, grid, channels, source, base_dir)
-    _check(cfg, FMU_KEYS, "model", source)
-    from calib.fmu import plan as fp
+    t = settings_from_table(FmuModelTable, cfg, "model", source, FMU_KEYS, table_label="[model]")
     from calib.fmu.model import FmuModel
 
-    if ("fmu" in cfg) == ("variant" in cfg):
+    if (t.fmu is None) == (t.variant is None):
         raise InputError("[model] kind = \"fmu\" needs either fmu = \"PATH\" or variant = \"A\" | \"B\"", source,
                          field="model.fmu")
     build = None
-    if "variant" in cfg:
+    if t.variant is not None:
         from calib.fmu.build import mapping_path
         from calib.fmu.bundled import build_variant
         from calib.rotor.sources import absolute_table
 
-        build = {"variant": cfg["variant"].upper(), "rotor": absolute_table(rotor_table or {}, base_dir),
+        build = {"variant": t.variant.upper(), "rotor": absolute_table(rotor_table or {}, base_dir),
                  "grid": grid.to_dict() if grid is not None else None}
         fmu = build_variant(build, source, base_dir)
-        mapping = _path(cfg["mapping"], base_dir) if "mapping" in cfg else mapping_path(build["variant"])
+        mapping = _path(t.mapping, base_dir) if t.mapping is not None else mapping_path(build["variant"])
     else:
-        if "mapping" not in cfg:
+        if t.mapping is None:
             raise InputError("[model] kind = \"fmu\" with fmu = ... needs mapping = \"PATH\" (the mapping file "
                              "that tells calib how to reach the FMU's variables)", source, field="model.mapping")
-        fmu = _path(cfg["fmu"], base_dir)
-        mapping = _path(cfg["mapping"], base_dir)
+        fmu = _path(t.fmu, base_dir)
+        mapping = _path(t.mapping, base_dir)
         if not fmu.is_file():
             raise InputError(f"FMU file not found: {fmu}", source, field="model.fmu")
     if not Path(mapping).is_file():
         raise InputError(f"mapping file not found: {mapping}", source, field="model.mapping")
-    params = cfg.get("parameters")
-    if params is not None and not all(isinstance(p, str) for p in params):
-        raise InputError("'model.parameters' must be an array of names", source, field="model.parameters")
-    return FmuModel(fmu, mapping, list(channels), parameters=params, corrections=cfg.get("corrections", True),
-                    switches=cfg.get("switches"), settings=cfg.get("settings"), steady=cfg.get("steady"),
-                    jacobian=cfg.get("jacobian"), executor=executor, timeout=float(cfg.get("timeout", fp.DEFAULT_TIMEOUT)),
-                    isolate=cfg.get("isolate", True), build=build)
+    return FmuModel(fmu, mapping, list(channels), parameters=None if t.parameters is None else list(t.parameters),
+                    corrections=t.corrections, switches=t.switches, settings=t.settings, steady=t.steady,
+                    jacobian=t.jacobian, executor=executor, timeout=t.timeout, isolate=t.isolate, build=build)
 
 
 def _bem_model(cfg: dict, rotor_table: dict, grid, channels, source: str, base_dir):
@@ -169,14 +215,11 @@ def executor_from_table(table: dict | None, source: str, progress=None):
     """
     from calib.executors import get_executor
 
-    table = dict(table or {})
-    _check(table, EXECUTOR_KEYS, "executor", source)
-    kind = table.get("kind", "serial")
-    if "address" in table and kind != "dask":
+    st = settings_from_table(ExecutorSettings, dict(table or {}), "executor", source, EXECUTOR_KEYS,
+                             table_label="[executor]")
+    if st.address is not None and st.kind != "dask":
         raise InputError("'executor.address' applies to kind = \"dask\" only", source, field="executor.address")
-    if "workers" in table and table["workers"] < 1:
-        raise InputError(f"'executor.workers' must be >= 1, got {table['workers']}", source, field="executor.workers")
     try:
-        return get_executor(kind, table.get("workers"), table.get("address"), progress, source)
+        return get_executor(st.kind, st.workers, st.address, progress, source)
     except InputError as exc:
         raise InputError(exc.message, source, field=f"executor.{exc.field}" if exc.field else "executor") from None
