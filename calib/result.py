@@ -155,38 +155,38 @@ class CalibrationResult:
     @property
     def estimator(self) -> str:
         """``"map"`` or ``"truncated"`` (results written before the setting existed: truncated)."""
-        return str(self.settings.get("estimator", "truncated"))
+        return str(self.provenance.settings.get("estimator", "truncated"))
 
     @property
     def n_params(self) -> int:
-        return int(self.p_hat.size)
+        return int(self.estimate.p_hat.size)
 
     @property
     def n_retained(self) -> int:
-        return int(np.count_nonzero(self.retained))
+        return int(np.count_nonzero(self.identifiability.retained))
 
     @property
     def n_points(self) -> int:
-        return int(self.measured.shape[0])
+        return int(self.fit.measured.shape[0])
 
     @property
     def dof(self) -> int:
         """Degrees of freedom of χ² after: converged residuals minus retained parameters."""
-        ok = self.status_after == 0
+        ok = self.fit.status_after == 0
         return int(ok.sum() * len(self.channels) - self.n_retained)
 
     @property
     def dof_before(self) -> int:
         """Degrees of freedom of χ² before: converged residuals of the nominal model (nothing fitted)."""
-        return int((self.status_before == 0).sum() * len(self.channels))
+        return int((self.fit.status_before == 0).sum() * len(self.channels))
 
     @property
     def chi2_per_dof_before(self) -> float:
-        return self.chi2_before / max(self.dof_before, 1)
+        return self.fit.chi2_before / max(self.dof_before, 1)
 
     @property
     def chi2_per_dof_after(self) -> float:
-        return self.chi2_after / max(self.dof, 1)
+        return self.fit.chi2_after / max(self.dof, 1)
 
     def goodness_of_fit(self, n_worst: int = 5) -> dict:
         """χ² before (dof N) and after (dof N − n_retained), p-values, per channel, worst points.
@@ -201,25 +201,26 @@ class CalibrationResult:
         """
         from scipy import stats
 
-        out = {"chi2_before": self.chi2_before, "dof_before": self.dof_before,
+        fit = self.fit
+        out = {"chi2_before": fit.chi2_before, "dof_before": self.dof_before,
                "chi2_per_dof_before": self.chi2_per_dof_before,
-               "p_value_before": float(stats.chi2.sf(self.chi2_before, max(self.dof_before, 1))),
-               "chi2_after": self.chi2_after, "dof_after": self.dof, "chi2_per_dof_after": self.chi2_per_dof_after,
-               "p_value_after": float(stats.chi2.sf(self.chi2_after, max(self.dof, 1)))}
+               "p_value_before": float(stats.chi2.sf(fit.chi2_before, max(self.dof_before, 1))),
+               "chi2_after": fit.chi2_after, "dof_after": self.dof, "chi2_per_dof_after": self.chi2_per_dof_after,
+               "p_value_after": float(stats.chi2.sf(fit.chi2_after, max(self.dof, 1)))}
         per = {}
         rb, ra = self.rms("before"), self.rms("after")
         for i, c in enumerate(self.channels):
             row = {}
-            for which, model, status in (("before", self.model_before, self.status_before),
-                                         ("after", self.model_after, self.status_after)):
+            for which, model, status in (("before", fit.model_before, fit.status_before),
+                                         ("after", fit.model_after, fit.status_after)):
                 ok = status == 0
-                w = (self.measured[ok, i] - model[ok, i]) / self.sigma[ok, i]
+                w = (fit.measured[ok, i] - model[ok, i]) / fit.sigma[ok, i]
                 row[f"chi2_per_point_{which}"] = float(np.mean(w ** 2)) if w.size else float("nan")
             row["rms_before"], row["rms_after"] = rb[c], ra[c]
             per[c] = row
         out["per_channel"] = per
-        ok = self.status_after == 0
-        w = np.where(ok[:, None], (self.measured - np.where(ok[:, None], self.model_after, 0.0)) / self.sigma, 0.0)
+        ok = fit.status_after == 0
+        w = np.where(ok[:, None], (fit.measured - np.where(ok[:, None], fit.model_after, 0.0)) / fit.sigma, 0.0)
         order = np.argsort(-np.abs(w), axis=None)[:n_worst]
         out["worst"] = [{"point": int(k // w.shape[1]), "channel": self.channels[int(k % w.shape[1])],
                          "whitened_residual": float(w.flat[k]),
@@ -249,12 +250,12 @@ class CalibrationResult:
         json_path = self.json_path
         folder = None if json_path is None else json_path.parent
         where = str(json_path) if json_path is not None else self.name
-        if not self.model_spec:
+        if not self.provenance.model_spec:
             raise InputError("this result recorded no model spec to rebuild its model; pass model=", where,
                              field="model_spec")
         from calib.models.registry import build_model
 
-        return build_model(self.model_spec, base_dir=folder, source=f"{where}: model_spec")
+        return build_model(self.provenance.model_spec, base_dir=folder, source=f"{where}: model_spec")
 
     @property
     def parameter_objects(self) -> tuple[Parameter, ...]:
@@ -267,56 +268,59 @@ class CalibrationResult:
 
     def verdict_counts(self) -> dict[str, int]:
         out = {"identified": 0, "poorly observable": 0, "at bound": 0, "confounded": 0}
-        for v in self.verdicts:
+        for v in self.identifiability.verdicts:
             out[v["verdict"]] = out.get(v["verdict"], 0) + 1
         return out
 
     def rms(self, which: str = "after") -> dict[str, float]:
         """Per-channel RMS of the residual (converged points) [channel units]."""
-        model = self.model_after if which == "after" else self.model_before
-        status = self.status_after if which == "after" else self.status_before
+        model = self.fit.model_after if which == "after" else self.fit.model_before
+        status = self.fit.status_after if which == "after" else self.fit.status_before
         ok = status == 0
-        return {c: float(np.sqrt(np.mean((self.measured[ok, i] - model[ok, i]) ** 2)))
+        return {c: float(np.sqrt(np.mean((self.fit.measured[ok, i] - model[ok, i]) ** 2)))
                 for i, c in enumerate(self.channels)}
 
     def tip_speed_ratio(self) -> np.ndarray | None:
         """λ = ΩR/V of each point [-] (None when the rotor radius is unknown)."""
-        if not self.rotor_radius:
+        if not self.provenance.rotor_radius:
             return None
-        return self.conditions["rotor_speed"] * np.pi / 30.0 * self.rotor_radius / self.conditions["wind_speed"]
+        cond = self.conditions
+        return cond["rotor_speed"] * np.pi / 30.0 * self.provenance.rotor_radius / cond["wind_speed"]
 
     def eigenshapes(self, alpha_deg, eta, modes=None):
         """Lift and drag eigenshapes (n_modes, n_eta, n_alpha) of the given modes (default: retained)."""
         if modes is None:
-            modes = np.flatnonzero(self.retained)
-        return eigenshapes(self.V, self.layout, alpha_deg, eta, modes)
+            modes = np.flatnonzero(self.identifiability.retained)
+        return eigenshapes(self.identifiability.V, self.layout, alpha_deg, eta, modes)
 
     def summary(self) -> str:
         """A few plain lines with the key numbers."""
         counts = self.verdict_counts()
-        how = (f"chosen by {self.truncation.get('criterion', 'K-fold')} cross-validation over operating points"
-               if self.truncation else "set")
+        ident, unc = self.identifiability, self.uncertainty
+        how = (f"chosen by {ident.truncation.get('criterion', 'K-fold')} cross-validation over operating "
+               "points" if ident.truncation else "set")
         if self.estimator == "map":
             kept = (f"  parameters {self.n_params}, MAP estimate under the stated prior; the data determine "
                     f"{self.n_retained} directions better than the prior (s > 1)")
         else:
-            kept = f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {self.sigma_bar:.3g}, {how})"
-        lines = [f"{self.name}: {self.status} ({self.message})", kept,
+            kept = (f"  parameters {self.n_params}, retained {self.n_retained} (sigma_bar = {ident.sigma_bar:.3g}, "
+                    f"{how})")
+        lines = [f"{self.name}: {self.estimate.status} ({self.estimate.message})", kept,
                  f"  chi2/dof before {self.chi2_per_dof_before:.3g} (dof {self.dof_before}), after "
                  f"{self.chi2_per_dof_after:.3g} (dof {self.dof})",
                  "  verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()),
-                 "  failed model points: " + ", ".join(f"{k} {v}" for k, v in self.failures.items())]
-        if "second_retained" in self.truncation:
-            lines.append("  " + second_start_sentence(self.truncation))
-        if self.prior_check.get("failed"):
-            lines.append(f"  prior check: failed ({self.prior_check['failed']})")
-        elif self.prior_check:
-            pc = self.prior_check
+                 "  failed model points: " + ", ".join(f"{k} {v}" for k, v in self.fit.failures.items())]
+        if "second_retained" in ident.truncation:
+            lines.append("  " + second_start_sentence(ident.truncation))
+        if unc.prior_check.get("failed"):
+            lines.append(f"  prior check: failed ({unc.prior_check['failed']})")
+        elif unc.prior_check:
+            pc = unc.prior_check
             lines.append(f"  prior check: field amplitude {pc['amplitude']:.2g} x stated "
                          f"({100 * pc['confidence']:.0f} % interval {pc['lower']:.2g}-{pc['upper']:.2g}), "
                          f"{pc['verdict']}")
-        if self.fold_directions:
-            lines.append("  " + fold_sentence(self.fold_directions, self.conditions, self.tip_speed_ratio()))
+        if ident.fold_directions:
+            lines.append("  " + fold_sentence(ident.fold_directions, self.conditions, self.tip_speed_ratio()))
         rb, ra = self.rms("before"), self.rms("after")
         for c in self.channels:
             lines.append(f"  rms {c}: {rb[c]:.4g} -> {ra[c]:.4g}")
@@ -334,12 +338,12 @@ class CalibrationResult:
         """``result.json``: every field that is not an array, under its flat name, and a summary."""
         scalars = {k: v for k, v in self.flat_fields().items() if k not in ARRAY_FIELDS and k not in _DICT_ARRAYS}
         scalars["schema_version"] = SCHEMA_VERSION
+        ident = self.identifiability
+        truncation = {"criterion": f"{ident.truncation.get('criterion')} cross-validation",
+                      "chosen": ident.truncation.get("chosen"), "sigma_bar": ident.sigma_bar} if ident.truncation \
+            else {"criterion": "threshold", "sigma_bar": ident.sigma_bar}
         scalars["summary"] = {"n_params": self.n_params, "n_retained": self.n_retained, "dof": self.dof,
-                              "goodness_of_fit": self.goodness_of_fit(),
-                              "truncation": {"criterion": f"{self.truncation.get('criterion')} cross-validation",
-                                             "chosen": self.truncation.get("chosen"),
-                                             "sigma_bar": self.sigma_bar} if self.truncation else
-                              {"criterion": "threshold", "sigma_bar": self.sigma_bar},
+                              "goodness_of_fit": self.goodness_of_fit(), "truncation": truncation,
                               "verdict_counts": self.verdict_counts()}
         return jsonable(scalars)
 

@@ -55,3 +55,12 @@ def test_the_flat_names_write_through_to_the_parts_and_replace_copies():
     assert other.estimate is not res.estimate and res.name == "field loads"
     with pytest.raises(AttributeError, match="no attribute 'p_hut'"):
         res.p_hut
+
+
+def test_the_json_keeps_its_content_under_the_same_names():
+    """Written again by this version, the old result's JSON is the old file's, key for key."""
+    import json
+
+    res = load_result(OLD)
+    again = json.loads(json.dumps(res.to_json_dict(), allow_nan=True))
+    assert again == json.loads((OLD / "result.json").read_text())
