@@ -44,7 +44,7 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.recorded_model import PER_STATION_EXTRAS, RecordedModel, recorded  # noqa: F401  (importable from here)
-from calib.result import _jsonable as result_jsonable
+from calib.result_io import jsonable as result_jsonable
 
 FORMAT = "calib.history/1"
 HISTORY_DIR = "history"

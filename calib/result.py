@@ -28,8 +28,6 @@ __all__ = ["CalibrationResult", "Prediction", "load_result", "package_versions",
            "second_start_sentence", "Estimate", "Identifiability", "Uncertainty", "Fit", "Provenance"]
 
 SCHEMA_VERSION = 2
-_jsonable = jsonable          # (the name history and the diagnosis report import)
-_ARRAY_FIELDS = ARRAY_FIELDS
 _DICT_ARRAYS = {"conditions": "conditions__", "polar_bands": "polar__", "truncation": "truncation__"}
 """Dicts of arrays stored in ``result.npz``, each key under its prefix."""
 

@@ -12,7 +12,8 @@ from calib.measurements import synthesize
 from calib.models.base import nominal_vector
 from calib.report import figures as F
 from calib.report.html import write_report
-from calib.result import _ARRAY_FIELDS, load_result
+from calib.result import load_result
+from calib.result_parts import ARRAY_FIELDS
 from twin_model import TwinModel, twin_conditions
 
 
@@ -35,7 +36,7 @@ def figure_paths(result, tmp_path_factory):
 def test_result_round_trip(result, tmp_path):
     jpath, npath = result.save(tmp_path)
     back = load_result(tmp_path)
-    for name in _ARRAY_FIELDS:
+    for name in ARRAY_FIELDS:
         np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(result, name)),
                                       err_msg=name)
     for k, v in result.conditions.items():

@@ -1,10 +1,10 @@
 """Status and message of each operating point of a BEM solve, and the section arrays they are judged on.
 
-- :func:`_check_conditions`, :func:`_check_inflow`: invalid inputs, before and after the
+- :func:`check_conditions`, :func:`check_inflow`: invalid inputs, before and after the
   effect chain's conditions stage (``INVALID_INPUT``);
-- :func:`_section_fields`: the ``sections`` dict of :class:`~calib.bem.solver.BemResult`,
+- :func:`section_fields`: the ``sections`` dict of :class:`~calib.bem.solver.BemResult`,
   in (n_points, n_sectors, n_stations) arrays;
-- :func:`_status_per_point`: per-section trouble flags (no root, C_D <= 0, reversed flow,
+- :func:`status_per_point`: per-section trouble flags (no root, C_D <= 0, reversed flow,
   |a| > :data:`INDUCTION_LIMIT`, several roots) turned into a status and a message per point.
 
 Used by :func:`calib.bem.solver.solve_bem`, whose Notes give the reasons for each status.
@@ -23,7 +23,7 @@ INDUCTION_LIMIT = 2.0
 """Largest |a| accepted at a converged section [-] (see :func:`calib.bem.solver.solve_bem`, Notes)."""
 
 
-def _check_conditions(conditions: OperatingConditions):
+def check_conditions(conditions: OperatingConditions):
     """Per-point validity of the operating conditions: (bad mask, messages)."""
     n = len(conditions)
     msgs = [""] * n
@@ -43,7 +43,7 @@ def _check_conditions(conditions: OperatingConditions):
     return bad, msgs
 
 
-def _check_inflow(inflow: Inflow, bad_pt, msgs):
+def check_inflow(inflow: Inflow, bad_pt, msgs):
     """Points whose inflow after the conditions stage is unusable (speed not finite and > 0)."""
     msgs = list(msgs)
     with np.errstate(invalid="ignore"):
@@ -61,7 +61,7 @@ def _scatter(sec, roots, v, fill=0.0, dtype=float):
     return out.reshape(sec.shape)
 
 
-def _section_fields(sec, roots, values) -> dict:
+def section_fields(sec, roots, values) -> dict:
     """The ``sections`` dict of :class:`BemResult`."""
     eq = values.eq
     fields = {"phi": roots.phi, "alpha_deg": values.alpha_deg, "cl": values.cl, "cd": values.cd,
@@ -83,7 +83,7 @@ def _section_flags(sec, roots, values) -> dict:
             "multiple_roots": _scatter(sec, roots, roots.n_roots > 1, False, bool)}
 
 
-def _status_per_point(sec, roots, values, a_sections, bad, msgs: list, unsettled, eta):
+def status_per_point(sec, roots, values, a_sections, bad, msgs: list, unsettled, eta):
     """Status and message per point, and the points with several roots, from the section results.
 
     Parameters
@@ -91,7 +91,7 @@ def _status_per_point(sec, roots, values, a_sections, bad, msgs: list, unsettled
     sec, roots, values
         Sections, roots and section values of the solve.
     a_sections : ndarray, shape (n_points, n_sectors, n_stations)
-        Axial induction a [-] (``sections["a"]`` of :func:`_section_fields`).
+        Axial induction a [-] (``sections["a"]`` of :func:`section_fields`).
     bad : ndarray of bool, shape (n_points,)
         Points with invalid input.
     msgs : list of str

@@ -18,7 +18,7 @@ from calib.bem.chain import BoundChain, EffectChain
 from calib.bem.jacobian import Block, SectionSensitivities, project
 from calib.bem.kinematics import curvature
 from calib.bem.point_status import INDUCTION_LIMIT  # noqa: F401 (re-exported)
-from calib.bem.point_status import _check_conditions, _check_inflow, _section_fields, _status_per_point
+from calib.bem.point_status import check_conditions, check_inflow, section_fields, status_per_point
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY, SectionPolars, station_reynolds
 from calib.bem.sections import RESIDUAL_TOL, build_sections, eliminate_phi, find_roots, section_pass
 from calib.bem.stages import Inflow, PointContext, ProbeMap, RotorData
@@ -250,8 +250,8 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     solve, pctx, bad_pt, msgs, w = _set_up(rotor, conditions, settings, effects, p, polars)
     inflow, bad_all, msgs, sec, roots, values, unsettled = solve.to_fixed_point(pctx, bad_pt, msgs, sensitivities)
 
-    sections = _section_fields(sec, roots, values)
-    status, msgs, multiple, n_multiple = _status_per_point(sec, roots, values, sections["a"], bad_all, msgs,
+    sections = section_fields(sec, roots, values)
+    status, msgs, multiple, n_multiple = status_per_point(sec, roots, values, sections["a"], bad_all, msgs,
                                                            unsettled, rotor.eta)
     outs = _rotor_quantities(rotor, conditions, sections, w, solve.n_sec, status != Status.CONVERGED)
     omega = conditions.rotor_speed * np.pi / 30.0
@@ -298,7 +298,7 @@ def _set_up(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings
                                                 kinematic_viscosity=settings.kinematic_viscosity)
     chain = (effects if isinstance(effects, EffectChain) else EffectChain(effects)).bind(p)
     n_sec = settings.sectors_for(rotor, conditions)
-    bad_pt, msgs = _check_conditions(conditions)
+    bad_pt, msgs = check_conditions(conditions)
     if not np.isfinite(rotor.hub_height) and settings.shear_exponent != 0.0:
         raise InputError("wind shear needs a finite hub height", rotor.source, field="hub_height")
     interior = interior_stations(rotor)
@@ -341,12 +341,12 @@ class _Solve:
         k = chain.n_section_columns if sensitivities else 0
         if not chain.reads_thrust:
             inflow = _inflow(chain, pctx)
-            bad, msgs = _check_inflow(inflow, bad_pt, msgs)
+            bad, msgs = check_inflow(inflow, bad_pt, msgs)
             return (inflow, bad, msgs) + self.at(inflow, bad, k) + (np.zeros(bad.size, bool),)
         thrust, previous = np.zeros(bad_pt.size), None          # first pass: no thrust yet
         for iteration in range(FIXED_POINT_MAX_ITER + 1):
             inflow = _inflow(chain, replace(pctx, thrust=thrust))
-            bad, point_msgs = _check_inflow(inflow, bad_pt, msgs)
+            bad, point_msgs = check_inflow(inflow, bad_pt, msgs)
             sec, roots, values = self.at(inflow, bad, 0)
             solved = _per_point(dl.value(values.quantities["Np"]), roots, sec, self.thrust_weights)
             settled = _inflow(chain, replace(pctx, thrust=np.nan_to_num(solved)))

@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from calib.report.atomic import atomic_path, atomic_write_text  # noqa: E402
-from calib.result import _jsonable  # noqa: E402
+from calib.result_io import jsonable as _jsonable  # noqa: E402
 from calib.words import p_is, p_text
 
 
