@@ -55,6 +55,11 @@ def test_the_flat_names_write_through_to_the_parts_and_replace_copies():
     assert other.estimate is not res.estimate and res.name == "field loads"
     with pytest.raises(AttributeError, match="no attribute 'p_hut'"):
         res.p_hut
+    import pickle
+
+    back = pickle.loads(pickle.dumps(res))      # (executors pickle what they return)
+    np.testing.assert_array_equal(back.p_hat, res.p_hat)
+    assert back.checks == {"note": "x"}
 
 
 def test_the_json_keeps_its_content_under_the_same_names():
