@@ -10,7 +10,6 @@
 import csv
 
 import numpy as np
-import pytest
 
 from calib.bem import BemSettings, SectionPolars, solve_bem
 from calib.models.base import OperatingConditions

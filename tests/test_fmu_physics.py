@@ -15,7 +15,7 @@ import pytest
 
 import fmpy  # noqa: E402  (a core dependency: a missing install must fail, not skip)
 
-from calib.fmu.build import FmuBuildError, build_fmu, mapping_path  # noqa: E402
+from calib.fmu.build import mapping_path  # noqa: E402
 from calib.fmu.mapping import load_mapping  # noqa: E402
 from calib.fmu.resources import default_grid, tabulated_polars  # noqa: E402
 from calib.rotor.library import load_rotor  # noqa: E402
