@@ -234,7 +234,8 @@ class Calibrator:
         return SvdAnalysis(svd.singular_values, svd.V, svd.sigma_theta, self.truncation.curve.sigma_bar, retained)
 
     def _prior_cov_scaled(self) -> np.ndarray:
-        """The stated prior covariance of the scaled parameters [scale units²] (:meth:`ModelTerms.prior_cov_scaled`)."""
+        """The stated prior covariance of the scaled parameters [scale units²]
+        (:meth:`calib.uncertainty_terms.ModelTerms.prior_cov_scaled`)."""
         return self.terms.prior_cov_scaled()
 
     def _map_prior_cov_scaled(self) -> np.ndarray:
@@ -471,9 +472,16 @@ class Calibrator:
 
     def _result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
                 wall, **extra) -> CalibrationResult:
-        """The result of either estimator (:func:`calib.result_assembly.assemble_result`)."""
-        return assemble_result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,
-                               status, message, wall, **extra)
+        """The result of either estimator (:func:`calib.result_assembly.assemble_result`), with the
+        history, the automatic truncation's record and the run's name."""
+        st = self.settings
+        curve = self.truncation.curve
+        truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" and st.retain != "all" else {}
+        if truncation and self._second_start_record:
+            truncation.update(self._second_start_record)
+        return assemble_result(self.terms, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,
+                               status, message, wall, history=self.history, truncation=truncation, name=self.name,
+                               **extra)
 
 
 def calibrate(model, measurements: Measurements, **settings) -> CalibrationResult:

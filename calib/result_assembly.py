@@ -15,16 +15,18 @@ from calib.errors import InputError
 from calib.identifiability import confounding, cramer_rao, fisher_matrix, parameter_verdicts
 from calib.result import CalibrationResult
 from calib.result_parts import Estimate, Fit, Identifiability, Provenance, Uncertainty
+from calib.types import nominal_vector
+from calib.uncertainty_terms import ModelTerms
 
 
-def assemble_result(cal, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
-                    wall, **extra) -> CalibrationResult:
+def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,
+                    status, message, wall, **extra) -> CalibrationResult:
     """The :class:`CalibrationResult` of either estimator.
 
     Parameters
     ----------
-    cal : Calibrator
-        The calibrator that ran (its problem statement, prior, history and model terms).
+    terms : ModelTerms
+        The problem statement and its model-derived terms.
     problem, nominal, lin : LeastSquaresProblem, its evaluation at nominal, its linearization at p̂
     svd : SvdAnalysis
         The directions (truncated: retained θ; MAP: the prior-whitened directions).
@@ -39,79 +41,76 @@ def assemble_result(cal, problem, nominal, lin, svd, cov_p, cov_frozen, cov_thet
     wall : float
         Duration [s].
     **extra
-        The estimator's own fields of the result's parts, by flat name.
+        The result's other fields by flat name: the estimator's own, and the calibrator's (``history``,
+        ``truncation``, ``name``).
     """
-    m = cal.measurements
-    radius, spec = _model_record(cal)
-    fit = _fit_part(cal, problem, nominal, lin)     # the failures counted before the tightening's probes
-    extra.setdefault("tightening", cal.terms.tightening(problem, lin, cov_p, radius))
+    m = terms.measurements
+    radius, spec = _model_record(terms.model)
+    fit = _fit_part(terms, problem, nominal, lin)     # the failures counted before the tightening's probes
+    extra.setdefault("tightening", terms.tightening(problem, lin, cov_p, radius))
+    units = [terms.model.channels[i].unit for i in terms.channel_index]
     res = CalibrationResult(
-        parameters=[asdict(q) for q in cal.parameters], channels=list(m.channels),
-        channel_units=cal.channel_units, conditions=m.conditions.as_dict(),
-        estimate=Estimate(cal.p0, lin.p, cal.lower, cal.upper, cal.scale, theta_hat, status, message,
-                          cal.history),
-        identifiability=_identifiability(cal, lin, svd, cov_p, obs),
-        uncertainty=Uncertainty(cov_p, np.sqrt(np.maximum(np.diag(cov_p), 0.0)), cov_theta, cal.prior_std,
+        parameters=[asdict(q) for q in terms.parameters], channels=list(m.channels), channel_units=units,
+        conditions=m.conditions.as_dict(),
+        estimate=Estimate(nominal_vector(terms.parameters), lin.p, terms.lower, terms.upper, terms.scale, theta_hat,
+                          status, message),
+        identifiability=_identifiability(terms, lin, svd, cov_p, obs),
+        uncertainty=Uncertainty(cov_p, np.sqrt(np.maximum(np.diag(cov_p), 0.0)), cov_theta, terms.prior_std,
                                 cov_frozen),
         fit=fit,
-        provenance=Provenance(_settings_record(cal), spec, radius, wall_time=wall,
-                              inputs={m.source: m.sha256} if m.sha256 else {}),
-        name=cal.name).replace(**extra)
-    st = cal.settings
-    if cal.field is not None and cal.field.grid is not None:
-        res.uncertainty.polar_bands = cal.field.bands(
+        provenance=Provenance(_settings_record(terms), spec, radius, wall_time=wall,
+                              inputs={m.source: m.sha256} if m.sha256 else {})).replace(**extra)
+    st, field = terms.settings, terms.field
+    if field is not None and field.grid is not None:
+        res.uncertainty.polar_bands = field.bands(
             lin.p, cov_p, cov_frozen, eta=st.band_eta, confidence=st.band_confidence,
-            prior_std=cal.prior_std if st.representation_error else None,
+            prior_std=terms.prior_std if st.representation_error else None,
             correlation_length=st.prior_correlation, cd_min=st.cd_min)
     return res
 
 
-def _identifiability(cal, lin, svd, cov_p, obs) -> Identifiability:
-    """The result's identifiability part: the directions, the Cramér–Rao figures, the verdicts
-    and the truncation curve (empty for an explicit σ̄ or with every parameter kept)."""
-    st = cal.settings
+def _identifiability(terms: ModelTerms, lin, svd, cov_p, obs) -> Identifiability:
+    """The result's identifiability part: the directions, the Cramér–Rao figures and the verdicts
+    (the truncation record is the calibrator's to add)."""
+    st = terms.settings
     F = fisher_matrix(lin.M)
     _, crb_std_scaled, corr = cramer_rao(F)
-    conf = confounding(F, cal.prior_std / cal.scale, cal.parameters)
+    conf = confounding(F, terms.prior_std / terms.scale, terms.parameters)
     std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
-    verdicts = parameter_verdicts(cal.parameters, lin.p, cal.lower, cal.upper, std_p, cal.prior_std, obs,
+    verdicts = parameter_verdicts(terms.parameters, lin.p, terms.lower, terms.upper, std_p, terms.prior_std, obs,
                                   conf, st.identified_ratio, st.confounded_share)
-    curve = cal.truncation.curve
-    truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" and st.retain != "all" else {}
-    if truncation and cal._second_start_record:
-        truncation.update(cal._second_start_record)
     return Identifiability(svd.singular_values, svd.V, svd.sigma_theta, svd.retained, float(svd.sigma_bar),
-                           corr, crb_std_scaled * cal.scale, obs, verdicts, conf, truncation)
+                           corr, crb_std_scaled * terms.scale, obs, verdicts, conf)
 
 
-def _fit_part(cal, problem, nominal, lin) -> Fit:
+def _fit_part(terms: ModelTerms, problem, nominal, lin) -> Fit:
     """The result's fit part: the model before and after against the measurements, χ², failures."""
-    m = cal.measurements
-    before = nominal.evaluation.values[:, cal.channel_index]
+    m = terms.measurements
+    before = nominal.evaluation.values[:, terms.channel_index]
     ev = lin.evaluation
-    alpha_seen, eta_seen = cal.field.seen(ev) if cal.field is not None else (np.zeros(0), np.zeros(0))
+    alpha_seen, eta_seen = terms.field.seen(ev) if terms.field is not None else (np.zeros(0), np.zeros(0))
     failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
                 "total_failed_point_evaluations": problem.n_failed_points_total,
                 "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
-    return Fit(m.values, problem.sigma, before, ev.values[:, cal.channel_index], nominal.evaluation.status,
+    return Fit(m.values, problem.sigma, before, ev.values[:, terms.channel_index], nominal.evaluation.status,
                ev.status, problem.sigma[0],
                float(np.sum(((m.values - before)[nominal.ok] / problem.sigma[nominal.ok]) ** 2)),
                float(np.sum(lin.residual[lin.ok] ** 2)), alpha_seen, eta_seen, failures=failures)
 
 
-def _model_record(cal) -> tuple[float | None, dict | None]:
+def _model_record(model) -> tuple[float | None, dict | None]:
     """The rotor radius [m] and the spec that rebuilds the model, (None, None) when it cannot be rebuilt."""
-    if not cal.model.capabilities.rebuildable:
+    if not model.capabilities.rebuildable:
         return None, None
     try:
-        return cal.model.rotor_radius, cal.model.spec()
+        return model.rotor_radius, model.spec()
     except InputError:
-        return cal.model.rotor_radius, None
+        return model.rotor_radius, None
 
 
-def _settings_record(cal) -> dict:
+def _settings_record(terms: ModelTerms) -> dict:
     """The settings as the result records them: the model's name and the effective lower bounds added."""
-    settings = asdict(cal.settings)
-    settings["model"] = cal.model.capabilities.name
-    settings["lower_effective"] = cal.lower.tolist()
+    settings = asdict(terms.settings)
+    settings["model"] = terms.model.capabilities.name
+    settings["lower_effective"] = terms.lower.tolist()
     return settings

@@ -23,7 +23,9 @@ from calib.parametrizations.aliasing import FineSensitivities
 
 @dataclass(frozen=True, eq=False)
 class ModelTerms:
-    """The model-derived uncertainty terms of one calibration problem.
+    """One calibration problem's statement (model, settings, measurements, parameters, prior,
+    bounds) and its model-derived uncertainty terms; the result is assembled from it
+    (:func:`calib.result_assembly.assemble_result`).
 
     Parameters
     ----------
