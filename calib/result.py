@@ -132,11 +132,12 @@ class CalibrationResult:
             setattr(self.__dict__[part], name, value)
 
     def replace(self, **changes) -> "CalibrationResult":
-        """A copy with ``changes`` (flat names or the result's own fields), the parts copied as needed."""
+        """A copy with ``changes``: the result's own fields (a whole part included) or a part's fields by
+        flat name. Every part is copied (shallow), so setting a field of the copy leaves this one alone."""
         own = {k: v for k, v in changes.items() if k not in PART_OF}
         for part in PARTS:
             mine = {k: v for k, v in changes.items() if PART_OF.get(k) == part}
-            own[part] = dataclasses.replace(getattr(self, part), **mine)    # a copy even without changes
+            own[part] = dataclasses.replace(own.get(part, getattr(self, part)), **mine)
         return dataclasses.replace(self, **own)
 
     # ------------------------------------------------------------------ derived

@@ -53,6 +53,10 @@ def test_the_flat_names_write_through_to_the_parts_and_replace_copies():
     other = res.replace(p_hat=res.p_hat + 1.0, name="moved")
     assert other.name == "moved" and np.allclose(other.estimate.p_hat, res.estimate.p_hat + 1.0)
     assert other.estimate is not res.estimate and res.name == "field loads"
+    other.p_hat = np.zeros_like(res.p_hat)                    # the copy's part, not the original's
+    assert np.any(res.p_hat != 0)
+    fit = res.fit
+    assert res.replace(fit=fit, chi2_after=1.0).fit.chi2_after == 1.0 and fit.chi2_after != 1.0
     with pytest.raises(AttributeError, match="no attribute 'p_hut'"):
         res.p_hut
     import pickle
