@@ -16,6 +16,7 @@ OLD = Path(__file__).parent / "data" / "results" / "own_turbine_c519001"
 
 def test_a_result_written_before_the_parts_loads_into_them():
     res = load_result(OLD)
+    # exact: the loader hands over the bytes it read, no arithmetic in between (any CPU)
     with np.load(OLD / "result.npz") as z:
         np.testing.assert_array_equal(res.estimate.p_hat, z["p_hat"])
         np.testing.assert_array_equal(res.uncertainty.cov_p, z["cov_p"])
@@ -62,7 +63,7 @@ def test_the_flat_names_write_through_to_the_parts_and_replace_copies():
     import pickle
 
     back = pickle.loads(pickle.dumps(res))      # (executors pickle what they return)
-    np.testing.assert_array_equal(back.p_hat, res.p_hat)
+    np.testing.assert_array_equal(back.p_hat, res.p_hat)      # exact: pickling copies the bytes
     assert back.checks == {"note": "x"}
 
 
