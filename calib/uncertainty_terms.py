@@ -53,13 +53,17 @@ class ModelTerms:
     upper: np.ndarray
 
     def prior_cov_scaled(self) -> np.ndarray:
-        """The stated prior covariance of the scaled parameters [scale units²]: ``prior_std``
-        per parameter, neighbouring field nodes correlated by the smooth-field prior."""
+        """The stated prior covariance of the scaled parameters [scale units²], P = D C D.
+
+        D = diag(``prior_std`` / ``scale``); C the prior correlation: block-diagonal, the
+        correction field's nodes correlated by the smooth-field prior
+        (:meth:`calib.parametrizations.CorrectionField.node_correlation`), every other parameter
+        independent of all (identity rows). Never the outer product σσᵀ alone, which states
+        that all parameters move together (rank one; the MAP then moves them along σ)."""
         prior_scaled = self.prior_std / self.scale
-        prior_cov = np.outer(prior_scaled, prior_scaled)
-        if self.field is not None:
-            prior_cov = prior_cov * self.field.node_correlation(self.settings.prior_correlation)
-        return prior_cov
+        n = len(prior_scaled)
+        corr = np.eye(n) if self.field is None else self.field.node_correlation(self.settings.prior_correlation)
+        return prior_scaled[:, None] * corr * prior_scaled[None, :]
 
     def aliasing(self, problem, lin, svd, alpha_seen, eta_seen, gain: np.ndarray | None = None
                   ) -> tuple[np.ndarray | None, float, str, FineSensitivities | None]:

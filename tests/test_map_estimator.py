@@ -17,6 +17,7 @@ from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import synthesize
 from calib.types import nominal_vector
+from calib.uncertainty_terms import ModelTerms
 from twin_model import TwinModel, twin_conditions
 
 LINEAR = dict(estimator="map", cd_min=None, scale_by_fit=False, representation_error=False, prior_check=False)
@@ -130,6 +131,35 @@ def test_a_stated_prior_in_physical_units_holds_a_nuisance_and_names_unknown_par
         Calibrator(model, meas, CalibrationSettings(prior_std={"pitch_ofset": 0.3}, **base))
     with pytest.raises(InputError, match="prior_std.pitch_offset.*must be a number > 0"):
         CalibrationSettings(prior_std={"pitch_offset": -1.0}).validate()
+
+
+def test_the_prior_is_block_diagonal_nodes_correlated_others_independent():
+    """Issue 34: the prior was the outer product σσᵀ masked by the field's correlation, so
+    without a field (an FMU's scalar parameters) every stated parameter moved with every other.
+    P must be diag(σ) C diag(σ), C the smooth-field correlation on the node blocks and the
+    identity for every other parameter, with or without a field."""
+    model = TwinModel(channels=("power", "thrust"), nuisance=("pitch_offset", "wind_scale"), nonlinearity=0.05)
+    cond = twin_conditions()
+    p0 = nominal_vector(model.parameters)
+    meas = synthesize(model, p0, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=4)
+    prior = {"pitch_offset": 0.5, "wind_scale": 0.03}
+    cal = Calibrator(model, meas, CalibrationSettings(prior_std=prior, prior_correlation=1.0))
+    P = cal._prior_cov_scaled()
+    names = [q.name for q in model.parameters]
+    j, k = names.index("pitch_offset"), names.index("wind_scale")
+    others = np.setdiff1d(np.arange(len(names)), [j, k])
+    assert P[j, k] == 0.0 and not P[[j, k]][:, others].any()
+    assert np.isclose(P[j, j], (0.5 / model.parameters[j].scale) ** 2)
+    assert np.isclose(P[k, k], (0.03 / model.parameters[k].scale) ** 2)
+    C = model.correction_field().node_correlation(1.0)
+    d = np.sqrt(np.diag(P))
+    assert np.allclose(P / np.outer(d, d), C)
+    # positive definite: full rank, as a prior over independent parameters must be
+    assert np.linalg.eigvalsh(P).min() > 0
+    # without a field (an FMU's scalar parameters): diagonal
+    sd, scale = np.array([0.1, 0.1, 2.0]), np.array([0.05, 0.05, 0.5])
+    terms = ModelTerms(None, None, CalibrationSettings(), meas, (), [], sd, scale, -np.inf * sd, np.inf * sd)
+    assert np.array_equal(terms.prior_cov_scaled(), np.diag((sd / scale) ** 2))
 
 
 def test_map_predictive_intervals_are_sharp_at_the_calibration_points():
