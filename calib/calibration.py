@@ -45,6 +45,7 @@ counted in the result.
 from __future__ import annotations
 
 import difflib
+import logging
 import time
 from typing import Callable
 
@@ -54,6 +55,7 @@ from scipy import stats
 from calib.calibration_settings import ESTIMATORS, NOISE_MODES, CalibrationSettings
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate
+from calib.map_agreement import map_ml_agreement
 from calib.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
 from calib.measurements import Measurements, check_channels, ml_noise
 from calib.noise import initial_sigma
@@ -64,6 +66,8 @@ from calib.truncation import AutoTruncation, keep_second_start
 from calib.uncertainty_terms import ModelTerms
 from calib.uncertainty import laplace_covariance, map_fit_scale, map_gain, prior_whitened_svd, truncated_covariance
 from calib.types import nominal_vector
+
+log = logging.getLogger(__name__)
 
 __all__ = ["CalibrationSettings", "Calibrator", "calibrate", "NOISE_MODES", "ESTIMATORS"]
 
@@ -418,8 +422,17 @@ class Calibrator:
         multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
         D = np.outer(self.scale, self.scale)
         self._emit({"stage": "map_covariance", "n_eff": n_eff, "fit_scale": fit_scale})
+        agreement = map_ml_agreement(lin.M, lin.residual.reshape(-1), problem.scaled(lin.p),
+                                     self._map_prior_cov_scaled(), problem.scaled(self.lower),
+                                     problem.scaled(self.upper), [q.name for q in self.parameters], fit_scale)
+        self._emit({"stage": "map_agreement", "ok": agreement.ok, "max_z": agreement.max_z,
+                    "n_fixed": agreement.n_fixed})
+        if not agreement.ok:
+            log.warning("%s: %s", self.name, agreement.sentence())
+            message = f"{message}; {agreement.sentence()}" if message else agreement.sentence()
         return self._result(problem, nominal, lin, svd, cov * D, cov_weak * D,
                             np.diag(svd.sigma_theta[svd.retained] ** 2), theta_hat, obs, status, message, wall,
+                            checks={"MAP and ML": agreement.sentence()},
                             fit_scale=fit_scale, prior_check=prior_check, multiple_roots=multiple_roots,
                             aliasing_note=alias_note, gain=gain if alias is not None else np.zeros((0, 0)),
                             cov_alias=cov_alias * D)
