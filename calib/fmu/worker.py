@@ -88,7 +88,7 @@ def child_main() -> int:
         if msg is None or msg[0] == "close":
             if sim is not None:
                 sim.close()
-            return 0
+            _leave()
         kind, payload = msg
         if kind == "plan":
             if sim is not None:
@@ -100,6 +100,21 @@ def child_main() -> int:
             _child_probe(sim, payload, out_fd)
         elif kind == "point":
             _child_point(sim, payload, out_fd)
+
+
+def _leave() -> None:
+    """End the child at once after its instance is freed: no interpreter finalization and no exit
+    handlers or static destructors of the FMU's shared library (or of an interpreter it embeds,
+    as PythonFMU's do) run in a process that loaded a vendor binary. Those ran at exit, after the
+    instance was freed, and are where a heap corrupted by the library shows itself ("corrupted
+    double-linked list", "double free"); nothing is lost by skipping them: every answer has been
+    written, and the supervisor reads the exit status."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(0)
 
 
 def _child_fatal(out_fd: int) -> None:
@@ -250,12 +265,18 @@ class WorkerProcess:
         self.proc = None
 
     def close(self):
-        """Ask the child to free its instance and exit (killed after 5 s)."""
+        """Ask the child to free its instance and exit (killed after 5 s). A child that ends by a
+        signal while freeing its instance (the FMU's library aborting on a corrupted heap) is
+        logged as a warning naming the signal: the results it returned before stand."""
         if self.proc is not None and self.proc.poll() is None:
             try:
                 _write_message(self.proc.stdin.fileno(), ("close", None))
-                self.proc.wait(timeout=5)
-            except (OSError, subprocess.TimeoutExpired):
+                code = self.proc.wait(timeout=5)
+                if code < 0:
+                    log.warning("the FMU process %d ended with %s while freeing its instance of %s (the FMU's "
+                                "library, at close; the results it returned before stand)", self.proc.pid,
+                                signal.Signals(-code).name, self.plan.model_identifier)
+            except (OSError, subprocess.TimeoutExpired, ValueError):
                 pass
         self.kill()
 
