@@ -1,0 +1,89 @@
+"""Every path gives the same right answer: the conformance matrix of ``tests/conformance.py``
+(model kind × estimator × prior × executor × noise model) on synthetic data with a known truth.
+
+``make test`` runs the subset ``FAST`` (every model kind, estimator, prior mode and noise model,
+and the process pool, at least once); the whole matrix runs with ``pytest -m statistics`` (in CI
+after the test command) and in ``make validate`` (``benchmarks/bench_conformance.py``, which
+publishes the table on the validation pages)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conformance import FAST, Cell, matrix, run_cell
+
+pytestmark = pytest.mark.filterwarnings("ignore:.*InitialUnknowns")
+
+
+@pytest.fixture(scope="session")
+def workdir(tmp_path_factory):
+    return tmp_path_factory.mktemp("conformance")
+
+
+_RESULTS: dict = {}
+
+
+def _run(cell: Cell, workdir) -> dict:
+    if cell.id not in _RESULTS:
+        _RESULTS[cell.id] = run_cell(cell, workdir)
+    return _RESULTS[cell.id]
+
+
+@pytest.mark.parametrize("cell", FAST, ids=lambda c: c.id)
+def test_a_fast_cell_gives_the_right_answer(cell, workdir):
+    r = _run(cell, workdir)
+    assert r["passed"], r["why"]
+
+
+def test_the_fast_subset_spans_every_dimension():
+    for field in ("estimator", "prior", "noise"):
+        assert {getattr(c, field) for c in FAST} == {getattr(c, field) for c in matrix()}, field
+    assert {c.model for c in FAST} >= {"bem_field", "bem_effects", "fmu_b", "fmu_generic"}
+    assert {"serial", "process"} <= {c.executor for c in FAST}
+    assert all(c in matrix() for c in FAST)
+
+
+def test_the_process_pool_gives_the_serial_answer_bit_for_bit(workdir):
+    """Where a simulation runs cannot change a bit of the result (same code path, same machine)."""
+    a = _run(Cell("fmu_generic", "map", "stated", "serial", "known"), workdir)
+    b = _run(Cell("fmu_generic", "map", "stated", "process", "known"), workdir)
+    assert a["p_hat"] == b["p_hat"] and a["std_p"] == b["std_p"]
+
+
+@pytest.mark.statistics
+@pytest.mark.parametrize("cell", [c for c in matrix() if c not in FAST], ids=lambda c: c.id)
+def test_every_cell_gives_the_right_answer(cell, workdir):
+    r = _run(cell, workdir)
+    assert r["passed"], r["why"]
+
+
+@pytest.mark.statistics
+def test_cells_that_differ_only_in_the_executor_agree_bit_for_bit(workdir):
+    groups: dict = {}
+    for c in matrix():
+        if c.is_fmu:
+            groups.setdefault((c.model, c.estimator, c.prior, c.noise), []).append(_run(c, workdir))
+    for key, runs in groups.items():
+        for r in runs[1:]:
+            assert r["p_hat"] == runs[0]["p_hat"], (key, r["executor"])
+
+
+@pytest.mark.statistics
+def test_the_estimators_agree_within_their_sigma_on_the_same_data(workdir):
+    """MAP and truncated, known and estimated noise, on one data set: the non-field estimates of any
+    two cells of one model and prior differ by less than 3 σ of the difference (σ² the sum of the two
+    variances: conservative, the two share the data)."""
+    by_model: dict = {}
+    for c in matrix():
+        if c.executor == "serial":
+            by_model.setdefault((c.model, c.prior), []).append(_run(c, workdir))
+    for key, runs in by_model.items():
+        names = runs[0]["names"]
+        other = [j for j, n in enumerate(names) if not n.startswith(("dCL", "dCD"))]
+        for a in runs:
+            for b in runs:
+                pa, pb = np.array(a["p_hat"])[other], np.array(b["p_hat"])[other]
+                sa, sb = np.array(a["std_p"])[other], np.array(b["std_p"])[other]
+                z = np.abs(pa - pb) / np.hypot(sa, sb)
+                assert z.max() < 3.0, (key, a["cell"], b["cell"], [names[j] for j in other], z)
