@@ -62,8 +62,20 @@ def judge_round(fits: list[CandidateFit], base_chi2: float, base_names: list, ds
         rnd.update(verdict="none", reason=_nothing_significant(fits, dset))
         return rnd, None
     best = sig[0]
+    stand_in, passed = "", ""
+    if _switched_off_at_bound(best):
+        # the fit pins a parameter on the bound where the effect is off (its nominal) and pushes past
+        # it: the data want the effect reversed there (erosion that wants a drag decrease), so it
+        # stands in for another effect; a significant candidate of another effect whose parameters
+        # are all inside their bounds is named before it
+        inside = [f for f in sig if f.effect != best.effect and not f.at_bound]
+        if inside:
+            stand_in = (f"; {best.name} fits better (ΔBIC = {inside[0].bic - best.bic:.3g}) but only with "
+                        f"{best.bound_phrase()}, where that effect is off: it stands in for another effect")
+            passed, best = best.effect, inside[0]
     # variants of the same effect are not rivals: the best variant names the effect
-    rivals = [f for f in sig[1:] if f.bic - best.bic < dset.ambiguity_bic and f.effect != best.effect]
+    rivals = [f for f in sig if f is not best and f.bic - best.bic < dset.ambiguity_bic
+              and f.effect not in (best.effect, passed)]
     pattern_note = ""
     if rivals:
         rival = rivals[0]
@@ -82,13 +94,20 @@ def judge_round(fits: list[CandidateFit], base_chi2: float, base_names: list, ds
                 f"{close} and their patterns agree equally with the localized correction ({a:.2f} and {b:.2f}): "
                 f"the data cannot tell them apart; {separation['text']}"))
             return rnd, None
-    nxt = fits[1] if len(fits) > 1 else None
+    nxt = next((f for f in fits if f is not best), None)
     rnd.update(verdict=best.effect, reason=(
         f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), {p_is(best.p_value)}; "
         f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
         f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
-        f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best) + pattern_note))
+        f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best) + pattern_note
+        + stand_in))
     return rnd, best
+
+
+def _switched_off_at_bound(fit: CandidateFit) -> bool:
+    """Whether a parameter of ``fit`` sits on a bound that is also its nominal (the value that
+    switches the effect off in that parameter)."""
+    return any(q.get("at_bound") and q[q["at_bound"]] == q["nominal"] for q in fit.parameters)
 
 
 def _nothing_significant(fits: list[CandidateFit], dset: DiagnosisSettings) -> str:
