@@ -139,8 +139,8 @@ def map_ml_agreement(M: np.ndarray, r: np.ndarray, x: np.ndarray, P: np.ndarray,
     -------
     MapAgreement
     """
-    k = np.sqrt(float(fit_scale))
-    M, r, x = np.asarray(M, float) / k, np.asarray(r, float) / k, np.asarray(x, float)
+    noise_factor = np.sqrt(float(fit_scale))
+    M, r, x = np.asarray(M, float) / noise_factor, np.asarray(r, float) / noise_factor, np.asarray(x, float)
     names = list(names)
     held = (x <= lower + AT_BOUND) | (x >= upper - AT_BOUND)
     free = np.flatnonzero(~held)
