@@ -92,6 +92,15 @@ def test_blockage_and_wind_scale_ambiguous_unless_the_data_separate_them(wide):
         assert abs(best["tip_speed_ratio"] - 7.5) > 0.5 or abs(best["pitch"]) > 1.0, best
         assert "to tell them apart, measure" in d.rounds[0]["reason"] and "thrust coefficient" in d.rounds[0]["reason"]
         assert d.to_dict()["rounds"][0]["separate"]["probes"][0] == best
+        # the words keep both candidates with their fitted values, and add no effect that was not added
+        from calib.report.diagnosis_report import _summary_html, decision_words
+
+        assert d.effects == [] and d.to_dict()["ambiguous"] == d.rounds[0]["ambiguous"]
+        words = decision_words(d)
+        assert "ambiguous between wind_tunnel_blockage (blockage_area_ratio " in words and \
+            " and wind_speed_scale (wind_scale " in words and " ± " in words, words
+        summary = "".join(_summary_html(d))
+        assert "with the effect" not in summary and "neither added" in summary, summary
 
 
 def test_diagnose_cli_writes_json_and_report(tmp_path, capsys):

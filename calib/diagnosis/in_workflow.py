@@ -105,6 +105,8 @@ def diagnosis_sentence(diag) -> str:
         return f"no candidate could be fitted; named {diag.effect}{failed}"
     reasons = "; ".join(r["reason"] for r in diag.rounds)
     added = ", ".join(diag.effects) if diag.effects else "nothing"
-    return (f"named {diag.effect} (free parameters of this model: {added}); {reasons}; χ²/dof "
-            f"{diag.before['chi2_per_dof']:.3g} nominal -> {diag.with_effects['chi2_per_dof']:.3g} with the effect(s) "
-            f"at their fitted values{failed} (see diagnosis/report.html)")
+    gap = (f"{diag.before['chi2_per_dof']:.3g} nominal -> {diag.with_effects['chi2_per_dof']:.3g} with the effect(s) "
+           "at their fitted values" if diag.effects else f"{diag.before['chi2_per_dof']:.3g} nominal, no effect added")
+    between = f" between {' and '.join(diag.ambiguous)}" if diag.ambiguous else ""
+    return (f"named {diag.effect}{between} (free parameters of this model: {added}); {reasons}; χ²/dof "
+            f"{gap}{failed} (see diagnosis/report.html)")

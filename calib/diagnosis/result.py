@@ -81,8 +81,14 @@ class Diagnosis:
         """The first round's candidates (the comparison against the nominal model)."""
         return self.rounds[0]["candidates"] if self.rounds else []
 
+    @property
+    def ambiguous(self) -> list:
+        """The two effects the last round could not tell apart ([] unless ``effect`` is ``ambiguous``);
+        ``effects`` holds only those added to the model, by the rounds before."""
+        return list(self.rounds[-1].get("ambiguous", [])) if self.rounds and self.effect == "ambiguous" else []
+
     def to_dict(self) -> dict:
-        return {"effect": self.effect, "effects": self.effects,
+        return {"effect": self.effect, "effects": self.effects, "ambiguous": self.ambiguous,
                 "candidates": [c.to_dict() for c in self.candidates],
                 "rounds": [{"base": r["base"], "verdict": r["verdict"], "reason": r["reason"],
                             **{k: r[k] for k in ("ambiguous", "separate") if k in r},

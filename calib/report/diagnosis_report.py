@@ -140,17 +140,29 @@ def decision_words(d) -> str:
                 (last.get("reason", "the nominal model is consistent with the noise") if last else
                  "the nominal model is consistent with the noise"))
         return text[0].upper() + text[1:].rstrip(".") + "."
-    named = [f for f in fits if f.name in (d.effects or [d.effect])] or fits[:1]
-    f = named[0]
-    strength = "; ".join(f"{q['name']} {q['value']:.3g} ± {q['std']:.2g}"
-                         + ("" if q.get("unit") in ("", "-", None) else f" {q['unit']}") for q in f.parameters)
+    text = gap + "; " if gap else ""
+    if d.effect == "ambiguous":
+        # the best fit of each of the two effects the last round could not tell apart
+        pair = [next((g for g in fits if g.effect == e), None) for e in d.ambiguous]
+        pair = [g for g in pair if g is not None]
+        after = f"after {', '.join(d.effects)}, " if d.effects else ""
+        text += f"{after}ambiguous between " + " and ".join(_with_strength(g) for g in pair)
+        if len(pair) == 2:
+            text += f" (ΔBIC {round(pair[1].bic - pair[0].bic, 2):g})"
+        return text + "."
+    f = ([g for g in fits if g.name in (d.effects or [d.effect])] or fits[:1])[0]
+    text += f"best explanation: {_with_strength(f)}"
     rival = next((g for g in fits if g is not f), None)
-    text = (gap + "; " if gap else "") + (
-        f"ambiguous between {' and '.join(d.effects)}" if d.effect == "ambiguous" else f"best explanation: {f.name}")
-    text += f" ({strength})" if strength else ""
-    if rival is not None and d.effect != "ambiguous":
+    if rival is not None:
         text += f"; runner-up {rival.name}, ΔBIC {rival.bic - f.bic:.3g}"
     return text + "."
+
+
+def _with_strength(f) -> str:
+    """A candidate's name and its fitted parameters with their σ: "pitch_offset (pitch_offset 1.01 ± 0.027 deg)"."""
+    strength = "; ".join(f"{q['name']} {q['value']:.3g} ± {q['std']:.2g}"
+                         + ("" if q.get("unit") in ("", "-", None) else f" {q['unit']}") for q in f.parameters)
+    return f"{f.name} ({strength})" if strength else f.name
 
 
 def _candidate_rows(d) -> list[tuple]:
@@ -223,9 +235,14 @@ def _summary_html(d) -> list[str]:
     if failure:
         body.append(f'<p class="failed"><b>Stopped early:</b> {html.escape(failure)}. What the rounds before '
                     "found is reported below.</p>")
-    body.append(f"<p>Named effect(s): <b>{html.escape(', '.join(d.effects) or d.effect)}</b>. "
-                f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal) → {d.with_effects['chi2_per_dof']:.3g} (with the "
-                f"effect) → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field). "
+    named = ", ".join(d.effects) or "none"
+    if d.ambiguous:
+        named += f" (the last round: ambiguous between {' and '.join(d.ambiguous)}, neither added)"
+    steps = f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal)"
+    if d.effects:     # the model with the named effects differs from the nominal one only when one was added
+        steps += f" → {d.with_effects['chi2_per_dof']:.3g} (with the effect{'s' if len(d.effects) > 1 else ''})"
+    steps += f" → {d.after['chi2_per_dof']:.3g} (after recalibrating the correction field)"
+    body.append(f"<p>Named effect(s): <b>{html.escape(named)}</b>. {html.escape(steps)}. "
                 f"Wall time {d.wall_time:.1f} s.</p>")
     return body
 
