@@ -128,6 +128,28 @@ def test_diagnose_cli_writes_json_and_report(tmp_path, capsys):
     assert "diagnosis.candidates" in capsys.readouterr().err
 
 
+def test_diagnose_cli_on_a_table_without_sigma_columns_takes_the_noise_model_from_the_command_line(tmp_path, capsys):
+    """Issue 35, item 4: an ordinary CSV (no _sigma columns) stops the documented command with the
+    stated noise model, and ``--noise ml`` (the same key as [calibration] noise) lets it run."""
+    rotor = load_rotor("nrel5mw")
+    meas = hidden({"pitch_offset": {"pitch_offset": 1.0}}, campaign(rotor), 9021, channels=("power", "thrust"))
+    meas.write_csv(tmp_path / "full.csv")
+    lines = [ln for ln in (tmp_path / "full.csv").read_text().splitlines() if not ln.startswith("#")]
+    head = lines[0].split(",")
+    keep = [j for j, h in enumerate(head) if "_sigma" not in h]
+    assert len(keep) < len(head)
+    (tmp_path / "data.csv").write_text("\n".join(",".join(row.split(",")[j] for j in keep) for row in lines) + "\n")
+    (tmp_path / "cfg.toml").write_text('[model]\nuse_tilt = false\n[diagnosis]\ncandidates = ["pitch_offset", '
+                                       '"wind_speed_scale"]\nrecalibrate = false\n')
+    args = ["diagnose", "--rotor", "nrel5mw", "--data", str(tmp_path / "data.csv"), "--config", str(tmp_path / "cfg.toml")]
+    assert cli_main(args + ["--out", str(tmp_path / "known")]) == 2
+    assert "sigma" in capsys.readouterr().err
+    assert cli_main(args + ["--out", str(tmp_path / "ml"), "--noise", "ml"]) == 0
+    d = json.loads((tmp_path / "ml" / "diagnosis.json").read_text())
+    assert d["effect"] == "pitch_offset", d["rounds"][0]["reason"]
+    assert any("noise model: ml" in line for line in (tmp_path / "ml" / "calib.log").read_text().splitlines())
+
+
 def test_unknown_candidate_refused():
     with pytest.raises(InputError, match="valid"):
         DiagnosisSettings(candidates=("icing",)).validate()

@@ -117,3 +117,25 @@ def test_a_model_specific_channel_is_read_as_given_and_a_unit_on_it_refused(tmp_
     with pytest.raises(InputError, match="cannot be converted") as err:
         read_measurements(path, ["shaft_power"])
     assert err.value.line == 1 and err.value.field == "shaft_power"
+
+
+def test_calib_run_takes_the_noise_model_from_the_command_line(campaign, tmp_path, capsys):
+    """Issue 35, item 4: a table without _sigma columns stops a workflow with the stated noise model;
+    ``calib run --noise ml`` replaces the workflow's [calibration] noise and runs."""
+    lines = [ln for ln in (campaign / "field.csv").read_text().splitlines() if not ln.startswith("#")]
+    head = lines[0].split(",")
+    keep = [j for j, h in enumerate(head) if "_sigma" not in h]
+    assert len(keep) < len(head)
+    folder = tmp_path / "plain"
+    folder.mkdir()
+    for name in ("GenericRotor.fmu", "mapping.toml"):
+        (folder / name).write_bytes((campaign / name).read_bytes())
+    (folder / "field.csv").write_text("\n".join(",".join(r.split(",")[j] for j in keep) for r in lines) + "\n")
+    wf = workflow(folder)
+    assert main(["run", str(wf), "--out", str(tmp_path / "known"), "-q"]) == 2
+    assert "sigma" in capsys.readouterr().err
+    assert main(["run", str(wf), "--out", str(tmp_path / "ml"), "-q", "--noise", "ml"]) == 0
+    res = load_result(tmp_path / "ml" / "stage1_loads")
+    assert res.provenance.settings["noise"] == "ml" and res.status == "converged"
+    for v in res.verdicts:
+        assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v

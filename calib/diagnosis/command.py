@@ -55,7 +55,8 @@ def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
 
 
 def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
-                 resume: bool = False, history: bool = True, force: bool = False, strict_units: bool = False):
+                 resume: bool = False, history: bool = True, force: bool = False, strict_units: bool = False,
+                 noise: str | None = None):
     """Run the diagnosis from the command line's arguments; returns the Diagnosis.
 
     Parameters
@@ -73,7 +74,9 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         unless a command console is active, :func:`calib.logs.say`).
     resume : bool
         Continue the killed diagnosis whose history is in ``out`` (:mod:`calib.history`);
-        refused when the data, config or rotor changed.
+        refused when the data, config, rotor or noise model changed.
+    noise : str, optional
+        The noise model (``--noise``), replacing ``[calibration] noise`` of the config.
     history : bool
         Keep ``out/history`` (every model call and iteration as it happens).
     """
@@ -85,6 +88,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
             say(log, line)
 
     cfg, src, base_dir = _read_config(config, rotor)
+    if noise is not None:
+        cfg["calibration"] = {**cfg.get("calibration", {}), "noise": noise}
     is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
     dset, channels = _diagnosis_table(cfg.pop("diagnosis", {}), src, is_fmu)
     meas = read_measurements(data)
@@ -100,7 +105,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     grid = setup.grid(meas.conditions, prefix="[calib diagnose]")
     hist = None
     if history or resume:
-        hist = _open_history(out, rotor, data, config, force, setup, resume, printer)
+        hist = _open_history(out, rotor, data, config, force, setup, resume, printer, noise)
     diag, unit_notes = _checked_diagnosis(setup, grid, meas, dset, hist, is_fmu=is_fmu, src=src, data=data,
                                           force=force or setup.force, strict=strict_units or setup.strict_units,
                                           printer=printer)
@@ -170,7 +175,7 @@ def _workflow_table(cfg: dict, channels: list, src: str, base_dir: Path, is_fmu:
 
 
 def _open_history(out: str, rotor: str | None, data: str, config: str | None, force: bool, setup, resume: bool,
-                  printer):
+                  printer, noise: str | None = None):
     """Open (or, with ``resume``, continue) the history in ``out/history``, with the arguments and
     input digests that a resumed diagnosis must match (:func:`calib.history.open_history`)."""
     from calib.history import content_digest, open_history
@@ -180,7 +185,7 @@ def _open_history(out: str, rotor: str | None, data: str, config: str | None, fo
     rotor_arg = str(Path(rotor).resolve()) if rotor is not None and Path(rotor).is_file() else rotor
     hist = open_history(out, {"command": "diagnose", "arguments": {
         "rotor": rotor_arg, "data": str(Path(data).resolve()),
-        "config": str(Path(config).resolve()) if config else None, "force": bool(force)},
+        "config": str(Path(config).resolve()) if config else None, "force": bool(force), "noise": noise},
         "inputs": {**diagnose_inputs(rotor_arg, data, config),
                    "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
     hist.event("start", resumed=resume, records=hist.n_records)
@@ -323,6 +328,10 @@ def add_diagnose_arguments(parser) -> None:
                         "it started with")
     parser.add_argument("--strict-units", action="store_true", help="also stop when the nominal model misses the "
                         "data and no unit factor explains it (default: a loud warning, then diagnose)")
+    from calib.calibration_settings import NOISE_MODES
+    parser.add_argument("--noise", choices=NOISE_MODES, default=None, help="the noise model, as [calibration] noise "
+                        "(which it replaces): 'ml' estimates one σ per channel from the fit, for a table without "
+                        "_sigma columns; default: the config's, else 'known' (the _sigma columns)")
     add_output_arguments(parser, "also print every model call (the log file DIR/calib.log always has them)")
 
 
@@ -332,6 +341,7 @@ def diagnose_from_args(args) -> int:
 
     rotor, data, config, out = args.rotor, args.data, args.config, args.out
     force = bool(getattr(args, "force", False))
+    noise = getattr(args, "noise", None)
     if args.resume is not None:
         if out is not None and Path(out).resolve() != Path(args.resume).resolve():
             raise InputError(f"--out {out} and --resume {args.resume} name different folders; give one",
@@ -345,13 +355,14 @@ def diagnose_from_args(args) -> int:
         data = data if data is not None else recorded_args.get("data")
         config = config if config is not None else recorded_args.get("config")
         force = force or bool(recorded_args.get("force", False))
+        noise = noise if noise is not None else recorded_args.get("noise")
     if data is None or out is None:
         raise InputError("give --data FILE and --out DIR (or --resume DIR)", "calib diagnose",
                          field="--data" if data is None else "--out")
     with command_logging(out, args.verbose, args.quiet):
         try:
             run_diagnose(rotor, data, out, config, resume=args.resume is not None, history=not args.no_history,
-                         force=force, strict_units=bool(getattr(args, "strict_units", False)))
+                         force=force, strict_units=bool(getattr(args, "strict_units", False)), noise=noise)
         except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
             log.debug(f"calib: error: {exc}", exc_info=True)
             raise

@@ -29,7 +29,7 @@ log = logging.getLogger("calib.workflow")
 
 def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
                  force: bool = False, resume: bool = False, history: bool = True,
-                 strict_units: bool = False) -> list[StageOutcome]:
+                 strict_units: bool = False, noise: str | None = None) -> list[StageOutcome]:
     """Run a workflow file; writes results, figures and ``report.html`` into ``out_dir``.
 
     Parameters
@@ -54,9 +54,13 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         the measurement file or the rotor's geometry and polars changed since.
     history : bool
         Keep the history in ``out_dir/history`` (model calls and iterations as they happen).
+    noise : str, optional
+        The noise model (``calib run --noise``), replacing the workflow's ``[calibration] noise``.
     """
     cfg = load_workflow(path)
     src = cfg["_source"]
+    if noise is not None:
+        cfg["calibration"] = {**cfg.get("calibration", {}), "noise": noise}
     # everything the settings can get wrong is found here, before any data is read
     setup = prepare(cfg)
     force = setup.force or force
@@ -70,7 +74,8 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         from calib.history import content_digest
         inputs = {**run_inputs(cfg), "rotor (geometry and polars)": content_digest(setup.rotor)
                   if setup.rotor is not None else None}
-        hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "inputs": inputs}, resume)
+        hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "noise": noise,
+                                  "inputs": inputs}, resume)
         hist.event("start", resumed=resume, records=hist.n_records)
         if resume:
             say(log, f"[calib run] resuming from {hist.folder}: {hist.n_records} model calls on record", progress)
@@ -318,6 +323,10 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed run whose output "
                         "folder is DIR: model calls on record in DIR/history are read back, not computed again; "
                         "refused if the workflow, the measurement file or the rotor's data changed")
+    from calib.calibration_settings import NOISE_MODES
+    parser.add_argument("--noise", choices=NOISE_MODES, default=None, help="the noise model, replacing the "
+                        "workflow's [calibration] noise ('ml': one σ per channel estimated from the fit, for a table "
+                        "without _sigma columns)")
     add_output_arguments(parser, "also print every optimizer iteration and model call (the log file "
                          "DIR/calib.log always has them)")
 
@@ -327,24 +336,27 @@ def run_from_args(args) -> int:
     from calib.logs import command_logging
 
     out, file = args.out, args.file
+    noise = getattr(args, "noise", None)
     if args.resume is not None:
         if out is not None and Path(out).resolve() != Path(args.resume).resolve():
             raise InputError(f"--out {out} and --resume {args.resume} name different folders; give one", "calib run",
                              field="--out")
         out = args.resume
-        if file is None:
-            manifest = Path(out) / "history" / "manifest.json"
+        manifest = Path(out) / "history" / "manifest.json"
+        if file is None or noise is None:
             if not manifest.is_file():
                 raise InputError(f"nothing to resume: no history/manifest.json in {out}", str(out), field="--resume")
             import json
-            file = json.loads(manifest.read_text()).get("workflow")
+            recorded = json.loads(manifest.read_text())
+            file = file if file is not None else recorded.get("workflow")
+            noise = noise if noise is not None else recorded.get("noise")
     if file is None or out is None:
         raise InputError("give a workflow file and --out DIR (or --resume DIR)", "calib run",
                          field="file" if file is None else "--out")
     with command_logging(out, args.verbose, args.quiet):
         try:
             run_workflow(file, out, force=args.force, resume=args.resume is not None, history=not args.no_history,
-                         strict_units=getattr(args, "strict_units", False))
+                         strict_units=getattr(args, "strict_units", False), noise=noise)
         except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
             log.debug(f"calib: error: {exc}", exc_info=True)
             raise
