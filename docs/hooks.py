@@ -126,6 +126,8 @@ def _speed_tables(data: dict) -> str:
 RENDERERS = {"prediction": lambda load: _prediction_tables(load("prediction")),
              "speed": lambda load: _speed_tables(load("speed")),
              "coverage": _coverage_tables}
+#: The data files a marker's table is made from, where they are not the one named by the marker.
+SOURCES = {"coverage": ("coverage_map", "coverage_truncated")}
 
 
 def _published_markdown(data: dict) -> str:
@@ -143,9 +145,11 @@ def _bench(markdown: str, config) -> str:
 
     def render(m):
         name = m.group(1)
-        if not (Path(config["docs_dir"]) / "validation" / "data" / f"{name}.json").is_file():
-            return (f"*Not published yet: no run of the benchmark that writes `docs/validation/data/{name}.json` "
-                    "is on record in this version.*\n")
+        missing = [f for f in SOURCES.get(name, (name,))
+                   if not (Path(config["docs_dir"]) / "validation" / "data" / f"{f}.json").is_file()]
+        if missing:
+            return (f"*Not published yet: no run of the benchmark that writes "
+                    f"{', '.join(f'`docs/validation/data/{f}.json`' for f in missing)} is on record in this version.*\n")
         if name in RENDERERS:
             return RENDERERS[name](load)
         return _published_markdown(load(name))
