@@ -13,6 +13,16 @@ import re
 MARKER = re.compile(r"^<!-- settings: ([\w.]+)\.(\w+) (\w+) -->$", re.M)
 
 
+#: A Sphinx role left in a rendered docstring (mkdocstrings does not read them): ":class:<code>~a.b.C</code>".
+ROLE = re.compile(r":(?:class|func|meth|mod|attr|data|obj|exc|ref):<code>(~?)([^<]+)</code>")
+
+
+def on_page_content(html, page, config, files):
+    """The docstrings' Sphinx roles as code: ``:class:`~calib.history.RecordedModel``` reads
+    ``RecordedModel`` (the tilde: the last name only), ``:func:`calib.x.f``` reads ``calib.x.f``."""
+    return ROLE.sub(lambda m: f"<code>{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}</code>", html)
+
+
 def on_page_markdown(markdown, page, config, files):
     from calib.settings_doc import settings_markdown
 
