@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from calib.cli import main
@@ -17,6 +18,11 @@ def test_demo_writes_figures_and_summary(tmp_path, capsys):
     assert 6.5 < summary["tsr_at_cp_max"] < 8.5
     assert summary["surface_failed"] == 0 and summary["power_curve_failed"] == 0
     assert 10.5 < summary["rated_wind_speed"] < 12.5
+    # the 5° shaft tilt explains the difference from an untilted rotor's maximum (the CCBlade comparison's):
+    # the wind's normal component scales by cos(tilt), the power by about cos³(tilt)
+    ratio = summary["cp_max"] / summary["cp_max_untilted"]
+    assert summary["shaft_tilt_deg"] == 5.0 and abs(ratio - np.cos(np.radians(5.0)) ** 3) < 0.002, ratio
+    assert "with the 5° shaft tilt, " in (tmp_path / "report.html").read_text()
     # the diagnosis on the embedded campaign names its hidden effect (stall delay)
     diagnosis = json.loads((tmp_path / "diagnosis" / "diagnosis.json").read_text())
     assert diagnosis["effect"] == "rotational_augmentation"
