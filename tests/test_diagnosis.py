@@ -121,6 +121,7 @@ def test_diagnose_cli_writes_json_and_report(tmp_path, capsys):
     assert abs(fitted["value"] - 1.0) <= 3 * fitted["std"]
     html = (tmp_path / "out" / "report.html").read_text()
     assert "pitch_offset" in html and html.rstrip().endswith("</html>")
+    assert "&lt; 1e-16" in html and "<td><" not in html       # a p-value below round-off, escaped (issue 35)
     # bad input: a clear message and a non-zero exit
     (tmp_path / "bad.toml").write_text("[diagnosis]\ncandidates = [\"ice\"]\n")
     assert cli_main(["diagnose", "--rotor", "nrel5mw", "--data", str(tmp_path / "data.csv"), "--out",

@@ -177,7 +177,7 @@ def _candidate_rows(d) -> list[tuple]:
             if f.at_bound:
                 status += f"; at bound: {', '.join(f.at_bound)}"
             rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
-                         f"{f.lr_statistic:.4g}", f"{p_text(f.p_value)}", "yes" if f.significant else "no",
+                         f"{f.lr_statistic:.4g}", html.escape(p_text(f.p_value)), "yes" if f.significant else "no",
                          f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}", html.escape(f.effect_text),
                          html.escape("; ".join(_parameter_text(q) for q in f.parameters)), html.escape(status)))
     return rows
@@ -271,7 +271,7 @@ def _gap_html(d, figs: dict[str, Path]) -> list[str]:
     """Where the nominal model misses (trends per channel, the residual figure) and how much the
     misfit shrank with the named effect(s) and the recalibration."""
     units = dict(zip(d.localization.channels, d.localization.channel_units)) if d.localization is not None else {}
-    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], f"{p_text(g['p_value'])}",
+    gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], html.escape(p_text(g['p_value'])),
                  html.escape(", ".join(f"{c} {v:.4g} {units.get(c, '')}".rstrip() for c, v in g["rms"].items())))
                 for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
                                                          d.with_effects),
