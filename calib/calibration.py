@@ -76,6 +76,8 @@ FLAT_PRIOR = 1e3
 ``Parameter.prior_std``, not in ``prior_std``, not a correction node): flat for any data that
 determine it to better than a thousand scales, so such a parameter is estimated by maximum
 likelihood, and one the data cannot determine shows its σ unbounded instead of a prior nobody stated."""
+NOISE_SETTLED = 1e-3
+"""Largest relative change of a channel's σ between two fits below which an estimated noise has settled [-]."""
 MAP_DECREASE = 5e-4
 """Cost decrease [-] (half a χ²) below which the MAP iteration stops: the last step was then about
 √(2 × 5e-4) = 0.03 posterior standard deviations long (:func:`calib.estimation.estimate`). On the
@@ -215,8 +217,15 @@ class Calibrator:
             self._emit({"stage": "noise", "iteration": k_noise + 1, "sigma": new_sigma[0].tolist(),
                         "change": change})
             problem = problem.with_sigma(new_sigma)
-            if change < 1e-3:
+            if change < NOISE_SETTLED:
                 break
+        if st.noise in ("ml", "relative_ml"):
+            # the estimator's message is the last fit's: say how many fits the noise estimate took
+            settled = change < NOISE_SETTLED
+            message = (f"{message}; noise σ estimated over {k_noise + 1} fit(s), "
+                       + (f"settled (last change {change:.2g} < {NOISE_SETTLED:g})" if settled else
+                          f"NOT settled after max_noise_iterations = {noise_iters} (last change {change:.2g}, "
+                          f"settled below {NOISE_SETTLED:g}): σ and the covariance are those of the last fit"))
         lin = problem.linearize(p)
         if st.estimator == "map":
             return self._finish_map(problem, nominal, lin, status, message, time.perf_counter() - t0)

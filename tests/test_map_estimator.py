@@ -202,3 +202,18 @@ def test_map_predictive_intervals_are_sharp_at_the_calibration_points():
     print(f"in-sample χ² per row {chi2 / rows:.3f}, inside {inside / rows:.3f} of {rows} rows")
     assert 0.55 < chi2 / rows < 1.1
     assert 0.90 <= inside / rows <= 0.995
+
+
+@pytest.mark.parametrize("estimator", ["map", "truncated"])
+def test_an_estimated_noise_says_how_many_fits_it_took_and_whether_it_settled(estimator):
+    """The estimator's message is its last fit's ("converged in 1 iterations" after several noise
+    re-estimates, issue 35): the message adds the number of fits and whether σ settled."""
+    model = TwinModel(channels=("power", "thrust"), nonlinearity=0.05)
+    cond = twin_conditions()
+    meas = synthesize(model, nominal_vector(model.parameters), cond, relative_sigma={"power": 0.01, "thrust": 0.01},
+                      seed=4)
+    base = dict(estimator=estimator, noise="ml", cd_min=None, prior_check=False, representation_error=False)
+    res = Calibrator(model, meas, CalibrationSettings(**base)).run()
+    assert "noise σ estimated over" in res.message and ", settled (last change" in res.message, res.message
+    short = Calibrator(model, meas, CalibrationSettings(max_noise_iterations=1, **base)).run()
+    assert "noise σ estimated over 1 fit(s), NOT settled" in short.message, short.message
