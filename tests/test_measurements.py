@@ -300,3 +300,17 @@ def test_trailing_delimiter_and_odd_headers_are_ignored_columns(tmp_path):
     np.testing.assert_allclose(m.channel("power"), [1.5e6])
     assert any(n.startswith("ignored unrecognised numeric column(s): power (avg) [kW]") for n in m.notes)
     assert "ignored non-numeric column(s): <column 6>" in m.notes
+
+
+def test_a_rotor_and_a_measurement_table_print_as_a_short_summary(tmp_path):
+    """print(rotor) and print(meas) dumped hundreds of lines of arrays (issue 35): one line each."""
+    from calib.rotor.library import load_rotor
+
+    rotor = load_rotor("nrel5mw")
+    text = repr(rotor)
+    assert "\n" not in text and len(text) < 200 and "19 stations" in text and "3 blades" in text, text
+    path = tmp_path / "m.csv"
+    path.write_text("wind_speed,rotor_speed,pitch,power [kW],power_sigma [kW]\n8,9,0,1500,15\n10,11,0,2500,25\n")
+    meas = read_measurements(path, ["power"])
+    text = repr(meas)
+    assert "\n" not in text and "2 points × 1 channels (power)" in text and "with σ" in text, text

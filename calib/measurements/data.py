@@ -193,6 +193,14 @@ class Measurements:
     metadata: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
 
+    def __repr__(self) -> str:
+        """A short summary (``values``, ``sigma`` and ``conditions`` hold the arrays)."""
+        v = self.conditions.wind_speed
+        span = f", wind {v.min():.3g}–{v.max():.3g} m/s" if v.size else ""
+        noise = "with σ" if self.sigma is not None else "no σ"
+        return (f"Measurements({len(v)} points × {len(self.channels)} channels ({', '.join(self.channels)}){span}, "
+                f"{noise}, from {self.source!r})")
+
     def __post_init__(self):
         v = np.asarray(self.values, dtype=float)
         if v.ndim == 1:

@@ -163,6 +163,12 @@ class Rotor:
         object.__setattr__(self, "tip_radius", tip)
         object.__setattr__(self, "n_blades", int(self.n_blades))
 
+    def __repr__(self) -> str:
+        """A short summary (the arrays are too long to print; ``r``, ``chord`` ... hold them)."""
+        return (f"Rotor({self.name!r}, R = {self.tip_radius:.4g} m, hub {self.hub_radius:.4g} m, {self.n_blades} blades, "
+                f"{self.n_stations} stations, {len(self.airfoils)} airfoils, precone {self.precone_deg:g}°, "
+                f"tilt {self.tilt_deg:g}°, {'with' if self.schedule is not None else 'no'} operating schedule)")
+
     @property
     def n_stations(self) -> int:
         return int(self.r.size)
