@@ -366,7 +366,11 @@ def _result_files(path: Path, stem: str) -> tuple[Path, Path]:
         jpath, npath = path.with_suffix(".json"), path.with_suffix(".npz")
     for p in (jpath, npath):
         if not p.is_file():
-            raise InputError("result file not found", p)
+            stages = sorted(d.name for d in path.iterdir() if (d / f"{stem}.json").is_file()) if path.is_dir() else []
+            hint = (f"; this is a run's folder: give one of its stage folders, {', '.join(str(path / d) for d in stages)}"
+                    if stages else "")
+            raise InputError(f"result file not found (a folder holding {stem}.json and {stem}.npz, or their path)"
+                             + hint, p)
     return jpath, npath
 
 

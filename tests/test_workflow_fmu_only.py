@@ -139,3 +139,12 @@ def test_calib_run_takes_the_noise_model_from_the_command_line(campaign, tmp_pat
     assert res.provenance.settings["noise"] == "ml" and res.status == "converged"
     for v in res.verdicts:
         assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v
+
+
+def test_a_run_folder_given_for_a_result_lists_its_stage_folders(campaign, tmp_path):
+    """'calib predict own ...' answered "own/result.json: result file not found" (issue 35): the run's
+    folder holds stage folders, and the message names them."""
+    out = tmp_path / "out"
+    assert main(["run", str(workflow(campaign)), "--out", str(out), "-q"]) == 0
+    with pytest.raises(InputError, match=r"give one of its stage folders, .*stage1_loads"):
+        load_result(out)
