@@ -148,3 +148,20 @@ def test_a_run_folder_given_for_a_result_lists_its_stage_folders(campaign, tmp_p
     assert main(["run", str(workflow(campaign)), "--out", str(out), "-q"]) == 0
     with pytest.raises(InputError, match=r"give one of its stage folders, .*stage1_loads"):
         load_result(out)
+
+
+def test_a_file_a_workflow_names_but_lacks_says_where_relative_paths_start(campaign, tmp_path):
+    folder = tmp_path / "elsewhere"
+    folder.mkdir()
+    wf = folder / "wf.toml"
+    wf.write_text(workflow(campaign).read_text())      # names GenericRotor.fmu, mapping.toml, field.csv: not here
+    with pytest.raises(InputError, match="relative to the workflow file's folder") as err:
+        prepare(load_workflow(wf))
+    assert err.value.field in ("model.fmu", "model.mapping", "measurements.file")
+    (folder / "GenericRotor.fmu").write_bytes((campaign / "GenericRotor.fmu").read_bytes())
+    (folder / "mapping.toml").write_bytes((campaign / "mapping.toml").read_bytes())
+    with pytest.raises(InputError, match="measurement file not found: .*relative to the workflow file's folder") as err:
+        from calib.workflow.setup import measurements_of
+
+        measurements_of(load_workflow(wf), ["power"])
+    assert err.value.field == "measurements.file"

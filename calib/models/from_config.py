@@ -106,6 +106,10 @@ EXECUTOR_KEYS = schema_of(ExecutorSettings, overrides={
 """[executor] keys: the :class:`ExecutorSettings` fields."""
 
 
+#: What a "not found" message adds: where relative paths start.
+_RELATIVE = " (paths in a workflow are relative to the workflow file's folder)"
+
+
 def _path(value: str, base_dir) -> Path:
     p = Path(value)
     return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
@@ -167,9 +171,9 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         fmu = _path(t.fmu, base_dir)
         mapping = _path(t.mapping, base_dir)
         if not fmu.is_file():
-            raise InputError(f"FMU file not found: {fmu}", source, field="model.fmu")
+            raise InputError(f"FMU file not found: {fmu}{_RELATIVE}", source, field="model.fmu")
     if not Path(mapping).is_file():
-        raise InputError(f"mapping file not found: {mapping}", source, field="model.mapping")
+        raise InputError(f"mapping file not found: {mapping}{_RELATIVE}", source, field="model.mapping")
     return FmuModel(fmu, mapping, list(channels), parameters=None if t.parameters is None else list(t.parameters),
                     corrections=t.corrections, switches=t.switches, settings=t.settings, steady=t.steady,
                     jacobian=t.jacobian, executor=executor, timeout=t.timeout, isolate=t.isolate, build=build)

@@ -339,6 +339,10 @@ def _check_channels(fmu_table: dict | None, rotor, settings: BemSettings, channe
 def measurements_of(cfg: dict, channels) -> "Measurements":
     """The measurement table of ``[measurements]`` (CSV, or OpenFAST output with ``time_series``)."""
     table = cfg["measurements"]
+    path = Path(cfg["_dir"]) / table["file"]
+    if not path.is_file():
+        raise InputError(f"measurement file not found: {path} (paths in a workflow are relative to the workflow "
+                         f"file's folder, {cfg['_dir']})", cfg["_source"], field="measurements.file")
     try:
         return read_measurements(Path(cfg["_dir"]) / table["file"], channels,
                                  drop_incomplete_rows=table.get("drop_incomplete_rows", False),
