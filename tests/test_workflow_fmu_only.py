@@ -76,6 +76,10 @@ def test_fmu_workflow_needs_no_rotor_and_no_grid(campaign, tmp_path, capsys):
         assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v
     report = (out / "report.html").read_text()
     assert "correction node" not in report and "Every parameter of the model" in report
+    # the report leads with its decision, before the set-up table (issue 35, item 5)
+    lead = report.index("<p class='decision'>")
+    assert lead < report.index("<table") and "loads: the calibration ended converged; χ²/dof" in report[lead:]
+    assert "3 identified" in report[lead:report.index("</p>", lead)]
     assert "FMU GenericRotor.fmu" in (out / "calib.log").read_text()
 
 

@@ -380,6 +380,26 @@ def _verdicts_html(r: CalibrationResult) -> str:
             "quantity alone).</p>")
 
 
+def decision_html(r: CalibrationResult) -> str:
+    """One paragraph an engineer reads first: how the calibration ended, the misfit before and
+    after, what the data determined, and every warning the run raised."""
+    gof = r.goodness_of_fit()
+    counts = r.verdict_counts()
+    ended = "ended converged" if r.status == "converged" else f"did NOT converge (status {r.status})"
+    fit = ("consistent with the noise" if gof["p_value_after"] > 0.01 else "worse than the stated noise explains")
+    verdicts = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v)
+    warnings = [t for t in [r.message, *r.checks.values()] if "WARNING" in t]
+    text = (f"{r.name}: the calibration {ended}; χ²/dof {gof['chi2_per_dof_before']:.3g} before → "
+            f"{gof['chi2_per_dof_after']:.3g} after, {fit}; of {r.n_params} parameters: {verdicts}.")
+    failed = r.failures.get("final", 0)
+    if failed:
+        text += f" {failed} operating point(s) failed at the estimate."
+    body = f"<p class='decision'><b>{html.escape(text)}</b>"
+    for w in warnings:
+        body += f"<br><span class='bad'>{html.escape(w)}</span>"
+    return body + "</p>"
+
+
 def write_report(path: str | Path, sections: list[str] | None = None, title: str = "calib report",
                  results: Mapping[str, CalibrationResult] | None = None,
                  figures: Mapping[str, Mapping[str, Mapping[str, Path]]] | None = None,
@@ -403,7 +423,7 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
     checks : mapping name -> {label: statement}, optional
         Extra statements per result (e.g. coverage of a known truth).
     """
-    body = [f"<h1>{html.escape(title)}</h1>"]
+    body = [f"<h1>{html.escape(title)}</h1>"] + [decision_html(r) for r in (results or {}).values()]
     if intro:
         body.append(f"<p>{html.escape(intro)}</p>")
     if results and len(results) > 1:
