@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-browser bench validate venv clean phase_vi docs
+.PHONY: demo test test-browser test-statistics bench validate venv clean phase_vi docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,11 @@ test-browser:
 
 test: $(STAMP) test-browser
 	$(PY) -m pytest -q
+
+# the statistical suite (coverage, NEES, the diagnosis over seeds, the whole conformance matrix; CI runs
+# it after `make test`)
+test-statistics: $(STAMP)
+	$(PY) -m pytest -q -m statistics
 
 # speed figures, as ratios against baselines measured in the same run (a few minutes)
 bench: $(STAMP)
