@@ -228,9 +228,11 @@ class Calibrator:
                           f"settled below {NOISE_SETTLED:g}): σ and the covariance are those of the last fit"))
         lin = problem.linearize(p)
         if st.estimator == "map":
-            return self._finish_map(problem, nominal, lin, status, message, time.perf_counter() - t0)
-        svd = self._svd(problem, lin)
-        return self._finish(problem, nominal, lin, svd, status, message, time.perf_counter() - t0)
+            res = self._finish_map(problem, nominal, lin, status, message, 0.0)
+        else:
+            res = self._finish(problem, nominal, lin, self._svd(problem, lin), status, message, 0.0)
+        res.provenance.wall_time = time.perf_counter() - t0    # the uncertainty terms included (issue 35)
+        return res
 
     def _svd(self, problem: LeastSquaresProblem, lin) -> SvdAnalysis:
         """SVD at a linearization and the retained set (threshold, all, or chosen by the data)."""
