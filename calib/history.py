@@ -145,7 +145,9 @@ class History:
         self.resumed = resumed
         self._index: dict[str, str] = {}
         self.computed = 0
-        self.replayed = 0
+        self.replayed = 0          # calls answered from a record of an earlier (killed) run
+        self.repeated = 0          # calls this run had made already, answered from its own record
+        self._this_run: set[str] = set()
         if resumed:
             self._load_index()
 
@@ -167,6 +169,17 @@ class History:
         """The record file of a call key, or None."""
         name = self._index.get(key)
         return None if name is None else self.records / name
+
+    def recorded_by_this_run(self, key: str) -> bool:
+        """Whether the record of ``key`` was written by this run (not read from an earlier one)."""
+        return key in self._this_run
+
+    def calls_sentence(self) -> str:
+        """"N computed, M read back from FOLDER[, R repeated]": the model calls of the run."""
+        text = f"{self.computed} computed, {self.replayed} read back from {self.folder}"
+        if self.repeated:
+            text += f", {self.repeated} repeated within this run (answered from its own record)"
+        return text
 
     @property
     def n_records(self) -> int:
@@ -190,6 +203,7 @@ class History:
             _atomic_npz(self.records / name, arrays)
             event["record"] = name
             self._index[event["key"]] = name
+            self._this_run.add(event["key"])
         line = json.dumps(_jsonable(event), allow_nan=True) + "\n"
         # one write() on an O_APPEND descriptor: lines of processes sharing the file do not interleave
         fd = os.open(self.events_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)

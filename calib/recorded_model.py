@@ -171,7 +171,10 @@ class RecordedModel:
                 log.warning("history: record %s unreadable (%s); computing the call again", path.name, exc)
             else:
                 self.n_replayed += 1
-                self._history.replayed += 1
+                if self._history.recorded_by_this_run(key):
+                    self._history.repeated += 1
+                else:
+                    self._history.replayed += 1
                 self._history.event(kind, key=key, label=self._label, points=where, n_points=len(cond),
                                     replayed=True)
                 return out

@@ -354,3 +354,25 @@ def test_rotor_digest_sees_an_edited_polar_and_not_its_path():
     moved = dataclasses.replace(rotor, source="/elsewhere/phase_vi.fst")
     assert content_digest(edited) != content_digest(rotor)
     assert content_digest(moved) == content_digest(rotor) == content_digest(load_rotor("phase_vi"))
+
+
+def test_a_call_repeated_within_a_fresh_run_is_not_counted_as_read_back(tmp_path):
+    """A fresh output folder reported "1 read back" (issue 35): a call the run had made already, answered
+    from its own record, is counted as repeated; "read back" counts only records of an earlier run."""
+    from calib.history import open_history
+    from calib.recorded_model import recorded
+    from calib.types import nominal_vector
+    from twin_model import TwinModel, twin_conditions
+
+    model = TwinModel(channels=("power",))
+    p, cond = nominal_vector(model.parameters), twin_conditions()
+    hist = open_history(tmp_path, {"command": "test", "inputs": {}}, resume=False)
+    rec = recorded(model, hist, "test")
+    rec.evaluate(p, cond)
+    rec.evaluate(p, cond)
+    assert (hist.computed, hist.replayed, hist.repeated) == (1, 0, 1)
+    assert "1 computed, 0 read back from" in hist.calls_sentence() and "1 repeated within this run" in \
+        hist.calls_sentence()
+    again = open_history(tmp_path, {"command": "test", "inputs": {}}, resume=True)
+    recorded(model, again, "test").evaluate(p, cond)
+    assert (again.computed, again.replayed, again.repeated) == (0, 1, 0)

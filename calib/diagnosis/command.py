@@ -116,8 +116,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     paths = write_diagnosis(diag, out)
     if hist is not None:
         hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
-        printer(f"[calib diagnose] model calls: {hist.computed} computed, {hist.replayed} read back from "
-                f"{hist.folder}")
+        printer(f"[calib diagnose] model calls: {hist.calls_sentence()}")
     printer(f"[calib diagnose] named: {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else "")
             + (f" between {' and '.join(diag.ambiguous)}" if diag.ambiguous else ""))
     printer(f"[calib diagnose] report: {paths['report']}")

@@ -88,8 +88,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         executor.close()
     if hist is not None:
         hist.event("finished", computed=hist.computed, replayed=hist.replayed)
-        say(log, f"[calib run] model calls: {hist.computed} computed, {hist.replayed} read back from "
-                 f"{hist.folder}", progress)
+        say(log, f"[calib run] model calls: {hist.calls_sentence()}", progress)
     return outcomes
 
 
