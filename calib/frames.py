@@ -16,6 +16,8 @@ a convenience at its edges, so the core stays light.
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import hashlib
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -83,13 +85,23 @@ def measurements_from_dataframe(df, channels: Sequence[str] | None = None, *, un
     text = frame.to_csv(index=False, lineterminator="\n", na_rep="nan")
     digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
     try:
-        return _measurements_from_text(text, Path(source), [], digest, channels, drop_incomplete_rows,
+        meas = _measurements_from_text(text, Path(source), [], digest, channels, drop_incomplete_rows,
                                        allow_no_channels, None, None)
     except InputError as exc:       # the CSV text's line L is the DataFrame's row L − 2 (by position)
         if exc.line is None or exc.line < 2:
             raise
         raise InputError(f"row {exc.line - 2} (by position, from 0): {exc.message}", source,
                          field=exc.field) from None
+    # the notes name the CSV text's lines; the user's rows are those lines − 2 (by position, from 0)
+    return dataclasses.replace(meas, notes=tuple(_LINES.sub(_as_rows, n) for n in meas.notes))
+
+
+_LINES = re.compile(r"\(lines ([\d, ]+)((?: \.\.\. \(\d+ in all\))?)\)")
+
+
+def _as_rows(m) -> str:
+    rows = ", ".join(str(int(v) - 2) for v in m.group(1).split(","))
+    return f"(rows {rows}{m.group(2)}, by position from 0)"
 
 
 def prediction_frame(conditions, prediction):

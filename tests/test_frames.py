@@ -83,3 +83,16 @@ def test_results_and_predictions_as_dataframes():
     np.testing.assert_array_equal(frame["thrust_upper [N]"], pred.upper[:, 1])
     assert set(frame["status"]) == {"CONVERGED"} and set(frame["envelope"]) == {"inside"}
     np.testing.assert_array_equal(frame["wind_speed [m/s]"], v)
+
+
+def test_rows_dropped_from_a_dataframe_are_named_by_their_position():
+    """from_dataframe(drop_incomplete_rows=True) is in its signature, and its note names the DataFrame's
+    rows by position, as its errors do (it said "lines 7" for row 5; issue 35)."""
+    import inspect
+
+    df = pd.DataFrame(TABLE)
+    df.loc[1, "power"] = float("nan")
+    assert "drop_incomplete_rows" in inspect.signature(Measurements.from_dataframe).parameters
+    m = Measurements.from_dataframe(df, units={"power": "kW", "thrust": "kN"}, drop_incomplete_rows=True)
+    assert m.n_points == len(df) - 1
+    assert any("(rows 1, by position from 0)" in n for n in m.notes), m.notes

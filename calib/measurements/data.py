@@ -231,11 +231,15 @@ class Measurements:
         return self.values[:, self.channels.index(name)]
 
     @classmethod
-    def from_dataframe(cls, df, channels: Sequence[str] | None = None, **options) -> "Measurements":
+    def from_dataframe(cls, df, channels: Sequence[str] | None = None, *, units: dict | None = None,
+                       source: str = "DataFrame", drop_incomplete_rows: bool = False) -> "Measurements":
         """Measurements from a pandas DataFrame, with the checks of the CSV reader
-        (:func:`calib.frames.measurements_from_dataframe`: ``units=``, ``source=`` ...)."""
+        (:func:`calib.frames.measurements_from_dataframe`): units from the column names or ``units``,
+        ``source`` for messages, ``drop_incomplete_rows`` to drop rows with a missing value (noted, by
+        their position from 0) instead of refusing them."""
         from calib.frames import measurements_from_dataframe
-        return measurements_from_dataframe(df, channels, **options)
+        return measurements_from_dataframe(df, channels, units=units, source=source,
+                                           drop_incomplete_rows=drop_incomplete_rows)
 
     def select_channels(self, names: Sequence[str]) -> "Measurements":
         """A copy restricted to ``names`` (in that order); notes and metadata are kept."""
