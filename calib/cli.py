@@ -25,7 +25,7 @@ def _demo(args) -> int:
             log.info(f"[calib demo] diagnosis on the embedded NREL 5-MW campaign ({campaign.name}, a hidden "
                      f"effect in the data)")
             diag = run_diagnose("nrel5mw", str(campaign), str(Path(args.out) / "diagnosis"),
-                                printer=lambda s: log.info(s.replace("[calib diagnose]", "[calib demo]")))
+                                printer=log.info, prefix="[calib demo]")
         from calib.demo import write_demo_report
         log.info(f"[calib demo] report: {write_demo_report(args.out, summary, diag)}")
     return 0

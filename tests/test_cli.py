@@ -35,7 +35,10 @@ def test_demo_writes_figures_and_summary(tmp_path, capsys):
     demo = (tmp_path / "report.html").read_text()
     assert demo.count("data:image/png;base64,") == 2 and "Du &amp; Selig (1998) form, strength 1" in demo
     assert "best explanation: rotational_augmentation" in demo and 'href="diagnosis/report.html"' in demo
-    assert "report.html" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "report.html" in out
+    # every line under the demo's own prefix, the diagnosis's set-up lines too (issue 35)
+    assert "[calib demo] set-up: alpha nodes" in out and "[calib diagnose]" not in out
 
 
 def test_unknown_rotor_is_a_clean_error(tmp_path, capsys):

@@ -56,7 +56,7 @@ def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
 
 def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
                  resume: bool = False, history: bool = True, force: bool = False, strict_units: bool = False,
-                 noise: str | None = None):
+                 noise: str | None = None, prefix: str = "[calib diagnose]"):
     """Run the diagnosis from the command line's arguments; returns the Diagnosis.
 
     Parameters
@@ -77,6 +77,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         refused when the data, config, rotor or noise model changed.
     noise : str, optional
         The noise model (``--noise``), replacing ``[calibration] noise`` of the config.
+    prefix : str
+        What the progress lines start with (``calib demo`` runs the diagnosis under its own).
     history : bool
         Keep ``out/history`` (every model call and iteration as it happens).
     """
@@ -86,6 +88,11 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     if printer is None:
         def printer(line):
             say(log, line)
+    if prefix != "[calib diagnose]":
+        inner = printer
+
+        def printer(line):
+            inner(line.replace("[calib diagnose]", prefix, 1))
 
     cfg, src, base_dir = _read_config(config, rotor)
     if noise is not None:
@@ -102,13 +109,13 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     set_up = statement(setup, wf, meas)
     for line in statement_lines(set_up):
         printer(f"[calib diagnose] set-up in force: {line}")
-    grid = setup.grid(meas.conditions, prefix="[calib diagnose]")
+    grid = setup.grid(meas.conditions, prefix=prefix)
     hist = None
     if history or resume:
         hist = _open_history(out, rotor, data, config, force, setup, resume, printer, noise)
     diag, unit_notes = _checked_diagnosis(setup, grid, meas, dset, hist, is_fmu=is_fmu, src=src, data=data,
                                           force=force or setup.force, strict=strict_units or setup.strict_units,
-                                          printer=printer)
+                                          printer=printer, prefix=prefix)
     diag.notes.extend(f"{key}: {text}" for key, text in unit_notes.items())
     diag.setup = set_up
     if diag.failure:
@@ -194,7 +201,7 @@ def _open_history(out: str, rotor: str | None, data: str, config: str | None, fo
 
 
 def _checked_diagnosis(setup, grid, meas, dset, hist, *, is_fmu: bool, src: str, data: str, force: bool,
-                       strict: bool, printer):
+                       strict: bool, printer, prefix: str = "[calib diagnose]"):
     """The unit check, then :func:`calib.diagnosis.core.diagnose`, every model call recorded in ``hist``.
 
     An FMU's simulations run on an executor of ``[executor]``, closed at the end.
@@ -217,7 +224,7 @@ def _checked_diagnosis(setup, grid, meas, dset, hist, *, is_fmu: bool, src: str,
         return recorded(model, hist, label, chunk, progress=progress_line)
 
     try:
-        unit_notes = _unit_check(setup, family, meas, wrap, data, force, strict, printer)
+        unit_notes = _unit_check(setup, family, meas, wrap, data, force, strict, printer, prefix)
         diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
                         progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
                         wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
@@ -267,7 +274,8 @@ def _select_channels(meas, channels, src: str):
     return meas.select_channels(channels)
 
 
-def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool, printer) -> dict:
+def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool, printer,
+                prefix: str = "[calib diagnose]") -> dict:
     """The unit check of ``calib run`` on the nominal model (same messages); its notes for the report.
 
     Raises
@@ -286,7 +294,7 @@ def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool,
     p = np.array([q.nominal for q in model.parameters], float)
     _, notes = apply_unit_check(model, p, meas, sigma=setup.calibration.get("sigma"), force=force,
                                 strict=strict, source=str(data), printer=printer,
-                                prefix="[calib diagnose]", model_units=setup.model_units())
+                                prefix=prefix, model_units=setup.model_units())
     return notes
 
 

@@ -136,7 +136,7 @@ class FaultLedger:
         med = float(np.median(self.walls))
         self.changes.append({"call": self.counts["calls"], "timeout_s": t, "median_healthy_s": med,
                              "healthy_runs": self.n_healthy})
-        log.info("%s: simulation timeout now %.3g s (%g x the median %.3g s of %d healthy runs, floor %g s, "
+        log.info("[calib fmu] %s: simulation timeout now %.3g s (%g x the median %.3g s of %d healthy runs, floor %g s, "
                  "configured %g s)", self.label, t, self._rule.multiple, med, self.n_healthy, self._rule.floor,
                  self._rule.configured)
         self._announced = t
