@@ -292,6 +292,20 @@ class CalibrationResult:
             modes = np.flatnonzero(self.identifiability.retained)
         return eigenshapes(self.identifiability.V, self.layout, alpha_deg, eta, modes)
 
+    def noise_words(self) -> str:
+        """Which noise the χ² figures are taken against, with its σ per channel: "the σ estimated with
+        the fit (ml): power 1.2e+04 W, thrust 3.1e+03 N" (two χ² of one run, the unit check's and the
+        calibration's, are read apart by it)."""
+        noise = str(self.settings.get("noise", "known"))
+        how = {"known": "the stated σ", "repeats": "the σ of the repeated records", "ml": "the σ estimated with the fit",
+               "relative": "the stated σ relative to each point's value",
+               "relative_ml": "the stated relative σ times a factor estimated with the fit"}.get(noise, noise)
+        if noise in ("relative", "relative_ml"):
+            return f"{how} ({noise})"
+        sig = ", ".join(f"{c} {float(s):.3g} {u}" for c, u, s in zip(self.channels, self.channel_units,
+                                                                      self.fit.noise_sigma))
+        return f"{how} ({noise}): {sig}"
+
     def summary(self) -> str:
         """A few plain lines with the key numbers."""
         counts = self.verdict_counts()

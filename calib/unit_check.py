@@ -239,7 +239,7 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
         chi2_per_dof={c: float(as_read.chi2_per_dof[k]) for k, c in enumerate(measurements.channels)},
         chi2_threshold=float(chi2_threshold), hypotheses=tuple((f.label, float(f.misfit)) for f in fits),
         notes=tuple(notes), source=measurements.source, n_points=measurements.n_points,
-        n_failed=base.n_failed)
+        n_failed=base.n_failed, model_error=float(model_error))
 
 
 def _check_condition_names(conditions: Sequence[str]) -> None:

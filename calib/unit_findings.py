@@ -107,6 +107,7 @@ class UnitCheckReport:
     source: str
     n_points: int
     n_failed: int
+    model_error: float = 0.10
 
     @property
     def ok(self) -> bool:
@@ -127,7 +128,8 @@ class UnitCheckReport:
         """Lines a user reads: verdict, per-channel ratio and χ²/dof, findings, notes."""
         head = "unit check: " + ("passed" if self.ok else f"{len(self.findings)} finding(s)")
         per = ", ".join(f"{c} {self.ratios[c]:.3g} (χ²/dof {self.chi2_per_dof[c]:.3g})" for c in self.ratios)
-        lines = [head, f"  measured/model as read: {per}"]
+        lines = [head, f"  measured/model as read (χ²/dof of the unit check: against the noise σ plus a "
+                       f"{self.model_error:.0%} allowance for the uncalibrated model, not the calibration's χ²): {per}"]
         lines += [f"  - {f.message}" for f in self.findings]
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)

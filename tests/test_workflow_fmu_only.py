@@ -80,7 +80,11 @@ def test_fmu_workflow_needs_no_rotor_and_no_grid(campaign, tmp_path, capsys):
     lead = report.index("<p class='decision'>")
     assert lead < report.index("<table") and "loads: the calibration ended converged; χ²/dof" in report[lead:]
     assert "3 identified" in report[lead:report.index("</p>", lead)]
-    assert "FMU GenericRotor.fmu" in (out / "calib.log").read_text()
+    log_text = (out / "calib.log").read_text()
+    assert "FMU GenericRotor.fmu" in log_text
+    # two χ² of one run, read apart: the unit check's (with its allowance) and the calibration's (issue 35, item 3)
+    assert "χ²/dof of the unit check: against the noise σ plus a 10% allowance" in log_text
+    assert "against the stated σ (known): shaft_power " in log_text
 
 
 def test_channels_are_checked_against_the_fmu(campaign):
@@ -141,6 +145,7 @@ def test_calib_run_takes_the_noise_model_from_the_command_line(campaign, tmp_pat
     assert main(["run", str(wf), "--out", str(tmp_path / "ml"), "-q", "--noise", "ml"]) == 0
     res = load_result(tmp_path / "ml" / "stage1_loads")
     assert res.provenance.settings["noise"] == "ml" and res.status == "converged"
+    assert "against the σ estimated with the fit (ml): shaft_power " in (tmp_path / "ml" / "calib.log").read_text()
     for v in res.verdicts:
         assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v
 

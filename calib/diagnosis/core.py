@@ -149,7 +149,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     sigma = loc.sigma
 
     # 1. find
-    y0, before, findings = _find_disagreement(family, meas, wrap, say)
+    y0, before, findings = _find_disagreement(family, meas, wrap, say, loc.noise_words())
 
     # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand),
     # against the noise plus the model-form tolerance
@@ -194,15 +194,17 @@ def _localize(family, measurements: Measurements, cal: CalibrationSettings, wrap
     return loc, meas
 
 
-def _find_disagreement(family, meas: Measurements, wrap: Callable, say: Callable[[str], None]) -> tuple:
+def _find_disagreement(family, meas: Measurements, wrap: Callable, say: Callable[[str], None],
+                       noise: str = "the stated σ") -> tuple:
     """Step 1: the nominal model's outputs y0, shape (n_points, n_channels) [channel units], its
-    gap to the measurements (:func:`gap`) and where it disagrees (:func:`find`)."""
+    gap to the measurements (:func:`gap`) and where it disagrees (:func:`find`); ``noise`` says
+    which σ the χ² is against (the localization's, stated or estimated with the correction field)."""
     channels = list(meas.channels)
     base_model = wrap(family.nominal_model(), "nominal")
     y0 = base_model.evaluate(np.zeros(0), meas.conditions).values
     before = gap(meas.values, y0, meas.sigma, channels)
     findings = find(meas.values, y0, meas.sigma, meas.conditions.as_dict(), channels, family.rotor_radius)
-    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} ({p_is(before['p_value'])})")
+    say(f"find: nominal χ²/dof {before['chi2_per_dof']:.3g} ({p_is(before['p_value'])}) against {noise}")
     return y0, before, findings
 
 

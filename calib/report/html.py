@@ -390,7 +390,8 @@ def decision_html(r: CalibrationResult) -> str:
     verdicts = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v)
     warnings = [t for t in [r.message, *r.checks.values()] if "WARNING" in t]
     text = (f"{r.name}: the calibration {ended}; χ²/dof {gof['chi2_per_dof_before']:.3g} before → "
-            f"{gof['chi2_per_dof_after']:.3g} after, {fit}; of {r.n_params} parameters: {verdicts}.")
+            f"{gof['chi2_per_dof_after']:.3g} after against {r.noise_words()}, {fit}; of {r.n_params} parameters: "
+            f"{verdicts}.")
     failed = r.failures.get("final", 0)
     if failed:
         text += f" {failed} operating point(s) failed at the estimate."

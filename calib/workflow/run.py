@@ -263,7 +263,7 @@ class _Run:
         kept = (f"the data beat the prior in {res.n_retained} of {res.n_params} directions" if res.estimator == "map"
                 else f"{res.n_retained} of {res.n_params} retained")
         echo(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {kept}; "
-             f"chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g}; "
+             f"chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g} against {res.noise_words()}; "
              f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}")
         for label, text in res.checks.items():
             echo(f"[calib run] {name}: {label}: {text}")
