@@ -428,17 +428,35 @@ def test_the_separating_probe_is_where_the_two_predictions_differ_most_against_t
     measured = OperatingConditions(np.array([8.0, 10.0]), np.array([10.0, 12.0]), np.array([0.0, 0.0]))
     probes = probe_conditions(measured, 63.0)
     lam = probes.tip_speed_ratio(63.0)
-    assert len(probes) == 7 * 3 * 3 and np.isclose(lam.min(), 0.75 * measured.tip_speed_ratio(63.0).min())
-    assert set(np.round(probes.wind_speed, 6)) == {4.0, 9.0, 15.0} and set(probes.pitch) == {-2.0, 0.0, 4.0}
+    # no schedule: the campaign's rotor speeds (10, 11, 12 rpm) at wind speeds from half the lowest to 1.5
+    # times the highest measured
+    assert set(np.round(probes.rotor_speed, 6)) == {10.0, 11.0, 12.0} and set(probes.pitch) == {-2.0, 0.0, 4.0}
+    assert probes.wind_speed.min() >= 4.0 and probes.wind_speed.max() <= 15.0 and len(probes) >= 30
+    assert lam.min() >= 0.75 * measured.tip_speed_ratio(63.0).min() - 1e-9
     both = OperatingConditions(*(np.concatenate([getattr(measured, f), getattr(probes, f)])
                                  for f in ("wind_speed", "rotor_speed", "pitch")))
     a = np.ones((len(both), 2)) * [1e6, 5e5]
     b = a.copy()
     b[1, 1] *= 1.05             # a measured point, in the unmeasured channel: 5 % = 2.5 noise
-    b[30, 0] *= 1.10            # a probe, in the measured channel: 10 % = 5 noise
+    b[2 + 17, 0] *= 1.10        # a probe, in the measured channel: 10 % = 5 noise
     found = separating_probes(a, b, both, ["power", "fn@0.70"], ["power"], {"power": 0.02}, 2, 63.0)
     assert [(p.kind, p.channel) for p in found] == [("another operating point", "power"),
                                                     ("measured point, another channel", "fn@0.70")]
     assert np.isclose(found[0].separation, 0.1 / 0.02 / 1.05, rtol=1e-12)
     assert np.isclose(found[1].separation, 0.05 / 0.02 / 1.025, rtol=1e-12)
-    assert np.isclose(found[0].tip_speed_ratio, lam[28]) and "power at λ" in found[0].words(("x", "y"), "W")
+    assert np.isclose(found[0].tip_speed_ratio, lam[17]) and "power at λ" in found[0].words(("x", "y"), "W")
+
+
+def test_separation_probes_keep_to_the_rotors_operating_limits():
+    """Issue 35: the probe proposed to separate two effects ran the NREL 5-MW at 24.6 rpm, where its
+    schedule caps it at 12.1 rpm. Probes keep to the schedule's rotor speeds and cut-in to cut-out."""
+    from calib.diagnosis.separation import probe_conditions, probe_limits
+
+    rotor = load_rotor("nrel5mw")
+    sch = rotor.schedule
+    measured = campaign(rotor, tsr=np.linspace(3.0, 11.0, 9), pitch=(-1.0, 2.0, 5.0, 8.0))
+    probes = probe_conditions(measured, rotor.rotor_radius, sch)
+    assert len(probes) > 0
+    assert probes.rotor_speed.min() >= sch.min_rotor_speed - 1e-9 and probes.rotor_speed.max() <= sch.max_rotor_speed + 1e-9
+    assert probes.wind_speed.min() >= sch.cut_in - 1e-9 and probes.wind_speed.max() <= sch.cut_out + 1e-9
+    assert f"rotor speed {sch.min_rotor_speed:.3g}–{sch.max_rotor_speed:.3g} rpm" in probe_limits(measured, sch)[2]

@@ -62,6 +62,7 @@ class BemFamily:
         self.rotor, self.channels, self.grid, self.settings = rotor, list(channels), grid, settings
         self.rotor_source = rotor_source
         self.rotor_radius = rotor.rotor_radius
+        self.schedule = rotor.schedule      # the operating limits separation probes keep to (None: unknown)
         self.names = NAMEABLE
 
     def field_model(self, base=()):

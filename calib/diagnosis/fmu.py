@@ -63,6 +63,7 @@ class FmuFamily:
             raise InputError("a diagnosis localizes with the correction field, but the mapping maps no "
                              "[corrections]", nominal.mapping.source, field="corrections")
         self.rotor_radius = nominal.rotor_radius
+        self.schedule = None    # an FMU states no operating limits: probes keep to the campaign's rotor speeds
 
     def field_model(self, base=()):
         return self.build([c.name for c in base], True)

@@ -30,9 +30,10 @@ import numpy as np
 
 from calib.types import OperatingConditions
 
-#: Tip-speed ratios, pitch angles and wind speeds probed, relative to the measured envelope:
-#: λ from 0.75 λ_min (at least 1.5) to 1.25 λ_max; pitch 2 deg below to 4 deg above the
-#: measured; wind speed from half the lowest to 1.5 times the highest.
+#: Tip-speed ratios and pitch angles probed, relative to the measured envelope: λ from 0.75 λ_min
+#: (at least 1.5) to 1.25 λ_max; pitch 2 deg below to 4 deg above the measured; each at the
+#: rotor-speed limits and the measured median, where the wind speed stays in its limits
+#: (:func:`probe_limits`).
 PROBE_TSR_POINTS = 7
 PROBE_FLOOR = 0.1
 
@@ -58,8 +59,39 @@ class Probe:
                 f"the noise and model-form tolerance)")
 
 
-def probe_conditions(conditions: OperatingConditions, radius: float) -> OperatingConditions:
-    """Operating points around and beyond the measured envelope (see :data:`PROBE_TSR_POINTS`).
+def probe_limits(conditions: OperatingConditions, schedule=None) -> tuple[tuple, tuple, str]:
+    """The rotor-speed and wind-speed ranges a probe must stay in, and where they come from.
+
+    With the rotor's steady schedule (:class:`calib.rotor.geometry.OperatingSchedule`): its
+    rotor-speed limits and its cut-in to cut-out wind speeds. Without one (a wind-tunnel model, an
+    FMU): the rotor speeds the campaign ran at, and half the lowest to 1.5 times the highest
+    measured wind speed.
+
+    Returns
+    -------
+    rpm : (float, float)
+        [rpm].
+    wind : (float, float)
+        [m/s].
+    words : str
+        The limits and their source, for the separation's text.
+    """
+    rpm, v = conditions.rotor_speed, conditions.wind_speed
+    if schedule is not None:
+        lo, hi = float(schedule.min_rotor_speed), float(schedule.max_rotor_speed)
+        wind = (float(schedule.cut_in), float(schedule.cut_out))
+        return (lo, hi), wind, (f"within the rotor's schedule: rotor speed {lo:.3g}–{hi:.3g} rpm, wind speed "
+                                f"{wind[0]:.3g}–{wind[1]:.3g} m/s")
+    lo, hi = float(rpm.min()), float(rpm.max())
+    wind = (0.5 * float(v.min()), 1.5 * float(v.max()))
+    speeds = f"{lo:.3g} rpm" if np.isclose(lo, hi) else f"{lo:.3g}–{hi:.3g} rpm"
+    return (lo, hi), wind, (f"within the campaign's rotor speeds ({speeds}; no schedule of the rotor's limits) and "
+                            f"wind speeds {wind[0]:.3g}–{wind[1]:.3g} m/s")
+
+
+def probe_conditions(conditions: OperatingConditions, radius: float, schedule=None) -> OperatingConditions:
+    """Operating points around and beyond the measured envelope (see :data:`PROBE_TSR_POINTS`),
+    inside the operating limits of :func:`probe_limits`.
 
     Parameters
     ----------
@@ -67,20 +99,26 @@ def probe_conditions(conditions: OperatingConditions, radius: float) -> Operatin
         The measured points.
     radius : float
         Rotor radius [m].
+    schedule : OperatingSchedule, optional
+        The rotor's steady schedule (its rotor-speed and wind-speed limits).
 
     Returns
     -------
     OperatingConditions
-        A λ × pitch × wind-speed grid (air density and yaw: the measured medians).
+        λ × pitch × rotor speed (the limits and the measured median), each at the wind speed
+        V = Ω R / λ, those with V inside the limits (air density and yaw: the measured medians).
     """
+    (rpm_lo, rpm_hi), (v_lo, v_hi), _ = probe_limits(conditions, schedule)
     lam = conditions.tip_speed_ratio(radius)
-    v, pitch = conditions.wind_speed, conditions.pitch
+    pitch = conditions.pitch
     lams = np.linspace(max(1.5, 0.75 * lam.min()), 1.25 * lam.max(), PROBE_TSR_POINTS)
     pitches = np.unique(np.round([pitch.min() - 2.0, np.median(pitch), pitch.max() + 4.0], 6))
-    speeds = np.unique(np.round([0.5 * v.min(), np.median(v), 1.5 * v.max()], 6))
-    L, P, V = (a.ravel() for a in np.meshgrid(lams, pitches, speeds, indexing="ij"))
-    rpm = L * V / radius * 30.0 / np.pi
-    return OperatingConditions(V, rpm, P, float(np.median(conditions.air_density)), float(np.median(conditions.yaw)))
+    rpms = np.unique(np.round([rpm_lo, float(np.clip(np.median(conditions.rotor_speed), rpm_lo, rpm_hi)), rpm_hi], 6))
+    L, P, W = (a.ravel() for a in np.meshgrid(lams, pitches, rpms, indexing="ij"))
+    V = W * np.pi / 30.0 * radius / L
+    keep = (V >= v_lo) & (V <= v_hi)
+    return OperatingConditions(V[keep], W[keep], P[keep], float(np.median(conditions.air_density)),
+                               float(np.median(conditions.yaw)))
 
 
 def separating_probes(values_a: np.ndarray, values_b: np.ndarray, conditions: OperatingConditions,

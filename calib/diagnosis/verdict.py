@@ -17,7 +17,7 @@ import numpy as np
 
 from calib.diagnosis.ranking import set_bic_weights
 from calib.diagnosis.result import CandidateFit
-from calib.diagnosis.separation import envelope_words, probe_conditions, separating_probes
+from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
 from calib.diagnosis.settings import DiagnosisSettings
 from calib.errors import CalibError
 from calib.types import CONDITION_FIELDS, OperatingConditions
@@ -130,7 +130,7 @@ def _separation_of(namer: "_Namer", a: CandidateFit, b: CandidateFit) -> dict:
     envelope = envelope_words(meas.conditions, fam.rotor_radius)
     out = {"probes": [], "envelope": envelope, "fingerprints": fingerprints}
     try:
-        probes = probe_conditions(meas.conditions, fam.rotor_radius)
+        probes = probe_conditions(meas.conditions, fam.rotor_radius, fam.schedule)
         both = OperatingConditions(*(np.concatenate([getattr(meas.conditions, f), getattr(probes, f)])
                                      for f in CONDITION_FIELDS))
         channels = fam.probe_channels(list(meas.channels))
@@ -154,7 +154,7 @@ def _separation_of(namer: "_Namer", a: CandidateFit, b: CandidateFit) -> dict:
     else:
         text = ("no probe considered separates them beyond the noise and model-form tolerance (closest: "
                 f"{out['probes'][0]['words']})")
-    text += f"; the campaign measured {envelope}"
+    text += f"; probes {probe_limits(meas.conditions, fam.schedule)[2]}; the campaign measured {envelope}"
     if fingerprints:
         text += "; fingerprints: " + "; ".join(f"{n}: {fp}" for n, fp in fingerprints.items())
     out["text"] = text
