@@ -55,8 +55,8 @@ from scipy import stats
 from calib.calibration_settings import ESTIMATORS, NOISE_MODES, CalibrationSettings
 from calib.errors import InputError
 from calib.estimation import LeastSquaresProblem, estimate
-from calib.map_agreement import map_ml_agreement
 from calib.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
+from calib.map_agreement import map_ml_agreement
 from calib.measurements import Measurements, check_channels, ml_noise
 from calib.noise import initial_sigma
 from calib.prior_check import psd_sqrt
