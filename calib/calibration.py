@@ -228,10 +228,10 @@ class Calibrator:
                           f"settled below {NOISE_SETTLED:g}): σ and the covariance are those of the last fit"))
         lin = problem.linearize(p)
         if st.estimator == "map":
-            res = self._finish_map(problem, nominal, lin, status, message, 0.0)
+            res = self._finish_map(problem, nominal, lin, status, message)
         else:
-            res = self._finish(problem, nominal, lin, self._svd(problem, lin), status, message, 0.0)
-        res.provenance.wall_time = time.perf_counter() - t0    # the uncertainty terms included (issue 35)
+            res = self._finish(problem, nominal, lin, self._svd(problem, lin), status, message)
+        res.provenance.wall_time = time.perf_counter() - t0    # once the result is whole, its terms included
         return res
 
     def _svd(self, problem: LeastSquaresProblem, lin) -> SvdAnalysis:
@@ -402,7 +402,7 @@ class Calibrator:
         L = psd_sqrt(self._map_prior_cov_scaled())
         return (*prior_whitened_svd(lin.M, L), L)
 
-    def _finish_map(self, problem, nominal, lin, status, message, wall) -> CalibrationResult:
+    def _finish_map(self, problem, nominal, lin, status, message) -> CalibrationResult:
         """The result of ``estimator = "map"``: the Laplace covariance at the estimate, widened by
         the fit scale (the noise variance multiplied by max(1, χ²/(N − n_eff)), n_eff = Σ s²/(1+s²)
         the effective number of parameters; MacKay 1992) with a stated noise and ``scale_by_fit``."""
@@ -442,7 +442,7 @@ class Calibrator:
             log.warning("%s: %s", self.name, agreement.sentence())
             message = f"{message}; {agreement.sentence()}" if message else agreement.sentence()
         return self._result(problem, nominal, lin, svd, cov * D, cov_weak * D,
-                            np.diag(svd.sigma_theta[svd.retained] ** 2), theta_hat, obs, status, message, wall,
+                            np.diag(svd.sigma_theta[svd.retained] ** 2), theta_hat, obs, status, message,
                             checks={"MAP and ML": agreement.sentence()},
                             fit_scale=fit_scale, prior_check=prior_check, multiple_roots=multiple_roots,
                             aliasing_note=alias_note, gain=gain if alias is not None else np.zeros((0, 0)),
@@ -466,7 +466,7 @@ class Calibrator:
         dof = int(lin.ok.sum()) * len(self.channel_index) - svd.n_retained
         return float(np.sum(lin.residual[lin.ok] ** 2)), dof
 
-    def _finish(self, problem, nominal, lin, svd, status, message, wall) -> CalibrationResult:
+    def _finish(self, problem, nominal, lin, svd, status, message) -> CalibrationResult:
         B = svd.basis
         # B holds right singular vectors of M at this linearization, so Bᵀ F B = diag(s²) and
         # Cov(θ̂) = diag(σ(θ)²) exactly, without inverting a possibly ill-conditioned matrix
@@ -489,13 +489,13 @@ class Calibrator:
         fold = [{**d, **sigmas[d["theta"]]} for d in fold]
         D = np.outer(self.scale, self.scale)
         return self._result(problem, nominal, lin, svd, parts.total * D, parts.frozen * D, cov_theta,
-                            B.T @ problem.scaled(lin.p), observability(svd.V, svd.retained), status, message, wall,
+                            B.T @ problem.scaled(lin.p), observability(svd.V, svd.retained), status, message,
                             fit_scale=fit_scale, aliasing_chi2=alias_misfit, aliasing_note=alias_note,
                             curvature=curvature, prior_check=prior_check, multiple_roots=multiple_roots,
                             fold_directions=fold)
 
     def _result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
-                wall, **extra) -> CalibrationResult:
+                **extra) -> CalibrationResult:
         """The result of either estimator (:func:`calib.result_assembly.assemble_result`), with the
         history, the automatic truncation's record and the run's name."""
         st = self.settings
@@ -503,8 +503,9 @@ class Calibrator:
         truncation = curve.to_dict() if curve is not None and st.sigma_bar == "auto" and st.retain != "all" else {}
         if truncation and self._second_start_record:
             truncation.update(self._second_start_record)
+        # wall time 0 here: run() sets it once the result is whole (the assembly's model calls included)
         return assemble_result(self.terms, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,
-                               status, message, wall, history=self.history, truncation=truncation, name=self.name,
+                               status, message, 0.0, history=self.history, truncation=truncation, name=self.name,
                                **extra)
 
 
