@@ -10,6 +10,7 @@ from PIL import Image
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
 from calib.models.base import nominal_vector
+from calib.report import eigenshape_figures
 from calib.report import figures as F
 from calib.report.correlation_figure import display_order
 from calib.report.eigenshape_figures import seen_inside
@@ -65,11 +66,12 @@ def test_eigenshape_maps_stay_on_the_node_range(result):
     assert dots.get_xdata().size == a_in.size * wide.n_retained
     # every drawn point lies inside its tile: [col (1 + gap), col (1 + gap) + 1] in tile units
     x = dots.get_xdata()
-    gap = 0.22 / 1.9
-    tile = np.repeat(np.arange(wide.n_retained) % 6, a_in.size)
+    ncol = eigenshape_figures.MAX_COLUMNS
+    gap = eigenshape_figures.MARGINS.wgap / eigenshape_figures.PANEL_SIZE[0]
+    tile = np.repeat(np.arange(wide.n_retained) % ncol, a_in.size)
     u = x - tile * (1 + gap)
     assert u.min() >= -1e-9 and u.max() <= 1 + 1e-9
-    assert ax.get_xlim()[1] == pytest.approx(6 + 5 * gap)     # six tiles across, nothing beyond
+    assert ax.get_xlim()[1] == pytest.approx(ncol + (ncol - 1) * gap)     # the tiles across, nothing beyond
 
 
 def _lines(fig, kind):
@@ -102,8 +104,9 @@ def _xlabel(fig) -> str:
 
 def test_each_fit_panel_has_a_residual_strip_under_it(result):
     fig = F.plot_fit(result)
-    assert [ax.get_ylabel() for ax in fig.axes] == [f"{c} [{u}]" for c, u in zip(result.channels,
-                                                                                 result.channel_units)]
+    # loads of 1.5e4 to 7.3e4 in W, N and N m are drawn in kW, kN and kN m
+    assert result.channel_units == ["W", "N", "N m"]
+    assert [ax.get_ylabel() for ax in fig.axes] == ["power [kW]", "thrust [kN]", "root_flap_moment [kN m]"]
     r = whitened_residual(result)
     for k, ax in enumerate(fig.axes):
         [strip] = [line for line in ax.lines if line.get_gid() == f"residual:{k}"]

@@ -15,7 +15,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.patches import Rectangle
 
-from calib.report.panels import Margins, lean_ticks, panel_grid, settle_labels, title_height, wrap_title
+from calib.report.panels import (Margins, lean_ticks, panel_grid, plain_numbers, settle_labels, title_height,
+                                 unit_prefix, wrap_title)
 from calib.result import CalibrationResult
 
 ROTOR_SPEED_VARIATION = 0.01   # relative spread [-] above which the rotor speed "varies"
@@ -112,22 +113,24 @@ def plot_fit(result: CalibrationResult):
     g, s = gap / h, strip / h                              # strip position in axes fraction
     for k, (ch, unit) in enumerate(zip(result.channels, result.channel_units)):
         ax = axes[k // ncol, k % ncol]
-        ax.errorbar(x, result.measured[:, k], yerr=result.sigma[:, k], fmt=".", color="k", ms=3, lw=0.6,
+        div, unit = unit_prefix(unit, result.measured[:, k])      # 5.1 MW, not 5.1 with "1e6" at the axis end
+        ax.errorbar(x, result.measured[:, k] / div, yerr=result.sigma[:, k] / div, fmt=".", color="k", ms=3, lw=0.6,
                     label="measured ±σ")
-        ax.plot(x[okb], result.model_before[okb, k], "x", color="C3", ms=4, label="model before")
-        ax.plot(x[oka], result.model_after[oka, k], "o", mfc="none", color="C0", ms=4, label="model after")
+        ax.plot(x[okb], result.model_before[okb, k] / div, "x", color="C3", ms=4, label="model before")
+        ax.plot(x[oka], result.model_after[oka, k] / div, "o", mfc="none", color="C0", ms=4, label="model after")
         for idx in groups:
             idx = idx[oka[idx]]
-            ax.plot(x[idx], result.model_after[idx, k], "-", color="C0", lw=0.5, alpha=0.6)
+            ax.plot(x[idx], result.model_after[idx, k] / div, "-", color="C0", lw=0.5, alpha=0.6)
         ax.set_xlim(xlo, xhi)
         lean_ticks(ax)
+        plain_numbers(ax)
         ax.set_ylabel(f"{ch} [{unit}]", fontsize=8)
         ax.tick_params(labelsize=7, labelbottom=False)
         ax.grid(True, alpha=0.3)
         ax.set_title(f"{ch}: χ²/point {gof[ch]['chi2_per_point_before']:.3g} → "
                      f"{gof[ch]['chi2_per_point_after']:.3g}", fontsize=8, pad=3, y=1.0)
         if k == 0:
-            ax.legend(fontsize=6, loc="best")
+            ax.legend(fontsize=7, loc="best")
         _residual_strip(ax, x, res_after[:, k], ~oka, (xlo, xhi), g, s, k)
         ax.text(0.5, -(g + s) - 0.13, xlabel, transform=ax.transAxes, ha="center", va="top", fontsize=8, gid="xlabel")
     settle_labels(fig)

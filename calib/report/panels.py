@@ -94,6 +94,141 @@ def lean_ticks(ax, nbins: int = 5) -> None:
     ax.yaxis.set_major_locator(MaxNLocator(nbins))
 
 
+#: Units that take an SI prefix on their first symbol (channel units of calib's outputs).
+PREFIXABLE_UNITS = ("W", "N", "N m", "N/m", "Pa", "J")
+_PREFIXES = ((1e9, "G"), (1e6, "M"), (1e3, "k"))
+
+
+def unit_prefix(unit: str, values) -> tuple[float, str]:
+    """The SI prefix that brings ``values`` of ``unit`` to below 1000, as (divisor, prefixed unit).
+
+    ``unit_prefix("W", [2e5, 5.1e6])`` is ``(1e6, "MW")`` and ``unit_prefix("N m", [3e4])``
+    ``(1e3, "kN m")``: an axis reads 5.1 MW, not 5.1 with "1e6" at its end. Units outside
+    :data:`PREFIXABLE_UNITS`, or values below 1000 (or none finite), are left as they are
+    (divisor 1).
+
+    Parameters
+    ----------
+    unit : str
+    values : array_like
+        In ``unit``; NaN ignored.
+    """
+    v = np.abs(np.asarray(values, float))
+    v = v[np.isfinite(v)]
+    if unit not in PREFIXABLE_UNITS or not v.size:
+        return 1.0, unit
+    top = float(v.max())
+    for factor, prefix in _PREFIXES:
+        if top >= factor:
+            return factor, prefix + unit
+    return 1.0, unit
+
+
+def plain_numbers(ax) -> None:
+    """Tick labels without a scale factor or offset at the axis end (``1e6``, ``+1.2e3``)."""
+    for axis in (ax.xaxis, ax.yaxis):
+        formatter = axis.get_major_formatter()
+        if hasattr(formatter, "set_useOffset"):
+            formatter.set_useOffset(False)
+            formatter.set_scientific(False)
+
+
+CHAR_WIDTH = 0.62            # width of a digit or sign [em]
+
+
+def tile_labels(positions, values, tile_width: float, fontsize: float, pad: float = 0.5, along: str = "x"):
+    """Which values to write along one edge of a tile, and how to align them, so that none
+    runs into another or into the next tile's.
+
+    The first value is aligned to start at the tile's left edge and the last to end at its
+    right edge (centred values of two neighbouring tiles ran together, "8.22-3.03"); the
+    inner values are centred and kept from the left while they clear the one kept before
+    and the last one by ``pad`` em.
+
+    Parameters
+    ----------
+    positions : array_like
+        Where each value belongs across the tile, in [0, 1], increasing.
+    values : array_like of float
+    tile_width : float
+        Width of the tile as drawn [in].
+    fontsize : float
+        Of the labels [pt].
+    pad : float
+        Least space between two labels [em].
+    along : {"x", "y"}
+        Labels side by side along a tile's width (a label's extent is its text's width) or
+        stacked up its height (``tile_width`` is then the height; an extent is one line,
+        and the alignments "left", "center", "right" mean "bottom", "center", "top").
+
+    Returns
+    -------
+    list of (float, str, str)
+        (position, text, alignment) of each label to write.
+    """
+    u = np.asarray(positions, float)
+    texts = [f"{v:g}" for v in values]
+    if not texts:
+        return []
+    em = fontsize / 72.0 / tile_width                      # one em in tile units
+    widths = [(CHAR_WIDTH * len(t) if along == "x" else 1.2) * em for t in texts]
+
+    def extent(k, ha):
+        return (u[k], u[k] + widths[k]) if ha == "left" else \
+            (u[k] - widths[k], u[k]) if ha == "right" else (u[k] - widths[k] / 2, u[k] + widths[k] / 2)
+
+    last = len(texts) - 1
+    out = [(u[0], texts[0], "left")]
+    if last == 0:
+        return out
+    end = extent(last, "right")
+    right_edge = extent(0, "left")[1]
+    for k in range(1, last):
+        lo, hi = extent(k, "center")
+        if lo >= right_edge + pad * em and hi <= end[0] - pad * em:
+            out.append((u[k], texts[k], "center"))
+            right_edge = hi
+    if end[0] >= extent(0, "left")[1] + pad * em:
+        out.append((u[last], texts[last], "right"))
+    return out
+
+
+def spread(positions, gap: float, lo: float, hi: float) -> np.ndarray:
+    """Label positions moved apart as little as needed to be at least ``gap`` apart, within [lo, hi].
+
+    A forward pass pushes each position past its predecessor, a backward pass pulls them
+    back inside ``hi``; positions already ``gap`` apart are not moved. When ``hi - lo`` is
+    too short for all of them, they are spaced evenly over it.
+
+    Parameters
+    ----------
+    positions : array_like
+        Increasing label positions (any unit).
+    gap : float
+        Least distance between two labels (same unit).
+    lo, hi : float
+        Range the labels stay in.
+
+    Returns
+    -------
+    ndarray
+    """
+    p = np.asarray(positions, float).copy()
+    if p.size < 2:
+        return p
+    if (p.size - 1) * gap > hi - lo:
+        return np.linspace(lo, hi, p.size)
+    for k in range(1, p.size):
+        p[k] = max(p[k], p[k - 1] + gap)
+    p[-1] = min(p[-1], hi)
+    for k in range(p.size - 2, -1, -1):
+        p[k] = min(p[k], p[k + 1] - gap)
+    p[0] = max(p[0], lo)
+    for k in range(1, p.size):
+        p[k] = max(p[k], p[k - 1] + gap)
+    return p
+
+
 def lean_log_ticks(ax, numticks: int = 8) -> None:
     """Decade ticks only on a logarithmic y axis, labelled as plain numbers (``100``, ``0.01``, ``1e-05``).
 

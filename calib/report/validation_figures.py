@@ -11,7 +11,7 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
-from calib.report.panels import Margins, lean_ticks, panel_grid, settle_labels
+from calib.report.panels import Margins, lean_ticks, panel_grid, plain_numbers, settle_labels, unit_prefix
 from calib.result import CalibrationResult
 
 STAGE_COLOURS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
@@ -79,13 +79,14 @@ def plot_campaign(channels, measured: np.ndarray, wind: np.ndarray, nominal: np.
     x = wind[order]
     for j, c in enumerate(channels):
         ax = axes[j]
-        ax.plot(x, nominal[order, j], ls="--", color="0.45", lw=1.2, label="nominal 2-D polars")
+        div, unit = unit_prefix(units.get(c, ""), measured[:, j])     # kN, not N with "1e3" at the axis end
+        ax.plot(x, nominal[order, j] / div, ls="--", color="0.45", lw=1.2, label="nominal 2-D polars")
         if with_effects is not None:
-            ax.plot(x, with_effects[order, j], ls=":", color="tab:orange", lw=2.2, zorder=4,
+            ax.plot(x, with_effects[order, j] / div, ls=":", color="tab:orange", lw=2.2, zorder=4,
                     label=f"nominal + {effect_label} (fitted)")
         for s, (name, (vals, half)) in enumerate(stages.items()):
             col = STAGE_COLOURS[s % len(STAGE_COLOURS)]
-            v, h = vals[order, j], half[order, j]
+            v, h = vals[order, j] / div, half[order, j] / div
             ax.plot(x, v, color=col, lw=1.4, label=f"calibrated: {name}")
             ax.fill_between(x, v - h, v + h, color=col, alpha=0.18, lw=0)
             val = (validations or {}).get(name)
@@ -93,15 +94,15 @@ def plot_campaign(channels, measured: np.ndarray, wind: np.ndarray, nominal: np.
                 rows = [r for r in val.rows if r.channel == c and np.isfinite(r.predicted)]
                 if rows:
                     g = np.array([r.group for r in rows]) + 0.25 * (s + 1)
-                    p = np.array([r.predicted for r in rows])
-                    err = np.array([[r.predicted - r.lower for r in rows], [r.upper - r.predicted for r in rows]])
+                    p = np.array([r.predicted for r in rows]) / div
+                    err = np.array([[r.predicted - r.lower for r in rows], [r.upper - r.predicted for r in rows]]) / div
                     ax.errorbar(g, p, yerr=err, fmt="s", ms=3.5, color=col, mfc="white", capsize=2, lw=0.9,
                                 label=f"left out ({name}), 95 % PI")
-        ax.plot(x, measured[order, j], "o", color="k", ms=4.5, zorder=5, label="measured")
-        unit = units.get(c, "")
+        ax.plot(x, measured[order, j] / div, "o", color="k", ms=4.5, zorder=5, label="measured")
         ax.set_title(f"{c} [{unit}]" if unit else c, fontsize=9)
         ax.set_xlabel("wind speed [m/s]", fontsize=8)
         lean_ticks(ax)
+        plain_numbers(ax)
         ax.grid(alpha=0.3)
     for ax in axes[n:]:
         ax.set_visible(False)
