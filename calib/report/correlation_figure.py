@@ -13,10 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.report.panels import Margins, colorbar_axes, panel_grid, settle_labels
+from calib.report.panels import Margins, colorbar_axes, panel_grid, settle_labels, spread
 from calib.result import CalibrationResult
 
 BLOCK_LABEL = {"lift": "ΔC_L", "drag": "ΔC_D"}
+MATRIX_SIZE = 5.6          # side of the matrix [in]
+LABEL_SIZE = 7             # of the group labels [pt]
+LEADER = 0.12              # length of the leader from a group to its label, where labels were moved apart [in]
 
 
 @dataclass(frozen=True)
@@ -79,15 +82,11 @@ def plot_correlation(result: CalibrationResult):
     """
     order, groups = display_order(result)
     n = order.size
-    fig, axes = panel_grid(1, 1, (5.6, 5.6), Margins(left=1.35, right=1.1, bottom=1.35, top=0.75))
+    fig, axes = panel_grid(1, 1, (MATRIX_SIZE, MATRIX_SIZE), Margins(left=1.5, right=1.1, bottom=1.5, top=0.75))
     ax = axes[0, 0]
     c = np.ma.masked_invalid(np.asarray(result.correlation)[np.ix_(order, order)])
     im = ax.imshow(c, cmap="RdBu_r", vmin=-1, vmax=1, interpolation="nearest", extent=(-0.5, n - 0.5, n - 0.5, -0.5))
-    centers = [0.5 * (g.start + g.stop - 1) for g in groups]
-    labels = [g.label for g in groups]
-    ax.set_xticks(centers, labels, rotation=90, fontsize=7)
-    ax.set_yticks(centers, labels, fontsize=7)
-    ax.tick_params(length=0)
+    _label_groups(ax, groups, n)
     ax.set_xlim(-0.5, n - 0.5)
     ax.set_ylim(n - 0.5, -0.5)
     bounds = [g.start - 0.5 for g in groups[1:]]
@@ -109,3 +108,31 @@ def plot_correlation(result: CalibrationResult):
     ax.set_title(title, fontsize=8, y=1.0)
     settle_labels(fig)
     return fig
+
+
+def _label_groups(ax, groups: list[ParameterGroup], n: int) -> None:
+    """Label each group of rows (and columns) at its centre, or, where rows are too thin for
+    neighbouring labels (two single parameters after the field), moved apart just enough with a
+    leader line from the group to its label.
+
+    Parameters
+    ----------
+    ax : Axes
+        The matrix, rows and columns ``-0.5 … n - 0.5`` [rows].
+    groups : list of ParameterGroup
+    n : int
+        Rows of the matrix.
+    """
+    centers = np.array([0.5 * (g.start + g.stop - 1) for g in groups])
+    labels = [g.label for g in groups]
+    gap = 1.25 * LABEL_SIZE / 72.0 * n / MATRIX_SIZE           # one line of label text [rows]
+    placed = spread(centers, gap, -0.5 + 0.4 * gap, n - 0.5 - 0.4 * gap)
+    moved = np.abs(placed - centers) > 0.05
+    lead = LEADER * 72.0 if moved.any() else 0.0               # [pt]
+    ax.set_xticks(placed, labels, rotation=90, fontsize=LABEL_SIZE)
+    ax.set_yticks(placed, labels, fontsize=LABEL_SIZE)
+    ax.tick_params(length=0, pad=3.5 + lead)
+    length = LEADER * n / MATRIX_SIZE                          # [rows]
+    for k in np.flatnonzero(moved):     # left edge x = -0.5; bottom edge y = n - 0.5 (the y axis points down)
+        ax.plot([-0.5, -0.5 - length], [centers[k], placed[k]], color="0.4", lw=0.6, clip_on=False)
+        ax.plot([centers[k], placed[k]], [n - 0.5, n - 0.5 + length], color="0.4", lw=0.6, clip_on=False)

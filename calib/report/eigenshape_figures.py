@@ -24,14 +24,15 @@ from matplotlib.figure import Figure
 from matplotlib.image import AxesImage
 from matplotlib.patches import Rectangle
 
-from calib.report.panels import DPI, Margins, title_height, wrap_title
+from calib.report.panels import DPI, Margins, tile_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
-MAX_COLUMNS = 6
+MAX_COLUMNS = 4           # maps across: four keep a map over 180 px wide in a 1100 px report
 MIN_WIDTH = 5.0           # narrowest figure [in] (title and axis labels fit)
-PANEL_SIZE = (1.9, 1.35)   # one map [in]
+PANEL_SIZE = (2.2, 1.5)    # one map [in]
 MARGINS = Margins(left=0.6, right=1.05, bottom=0.5, top=0.8, wgap=0.22, hgap=0.3)
 N_ALPHA, N_ETA = 97, 49    # mesh of the maps
+NODE_FONTSIZE = 7          # node values beside the tiles [pt]
 
 
 def eigen_mesh(result: CalibrationResult, n_alpha: int = N_ALPHA, n_eta: int = N_ETA, layout=None):
@@ -250,7 +251,7 @@ def _draw_tiles(ax: Axes, result: CalibrationResult, block: str, modes: np.ndarr
             ticks += _eta_node_values(ax, x0, y0, ue, e_nodes)
     ax.add_collection(LineCollection(segments, colors="0.55", linewidths=0.3))
     ax.add_collection(LineCollection(ticks, colors="k", linewidths=0.6, clip_on=False))
-    ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="0.2", linewidths=0.6))
+    ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="0.2", linewidths=0.6, gid="tiles"))
     if a_seen.size:
         ax.plot(np.concatenate(dots_x), np.concatenate(dots_y), ",", color="k", alpha=0.35, rasterized=True)
     return im
@@ -275,8 +276,8 @@ def _alpha_node_values(ax: Axes, x0: float, y0: float, ua: np.ndarray, a_nodes: 
         The tick marks' segments, for one LineCollection.
     """
     tick_y = 0.03 / PANEL_SIZE[1]                         # 0.03 in in tile units
-    for u, a in zip(ua, a_nodes):
-        ax.text(x0 + u, y0 - 1.6 * tick_y, f"{a:g}", ha="center", va="top", fontsize=6)
+    for u, text, ha in tile_labels(ua, a_nodes, PANEL_SIZE[0], NODE_FONTSIZE):
+        ax.text(x0 + u, y0 - 1.6 * tick_y, text, ha=ha, va="top", fontsize=NODE_FONTSIZE)
     return [[(x0 + u, y0), (x0 + u, y0 - tick_y)] for u in ua]
 
 
@@ -299,8 +300,9 @@ def _eta_node_values(ax: Axes, x0: float, y0: float, ue: np.ndarray, e_nodes: np
         The tick marks' segments, for one LineCollection.
     """
     tick_x = 0.03 / PANEL_SIZE[0]                         # 0.03 in in tile units
-    for u, e in zip(ue, e_nodes):
-        ax.text(x0 - 1.6 * tick_x, y0 + u, f"{e:g}", ha="right", va="center", fontsize=6)
+    va = {"left": "bottom", "center": "center", "right": "top"}
+    for u, text, align in tile_labels(ue, e_nodes, PANEL_SIZE[1], NODE_FONTSIZE, along="y"):
+        ax.text(x0 - 1.6 * tick_x, y0 + u, text, ha="right", va=va[align], fontsize=NODE_FONTSIZE)
     return [[(x0, y0 + u), (x0 - tick_x, y0 + u)] for u in ue]
 
 

@@ -23,7 +23,7 @@ from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
 
-from calib.report.panels import Margins, panel_grid, settle_labels, title_height, wrap_title
+from calib.report.panels import Margins, panel_grid, settle_labels, tile_labels, title_height, wrap_title
 from calib.result import CalibrationResult
 
 TruthField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -202,15 +202,15 @@ def _draw_row(ax: Axes, st: _Stations, row: int, letter: str) -> None:
                     transform=xt, ha="center", va="bottom", fontsize=8)
         else:
             marks += [[(x0 + t, 0), (x0 + t, -0.02)] for t in st.ua_ticks]
-            for t, a in zip(st.ua_ticks, st.a_ticks):
-                ax.text(x0 + t, -0.035, f"{a:g}", transform=xt, ha="center", va="top", fontsize=7)
+            for t, text, ha in tile_labels(st.ua_ticks, st.a_ticks, TILE_SIZE[0], 7):
+                ax.text(x0 + t, -0.035, text, transform=xt, ha=ha, va="top", fontsize=7)
             ax.text(x0 + 0.5, -0.13, "α [deg]", transform=xt, ha="center", va="top", fontsize=8)
     n = st.idx.size
     for k in range(n - 1):                           # white gaps between tiles, over the y grid
         ax.axvspan(k * (1 + GAP) + 1, (k + 1) * (1 + GAP), color="white", lw=0, zorder=0.8)
     ax.add_collection(LineCollection(vgrid, colors="0.85", linewidths=0.6, transform=xt, zorder=0.7))
     ax.add_collection(PatchCollection(frames, facecolor="none", edgecolor="k", linewidths=0.8, transform=xt,
-                                      zorder=2.5))
+                                      zorder=2.5, gid="tiles"))
     if marks:
         ax.add_collection(LineCollection(marks, colors="k", linewidths=0.8, transform=xt, clip_on=False))
 
@@ -275,4 +275,4 @@ def _style_row(ax: Axes, n: int, row: int, letter: str) -> None:
     ax.tick_params(axis="y", labelsize=7)
     ax.set_ylabel("C_L [-]" if letter == "cl" else "C_D [-]", fontsize=8)
     if row == 0:
-        ax.legend(fontsize=6, loc="lower right", bbox_to_anchor=(1.0, 0.02), bbox_transform=xt)
+        ax.legend(fontsize=7, loc="lower right", bbox_to_anchor=(1.0, 0.02), bbox_transform=xt)
