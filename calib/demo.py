@@ -38,10 +38,6 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
 
     Writes ``cp_surface.png``, ``power_curve.png`` and ``summary.json`` into ``out_dir``.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rotor = load_rotor(rotor_name)
@@ -64,36 +60,13 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
     curve = steady_power_curve(rotor, v, polars=polars)
     say(log, f"[calib demo] power curve: {v.size} wind speeds, {curve.result.n_failed} failed")
 
-    fig, ax = plt.subplots(figsize=(7, 5))
-    levels = np.linspace(0, np.nanmax(cp), 25)
-    cs = ax.contourf(tsr, pitch, np.clip(cp, 0, None), levels=levels, cmap="viridis")
-    ax.contour(tsr, pitch, cp, levels=[0.1, 0.2, 0.3, 0.4, 0.45], colors="w", linewidths=0.6)
-    ax.plot(tsr[j], pitch[i], "r*", ms=12, label=f"max C_P = {cp[i, j]:.3f} at λ = {tsr[j]:.2f}, "
-                                                    f"β = {pitch[i]:.1f}°")
-    fig.colorbar(cs, label="C_P [-]")
-    ax.set(xlabel="tip-speed ratio λ [-]", ylabel="pitch β [deg]", title=f"{rotor.name}: C_P(λ, β), native BEM")
-    ax.legend(loc="upper right")
-    fig.tight_layout()
+    fig = plot_cp_surface(rotor.name, tsr, pitch, cp)
     with atomic_path(out / "cp_surface.png") as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
-
-    ref = _openfast_reference() if rotor_name == "nrel5mw" else None
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    a1.plot(v, curve.result.power / 1e6, "-", label="native BEM, own schedule")
-    a2.plot(v, curve.result.thrust / 1e3, "-", label="native BEM, own schedule")
-    if ref is not None:
-        a1.plot(ref["wind_speed"], ref["power"] / 1e6, "ko", ms=4, label="OpenFAST steady (aero)")
-        a2.plot(ref["wind_speed"], ref["thrust"] / 1e3, "ko", ms=4, label="OpenFAST steady (aero)")
-    a1.set(xlabel="wind speed [m/s]", ylabel="aerodynamic power [MW]", title="power curve")
-    a2.set(xlabel="wind speed [m/s]", ylabel="rotor thrust [kN]", title="thrust curve")
-    for a in (a1, a2):
-        a.grid(alpha=0.3)
-        a.legend()
-    fig.tight_layout()
+        fig.savefig(tmp, dpi=DEMO_DPI, format="png")
+    fig = plot_power_curve(v, curve.result.power, curve.result.thrust,
+                           _openfast_reference() if rotor_name == "nrel5mw" else None)
     with atomic_path(out / "power_curve.png") as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
+        fig.savefig(tmp, dpi=DEMO_DPI, format="png")
 
     summary = {"rotor": rotor.name, "cp_max": float(cp[i, j]), "tsr_at_cp_max": float(tsr[j]),
                "pitch_at_cp_max": float(pitch[i]), "surface_points": int(cp.size),
@@ -105,6 +78,93 @@ def run_demo(out_dir: str | Path = "demo_output", rotor_name: str = "nrel5mw") -
     say(log, f"[calib demo] max C_P = {summary['cp_max']:.4f} at λ = {summary['tsr_at_cp_max']:.2f}, "
           f"β = {summary['pitch_at_cp_max']:.1f} deg{_tilt_words(summary)}; figures in {out}/")
     return summary
+
+
+DEMO_DPI = 130      # resolution of the demo's figures [1/in]
+
+
+def plot_cp_surface(name: str, tsr: np.ndarray, pitch: np.ndarray, cp: np.ndarray):
+    """C_P(λ, β) as filled contours with its maximum starred.
+
+    Where C_P < 0 the rotor takes power from the shaft (it drives the air, at high λ and low
+    pitch or at high pitch); that region is hatched and named instead of being shown as the
+    lowest colour, and points the BEM could not solve (NaN) are counted in the title.
+
+    Parameters
+    ----------
+    name : str
+        Rotor name for the title.
+    tsr : ndarray, shape (n_tsr,)
+        Tip-speed ratios λ [-].
+    pitch : ndarray, shape (n_pitch,)
+        Blade pitch β [deg].
+    cp : ndarray, shape (n_pitch, n_tsr)
+        Power coefficient [-]; NaN where the solve failed.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
+    fig = Figure(figsize=(7, 5))
+    ax = fig.add_axes((0.1, 0.11, 0.68, 0.8))
+    i, j = np.unravel_index(np.nanargmax(cp), cp.shape)
+    top = float(cp[i, j])
+    cs = ax.contourf(tsr, pitch, cp, levels=np.linspace(0, top, 25), cmap="viridis")     # C_P < 0 left blank
+    lines = ax.contour(tsr, pitch, cp, levels=[v for v in (0.1, 0.2, 0.3, 0.4, 0.45) if v < top], colors="w",
+                       linewidths=0.6)
+    ax.clabel(lines, fontsize=7, fmt="%g")
+    handles = [ax.plot(tsr[j], pitch[i], "r*", ms=12, ls="none")[0]]
+    labels = [f"max C_P = {top:.3f} at λ = {tsr[j]:.2f}, β = {pitch[i]:.1f}°"]
+    if np.nanmin(cp) < 0:
+        ax.contourf(tsr, pitch, cp, levels=[float(np.nanmin(cp)) - 1.0, 0.0], colors=["0.92"], hatches=["///"])
+        handles.append(Patch(facecolor="0.92", hatch="///", edgecolor="0.5"))
+        labels.append("C_P < 0: the rotor takes power from the shaft")
+    failed = int(np.count_nonzero(~np.isfinite(cp)))
+    cax = fig.add_axes((0.81, 0.11, 0.03, 0.8))
+    # round ticks and the maximum, none so close to it that the labels touch (6 % of the bar's 4 in)
+    fig.colorbar(cs, cax=cax, ticks=[v for v in np.arange(0.0, top, 0.05) if v < 0.94 * top] + [top],
+                 format="%.3g")
+    cax.set_ylabel("C_P [-] (C_P ≥ 0)")
+    ax.set(xlabel="tip-speed ratio λ [-]", ylabel="pitch β [deg]",
+           title=f"{name}: C_P(λ, β), native BEM" + (f"; {failed} points not solved (blank)" if failed else ""))
+    ax.legend(handles, labels, loc="upper right", fontsize=8)
+    return fig
+
+
+def plot_power_curve(wind: np.ndarray, power: np.ndarray, thrust: np.ndarray, reference: dict | None = None):
+    """Steady aerodynamic power [MW] and rotor thrust [kN] against wind speed, beside a reference.
+
+    Parameters
+    ----------
+    wind : ndarray
+        Wind speed [m/s].
+    power, thrust : ndarray
+        [W], [N].
+    reference : dict, optional
+        ``wind_speed`` [m/s], ``power`` [W] and ``thrust`` [N] of another code (OpenFAST).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 4.2))
+    a1, a2 = fig.add_axes((0.07, 0.13, 0.4, 0.78)), fig.add_axes((0.57, 0.13, 0.4, 0.78))
+    a1.plot(wind, power / 1e6, "-", label="native BEM, own schedule")
+    a2.plot(wind, thrust / 1e3, "-", label="native BEM, own schedule")
+    if reference is not None:
+        a1.plot(reference["wind_speed"], reference["power"] / 1e6, "ko", ms=4, label="OpenFAST steady (aero)")
+        a2.plot(reference["wind_speed"], reference["thrust"] / 1e3, "ko", ms=4, label="OpenFAST steady (aero)")
+    a1.set(xlabel="wind speed [m/s]", ylabel="aerodynamic power [MW]", title="power curve")
+    a2.set(xlabel="wind speed [m/s]", ylabel="rotor thrust [kN]", title="thrust curve")
+    for a in (a1, a2):
+        a.grid(alpha=0.3)
+        a.legend()
+    return fig
 
 
 def _tilt_words(summary: dict) -> str:
