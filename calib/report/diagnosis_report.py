@@ -28,10 +28,12 @@ from calib.result_io import jsonable as _jsonable
 from calib.words import p_is, p_text
 
 
-def _table(header, rows) -> str:
-    """An HTML table in its scroll box; cells wrap at spaces only, never inside a word."""
+def _table(header, rows, numbers=()) -> str:
+    """An HTML table in its scroll box; cells wrap at spaces only, never inside a word, and the
+    columns in ``numbers`` are right-aligned on one line ("< 1e-16" does not break at its minus)."""
     th = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    body = "".join("<tr>" + "".join(f'<td class="n">{c}</td>' if j in numbers else f"<td>{c}</td>"
+                                    for j, c in enumerate(row)) + "</tr>" for row in rows)
     return f'<div class="table"><table><tr>{th}</tr>{body}</table></div>'
 
 
@@ -305,10 +307,11 @@ def _gap_html(d, figs: dict[str, Path]) -> list[str]:
                    f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
     return ["<h2>Where the gap is</h2>",
             _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
-                    "corr. with wind speed", "corr. with load level"], trend_rows),
+                    "corr. with wind speed", "corr. with load level"], trend_rows, numbers=range(1, 7)),
             _img(figs["gap"]),
             "<h2>How much it shrank</h2>",
-            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel (measured − model)"], gap_rows),
+            _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel (measured − model)"], gap_rows,
+                   numbers=(1, 2, 3)),
             ("<p class='explain'>χ²/dof near 1 means the model explains the measurements to within their noise; "
              "the p-value is the chance of a misfit at least this large if it did.</p>")]
 
