@@ -8,6 +8,7 @@
 """
 
 import importlib
+import itertools
 import re
 
 MARKER = re.compile(r"^<!-- settings: ([\w.]+)\.(\w+) (\w+) -->$", re.M)
@@ -140,9 +141,58 @@ RENDERERS = {"prediction": lambda load: _prediction_tables(load("prediction")),
 SOURCES = {"coverage": ("coverage_map", "coverage_truncated")}
 
 
-def _published_markdown(data: dict) -> str:
-    """A benchmark's own tables (``publish(..., markdown=...)``) under its run's date, commit and command."""
+#: Published tables too wide for the content column, split by columns into narrower ones: NAME of the
+#: benchmark -> the column groups by header, each with the columns that name a row. Every column of
+#: the table is in a group, so that every number still reaches the page.
+SPLITS = {"diagnosis_out_of_family": (
+    ("set-up", "data set", "right / total", "alone", "χ²/dof before (median)", "s / diagnosis"),
+    ("set-up", "data set", "counts as right", "first verdicts", "all named"))}
+
+#: A cell boundary of a Markdown table row (a ``|`` not escaped as ``\|``).
+CELL = re.compile(r"(?<!\\)\|")
+
+
+def _cells(line: str) -> list[str]:
+    """The cells of one Markdown table row, stripped."""
+    return [c.strip() for c in CELL.split(line.strip())[1:-1]]
+
+
+def _split_tables(markdown: str, groups: tuple, name: str) -> str:
+    """``markdown`` with the table whose columns are those of ``groups`` written as one table per group.
+
+    Raises
+    ------
+    ValueError
+        When no table has exactly those columns: the benchmark's table changed, and ``SPLITS[name]``
+        must follow it (a column left out would drop its numbers from the page).
+    """
+    if not groups:
+        return markdown
+    wanted = {c for group in groups for c in group}
+    out, done = [], False
+    for is_table, block in itertools.groupby(markdown.split("\n"), key=lambda line: line.startswith("|")):
+        block = list(block)
+        header = _cells(block[0]) if is_table else []
+        if sorted(header) != sorted(wanted):
+            out += block
+            continue
+        rows = [_cells(line) for line in block[2:]]
+        for j, group in enumerate(groups):
+            at = [header.index(c) for c in group]
+            out += ([""] if j else []) + ["| " + " | ".join(group) + " |", "|---" * len(group) + "|"]
+            out += ["| " + " | ".join(row[i] for i in at) + " |" for row in rows]
+        done = True
+    if not done:
+        raise ValueError(f"docs/hooks.py SPLITS[{name!r}]: no table of docs/validation/data/{name}.json has the "
+                         f"columns {sorted(wanted)}; update SPLITS to the benchmark's table")
+    return "\n".join(out)
+
+
+def _published_markdown(data: dict, name: str) -> str:
+    """A benchmark's own tables (``publish(..., markdown=...)``) under its run's date, commit and command,
+    the wide ones split by :data:`SPLITS`."""
     body = re.sub(r"^## ", "### ", data["markdown"].strip(), flags=re.M)    # the page owns the sections
+    body = _split_tables(body, SPLITS.get(name, ()), name)
     return f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`.*\n\n" + body + "\n"
 
 
@@ -162,6 +212,6 @@ def _bench(markdown: str, config) -> str:
                     f"{', '.join(f'`docs/validation/data/{f}.json`' for f in missing)} is on record in this version.*\n")
         if name in RENDERERS:
             return RENDERERS[name](load)
-        return _published_markdown(load(name))
+        return _published_markdown(load(name), name)
 
     return BENCH.sub(render, markdown)

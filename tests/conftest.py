@@ -1,10 +1,13 @@
 import os
+import subprocess
 import sys
+from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 sys.path.insert(0, os.path.dirname(__file__))
+ROOT = Path(__file__).resolve().parents[1]
 
 
 import pytest  # noqa: E402
@@ -18,6 +21,19 @@ def fmus():
     """
     from calib.fmu.build import build_fmu
     return {v: build_fmu(v) for v in ("A", "B")}
+
+
+@pytest.fixture(scope="session")
+def docs_site(tmp_path_factory):
+    """The documentation site, built once per session as ``make docs`` builds it (MkDocs in strict
+    mode): ``(site directory, the finished build process)``. tests/test_docs.py asserts that it
+    built; tests/test_browser_report.py opens its pages."""
+    pytest.importorskip("mkdocs")
+    pytest.importorskip("mkdocstrings")
+    site = tmp_path_factory.mktemp("docs") / "site"
+    build = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
+                           capture_output=True, text=True, timeout=600, cwd=ROOT)
+    return site, build
 
 
 # ------------------------------------------------------------------ heap checks in FMU tests

@@ -96,8 +96,8 @@ def test_candidate_table_and_verdict_say_at_bound():
         rounds = [{"candidates": [fit]}]
 
     (row,) = _candidate_rows(D)
-    assert "erosion_onset_eta = 0.3 ± 0.01 - (at lower bound)" in row[11]
-    assert row[12] == "converged; at bound: erosion_onset_eta"
+    assert row.cells[-1].startswith('<span class="nb">0.3 at bound</span>')     # the bound, not the estimate
+    assert "erosion_onset_eta = 0.3 ± 0.01 (at lower bound)" in row.detail and row.detail.endswith("Fit: converged.")
 
 
 # ----------------------------------------------------------------------------- end to end

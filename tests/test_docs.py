@@ -100,31 +100,28 @@ def test_the_python_page_example_runs(tmp_path):
     assert "(30, " in out.stdout
 
 
-def test_the_documentation_site_builds_without_warnings(tmp_path):
+def test_the_documentation_site_builds_without_warnings(docs_site):
     """``make docs``: MkDocs in strict mode (a broken link, a missing page, a docstring the API
-    reference cannot render is an error)."""
-    pytest.importorskip("mkdocs")
-    pytest.importorskip("mkdocstrings")
-    out = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
-                         capture_output=True, text=True, timeout=600, cwd=ROOT)
+    reference cannot render is an error); the build is the session's ``docs_site`` (tests/conftest.py)."""
+    site, out = docs_site
     assert out.returncode == 0, out.stderr[-3000:]
-    assert (tmp_path / "site" / "api" / "calibration" / "index.html").stat().st_size > 50_000
-    assert "CalibrationSettings" in (tmp_path / "site" / "api" / "calibration" / "index.html").read_text()
-    assert "calibration.prior_std" in (tmp_path / "site" / "reference" / "settings" / "index.html").read_text()
+    assert (site / "api" / "calibration" / "index.html").stat().st_size > 50_000
+    assert "CalibrationSettings" in (site / "api" / "calibration" / "index.html").read_text()
+    assert "calibration.prior_std" in (site / "reference" / "settings" / "index.html").read_text()
     # the examples ran during the build: their pages hold the code's output
-    demo = (tmp_path / "site" / "examples" / "diagnose_demo" / "index.html").read_text()
+    demo = (site / "examples" / "diagnose_demo" / "index.html").read_text()
     assert "best explanation: rotational_augmentation" in demo
-    assert "To tighten pitch_offset" in (tmp_path / "site" / "examples" / "own_turbine" / "index.html").read_text()
+    assert "To tighten pitch_offset" in (site / "examples" / "own_turbine" / "index.html").read_text()
     # a validation page says "Not published yet" only where its data file is missing (issue 35: the coverage
     # page said so beside coverage_map.json and coverage_truncated.json)
-    for page in (tmp_path / "site" / "validation").rglob("index.html"):
+    for page in (site / "validation").rglob("index.html"):
         for sentence in re.findall(r"Not published yet[^*<]*", page.read_text()):
             names = re.findall(r"docs/validation/data/([\w.]+\.json)", sentence)
             assert names and not any((ROOT / "docs" / "validation" / "data" / n).is_file() for n in names), \
                 (page, sentence)
-    assert "Not published yet" not in (tmp_path / "site" / "validation" / "coverage" / "index.html").read_text()
+    assert "Not published yet" not in (site / "validation" / "coverage" / "index.html").read_text()
     # no docstring role left raw (issue 35: ":class:`~calib.history.RecordedModel`" in 636 places)
-    raw = [(p.relative_to(tmp_path), m) for p in (tmp_path / "site").rglob("*.html")
+    raw = [(p.relative_to(site), m) for p in site.rglob("*.html")
            for m in re.findall(r":(?:class|func|meth|mod|attr|data|obj|exc):(?:<code>|`)[^<`]*", p.read_text())]
     assert not raw, raw[:5]
 

@@ -18,27 +18,34 @@ import base64
 import html
 import json
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from calib.report.atomic import atomic_write_text
 from calib.report.diagnosis_figures import write_figures
 from calib.result_io import jsonable as _jsonable
-from calib.words import p_text
+from calib.words import p_is, p_text
 
 
-def _table(header, rows, wrap=()) -> str:
-    """An HTML table; the columns in ``wrap`` (long text) may break inside words to fit the page."""
+def _table(header, rows, numbers=()) -> str:
+    """An HTML table in its scroll box; cells wrap at spaces only, never inside a word, and the
+    columns in ``numbers`` are right-aligned on one line ("< 1e-16" does not break at its minus)."""
     th = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f'<td class="w">{c}</td>' if j in wrap else f"<td>{c}</td>"
+    body = "".join("<tr>" + "".join(f'<td class="n">{c}</td>' if j in numbers else f"<td>{c}</td>"
                                     for j, c in enumerate(row)) + "</tr>" for row in rows)
     return f'<div class="table"><table><tr>{th}</tr>{body}</table></div>'
 
 
 def _parameter_text(q: dict) -> str:
     """"name = value ± std unit", with "(at lower bound)" / "(at upper bound)" when it is."""
-    text = f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g} {q['unit']}"
+    text = f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g}{_unit(q)}"
     return text + (f" (at {q['at_bound']} bound)" if q.get("at_bound") else "")
+
+
+def _unit(q: dict) -> str:
+    """" unit" of a parameter record, "" for a dimensionless one ("-" or no unit)."""
+    return "" if q.get("unit") in ("", "-", None) else f" {q['unit']}"
 
 
 def gap_words(d) -> str:
@@ -111,31 +118,114 @@ def _with_strength(f) -> str:
     return f"{f.name} ({strength})" if strength else f.name
 
 
-def _candidate_rows(d) -> list[tuple]:
-    """One row of the candidate table per candidate of every round (HTML-escaped)."""
+class CandidateRow(NamedTuple):
+    """One candidate in the candidate table: a main row and the detail line under it (HTML-escaped)."""
+
+    round_no: int
+    cells: tuple        # candidate, ΔBIC, BIC weight, Λ, significant, effect size, fitted value ± σ
+    detail: str         # the full effect-size sentence, the parameters by name, χ², k, BIC, p, fit status
+    named: bool         # the round named this candidate (or one of the two of an ambiguous verdict)
+
+
+#: The candidate table's columns (:func:`_candidate_rows` fills them).
+CANDIDATE_HEADER = ("candidate", "ΔBIC", "BIC weight", "Λ", "significant", "effect size", "fitted value ± σ")
+
+
+#: Their cells' classes: a name on one line, numbers right-aligned, room for two fitted values a line.
+_CANDIDATE_CLASSES = ("id", "n", "n", "n", "", "", "fit")
+
+
+def _named_in(rnd: dict) -> set:
+    """Names of the candidates a round named: the one its reason starts with, or for an ambiguous
+    verdict the best significant candidate of each of the two effects."""
+    fits = rnd["candidates"]
+    if rnd.get("verdict") == "ambiguous":
+        best = (next((f for f in fits if f.significant and f.effect == e), None) for e in rnd.get("ambiguous", []))
+        return {f.name for f in best if f is not None}
+    return {f.name for f in fits if rnd.get("reason", "").startswith(f"{f.name}: ")}
+
+
+def _short_effect(text: str) -> str:
+    """The effect size without where and against what, HTML: "+6.4 % thrust" of "+6.4 % thrust at
+    19.8 m/s (tolerance 0.24 %)", the line breaking between the size and the channel only (the whole
+    text when it has no " at ")."""
+    size, _, channel = text.split(" at ", 1)[0].partition(" % ")
+    return f"{_unbroken(size + ' %')} {html.escape(channel)}" if channel else _unbroken(size)
+
+
+def _short_value(q: dict) -> str:
+    """A fitted parameter without its name: "1.03 ± 0.026", "1.4 ± 0.19 deg", or "0 at bound"
+    (the bound's value: on a bound the estimate is the bound, not an estimate)."""
+    if q.get("at_bound"):
+        return f"{q.get(q['at_bound'], q['value']):.3g}{_unit(q)} at bound"
+    return f"{q['value']:.3g} ± {q['std']:.2g}{_unit(q)}"
+
+
+def _unbroken(text: str) -> str:
+    """``text`` HTML-escaped in a span the line never breaks inside ("1.03 ± 0.026" stays whole)."""
+    return f'<span class="nb">{html.escape(text)}</span>'
+
+
+def _chi2_change(x: float) -> str:
+    """A change of χ² (ΔBIC, Λ) for a reader: one decimal below 100, none above."""
+    return f"{x:.1f}" if abs(x) < 100 else f"{x:.0f}"
+
+
+def _candidate_rows(d) -> list[CandidateRow]:
+    """Every candidate of every round, in the rounds' order (best BIC first): the main row, short
+    enough for one or two lines, and the long text for the detail line under it."""
     rows = []
     for r_no, rnd in enumerate(d.rounds):
+        named = _named_in(rnd)
+        best = min((f.bic for f in rnd["candidates"]), default=0.0)
         for f in rnd["candidates"]:
-            name = html.escape(f.name).replace(":", ":<wbr>")        # may break after "effect:"
-            status = f.status or "?"
+            cells = (html.escape(f.name), _chi2_change(f.bic - best), f"{f.weight:.3f}", _chi2_change(f.lr_statistic),
+                     "yes" if f.significant else "no", _short_effect(f.effect_text),
+                     ", ".join(_unbroken(_short_value(q)) for q in f.parameters))
+            fit = f.status or "?"
             if f.start:
-                status += f"; {f.start}"
-            if f.at_bound:
-                status += f"; at bound: {', '.join(f.at_bound)}"
-            rows.append((r_no + 1, name, f"{f.chi2:.4g}", f.n_params, f"{f.bic:.4g}",
-                         f"{f.lr_statistic:.4g}", html.escape(p_text(f.p_value)), "yes" if f.significant else "no",
-                         f"{f.weight:.3f}", f"{f.pattern_agreement:.2f}", html.escape(f.effect_text),
-                         html.escape("; ".join(_parameter_text(q) for q in f.parameters)), html.escape(status)))
+                fit += f"; {f.start}"
+            detail = (f"{f.effect_text}. Fitted (1σ): {'; '.join(_parameter_text(q) for q in f.parameters)}. "
+                      f"χ² {f.chi2:.4g} with k = {f.n_params}, BIC {f.bic:.4g}, {p_is(f.p_value)}, pattern agreement "
+                      f"{f.pattern_agreement:.2f}. Fit: {fit}.")
+            rows.append(CandidateRow(r_no + 1, cells, html.escape(detail), f.name in named))
     return rows
 
 
-# long text cells (fitted parameters) may break inside words, a candidate after its ":"
-# (<wbr>); a table still too wide scrolls inside its own box, never the page (checked at
-# 1280 px in tests/test_browser_report.py)
+def _round_title(rnd: dict, r_no: int) -> str:
+    """"round 1: rotational_augmentation", "round 2, on top of rotational_augmentation: none"."""
+    base = f", on top of {', '.join(rnd['base'])}" if rnd.get("base") else ""
+    return f"round {r_no}{base}: {rnd.get('verdict', '?')}"
+
+
+def _candidate_table(d) -> str:
+    """The candidate table: per round a title row, then per candidate a main row (the named one in
+    bold) and a detail line under it."""
+    n = len(CANDIDATE_HEADER)
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in CANDIDATE_HEADER)
+    body, last = [], 0
+    for row in _candidate_rows(d):
+        if row.round_no != last:
+            last = row.round_no
+            title = _round_title(d.rounds[last - 1], last)
+            body.append(f'<tr class="round"><th colspan="{n}">{html.escape(title)}</th></tr>')
+        cells = "".join(f'<td class="{cls}">{c}</td>' for cls, c in zip(_CANDIDATE_CLASSES, row.cells))
+        body.append(f'<tr class="candidate{" named" if row.named else ""}">{cells}</tr>'
+                    f'<tr class="detail"><td colspan="{n}">{row.detail}</td></tr>')
+    return f'<div class="table"><table class="candidates"><tr>{head}</tr>{"".join(body)}</table></div>'
+
+
+# Cells wrap at spaces only, so a name never breaks inside; the candidate table keeps its main rows
+# short and puts the long text on a detail line under each; a table still too wide scrolls inside its
+# own box, never the page (tests/test_browser_report.py fails when any table needs to at 1100 px).
 _CSS = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
-        ".table{overflow-x:auto;max-width:100%;margin:.5em 0 1.2em}table{border-collapse:collapse}"
-        "td,th{border:1px solid #ccc;padding:3px 7px}td.w{overflow-wrap:anywhere}"
-        "th{background:#f0f0f0}img{max-width:100%;height:auto}.failed{background:#fde8e8;padding:.5em}")
+        ".table{overflow-x:auto;max-width:100%;margin:.5em 0 1.2em}table{border-collapse:collapse;font-size:.9em}"
+        "td,th{border:1px solid #ccc;padding:3px 7px}th{background:#f0f0f0}"
+        "td.n{text-align:right;white-space:nowrap}td.id,.nb{white-space:nowrap}td.fit{min-width:12em}"
+        "tr.named td{font-weight:bold}tr.named td,tr.named+tr.detail td{background:#eef5ee}"
+        "tr.round th{text-align:left;background:#e4e4e4}tr.candidate td{border-bottom-style:hidden}"
+        "tr.detail td{font-size:.85em;color:#555;padding:0 7px 5px 1.6em}"
+        "img{max-width:100%;height:auto}.failed{background:#fde8e8;padding:.5em}")
 
 
 def write_diagnosis(d, out_dir: str | Path, progress=None) -> dict[str, Path]:
@@ -184,16 +274,18 @@ def _evidence_html(d, figs: dict[str, Path]) -> list[str]:
     """Why each round named what it did: the reasons, the candidate table explained, its figure."""
     reasons = "".join(f"<li>round {k + 1}: {html.escape(r['reason'])}</li>" for k, r in enumerate(d.rounds))
     return [f"<h2>Evidence</h2><ul>{reasons}</ul>",
-            _table(["round", "candidate", "χ²", "k", "BIC", "Λ", "p", "significant", "BIC weight",
-                    "pattern agreement", "effect size", "fitted parameters (1σ)", "fit status"],
-                   _candidate_rows(d), wrap=(1, 10, 11, 12)),
-            ("<p class='explain'>How to read the table: <b>χ²</b> is the misfit of the candidate's fit, "
-             "whitened by the noise; <b>k</b> its number of fitted parameters. <b>Λ</b> (likelihood ratio) is "
-             "how much the candidate lowers χ² against the model without it; <b>p</b> is how likely so large a "
-             "drop is by chance if the candidate were not there (χ² with k degrees of freedom), and "
-             "<b>significant</b> compares it with the significance level shared among the candidates. "
-             "<b>BIC</b> = χ² + k ln N charges each parameter; lower is better, and the <b>BIC weight</b> is the "
-             "candidate's share of the evidence among all candidates and no effect (1 = all of it). The "
+            _candidate_table(d),
+            ("<p class='explain'>How to read the table: one row per candidate, best first in each round, the "
+             "one the round named in bold on green; the grey line under it holds the full effect size, the "
+             "fitted parameters by name, χ², k, BIC, p and the fit status. <b>χ²</b> is the misfit of the "
+             "candidate's fit, whitened by the noise; <b>k</b> its number of fitted parameters. <b>BIC</b> = "
+             "χ² + k ln N charges each parameter; lower is better, <b>ΔBIC</b> is the distance to the round's "
+             "best, and the <b>BIC weight</b> is the candidate's share of the evidence among all candidates and "
+             "no effect (1 = all of it). <b>Λ</b> (likelihood ratio) is how much the candidate lowers χ² "
+             "against the model without it; <b>p</b> is how likely so large a drop is by chance if the "
+             "candidate were not there (χ² with k degrees of freedom), and <b>significant</b> compares it with "
+             "the significance level shared among the candidates (and the effect size with the model-form "
+             "tolerance). The <b>effect size</b> is the largest change of an output the candidate makes. The "
              "<b>pattern agreement</b> is the correlation between how the candidate changes the outputs and "
              "how the free correction field changes them (1 = the same shape, 0 = unrelated). A fitted value "
              "at its bound is flagged: it is the bound the data push against, not an estimate.</p>"),
@@ -215,11 +307,11 @@ def _gap_html(d, figs: dict[str, Path]) -> list[str]:
                    f"{t['corr_load_level']:+.2f}") for c, t in d.find["trends"].items()]
     return ["<h2>Where the gap is</h2>",
             _table(["channel", "χ²/point nominal", "mean whitened residual", "corr. with λ", "corr. with pitch",
-                    "corr. with wind speed", "corr. with load level"], trend_rows),
+                    "corr. with wind speed", "corr. with load level"], trend_rows, numbers=range(1, 7)),
             _img(figs["gap"]),
             "<h2>How much it shrank</h2>",
             _table(["model", "χ²/dof", "dof", "p-value", "RMS per channel (measured − model)"], gap_rows,
-                   wrap=(4,)),
+                   numbers=(1, 2, 3)),
             ("<p class='explain'>χ²/dof near 1 means the model explains the measurements to within their noise; "
              "the p-value is the chance of a misfit at least this large if it did.</p>")]
 

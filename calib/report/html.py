@@ -27,11 +27,14 @@ body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0
 .table{overflow-x:auto;max-width:100%;margin:0.5em 0 1.2em}table{border-collapse:collapse}
 td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
 th{background:#f0f0f0}td.l,th.l{text-align:left}img{max-width:100%;height:auto;margin:0.4em 0}
+tr.above td{border-bottom-style:hidden}tr.detail td{text-align:left;font-size:.9em;color:#555;padding-left:1.6em}
 pre{white-space:pre-wrap;overflow-wrap:anywhere}
 .bad{color:#b00}.ok{color:#070}h2{border-bottom:2px solid #ddd;padding-bottom:2px}
 """
-# Layout at any window width: a table too wide for the page scrolls inside its own box
-# (.table), never the page; preformatted text wraps (checked in tests/test_browser_report.py).
+# Layout at any window width: cells wrap at spaces only (a name never breaks inside), long text
+# goes on a detail line under its row; a table still too wide scrolls inside its own box (.table),
+# never the page; preformatted text wraps. tests/test_browser_report.py fails when a table needs
+# its scroll box at 1100 px or a name breaks.
 
 
 def _img(path: Path) -> str:
@@ -78,11 +81,18 @@ def _has_field(r: CalibrationResult) -> bool:
     return any(v["kind"] in ("lift_correction", "drag_correction") for v in r.verdicts)
 
 
-def _table(header, rows, left=1) -> str:
+def _table(header, rows, left=1, details=()) -> str:
+    """An HTML table in its scroll box: the first ``left`` columns left-aligned, the others right-aligned.
+
+    ``details`` (HTML, one per row, "" for none) go on a line under their row, across the table:
+    long text that would widen a column of short numbers.
+    """
     th = "".join(f'<th class="{"l" if i < left else ""}">{html.escape(str(h))}</th>' for i, h in enumerate(header))
     body = ""
-    for row in rows:
-        body += "<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{c}</td>' for i, c in enumerate(row)) + "</tr>"
+    for row, detail in zip(rows, list(details) or [""] * len(rows)):
+        cells = "".join(f'<td class="{"l" if i < left else ""}">{c}</td>' for i, c in enumerate(row))
+        body += (f'<tr class="above">{cells}</tr><tr class="detail"><td colspan="{len(header)}">{detail}</td></tr>'
+                 if detail else f"<tr>{cells}</tr>")
     return f'<div class="table"><table><tr>{th}</tr>{body}</table></div>'
 
 
@@ -356,28 +366,38 @@ def _fit_tables_html(r: CalibrationResult, gof: dict) -> list[str]:
 def _verdicts_html(r: CalibrationResult) -> str:
     """The verdict table (every parameter but the poorly observable nodes within 2σ of nominal) and
     what the verdicts mean."""
-    rows = []
+    rows, details = [], []
     for v in r.verdicts:
         if v["kind"] in ("lift_correction", "drag_correction") and v["verdict"] == "poorly observable" \
                 and not v["note"]:
             continue
         rows.append((html.escape(v["name"]), html.escape(v["verdict"]), html.escape(v.get("unit", "") or "-"),
                      _fmt(v["nominal"]), _fmt(v["value"]),
-                     _fmt(v["std"]), _fmt(v["prior_std"]), _fmt(v["std_ratio"], 2),
-                     html.escape(v.get("note", "")), html.escape(v.get("confounded_with", ""))))
+                     _fmt(v["std"]), _fmt(v["prior_std"]), _fmt(v["std_ratio"], 2), html.escape(v.get("note", ""))))
+        details.append(html.escape(_shared_words(v)))
     n_hidden = len(r.verdicts) - len(rows)
     which = (f"Every non-field parameter, and every correction node that is identified, at a bound, or moved more "
              f"than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are not listed (their bands are as "
              f"wide as the prior)." if _has_field(r) else "Every parameter of the model.")
     return (f"<h3>Verdicts</h3><p>{which}</p>" +
-            _table(["parameter", "verdict", "unit", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior",
-                    "note", "confounded with"], rows, left=3) +
+            _table(["parameter", "verdict", "unit", "nominal", "estimate", "σ (1σ)", "prior σ", "σ/prior", "note"],
+                   rows, left=3, details=details) +
             "<p class='explain'>σ is the standard deviation of the estimate (1σ); σ/prior compares it with "
             "the prior's: <b>identified</b> when the data halve it at least, <b>poorly observable</b> when "
             "the band stays close to the prior's width, <b>at bound</b> when the estimate sits on a bound "
             "(its value is the bound, not an estimate), <b>confounded</b> when a nuisance shares most of "
             "its information with the correction field (read it with its σ, not as a measurement of that "
             "quantity alone).</p>")
+
+
+def _shared_words(v: dict) -> str:
+    """Whom a parameter shares its information with, for the line under its verdict ("" for a
+    correction node, or a result saved before the shared information)."""
+    if not v.get("confounded_with"):
+        return ""
+    share = (f"{100 * v['shared_information']:.0f} % of its information with the other parameters, most"
+             if "shared_information" in v else "its information most")
+    return f"{v['name']} shares {share} with {v['confounded_with']}"
 
 
 def decision_html(r: CalibrationResult) -> str:
