@@ -26,8 +26,8 @@ Read a history with :func:`read_events` and :func:`read_record` (or ``json`` and
 ``numpy.load`` directly).
 
 This module holds the folder (:class:`History`, :func:`open_history`) and its reading; the
-recorded model calls (:class:`~calib.recorded_model.RecordedModel`, :func:`recorded`) live in
-:mod:`calib.recorded_model` and are importable from here.
+recorded model calls (:class:`~calib.recorded_model.RecordedModel`, :func:`~calib.recorded_model.recorded`) live in
+:mod:`calib.recorded_model`.
 """
 
 from __future__ import annotations
@@ -43,7 +43,6 @@ from pathlib import Path
 import numpy as np
 
 from calib.errors import InputError
-from calib.recorded_model import PER_STATION_EXTRAS, RecordedModel, recorded  # noqa: F401  (importable from here)
 from calib.result_io import jsonable as result_jsonable
 
 FORMAT = "calib.history/1"

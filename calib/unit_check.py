@@ -54,7 +54,6 @@ Here: the hypotheses and their fits (:func:`check_units`) and the gate before a 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -63,7 +62,7 @@ from calib.errors import CalibError, InputError
 from calib.measurements import Measurements, check_channels
 from calib.types import CONDITION_FIELDS, OperatingConditions
 from calib.unit_findings import (CHANNEL_FACTORS, CONDITION_FACTORS, GROSS_RATIO, OVERRIDE_HINT, STOPPING_KINDS,
-                                 UnitCheckReport, UnitFinding, findings_of)
+                                 UnitCheckReport, UnitFinding, UnitFit, findings_of)
 
 __all__ = ["CHANNEL_FACTORS", "CONDITION_FACTORS", "GROSS_RATIO", "OVERRIDE_HINT", "STOPPING_KINDS",
            "UnitCheckReport", "UnitFinding", "apply_unit_check", "check_units"]
@@ -74,20 +73,6 @@ _FLOOR = 1e-3              # σ floor as a fraction of the channel's RMS model v
 
 
 # ----------------------------------------------------------------------------- fitting one hypothesis
-@dataclass
-class _Fit:
-    label: str
-    misfit: float
-    factors: np.ndarray          # per channel, read / meant (1 = as read)
-    ratios: np.ndarray           # per channel, median measured/model
-    chi2_per_dof: np.ndarray     # per channel, after dividing by ``factors``
-    n_failed: int
-    n_ratio: np.ndarray          # per channel, points behind the median ratio
-    status_summary: str = ""
-    condition: str | None = None
-    condition_factor: float = 1.0
-
-
 def _nearest_factor(ratios: np.ndarray, tolerance: float) -> tuple[float, float]:
     """(median ratio, the signed unit factor it is near, or 1 when none) of one channel."""
     if ratios.size == 0:
@@ -108,7 +93,7 @@ def _nearest_factor(ratios: np.ndarray, tolerance: float) -> tuple[float, float]
 
 def _fit(label: str, y: np.ndarray, ok: np.ndarray, z: np.ndarray, sigma: np.ndarray | None, *,
          relative_sigma: float, model_error: float, factor_tolerance: float, failure_cost: float,
-         search_factors: bool = True) -> _Fit:
+         search_factors: bool = True) -> UnitFit:
     """Misfit of the data ``z`` against model values ``y`` (points ``ok``), per the module docstring;
     with ``search_factors`` each channel may be divided by a unit factor its ratio is near."""
     n_pts, n_ch = z.shape
@@ -132,7 +117,7 @@ def _fit(label: str, y: np.ndarray, ok: np.ndarray, z: np.ndarray, sigma: np.nda
         total += float(np.sum(r2))
     n_failed = int(np.count_nonzero(~ok))
     misfit = (total + failure_cost * n_failed * n_ch) / (n_pts * n_ch)
-    return _Fit(label, misfit, factors, ratios, chi2, n_failed, n_ratio)
+    return UnitFit(label, misfit, factors, ratios, chi2, n_failed, n_ratio)
 
 
 def _hypothesis_label(name: str, factor: float) -> str:
@@ -305,18 +290,18 @@ def _evaluator(model, p: np.ndarray, idx: list, s: np.ndarray | None, relative_s
 
 
 def _hypotheses(evaluate, measurements: Measurements, conditions: Sequence[str], kw: dict,
-                chi2_threshold: float, notes: list) -> tuple[_Fit, _Fit, list, _Fit]:
+                chi2_threshold: float, notes: list) -> tuple[UnitFit, UnitFit, list, UnitFit]:
     """Fit every hypothesis and choose the one that explains the data (steps 1–4 of the module docstring).
 
     Returns
     -------
-    as_read : _Fit
+    as_read : UnitFit
         The conditions and channels as read (no unit factor searched).
-    base : _Fit
+    base : UnitFit
         The conditions as read, each channel divided by the unit factor its ratio is near.
-    fits : list of _Fit
+    fits : list of UnitFit
         ``base``, then every condition hypothesis.
-    chosen : _Fit
+    chosen : UnitFit
         The best condition hypothesis where it explains the data, else ``base``.
     """
     z = measurements.values

@@ -135,7 +135,7 @@ def test_every_setting_is_documented_where_the_reference_is_generated_from():
     from calib.bem import BemSettings
     from calib.calibration import CalibrationSettings
     from calib.validation import ValidationSettings
-    from calib.diagnosis.core import DiagnosisSettings
+    from calib.diagnosis.settings import DiagnosisSettings
     from calib.settings_doc import parameter_docs, settings_markdown, undocumented_fields
 
     for cls in (CalibrationSettings, BemSettings, DiagnosisSettings, ValidationSettings):

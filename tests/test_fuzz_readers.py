@@ -1141,7 +1141,7 @@ def test_mapping_setting_that_is_not_a_table_is_named(tmp_path):
 
 def test_diagnosis_table_of_the_wrong_type_is_named(tmp_path):
     from calib.diagnosis.in_workflow import diagnosis_settings
-    from calib.diagnosis.core import DiagnosisSettings
+    from calib.diagnosis.settings import DiagnosisSettings
 
     with pytest.raises(InputError) as exc:
         DiagnosisSettings(significance=[1]).validate("c.toml", "diagnosis.")

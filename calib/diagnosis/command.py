@@ -212,7 +212,7 @@ def _checked_diagnosis(setup, grid, meas, dset, hist, *, is_fmu: bool, src: str,
     unit_notes : dict
         What the unit check says for the report (:func:`_unit_check`).
     """
-    from calib.history import recorded
+    from calib.recorded_model import recorded
     from calib.logs import progress_line
 
     family, executor, chunk = None, None, None

@@ -36,7 +36,7 @@ class Capabilities:
     ----------
     name : str
         The model's name in results and reports (e.g. ``"BemModel"``); a wrapper (the history's
-        :class:`~calib.history.RecordedModel`) passes its model's on, so results are the same with and
+        :class:`~calib.recorded_model.RecordedModel`) passes its model's on, so results are the same with and
         without it.
     correction_field : bool
         ``correction_field()`` returns the model's additive polar-correction field

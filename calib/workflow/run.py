@@ -138,7 +138,7 @@ class _Run:
     def measurements(self, progress, force, strict) -> None:
         """The measured table (with the set-up's density and yaw, checked against the model's units) or the
         synthetic one of ``[truth]``; the correction grid; the set-up in force."""
-        from calib.history import recorded
+        from calib.recorded_model import recorded
         from calib.logs import progress_line
 
         cfg, setup, echo, src = self.cfg, self.setup, self.echo, self.src
@@ -216,7 +216,7 @@ class _Run:
         """One stage: calibrate, validate, write its result and figures, say what it found."""
         from calib import validation
         from calib.diagnosis import in_workflow
-        from calib.history import recorded
+        from calib.recorded_model import recorded
         from calib.logs import progress_line
         from calib.report.figures import write_figures
 
