@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from calib.errors import InputError
-from calib.identifiability import NodeLayout, eigenshapes, node_layout
+from calib.parametrizations.correction_field import NodeLayout, eigenshapes, node_layout
 from calib.prediction import Prediction, predict_outputs
 from calib.result_io import atomic_write, jsonable, package_versions, write_npz_synced, write_text_synced
 from calib.result_parts import ARRAY_FIELDS, PART_OF, PARTS, Estimate, Fit, Identifiability, Provenance, Uncertainty

@@ -16,7 +16,8 @@ import numpy as np
 
 from calib.calibration_settings import CalibrationSettings
 from calib.errors import InputError
-from calib.identifiability import fold_dominated_directions, frozen_curvature_covariance
+from calib.identifiability import frozen_curvature_covariance
+from calib.fold_directions import fold_dominated_directions
 from calib.measurements import Measurements
 from calib.parametrizations.aliasing import FineSensitivities
 

@@ -7,7 +7,7 @@ import numpy as np
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.envelope import envelope_of
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.predict import write_prediction_csv
 from twin_model import RADIUS, TwinModel, twin_conditions
 

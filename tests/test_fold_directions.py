@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.identifiability import FOLD_SHARE, fold_dominated_directions
+from calib.fold_directions import FOLD_SHARE, fold_dominated_directions
 from calib.measurements import Measurements, synthesize
 from calib.report.html import result_section
 from calib.result import fold_sentence, load_result

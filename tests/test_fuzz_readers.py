@@ -40,7 +40,8 @@ from hypothesis import strategies as st
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements
 from calib.fmu.mapping import load_mapping
-from calib.rotor.aerodyn import read_aerodyn_blade, read_aerodyn_main, read_aerodyn_polar
+from calib.rotor.aerodyn import read_aerodyn_blade, read_aerodyn_polar
+from calib.rotor.aerodyn_main import read_aerodyn_main
 from calib.rotor.geometry import Rotor
 from calib.rotor.openfast import read_elastodyn, read_openfast
 from calib.rotor.polar import Airfoil

@@ -5,9 +5,9 @@ import pytest
 
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.identifiability import (cramer_rao, eigenshapes, field_basis, fisher_matrix, node_layout,
-                                   observability, parameter_verdicts, sigma_bar_for, subspace_cosines,
-                                   svd_analysis, whitened_sensitivities)
+from calib.identifiability import (cramer_rao, fisher_matrix, observability, parameter_verdicts, sigma_bar_for,
+                                   subspace_cosines, svd_analysis, whitened_sensitivities)
+from calib.parametrizations.correction_field import eigenshapes, field_basis, node_layout
 from calib.models.base import Parameter
 
 GRID = CorrectionGrid([-4.0, 4.0, 12.0, 20.0], [0.25, 0.6, 1.0])

@@ -23,7 +23,8 @@ from calib.models.registry import build_model, check_fmu_files
 from calib.result import load_result
 from calib.rotor.library import DATA_DIR, ROTORS, load_rotor
 from calib.rotor.serialize import rotor_digest, rotor_from_dict, rotor_to_dict
-from calib.rotor.sources import file_provenance, rotor_from_table
+from calib.rotor.sources import rotor_from_table
+from calib.rotor.provenance import file_provenance
 from calib.types import OperatingConditions
 from floats import assert_same_numbers
 

@@ -9,7 +9,7 @@ import pytest
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.errors import InputError
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.report import figures as F
 from calib.report.html import write_report
 from calib.result import load_result

@@ -25,7 +25,7 @@ from PIL import Image
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.report import atomic
 from calib.report import figures as F
 from calib.report.atomic import atomic_path, is_temporary

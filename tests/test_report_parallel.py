@@ -13,7 +13,7 @@ import pytest
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.report import figures as F
 from calib.report.atomic import is_temporary
 from calib.report.parallel import fork_available, partition

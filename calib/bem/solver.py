@@ -17,7 +17,6 @@ from calib.bem import dual as dl
 from calib.bem.chain import BoundChain, EffectChain
 from calib.bem.jacobian import Block, SectionSensitivities, project
 from calib.bem.kinematics import curvature
-from calib.bem.point_status import INDUCTION_LIMIT  # noqa: F401 (re-exported)
 from calib.bem.point_status import check_conditions, check_inflow, section_fields, status_per_point
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY, SectionPolars, station_reynolds
 from calib.bem.sections import RESIDUAL_TOL, build_sections, eliminate_phi, find_roots, section_pass

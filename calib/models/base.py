@@ -20,8 +20,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditions, Parameter,  # noqa: F401
-                         ParameterKind, Status, StatusCounts, check_parameter_vector, nominal_vector)
+from calib.types import Channel, Evaluation, OperatingConditions, Parameter
 
 
 #: how a model's ``jacobian`` is computed: analytic sensitivities, or finite differences of simulations
