@@ -5,7 +5,7 @@ Field data and simulation outputs usually live in pandas. pandas is an optional 
 (``pip install 'calib[pandas]'``): the calibration itself needs only numpy, and a DataFrame is
 a convenience at its edges, so the core stays light.
 
-- :func:`prediction_frame`: a :class:`calib.result.Prediction` with its conditions, one row per
+- :func:`prediction_frame`: a :class:`calib.prediction.Prediction` with its conditions, one row per
   point, units in the column names;
 - :func:`parameters_frame`: a calibration's parameters with their estimates, σ, priors and verdicts;
 - :func:`points_frame`: per operating point the measured, nominal and calibrated outputs and the
@@ -40,7 +40,7 @@ def prediction_frame(conditions, prediction):
     ----------
     conditions : OperatingConditions
         The conditions the prediction was made at.
-    prediction : calib.result.Prediction
+    prediction : calib.prediction.Prediction
 
     Returns
     -------

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from calib.measurements import read_measurements
-from calib.result import Prediction, load_result
+from calib.result import load_result
+from calib.prediction import Prediction
 from calib.types import CONDITION_FIELDS, Status
 
 

@@ -20,12 +20,11 @@ import numpy as np
 from calib.errors import InputError
 from calib.parametrizations.correction_field import NodeLayout, eigenshapes, node_layout
 from calib.prediction import Prediction, predict_outputs
-from calib.result_io import atomic_write, jsonable, package_versions, write_npz_synced, write_text_synced
+from calib.result_io import atomic_write, jsonable, write_npz_synced, write_text_synced
 from calib.result_parts import ARRAY_FIELDS, PART_OF, PARTS, Estimate, Fit, Identifiability, Provenance, Uncertainty
 from calib.types import Parameter
 
-__all__ = ["CalibrationResult", "Prediction", "load_result", "package_versions", "fold_sentence",
-           "second_start_sentence", "Estimate", "Identifiability", "Uncertainty", "Fit", "Provenance"]
+__all__ = ["CalibrationResult", "load_result", "fold_sentence", "second_start_sentence"]
 
 SCHEMA_VERSION = 2
 _DICT_ARRAYS = {"conditions": "conditions__", "polar_bands": "polar__", "truncation": "truncation__"}

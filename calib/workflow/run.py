@@ -14,13 +14,13 @@ import numpy as np
 
 from calib.calibration import Calibrator
 from calib.errors import CalibError, InputError
-from calib.measurements import Measurements, sha256_of, synthesize
+from calib.measurements import sha256_of, synthesize
 from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
 from calib.setup_statement import statement, statement_html, statement_lines
 from calib.unit_check import apply_unit_check
 from calib.logs import add_output_arguments, say
-from calib.workflow.schema import SCHEMA, load_workflow
+from calib.workflow.schema import load_workflow
 from calib.workflow.setup import StageOutcome, synthetic_conditions, measurements_of, prepare, run_inputs
 from calib.workflow.truth import smooth_field, truth_checks, truth_model
 
@@ -273,7 +273,8 @@ class _Run:
         """The figures across stages: the singular-value spectra, and with measured data and a diagnosis or a
         validation the loads against wind speed and the informed eigenshapes."""
         from calib import validation
-        from calib.report.figures import plot_spectra, save_figure
+        from calib.report.figures import save_figure
+        from calib.report.spectrum_figures import plot_spectra
 
         cfg, out, extra = self.cfg, self.out, {}
         if len(outcomes) > 1:
@@ -373,4 +374,4 @@ def main(argv=None) -> int:
         return 2
 
 
-__all__ = ["Measurements", "SCHEMA", "load_workflow", "main", "run_workflow", "smooth_field", "truth_model"]
+__all__ = ["main", "run_workflow"]
