@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from calib.calibration.estimation import OPTIMIZERS, LeastSquaresProblem, estimate, get_optimizer
 from calib.errors import InputError
-from calib.estimation import OPTIMIZERS, LeastSquaresProblem, estimate, get_optimizer
 from calib.models.base import Capabilities, Channel, Evaluation, OperatingConditions, Parameter
 
 
@@ -129,7 +129,7 @@ def test_unknown_optimizer_error_lists_valid_names():
 
 
 def test_a_step_leaving_the_bounds_is_cut_back_to_them():
-    from calib.estimation import _feasible_step
+    from calib.calibration.estimation import _feasible_step
     B = np.eye(2)
     theta = np.array([0.5, 0.0])
     x = np.array([1.0, 0.2])  # would reach 1.5 in the first coordinate, bound 1.0
@@ -144,7 +144,7 @@ def test_a_round_off_step_across_an_active_bound_does_not_stop_the_step():
     """A start exactly on a bound and a QP step that crosses it by round-off (1e-17, as a QP
     solver returns along an active constraint): the step is kept, not cut to zero (which
     stopped the estimator at nominal on the coverage benchmark's twin (d))."""
-    from calib.estimation import _feasible_step
+    from calib.calibration.estimation import _feasible_step
     B = np.linalg.qr(np.random.default_rng(7).standard_normal((3, 2)))[0]
     lb, ub = -np.ones(3), np.ones(3)
     theta = np.linalg.lstsq(B, np.array([-1.0, 0.2, 0.1]), rcond=None)[0]
@@ -195,7 +195,7 @@ def test_an_iteration_damps_until_a_step_is_accepted_and_says_stalled_when_it_ca
     """The full Gauss–Newton step lands where a point fails: more damping finds a step that
     does not (converged, inside the working region); with a single damping level the
     estimator stops where it started and says "stalled", not "converged"."""
-    import calib.estimation as est
+    import calib.calibration.estimation as est
 
     model = LinearModel(fail_if_p0_above=0.05)
     prob = _problem(model, np.array([0.8, -0.2, 0.5, 0.1]))
@@ -211,7 +211,7 @@ def test_sqpmethod_vanishing_search_direction_is_accepted_only_at_an_improving_p
     (a failure to CasADi) at the QP's solution: that iterate is accepted. The same status at an
     iterate worse than the start x = 0, or any other failure, is not (a coverage twin run had
     ended "failed" on it with the cost converged)."""
-    from calib.estimation import CasadiQp
+    from calib.calibration.estimation import CasadiQp
 
     H = np.diag([2.0, 1.0])
     g = np.array([-2.0, 1.0])

@@ -1,13 +1,13 @@
-"""pandas in (calib.measurements.read_dataframe) and out (calib.frames): the same checks as the CSV reader, results as DataFrames."""
+"""pandas in (calib.measurements.read_dataframe) and out (calib.calibration.frames): the same checks as the CSV reader, results as DataFrames."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from floats import assert_same_numbers
 
 from calib.errors import InputError
 from calib.measurements import Measurements, read_dataframe, read_measurements
-from floats import assert_same_numbers
 
 pd = pytest.importorskip("pandas")
 

@@ -1,4 +1,4 @@
-"""The MAP estimate's self-check (calib.map_agreement): it fires on a prior that fixes what the
+"""The MAP estimate's self-check (calib.calibration.map_agreement): it fires on a prior that fixes what the
 data determine and on a MAP that stopped short where the data dominate, and stays silent on a
 correct MAP, computed here in closed form on a linear Gaussian problem."""
 
@@ -8,13 +8,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from twin_model import TwinModel, twin_conditions
 
-import calib.calibration as calibration
+import calib.calibration.calibrator as calibration
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.map_agreement import AGREEMENT_Z, DOMINANT_S, map_ml_agreement
+from calib.calibration.map_agreement import AGREEMENT_Z, DOMINANT_S, map_ml_agreement
 from calib.measurements import synthesize
 from calib.types import nominal_vector
-from twin_model import TwinModel, twin_conditions
 
 NAMES = ["gain_root", "gain_tip", "drag_add", "pitch_bias"]
 

@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.uncertainty_terms import ModelTerms
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import synthesize
 from calib.types import nominal_vector
-from calib.uncertainty_terms import ModelTerms
-from twin_model import TwinModel, twin_conditions
 
 LINEAR = dict(estimator="map", cd_min=None, scale_by_fit=False, representation_error=False, prior_check=False)
 

@@ -4,13 +4,13 @@ two starts is kept by the one-standard-error rule across them."""
 
 import numpy as np
 import pytest
-
-from calib.calibration import CalibrationSettings, Calibrator, keep_second_start
-from calib.measurements import synthesize
-from calib.report.html import _sentences
-from calib.result import load_result, second_start_sentence
 from test_calibration import CHANNELS, twin_truth
 from twin_model import TwinModel, twin_conditions
+
+from calib.calibration import CalibrationSettings, Calibrator, keep_second_start
+from calib.calibration.result import load_result, second_start_sentence
+from calib.measurements import synthesize
+from calib.report.html import _sentences
 
 
 class TrappedAtOne(Calibrator):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 #: A fitted parameter is "at bound" when it lies within this fraction of its scale of a bound
-#: (or beyond it by round-off): the rule of :func:`calib.identifiability.parameter_verdicts`.
+#: (or beyond it by round-off): the rule of :func:`calib.calibration.identifiability.parameter_verdicts`.
 AT_BOUND_TOLERANCE = 1e-3
 
 #: An own parameter of a candidate that ends within this fraction of its scale of its start

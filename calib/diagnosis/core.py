@@ -13,7 +13,7 @@ Steps
 1. **Find**: the nominal model's whitened residuals r = (z − y)/σ; the χ² test (χ²/N and its
    p-value) says whether the model is consistent with the noise; per channel and against
    tip-speed ratio, pitch and wind speed the residuals say where it is not.
-2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.Calibrator`,
+2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.calibrator.Calibrator`,
    automatic truncation) says which (α, η) region of the polars would have to change; with
    ``noise = "ml"`` it also gives the noise σ the later steps use.
 3. **Name**: every candidate effect of :data:`calib.effects.EFFECTS` (but the correction field)
@@ -68,7 +68,7 @@ from typing import Callable
 import numpy as np
 
 from calib.bem import BemSettings
-from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.calibrator import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.diagnosis.bem_family import BemFamily
 from calib.diagnosis.figures_of_merit import find, gap
@@ -111,7 +111,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         Receives one line per step.
     wrap : callable(model, label) -> model, optional
         Applied to every model the diagnosis calibrates or evaluates (e.g.
-        :func:`calib.recorded_model.recorded`, which records each call and answers it on resume).
+        :func:`calib.models.recorded_model.recorded`, which records each call and answers it on resume).
     fit_progress : callable(done, total), optional
         Called as the candidate fits of a round finish.
     family : optional
@@ -119,7 +119,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         ``settings``); e.g. :class:`calib.diagnosis.fmu.FmuFamily` for an FMU.
     on_iteration : callable(dict), optional
         Receives every optimizer iteration record of the localization and the recalibration
-        (:class:`~calib.calibration.Calibrator` records with ``run`` added).
+        (:class:`~calib.calibration.calibrator.Calibrator` records with ``run`` added).
 
     Returns
     -------

@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from calib.calibration import Calibrator
+from calib.calibration.calibrator import Calibrator
 from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
 from calib.diagnosis.figures_of_merit import effect_size, gap
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement

@@ -74,7 +74,7 @@ class Diagnosis:
     wall_time: float = 0.0
     notes: list = field(default_factory=list)
     failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
-    setup: list = field(default_factory=list)   # calib.setup_statement.SetupItem: the set-up in force
+    setup: list = field(default_factory=list)   # calib.report.setup_statement.SetupItem: the set-up in force
 
     @property
     def candidates(self) -> list:

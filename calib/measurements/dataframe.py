@@ -13,8 +13,8 @@ import re
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from calib.calibration.frames import require_pandas
 from calib.errors import InputError
-from calib.frames import require_pandas
 from calib.measurements.data import Measurements
 from calib.measurements.reader import measurements_from_text
 

@@ -34,7 +34,7 @@ unit either in brackets in the header or in the units row: both is refused.
 OpenFAST text output (``.out``: title lines, a channel-name row starting with ``Time``, a
 units row, the time rows; tabs or blanks) is recognised from its content and read with the
 OpenFAST channel names mapped to calib's, and its time series refused, averaged into one
-operating point or read row by row (``time_series``; :mod:`calib.openfast_out`). The binary
+operating point or read row by row (``time_series``; :mod:`calib.measurements.openfast_out`). The binary
 ``.outb`` is refused.
 
 Files as spreadsheets and loggers export them are accepted, and what was done is said in
@@ -63,17 +63,14 @@ from typing import Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.openfast_out import CHANNELS as OPENFAST_CHANNELS
-from calib.openfast_out import TIME_SERIES_MODES, average, missing_hint, time_rows
-from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, OperatingConditions
-
-from calib.measurements.data import (FIXED_QUANTITY, MISSING_CELLS, REQUIRED_CONDITIONS, UNITS,
-                                     Measurements, is_channel_name, quantity_of,
-                                     sha256_of, si_unit)
-
 from calib.measurements.cells import (DECIMAL_COMMA, declared_unit, did_you_mean, is_number_cell, known_names_text,
                                       short_list, split_line, to_float, unit_cell)
-from calib.measurements.table import read_table, read_text, Table
+from calib.measurements.data import (FIXED_QUANTITY, MISSING_CELLS, REQUIRED_CONDITIONS, UNITS, Measurements,
+                                     is_channel_name, quantity_of, sha256_of, si_unit)
+from calib.measurements.openfast_out import CHANNELS as OPENFAST_CHANNELS
+from calib.measurements.openfast_out import TIME_SERIES_MODES, average, missing_hint, time_rows
+from calib.measurements.table import Table, read_table, read_text
+from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, OperatingConditions
 
 
 def _check_columns(table: Table) -> None:
@@ -344,7 +341,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     ----------
     path : str or Path
         CSV file (UTF-8 with or without byte-order mark; comma, semicolon or tab), or OpenFAST
-        text output (``.out``, recognised from its content; :mod:`calib.openfast_out`).
+        text output (``.out``, recognised from its content; :mod:`calib.measurements.openfast_out`).
     channels : sequence of str, optional
         Channels to keep (default: every known channel column present).
     drop_incomplete_rows : bool

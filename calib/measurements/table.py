@@ -13,10 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from calib.errors import InputError
-from calib.openfast_out import MAX_TITLE_LINES, ChannelMap, channel_row, map_channels, refuse_binary
-
-from calib.measurements.cells import (DELIMITERS, LINE_BREAK, decode, detect_delimiter, is_units_row,
-                                      parse_header, split_line)
+from calib.measurements.cells import (DELIMITERS, LINE_BREAK, decode, detect_delimiter, is_units_row, parse_header,
+                                      split_line)
+from calib.measurements.openfast_out import MAX_TITLE_LINES, ChannelMap, channel_row, map_channels, refuse_binary
 
 
 @dataclass

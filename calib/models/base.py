@@ -22,7 +22,6 @@ import numpy as np
 
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter
 
-
 #: how a model's ``jacobian`` is computed: analytic sensitivities, or finite differences of simulations
 DERIVATIVE_KINDS = ("exact", "finite_difference")
 
@@ -35,7 +34,7 @@ class Capabilities:
     ----------
     name : str
         The model's name in results and reports (e.g. ``"BemModel"``); a wrapper (the history's
-        :class:`~calib.recorded_model.RecordedModel`) passes its model's on, so results are the same with and
+        :class:`~calib.models.recorded_model.RecordedModel`) passes its model's on, so results are the same with and
         without it.
     correction_field : bool
         ``correction_field()`` returns the model's additive polar-correction field

@@ -26,6 +26,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+from calib.calibration.result import CalibrationResult  # noqa: E402
 from calib.report.atomic import atomic_path  # noqa: E402
 from calib.report.correlation_figure import plot_correlation  # noqa: E402
 from calib.report.eigenshape_figures import plot_eigenshapes  # noqa: E402
@@ -35,7 +36,6 @@ from calib.report.panels import DPI  # noqa: E402
 from calib.report.parallel import default_workers, fork_available, run_forked  # noqa: E402
 from calib.report.polar_figures import TruthField, plot_polars  # noqa: E402
 from calib.report.spectrum_figures import plot_singular_values, plot_truncation  # noqa: E402
-from calib.result import CalibrationResult  # noqa: E402
 
 FORMATS = ("png",)
 ALL_FORMATS = ("png", "svg")

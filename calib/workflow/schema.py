@@ -6,15 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.calibration import CalibrationSettings
+from calib.calibration.calibrator import CalibrationSettings
 from calib.config import AUTO_OR_NUM, NUM, check_table, schema_of
 from calib.errors import InputError
 from calib.models.from_config import BEM_KEYS
 from calib.tomlfile import read_toml
-
-
-
-
 
 #: [model] keys of the native BEM (:data:`calib.models.from_config.BEM_KEYS`).
 MODEL_KEYS = BEM_KEYS

@@ -11,19 +11,19 @@ from pathlib import Path
 import numpy as np
 
 from calib.bem import BemSettings
-from calib.calibration import CalibrationSettings
+from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
+from calib.calibration.calibrator import CalibrationSettings
 from calib.config import field_values, settings_from_table
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
+from calib.logs import say
 from calib.measurements import Measurements, read_measurements, sha256_of
-from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
-from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
 from calib.models.bem_model import BemModel
 from calib.models.from_config import angle_overrides
 from calib.models.registry import MODEL_KINDS
-from calib.rotor.sources import rotor_from_table
 from calib.rotor.provenance import absolute_table, file_provenance
-from calib.logs import say
+from calib.rotor.sources import rotor_from_table
+from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
 from calib.workflow.schema import CALIBRATION_KEYS, number_array
 
 log = logging.getLogger("calib.workflow")
@@ -88,7 +88,7 @@ class WorkflowSetup:
     base_dir: str = "."
     yaw: float = 0.0
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
-    validation: object = None             # calib.validation.ValidationSettings of [validation]
+    validation: object = None             # calib.workflow.validation.ValidationSettings of [validation]
     strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
     rotor_files: dict | None = None       # provenance of the rotor files read (calib.rotor.sources.file_provenance)
     origins: dict = dataclasses.field(default_factory=dict)   # set-up key -> where its value came from
@@ -304,7 +304,7 @@ def _check_grid(setup: WorkflowSetup, cfg: dict) -> None:
 def _add_diagnosis_and_validation(setup: WorkflowSetup, cfg: dict) -> None:
     """The settings of ``[diagnosis]`` (native BEM with measured data only) and ``[validation]``."""
     from calib.diagnosis.in_workflow import diagnosis_settings
-    from calib.validation import ValidationSettings
+    from calib.workflow.validation import ValidationSettings
     src = setup.source
     if "diagnosis" in cfg:
         if setup.fmu_table is not None:

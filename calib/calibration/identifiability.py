@@ -1,6 +1,6 @@
 """Identifiability: Fisher matrix, Cramér–Rao bound, whitened SVD, eigenshapes, verdicts (the
 retained directions that a point near a fold of the BEM equations determines are found by
-:mod:`calib.fold_directions`).
+:mod:`calib.calibration.fold_directions`).
 
 Notes
 -----

@@ -5,7 +5,7 @@ Field data and simulation outputs usually live in pandas. pandas is an optional 
 (``pip install 'calib[pandas]'``): the calibration itself needs only numpy, and a DataFrame is
 a convenience at its edges, so the core stays light.
 
-- :func:`prediction_frame`: a :class:`calib.prediction.Prediction` with its conditions, one row per
+- :func:`prediction_frame`: a :class:`calib.calibration.prediction.Prediction` with its conditions, one row per
   point, units in the column names;
 - :func:`parameters_frame`: a calibration's parameters with their estimates, σ, priors and verdicts;
 - :func:`points_frame`: per operating point the measured, nominal and calibrated outputs and the
@@ -28,7 +28,7 @@ def require_pandas():
         import pandas as pd
     except ImportError as exc:     # an optional extra
         raise InputError("pandas is needed for DataFrames: pip install 'calib[pandas]' (or pandas>=2.0)",
-                         "calib.frames") from exc
+                         "calib.calibration.frames") from exc
     return pd
 
 
@@ -40,7 +40,7 @@ def prediction_frame(conditions, prediction):
     ----------
     conditions : OperatingConditions
         The conditions the prediction was made at.
-    prediction : calib.prediction.Prediction
+    prediction : calib.calibration.prediction.Prediction
 
     Returns
     -------
@@ -70,7 +70,7 @@ def parameters_frame(result):
 
     Parameters
     ----------
-    result : calib.result.CalibrationResult
+    result : calib.calibration.result.CalibrationResult
 
     Returns
     -------
@@ -99,7 +99,7 @@ def points_frame(result):
 
     Parameters
     ----------
-    result : calib.result.CalibrationResult
+    result : calib.calibration.result.CalibrationResult
 
     Returns
     -------

@@ -40,8 +40,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from calib.calibration.identifiability import whitened_sensitivities
 from calib.errors import InputError
-from calib.identifiability import whitened_sensitivities
 from calib.types import Evaluation, OperatingConditions
 
 
@@ -395,7 +395,7 @@ def estimate(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray
         estimate long (its Gauss–Newton model is ½ xᵀHx with H the inverse covariance).
     prior : bool
         Add ½‖θ‖² to the cost: the maximum a posteriori estimate under θ ~ N(0, I), i.e. with
-        B = L, P = L Lᵀ, the prior p̃ ~ N(0, P) (:class:`calib.calibration.Calibrator`,
+        B = L, P = L Lᵀ, the prior p̃ ~ N(0, P) (:class:`calib.calibration.calibrator.Calibrator`,
         ``estimator = "map"``). The Gauss–Newton model of the prior term is exact.
 
     Returns

@@ -19,9 +19,9 @@ Truncated ML (``estimator = "truncated"``; Bottasso, Cacciola & Iriarte 2014)
 2. Linearize at the current estimate: whitened scaled sensitivities M = R^(−½) G D,
    SVD M = U S Vᵀ, retain θ_i = v_iᵀ p̃ with σ(θ_i) = 1/s_i <= σ̄, or (``sigma_bar =
    "auto"``, the default) the number of θ that minimizes the 10-fold cross-validated
-   prediction error over operating points of the linearized problem (:mod:`calib.truncation`).
+   prediction error over operating points of the linearized problem (:mod:`calib.calibration.truncation`).
 3. Estimate the retained θ under bounds (corrections and C_D >= C_D,min at the nodes) by
-   constrained Gauss–Newton (:func:`calib.estimation.estimate`); the others stay at 0.
+   constrained Gauss–Newton (:func:`calib.calibration.estimation.estimate`); the others stay at 0.
 4. Re-linearize at the estimate and redo the SVD; stop when the retained set is stable
    (same count, principal-angle cosines >= ``stability_cosine``). With ``second_start``
    (default), ``sigma_bar = "auto"`` and a stated noise, a fit whose χ² rejects that noise is started
@@ -30,10 +30,10 @@ Truncated ML (``estimator = "truncated"``; Bottasso, Cacciola & Iriarte 2014)
 5. Covariance of the estimate including the frozen directions: Cov(p̃̂) = V_ID S_ID⁻² V_IDᵀ
    + V_NID (V_NIDᵀ P V_NID) V_NIDᵀ with the prior P (prior σ² per parameter; neighbouring
    correction nodes correlated, ``prior_correlation``)
-   (:func:`calib.identifiability.frozen_aware_covariance`), plus, for the retained θ, the
+   (:func:`calib.calibration.identifiability.frozen_aware_covariance`), plus, for the retained θ, the
    aliasing of the field between the nodes (:mod:`calib.parametrizations.aliasing`), the fit
    scale (``scale_by_fit``) and the frozen part's bias through the model's curvature
-   (:func:`calib.identifiability.frozen_curvature_covariance`); confidence bands on the corrected
+   (:func:`calib.calibration.identifiability.frozen_curvature_covariance`); confidence bands on the corrected
    polars; confounding of the non-field parameters with the field; a verdict per parameter
    from posterior vs prior; goodness of fit (χ² before over N, after over N − n_retained,
    p-value, per channel, worst points).
@@ -52,24 +52,25 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
-from calib.calibration_settings import ESTIMATORS, NOISE_MODES, CalibrationSettings
+from calib.calibration.estimation import LeastSquaresProblem, estimate
+from calib.calibration.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
+from calib.calibration.map_agreement import map_ml_agreement
+from calib.calibration.noise import initial_sigma
+from calib.calibration.result import CalibrationResult
+from calib.calibration.result_assembly import assemble_result
+from calib.calibration.settings import CalibrationSettings
+from calib.calibration.truncation import AutoTruncation, keep_second_start
+from calib.calibration.uncertainty import (laplace_covariance, map_fit_scale, map_gain, prior_whitened_svd,
+                                           truncated_covariance)
+from calib.calibration.uncertainty_terms import ModelTerms
+from calib.checks.prior_check import psd_sqrt
 from calib.errors import InputError
-from calib.estimation import LeastSquaresProblem, estimate
-from calib.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
-from calib.map_agreement import map_ml_agreement
 from calib.measurements import Measurements, check_channels, ml_noise
-from calib.noise import initial_sigma
-from calib.prior_check import psd_sqrt
-from calib.result import CalibrationResult
-from calib.result_assembly import assemble_result
-from calib.truncation import AutoTruncation, keep_second_start
-from calib.uncertainty_terms import ModelTerms
-from calib.uncertainty import laplace_covariance, map_fit_scale, map_gain, prior_whitened_svd, truncated_covariance
 from calib.types import nominal_vector
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CalibrationSettings", "Calibrator", "calibrate", "NOISE_MODES", "ESTIMATORS"]
+__all__ = ["Calibrator", "calibrate"]
 
 FLAT_PRIOR = 1e3
 """Prior 1-σ [scale units] the MAP estimator gives a parameter without a stated prior (no
@@ -80,7 +81,7 @@ NOISE_SETTLED = 1e-3
 """Largest relative change of a channel's σ between two fits below which an estimated noise has settled [-]."""
 MAP_DECREASE = 5e-4
 """Cost decrease [-] (half a χ²) below which the MAP iteration stops: the last step was then about
-√(2 × 5e-4) = 0.03 posterior standard deviations long (:func:`calib.estimation.estimate`). On the
+√(2 × 5e-4) = 0.03 posterior standard deviations long (:func:`calib.calibration.estimation.estimate`). On the
 wind-tunnel coverage twin (c) (seed 5003) the Gauss–Newton converges linearly near the bounds: stopping
 at a relative decrease of 1e-9 the calibration made 15 model Jacobians in all, with this rule 9."""
 SECOND_START_P = 0.01
@@ -204,7 +205,7 @@ class Calibrator:
                 break
             if st.noise == "relative_ml":
                 # one ML factor on the stated σ of every channel, with N − k degrees of freedom
-                from calib.noise import ml_scale
+                from calib.calibration.noise import ml_scale
                 n_res = int(lin.ok.sum()) * len(self.channel_index)
                 fitted = float(np.sum(svd.singular_values ** 2 / (1.0 + svd.singular_values ** 2))) \
                     if st.estimator == "map" else svd.n_retained     # the MAP's effective number of parameters
@@ -250,7 +251,7 @@ class Calibrator:
 
     def _prior_cov_scaled(self) -> np.ndarray:
         """The stated prior covariance of the scaled parameters [scale units²]
-        (:meth:`calib.uncertainty_terms.ModelTerms.prior_cov_scaled`)."""
+        (:meth:`calib.calibration.uncertainty_terms.ModelTerms.prior_cov_scaled`)."""
         return self.terms.prior_cov_scaled()
 
     def _map_prior_cov_scaled(self) -> np.ndarray:
@@ -286,7 +287,7 @@ class Calibrator:
         limit's 22 θ it settled on 22 θ at χ²/dof 1.26 (criterion 1.73). Each result is judged
         by its own final curve at its own count; the one with fewer θ is kept unless the other's
         criterion is lower by more than that criterion's standard error (the one-standard-error
-        rule of :func:`calib.truncation.cv_curve` across the two starts). When only one of the
+        rule of :func:`calib.calibration.truncation.cv_curve` across the two starts). When only one of the
         two ended with a settled retained set (status ``converged``), that one takes the place of
         the one with fewer θ in this rule: on coverage twin (d), tuning seed 8302, both starts
         kept 17 θ, and the first, whose last direction still turned by 53°, had been kept over
@@ -378,7 +379,7 @@ class Calibrator:
         """The maximum a posteriori estimate under the stated prior (``estimator = "map"``).
 
         min ½‖R^(−½) r(p)‖² + ½ p̃ᵀP⁻¹p̃ under the bounds, by the damped Gauss–Newton of
-        :func:`calib.estimation.estimate` in the prior-whitened coordinates u (p̃ = L u,
+        :func:`calib.calibration.estimation.estimate` in the prior-whitened coordinates u (p̃ = L u,
         P = L Lᵀ), where the prior term is ½‖u‖² (MacKay 1992; Rasmussen & Williams 2006,
         ch. 3, on the Laplace approximation). There is no retained set to settle: the status is
         the estimator's (``converged``, ``max_iterations``, ``stalled``, ``failed``).
@@ -397,7 +398,7 @@ class Calibrator:
         return out.p, analysis, lin, status, out.message
 
     def _map_decomposition(self, lin):
-        """The SVD of the prior-whitened sensitivities at ``lin`` (:func:`calib.uncertainty.prior_whitened_svd`,
+        """The SVD of the prior-whitened sensitivities at ``lin`` (:func:`calib.calibration.uncertainty.prior_whitened_svd`,
         P = L Lᵀ the MAP's prior): s (descending), W and L."""
         L = psd_sqrt(self._map_prior_cov_scaled())
         return (*prior_whitened_svd(lin.M, L), L)
@@ -496,7 +497,7 @@ class Calibrator:
 
     def _result(self, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs, status, message,
                 **extra) -> CalibrationResult:
-        """The result of either estimator (:func:`calib.result_assembly.assemble_result`), with the
+        """The result of either estimator (:func:`calib.calibration.result_assembly.assemble_result`), with the
         history, the automatic truncation's record and the run's name."""
         st = self.settings
         curve = self.truncation.curve

@@ -1,4 +1,4 @@
-"""What the unit check (:mod:`calib.unit_check`) finds, and how it says so.
+"""What the unit check (:mod:`calib.checks.unit_check`) finds, and how it says so.
 
 The unit factors the check tries (:data:`CHANNEL_FACTORS`, :data:`CONDITION_FACTORS`); each
 finding (:class:`UnitFinding`) in words, with the unit meant and the fix to write
@@ -73,7 +73,7 @@ class UnitFinding:
 
 @dataclass(frozen=True)
 class UnitCheckReport:
-    """Outcome of :func:`calib.unit_check.check_units`.
+    """Outcome of :func:`calib.checks.unit_check.check_units`.
 
     Attributes
     ----------
@@ -82,7 +82,7 @@ class UnitCheckReport:
     ratios : dict channel -> float
         Median measured/model per channel, as read [-].
     chi2_per_dof : dict channel -> float
-        χ²/dof per channel as read, with the σ of the :mod:`calib.unit_check` docstring [-].
+        χ²/dof per channel as read, with the σ of the :mod:`calib.checks.unit_check` docstring [-].
     chi2_threshold : float
     hypotheses : tuple of (str, float)
         Each hypothesis tried ("as read", "wind_speed x 3.6" ...) and its misfit [-].
@@ -232,7 +232,7 @@ def _model_side(name: str, model_units: str | None) -> str:
 # ----------------------------------------------------------------------------- the findings
 @dataclass
 class UnitFit:
-    """One unit hypothesis fitted by the unit check (:func:`calib.unit_check.check_units`).
+    """One unit hypothesis fitted by the unit check (:func:`calib.checks.unit_check.check_units`).
 
     Attributes
     ----------
@@ -284,7 +284,7 @@ def findings_of(chosen: UnitFit, base: UnitFit, measurements: Measurements, unit
     units : dict channel -> str
         The model's output units.
     model_units, chi2_threshold, model_error
-        As :func:`calib.unit_check.check_units`.
+        As :func:`calib.checks.unit_check.check_units`.
 
     Returns
     -------

@@ -248,7 +248,7 @@ class AutoTruncation:
         As :func:`cv_curve`.
     start_at_limit : bool
         The first choice is the prior limit's count (the second start of
-        :meth:`calib.calibration.Calibrator._second_start`), the later ones as usual.
+        :meth:`calib.calibration.calibrator.Calibrator._second_start`), the later ones as usual.
     """
 
     def __init__(self, cv_folds: int, max_retained: int | None, one_se: bool, start_at_limit: bool = False):

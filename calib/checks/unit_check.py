@@ -10,7 +10,7 @@ points and names the channel or the condition that looks wrong, and by which fac
    the conditions corrected by that factor (a few model evaluations in all).
 2. Under each hypothesis, per channel, the robust ratio ρ_c = median_k (z_kc / y_kc) over the
    points where the model value is at least 10 % of the channel's largest; if ρ_c is within
-   ``factor_tolerance`` of a unit factor f ≠ 1 (:data:`~calib.unit_findings.CHANNEL_FACTORS`, either sign) and at
+   ``factor_tolerance`` of a unit factor f ≠ 1 (:data:`~calib.checks.unit_findings.CHANNEL_FACTORS`, either sign) and at
    least half of the points agree, the channel is taken to be off by f and divided by it.
 3. The misfit of a hypothesis is the mean of χ² over all values,
 
@@ -30,7 +30,7 @@ Findings. Those a unit factor (or a sign) explains stop the run through
 - ``condition``: a condition off by a unit factor (wind speed ×3.6: km/h read as m/s);
 - ``channel``: a channel off by a unit factor (power ×10⁻³: kW read as W);
 - ``sign``: a channel with the opposite sign of the model's (measured/model ≈ −1);
-- ``gross``: a channel misfit whose ratio lies outside 1/5 to 5 (:data:`~calib.unit_findings.GROSS_RATIO`) without
+- ``gross``: a channel misfit whose ratio lies outside 1/5 to 5 (:data:`~calib.checks.unit_findings.GROSS_RATIO`) without
   matching a unit factor (a kW table whose loads are also off): no polar correction explains it.
 
 Those no unit factor explains are warnings: a misfit is what calibration is for, so the run
@@ -49,7 +49,7 @@ misfit finding still stops the run); yaw and air density are not checked.
 
 Here: the hypotheses and their fits (:func:`check_units`) and the gate before a run
 (:func:`apply_unit_check`). The unit factors, the findings in words and the report are in
-:mod:`calib.unit_findings`.
+:mod:`calib.checks.unit_findings`.
 """
 
 from __future__ import annotations
@@ -58,10 +58,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from calib.checks.unit_findings import CHANNEL_FACTORS, CONDITION_FACTORS, UnitCheckReport, UnitFit, findings_of
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements, check_channels
 from calib.types import CONDITION_FIELDS, OperatingConditions
-from calib.unit_findings import CHANNEL_FACTORS, CONDITION_FACTORS, UnitCheckReport, UnitFit, findings_of
 
 __all__ = ["apply_unit_check", "check_units"]
 
