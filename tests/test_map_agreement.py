@@ -102,7 +102,7 @@ def test_the_calibrator_warns_when_its_map_is_planted_off_the_maximum(monkeypatc
     assert honest.status == "converged" and "WARNING" not in honest.message
     assert honest.checks["MAP and ML"].startswith("MAP and ML agree within")
     j = [q.name for q in model.parameters].index("pitch_offset")
-    real = calibration.estimate
+    real = calibration.estimate_map
 
     def stopped_short(problem, *args, **kwargs):
         out = real(problem, *args, **kwargs)
@@ -110,7 +110,7 @@ def test_the_calibrator_warns_when_its_map_is_planted_off_the_maximum(monkeypatc
         p[j] += 5.0 * honest.std_p[j]
         return dataclasses.replace(out, p=p, linearization=problem.linearize(p), status="converged")
 
-    monkeypatch.setattr(calibration, "estimate", stopped_short)
+    monkeypatch.setattr(calibration, "estimate_map", stopped_short)
     planted = Calibrator(model, meas, settings).run()
     assert planted.status == "converged"
     assert "WARNING" in planted.message and "pitch_offset" in planted.checks["MAP and ML"], planted.checks

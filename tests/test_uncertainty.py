@@ -702,14 +702,14 @@ def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monk
     from twin_model import TwinModel, twin_conditions
 
     import calib.calibration.calibrator as cal
-    from calib.calibration.estimation import EstimationOutcome
+    from calib.calibration.gauss_newton import EstimationOutcome
 
     def no_step(problem, basis, theta0, *args, **kwargs):
         start = problem.linearize(problem.p_of(basis, theta0))
         return EstimationOutcome(np.asarray(theta0, float), start.p, start.cost, 0, "stalled",
                                  "no step decreased the cost (damping exhausted)", start)
 
-    monkeypatch.setattr(cal, "estimate", no_step)
+    monkeypatch.setattr(cal, "estimate_ml", no_step)
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 5))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7121)

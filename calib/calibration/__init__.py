@@ -2,7 +2,9 @@
 
 - :mod:`calib.calibration.calibrator`       :class:`Calibrator` (orchestrates the steps), :func:`calibrate`;
 - :mod:`calib.calibration.settings`         :class:`CalibrationSettings`;
-- :mod:`calib.calibration.estimation`       the least-squares problem and its constrained Gauss–Newton;
+- :mod:`calib.calibration.problem`          the least-squares problem and its linearization;
+- :mod:`calib.calibration.gauss_newton`     the ML and MAP estimators: damped Gauss–Newton under bounds;
+- :mod:`calib.calibration.qp`               the quadratic programs of its steps, by name;
 - :mod:`calib.calibration.noise`            the noise σ to start from;
 - :mod:`calib.calibration.identifiability`  Fisher information, SVD, verdicts, eigenshapes;
 - :mod:`calib.calibration.fold_directions`  retained directions a point near a fold of the BEM equations determines;

@@ -21,7 +21,7 @@ Truncated ML (``estimator = "truncated"``; Bottasso, Cacciola & Iriarte 2014)
    "auto"``, the default) the number of θ that minimizes the 10-fold cross-validated
    prediction error over operating points of the linearized problem (:mod:`calib.calibration.truncation`).
 3. Estimate the retained θ under bounds (corrections and C_D >= C_D,min at the nodes) by
-   constrained Gauss–Newton (:func:`calib.calibration.estimation.estimate`); the others stay at 0.
+   constrained Gauss–Newton (:func:`calib.calibration.gauss_newton.estimate_ml`); the others stay at 0.
 4. Re-linearize at the estimate and redo the SVD; stop when the retained set is stable
    (same count, principal-angle cosines >= ``stability_cosine``). With ``second_start``
    (default), ``sigma_bar = "auto"`` and a stated noise, a fit whose χ² rejects that noise is started
@@ -52,10 +52,11 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
-from calib.calibration.estimation import LeastSquaresProblem, estimate
+from calib.calibration.gauss_newton import EstimationStatus, StopRule, estimate_map, estimate_ml
 from calib.calibration.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
 from calib.calibration.map_agreement import map_ml_agreement
 from calib.calibration.noise import initial_sigma
+from calib.calibration.problem import LeastSquaresProblem
 from calib.calibration.result import CalibrationResult
 from calib.calibration.result_assembly import assemble_result
 from calib.calibration.settings import CalibrationSettings
@@ -81,7 +82,7 @@ NOISE_SETTLED = 1e-3
 """Largest relative change of a channel's σ between two fits below which an estimated noise has settled [-]."""
 MAP_DECREASE = 5e-4
 """Cost decrease [-] (half a χ²) below which the MAP iteration stops: the last step was then about
-√(2 × 5e-4) = 0.03 posterior standard deviations long (:func:`calib.calibration.estimation.estimate`). On the
+√(2 × 5e-4) = 0.03 posterior standard deviations long (:class:`calib.calibration.gauss_newton.StopRule`). On the
 wind-tunnel coverage twin (c) (seed 5003) the Gauss–Newton converges linearly near the bounds: stopping
 at a relative decrease of 1e-9 the calibration made 15 model Jacobians in all, with this rule 9."""
 SECOND_START_P = 0.01
@@ -350,11 +351,11 @@ class Calibrator:
             if k == st.max_relinearizations:
                 break
             theta0 = basis.T @ problem.scaled(p)
-            out = estimate(problem, basis, theta0, st.optimizer, st.max_iterations, st.tolerance,
-                           callback=self._emit, stage=f"estimate[{k + 1}]")
+            out = estimate_ml(problem, basis, theta0, st.optimizer, StopRule(st.max_iterations, st.tolerance),
+                              callback=self._emit, stage=f"estimate[{k + 1}]")
             self._emit({"stage": "relinearize", "iteration": k + 1, "n_retained": svd.n_retained,
                         "cost": out.cost, "estimate_status": out.status, "n_failed": out.linearization.n_failed})
-            if out.status in ("qp_failed",):
+            if out.status == EstimationStatus.QP_FAILED:
                 status, message = "failed", out.message
                 p = out.p
                 break
@@ -379,7 +380,7 @@ class Calibrator:
         """The maximum a posteriori estimate under the stated prior (``estimator = "map"``).
 
         min ½‖R^(−½) r(p)‖² + ½ p̃ᵀP⁻¹p̃ under the bounds, by the damped Gauss–Newton of
-        :func:`calib.calibration.estimation.estimate` in the prior-whitened coordinates u (p̃ = L u,
+        :func:`calib.calibration.gauss_newton.estimate_map` in the prior-whitened coordinates u (p̃ = L u,
         P = L Lᵀ), where the prior term is ½‖u‖² (MacKay 1992; Rasmussen & Williams 2006,
         ch. 3, on the Laplace approximation). There is no retained set to settle: the status is
         the estimator's (``converged``, ``max_iterations``, ``stalled``, ``failed``).
@@ -387,9 +388,10 @@ class Calibrator:
         st = self.settings
         L = psd_sqrt(self._map_prior_cov_scaled())
         u0 = np.linalg.lstsq(L, problem.scaled(p), rcond=None)[0]
-        out = estimate(problem, L, u0, st.optimizer, st.max_iterations, st.tolerance, callback=self._emit,
-                       stage="map", prior=True, decrease_tolerance=MAP_DECREASE)
-        status = {"qp_failed": "failed"}.get(out.status, out.status)
+        out = estimate_map(problem, L, u0, st.optimizer,
+                           StopRule(st.max_iterations, st.tolerance, decrease_tolerance=MAP_DECREASE),
+                           callback=self._emit, stage="map")
+        status = "failed" if out.status == EstimationStatus.QP_FAILED else str(out.status)
         lin = out.linearization
         sv, W, L = self._map_decomposition(lin)
         analysis = laplace_covariance(sv, L @ W).directions

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.calibration.estimation import get_optimizer
+from calib.calibration.qp import get_optimizer
 from calib.errors import InputError
 
 NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
