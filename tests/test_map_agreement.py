@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from twin_model import TwinModel, twin_conditions
 
-import calib.calibration.calibrator as calibration
+import calib.calibration.map_fit as calibration
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.calibration.map_agreement import AGREEMENT_Z, DOMINANT_S, map_ml_agreement
 from calib.measurements import synthesize

@@ -701,7 +701,7 @@ def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monk
     from test_calibration import CHANNELS, twin_truth
     from twin_model import TwinModel, twin_conditions
 
-    import calib.calibration.calibrator as cal
+    import calib.calibration.truncated_fit as cal
     from calib.calibration.gauss_newton import EstimationOutcome
 
     def no_step(problem, basis, theta0, *args, **kwargs):

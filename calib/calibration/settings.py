@@ -26,7 +26,7 @@ class CalibrationSettings:
         ``prior_std``, ``prior_correlation``) and its Laplace covariance; every parameter moves,
         held by the prior where the data say little, and the SVD of the prior-whitened
         sensitivities gives the directions where the data beat the prior (s_i > 1), their
-        eigenshapes and verdicts (:meth:`Calibrator._fit_map`). ``"truncated"``: the truncated
+        eigenshapes and verdicts (:meth:`calib.calibration.map_fit.MapFit.fit`). ``"truncated"``: the truncated
         ML estimate of Bottasso et al. (2014), re-linearized until the retained set is stable,
         with the frozen directions' prior and the added terms below (``sigma_bar``, ``cv_*``,
         ``second_start``, ``curvature_samples``, ``representation_error``'s aliasing term).
