@@ -24,7 +24,8 @@ from surface_grid import surface_grid, surface_points  # noqa: E402
 from calib.bem import BemSettings, SectionPolars, solve_bem  # noqa: E402
 from calib.corrections import CorrectionGrid  # noqa: E402
 from calib.effects import make_effect  # noqa: E402
-from calib.models.base import OperatingConditions, nominal_vector  # noqa: E402
+from calib.models.base import OperatingConditions
+from calib.types import nominal_vector
 from calib.models.bem_model import BemModel  # noqa: E402
 from calib.rotor.library import load_rotor  # noqa: E402
 

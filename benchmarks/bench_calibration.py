@@ -17,7 +17,8 @@ from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.measurements import synthesize
-from calib.models.base import OperatingConditions, nominal_vector
+from calib.models.base import OperatingConditions
+from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 

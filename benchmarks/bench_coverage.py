@@ -9,7 +9,7 @@ nodes and a pitch offset; truth pitch offset 0.2 deg), two truths:
     calibration nodes (the calibrated model can represent it exactly);
 (b) outside it: the same smooth field sampled on a 1 deg × 0.025 grid (as the workflow);
 (c) a check of the bands themselves: a truth drawn, for each seed, from the stated prior
-    (the smooth-field prior of ``calib.calibration.CalibrationSettings``: 1 scale unit per
+    (the smooth-field prior of ``calib.calibration.calibrator.CalibrationSettings``: 1 scale unit per
     node, correlation length one node spacing) at the calibration nodes, pitch offset 0.2 deg.
     Draws that make C_D < C_D,min (the calibration's bound, 0.003) at a reached section are
     drawn again (the prior conditioned on the polars the calibration states possible; its drag
@@ -30,7 +30,7 @@ inside the node range only, the summed NEES of the retained θ against its two-s
 band (against the truth's values at the calibration nodes, with the covariance the result
 states: noise, the field between the nodes, fit scale; also with the noise part alone), the
 same over the calibrations that ended "converged" (the others listed), the prior check's
-verdicts and how often its 95 % interval holds the stated amplitude 1 (:mod:`calib.prior_check`;
+verdicts and how often its 95 % interval holds the stated amplitude 1 (:mod:`calib.checks.prior_check`;
 in (d) the truth is drawn from the very prior the check assumes), the retained count, how often
 the automatic choice started again and kept the second start (``second_start``), failures and
 time.
@@ -70,7 +70,7 @@ from calib.corrections import CorrectionGrid
 from calib.measurements import Measurements, synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.workflow import synthetic_conditions, load_workflow, prepare, smooth_field, truth_model
+from calib.workflow import load_workflow, prepare, smooth_field, synthetic_conditions, truth_model
 
 #: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
 SUITE = "validate"
@@ -161,7 +161,7 @@ def _fine_prior_draw(tmodel, model, grid, cond, seed: int, cd_min: float | None)
 
 def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calibration) -> dict:
     """Coverage of the polar bands and NEES over ``n_seeds`` noise seeds, twins (a)–(d);
-    ``calibration`` overrides :class:`calib.calibration.CalibrationSettings` fields (default
+    ``calibration`` overrides :class:`calib.calibration.calibrator.CalibrationSettings` fields (default
     ``cd_min = 0.003``)."""
     cfg, rotor, settings, channels, cond, grid, model = _setup()
     bumps = cfg["truth"]["bumps"]
@@ -270,7 +270,7 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             fig[f"coverage_{key}_p10_p90"] = np.percentile(v, [10, 90]).tolist()
         for block in ("lift", "drag"):
             fig[f"coverage_{block}_pooled"] = hits[block][0] / hits[block][1]
-        # the prior check (calib.prior_check): how often its interval holds the stated amplitude 1
+        # the prior check (calib.checks.prior_check): how often its interval holds the stated amplitude 1
         amp = np.array([pc["amplitude"] for pc in prior_checks])
         fig.update({"prior_check_contains_stated": float(np.mean([pc["lower"] <= 1.0 <= pc["upper"]
                                                                    for pc in prior_checks])),

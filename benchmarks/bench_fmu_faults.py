@@ -6,8 +6,8 @@ points along a power curve (5-12 m/s); measurements synthesized by the fault-fre
 known parameters, 1 % noise. The faulty run switches on, at one point each: a crash
 (``abort()``), a hang (``do_step`` never returns) and an error status (a refused step,
 ``fmi2Discard``); the clean run simulates the same FMU with the faults off. Both run, in this
-process and this order: :func:`calib.unit_check.check_units` at the nominal parameters, then
-:func:`calib.calibration.calibrate` (``retain="all"``, known noise), with the model's default
+process and this order: :func:`calib.checks.unit_check.check_units` at the nominal parameters, then
+:func:`calib.calibration.calibrator.calibrate` (``retain="all"``, known noise), with the model's default
 timeout (60 s) and the serial executor. ``step_cost`` [s] of busy work per FMU step gives a
 healthy simulation the cost of a real aeroelastic FMU: the default, 0.16 ms (about 5 ms per
 cold run, 2 s per Jacobian of the 48 points), makes the clean run cost about what the clean
@@ -87,7 +87,7 @@ def _timed_run(model, meas, log: Path | None = None) -> dict:
     """Unit check and calibration through ``model``: wall times [s], the estimate, and the
     number of fault-log lines written before the calibration."""
     from calib.calibration import calibrate
-    from calib.unit_check import check_units
+    from calib.checks.unit_check import check_units
     p0 = np.array([q.nominal for q in model.parameters])
     t0 = time.perf_counter()
     check_units(model, p0, meas)

@@ -32,12 +32,12 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from calib.diagnosis.in_workflow import named_effect_specs  # noqa: E402
-from calib.validation import ValidationSettings, leave_one_out  # noqa: E402
 from calib.diagnosis.core import diagnose  # noqa: E402
-from calib.words import p_text  # noqa: E402
+from calib.diagnosis.in_workflow import named_effect_specs  # noqa: E402
 from calib.measurements import read_measurements  # noqa: E402
+from calib.words import p_text  # noqa: E402
 from calib.workflow import load_workflow, prepare, run_workflow  # noqa: E402
+from calib.workflow.validation import ValidationSettings, leave_one_out  # noqa: E402
 
 #: A statistical or soak study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
 SUITE = "validate"
@@ -59,8 +59,8 @@ def workflow_figures(out_dir: str) -> dict:
 
     import numpy as np
 
-    from calib.validation import INFORMED_LEVEL
-    from calib.result import load_result
+    from calib.calibration.result import load_result
+    from calib.workflow.validation import INFORMED_LEVEL
 
     t0 = time.perf_counter()
     outcomes = run_workflow(WORKFLOW, out_dir, progress=False)

@@ -1,7 +1,7 @@
 """Predictions by extrapolation: calibrate on one band of wind speed, predict the other (issue 26).
 
 Three families of data, each split both ways at the median wind speed (``[validation] split =
-"band"``, :mod:`calib.validation`), each calibrated with both estimators:
+"band"``, :mod:`calib.workflow.validation`), each calibrated with both estimators:
 
 - **out of family**: the committed CCBlade data sets of ``tests/data/oof`` (WISDEM CCBlade on
   the NREL 5-MW with its own polars; a control and three hidden effects written in CCBlade's

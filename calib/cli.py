@@ -37,7 +37,7 @@ def _run(args) -> int:
 
 
 def _predict(args) -> int:
-    from calib.predict import run_predict
+    from calib.calibration.predict_command import run_predict
     run_predict(args.result_dir, args.data, args.out, args.confidence)
     return 0
 

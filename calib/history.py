@@ -17,7 +17,7 @@ leaves at most one incomplete last line, which is ignored (and cut) on resume.
 
 Resume rests on determinism: the calibration and the diagnosis are deterministic
 functions of their inputs, so running them again with every model call answered from
-the records (:class:`~calib.recorded_model.RecordedModel`, keyed on a hash of the model's
+the records (:class:`~calib.models.recorded_model.RecordedModel`, keyed on a hash of the model's
 identity, the call kind, the parameter vector's bytes and the operating conditions' bytes)
 retraces the killed run exactly, with no simulation repeated, and continues from where it
 stopped. Resuming into a folder whose recorded inputs differ is refused (:func:`open_history`).
@@ -26,8 +26,8 @@ Read a history with :func:`read_events` and :func:`read_record` (or ``json`` and
 ``numpy.load`` directly).
 
 This module holds the folder (:class:`History`, :func:`open_history`) and its reading; the
-recorded model calls (:class:`~calib.recorded_model.RecordedModel`, :func:`recorded`) live in
-:mod:`calib.recorded_model` and are importable from here.
+recorded model calls (:class:`~calib.models.recorded_model.RecordedModel`, :func:`~calib.models.recorded_model.recorded`) live in
+:mod:`calib.models.recorded_model`.
 """
 
 from __future__ import annotations
@@ -42,9 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.calibration.result_io import jsonable as result_jsonable
 from calib.errors import InputError
-from calib.recorded_model import PER_STATION_EXTRAS, RecordedModel, recorded  # noqa: F401  (importable from here)
-from calib.result_io import jsonable as result_jsonable
 
 FORMAT = "calib.history/1"
 HISTORY_DIR = "history"

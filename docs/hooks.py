@@ -1,7 +1,7 @@
 """MkDocs hook: tables generated at build time, so that they cannot drift.
 
 - ``<!-- settings: module.Class section -->`` becomes the table of that settings dataclass's fields,
-  defaults and documented meaning (:func:`calib.settings_doc.settings_markdown`);
+  defaults and documented meaning (:func:`calib.report.settings_doc.settings_markdown`);
 - ``<!-- bench: NAME -->`` becomes the tables of the benchmark output ``docs/validation/data/NAME.json``,
   which the benchmark writes with its date, commit and command: through a renderer of :data:`RENDERERS`,
   or, for the others, the tables the benchmark wrote into the file's ``markdown``.
@@ -25,7 +25,7 @@ def on_page_content(html, page, config, files):
 
 
 def on_page_markdown(markdown, page, config, files):
-    from calib.settings_doc import settings_markdown
+    from calib.report.settings_doc import settings_markdown
 
     def table(m):
         cls = getattr(importlib.import_module(m.group(1)), m.group(2))

@@ -275,7 +275,7 @@ def _case(model: str, workdir: str):
             # the field from the stated smooth-field prior, inside the calibration's bounds
             probe = synthesize(m, p_true, cond, relative_sigma={c: NOISE for c in channels}, seed=0)
             cal = Calibrator(m, probe, CalibrationSettings())
-            P = cal._prior_cov_scaled()[np.ix_(idx, idx)]
+            P = cal.prior_cov_scaled()[np.ix_(idx, idx)]
             L = np.linalg.cholesky(P + 1e-12 * np.eye(idx.size))
             drag = np.array([names[j].startswith("dCD") for j in idx])
             for _ in range(100):

@@ -9,8 +9,7 @@ import pytest
 from calib.bem import BemSettings
 from calib.corrections import CorrectionGrid
 from calib.models.bem_model import BemModel
-from calib.parametrizations.aliasing import (discrepancy_correlation, interpolation_matrix, refined_grid,
-                                             refined_nodes)
+from calib.parametrizations.aliasing import discrepancy_correlation, interpolation_matrix, refined_grid, refined_nodes
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions, nominal_vector
 
@@ -95,7 +94,7 @@ def test_aliasing_covariance_and_misfit_against_monte_carlo():
     from the closed-form covariance) pushed through the fine model's whitened sensitivities:
     the retained θ's one-step error S⁻²V_IDᵀMᵀWδ and the residual χ² it leaves match the
     function's covariance and expected misfit."""
-    from calib.identifiability import whitened_sensitivities
+    from calib.calibration.identifiability import whitened_sensitivities
     from calib.parametrizations.aliasing import aliasing_covariance
 
     rotor = load_rotor("phase_vi")

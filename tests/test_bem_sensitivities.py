@@ -5,7 +5,8 @@ import pytest
 
 from calib.bem import BemSettings
 from calib.corrections import CorrectionGrid
-from calib.models.base import OperatingConditions, nominal_vector
+from calib.models.base import OperatingConditions
+from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
 from synthetic import synthetic_rotor
 

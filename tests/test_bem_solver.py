@@ -9,7 +9,7 @@ from calib.bem.kinematics import curvature, wind_components
 from calib.bem.multiple_roots import SCAN_STEP_DEG, lowest_roots
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.residual import SectionGeometry, section_equations
-from calib.bem.solver import INDUCTION_LIMIT
+from calib.bem.point_status import INDUCTION_LIMIT
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_phase_vi_measurements, load_rotor, reference_path
 from calib.types import OperatingConditions, Status

@@ -16,9 +16,10 @@ from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.identifiability import eigenshapes
+from calib.parametrizations.correction_field import eigenshapes
 from calib.measurements import synthesize
-from calib.models.base import OperatingConditions, nominal_vector
+from calib.models.base import OperatingConditions
+from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 from twin_model import TwinModel, twin_conditions

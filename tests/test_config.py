@@ -10,8 +10,8 @@ from calib.config import settings_from_table
 from calib.diagnosis.in_workflow import diagnosis_settings
 from calib.errors import InputError
 from calib.models.from_config import BEM_KEYS, executor_from_table, model_from_workflow
-from calib.validation import ValidationSettings
 from calib.workflow import CALIBRATION_KEYS
+from calib.workflow.validation import ValidationSettings
 
 
 def test_tables_become_typed_settings():

@@ -11,9 +11,9 @@ import json
 import numpy as np
 import pytest
 
-from calib.diagnosis import core as discrepancy
+from calib.diagnosis import bem_family, candidate_parameters, naming, verdict
 from calib.cli import main as cli_main
-from calib.diagnosis.core import CandidateFit
+from calib.diagnosis.result import CandidateFit
 from calib.effects import EFFECTS, make_effect
 from calib.errors import InputError, ModelError
 
@@ -50,7 +50,7 @@ def test_fitted_value_past_a_bound_by_round_off_becomes_the_bound_as_nominal():
         for bound, away in ((q.lower, -np.inf), (q.upper, np.inf)):
             value = _ulps_outside(bound, away)
             assert not (q.lower <= value <= q.upper)
-            fixed = discrepancy._fixed_effect(spec, {q.name: value})
+            fixed = bem_family._fixed_effect(spec, {q.name: value})
             nominal = {p.name: p.nominal for p in fixed.parameters()}[q.name]
             assert nominal == bound
             assert q.lower <= fixed.spec()["options"]["nominal"][q.name] <= q.upper
@@ -69,15 +69,15 @@ def test_effect_nominal_tolerates_round_off_only():
 
 
 def test_at_bound_is_a_fraction_of_the_parameter_scale():
-    tol = discrepancy.AT_BOUND_TOLERANCE
+    tol = candidate_parameters.AT_BOUND_TOLERANCE
     lo, hi, scale = -0.2, 0.5, 0.05
-    assert discrepancy.bound_side(lo + 0.5 * tol * scale, lo, hi, scale) == "lower"
-    assert discrepancy.bound_side(_ulps_outside(lo, -np.inf), lo, hi, scale) == "lower"
-    assert discrepancy.bound_side(hi - 0.5 * tol * scale, lo, hi, scale) == "upper"
-    assert discrepancy.bound_side(lo + 2 * tol * scale, lo, hi, scale) == ""
-    assert discrepancy.bound_side(hi - 2 * tol * scale, lo, hi, scale) == ""
+    assert candidate_parameters.bound_side(lo + 0.5 * tol * scale, lo, hi, scale) == "lower"
+    assert candidate_parameters.bound_side(_ulps_outside(lo, -np.inf), lo, hi, scale) == "lower"
+    assert candidate_parameters.bound_side(hi - 0.5 * tol * scale, lo, hi, scale) == "upper"
+    assert candidate_parameters.bound_side(lo + 2 * tol * scale, lo, hi, scale) == ""
+    assert candidate_parameters.bound_side(hi - 2 * tol * scale, lo, hi, scale) == ""
     # relative to the scale, not to the bound: a wider scale widens the band
-    assert discrepancy.bound_side(lo + 2 * tol * scale, lo, hi, 4 * scale) == "lower"
+    assert candidate_parameters.bound_side(lo + 2 * tol * scale, lo, hi, 4 * scale) == "lower"
 
 
 def test_candidate_table_and_verdict_say_at_bound():
@@ -89,7 +89,7 @@ def test_candidate_table_and_verdict_say_at_bound():
                "lower": -0.2, "upper": 0.5, "at_bound": ""}]
     fit = CandidateFit("leading_edge_erosion", params, 10.0, 2, -5.0, 12.0, 100.0, 1e-9, True, status="converged",
                        effect="leading_edge_erosion", at_bound=["erosion_onset_eta"])
-    suffix = discrepancy._bound_suffix(fit)
+    suffix = verdict.bound_suffix(fit)
     assert "at bound: erosion_onset_eta = 0.3 (lower bound)" in suffix and "erosion_lift_loss" not in suffix
 
     class D:
@@ -138,7 +138,7 @@ def _past_the_bound(fit_task):
 def test_diagnose_names_an_effect_on_its_bound_and_goes_on(tmp_path, lift_data, monkeypatch):
     """Erosion follows the hidden lift offset to its lower onset bound; the estimate ends past
     the bound by round-off (made certain here), which on main stopped the run with exit 2."""
-    monkeypatch.setattr(discrepancy, "_fit_task", _past_the_bound(discrepancy._fit_task))
+    monkeypatch.setattr(naming, "fit_task", _past_the_bound(naming.fit_task))
     # erosion's near-stall form, which can follow the offset only with its onset on the bound
     code, out = _diagnose(tmp_path, lift_data, CONFIG + 'candidates = ["leading_edge_erosion", "pitch_offset"]\n'
                           'candidate_options = { leading_edge_erosion = { variant = "stall" } }\n')
@@ -155,14 +155,14 @@ def test_diagnose_names_an_effect_on_its_bound_and_goes_on(tmp_path, lift_data, 
 
 
 def test_a_failure_in_round_2_keeps_round_1_and_exits_0(tmp_path, lift_data, monkeypatch, capsys):
-    original = discrepancy.BemFamily.candidate_model
+    original = bem_family.BemFamily.candidate_model
 
     def fails_on_top_of_an_effect(self, base, effect):
         if base:
             raise ModelError("injected failure of a round-2 model")
         return original(self, base, effect)
 
-    monkeypatch.setattr(discrepancy.BemFamily, "candidate_model", fails_on_top_of_an_effect)
+    monkeypatch.setattr(bem_family.BemFamily, "candidate_model", fails_on_top_of_an_effect)
     # round 1 names one of two candidates that end inside their bounds; round 2 fails
     text = CONFIG + 'candidates = ["wind_speed_scale", "pitch_offset"]\n'
     code, out = _diagnose(tmp_path, lift_data, text)
@@ -274,7 +274,7 @@ def test_diagnose_states_the_set_up_in_force(tmp_path, lift_data):
 
 def test_a_failing_candidate_fit_leaves_the_others_compared(tmp_path, lift_data, monkeypatch):
     """One candidate whose fit raises is left out with a note; the round still names from the rest."""
-    import calib.diagnosis.core as D
+    import calib.diagnosis.naming as D
     from calib.errors import ModelError
 
     real = D.Calibrator

@@ -16,7 +16,8 @@ from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings
 from calib.cli import main as cli_main
 from calib.corrections import CorrectionGrid
-from calib.diagnosis.core import DiagnosisSettings, diagnose
+from calib.diagnosis.core import diagnose
+from calib.diagnosis.settings import DiagnosisSettings
 from calib.effects import make_effect
 from calib.errors import InputError
 from calib.measurements import synthesize
@@ -289,7 +290,7 @@ def test_a_recalibration_that_ends_above_its_start_is_not_kept(monkeypatch):
     (-0.03, 0.0, 0.03, True, "-3 % power at 8 m/s"),
 ])
 def test_effect_size_against_the_model_form_tolerance(change, tolerance, size, exceeds, text):
-    from calib.diagnosis.core import effect_size
+    from calib.diagnosis.figures_of_merit import effect_size
 
     base = np.array([[1.0e6, 5.0e5], [2.0e6, 6.0e5], [1.0e3, 7.0e5]])    # the last power is below 10 % of the largest
     values = base.copy()
@@ -364,7 +365,8 @@ class _ProductModel:
 def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again_away_from_it():
     """Gauss-Newton cannot leave a point where every derivative vanishes: the candidate fit ends
     on its start, is started again one scale away, and the second start (kept) finds the truth."""
-    from calib.diagnosis.core import _fit_task, away_start
+    from calib.diagnosis.candidate_parameters import away_start
+    from calib.diagnosis.naming import fit_task
     model = _ProductModel()
     J = model.jacobian(np.zeros(2), campaign(load_rotor("nrel5mw")))[1]
     assert np.all(J == 0.0)
@@ -372,7 +374,7 @@ def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again
     meas = synthesize(model, truth, campaign(load_rotor("nrel5mw")), relative_sigma={"power": 0.01, "thrust": 0.01},
                       seed=9611)
     known = CalibrationSettings(noise="known", retain="all")
-    out = _fit_task({"name": "product", "model": model, "measurements": meas, "settings": known, "own": [0, 1]})
+    out = fit_task({"name": "product", "model": model, "measurements": meas, "settings": known, "own": [0, 1]})
     a, b = out["result"].p_hat
     assert out["start_note"].startswith("second start kept"), out["start_note"]
     assert abs(a * b - 0.5) < 0.05 and abs(a * a - 1.0) < 0.1, (a, b)
@@ -387,19 +389,19 @@ def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again
 
 def _namer(monkeypatch, ambiguity_pattern=0.1):
     """A naming step with nothing but settings (for the verdict rules alone)."""
-    from calib.diagnosis import core as D
-    monkeypatch.setattr(D, "_separation_of", lambda namer, a, b: {"text": f"separate {a.effect} from {b.effect}"})
+    from calib.diagnosis import naming as D
+    monkeypatch.setattr(D, "separation_of", lambda namer, a, b: {"text": f"separate {a.effect} from {b.effect}"})
 
     class Family:
         def names_of(self, base):
             return []
     y0 = np.ones((10, 2))
-    return D._Namer(Family(), None, y0, 100.0, np.zeros_like(y0), DiagnosisSettings(ambiguity_pattern=ambiguity_pattern),
+    return D.Namer(Family(), None, y0, 100.0, np.zeros_like(y0), DiagnosisSettings(ambiguity_pattern=ambiguity_pattern),
                     None, None, None, None, lambda s: None)
 
 
 def _fit(name, bic, agreement):
-    from calib.diagnosis.core import CandidateFit
+    from calib.diagnosis.result import CandidateFit
     return CandidateFit(name, [], bic - 2.0, 1, -0.5 * bic, bic, 100.0 - bic, 1e-9, True, pattern_agreement=agreement,
                         status="converged", effect=name, effect_text="+3 % power")
 

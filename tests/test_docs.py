@@ -131,14 +131,14 @@ def test_every_setting_is_documented_where_the_reference_is_generated_from():
     field without a description would reach the page as "(undocumented)"."""
     from calib.bem import BemSettings
     from calib.calibration import CalibrationSettings
-    from calib.validation import ValidationSettings
-    from calib.diagnosis.core import DiagnosisSettings
-    from calib.settings_doc import parameter_docs, settings_markdown, undocumented_fields
+    from calib.diagnosis.settings import DiagnosisSettings
+    from calib.report.settings_doc import parameter_docs, settings_markdown, undocumented_fields
+    from calib.workflow.validation import ValidationSettings
 
     for cls in (CalibrationSettings, BemSettings, DiagnosisSettings, ValidationSettings):
         assert undocumented_fields(cls) == [], cls.__name__
         assert all(desc for _, desc in parameter_docs(cls).values()), cls.__name__
     table = settings_markdown(CalibrationSettings, "calibration")
     assert '| `calibration.estimator` | `"map"` |' in table and "(undocumented)" not in table
-    assert "<!-- settings: calib.calibration.CalibrationSettings calibration -->" in \
+    assert "<!-- settings: calib.calibration.calibrator.CalibrationSettings calibration -->" in \
         (ROOT / "docs" / "reference" / "settings.md").read_text()

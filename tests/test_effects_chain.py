@@ -16,7 +16,8 @@ from calib.bem import BemSettings, EffectChain, solve_bem
 from calib.corrections import CorrectionGrid
 from calib.effects import EFFECTS, Effect, effect_from_spec, make_effect
 from calib.errors import InputError
-from calib.models.base import OperatingConditions, nominal_vector
+from calib.models.base import OperatingConditions
+from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
 from calib.models.registry import build_model
 from calib.types import Parameter

@@ -3,13 +3,13 @@
 import csv
 
 import numpy as np
+from twin_model import RADIUS, TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.envelope import envelope_of
+from calib.calibration.predict_command import write_prediction_csv
+from calib.checks.envelope import envelope_of
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
-from calib.predict import write_prediction_csv
-from twin_model import RADIUS, TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 
 def test_envelope_names_what_lies_outside():
@@ -49,8 +49,8 @@ def test_a_calibrated_twin_flags_its_extrapolations_in_the_prediction_and_the_cs
 def test_a_band_split_calibrates_on_one_band_and_predicts_the_other_with_the_nominal_beside_it():
     import pytest
 
-    from calib.validation import ValidationSettings, leave_one_out
     from calib.errors import InputError
+    from calib.workflow.validation import ValidationSettings, leave_one_out
     model = TwinModel(channels=("power", "thrust"))
     p_true = nominal_vector(model.parameters)
     p_true[:model.grid.n_lift] = 0.05 * np.sin(np.arange(model.grid.n_lift))

@@ -1,10 +1,13 @@
-"""Constrained Gauss–Newton ML estimation: exact recovery, bounds, subspaces, optimizers by name."""
+"""Constrained Gauss–Newton ML and MAP estimation: exact recovery, bounds, subspaces, the MAP as the
+posterior mean of a linear model, optimizers by name."""
 
 import numpy as np
 import pytest
 
+from calib.calibration.gauss_newton import EstimationStatus, StopRule, estimate_map, estimate_ml
+from calib.calibration.problem import LeastSquaresProblem
+from calib.calibration.qp import OPTIMIZERS, get_optimizer
 from calib.errors import InputError
-from calib.estimation import OPTIMIZERS, LeastSquaresProblem, estimate, get_optimizer
 from calib.models.base import Capabilities, Channel, Evaluation, OperatingConditions, Parameter
 
 
@@ -63,7 +66,7 @@ def test_noise_free_linear_problem_is_recovered_exactly(optimizer):
     model = LinearModel()
     p_true = np.array([0.3, -0.2, 0.5, 0.1])
     prob = _problem(model, p_true)
-    out = estimate(prob, np.eye(model.n), optimizer=optimizer)
+    out = estimate_ml(prob, np.eye(model.n), optimizer=optimizer)
     assert out.converged, out.message
     np.testing.assert_allclose(out.p, p_true, atol=1e-6)
     assert out.cost < 1e-6
@@ -74,7 +77,7 @@ def test_bounds_are_respected_and_active():
     p_true = np.array([0.3, -0.2, 0.5, 0.1])
     upper = np.array([1.0, 1.0, 0.2, 1.0])  # truth violates the bound on p2
     prob = _problem(model, p_true, upper=upper)
-    out = estimate(prob, np.eye(model.n), optimizer="sqpmethod")
+    out = estimate_ml(prob, np.eye(model.n), optimizer="sqpmethod")
     assert np.all(out.p <= upper + 1e-9) and np.all(out.p >= prob.lower - 1e-9)
     assert out.p[2] == pytest.approx(0.2, abs=1e-7)
 
@@ -84,7 +87,7 @@ def test_subspace_estimate_is_the_projected_least_squares_solution():
     p_true = np.array([0.2, 0.1, -0.3, 0.05])
     prob = _problem(model, p_true, noise=0.01)
     B = np.linalg.qr(np.random.default_rng(0).standard_normal((4, 2)))[0]
-    out = estimate(prob, B, optimizer="slsqp")
+    out = estimate_ml(prob, B, optimizer="slsqp")
     # closed form: min ||(z - A p0 - A D B θ)/σ||
     lin = prob.linearize(prob.p0)
     J = lin.M @ B
@@ -97,7 +100,7 @@ def test_progress_callback_reports_every_iteration():
     model = LinearModel()
     prob = _problem(model, np.array([0.3, -0.2, 0.5, 0.1]), noise=0.01)
     records = []
-    out = estimate(prob, np.eye(model.n), callback=records.append, stage="unit")
+    out = estimate_ml(prob, np.eye(model.n), callback=records.append, stage="unit")
     assert len(records) == out.iterations == len(out.history)
     assert all(r["stage"] == "unit" and "cost" in r and "n_failed" in r for r in records)
     costs = [r["cost"] for r in records]
@@ -108,7 +111,7 @@ def test_steps_that_make_points_fail_are_rejected():
     model = LinearModel(fail_if_p0_above=0.25)
     p_true = np.array([0.3, -0.2, 0.5, 0.1])  # the truth lies in the failing region
     prob = _problem(model, p_true)
-    out = estimate(prob, np.eye(model.n))
+    out = estimate_ml(prob, np.eye(model.n))
     assert out.linearization.n_failed == 0
     assert out.p[0] <= 0.25 + 1e-12
     assert prob.n_failed_points_total >= 1  # the rejected trials were counted
@@ -117,7 +120,7 @@ def test_steps_that_make_points_fail_are_rejected():
 def test_empty_subspace_returns_nominal():
     model = LinearModel()
     prob = _problem(model, np.array([0.3, -0.2, 0.5, 0.1]))
-    out = estimate(prob, np.zeros((model.n, 0)))
+    out = estimate_ml(prob, np.zeros((model.n, 0)))
     assert out.converged and np.array_equal(out.p, prob.p0)
 
 
@@ -129,7 +132,7 @@ def test_unknown_optimizer_error_lists_valid_names():
 
 
 def test_a_step_leaving_the_bounds_is_cut_back_to_them():
-    from calib.estimation import _feasible_step
+    from calib.calibration.gauss_newton import _feasible_step
     B = np.eye(2)
     theta = np.array([0.5, 0.0])
     x = np.array([1.0, 0.2])  # would reach 1.5 in the first coordinate, bound 1.0
@@ -144,7 +147,7 @@ def test_a_round_off_step_across_an_active_bound_does_not_stop_the_step():
     """A start exactly on a bound and a QP step that crosses it by round-off (1e-17, as a QP
     solver returns along an active constraint): the step is kept, not cut to zero (which
     stopped the estimator at nominal on the coverage benchmark's twin (d))."""
-    from calib.estimation import _feasible_step
+    from calib.calibration.gauss_newton import _feasible_step
     B = np.linalg.qr(np.random.default_rng(7).standard_normal((3, 2)))[0]
     lb, ub = -np.ones(3), np.ones(3)
     theta = np.linalg.lstsq(B, np.array([-1.0, 0.2, 0.1]), rcond=None)[0]
@@ -187,7 +190,7 @@ def test_an_infeasible_start_is_pulled_back_inside_the_bounds():
                                   -np.ones(2), np.ones(2))
     basis = np.array([[2.0], [1.0]]) / np.sqrt(5)
     # θ₀ = 3 gives (2.68, 1.34); clipped (1, 1) and projected back on the basis: (1.2, 0.6), still outside
-    out = estimate(problem, basis, np.array([3.0]))
+    out = estimate_ml(problem, basis, np.array([3.0]))
     assert np.all(np.abs(out.p) <= 1.0 + 1e-12) and all(np.all(np.abs(c) <= 1.0 + 1e-12) for c in calls)
 
 
@@ -195,14 +198,14 @@ def test_an_iteration_damps_until_a_step_is_accepted_and_says_stalled_when_it_ca
     """The full Gauss–Newton step lands where a point fails: more damping finds a step that
     does not (converged, inside the working region); with a single damping level the
     estimator stops where it started and says "stalled", not "converged"."""
-    import calib.estimation as est
+    import calib.calibration.gauss_newton as est
 
     model = LinearModel(fail_if_p0_above=0.05)
     prob = _problem(model, np.array([0.8, -0.2, 0.5, 0.1]))
-    out = estimate(prob, np.eye(model.n))
+    out = estimate_ml(prob, np.eye(model.n))
     assert out.status == "converged" and out.linearization.n_failed == 0 and out.cost < prob.linearize(prob.p0).cost
     monkeypatch.setattr(est, "DAMPING_TRIES", 1)
-    stuck = estimate(_problem(model, np.array([0.8, -0.2, 0.5, 0.1])), np.eye(model.n))
+    stuck = estimate_ml(_problem(model, np.array([0.8, -0.2, 0.5, 0.1])), np.eye(model.n))
     assert stuck.status == "stalled" and not stuck.history and np.array_equal(stuck.p, np.zeros(model.n))
 
 
@@ -211,7 +214,7 @@ def test_sqpmethod_vanishing_search_direction_is_accepted_only_at_an_improving_p
     (a failure to CasADi) at the QP's solution: that iterate is accepted. The same status at an
     iterate worse than the start x = 0, or any other failure, is not (a coverage twin run had
     ended "failed" on it with the cost converged)."""
-    from calib.estimation import CasadiQp
+    from calib.calibration.qp import CasadiQp
 
     H = np.diag([2.0, 1.0])
     g = np.array([-2.0, 1.0])
@@ -270,7 +273,7 @@ def test_damped_trials_are_evaluated_when_the_jacobian_costs_simulations(derivat
     prob = LeastSquaresProblem(model, cond, z, np.full(z.shape, 1e-3), [0, 1], np.full(model.n, -0.9),
                                np.array([q.scale for q in qs]), np.array([q.lower for q in qs]),
                                np.array([q.upper for q in qs]))
-    out = estimate(prob, np.eye(model.n), np.zeros(model.n), max_iterations=60)
+    out = estimate_ml(prob, np.eye(model.n), np.zeros(model.n), stop=StopRule(max_iterations=60))
     assert out.converged, out.message
     np.testing.assert_allclose(out.p, p_true, atol=1e-6)
     accepted = len(out.history)
@@ -279,3 +282,22 @@ def test_damped_trials_are_evaluated_when_the_jacobian_costs_simulations(derivat
         assert prob.n_evaluations > accepted          # some trials were rejected, each one evaluation
     else:
         assert prob.n_evaluations == 0 and prob.n_jacobians > accepted + 1
+
+
+def test_the_map_estimate_of_a_linear_model_is_the_closed_form_posterior_mean():
+    """Linear outputs, Gaussian prior p̃ = L u, u ~ N(0, I), bounds far away: the MAP in u is
+    (JᵀJ + I)⁻¹ Jᵀ r₀ with J the whitened sensitivities times L and r₀ the whitened residual at
+    nominal (the posterior mean of Bayesian linear regression), which the ML estimate is not."""
+    model = LinearModel()
+    wide = np.full(model.n, 50.0)
+    prob = _problem(model, np.array([0.3, -0.2, 0.25, 0.1]), noise=0.05, lower=-wide, upper=wide)
+    L = np.diag([0.2, 0.5, 1.0, 2.0]) + 0.05
+    at_nominal = prob.linearize(prob.p0)
+    J = at_nominal.M @ L
+    u_closed = np.linalg.solve(J.T @ J + np.eye(model.n), J.T @ at_nominal.residual.reshape(-1))
+    out = estimate_map(prob, L, stop=StopRule(max_iterations=60))
+    assert out.status == EstimationStatus.CONVERGED and out.status == "converged" and f"{out.status}" == "converged"
+    np.testing.assert_allclose(out.theta, u_closed, rtol=1e-6, atol=1e-9)
+    assert out.cost == pytest.approx(prob.linearize(out.p).cost + 0.5 * float(out.theta @ out.theta))
+    ml = estimate_ml(prob, L, stop=StopRule(max_iterations=60))
+    assert np.linalg.norm(ml.theta - u_closed) > 1e-3 * np.linalg.norm(u_closed)

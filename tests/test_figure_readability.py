@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.demo import DEMO_DPI, plot_cp_surface, plot_power_curve
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.report import figures as F
 from calib.report.diagnosis_figures import plot_candidates, plot_gap
 from calib.report.panels import spread, tile_labels, unit_prefix

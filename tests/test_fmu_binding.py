@@ -16,8 +16,9 @@ import pytest
 
 from calib.corrections import CorrectionGrid
 from calib.fmu.archive import FmuInputError, check_archive, extract_once
-from calib.fmu.binding import (PlanSite, Variables, bind_inputs, bind_parameters, channel_specs,
-                               check_mapped_variables, fixed_assignments, make_plan)
+from calib.fmu.binding import (PlanSite, Variables, bind_inputs, bind_parameters, check_mapped_variables,
+                               fixed_assignments, make_plan)
+from calib.fmu.channels import channel_specs
 from calib.fmu.build import build_fmu, mapping_path
 from calib.fmu.mapping import load_mapping
 from calib.measurements import sha256_of

@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pythonfmu_export import export_fmu
 
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
 from calib.fmu.faults import FaultLedger
 from calib.fmu.model import FmuModel
 from calib.types import OperatingConditions, Status
-from pythonfmu_export import export_fmu
 
 DATA = Path(__file__).parent / "data" / "fmu"
 MAPPING = DATA / "faulty_rotor_mapping.toml"
@@ -305,9 +305,9 @@ def test_quarantine_with_a_process_executor(faulty_fmu, tmp_path, monkeypatch):
 def test_calib_run_reports_the_timeout_and_the_quarantined_points(faulty_fmu, tmp_path):
     """calib run on the faulty FMU (crash and hang on; 3 s timeout) finishes, and the stage's
     report lines state the timeout in force and each quarantined point with its status."""
+    from calib.calibration.result import load_result
     from calib.cli import main
     from calib.measurements import synthesize
-    from calib.result import load_result
 
     clean = model(faulty_fmu, faults=False)
     truth = np.array([q.nominal for q in clean.parameters]) * [1.05, 0.97, 1.0, 1.0]

@@ -4,20 +4,20 @@ Near a fold of the BEM residual the kept root's sensitivity grows without bound,
 direction that such a point alone determines gets a σ that holds only on a narrow ridge
 (coverage twin (d), tuning seed 8301: 99.5 % of the leading direction from one point, the
 estimate 8.9 σ from the truth along it). Such a direction is stated with its prior variance
-added, and the result and report say so (``calib.identifiability.fold_dominated_directions``).
+added, and the result and report say so (``calib.calibration.identifiability.fold_dominated_directions``).
 """
 
 import dataclasses
 
 import numpy as np
-
-from calib.calibration import CalibrationSettings, Calibrator
-from calib.identifiability import FOLD_SHARE, fold_dominated_directions
-from calib.measurements import Measurements, synthesize
-from calib.report.html import result_section
-from calib.result import fold_sentence, load_result
 from test_calibration import CHANNELS, twin_truth
 from twin_model import TwinModel, twin_conditions
+
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.fold_directions import FOLD_SHARE, fold_dominated_directions
+from calib.calibration.result import fold_sentence, load_result
+from calib.measurements import Measurements, synthesize
+from calib.report.html import result_section
 
 
 def _sensitivities(n_points=8, n_channels=2, n_params=4, loud=None, gain=100.0, seed=3):

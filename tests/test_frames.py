@@ -1,13 +1,13 @@
-"""pandas in and out (calib.frames): the same checks as the CSV reader, results as DataFrames."""
+"""pandas in (calib.measurements.read_dataframe) and out (calib.calibration.frames): the same checks as the CSV reader, results as DataFrames."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from floats import assert_same_numbers
 
 from calib.errors import InputError
-from calib.measurements import Measurements, read_measurements
-from floats import assert_same_numbers
+from calib.measurements import Measurements, read_dataframe, read_measurements
 
 pd = pytest.importorskip("pandas")
 
@@ -17,7 +17,7 @@ TABLE = {"wind_speed": [6.0, 8.0, 10.0], "rotor_speed": [8.0, 9.5, 11.5], "pitch
 
 def test_a_dataframe_reads_as_the_same_table_in_a_csv_file(tmp_path):
     df = pd.DataFrame(TABLE)
-    m = Measurements.from_dataframe(df, units={"power": "kW", "thrust": "kN"})
+    m = read_dataframe(df, units={"power": "kW", "thrust": "kN"})
     path = tmp_path / "t.csv"
     pd.DataFrame(TABLE).rename(columns={"power": "power [kW]", "thrust": "thrust [kN]"}).to_csv(path, index=False)
     ref = read_measurements(path)
@@ -27,7 +27,7 @@ def test_a_dataframe_reads_as_the_same_table_in_a_csv_file(tmp_path):
     assert_same_numbers(m.conditions.pitch, ref.conditions.pitch)
     assert m.source == "DataFrame"
     # units in the column names work too, and give the same numbers
-    named = Measurements.from_dataframe(df.rename(columns={"power": "power [kW]", "thrust": "thrust [kN]"}))
+    named = read_dataframe(df.rename(columns={"power": "power [kW]", "thrust": "thrust [kN]"}))
     assert_same_numbers(named.values, m.values)
 
 
@@ -38,15 +38,15 @@ def test_a_dataframe_reads_as_the_same_table_in_a_csv_file(tmp_path):
 ])
 def test_bad_dataframes_are_refused_naming_row_and_column(change, words):
     with pytest.raises(InputError, match=words):
-        Measurements.from_dataframe(change(pd.DataFrame(TABLE)), units={"power": "kW", "thrust": "kN"})
+        read_dataframe(change(pd.DataFrame(TABLE)), units={"power": "kW", "thrust": "kN"})
 
 
 def test_a_unit_stated_twice_or_for_a_missing_column_is_refused():
     df = pd.DataFrame(TABLE).rename(columns={"power": "power [kW]"})
     with pytest.raises(InputError, match="states its unit in its name and in units="):
-        Measurements.from_dataframe(df, units={"power [kW]": "kW"})
+        read_dataframe(df, units={"power [kW]": "kW"})
     with pytest.raises(InputError, match="not in the DataFrame: torque"):
-        Measurements.from_dataframe(pd.DataFrame(TABLE), units={"torque": "kN m"})
+        read_dataframe(pd.DataFrame(TABLE), units={"torque": "kN m"})
 
 
 def test_results_and_predictions_as_dataframes():
@@ -86,13 +86,18 @@ def test_results_and_predictions_as_dataframes():
 
 
 def test_rows_dropped_from_a_dataframe_are_named_by_their_position():
-    """from_dataframe(drop_incomplete_rows=True) is in its signature, and its note names the DataFrame's
+    """read_dataframe(drop_incomplete_rows=True) is in its signature, and its note names the DataFrame's
     rows by position, as its errors do (it said "lines 7" for row 5; issue 35)."""
     import inspect
 
     df = pd.DataFrame(TABLE)
     df.loc[1, "power"] = float("nan")
-    assert "drop_incomplete_rows" in inspect.signature(Measurements.from_dataframe).parameters
-    m = Measurements.from_dataframe(df, units={"power": "kW", "thrust": "kN"}, drop_incomplete_rows=True)
+    assert "drop_incomplete_rows" in inspect.signature(read_dataframe).parameters
+    m = read_dataframe(df, units={"power": "kW", "thrust": "kN"}, drop_incomplete_rows=True)
     assert m.n_points == len(df) - 1
     assert any("(rows 1, by position from 0)" in n for n in m.notes), m.notes
+
+
+def test_the_old_constructor_says_the_new_name():
+    with pytest.raises(InputError, match=r"calib\.measurements\.read_dataframe\(df, \.\.\.\)"):
+        Measurements.from_dataframe(pd.DataFrame(TABLE), units={"power": "kW", "thrust": "kN"})

@@ -40,7 +40,8 @@ from hypothesis import strategies as st
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements
 from calib.fmu.mapping import load_mapping
-from calib.rotor.aerodyn import read_aerodyn_blade, read_aerodyn_main, read_aerodyn_polar
+from calib.rotor.aerodyn import read_aerodyn_blade, read_aerodyn_polar
+from calib.rotor.aerodyn_main import read_aerodyn_main
 from calib.rotor.geometry import Rotor
 from calib.rotor.openfast import read_elastodyn, read_openfast
 from calib.rotor.polar import Airfoil
@@ -1141,7 +1142,7 @@ def test_mapping_setting_that_is_not_a_table_is_named(tmp_path):
 
 def test_diagnosis_table_of_the_wrong_type_is_named(tmp_path):
     from calib.diagnosis.in_workflow import diagnosis_settings
-    from calib.diagnosis.core import DiagnosisSettings
+    from calib.diagnosis.settings import DiagnosisSettings
 
     with pytest.raises(InputError) as exc:
         DiagnosisSettings(significance=[1]).validate("c.toml", "diagnosis.")

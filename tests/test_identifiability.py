@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
+from calib.calibration.identifiability import (cramer_rao, fisher_matrix, observability, parameter_verdicts,
+                                               sigma_bar_for, subspace_cosines, svd_analysis, whitened_sensitivities)
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.identifiability import (cramer_rao, eigenshapes, field_basis, fisher_matrix, node_layout,
-                                   observability, parameter_verdicts, sigma_bar_for, subspace_cosines,
-                                   svd_analysis, whitened_sensitivities)
 from calib.models.base import Parameter
+from calib.parametrizations.correction_field import eigenshapes, field_basis, node_layout
 
 GRID = CorrectionGrid([-4.0, 4.0, 12.0, 20.0], [0.25, 0.6, 1.0])
 NUISANCE = Parameter("pitch_offset", 0.0, -5.0, 5.0, 0.5, "deg", "nuisance")
@@ -148,7 +148,7 @@ def test_confounding_states_no_correlation_where_round_off_makes_a_variance_nega
     no correlation, never a NaN, and the others keep theirs."""
     import warnings
 
-    from calib.identifiability import confounding
+    from calib.calibration.identifiability import confounding
     from calib.types import ParameterKind
 
     rng = np.random.default_rng(60)        # a draw whose inverse has negative diagonal entries

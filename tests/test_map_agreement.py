@@ -1,4 +1,4 @@
-"""The MAP estimate's self-check (calib.map_agreement): it fires on a prior that fixes what the
+"""The MAP estimate's self-check (calib.calibration.map_agreement): it fires on a prior that fixes what the
 data determine and on a MAP that stopped short where the data dominate, and stays silent on a
 correct MAP, computed here in closed form on a linear Gaussian problem."""
 
@@ -8,13 +8,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from twin_model import TwinModel, twin_conditions
 
-import calib.calibration as calibration
+import calib.calibration.map_fit as calibration
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.map_agreement import AGREEMENT_Z, DOMINANT_S, map_ml_agreement
+from calib.calibration.map_agreement import AGREEMENT_Z, DOMINANT_S, map_ml_agreement
 from calib.measurements import synthesize
 from calib.types import nominal_vector
-from twin_model import TwinModel, twin_conditions
 
 NAMES = ["gain_root", "gain_tip", "drag_add", "pitch_bias"]
 
@@ -102,7 +102,7 @@ def test_the_calibrator_warns_when_its_map_is_planted_off_the_maximum(monkeypatc
     assert honest.status == "converged" and "WARNING" not in honest.message
     assert honest.checks["MAP and ML"].startswith("MAP and ML agree within")
     j = [q.name for q in model.parameters].index("pitch_offset")
-    real = calibration.estimate
+    real = calibration.estimate_map
 
     def stopped_short(problem, *args, **kwargs):
         out = real(problem, *args, **kwargs)
@@ -110,7 +110,7 @@ def test_the_calibrator_warns_when_its_map_is_planted_off_the_maximum(monkeypatc
         p[j] += 5.0 * honest.std_p[j]
         return dataclasses.replace(out, p=p, linearization=problem.linearize(p), status="converged")
 
-    monkeypatch.setattr(calibration, "estimate", stopped_short)
+    monkeypatch.setattr(calibration, "estimate_map", stopped_short)
     planted = Calibrator(model, meas, settings).run()
     assert planted.status == "converged"
     assert "WARNING" in planted.message and "pitch_offset" in planted.checks["MAP and ML"], planted.checks

@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.uncertainty_terms import ModelTerms
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import synthesize
 from calib.types import nominal_vector
-from calib.uncertainty_terms import ModelTerms
-from twin_model import TwinModel, twin_conditions
 
 LINEAR = dict(estimator="map", cd_min=None, scale_by_fit=False, representation_error=False, prior_check=False)
 
@@ -51,7 +51,7 @@ def test_map_is_the_exact_posterior_on_a_linear_model(correlation):
     cal = Calibrator(model, meas, CalibrationSettings(prior_correlation=correlation, **LINEAR))
     res = cal.run()
     assert res.status == "converged", res.message
-    p_map, cov, M = _closed_form(model, cond, meas, p0, scale, cal._prior_cov_scaled())
+    p_map, cov, M = _closed_form(model, cond, meas, p0, scale, cal.prior_cov_scaled())
     # the Gauss–Newton of a linear least-squares problem with a quadratic prior lands on the
     # normal equations' solution; the tolerance is that of the iteration's stopping rule
     assert np.max(np.abs(res.p_hat - p_map) / np.sqrt(np.diag(cov))) < 1e-3
@@ -59,7 +59,7 @@ def test_map_is_the_exact_posterior_on_a_linear_model(correlation):
     d = np.sqrt(np.diag(cov))
     assert np.max(np.abs(res.cov_p - cov) / np.outer(d, d)) < 1e-6
     # the directions where the data beat the prior: s² are the eigenvalues of LᵀMᵀML
-    L = np.linalg.cholesky(cal._prior_cov_scaled() + 1e-14 * np.eye(p0.size))
+    L = np.linalg.cholesky(cal.prior_cov_scaled() + 1e-14 * np.eye(p0.size))
     s2 = np.sort(np.linalg.eigvalsh(L.T @ M.T @ M @ L))[::-1]
     assert np.allclose(res.singular_values ** 2, s2, rtol=1e-6, atol=1e-9 * s2[0])
     assert res.n_retained == int(np.sum(s2 > 1.0))
@@ -144,7 +144,7 @@ def test_the_prior_is_block_diagonal_nodes_correlated_others_independent():
     meas = synthesize(model, p0, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=4)
     prior = {"pitch_offset": 0.5, "wind_scale": 0.03}
     cal = Calibrator(model, meas, CalibrationSettings(prior_std=prior, prior_correlation=1.0))
-    P = cal._prior_cov_scaled()
+    P = cal.prior_cov_scaled()
     names = [q.name for q in model.parameters]
     j, k = names.index("pitch_offset"), names.index("wind_scale")
     others = np.setdiff1d(np.arange(len(names)), [j, k])
@@ -182,7 +182,7 @@ def test_map_predictive_intervals_are_sharp_at_the_calibration_points():
     st = CalibrationSettings(cd_min=0.003, tightening=False, prior_check=False)
     p0 = nominal_vector(model.parameters)
     P = Calibrator(model, synthesize(model, p0, cond, relative_sigma={"power": 0.01, "thrust": 0.01}),
-                   st)._prior_cov_scaled()
+                   st).prior_cov_scaled()
     scale = np.array([q.scale for q in model.parameters])
     chi2, inside, rows = 0.0, 0, 0
     for seed in range(7100, 7106):

@@ -9,7 +9,7 @@ import pytest
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.errors import InputError
 from calib.measurements import Measurements, ml_noise, noise_from_repeats, read_measurements, synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from twin_model import TwinModel, twin_conditions
 
 GOOD = """# a comment line

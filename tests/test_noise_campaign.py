@@ -1,5 +1,5 @@
-"""Stated noise models (calib.noise, noise = "relative" / "relative_ml") and the workflow's
-[diagnosis] / [validation] tables (calib.validation)."""
+"""Stated noise models (calib.calibration.noise, noise = "relative" / "relative_ml") and the workflow's
+[diagnosis] / [validation] tables (calib.workflow.validation)."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.diagnosis.in_workflow import diagnosis_settings
-from calib.validation import ValidationSettings, leave_one_out
+from calib.calibration.noise import ml_scale, relative_noise
 from calib.corrections import CorrectionGrid
+from calib.diagnosis.in_workflow import diagnosis_settings
 from calib.errors import InputError
 from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
-from calib.noise import ml_scale, relative_noise
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions
+from calib.workflow.validation import ValidationSettings, leave_one_out
 
 
 def test_relative_noise_is_a_fraction_of_each_channels_rms_with_groups():

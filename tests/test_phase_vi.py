@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.validation import INFORMED_LEVEL as INFORMED   # s_i >= this: informed by the data (σ_θ <= 2 prior units)
-from calib.result import load_result
+from calib.calibration.result import load_result
 from calib.workflow import run_workflow
+from calib.workflow.validation import \
+    INFORMED_LEVEL as INFORMED  # s_i >= this: informed by the data (σ_θ <= 2 prior units)
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW = ROOT / "workflows" / "phase_vi.toml"

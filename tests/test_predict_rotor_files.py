@@ -15,17 +15,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from floats import assert_same_numbers
 
+from calib.calibration.result import load_result
 from calib.cli import main as cli_main
 from calib.errors import InputError
 from calib.history import content_digest
 from calib.models.registry import build_model, check_fmu_files
-from calib.result import load_result
 from calib.rotor.library import DATA_DIR, ROTORS, load_rotor
+from calib.rotor.provenance import file_provenance
 from calib.rotor.serialize import rotor_digest, rotor_from_dict, rotor_to_dict
-from calib.rotor.sources import file_provenance, rotor_from_table
+from calib.rotor.sources import rotor_from_table
 from calib.types import OperatingConditions
-from floats import assert_same_numbers
 
 DATA = Path(__file__).parent / "data"
 AIRFOILS = ["Cylinder1", "Cylinder2", "DU40_A17", "DU35_A17", "DU30_A17", "DU25_A17", "DU21_A17", "NACA64_A17"]
@@ -383,8 +384,8 @@ def test_fmu_files_are_checked_before_the_model_is_rebuilt(tmp_path):
 def test_prediction_without_a_density_column_takes_the_calibrations(tmp_path):
     """A water rotor calibrated at 1000 kg/m^3 is not predicted in air because the new table
     has no air_density column; a column in the table wins."""
+    from calib.calibration.predict_command import calibration_fluid
     from calib.measurements import read_measurements
-    from calib.predict import calibration_fluid
 
     path = tmp_path / "new.csv"
     path.write_text("wind_speed,rotor_speed,pitch\n2.0,20,0\n2.5,20,0\n")

@@ -6,14 +6,14 @@ Seeds 7600+ are used nowhere else in the suite.
 import numpy as np
 import pytest
 from scipy import stats
+from test_uncertainty import bem_twin  # noqa: F401 (the module's BEM twin fixture)
 
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.result import load_result
+from calib.checks.prior_check import PriorCheck, prior_amplitude
 from calib.measurements import synthesize
-from calib.prior_check import PriorCheck, prior_amplitude
 from calib.report.html import _sentences
-from calib.result import load_result
 from calib.types import nominal_vector
-from test_uncertainty import bem_twin  # noqa: F401 (the module's BEM twin fixture)
 
 
 def _linear_problem(rng, n=80, m=30, k=2):
@@ -121,7 +121,7 @@ def test_map_point_against_the_closed_form_and_a_general_minimizer():
     Gauss–Newton point minimizes ½|r|² + ½xᵀP⁻¹x as a general minimizer finds it."""
     from scipy import optimize
 
-    from calib.prior_check import map_point
+    from calib.checks.prior_check import map_point
 
     rng = np.random.default_rng(7620)
     n, m = 40, 6
@@ -167,7 +167,7 @@ def test_prior_check_off_is_said_and_a_non_boolean_is_refused(bem_twin):
 
 def test_a_prior_check_that_cannot_be_computed_keeps_the_result(bem_twin, monkeypatch):
     """A linear-algebra failure inside the check is recorded and said; the calibration's result stands."""
-    import calib.prior_check as pc_module
+    import calib.checks.prior_check as pc_module
 
     def broken(*args, **kwargs):
         raise np.linalg.LinAlgError("SVD did not converge")

@@ -5,16 +5,16 @@ import re
 
 import numpy as np
 import pytest
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.result import load_result
+from calib.calibration.result_parts import ARRAY_FIELDS
 from calib.errors import InputError
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
 from calib.report import figures as F
 from calib.report.html import write_report
-from calib.result import load_result
-from calib.result_parts import ARRAY_FIELDS
-from twin_model import TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 
 @pytest.fixture(scope="module")

@@ -22,16 +22,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
 from calib.report import atomic
 from calib.report import figures as F
 from calib.report.atomic import atomic_path, is_temporary
 from calib.report.html import write_report
 from calib.report.interrupts import interrupts_as_keyboard_interrupt
-from twin_model import TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -205,7 +205,7 @@ CHILD = textwrap.dedent('''
     from calib.report import figures as F
     from calib.report.interrupts import interrupts_as_keyboard_interrupt
     from calib.report.html import write_report
-    from calib.result import load_result
+    from calib.calibration.result import load_result
 
     result_dir, out, mode, rounds = sys.argv[1], Path(sys.argv[2]), sys.argv[3], int(sys.argv[4])
     res = load_result(result_dir)

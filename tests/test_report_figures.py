@@ -9,7 +9,7 @@ from PIL import Image
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
+from calib.types import nominal_vector
 from calib.report import eigenshape_figures
 from calib.report import figures as F
 from calib.report.correlation_figure import display_order

@@ -10,15 +10,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_report_atomic import broken_files
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
-from calib.models.base import nominal_vector
 from calib.report import figures as F
 from calib.report.atomic import is_temporary
 from calib.report.parallel import fork_available, partition
-from test_report_atomic import broken_files
-from twin_model import TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ CHILD = textwrap.dedent('''
 
     signal.signal(signal.SIGINT, signal.default_int_handler)   # even if started with SIGINT ignored
     from calib.report import figures as F
-    from calib.result import load_result
+    from calib.calibration.result import load_result
 
     res = load_result(sys.argv[1])
     print("ready", flush=True)

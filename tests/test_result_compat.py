@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calib.calibration.result import load_result
 from calib.errors import InputError
-from calib.result import load_result
 from calib.types import OperatingConditions
 
 OLD = Path(__file__).parent / "data" / "results" / "own_turbine_c519001"

@@ -359,10 +359,11 @@ def test_rotor_digest_sees_an_edited_polar_and_not_its_path():
 def test_a_call_repeated_within_a_fresh_run_is_not_counted_as_read_back(tmp_path):
     """A fresh output folder reported "1 read back" (issue 35): a call the run had made already, answered
     from its own record, is counted as repeated; "read back" counts only records of an earlier run."""
-    from calib.history import open_history
-    from calib.recorded_model import recorded
-    from calib.types import nominal_vector
     from twin_model import TwinModel, twin_conditions
+
+    from calib.history import open_history
+    from calib.models.recorded_model import recorded
+    from calib.types import nominal_vector
 
     model = TwinModel(channels=("power",))
     p, cond = nominal_vector(model.parameters), twin_conditions()

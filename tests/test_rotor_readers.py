@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from calib.errors import InputError
-from calib.rotor.aerodyn import (read_aerodyn_afnames, read_aerodyn_blade, read_aerodyn_polar,
-                                 rotor_from_aerodyn)
+from calib.rotor.aerodyn import read_aerodyn_blade, read_aerodyn_polar, rotor_from_aerodyn
+from calib.rotor.aerodyn_main import read_aerodyn_afnames
 from calib.rotor.library import DATA_DIR
 from calib.rotor.windio import nearest_airfoil_labels, read_windio
 

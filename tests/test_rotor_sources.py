@@ -15,7 +15,7 @@ import pytest
 from calib.bem.solver import BemSettings
 from calib.errors import InputError
 from calib.models.bem_model import BemModel
-from calib.rotor.aerodyn import read_aerodyn_main
+from calib.rotor.aerodyn_main import read_aerodyn_main
 from calib.rotor.library import DATA_DIR, load_rotor
 from calib.rotor.openfast import read_elastodyn
 from calib.rotor.sources import RotorSource, rotor_from_table

@@ -4,29 +4,38 @@ two starts is kept by the one-standard-error rule across them."""
 
 import numpy as np
 import pytest
-
-from calib.calibration import CalibrationSettings, Calibrator, keep_second_start
-from calib.measurements import synthesize
-from calib.report.html import _sentences
-from calib.result import load_result, second_start_sentence
 from test_calibration import CHANNELS, twin_truth
 from twin_model import TwinModel, twin_conditions
 
+from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.result import load_result, second_start_sentence
+from calib.calibration.truncated_fit import TruncatedFit
+from calib.calibration.truncation import keep_second_start
+from calib.measurements import synthesize
+from calib.report.html import _sentences
 
-class TrappedAtOne(Calibrator):
+
+class TrappedAtOne(TruncatedFit):
     """A first start that settles on one θ, as the loop from nominal did on coverage twin (d)
     seed 8319 (7 θ at χ²/dof 9.1; docs/user_guide/calibration.md); the second start chooses as usual."""
 
     in_second = False
 
-    def _second_start(self, *args):
+    def second_start(self, *args):
         self.in_second = True
-        return super()._second_start(*args)
+        return super().second_start(*args)
 
-    def _svd(self, problem, lin):
+    def svd(self, problem, lin):
         if not self.in_second:
             self.truncation.frozen = 1
-        return super()._svd(problem, lin)
+        return super().svd(problem, lin)
+
+
+def trapped_at_one(model, meas, settings) -> Calibrator:
+    """A Calibrator whose truncated estimator is :class:`TrappedAtOne`."""
+    cal = Calibrator(model, meas, settings)
+    cal.fitter = TrappedAtOne(cal)
+    return cal
 
 
 class CountingTwin(TwinModel):
@@ -57,10 +66,10 @@ def _settings(**kw):
 
 def test_a_first_start_trapped_at_few_theta_is_replaced_by_the_start_from_the_prior_limit(twin, tmp_path):
     model, meas = twin
-    trapped = TrappedAtOne(model, meas, _settings(second_start=False)).run()
+    trapped = trapped_at_one(model, meas, _settings(second_start=False)).run()
     assert trapped.n_retained == 1 and "second_retained" not in trapped.truncation
     model.jacobian_points.clear()
-    cal = TrappedAtOne(model, meas, _settings())
+    cal = trapped_at_one(model, meas, _settings())
     res = cal.run()
     t = res.truncation
     # the second start begins from the first's linearization at the start point, and the kept
@@ -95,7 +104,7 @@ def test_a_fit_the_stated_noise_explains_is_not_started_again(twin):
 def test_no_second_start_with_noise_from_the_residuals(twin):
     """With ML noise χ²/dof is 1 by construction: there is no test to reject it."""
     model, meas = twin
-    res = TrappedAtOne(model, meas, _settings(noise="ml")).run()
+    res = trapped_at_one(model, meas, _settings(noise="ml")).run()
     assert "second_retained" not in res.truncation and res.n_retained == 1
 
 

@@ -4,12 +4,12 @@ silently to data from an axisymmetric rotor)."""
 from pathlib import Path
 
 import numpy as np
+from test_workflow_setup import DECK, workflow
 
 from calib.measurements import Measurements
-from calib.setup_statement import statement, statement_html, statement_lines
+from calib.report.setup_statement import statement, statement_html, statement_lines
 from calib.types import OperatingConditions
 from calib.workflow import load_workflow, prepare
-from test_workflow_setup import DECK, workflow
 
 
 def items_of(cfg, meas=None) -> dict:
@@ -56,7 +56,7 @@ def test_calib_run_prints_and_reports_the_set_up(tmp_path):
 
     path = Path(__file__).resolve().parents[1] / "workflows" / "wind_tunnel_hub_loads.toml"
     lines = []
-    import calib.workflow.run as wf      # where the run says its lines
+    import calib.workflow.run as wf  # where the run says its lines
     original = wf.say
     try:
         wf.say = lambda log, line, progress=True: lines.append(line)

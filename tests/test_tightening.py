@@ -1,4 +1,4 @@
-"""A pitch offset under a free correction field, and what would tighten its σ (calib.tightening).
+"""A pitch offset under a free correction field, and what would tighten its σ (calib.calibration.tightening).
 
 The linear-Gaussian update of the covariance is checked against refitting with the suggested
 measurements added: the σ the advice promises is the σ the calibration then states.
@@ -13,11 +13,11 @@ import pytest
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.tightening import candidate_groups, sentence
 from calib.corrections import CorrectionGrid
 from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.tightening import candidate_groups, sentence
 from calib.types import OperatingConditions, nominal_vector
 
 CHANNELS = ("power", "thrust")

@@ -11,16 +11,15 @@ import pytest
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.identifiability import frozen_aware_covariance
+from calib.calibration.result import load_result
+from calib.calibration.truncation import cv_curve, prior_limit
 from calib.cli import main as cli_main
 from calib.corrections import CorrectionGrid
-from calib.identifiability import frozen_aware_covariance
 from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
-from calib.result import load_result
 from calib.rotor.library import load_rotor
-from calib.truncation import cv_curve, prior_limit
 from calib.types import OperatingConditions, nominal_vector
-
 
 
 @pytest.mark.parametrize("n_folds", [None, 4])
@@ -157,7 +156,7 @@ def _quadratic_toy(seed: int, curvature: np.ndarray):
 def test_frozen_curvature_covariance_is_the_second_moment_of_the_quadratic_bias():
     """y = M p̃ + b x² with x = v₃ᵀp̃ frozen, x ~ N(0, σ_f²): the retained θ take up
     Δθ = −S⁻² V_IDᵀ Mᵀ b x², whose second moment is 3 σ_f⁴ g gᵀ with g = S⁻² V_IDᵀ Mᵀ b."""
-    from calib.identifiability import frozen_curvature_covariance
+    from calib.calibration.identifiability import frozen_curvature_covariance
 
     b = np.linspace(-1.0, 2.0, 12)
     M, V, sig, z, residual_at = _quadratic_toy(7020, b)
@@ -183,7 +182,7 @@ def test_frozen_curvature_covariance_is_the_second_moment_of_the_quadratic_bias(
 
 def test_frozen_curvature_covariance_leaves_out_rows_that_did_not_converge():
     """A draw at which some points fail contributes through its converged rows only, and is counted."""
-    from calib.identifiability import frozen_curvature_covariance
+    from calib.calibration.identifiability import frozen_curvature_covariance
 
     b = np.ones(12)
     M, V, sig, z, residual_at = _quadratic_toy(7021, b)
@@ -467,7 +466,7 @@ def test_auto_truncation_on_the_shipped_workflows_held_back(workflow, stage):
     and docs/user_guide/calibration.md; it is not asserted here.)"""
     from pathlib import Path
 
-    from calib.workflow import synthetic_conditions, load_workflow, prepare, truth_model
+    from calib.workflow import load_workflow, prepare, synthetic_conditions, truth_model
 
     cfg = load_workflow(Path(__file__).resolve().parents[1] / "workflows" / workflow)
     setup = prepare(cfg)
@@ -699,18 +698,18 @@ def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monk
     """An estimator that stops where no step decreases the cost leaves the retained set
     unchanged, which the re-linearization loop would read as stable: the status is
     "stalled" and the message says the σ are not those of a minimum."""
-    import calib.calibration as cal
     from test_calibration import CHANNELS, twin_truth
     from twin_model import TwinModel, twin_conditions
 
-    from calib.estimation import EstimationOutcome
+    import calib.calibration.truncated_fit as cal
+    from calib.calibration.gauss_newton import EstimationOutcome
 
     def no_step(problem, basis, theta0, *args, **kwargs):
         start = problem.linearize(problem.p_of(basis, theta0))
         return EstimationOutcome(np.asarray(theta0, float), start.p, start.cost, 0, "stalled",
                                  "no step decreased the cost (damping exhausted)", start)
 
-    monkeypatch.setattr(cal, "estimate", no_step)
+    monkeypatch.setattr(cal, "estimate_ml", no_step)
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 5))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7121)

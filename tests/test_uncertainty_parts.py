@@ -1,10 +1,10 @@
-"""The truncated estimator's covariance by named parts (calib.uncertainty): the parts add up in the
+"""The truncated estimator's covariance by named parts (calib.calibration.uncertainty): the parts add up in the
 documented order, terms left out are zero, and a fold-dominated direction ends with at least its prior σ."""
 
 import numpy as np
 
-from calib.identifiability import frozen_aware_covariance
-from calib.uncertainty import truncated_covariance
+from calib.calibration.identifiability import frozen_aware_covariance
+from calib.calibration.uncertainty import truncated_covariance
 
 
 def _svd(seed=0, n=6, k=3):

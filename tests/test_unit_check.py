@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from calib.bem.solver import BemSettings
+from calib.checks.unit_check import check_units
 from calib.errors import InputError
 from calib.measurements import Measurements, read_measurements, synthesize
-from calib.models.base import Capabilities, Evaluation, OperatingConditions, Status, nominal_vector
+from calib.models.base import Capabilities, Evaluation, OperatingConditions
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.unit_check import check_units
+from calib.types import Status, nominal_vector
 
 CHANNELS = ("power", "thrust", "root_flap_moment")
 # (header, SI column name): the table as a logger would write it, every unit stated
@@ -223,7 +224,7 @@ def pitch_offset_data(nrel, offset_deg: float = 3.0) -> Measurements:
 def test_misfit_no_unit_factor_explains_warns_and_goes_on(nrel):
     """A 3 deg pitch offset misfits beyond the threshold, but no unit factor explains it: the gate
     prints the ratio per channel and that no unit factor explains it, and does not stop."""
-    from calib.unit_check import apply_unit_check
+    from calib.checks.unit_check import apply_unit_check
 
     model, p0, _ = nrel
     meas = pitch_offset_data(nrel)
@@ -242,7 +243,7 @@ def test_misfit_no_unit_factor_explains_warns_and_goes_on(nrel):
 
 
 def test_unit_factor_still_stops_and_force_overrides(nrel, tmp_path):
-    from calib.unit_check import apply_unit_check
+    from calib.checks.unit_check import apply_unit_check
 
     model, p0, truth = nrel
     path = write_table(tmp_path / "kw.csv", truth, numbers={"power": lambda x: x / 1e3,
@@ -267,7 +268,8 @@ def test_fmu_units_name_the_mapping_as_a_cause(nrel, tmp_path):
 def test_gross_ratio_no_factor_matches_still_stops(nrel):
     """kW read as W on data that are also 3 deg off in pitch: the power ratio (about 5e-4) matches no
     unit factor within tolerance, but no polar correction explains it either: it stops."""
-    from calib.unit_check import GROSS_RATIO, apply_unit_check
+    from calib.checks.unit_check import apply_unit_check
+    from calib.checks.unit_findings import GROSS_RATIO
 
     model, p0, _ = nrel
     meas = pitch_offset_data(nrel)

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calib.calibration.result import load_result
 from calib.cli import main as cli_main
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.result import load_result
 from calib.workflow import load_workflow, run_workflow, smooth_field
 
 WORKFLOWS = Path(__file__).resolve().parents[1] / "workflows"

@@ -12,15 +12,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pythonfmu_export import export_fmu
 
+from calib.calibration.result import load_result
 from calib.cli import main
 from calib.errors import InputError
-from calib.measurements import synthesize
 from calib.fmu.model import FmuModel
-from calib.result import load_result
+from calib.measurements import synthesize
 from calib.types import OperatingConditions
 from calib.workflow import load_workflow, prepare
-from pythonfmu_export import export_fmu
 
 DATA = Path(__file__).parent / "data" / "fmu"
 TRUTH = {"cp_gain": 1.08, "ct_gain": 0.94, "pitch_bias": 1.5}

@@ -9,11 +9,11 @@ import pytest
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.result import load_result
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import read_measurements, synthesize
 from calib.models.bem_model import BemModel
-from calib.result import load_result
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions, nominal_vector
 from calib.workflow import CALIBRATION_KEYS, MODEL_KEYS, load_workflow, prepare, run_workflow

@@ -17,17 +17,15 @@ from calib.bem import dual as dl
 from calib.bem.chain import BoundChain, EffectChain
 from calib.bem.jacobian import Block, SectionSensitivities, project
 from calib.bem.kinematics import curvature
-from calib.bem.point_status import INDUCTION_LIMIT  # noqa: F401 (re-exported)
 from calib.bem.point_status import check_conditions, check_inflow, section_fields, status_per_point
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY, SectionPolars, station_reynolds
-from calib.bem.sections import RESIDUAL_TOL, build_sections, eliminate_phi, find_roots, section_pass
+from calib.bem.sections import build_sections, eliminate_phi, find_roots, section_pass
 from calib.bem.stages import Inflow, PointContext, ProbeMap, RotorData
 from calib.errors import InputError
 from calib.types import OperatingConditions, Status, StatusCounts
 from calib.rotor.geometry import Rotor
 
-__all__ = ["BemResult", "BemSettings", "RESIDUAL_TOL", "SectionSensitivities", "integration_weights",
-           "interior_stations", "solve_bem"]
+__all__ = ["BemResult", "BemSettings", "integration_weights", "interior_stations", "solve_bem"]
 
 FIXED_POINT_TOL = 1e-12
 """Relative change of the inflow speed below which a thrust-dependent inflow has settled [-]."""

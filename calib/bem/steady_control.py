@@ -15,7 +15,7 @@ import numpy as np
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemResult, BemSettings, solve_bem
 from calib.errors import InputError
-from calib.types import STANDARD_AIR_DENSITY, OperatingConditions, Status
+from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
 from calib.rotor.geometry import Rotor
 
 
@@ -111,4 +111,4 @@ def cp_surface(rotor: Rotor, tsr, pitch, rotor_speed_rpm: float | None = None, s
     return res.cp.reshape(T.shape), res.ct.reshape(T.shape), res
 
 
-__all__ = ["PowerCurve", "Status", "cp_surface", "steady_power_curve"]
+__all__ = ["PowerCurve", "cp_surface", "steady_power_curve"]

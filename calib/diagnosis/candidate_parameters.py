@@ -1,5 +1,5 @@
 """A candidate's fitted parameters: which bound one sits on (:func:`bound_side`), their rows
-in the candidate table (:func:`_parameter_records`), and the start of a second fit for the
+in the candidate table (:func:`parameter_records`), and the start of a second fit for the
 parameters that never left their start (:func:`away_start`).
 """
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 #: A fitted parameter is "at bound" when it lies within this fraction of its scale of a bound
-#: (or beyond it by round-off): the rule of :func:`calib.identifiability.parameter_verdicts`.
+#: (or beyond it by round-off): the rule of :func:`calib.calibration.identifiability.parameter_verdicts`.
 AT_BOUND_TOLERANCE = 1e-3
 
 #: An own parameter of a candidate that ends within this fraction of its scale of its start
@@ -63,7 +63,7 @@ def bound_side(value: float, lower: float, upper: float, scale: float,
         return "upper"
     return ""
 
-def _parameter_records(res, own: list) -> list[dict]:
+def parameter_records(res, own: list) -> list[dict]:
     """{name, value, std, unit, nominal, lower, upper, at_bound} of a candidate's own parameters."""
     out = []
     for j in own:

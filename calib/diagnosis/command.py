@@ -4,7 +4,7 @@ Reads the rotor (an embedded name, or a rotor file: ``.fst`` OpenFAST deck, ``.y
 windIO, ``.dat`` AeroDyn15 main file), the measurement table and, optionally, the
 ``[rotor]``, ``[model]``, ``[fluid]``, ``[grid]``, ``[calibration]`` and ``[diagnosis]``
 tables of a workflow-style TOML file; checks the measurements' units against the nominal
-model as ``calib run`` does (:func:`calib.unit_check.apply_unit_check`: a unit factor that
+model as ``calib run`` does (:func:`calib.checks.unit_check.apply_unit_check`: a unit factor that
 explains the data stops it unless ``--force``); runs :func:`calib.diagnosis.core.diagnose`;
 writes ``DIR/diagnosis.json`` and ``DIR/report.html``. A naming round or the recalibration
 that fails ends the diagnosis early: what the rounds before it found is still written, with
@@ -17,13 +17,13 @@ import json
 import logging
 from pathlib import Path
 
-from calib.diagnosis.in_workflow import diagnosis_settings
 from calib.diagnosis.core import diagnose
+from calib.diagnosis.in_workflow import diagnosis_settings
 from calib.errors import CalibError, InputError
 from calib.logs import add_output_arguments, say
-from calib.tomlfile import read_toml
 from calib.measurements import read_measurements
-from calib.setup_statement import statement, statement_lines
+from calib.report.setup_statement import statement, statement_lines
+from calib.tomlfile import read_toml
 
 CONFIG_TABLES = ("rotor", "model", "fluid", "grid", "calibration", "diagnosis", "executor")
 DEFAULT_GRID = {"alpha_nodes_deg": "auto", "eta_nodes": [0.25, 0.5, 0.75, 1.0]}
@@ -212,8 +212,8 @@ def _checked_diagnosis(setup, grid, meas, dset, hist, *, is_fmu: bool, src: str,
     unit_notes : dict
         What the unit check says for the report (:func:`_unit_check`).
     """
-    from calib.history import recorded
     from calib.logs import progress_line
+    from calib.models.recorded_model import recorded
 
     family, executor, chunk = None, None, None
     if is_fmu:
@@ -286,7 +286,7 @@ def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool,
     """
     import numpy as np
 
-    from calib.unit_check import apply_unit_check
+    from calib.checks.unit_check import apply_unit_check
 
     # the nominal model: an FMU family's own, else the native BEM with its nuisance parameters at nominal
     model = wrap(family.nominal_model() if family is not None else setup.model(None, list(meas.channels)),
@@ -335,7 +335,7 @@ def add_diagnose_arguments(parser) -> None:
                         "it started with")
     parser.add_argument("--strict-units", action="store_true", help="also stop when the nominal model misses the "
                         "data and no unit factor explains it (default: a loud warning, then diagnose)")
-    from calib.calibration_settings import NOISE_MODES
+    from calib.calibration.settings import NOISE_MODES
     parser.add_argument("--noise", choices=NOISE_MODES, default=None, help="the noise model, as [calibration] noise "
                         "(which it replaces): 'ml' estimates one σ per channel from the fit, for a table without "
                         "_sigma columns; default: the config's, else 'known' (the _sigma columns)")

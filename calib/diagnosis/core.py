@@ -1,9 +1,9 @@
 """The diagnosis: find where model and measurements disagree, name the missing
 effect, add it, show the gap shrink (docs/theory.md, Diagnosis).
 
-This module runs the steps (:func:`diagnose`) and the naming rounds of step 3. Beside it live
-the settings (:mod:`calib.diagnosis.settings`), the result (:mod:`calib.diagnosis.result`), the
-figures of merit (:mod:`calib.diagnosis.figures_of_merit`), the candidates of the native BEM
+This module runs the steps (:func:`diagnose`); the naming rounds of step 3 are in
+:mod:`calib.diagnosis.naming`. Beside them live the settings (:mod:`calib.diagnosis.settings`),
+the result (:mod:`calib.diagnosis.result`), the figures of merit (:mod:`calib.diagnosis.figures_of_merit`), the candidates of the native BEM
 (:mod:`calib.diagnosis.bem_family`) and their fitted parameters
 (:mod:`calib.diagnosis.candidate_parameters`), the statistics that rank candidates
 (:mod:`calib.diagnosis.ranking`) and the verdict of a naming round (:mod:`calib.diagnosis.verdict`).
@@ -13,7 +13,7 @@ Steps
 1. **Find**: the nominal model's whitened residuals r = (z − y)/σ; the χ² test (χ²/N and its
    p-value) says whether the model is consistent with the noise; per channel and against
    tip-speed ratio, pitch and wind speed the residuals say where it is not.
-2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.Calibrator`,
+2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.calibrator.Calibrator`,
    automatic truncation) says which (α, η) region of the polars would have to change; with
    ``noise = "ml"`` it also gives the noise σ the later steps use.
 3. **Name**: every candidate effect of :data:`calib.effects.EFFECTS` (but the correction field)
@@ -68,25 +68,16 @@ from typing import Callable
 import numpy as np
 
 from calib.bem import BemSettings
-from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.calibrator import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.diagnosis.bem_family import BemFamily
-from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, _parameter_records, away_start
-from calib.diagnosis.figures_of_merit import effect_size, find, gap
-from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
-from calib.diagnosis.result import CandidateFit, Diagnosis
+from calib.diagnosis.figures_of_merit import find, gap
+from calib.diagnosis.naming import Namer
+from calib.diagnosis.result import Diagnosis
 from calib.diagnosis.settings import DiagnosisSettings
-from calib.diagnosis.verdict import _separation_of, judge_round
-from calib.errors import CalibError, InputError
+from calib.errors import CalibError
 from calib.measurements import Measurements
 from calib.words import p_is
-
-# moved to the step modules, importable from here as before
-from calib.diagnosis.bem_family import PROBE_STATIONS, _fixed_effect  # noqa: F401
-from calib.diagnosis.candidate_parameters import AT_BOUND_TOLERANCE, bound_side  # noqa: F401
-from calib.diagnosis.figures_of_merit import EFFECT_SIZE_USABLE  # noqa: F401
-from calib.diagnosis.settings import MODEL_FORM_TOLERANCE, NAMEABLE  # noqa: F401
-from calib.diagnosis.verdict import _bound_suffix  # noqa: F401
 
 #: Noise models whose σ the calibration estimates from the residuals (no global test against it).
 ESTIMATED_NOISE = ("ml", "relative_ml")
@@ -120,7 +111,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         Receives one line per step.
     wrap : callable(model, label) -> model, optional
         Applied to every model the diagnosis calibrates or evaluates (e.g.
-        :func:`calib.history.recorded`, which records each call and answers it on resume).
+        :func:`calib.models.recorded_model.recorded`, which records each call and answers it on resume).
     fit_progress : callable(done, total), optional
         Called as the candidate fits of a round finish.
     family : optional
@@ -128,7 +119,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         ``settings``); e.g. :class:`calib.diagnosis.fmu.FmuFamily` for an FMU.
     on_iteration : callable(dict), optional
         Receives every optimizer iteration record of the localization and the recalibration
-        (:class:`~calib.calibration.Calibrator` records with ``run`` added).
+        (:class:`~calib.calibration.calibrator.Calibrator` records with ``run`` added).
 
     Returns
     -------
@@ -210,7 +201,7 @@ def _find_disagreement(family, meas: Measurements, wrap: Callable, say: Callable
 
 def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, field_after: np.ndarray,
                   cal: CalibrationSettings, dset: DiagnosisSettings, executor, wrap: Callable, fit_progress,
-                  say: Callable[[str], None]) -> "_Namer":
+                  say: Callable[[str], None]) -> Namer:
     """Step 3: the naming rounds, against the noise plus the model-form tolerance.
 
     Parameters
@@ -222,7 +213,7 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
 
     Returns
     -------
-    _Namer
+    Namer
         With the rounds, the effects named and the model with them.
     """
     channels = list(meas.channels)
@@ -234,7 +225,7 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
     tol = dset.tolerance_of(channels)
     meas_name = dataclasses.replace(meas, sigma=np.hypot(meas.sigma, tol * np.abs(np.nan_to_num(y0))))
     before_name = gap(meas.values, y0, meas_name.sigma, channels)
-    namer = _Namer(family, meas_name, y0, before_name["chi2"], (field_after - y0) / meas_name.sigma, dset,
+    namer = Namer(family, meas_name, y0, before_name["chi2"], (field_after - y0) / meas_name.sigma, dset,
                    known, executor, wrap, fit_progress, say, tol)
     # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
     # localization's residuals, so the nominal model would pass against it by construction
@@ -245,7 +236,7 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
     return namer
 
 
-def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, say, effects_named):
+def _recalibrate(family, namer: Namer, meas, cal, dset, wrap, on_iteration, say, effects_named):
     """The correction field recalibrated on top of the named effects (a CalibrationResult), or
     None when switched off or when it fails (the failure is noted)."""
     if not dset.recalibrate:
@@ -274,201 +265,3 @@ def _recalibrate(family, namer: "_Namer", meas, cal, dset, wrap, on_iteration, s
 def _tagged(callback, run: str):
     """``callback`` receiving Calibrator records with ``run`` added (None stays None)."""
     return None if callback is None else (lambda rec: callback({"run": run, **rec}))
-
-
-def _fit_task(task: dict) -> dict:
-    """Fit one candidate (module-level so executors can ship it to other processes).
-
-    A candidate's own parameter (``task["own"]``: its indices) that ends where it started, to
-    :data:`STUCK_TOLERANCE` of its scale, may sit on a stationary point of χ² (every derivative
-    of a zero-magnitude effect's shape parameters vanishes at nominal): the fit is started
-    again from :func:`away_start` and the one with the lower χ² is kept; the fit's status says
-    which ("second start kept" / "second start not kept").
-    """
-    model = task["model"]
-    meas = task["measurements"]
-    st = dataclasses.replace(task["settings"], prior_check=False, tightening=False)   # a comparison: no advice
-    names = [c.name for c in model.channels]
-    cols = [names.index(c) for c in meas.channels]
-
-    def fit(start=None):
-        res = Calibrator(model, meas, st, name=task["name"], start=start).run()
-        values = model.evaluate(res.p_hat, meas.conditions).values[:, cols]
-        ok = np.isfinite(values).all(axis=1)
-        chi2 = float(np.sum(((meas.values - values) / meas.sigma)[ok] ** 2)) if ok.any() else float("inf")
-        return res, values, chi2
-
-    try:
-        res, values, chi2 = fit()
-    except CalibError as exc:        # this candidate failed; the others are still compared
-        return {"error": f"{type(exc).__name__}: {exc}"}
-    own = list(task.get("own", range(res.n_params)))
-    stuck = [j for j in own if abs(res.p_hat[j] - res.p_nominal[j]) <= STUCK_TOLERANCE * res.scale[j]]
-    note = ""
-    if stuck:
-        try:
-            res2, values2, chi2_2 = fit(away_start(res.p_hat, res.lower, res.upper, res.scale, stuck))
-        except CalibError as exc:
-            note = f"second start failed ({type(exc).__name__})"
-        else:
-            keep = chi2_2 < chi2
-            note = f"second start {'kept' if keep else 'not kept'} (χ² {chi2_2:.6g} against {chi2:.6g})"
-            if keep:
-                res, values = res2, values2
-    return {"result": res, "values": values, "start_note": note}
-
-
-class _Namer:
-    """Step 3 of :func:`diagnose`: naming rounds, each on top of the effects named before.
-
-    A round that raises a :class:`~calib.errors.CalibError` (a fit that cannot run, an effect
-    that cannot take its fitted values) is recorded with verdict ``failed`` and the failure in
-    words; the naming stops there and what the earlier rounds found stands.
-    """
-
-    def __init__(self, family, meas, y0, chi2_nominal, field_change, dset, known, executor, wrap, fit_progress,
-                 say, tolerance=None):
-        self.family, self.meas, self.y0, self.field_change = family, meas, y0, field_change
-        self.dset, self.known, self.executor, self.wrap = dset, known, executor, wrap
-        self.fit_progress, self.say = fit_progress, say
-        self.base_effects, self.named, self.rounds, self.notes, self.failures = [], [], [], [], []
-        self.base_chi2, self.base_values = chi2_nominal, y0
-        self.n_res = int(np.isfinite(y0).all(axis=1).sum() * y0.shape[1])
-        self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
-        self._effects = {}                        # the current round's candidate effects by label
-        self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
-
-    def run(self, candidates) -> None:
-        self.remaining = list(candidates)
-        for round_no in range(self.dset.max_effects):
-            if not self.remaining:
-                break
-            self._fits = []
-            try:
-                if self._round(round_no):
-                    break
-            except CalibError as exc:
-                self.rounds.append({"base": self.family.names_of(self.base_effects), "candidates": self._fits,
-                                    "verdict": "failed", "reason": f"failed: {exc}"})
-                before = {0: "no effect was named", 1: "what round 1 found stands"}.get(
-                    round_no, f"what rounds 1-{round_no} found stands")
-                self.fail(f"naming round {round_no + 1} failed: {exc}; {before}")
-                break
-
-    def consistent(self, before: dict, within_tolerance: bool = False) -> None:
-        """The nominal model passes the global χ² test (noise plus model-form tolerance): nothing
-        is named (a likelihood ratio that is significant on top of a model that already fits is
-        code-to-code residue, not an effect the data demand)."""
-        what = ("within the model-form tolerance (it misses the noise alone, but not the noise plus the "
-                "tolerance)" if within_tolerance else "consistent with the noise")
-        reason = (f"the nominal model is {what} (χ²/dof {before['chi2_per_dof']:.3g} over {before['dof']} "
-                  f"residuals, {p_is(before['p_value'])} ≥ significance {self.dset.significance:g}): no effect is "
-                  "looked for")
-        self.rounds.append({"base": [], "candidates": [], "verdict": "none", "reason": reason})
-        self.say(f"name: {reason}")
-
-    def fail(self, message: str) -> None:
-        self.failures.append(message)
-        self.notes.append(message)
-        self.say(message)
-
-    def verdict(self) -> tuple[str, list]:
-        """The diagnosis' one-word result and the effects named (in order)."""
-        effects_named = [n for n in self.named if not n.startswith("ambiguous:")]
-        if self.named and self.named[0].startswith("ambiguous:"):
-            return "ambiguous", effects_named
-        return (effects_named[0] if effects_named else "none"), effects_named
-
-    def _round(self, round_no: int) -> bool:
-        """One naming round; True when the naming is over."""
-        labels, effects = self._applicable()
-        if not labels:
-            return True
-        self._effects = effects
-        self._fits = fits = self._fit(round_no, labels, effects)
-        rnd, best = self._judge(fits)
-        if best is None:
-            self.rounds.append(rnd)
-            if rnd["verdict"] == "ambiguous" and not self.named:
-                self.named.append("ambiguous:" + "+".join(rnd["ambiguous"]))
-            return True
-        new_base = self.family.add(self.base_effects, best)    # may raise: the round then fails
-        self.rounds.append(rnd)
-        self.named.append(best.effect)
-        self.base_effects = new_base
-        self.base_chi2, self.base_values = best.chi2, best.model_values
-        self.remaining = [c for c in self.remaining if c != best.effect]
-        # a further effect is looked for only while the model is still inconsistent with the noise
-        fit_now = gap(self.meas.values, self.base_values, self.meas.sigma, list(self.meas.channels),
-                      self.family.n_parameters(self.base_effects))
-        if fit_now["p_value"] >= self.dset.significance:
-            self.say(f"name: with {', '.join(self.named)} the model is consistent with the noise (χ²/dof "
-                     f"{fit_now['chi2_per_dof']:.3g}, {p_is(fit_now['p_value'])}); no further effect is looked for")
-            return True
-        return False
-
-    def _applicable(self) -> tuple[list, dict]:
-        """Labels and effects of the remaining candidates' variants that can act on this rotor."""
-        labels, effects = [], {}
-        for c in list(self.remaining):
-            try:
-                variants = self.family.variants(c, self.dset.candidate_options.get(c, {}))
-                for label, effect in variants:
-                    # an effect that cannot act on this rotor (e.g. no reference Reynolds number) is
-                    # reported as not applicable, not fitted
-                    self.family.check(self.base_effects, effect, self.meas.conditions)
-            except InputError as exc:
-                self.notes.append(f"candidate {c} not applicable: {exc}")
-                self.say(f"name: candidate {c} not applicable: {exc}")
-                self.remaining.remove(c)
-                continue
-            for label, effect in variants:
-                labels.append(label)
-                effects[label] = effect
-        return labels, effects
-
-    def _fit(self, round_no: int, labels: list, effects: dict) -> list:
-        """Every candidate fitted on top of the base effects, scored against the base model."""
-        n_base = self.family.n_parameters(self.base_effects)
-        tasks = [{"name": lab, "measurements": self.meas, "settings": self.known,
-                  "own": list(range(n_base, n_base + len(effects[lab].parameters()))),
-                  "model": self.wrap(self.family.candidate_model(self.base_effects, effects[lab]),
-                                     f"round {round_no + 1}: {lab}")} for lab in labels]
-        self.say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
-        outs = self.executor.map(_fit_task, tasks, self.fit_progress)
-        alpha = self.dset.significance / max(len(self.remaining), 1)
-        failed = [(lab, out["error"]) for lab, out in zip(labels, outs) if "error" in out]
-        for lab, message in failed:
-            self.notes.append(f"round {round_no + 1}: the fit of candidate {lab} failed and it is left out of the "
-                              f"comparison: {message}")
-            self.say(f"name: {self.notes[-1]}")
-        if len(failed) == len(labels):
-            raise CalibError(f"every candidate fit of round {round_no + 1} failed (first: {failed[0][1]})")
-        return [self._score(lab, out, effects[lab], alpha) for lab, out in zip(labels, outs) if "error" not in out]
-
-    def _score(self, label: str, out: dict, effect, alpha: float) -> CandidateFit:
-        res, values = out["result"], out["values"]
-        meas, sigma = self.meas, self.meas.sigma
-        own = list(range(self.family.n_parameters(self.base_effects), res.n_params))
-        chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
-        k = len(own)
-        lr, p = likelihood_ratio(self.base_chi2, chi2, k)
-        agree = pattern_agreement((values - self.base_values) / sigma,
-                                  self.field_change - (self.base_values - self.y0) / sigma)
-        params = _parameter_records(res, own)
-        size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
-                                           meas.conditions.wind_speed)
-        return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
-                            p < alpha and exceeds, pattern_agreement=agree, status=res.status,
-                            start=out.get("start_note", ""), p_hat=np.array(res.p_hat, float),
-                            spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
-                            at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
-                            effect_text=words)
-
-    def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
-        """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
-        names (None for ``none`` and ``ambiguous``): :func:`calib.diagnosis.verdict.judge_round`."""
-        rnd, best = judge_round(fits, self.base_chi2, self.family.names_of(self.base_effects), self.dset,
-                                lambda a, b: _separation_of(self, a, b))
-        self.say(f"name: {rnd['reason']}")
-        return rnd, best

@@ -14,9 +14,8 @@ import dataclasses
 from typing import Callable
 
 from calib.config import Key, names_list, settings_from_table
-from calib.diagnosis.core import NAMEABLE, DiagnosisSettings
+from calib.diagnosis.settings import NAMEABLE, DiagnosisSettings
 from calib.measurements import Measurements
-
 
 #: [diagnosis] keys of a workflow: the DiagnosisSettings fields (their types checked by its validate()), plus
 #: the channels it uses.
@@ -82,7 +81,7 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
     meas = measurements.select_channels(channels) if channels else measurements
     wrap = on_iteration = None
     if history is not None:
-        from calib.history import recorded
+        from calib.models.recorded_model import recorded
 
         wrap = lambda model, label: recorded(model, history, f"diagnosis: {label}")  # noqa: E731
         on_iteration = lambda rec: history.event("iteration", **{"run": "diagnosis", **rec})  # noqa: E731

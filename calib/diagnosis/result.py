@@ -31,7 +31,7 @@ class CandidateFit:
     at_bound: list = field(default_factory=list)    # names of the parameters at a bound
     effect_size: float = float("nan")   # largest relative change of an output [-] (effect_size())
     effect_text: str = ""               # the same in words: "-2.1 % power at 7.3 m/s (tolerance 1 %)"
-    start: str = ""                     # the second start, when one ran (_fit_task): "second start kept (...)"
+    start: str = ""                     # the second start, when one ran (calib.diagnosis.naming.fit_task): "second start kept (...)"
     p_hat: np.ndarray | None = None     # every fitted parameter (base effects' too) [parameter units]
 
     def bound_phrase(self) -> str:
@@ -74,7 +74,7 @@ class Diagnosis:
     wall_time: float = 0.0
     notes: list = field(default_factory=list)
     failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
-    setup: list = field(default_factory=list)   # calib.setup_statement.SetupItem: the set-up in force
+    setup: list = field(default_factory=list)   # calib.report.setup_statement.SetupItem: the set-up in force
 
     @property
     def candidates(self) -> list:

@@ -10,21 +10,14 @@ round is ``ambiguous``.
 
 from __future__ import annotations
 
-import dataclasses
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
 from calib.diagnosis.ranking import set_bic_weights
 from calib.diagnosis.result import CandidateFit
-from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
 from calib.diagnosis.settings import DiagnosisSettings
-from calib.errors import CalibError
-from calib.types import CONDITION_FIELDS, OperatingConditions
 from calib.words import p_is
-
-if TYPE_CHECKING:
-    from calib.diagnosis.core import _Namer
 
 
 def judge_round(fits: list[CandidateFit], base_chi2: float, base_names: list, dset: DiagnosisSettings,
@@ -44,7 +37,7 @@ def judge_round(fits: list[CandidateFit], base_chi2: float, base_names: list, ds
         ``significance``, ``ambiguity_bic`` and ``ambiguity_pattern``.
     separate : callable(CandidateFit, CandidateFit) -> dict
         The measurement that would tell two candidates apart (``{"text": ...}``, e.g.
-        :func:`_separation_of`), asked only for an ``ambiguous`` verdict.
+        :func:`calib.diagnosis.naming.separation_of`), asked only for an ``ambiguous`` verdict.
 
     Returns
     -------
@@ -99,7 +92,7 @@ def judge_round(fits: list[CandidateFit], base_chi2: float, base_names: list, ds
         f"{best.name}: Λ = {best.lr_statistic:.4g} for {best.n_params} parameter(s), {p_is(best.p_value)}; "
         f"BIC weight {best.weight:.3f}; next {nxt.name if nxt else 'none'} ΔBIC = "
         f"{(nxt.bic - best.bic) if nxt else float('inf'):.3g}; pattern agreement with the localized correction "
-        f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + _bound_suffix(best) + pattern_note
+        f"{best.pattern_agreement:.2f}; effect {best.effect_text}" + bound_suffix(best) + pattern_note
         + stand_in))
     return rnd, best
 
@@ -118,50 +111,10 @@ def _nothing_significant(fits: list[CandidateFit], dset: DiagnosisSettings) -> s
             f"({small[0].effect_text}) is within the model-form tolerance" if small else "")
     return (f"no candidate improves the fit significantly (likelihood ratio at family-wise level "
             f"{dset.significance:g}); best {fits[0].name}: Λ = {fits[0].lr_statistic:.3g}, "
-            f"{p_is(fits[0].p_value)}" + _bound_suffix(fits[0]) + tail)
+            f"{p_is(fits[0].p_value)}" + bound_suffix(fits[0]) + tail)
 
 
-def _separation_of(namer: "_Namer", a: CandidateFit, b: CandidateFit) -> dict:
-    """The measurement that would tell ``a`` from ``b`` (:mod:`calib.diagnosis.separation`): {"text", "probes",
-    "envelope", "fingerprints"}; a probe that cannot be evaluated is said, never raised."""
-    fam, meas = namer.family, namer.meas
-    names = (a.effect, b.effect)
-    fingerprints = {n: fam.fingerprint(n) for n in names if fam.fingerprint(n)}
-    envelope = envelope_words(meas.conditions, fam.rotor_radius)
-    out = {"probes": [], "envelope": envelope, "fingerprints": fingerprints}
-    try:
-        probes = probe_conditions(meas.conditions, fam.rotor_radius, fam.schedule)
-        both = OperatingConditions(*(np.concatenate([getattr(meas.conditions, f), getattr(probes, f)])
-                                     for f in CONDITION_FIELDS))
-        channels = fam.probe_channels(list(meas.channels))
-        va, units = fam.predict(namer.base_effects, namer._effects[a.name], a.p_hat, both, channels)
-        vb, _ = fam.predict(namer.base_effects, namer._effects[b.name], b.p_hat, both, channels)
-    except CalibError as exc:
-        out["text"] = f"the probes that would separate them could not be evaluated ({exc})"
-        return out
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = {c: float(np.nanmedian(np.where(namer.y0[:, j] != 0, meas.sigma[:, j] / np.abs(namer.y0[:, j]), np.nan)))
-               for j, c in enumerate(meas.channels)}
-    rel = {c: r for c, r in rel.items() if np.isfinite(r) and r > 0}
-    found = separating_probes(va, vb, both, channels, list(meas.channels), rel, len(meas.conditions),
-                              fam.rotor_radius)
-    unit = dict(zip(channels, units))
-    out["probes"] = [{**dataclasses.asdict(p), "words": p.words(names, unit[p.channel])} for p in found]
-    if not found:
-        text = "no probe could compare them"
-    elif found[0].separation > 1.0:
-        text = "to tell them apart, measure " + "; or ".join(p["words"] for p in out["probes"] if p["separation"] > 1)
-    else:
-        text = ("no probe considered separates them beyond the noise and model-form tolerance (closest: "
-                f"{out['probes'][0]['words']})")
-    text += f"; probes {probe_limits(meas.conditions, fam.schedule)[2]}; the campaign measured {envelope}"
-    if fingerprints:
-        text += "; fingerprints: " + "; ".join(f"{n}: {fp}" for n, fp in fingerprints.items())
-    out["text"] = text
-    return out
-
-
-def _bound_suffix(fit: CandidateFit) -> str:
+def bound_suffix(fit: CandidateFit) -> str:
     """"; <fit's parameters at a bound>, ..." for a verdict ("" when none is at a bound)."""
     phrase = fit.bound_phrase()
     return (f"; {phrase}: the fit pushed against the bound, so the value is the bound, not an estimate (the "

@@ -5,8 +5,8 @@ module checks every mapped variable (it exists; its causality, variability and t
 array elements lie inside their arrays; setting values inside the FMU's range) and builds what a
 simulation needs: the fixed assignments of settings and switches (:func:`fixed_assignments`), the
 calibrated parameters with their writers and unit conversions (:func:`bind_parameters`), the
-operating-condition inputs (:func:`bind_inputs`), the channels (:func:`channel_specs`, which lives in
-:mod:`calib.fmu.channels` with :func:`signal_of`, and is importable from here) and the
+operating-condition inputs (:func:`bind_inputs`), the channels (read by
+:func:`calib.fmu.channels.channel_specs`) and the
 :class:`~calib.fmu.plan.SimulationPlan` (:func:`make_plan`). Nothing here runs the FMU: the radii of
 spanwise stations, which only an initialized FMU knows, come in as a function.
 """
@@ -24,7 +24,6 @@ from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.fmu import plan as fp
 from calib.fmu.archive import FmuInputError
-from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, signal_of  # noqa: F401 (re-exported)
 from calib.fmu.mapping import Mapping
 from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, Parameter
 

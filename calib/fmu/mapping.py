@@ -11,7 +11,7 @@ with ``scale`` a, ``offset`` b, ``sign`` s = ±1 and ``wrap`` w. Loading validat
 file against the schema: an unknown table or key, a missing required key or a value of the
 wrong type is refused with :class:`~calib.errors.InputError` naming the file and the key.
 The ``[steady]`` and ``[jacobian]`` tables are read by :mod:`calib.fmu.rules` (their classes
-:class:`SteadyRule` and :class:`JacobianRule` are importable from here too). Whether the named
+:class:`~calib.fmu.rules.SteadyRule` and :class:`~calib.fmu.rules.JacobianRule`). Whether the named
 variables exist in an FMU, with the right causality and variability, is checked by
 :class:`calib.fmu.model.FmuModel` at load time (it has the FMU).
 """

@@ -16,9 +16,9 @@ from calib.types import CONDITION_FIELDS
 from calib.measurements.data import (FIXED_QUANTITY, MISSING_CELLS, UNITS,
                                      canonical_unit, normalize_name, quantity_of)
 
-_DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
-_DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
-_LINE_BREAK = re.compile(r"\r\n|\r|\n")
+DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
+DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
+LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _MAGIC = (  # leading bytes of files people pick by mistake -> what they are
     (b"PK\x03\x04", "a zip archive (an .xlsx/.ods workbook is one: export the sheet as CSV)"),
     (b"\xd0\xcf\x11\xe0", "an OLE2 document (an .xls workbook: export the sheet as CSV)"),
@@ -27,13 +27,13 @@ _MAGIC = (  # leading bytes of files people pick by mistake -> what they are
 )
 
 
-def _known_names_text() -> str:
+def known_names_text() -> str:
     return (", ".join(list(CONDITION_FIELDS) + [n for n in FIXED_QUANTITY if n not in CONDITION_FIELDS])
             + ", root_flap_moment_blade<1-3>, root_edge_moment_blade<1-3>, cn@<r/R>, ct@<r/R>, fn@<r/R>, ft@<r/R>, "
               "<channel>_1p / _2p / _3p (harmonic amplitude), <channel>_1p_phase ... [deg], <channel>_sigma")
 
 
-def _decode(raw: bytes, src: str) -> tuple[str, list[str]]:
+def decode(raw: bytes, src: str) -> tuple[str, list[str]]:
     """Text of a table file and a note on its encoding; refuses binary and non-UTF-8 files."""
     if raw.startswith(codecs.BOM_UTF8):
         encoding, note = "utf-8-sig", "encoding: UTF-8 with byte-order mark"
@@ -67,7 +67,7 @@ def _decode(raw: bytes, src: str) -> tuple[str, list[str]]:
     return text, [note] if note else []
 
 
-def _split(text: str, delimiter: str, src: str | None = None, line: int | None = None) -> list[str]:
+def split_line(text: str, delimiter: str, src: str | None = None, line: int | None = None) -> list[str]:
     """The cells of one line; a line the csv module refuses (a cell over its size limit) is an InputError.
 
     ``delimiter`` ``" "`` splits at runs of blanks (OpenFAST text output without tabs).
@@ -83,16 +83,16 @@ def _split(text: str, delimiter: str, src: str | None = None, line: int | None =
 
 def _n_cells(text: str, delimiter: str) -> int:
     try:
-        return len(_split(text, delimiter))
+        return len(split_line(text, delimiter))
     except InputError:
         return -1
 
 
-def _detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
+def detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
     """The delimiter (``,``, ``;`` or tab) that splits the header into the most columns,
     preferring one that splits the sample rows into as many (``None``: a single column)."""
     best = None
-    for d in _DELIMITERS:
+    for d in DELIMITERS:
         n = _n_cells(header, d)
         if n < 2:
             continue
@@ -102,7 +102,7 @@ def _detect_delimiter(header: str, sample: Sequence[str]) -> str | None:
     return None if best is None else best[1]
 
 
-def _parse_header(text: str, column: int) -> tuple[str, str | None]:
+def parse_header(text: str, column: int) -> tuple[str, str | None]:
     """(normalized name, unit as written or None) of the header cell of 1-based ``column``.
 
     A cell that does not read as ``name [unit]`` keeps its whole text as the name (an unknown
@@ -135,7 +135,7 @@ def _split_unit(text: str) -> tuple[str, str | None]:
     return text, None
 
 
-def _declared_unit(column: str, unit: str | None, src: str, line: int | None, where: str = "") -> str | None:
+def declared_unit(column: str, unit: str | None, src: str, line: int | None, where: str = "") -> str | None:
     """:data:`UNITS` spelling of a known column's unit (``None`` when none was given).
 
     ``where`` names the cell in the message (`` in column 3 'RotPwr' of the units row``).
@@ -150,7 +150,7 @@ def _declared_unit(column: str, unit: str | None, src: str, line: int | None, wh
     return canon
 
 
-def _unit_cell(cell: str) -> tuple[str, bool]:
+def unit_cell(cell: str) -> tuple[str, bool]:
     """(unit, bracketed) of a units-row cell ``(m/s)``, ``[kW]`` or ``m/s`` (``''`` for ``()``)."""
     c = cell.strip()
     if len(c) >= 2 and (c[0], c[-1]) in (("(", ")"), ("[", "]")):
@@ -158,9 +158,9 @@ def _unit_cell(cell: str) -> tuple[str, bool]:
     return c, False
 
 
-def _is_number(cell: str) -> bool:
+def is_number_cell(cell: str) -> bool:
     """True for a cell that reads as a number, with a decimal point or a decimal comma."""
-    if _DECIMAL_COMMA.match(cell):
+    if DECIMAL_COMMA.match(cell):
         return True
     try:
         float(cell)
@@ -169,7 +169,7 @@ def _is_number(cell: str) -> bool:
         return False
 
 
-def _is_units_row(cells: Sequence[str], names: Sequence[str]) -> bool:
+def is_units_row(cells: Sequence[str], names: Sequence[str]) -> bool:
     """True if ``cells``, the row right under the header, is a units row.
 
     A units row holds no number (but ``1``, a unit of coefficients), and at least one unit: a
@@ -181,16 +181,16 @@ def _is_units_row(cells: Sequence[str], names: Sequence[str]) -> bool:
         c = cell.strip()
         if not c or c.lower() in MISSING_CELLS:
             continue
-        if c != "1" and _is_number(c):
+        if c != "1" and is_number_cell(c):
             return False
-        unit, bracketed = _unit_cell(c)
+        unit, bracketed = unit_cell(c)
         quantity = quantity_of(name)
         known = quantity is not None and c != "1" and canonical_unit(quantity, unit) is not None
         evidence = evidence or bracketed or known
     return evidence
 
 
-def _to_float(cell: str, decimal_comma: bool) -> float:
+def to_float(cell: str, decimal_comma: bool) -> float:
     """A cell as a float (ValueError if it is not a number)."""
     if decimal_comma:
         if "." in cell:
@@ -199,11 +199,11 @@ def _to_float(cell: str, decimal_comma: bool) -> float:
     return float(cell)
 
 
-def _did_you_mean(name: str, candidates: Sequence[str]) -> str:
+def did_you_mean(name: str, candidates: Sequence[str]) -> str:
     close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
 
 
-def _short_list(items: Sequence, n: int = 8) -> str:
+def short_list(items: Sequence, n: int = 8) -> str:
     items = [str(i) for i in items]
     return ", ".join(items[:n]) + (f" ... ({len(items)} in all)" if len(items) > n else "")

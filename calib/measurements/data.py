@@ -22,7 +22,6 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.types import CONDITION_DEFAULTS  # noqa: F401 (re-exported: the defaults a table may omit)
 from calib.types import CONDITION_FIELDS, OperatingConditions
 
 REQUIRED_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
@@ -231,15 +230,11 @@ class Measurements:
         return self.values[:, self.channels.index(name)]
 
     @classmethod
-    def from_dataframe(cls, df, channels: Sequence[str] | None = None, *, units: dict | None = None,
-                       source: str = "DataFrame", drop_incomplete_rows: bool = False) -> "Measurements":
-        """Measurements from a pandas DataFrame, with the checks of the CSV reader
-        (:func:`calib.frames.measurements_from_dataframe`): units from the column names or ``units``,
-        ``source`` for messages, ``drop_incomplete_rows`` to drop rows with a missing value (noted, by
-        their position from 0) instead of refusing them."""
-        from calib.frames import measurements_from_dataframe
-        return measurements_from_dataframe(df, channels, units=units, source=source,
-                                           drop_incomplete_rows=drop_incomplete_rows)
+    def from_dataframe(cls, df, *args, **kwargs):
+        """Refused with the new name: a DataFrame is read by :func:`calib.measurements.read_dataframe`
+        (beside :func:`calib.measurements.read_measurements` for files)."""
+        raise InputError("Measurements.from_dataframe(df, ...) is now calib.measurements.read_dataframe(df, ...), "
+                         "with the same arguments", "Measurements.from_dataframe")
 
     def select_channels(self, names: Sequence[str]) -> "Measurements":
         """A copy restricted to ``names`` (in that order); notes and metadata are kept."""

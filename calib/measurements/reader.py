@@ -34,7 +34,7 @@ unit either in brackets in the header or in the units row: both is refused.
 OpenFAST text output (``.out``: title lines, a channel-name row starting with ``Time``, a
 units row, the time rows; tabs or blanks) is recognised from its content and read with the
 OpenFAST channel names mapped to calib's, and its time series refused, averaged into one
-operating point or read row by row (``time_series``; :mod:`calib.openfast_out`). The binary
+operating point or read row by row (``time_series``; :mod:`calib.measurements.openfast_out`). The binary
 ``.outb`` is refused.
 
 Files as spreadsheets and loggers export them are accepted, and what was done is said in
@@ -63,41 +63,38 @@ from typing import Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.openfast_out import CHANNELS as OPENFAST_CHANNELS
-from calib.openfast_out import TIME_SERIES_MODES, average, missing_hint, time_rows
-from calib.types import CONDITION_FIELDS, OperatingConditions
-
-from calib.measurements.data import (CONDITION_DEFAULTS, FIXED_QUANTITY, MISSING_CELLS, REQUIRED_CONDITIONS, UNITS,
-                                     Measurements, is_channel_name, quantity_of,
-                                     sha256_of, si_unit)
-
-from calib.measurements.cells import (_DECIMAL_COMMA, _declared_unit, _did_you_mean, _is_number, _known_names_text,
-                                      _short_list, _split, _to_float, _unit_cell)
-from calib.measurements.table import _read_table, _read_text, _Table
+from calib.measurements.cells import (DECIMAL_COMMA, declared_unit, did_you_mean, is_number_cell, known_names_text,
+                                      short_list, split_line, to_float, unit_cell)
+from calib.measurements.data import (FIXED_QUANTITY, MISSING_CELLS, REQUIRED_CONDITIONS, UNITS, Measurements,
+                                     is_channel_name, quantity_of, sha256_of, si_unit)
+from calib.measurements.openfast_out import CHANNELS as OPENFAST_CHANNELS
+from calib.measurements.openfast_out import TIME_SERIES_MODES, average, missing_hint, time_rows
+from calib.measurements.table import Table, read_table, read_text
+from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, OperatingConditions
 
 
-def _check_columns(table: _Table) -> None:
+def _check_columns(table: Table) -> None:
     """Refuse duplicate columns and a missing required condition, naming the header line."""
     counts = Counter(table.names)  # a table exported transposed has tens of thousands of columns
     dupes = sorted(n for n, k in counts.items() if k > 1)
     if dupes:
         same = [r for r, n in zip(table.raw_names, table.names) if n == dupes[0]]
-        raise InputError(f"duplicate column(s) {_short_list(dupes)} (headers {_short_list(list(map(repr, same)))})",
+        raise InputError(f"duplicate column(s) {short_list(dupes)} (headers {short_list(list(map(repr, same)))})",
                          table.src, table.header_line, field=dupes[0])
     for req in REQUIRED_CONDITIONS:
         if req not in counts:
             raise InputError(f"missing required column '{req}'{_absent_hint(table, req)}; columns present: "
-                             f"{_short_list(table.raw_names, 30)}", table.src, table.header_line, field=req)
+                             f"{short_list(table.raw_names, 30)}", table.src, table.header_line, field=req)
 
 
-def _absent_hint(table: _Table, name: str) -> str:
+def _absent_hint(table: Table, name: str) -> str:
     """What to look for when a column ``name`` is absent: a close name, or the OpenFAST channel read for it."""
     if table.openfast is not None:
         return missing_hint(name, table.raw_names)
-    return _did_you_mean(name, [n for n in table.names if quantity_of(n) is None])
+    return did_you_mean(name, [n for n in table.names if quantity_of(n) is None])
 
 
-def _declared_units(table: _Table) -> dict[str, str | None]:
+def _declared_units(table: Table) -> dict[str, str | None]:
     """:data:`UNITS` spelling of each known column's unit, from its header or from the units row.
 
     Raises
@@ -117,17 +114,17 @@ def _declared_units(table: _Table) -> dict[str, str | None]:
                              f"{cell!r} in the units row; give a column's unit either in brackets in the header "
                              "or in the units row", table.src, row_line, field=name)
         if cell:
-            declared[name] = _declared_unit(name, _unit_cell(cell)[0] or None, table.src, row_line,
+            declared[name] = declared_unit(name, unit_cell(cell)[0] or None, table.src, row_line,
                                             where + " of the units row")
         elif table.openfast is not None:   # OpenFAST writes every unit; a gap is a damaged file, not SI
             raise InputError(f"no unit{where} of the units row; OpenFAST writes one for every channel",
                              table.src, row_line, field=name)
         else:
-            declared[name] = _declared_unit(name, head, table.src, table.header_line, where)
+            declared[name] = declared_unit(name, head, table.src, table.header_line, where)
     return declared
 
 
-def _model_specific_channels(table: _Table, needed: list[str]) -> list[str]:
+def _model_specific_channels(table: Table, needed: list[str]) -> list[str]:
     """Requested columns whose names calib does not know (a model's own outputs, e.g. an FMU
     mapping's ``shaft_power``): read as given; a unit on them is refused, since it cannot be
     converted.
@@ -154,24 +151,24 @@ def _model_specific_channels(table: _Table, needed: list[str]) -> list[str]:
     return out
 
 
-def _cells_error(table: _Table, n_cells: int, line_no: int) -> InputError:
+def _cells_error(table: Table, n_cells: int, line_no: int) -> InputError:
     hint = ("; numbers with a decimal comma need columns separated by ';' or tab"
             if table.delimiter == "," and n_cells > len(table.names) else "")
     return InputError(f"row has {n_cells} cells, header has {len(table.names)}{hint}", table.src, line_no)
 
 
-def _split_rows(table: _Table) -> list[tuple[int, list[str]]]:
+def _split_rows(table: Table) -> list[tuple[int, list[str]]]:
     """The data lines as (line number, stripped cells); a row longer than the header is refused."""
     rows = []
     for line_no, t in table.lines:
-        cells = _split(t, table.delimiter, table.src, line_no)
+        cells = split_line(t, table.delimiter, table.src, line_no)
         if len(cells) > len(table.names):
             raise _cells_error(table, len(cells), line_no)
         rows.append((line_no, [c.strip() for c in cells]))
     return rows
 
 
-def _kept_channels(table: _Table, channels: Sequence[str] | None, allow_no_channels: bool) -> tuple[list, list]:
+def _kept_channels(table: Table, channels: Sequence[str] | None, allow_no_channels: bool) -> tuple[list, list]:
     """The channels to keep and their ``_sigma`` columns (empty when the table gives no σ)."""
     src, line = table.src, table.header_line
     present = [n for n in table.names if is_channel_name(n)]
@@ -183,16 +180,16 @@ def _kept_channels(table: _Table, channels: Sequence[str] | None, allow_no_chann
     for c in channels:
         if c not in present_set:
             raise InputError(f"channel '{c}' is not in the file{_absent_hint(table, c)}; channel columns present: "
-                             f"{_short_list(present, 30) or '(none)'}", src, line, field=c)
+                             f"{short_list(present, 30) or '(none)'}", src, line, field=c)
     if not channels and not allow_no_channels:
         if table.openfast is not None:
             raise InputError("no calib channel among the OpenFAST channels; read are: " + "; ".join(
                 f"{c} from {', '.join(names)}" for c, names in OPENFAST_CHANNELS.items()
                 if c not in REQUIRED_CONDITIONS), src, line)
-        guesses = [f"'{r}'{_did_you_mean(n, list(FIXED_QUANTITY))}" for r, n in zip(table.raw_names, table.names)
+        guesses = [f"'{r}'{did_you_mean(n, list(FIXED_QUANTITY))}" for r, n in zip(table.raw_names, table.names)
                    if quantity_of(n) is None][:30]
         raise InputError("no channel columns (e.g. power, thrust, cn@0.30; a unit goes in brackets: "
-                         f"'power [kW]'); unrecognised columns: {_short_list(guesses, 30) or '(none)'}", src, line)
+                         f"'power [kW]'); unrecognised columns: {short_list(guesses, 30) or '(none)'}", src, line)
     sig_cols = [f"{c}_sigma" for c in channels]
     if not any(s in name_set for s in sig_cols):
         return channels, []
@@ -204,11 +201,11 @@ def _kept_channels(table: _Table, channels: Sequence[str] | None, allow_no_chann
     return channels, sig_cols
 
 
-def _ignored_column_notes(table: _Table, rows: list, decimal_comma: bool) -> list[str]:
+def _ignored_column_notes(table: Table, rows: list, decimal_comma: bool) -> list[str]:
     """Notes naming the columns that are not known names: non-numeric ones and numeric ones."""
     def is_number(cell: str) -> bool:
         try:
-            _to_float(cell, decimal_comma)
+            to_float(cell, decimal_comma)
             return True
         except ValueError:
             return False
@@ -221,15 +218,15 @@ def _ignored_column_notes(table: _Table, rows: list, decimal_comma: bool) -> lis
         (ignored_numeric if column and all(map(is_number, column)) else ignored_text).append(i)
     raw, names, notes = table.raw_names, table.names, []
     if ignored_text:
-        notes.append(f"ignored non-numeric column(s): {_short_list([raw[i] for i in ignored_text], 30)}")
+        notes.append(f"ignored non-numeric column(s): {short_list([raw[i] for i in ignored_text], 30)}")
     if ignored_numeric:
-        named = _short_list([raw[i] + _did_you_mean(names[i], list(FIXED_QUANTITY)) for i in ignored_numeric[:30]]
+        named = short_list([raw[i] + did_you_mean(names[i], list(FIXED_QUANTITY)) for i in ignored_numeric[:30]]
                             + [raw[i] for i in ignored_numeric[30:]], 30)
-        notes.append(f"ignored unrecognised numeric column(s): {named}; known names: {_known_names_text()}")
+        notes.append(f"ignored unrecognised numeric column(s): {named}; known names: {known_names_text()}")
     return notes
 
 
-def _cell_value(table: _Table, cells: list[str], i: int, name: str, line_no: int, decimal_comma: bool,
+def _cell_value(table: Table, cells: list[str], i: int, name: str, line_no: int, decimal_comma: bool,
                 drop_incomplete_rows: bool) -> float | None:
     """The number in cell ``i`` of a row (``None``: missing, the row is to be dropped); refuses a bad cell."""
     src, where = table.src, f"column {i + 1} '{table.raw_names[i]}'"
@@ -246,9 +243,9 @@ def _cell_value(table: _Table, cells: list[str], i: int, name: str, line_no: int
                          src, line_no, field=name)
     cell = cells[i]
     try:
-        x = _to_float(cell, decimal_comma)
+        x = to_float(cell, decimal_comma)
     except ValueError:
-        if decimal_comma and "." in cell and _is_number(cell.replace(".", "")):
+        if decimal_comma and "." in cell and is_number_cell(cell.replace(".", "")):
             raise InputError(f"ambiguous number {cell!r} in {where}: this file uses a decimal comma, so a point "
                              "could be a thousands separator; export the table without thousands separators",
                              src, line_no, field=name) from None
@@ -258,7 +255,7 @@ def _cell_value(table: _Table, cells: list[str], i: int, name: str, line_no: int
     return x
 
 
-def _parse_values(table: _Table, rows: list, needed: list[str], col_of: dict, decimal_comma: bool,
+def _parse_values(table: Table, rows: list, needed: list[str], col_of: dict, decimal_comma: bool,
                   drop_incomplete_rows: bool, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
     """The needed cells as numbers, shape (n_kept, n_needed), and the indices of the rows kept.
 
@@ -279,12 +276,12 @@ def _parse_values(table: _Table, rows: list, needed: list[str], col_of: dict, de
             raise InputError(f"every one of the {len(rows)} rows has a missing value in a needed column "
                              f"({', '.join(needed)})", table.src, table.header_line)
         notes.append(f"dropped {len(incomplete)} of {len(rows)} rows with a missing value in a needed column "
-                     f"(lines {_short_list([rows[r][0] for r in incomplete])})")
+                     f"(lines {short_list([rows[r][0] for r in incomplete])})")
         kept = np.setdiff1d(kept, incomplete)
     return data[kept], kept
 
 
-def _to_si(table: _Table, data: np.ndarray, needed: list[str], declared: dict, col_of: dict, rows: list,
+def _to_si(table: Table, data: np.ndarray, needed: list[str], declared: dict, col_of: dict, rows: list,
            kept: np.ndarray) -> np.ndarray:
     """The values converted to SI units; a value that overflows is refused (line and column named)."""
     factors = np.array([UNITS[quantity_of(n)][declared[n]] if declared.get(n) else 1.0 for n in needed])
@@ -344,7 +341,7 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     ----------
     path : str or Path
         CSV file (UTF-8 with or without byte-order mark; comma, semicolon or tab), or OpenFAST
-        text output (``.out``, recognised from its content; :mod:`calib.openfast_out`).
+        text output (``.out``, recognised from its content; :mod:`calib.measurements.openfast_out`).
     channels : sequence of str, optional
         Channels to keep (default: every known channel column present).
     drop_incomplete_rows : bool
@@ -378,16 +375,17 @@ def read_measurements(path: str | Path, channels: Sequence[str] | None = None, *
     """
     path = Path(path)
     _check_time_series_options(time_series, average_from, str(path))
-    text, notes = _read_text(path)
-    return _measurements_from_text(text, path, notes, sha256_of(path), channels, drop_incomplete_rows,
+    text, notes = read_text(path)
+    return measurements_from_text(text, path, notes, sha256_of(path), channels, drop_incomplete_rows,
                                    allow_no_channels, time_series, average_from)
 
 
-def _measurements_from_text(text: str, path: Path, notes: list, sha256: str, channels, drop_incomplete_rows: bool,
+def measurements_from_text(text: str, path: Path, notes: list, sha256: str, channels, drop_incomplete_rows: bool,
                             allow_no_channels: bool, time_series, average_from) -> Measurements:
-    """The body of :func:`read_measurements` on text already read (``path`` names it in errors)."""
+    """The body of :func:`read_measurements` on text already read (``path`` names it in errors);
+    :func:`calib.measurements.dataframe.read_dataframe` reads a DataFrame through it."""
     src = str(path)
-    table = _read_table(text, path, notes)
+    table = read_table(text, path, notes)
     _check_columns(table)
     if not table.lines:
         raise InputError("no data rows after the header", src, table.header_line)
@@ -404,7 +402,7 @@ def _measurements_from_text(text: str, path: Path, notes: list, sha256: str, cha
     elif time_series is not None:
         notes.append(f"time_series={time_series!r} ignored: the table is not OpenFAST time-series output")
     decimal_comma = table.delimiter in (";", "\t") and any(
-        _DECIMAL_COMMA.match(cells[i]) for _, cells in rows for i in col_of.values() if i < len(cells))
+        DECIMAL_COMMA.match(cells[i]) for _, cells in rows for i in col_of.values() if i < len(cells))
     if decimal_comma:
         notes.append("decimal comma: ',' read as the decimal separator")
     if table.openfast is None:

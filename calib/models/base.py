@@ -20,9 +20,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from calib.types import (CONDITION_FIELDS, Channel, Evaluation, OperatingConditions, Parameter,  # noqa: F401
-                         ParameterKind, Status, StatusCounts, check_parameter_vector, nominal_vector)
-
+from calib.types import Channel, Evaluation, OperatingConditions, Parameter
 
 #: how a model's ``jacobian`` is computed: analytic sensitivities, or finite differences of simulations
 DERIVATIVE_KINDS = ("exact", "finite_difference")
@@ -36,7 +34,7 @@ class Capabilities:
     ----------
     name : str
         The model's name in results and reports (e.g. ``"BemModel"``); a wrapper (the history's
-        :class:`~calib.history.RecordedModel`) passes its model's on, so results are the same with and
+        :class:`~calib.models.recorded_model.RecordedModel`) passes its model's on, so results are the same with and
         without it.
     correction_field : bool
         ``correction_field()`` returns the model's additive polar-correction field

@@ -195,7 +195,7 @@ class BemModel:
         for provenance.
         """
         from calib.rotor.serialize import rotor_digest, rotor_to_dict
-        from calib.rotor.sources import recorded_rotor_files
+        from calib.rotor.provenance import recorded_rotor_files
 
         spec = {"kind": "bem", "rotor": dict(self.rotor_source or {}), "settings": asdict(self.settings),
                 "tilt_deg": float(self.rotor.tilt_deg), "precone_deg": float(self.rotor.precone_deg),

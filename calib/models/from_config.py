@@ -158,7 +158,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
     if t.variant is not None:
         from calib.fmu.build import mapping_path
         from calib.fmu.bundled import build_variant
-        from calib.rotor.sources import absolute_table
+        from calib.rotor.provenance import absolute_table
 
         build = {"variant": t.variant.upper(), "rotor": absolute_table(rotor_table or {}, base_dir),
                  "grid": grid.to_dict() if grid is not None else None}

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.calibration.result import CalibrationResult
 from calib.report.panels import Margins, colorbar_axes, panel_grid, settle_labels, spread
-from calib.result import CalibrationResult
 
 BLOCK_LABEL = {"lift": "ΔC_L", "drag": "ΔC_D"}
 MATRIX_SIZE = 5.6          # side of the matrix [in]

@@ -22,9 +22,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from calib.calibration.result_io import jsonable as _jsonable
 from calib.report.atomic import atomic_write_text
 from calib.report.diagnosis_figures import write_figures
-from calib.result_io import jsonable as _jsonable
 from calib.words import p_is, p_text
 
 
@@ -328,6 +328,6 @@ def _closing_html(d) -> list[str]:
     if d.notes:
         body.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in d.notes) + "</ul>")
     if d.setup:
-        from calib.setup_statement import statement_html
+        from calib.report.setup_statement import statement_html
         body.append(statement_html(d.setup))
     return body

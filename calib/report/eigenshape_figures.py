@@ -17,15 +17,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.image import AxesImage
 from matplotlib.patches import Rectangle
 
+from calib.calibration.result import CalibrationResult
 from calib.report.panels import DPI, Margins, tile_labels, title_height, wrap_title
-from calib.result import CalibrationResult
 
 MAX_COLUMNS = 4           # maps across: four keep a map over 180 px wide in a 1100 px report
 MIN_WIDTH = 5.0           # narrowest figure [in] (title and axis labels fit)

@@ -26,6 +26,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+from calib.calibration.result import CalibrationResult  # noqa: E402
 from calib.report.atomic import atomic_path  # noqa: E402
 from calib.report.correlation_figure import plot_correlation  # noqa: E402
 from calib.report.eigenshape_figures import plot_eigenshapes  # noqa: E402
@@ -34,8 +35,7 @@ from calib.report.interrupts import interrupts_as_keyboard_interrupt  # noqa: E4
 from calib.report.panels import DPI  # noqa: E402
 from calib.report.parallel import default_workers, fork_available, run_forked  # noqa: E402
 from calib.report.polar_figures import TruthField, plot_polars  # noqa: E402
-from calib.report.spectrum_figures import plot_singular_values, plot_spectra, plot_truncation  # noqa: E402
-from calib.result import CalibrationResult  # noqa: E402
+from calib.report.spectrum_figures import plot_singular_values, plot_truncation  # noqa: E402
 
 FORMATS = ("png",)
 ALL_FORMATS = ("png", "svg")
@@ -200,5 +200,4 @@ def write_figures(result: CalibrationResult, out_dir: str | Path, prefix: str = 
     return out
 
 
-__all__ = ["ALL_FORMATS", "FIGURES", "FORMATS", "plot_correlation", "plot_eigenshapes", "plot_fit", "plot_polars",
-           "plot_singular_values", "plot_spectra", "plot_truncation", "save_figure", "write_figures"]
+__all__ = ["ALL_FORMATS", "FIGURES", "FORMATS", "save_figure", "write_figures"]

@@ -15,9 +15,9 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.patches import Rectangle
 
+from calib.calibration.result import CalibrationResult
 from calib.report.panels import (Margins, lean_ticks, panel_grid, plain_numbers, settle_labels, title_height,
                                  unit_prefix, wrap_title)
-from calib.result import CalibrationResult
 
 ROTOR_SPEED_VARIATION = 0.01   # relative spread [-] above which the rotor speed "varies"
 MAX_PITCH_LINES = 8            # join model points of equal pitch when there are at most this many pitches

@@ -13,11 +13,11 @@ from typing import Mapping
 
 import numpy as np
 
-from calib.report.atomic import atomic_write_text
+from calib.calibration.result import CalibrationResult, fold_sentence, second_start_sentence
+from calib.calibration.tightening import sentence as tightening_sentence
+from calib.checks.prior_check import PriorCheck
 from calib.parametrizations.correction_field import drag_floor_values
-from calib.prior_check import PriorCheck
-from calib.result import CalibrationResult, fold_sentence, second_start_sentence
-from calib.tightening import sentence as tightening_sentence
+from calib.report.atomic import atomic_write_text
 from calib.words import p_is, p_text
 
 _MIME = {"png": "image/png", "svg": "image/svg+xml"}

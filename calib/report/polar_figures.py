@@ -17,14 +17,13 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
-
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
 
+from calib.calibration.result import CalibrationResult
 from calib.report.panels import Margins, panel_grid, settle_labels, tile_labels, title_height, wrap_title
-from calib.result import CalibrationResult
 
 TruthField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 

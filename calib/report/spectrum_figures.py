@@ -6,8 +6,8 @@ from typing import Mapping
 
 import numpy as np
 
+from calib.calibration.result import CalibrationResult
 from calib.report.panels import lean_log_ticks, settle_labels, single_panel
-from calib.result import CalibrationResult
 
 
 def _fig_ax(ax, size=(6.4, 3.6)):

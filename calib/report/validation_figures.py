@@ -11,8 +11,8 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
+from calib.calibration.result import CalibrationResult
 from calib.report.panels import Margins, lean_ticks, panel_grid, plain_numbers, settle_labels, unit_prefix
-from calib.result import CalibrationResult
 
 STAGE_COLOURS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
 PANEL = (3.4, 2.3)     # one channel's panel [in]
@@ -58,7 +58,7 @@ def plot_campaign(channels, measured: np.ndarray, wind: np.ndarray, nominal: np.
     effect_label : str
     stages : mapping stage name -> (values, half_width), each (n_points, n_channels)
         Calibrated predictions with the half-width of their 95 % interval.
-    validations : mapping stage name -> calib.validation.Validation, optional
+    validations : mapping stage name -> calib.workflow.validation.Validation, optional
         Leave-one-out predictions drawn as error bars (prediction intervals).
     units : mapping channel -> unit
 

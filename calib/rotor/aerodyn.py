@@ -1,6 +1,6 @@
 """Readers for OpenFAST AeroDyn v15 input files, and a rotor from them.
 
-Each file kind has its own module; every public name is importable from here too:
+Each file kind has its own module:
 
 - :func:`~calib.rotor.aerodyn_blade.read_aerodyn_blade`: blade definition file
   (:mod:`calib.rotor.aerodyn_blade`);
@@ -27,11 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from calib.errors import InputError
-from calib.rotor.aerodyn_blade import BLADE_COLUMNS, read_aerodyn_blade  # noqa: F401 (re-exported)
-from calib.rotor.aerodyn_main import AeroDynMain, read_aerodyn_afnames, read_aerodyn_main  # noqa: F401 (re-exported)
-from calib.rotor.aerodyn_polar import POLAR_COLUMNS, read_aerodyn_polar  # noqa: F401 (re-exported)
+from calib.rotor.aerodyn_blade import read_aerodyn_blade
+from calib.rotor.aerodyn_polar import read_aerodyn_polar
 from calib.rotor.geometry import OperatingSchedule, Rotor
-from calib.rotor.input_file import InputFileValues, KeyedValue, resolve_input_file  # noqa: F401 (re-exported)
 from calib.rotor.polar import Airfoil
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from calib.errors import InputError
-from calib.rotor.input_file import _check_increasing, _count, _find_keyword, _read_lines, _read_rows, _tokens
+from calib.rotor.input_file import check_increasing, read_count, find_keyword, read_lines, read_rows, tokens_of
 
 BLADE_COLUMNS = ("BlSpn", "BlCrvAC", "BlSwpAC", "BlCrvAng", "BlTwist", "BlChord", "BlAFID")
 _BLADE_KEYS = {"BlSpn": "span", "BlCrvAC": "curve_ac", "BlSwpAC": "sweep_ac", "BlCrvAng": "curve_angle",
@@ -48,24 +48,24 @@ def read_aerodyn_blade(path) -> dict:
         Missing ``NumBlNds`` or column, fewer rows than ``NumBlNds``, non-numeric values,
         BlSpn negative or not increasing, BlChord <= 0, BlAFID not a positive integer.
     """
-    lines, src = _read_lines(path)
-    i_n = _find_keyword(lines, "NumBlNds", 0)
-    i_head = next((i for i, ln in enumerate(lines) if "BlSpn" in _tokens(ln)), None)
+    lines, src = read_lines(path)
+    i_n = find_keyword(lines, "NumBlNds", 0)
+    i_head = next((i for i, ln in enumerate(lines) if "BlSpn" in tokens_of(ln)), None)
     if i_n is None or (i_head is not None and i_head < i_n):
         where = i_head + 1 if i_head is not None else len(lines)
         raise InputError("keyword NumBlNds (number of blade nodes) not found before the node table",
                          src, where, "NumBlNds")
-    n_nodes = _count(_tokens(lines[i_n])[0], src, i_n + 1, "NumBlNds", minimum=2)
-    i_head = next((i for i in range(i_n + 1, len(lines)) if "BlSpn" in _tokens(lines[i])), None)
+    n_nodes = read_count(tokens_of(lines[i_n])[0], src, i_n + 1, "NumBlNds", minimum=2)
+    i_head = next((i for i in range(i_n + 1, len(lines)) if "BlSpn" in tokens_of(lines[i])), None)
     if i_head is None:
         raise InputError("column header line (BlSpn BlCrvAC ...) not found after NumBlNds",
                          src, i_n + 1, "BlSpn")
-    header = _tokens(lines[i_head])
+    header = tokens_of(lines[i_head])
     missing = [c for c in BLADE_COLUMNS if c not in header]
     if missing:
         raise InputError(f"column {missing[0]} missing from the header {header}", src, i_head + 1, missing[0])
     # the units line follows the header; rows start after it
-    values, row_lines, _ = _read_rows(lines, i_head + 2, n_nodes, tuple(header), len(header), src,
+    values, row_lines, _ = read_rows(lines, i_head + 2, n_nodes, tuple(header), len(header), src,
                                       "NumBlNds", i_n + 1)
     out = {_BLADE_KEYS[c]: values[:, header.index(c)] for c in BLADE_COLUMNS}
     ids = out["af_id"]
@@ -80,7 +80,7 @@ def read_aerodyn_blade(path) -> dict:
     if out["span"][0] < 0:
         raise InputError(f"BlSpn is measured from the blade root and must be >= 0, got "
                          f"{out['span'][0]:g} m", src, int(row_lines[0]), "BlSpn")
-    _check_increasing(out["span"], row_lines, src, "BlSpn", "BlSpn")
+    check_increasing(out["span"], row_lines, src, "BlSpn", "BlSpn")
     out["af_id"] = ids.astype(int)
     out["line"] = row_lines
     out["source"] = src

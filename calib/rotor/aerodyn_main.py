@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from calib.errors import InputError
-from calib.rotor.input_file import (_TOKEN, InputFileValues, _count, _find_keyword, _is_comment, _read_lines,
-                                    _tokens, resolve_input_file)
+from calib.rotor.input_file import (TOKEN, InputFileValues, read_count, find_keyword, is_comment, read_lines,
+                                    tokens_of, resolve_input_file)
 
 
 def read_aerodyn_afnames(path) -> list[str]:
@@ -39,12 +39,12 @@ def read_aerodyn_afnames(path) -> list[str]:
         ``NumAFfiles`` airfoil file names as written (quotes removed, relative paths
         not resolved). ``BlAFID = k`` in the blade file refers to name ``k - 1``.
     """
-    lines, src = _read_lines(path)
-    i_n = _find_keyword(lines, "NumAFfiles", 0)
+    lines, src = read_lines(path)
+    i_n = find_keyword(lines, "NumAFfiles", 0)
     if i_n is None:
         raise InputError("keyword NumAFfiles not found", src, len(lines), "NumAFfiles")
-    n_files = _count(_tokens(lines[i_n])[0], src, i_n + 1, "NumAFfiles")
-    i_names = _find_keyword(lines, "AFNames", i_n + 1)
+    n_files = read_count(tokens_of(lines[i_n])[0], src, i_n + 1, "NumAFfiles")
+    i_names = find_keyword(lines, "AFNames", i_n + 1)
     if i_names is None:
         raise InputError("keyword AFNames not found after NumAFfiles", src, i_n + 1, "AFNames")
     names = []
@@ -52,9 +52,9 @@ def read_aerodyn_afnames(path) -> list[str]:
     while len(names) < n_files and i < len(lines):
         line = lines[i]
         i += 1
-        if _is_comment(line):
+        if is_comment(line):
             continue
-        m = _TOKEN.match(line.strip())
+        m = TOKEN.match(line.strip())
         quoted, bare = m.group(1), m.group(2)
         if quoted is None and (bare.startswith("=") or bare.startswith("-") or "." not in bare):
             break
@@ -117,11 +117,11 @@ class AeroDynMain:
 def _afnames_with_lines(values: InputFileValues) -> list[tuple[str, int]]:
     """``AFNames`` entries with their 1-based lines (the list runs over NumAFfiles lines)."""
     names = read_aerodyn_afnames(values.path)
-    lines, _ = _read_lines(values.path)
+    lines, _ = read_lines(values.path)
     start = values.require("AFNames", "quoted file name").line - 1
     out, i = [], start
     while len(out) < len(names) and i < len(lines):
-        if not _is_comment(lines[i]):
+        if not is_comment(lines[i]):
             out.append((names[len(out)], i + 1))
         i += 1
     return out

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from calib.errors import InputError
-from calib.rotor.input_file import (_check_increasing, _count, _find_keyword, _is_comment, _is_number, _number,
-                                    _read_lines, _read_rows, _tokens)
+from calib.rotor.input_file import (check_increasing, read_count, find_keyword, is_comment, is_number, read_number,
+                                    read_lines, read_rows, tokens_of)
 from calib.rotor.polar import MIN_POLAR_POINTS, Airfoil, PolarTable
 from calib.rotor.viterna import densify_full_circle
 
@@ -50,32 +50,32 @@ def read_aerodyn_polar(path, name: str | None = None) -> Airfoil:
         Missing or wrong ``NumTabs``/``NumAlf``, fewer rows than ``NumAlf``, non-numeric
         values, alpha not strictly increasing, fewer than 4 rows.
     """
-    lines, src = _read_lines(path)
+    lines, src = read_lines(path)
     name = Path(path).stem if name is None else name
-    i_tabs = _find_keyword(lines, "NumTabs", 0)
+    i_tabs = find_keyword(lines, "NumTabs", 0)
     if i_tabs is None:
         raise InputError("keyword NumTabs (number of airfoil tables) not found", src, len(lines), "NumTabs")
-    n_tabs = _count(_tokens(lines[i_tabs])[0], src, i_tabs + 1, "NumTabs")
-    n_alf_lines = sum(1 for ln in lines[i_tabs:] if not _is_comment(ln)
-                      and len(_tokens(ln)) >= 2 and _tokens(ln)[1].lower() == "numalf")
+    n_tabs = read_count(tokens_of(lines[i_tabs])[0], src, i_tabs + 1, "NumTabs")
+    n_alf_lines = sum(1 for ln in lines[i_tabs:] if not is_comment(ln)
+                      and len(tokens_of(ln)) >= 2 and tokens_of(ln)[1].lower() == "numalf")
     if n_alf_lines != n_tabs:
         raise InputError(f"NumTabs = {n_tabs} but the file has {n_alf_lines} tables (NumAlf lines)",
                          src, i_tabs + 1, "NumTabs")
     tables = []
     pos = i_tabs + 1
     for k in range(n_tabs):
-        i_re = _find_keyword(lines, "Re", pos, stop_keys=("NumAlf",))
+        i_re = find_keyword(lines, "Re", pos, stop_keys=("NumAlf",))
         if i_re is None:
             raise InputError(f"table {k + 1}: no Re line before its NumAlf line", src, pos + 1, "Re")
-        reynolds = _number(_tokens(lines[i_re])[0], src, i_re + 1, "Re") * 1e6
+        reynolds = read_number(tokens_of(lines[i_re])[0], src, i_re + 1, "Re") * 1e6
         if not (np.isfinite(reynolds) and reynolds > 0):
-            raise InputError(f"expected a positive Reynolds number in millions, got {_tokens(lines[i_re])[0]!r}",
+            raise InputError(f"expected a positive Reynolds number in millions, got {tokens_of(lines[i_re])[0]!r}",
                              src, i_re + 1, "Re")
-        i_alf = _find_keyword(lines, "NumAlf", i_re + 1, stop_keys=("Re",))
+        i_alf = find_keyword(lines, "NumAlf", i_re + 1, stop_keys=("Re",))
         if i_alf is None:
             raise InputError(f"table {k + 1}: no NumAlf line after Re", src, i_re + 1, "NumAlf")
-        n_alf = _count(_tokens(lines[i_alf])[0], src, i_alf + 1, "NumAlf")
-        values, row_lines, pos = _read_rows(lines, i_alf + 1, n_alf, POLAR_COLUMNS, 3, src, "NumAlf",
+        n_alf = read_count(tokens_of(lines[i_alf])[0], src, i_alf + 1, "NumAlf")
+        values, row_lines, pos = read_rows(lines, i_alf + 1, n_alf, POLAR_COLUMNS, 3, src, "NumAlf",
                                             i_alf + 1, end_keywords=_TABLE_KEYWORDS)
         _check_no_extra_rows(lines, pos, src, n_alf, i_alf + 1)
         tables.append(_polar_table(values, row_lines, reynolds, src, i_alf + 1))
@@ -85,10 +85,10 @@ def read_aerodyn_polar(path, name: str | None = None) -> Airfoil:
 def _check_no_extra_rows(lines, pos, src, n_alf, count_line):
     """A numeric row right after the table means NumAlf is too small."""
     for i in range(pos, len(lines)):
-        if _is_comment(lines[i]):
+        if is_comment(lines[i]):
             continue
-        tok = _tokens(lines[i])
-        if len(tok) >= 3 and all(_is_number(t) for t in tok[:3]):
+        tok = tokens_of(lines[i])
+        if len(tok) >= 3 and all(is_number(t) for t in tok[:3]):
             raise InputError(f"NumAlf = {n_alf} but another data row follows at line {i + 1}",
                              src, count_line, "NumAlf")
         return
@@ -97,7 +97,7 @@ def _check_no_extra_rows(lines, pos, src, n_alf, count_line):
 def _polar_table(values, row_lines, reynolds, src, count_line) -> PolarTable:
     alpha, cl, cd = values[:, 0], values[:, 1], values[:, 2]
     cm = values[:, 3] if not np.any(np.isnan(values[:, 3])) else None
-    _check_increasing(alpha, row_lines, src, "Alpha", "Alpha")
+    check_increasing(alpha, row_lines, src, "Alpha", "Alpha")
     alpha, cl, cd, cm = densify_full_circle(alpha, cl, cd, cm)
     if alpha.size < MIN_POLAR_POINTS:
         raise InputError(f"a polar table needs at least {MIN_POLAR_POINTS} rows, this one has {alpha.size}",

@@ -22,12 +22,12 @@ import numpy as np
 
 from calib.errors import InputError
 
-_TOKEN = re.compile(r'"([^"]*)"|(\S+)')
+TOKEN = re.compile(r'"([^"]*)"|(\S+)')
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
 
 
 # ---------------------------------------------------------------- low-level helpers
-def _read_lines(path) -> tuple[list[str], str]:
+def read_lines(path) -> tuple[list[str], str]:
     path = Path(path)
     src = str(path)
     try:
@@ -44,17 +44,17 @@ def _read_lines(path) -> tuple[list[str], str]:
     return lines, src
 
 
-def _is_comment(line: str) -> bool:
+def is_comment(line: str) -> bool:
     s = line.strip()
     return not s or s.startswith("!") or s.startswith("#")
 
 
-def _tokens(line: str) -> list[str]:
+def tokens_of(line: str) -> list[str]:
     """Whitespace tokens before an inline ``!`` comment."""
     return line.split("!", 1)[0].split()
 
 
-def _find_keyword(lines, key: str, start: int, stop_keys=()) -> int | None:
+def find_keyword(lines, key: str, start: int, stop_keys=()) -> int | None:
     """Index of the first line (>= start) whose second token is ``key``.
 
     The search stops (returns None) at a line whose second token is in ``stop_keys``.
@@ -62,9 +62,9 @@ def _find_keyword(lines, key: str, start: int, stop_keys=()) -> int | None:
     key = key.lower()
     stops = {k.lower() for k in stop_keys}
     for i in range(start, len(lines)):
-        if _is_comment(lines[i]):
+        if is_comment(lines[i]):
             continue
-        tok = _tokens(lines[i])
+        tok = tokens_of(lines[i])
         if len(tok) >= 2:
             word = tok[1].lower()
             if word == key:
@@ -74,7 +74,7 @@ def _find_keyword(lines, key: str, start: int, stop_keys=()) -> int | None:
     return None
 
 
-def _number(text: str, src: str, line: int, field: str) -> float:
+def read_number(text: str, src: str, line: int, field: str) -> float:
     try:
         value = float(text)
     except ValueError:
@@ -84,7 +84,7 @@ def _number(text: str, src: str, line: int, field: str) -> float:
     return value
 
 
-def _count(text: str, src: str, line: int, field: str, minimum: int = 1) -> int:
+def read_count(text: str, src: str, line: int, field: str, minimum: int = 1) -> int:
     try:
         value = int(text)
     except ValueError:
@@ -94,7 +94,7 @@ def _count(text: str, src: str, line: int, field: str, minimum: int = 1) -> int:
     return value
 
 
-def _is_number(text: str) -> bool:
+def is_number(text: str) -> bool:
     try:
         float(text)
     except ValueError:
@@ -102,7 +102,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _read_rows(lines, start: int, n_rows: int, names, n_required: int, src: str,
+def read_rows(lines, start: int, n_rows: int, names, n_required: int, src: str,
                count_field: str, count_line: int, end_keywords=frozenset()):
     """Read ``n_rows`` numeric rows from ``lines[start:]``, skipping comment lines.
 
@@ -114,16 +114,16 @@ def _read_rows(lines, start: int, n_rows: int, names, n_required: int, src: str,
     while len(rows) < n_rows and i < len(lines):
         line = lines[i]
         i += 1
-        if _is_comment(line):
+        if is_comment(line):
             continue
-        tok = _tokens(line)
-        if len(tok) >= 2 and tok[1].lower() in end_keywords and not _is_number(tok[1]):
+        tok = tokens_of(line)
+        if len(tok) >= 2 and tok[1].lower() in end_keywords and not is_number(tok[1]):
             i -= 1
             break
         if len(tok) < n_required:
             raise InputError(f"expected {n_required} columns ({', '.join(names[:n_required])}), "
                              f"found {len(tok)}", src, i, names[len(tok)])
-        vals = [_number(t, src, i, names[k]) for k, t in enumerate(tok[:len(names)])]
+        vals = [read_number(t, src, i, names[k]) for k, t in enumerate(tok[:len(names)])]
         vals += [np.nan] * (len(names) - len(vals))
         rows.append(vals)
         row_lines.append(i)
@@ -133,7 +133,7 @@ def _read_rows(lines, start: int, n_rows: int, names, n_required: int, src: str,
     return np.array(rows, dtype=float).reshape(n_rows, len(names)), np.array(row_lines), i
 
 
-def _check_increasing(values, row_lines, src, field, what):
+def check_increasing(values, row_lines, src, field, what):
     bad = np.flatnonzero(np.diff(values) <= 0)
     if bad.size:
         k = bad[0] + 1
@@ -180,13 +180,13 @@ class InputFileValues:
 
     def __init__(self, path):
         self.path = Path(path)
-        lines, self.source = _read_lines(path)
+        lines, self.source = read_lines(path)
         self.n_lines = len(lines)
         self._values: dict[str, KeyedValue] = {}
         for i, line in enumerate(lines):
-            if _is_comment(line):
+            if is_comment(line):
                 continue
-            tokens = list(_TOKEN.finditer(line))
+            tokens = list(TOKEN.finditer(line))
             if len(tokens) < 2 or tokens[1].group(1) is not None:
                 continue
             first = tokens[0]

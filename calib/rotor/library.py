@@ -33,7 +33,8 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from calib.errors import InputError
-from calib.rotor.aerodyn import read_aerodyn_afnames, rotor_from_aerodyn
+from calib.rotor.aerodyn import rotor_from_aerodyn
+from calib.rotor.aerodyn_main import read_aerodyn_afnames
 from calib.rotor.geometry import OperatingSchedule, Rotor
 from calib.rotor.polar import Airfoil, PolarTable
 from calib.rotor.viterna import extrapolate_viterna

@@ -57,8 +57,9 @@ from pathlib import Path
 import numpy as np
 
 from calib.errors import InputError
-from calib.rotor.aerodyn import AeroDynMain, InputFileValues, read_aerodyn_blade, read_aerodyn_main, \
-    rotor_from_aerodyn
+from calib.rotor.aerodyn import read_aerodyn_blade, rotor_from_aerodyn
+from calib.rotor.aerodyn_main import AeroDynMain, read_aerodyn_main
+from calib.rotor.input_file import InputFileValues
 from calib.rotor.geometry import Rotor
 
 # InflowWind WindType values (InflowWind input file)

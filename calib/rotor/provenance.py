@@ -110,7 +110,7 @@ def _changed(path, recorded: str, now: str, source: str, key: str) -> InputError
                       "now); restore the file the run read, or run the calibration again", source, None, key)
 
 
-def _records_by_path(provenance: dict | None) -> dict[str, dict]:
+def records_by_path(provenance: dict | None) -> dict[str, dict]:
     """The recorded files of ``provenance`` (:func:`recorded_rotor_files`) by their absolute path.
 
     Parameters
@@ -130,7 +130,7 @@ def _records_by_path(provenance: dict | None) -> dict[str, dict]:
     return records
 
 
-def _located_table(table: dict, records: dict[str, dict], rdir: Path | None, source: str) -> tuple[dict, bool]:
+def located_table(table: dict, records: dict[str, dict], rdir: Path | None, source: str) -> tuple[dict, bool]:
     """The recorded ``[rotor]`` table with each file it names found, and checked against its digest.
 
     Each file is looked for at its recorded absolute path, then in ``rdir`` under its recorded
@@ -141,7 +141,7 @@ def _located_table(table: dict, records: dict[str, dict], rdir: Path | None, sou
     table : dict
         The recorded ``[rotor]`` table (absolute paths).
     records : dict
-        The recorded files by path (:func:`_records_by_path`).
+        The recorded files by path (:func:`records_by_path`).
     rdir : Path or None
         The result's folder, resolved.
     source : str
@@ -191,7 +191,7 @@ def _located_table(table: dict, records: dict[str, dict], rdir: Path | None, sou
     return new, relocated
 
 
-def _check_followed_files(records: dict[str, dict], source: str) -> None:
+def check_followed_files(records: dict[str, dict], source: str) -> None:
     """Refuse a recorded file that is still at its recorded path but changed since the run.
 
     These include the files the readers follow (an OpenFAST deck's AeroDyn, blade and airfoil
@@ -200,7 +200,7 @@ def _check_followed_files(records: dict[str, dict], source: str) -> None:
     Parameters
     ----------
     records : dict
-        The recorded files by path (:func:`_records_by_path`).
+        The recorded files by path (:func:`records_by_path`).
     source : str
         Named in errors (the result file).
 
@@ -217,7 +217,7 @@ def _check_followed_files(records: dict[str, dict], source: str) -> None:
                 raise _changed(path, rec["sha256"], now, source, "rotor")
 
 
-def _check_files_read(provenance: dict, files: tuple[Path, ...], source: str) -> None:
+def check_files_read(provenance: dict, files: tuple[Path, ...], source: str) -> None:
     """Refuse a rebuilt rotor whose files read differ, in number or digest, from those of the run.
 
     Parameters

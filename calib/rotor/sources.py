@@ -26,9 +26,9 @@ Relative paths are relative to ``base_dir`` (the folder of the workflow file). E
 is an :class:`~calib.errors.InputError` naming the workflow file and the key
 (``rotor.hub_radius``), or the rotor file, its line and its keyword.
 
-Provenance (:mod:`calib.rotor.provenance`, whose public names are importable from here too):
+Provenance (:mod:`calib.rotor.provenance`):
 every file a table's rotor was read from is remembered with its SHA-256 (taken when read) and
-its path relative to the workflow's folder (:func:`recorded_rotor_files`, which a model's
+its path relative to the workflow's folder (:func:`~calib.rotor.provenance.recorded_rotor_files`, which a model's
 ``spec()`` records in a result). A result written without its rotor data rebuilds the rotor
 from those files (:func:`rotor_from_recorded_files`), refusing any that is missing or changed
 since the run.
@@ -43,12 +43,12 @@ from pathlib import Path
 import numpy as np
 
 from calib.errors import InputError, unknown_key
-from calib.rotor.aerodyn import read_aerodyn_main, rotor_from_aerodyn
+from calib.rotor.aerodyn import rotor_from_aerodyn
+from calib.rotor.aerodyn_main import read_aerodyn_main
 from calib.rotor.geometry import Rotor
 from calib.rotor.library import ROTORS, load_rotor
 from calib.rotor.openfast import read_openfast
-from calib.rotor.provenance import FILE_KEYS, absolute_table, file_provenance, recorded_rotor_files  # noqa: F401 (re-exported)
-from calib.rotor.provenance import _check_files_read, _check_followed_files, _located_table, _records_by_path
+from calib.rotor.provenance import check_files_read, check_followed_files, located_table, records_by_path
 from calib.rotor.windio import load_windio, read_windio
 
 SOURCE_KEYS = ("name", "openfast", "aerodyn", "aerodyn_blade", "windio")
@@ -364,15 +364,15 @@ def rotor_from_recorded_files(table: dict, provenance: dict | None, result_dir, 
         Naming the file: missing (with the places looked at) or changed since the run (both
         digests shortened); or any error of :func:`rotor_from_table`.
     """
-    records = _records_by_path(provenance)
+    records = records_by_path(provenance)
     rdir = None if result_dir is None else Path(result_dir).resolve()
     if not isinstance(table, dict):
         raise InputError(f"expected the recorded [rotor] table, got {table!r}", source, None, "rotor")
-    new, relocated = _located_table(table, records, rdir, source)
+    new, relocated = located_table(table, records, rdir, source)
     if provenance and provenance.get("all_files_read") and not relocated:
         # the files the readers follow, checked before reading where they were
-        _check_followed_files(records, source)
+        check_followed_files(records, source)
     out = rotor_from_table(new, source, None)
     if provenance and provenance.get("all_files_read"):
-        _check_files_read(provenance, out.files, source)
+        check_files_read(provenance, out.files, source)
     return out

@@ -12,16 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.calibration import Calibrator
+from calib.calibration.calibrator import Calibrator
+from calib.checks.unit_check import apply_unit_check
 from calib.errors import CalibError, InputError
-from calib.measurements import Measurements, sha256_of, synthesize
-from calib.types import nominal_vector
-from calib.models.bem_model import BemModel
-from calib.setup_statement import statement, statement_html, statement_lines
-from calib.unit_check import apply_unit_check
 from calib.logs import add_output_arguments, say
-from calib.workflow.schema import SCHEMA, load_workflow
-from calib.workflow.setup import StageOutcome, synthetic_conditions, measurements_of, prepare, run_inputs
+from calib.measurements import sha256_of, synthesize
+from calib.models.bem_model import BemModel
+from calib.report.setup_statement import statement, statement_html, statement_lines
+from calib.types import nominal_vector
+from calib.workflow.schema import load_workflow
+from calib.workflow.setup import StageOutcome, measurements_of, prepare, run_inputs, synthetic_conditions
 from calib.workflow.truth import smooth_field, truth_checks, truth_model
 
 log = logging.getLogger("calib.workflow")
@@ -41,7 +41,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     progress : bool
         Print progress lines (logged under ``calib.workflow`` either way).
     force : bool
-        Calibrate even when the unit check (:func:`calib.unit_check.apply_unit_check`) finds
+        Calibrate even when the unit check (:func:`calib.checks.unit_check.apply_unit_check`) finds
         a unit factor that explains the data (also ``[calibration] force = true``); the report
         says so.
     strict_units : bool
@@ -70,8 +70,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         say(log, f"[calib run] set-up: {note}", progress)
     hist = None
     if history or resume:
-        from calib.history import open_history
-        from calib.history import content_digest
+        from calib.history import content_digest, open_history
         inputs = {**run_inputs(cfg), "rotor (geometry and polars)": content_digest(setup.rotor)
                   if setup.rotor is not None else None}
         hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "noise": noise,
@@ -112,8 +111,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
     if run.truth_p is not None:
         intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
                  "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
-    from calib import validation
-
+    from calib.workflow import validation
     sections = [statement_html(run.set_up)] + ([validation.section_html(run.diag, run.validations)]
                                               if (run.diag or run.validations) else [])
     report = write_report(out / "report.html", title=f"calib: {cfg['name']}", sections=sections,
@@ -138,8 +136,8 @@ class _Run:
     def measurements(self, progress, force, strict) -> None:
         """The measured table (with the set-up's density and yaw, checked against the model's units) or the
         synthetic one of ``[truth]``; the correction grid; the set-up in force."""
-        from calib.history import recorded
         from calib.logs import progress_line
+        from calib.models.recorded_model import recorded
 
         cfg, setup, echo, src = self.cfg, self.setup, self.echo, self.src
         all_channels = setup.channels
@@ -214,11 +212,11 @@ class _Run:
 
     def stage(self, k: int, stage: dict) -> StageOutcome:
         """One stage: calibrate, validate, write its result and figures, say what it found."""
-        from calib import validation
         from calib.diagnosis import in_workflow
-        from calib.history import recorded
         from calib.logs import progress_line
+        from calib.models.recorded_model import recorded
         from calib.report.figures import write_figures
+        from calib.workflow import validation
 
         cfg, setup, echo, src, grid, meas = self.cfg, self.setup, self.echo, self.src, self.grid, self.meas
         name = stage["name"]
@@ -272,8 +270,9 @@ class _Run:
     def study_figures(self, outcomes) -> dict:
         """The figures across stages: the singular-value spectra, and with measured data and a diagnosis or a
         validation the loads against wind speed and the informed eigenshapes."""
-        from calib import validation
-        from calib.report.figures import plot_spectra, save_figure
+        from calib.report.figures import save_figure
+        from calib.report.spectrum_figures import plot_spectra
+        from calib.workflow import validation
 
         cfg, out, extra = self.cfg, self.out, {}
         if len(outcomes) > 1:
@@ -322,7 +321,7 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed run whose output "
                         "folder is DIR: model calls on record in DIR/history are read back, not computed again; "
                         "refused if the workflow, the measurement file or the rotor's data changed")
-    from calib.calibration_settings import NOISE_MODES
+    from calib.calibration.settings import NOISE_MODES
     parser.add_argument("--noise", choices=NOISE_MODES, default=None, help="the noise model, replacing the "
                         "workflow's [calibration] noise ('ml': one σ per channel estimated from the fit, for a table "
                         "without _sigma columns)")
@@ -373,4 +372,4 @@ def main(argv=None) -> int:
         return 2
 
 
-__all__ = ["Measurements", "SCHEMA", "load_workflow", "main", "run_workflow", "smooth_field", "truth_model"]
+__all__ = ["main", "run_workflow"]

@@ -6,15 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.calibration import CalibrationSettings
+from calib.calibration.calibrator import CalibrationSettings
 from calib.config import AUTO_OR_NUM, NUM, check_table, schema_of
 from calib.errors import InputError
 from calib.models.from_config import BEM_KEYS
 from calib.tomlfile import read_toml
-
-
-
-
 
 #: [model] keys of the native BEM (:data:`calib.models.from_config.BEM_KEYS`).
 MODEL_KEYS = BEM_KEYS
@@ -57,7 +53,7 @@ def check_section(table: dict, section: str, source: str) -> None:
     check_table(table, SCHEMA[section], section, source)
 
 
-def _numbers(value, key: str, source: str) -> np.ndarray:
+def number_array(value, key: str, source: str) -> np.ndarray:
     """An array of numbers, or ``{start, stop, num}`` written as [start, stop, "num"]-free lists only."""
     if (not isinstance(value, (list, tuple)) or not value
             or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
@@ -96,13 +92,13 @@ def load_workflow(path: str | Path) -> dict:
             if key in bump and not bump[key] > 0:
                 raise InputError(f"must be > 0, got {bump[key]!r}", src, field=f"truth.bumps[{k}].{key}")
         if "eta_range" in bump:
-            lo_hi = _numbers(bump["eta_range"], f"truth.bumps[{k}].eta_range", src)
+            lo_hi = number_array(bump["eta_range"], f"truth.bumps[{k}].eta_range", src)
             if lo_hi.size != 2 or not lo_hi[0] < lo_hi[1]:
                 raise InputError(f"must be [lo, hi] with lo < hi (r/R), got {bump['eta_range']!r}", src,
                                  field=f"truth.bumps[{k}].eta_range")
     if "conditions" in data:  # the synthetic operating points: checked here, before any set-up
         for key in ("tsr", "pitch"):
-            _numbers(data["conditions"][key], f"conditions.{key}", src)
+            number_array(data["conditions"][key], f"conditions.{key}", src)
     for channel, fraction in data.get("noise", {}).get("relative", {}).items():
         if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not fraction >= 0:
             raise InputError(f"must be a noise fraction >= 0 of the channel's RMS, got {fraction!r}", src,

@@ -11,19 +11,20 @@ from pathlib import Path
 import numpy as np
 
 from calib.bem import BemSettings
-from calib.calibration import CalibrationSettings
+from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
+from calib.calibration.calibrator import CalibrationSettings
 from calib.config import field_values, settings_from_table
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
+from calib.logs import say
 from calib.measurements import Measurements, read_measurements, sha256_of
-from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY
-from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
 from calib.models.bem_model import BemModel
 from calib.models.from_config import angle_overrides
 from calib.models.registry import MODEL_KINDS
-from calib.rotor.sources import absolute_table, file_provenance, rotor_from_table
-from calib.logs import say
-from calib.workflow.schema import CALIBRATION_KEYS, _numbers
+from calib.rotor.provenance import absolute_table, file_provenance
+from calib.rotor.sources import rotor_from_table
+from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
+from calib.workflow.schema import CALIBRATION_KEYS, number_array
 
 log = logging.getLogger("calib.workflow")
 
@@ -41,8 +42,8 @@ def synthetic_conditions(cfg: dict, rotor, src: str, density: float = STANDARD_A
                          yaw: float = 0.0) -> OperatingConditions:
     """The operating points of ``[conditions]``: the product of its tip-speed ratios and pitch angles at its
     rotor speed, with the fluid's density and the yaw misalignment."""
-    tsr = _numbers(cfg["tsr"], "conditions.tsr", src)
-    pitch = _numbers(cfg["pitch"], "conditions.pitch", src)
+    tsr = number_array(cfg["tsr"], "conditions.tsr", src)
+    pitch = number_array(cfg["pitch"], "conditions.pitch", src)
     if np.any(tsr <= 0):
         raise InputError("tip-speed ratios must be > 0", src, field="conditions.tsr")
     T, P = np.meshgrid(tsr, pitch, indexing="ij")
@@ -87,7 +88,7 @@ class WorkflowSetup:
     base_dir: str = "."
     yaw: float = 0.0
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
-    validation: object = None             # calib.validation.ValidationSettings of [validation]
+    validation: object = None             # calib.workflow.validation.ValidationSettings of [validation]
     strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
     rotor_files: dict | None = None       # provenance of the rotor files read (calib.rotor.sources.file_provenance)
     origins: dict = dataclasses.field(default_factory=dict)   # set-up key -> where its value came from
@@ -142,7 +143,7 @@ class WorkflowSetup:
                 raise InputError(f"must be two percentiles 0 <= lo < hi <= 100, got {g['alpha_percentiles']!r}",
                                  src, field="grid.alpha_percentiles")
             ev = BemModel(self.rotor, None, ("power",), self.settings, ()).evaluate(np.zeros(0), conditions)
-            eta_nodes = _numbers(g["eta_nodes"], "grid.eta_nodes", src)
+            eta_nodes = number_array(g["eta_nodes"], "grid.eta_nodes", src)
             # only stations inside the η node range (outside it the field ramps to zero)
             reach = eta_nodes[0]
             a = np.asarray(ev.extras["alpha_deg"], float)[ev.ok][:, np.asarray(ev.extras["eta"]) >= reach]
@@ -156,8 +157,8 @@ class WorkflowSetup:
                               f"model's angles of attack): {', '.join(f'{x:g}' for x in alpha)} deg")
             say(log, f"{prefix} set-up: {self.notes[-1]}", progress)
         else:
-            alpha = _numbers(alpha, "grid.alpha_nodes_deg", src)
-        eta = _numbers(g["eta_nodes"], "grid.eta_nodes", src)
+            alpha = number_array(alpha, "grid.alpha_nodes_deg", src)
+        eta = number_array(g["eta_nodes"], "grid.eta_nodes", src)
         if np.any((eta <= 0) | (eta > 1)):
             raise InputError(f"eta nodes must lie in (0, 1] (r/R), got {g['eta_nodes']!r}", src,
                              field="grid.eta_nodes")
@@ -303,7 +304,7 @@ def _check_grid(setup: WorkflowSetup, cfg: dict) -> None:
 def _add_diagnosis_and_validation(setup: WorkflowSetup, cfg: dict) -> None:
     """The settings of ``[diagnosis]`` (native BEM with measured data only) and ``[validation]``."""
     from calib.diagnosis.in_workflow import diagnosis_settings
-    from calib.validation import ValidationSettings
+    from calib.workflow.validation import ValidationSettings
     src = setup.source
     if "diagnosis" in cfg:
         if setup.fmu_table is not None:

@@ -1,6 +1,6 @@
 """Identifiability: Fisher matrix, Cramér–Rao bound, whitened SVD, eigenshapes, verdicts (the
 retained directions that a point near a fold of the BEM equations determines are found by
-:mod:`calib.fold_directions`).
+:mod:`calib.calibration.fold_directions`).
 
 Notes
 -----
@@ -32,9 +32,6 @@ import numpy as np
 from scipy import stats
 
 from calib.errors import InputError
-from calib.fold_directions import FOLD_SHARE, fold_dominated_directions  # noqa: F401  (importable from here)
-from calib.parametrizations.correction_field import (NodeLayout, eigenshapes, field_basis,  # noqa: F401
-                                                     node_layout)
 from calib.types import Parameter, ParameterKind
 
 VERDICTS = ("identified", "poorly observable", "at bound", "confounded")

@@ -1,7 +1,7 @@
 """A calibrated model's outputs at new conditions, with intervals: :class:`Prediction`.
 
-:func:`predict_outputs` is what :meth:`calib.result.CalibrationResult.predict` runs; the
-command ``calib predict`` (:mod:`calib.predict`) writes its table.
+:func:`predict_outputs` is what :meth:`calib.calibration.result.CalibrationResult.predict` runs; the
+command ``calib predict`` (:mod:`calib.calibration.predict_command`) writes its table.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.envelope import envelope_of
+from calib.checks.envelope import envelope_of
 from calib.errors import InputError
 
 
@@ -29,7 +29,7 @@ class Prediction:
     confidence : float
     envelope : tuple of str
         Per point, "" inside the calibration envelope, else what lies outside it
-        (:func:`calib.envelope.envelope_of`): an extrapolation.
+        (:func:`calib.checks.envelope.envelope_of`): an extrapolation.
     representation : str
         Whether the intervals include the correction field between and beyond the nodes
         (:func:`field_between_nodes`).
@@ -48,8 +48,8 @@ class Prediction:
     representation: str = ""
 
     def to_dataframe(self, conditions):
-        """One row per point with its ``conditions`` (:func:`calib.frames.prediction_frame`)."""
-        from calib.frames import prediction_frame
+        """One row per point with its ``conditions`` (:func:`calib.calibration.frames.prediction_frame`)."""
+        from calib.calibration.frames import prediction_frame
         return prediction_frame(conditions, self)
 
     @property
@@ -71,7 +71,7 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     result : CalibrationResult
     conditions : OperatingConditions
     model : ForwardModel
-        The calibrated model (:meth:`calib.result.CalibrationResult.rebuild_model`).
+        The calibrated model (:meth:`calib.calibration.result.CalibrationResult.rebuild_model`).
     confidence : float
         Two-sided confidence of the intervals [-].
 

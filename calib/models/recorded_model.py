@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from calib.calibration.result_io import jsonable as result_jsonable
 from calib.errors import InputError
-from calib.result_io import jsonable as result_jsonable
 from calib.types import CONDITION_FIELDS, Evaluation, OperatingConditions
 
 if TYPE_CHECKING:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calib.prior_check import psd_sqrt
+from calib.checks.prior_check import psd_sqrt
 
 #: Directions with prior-whitened s_i at or above this are "data-dominated" (s ≫ 1): there the
 #: prior's share of the posterior precision is at most 1/(1 + s²) ≈ 1 %.

@@ -1,13 +1,11 @@
-"""pandas in and out: measurements from a DataFrame, predictions and results as DataFrames.
+"""pandas out: predictions and results as DataFrames (measurements are read from one by
+:func:`calib.measurements.read_dataframe`).
 
 Field data and simulation outputs usually live in pandas. pandas is an optional extra
 (``pip install 'calib[pandas]'``): the calibration itself needs only numpy, and a DataFrame is
 a convenience at its edges, so the core stays light.
 
-- :func:`measurements_from_dataframe`: the same reader and the same checks as a CSV file (units
-  from the column names such as ``"power [kW]"`` or from ``units=``, σ columns, missing values,
-  unit conversion to SI), errors naming the DataFrame's row and column;
-- :func:`prediction_frame`: a :class:`calib.result.Prediction` with its conditions, one row per
+- :func:`prediction_frame`: a :class:`calib.calibration.prediction.Prediction` with its conditions, one row per
   point, units in the column names;
 - :func:`parameters_frame`: a calibration's parameters with their estimates, σ, priors and verdicts;
 - :func:`points_frame`: per operating point the measured, nominal and calibrated outputs and the
@@ -16,92 +14,22 @@ a convenience at its edges, so the core stays light.
 
 from __future__ import annotations
 
-import dataclasses
-import re
-import hashlib
-from pathlib import Path
-from typing import Mapping, Sequence
-
 import numpy as np
 
 from calib.errors import InputError
-from calib.measurements import Measurements
-from calib.measurements.reader import _measurements_from_text
 from calib.types import CONDITION_FIELDS, Status
 
 CONDITION_UNITS = {"wind_speed": "m/s", "rotor_speed": "rpm", "pitch": "deg", "air_density": "kg/m^3", "yaw": "deg"}
 
 
-def _pandas():
+def require_pandas():
+    """The pandas module, or an :class:`~calib.errors.InputError` saying how to install it."""
     try:
         import pandas as pd
     except ImportError as exc:     # an optional extra
         raise InputError("pandas is needed for DataFrames: pip install 'calib[pandas]' (or pandas>=2.0)",
-                         "calib.frames") from exc
+                         "calib.calibration.frames") from exc
     return pd
-
-
-def measurements_from_dataframe(df, channels: Sequence[str] | None = None, *, units: Mapping[str, str] | None = None,
-                                source: str = "DataFrame", drop_incomplete_rows: bool = False,
-                                allow_no_channels: bool = False) -> Measurements:
-    """Measurements from a DataFrame, read and checked exactly as a CSV table.
-
-    Parameters
-    ----------
-    df : pandas.DataFrame
-        One row per operating point. Columns as in a CSV table: ``wind_speed``, ``rotor_speed``,
-        ``pitch`` (required), ``air_density``, ``yaw``, channels and ``<channel>_sigma``; a unit in
-        the name (``"power [kW]"``) or in ``units``. Other columns are noted and ignored.
-    channels : sequence of str, optional
-        Channels to keep (default: every known channel column present).
-    units : mapping column -> unit, optional
-        Units of columns whose names carry none (e.g. ``{"power": "kW", "thrust": "kN"}``).
-    source : str
-        Name in messages and in the result's provenance.
-    drop_incomplete_rows, allow_no_channels : bool
-        As in :func:`calib.measurements.read_measurements`.
-
-    Returns
-    -------
-    Measurements
-        In SI units. Errors name the row by its position in ``df`` (from 0) and the column.
-    """
-    pd = _pandas()
-    if not isinstance(df, pd.DataFrame):
-        raise InputError(f"expected a pandas DataFrame, got {type(df).__name__}", source)
-    units = dict(units or {})
-    names = [str(c) for c in df.columns]
-    unknown = [c for c in units if c not in names]
-    if unknown:
-        raise InputError(f"units given for column(s) not in the DataFrame: {', '.join(unknown)}; columns: "
-                         f"{', '.join(names)}", source, field="units")
-    for c in names:
-        if c in units and "[" in c:
-            raise InputError(f"column {c!r} states its unit in its name and in units= ({units[c]!r}); state it once",
-                             source, field=c)
-    header = [f"{c} [{units[c]}]" if c in units else c for c in names]
-    frame = df.copy()
-    frame.columns = header
-    text = frame.to_csv(index=False, lineterminator="\n", na_rep="nan")
-    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
-    try:
-        meas = _measurements_from_text(text, Path(source), [], digest, channels, drop_incomplete_rows,
-                                       allow_no_channels, None, None)
-    except InputError as exc:       # the CSV text's line L is the DataFrame's row L − 2 (by position)
-        if exc.line is None or exc.line < 2:
-            raise
-        raise InputError(f"row {exc.line - 2} (by position, from 0): {exc.message}", source,
-                         field=exc.field) from None
-    # the notes name the CSV text's lines; the user's rows are those lines − 2 (by position, from 0)
-    return dataclasses.replace(meas, notes=tuple(_LINES.sub(_as_rows, n) for n in meas.notes))
-
-
-_LINES = re.compile(r"\(lines ([\d, ]+)((?: \.\.\. \(\d+ in all\))?)\)")
-
-
-def _as_rows(m) -> str:
-    rows = ", ".join(str(int(v) - 2) for v in m.group(1).split(","))
-    return f"(rows {rows}{m.group(2)}, by position from 0)"
 
 
 def prediction_frame(conditions, prediction):
@@ -112,7 +40,7 @@ def prediction_frame(conditions, prediction):
     ----------
     conditions : OperatingConditions
         The conditions the prediction was made at.
-    prediction : calib.result.Prediction
+    prediction : calib.calibration.prediction.Prediction
 
     Returns
     -------
@@ -121,7 +49,7 @@ def prediction_frame(conditions, prediction):
         ``power_std [W]``, ``power_lower [W]``, ``power_upper [W]``; ``status`` (name),
         ``envelope`` (``inside``/``outside``) and ``outside_because``.
     """
-    pd = _pandas()
+    pd = require_pandas()
     cols = {f"{f} [{CONDITION_UNITS[f]}]": np.broadcast_to(getattr(conditions, f), prediction.values.shape[:1])
             for f in CONDITION_FIELDS}
     for j, (c, u) in enumerate(zip(prediction.channels, prediction.units)):
@@ -142,7 +70,7 @@ def parameters_frame(result):
 
     Parameters
     ----------
-    result : calib.result.CalibrationResult
+    result : calib.calibration.result.CalibrationResult
 
     Returns
     -------
@@ -150,7 +78,7 @@ def parameters_frame(result):
         Indexed by parameter name; columns ``kind``, ``unit``, ``nominal``, ``value``, ``std``,
         ``prior_std``, ``lower``, ``upper``, ``verdict``, ``shared_information``, ``note``.
     """
-    pd = _pandas()
+    pd = require_pandas()
     by_name = {v["name"]: v for v in result.verdicts}
     rows = []
     for j, q in enumerate(result.parameters):
@@ -171,7 +99,7 @@ def points_frame(result):
 
     Parameters
     ----------
-    result : calib.result.CalibrationResult
+    result : calib.calibration.result.CalibrationResult
 
     Returns
     -------
@@ -180,7 +108,7 @@ def points_frame(result):
         known), then per channel ``power [W]``, ``power_nominal [W]``, ``power_calibrated [W]``,
         ``power_residual [-]``; ``status``.
     """
-    pd = _pandas()
+    pd = require_pandas()
     n = result.measured.shape[0]
     cols = {f"{f} [{CONDITION_UNITS[f]}]": np.broadcast_to(np.asarray(result.conditions[f], float), (n,))
             for f in CONDITION_FIELDS if f in result.conditions}

@@ -3,9 +3,9 @@
 The result rebuilds its model from the spec it recorded, evaluates it at the conditions of
 FILE.csv and writes, next to the conditions, for each channel of the result
 ``<channel>``, ``<channel>_lower`` and ``<channel>_upper`` (the 95 % interval of the model
-output, :meth:`calib.result.CalibrationResult.predict`) in SI units, a ``status`` column,
+output, :meth:`calib.calibration.result.CalibrationResult.predict`) in SI units, a ``status`` column,
 and ``envelope`` (``inside`` / ``outside``) with ``outside_because`` (what lies outside the
-calibration's operating ranges or the angles of attack it reached; :mod:`calib.envelope`). When FILE.csv also holds measured channels, χ²/dof of measured against predicted is
+calibration's operating ranges or the angles of attack it reached; :mod:`calib.checks.envelope`). When FILE.csv also holds measured channels, χ²/dof of measured against predicted is
 printed per channel and overall, with σ² = σ_meas² + σ_pred² (σ_meas from the ``_sigma``
 columns, else the noise the calibration used).
 """
@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.calibration.prediction import Prediction
+from calib.calibration.result import load_result
 from calib.measurements import read_measurements
-from calib.result import Prediction, load_result
 from calib.types import CONDITION_FIELDS, Status
 
 

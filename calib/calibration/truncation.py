@@ -248,7 +248,7 @@ class AutoTruncation:
         As :func:`cv_curve`.
     start_at_limit : bool
         The first choice is the prior limit's count (the second start of
-        :meth:`calib.calibration.Calibrator._second_start`), the later ones as usual.
+        :meth:`calib.calibration.truncated_fit.TruncatedFit.second_start`), the later ones as usual.
     """
 
     def __init__(self, cv_folds: int, max_retained: int | None, one_se: bool, start_at_limit: bool = False):
@@ -288,7 +288,7 @@ class AutoTruncation:
 
 
 def keep_second_start(first: tuple, second: tuple) -> bool:
-    """Whether the automatic choice keeps its second start (:meth:`Calibrator._second_start`).
+    """Whether the automatic choice keeps its second start (:meth:`calib.calibration.truncated_fit.TruncatedFit.second_start`).
 
     Each start is (retained count, criterion at it, its standard error, status). The default
     is the start whose retained set settled (status ``converged``) when only one did, else the

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.identifiability import SvdAnalysis, frozen_aware_covariance
+from calib.calibration.identifiability import SvdAnalysis, frozen_aware_covariance
 
 
 @dataclass(frozen=True)
@@ -26,7 +26,7 @@ class TruncatedCovariance:
     ----------
     noise : ndarray
         The retained θ's covariance from the measurement noise, frozen-aware
-        (:func:`calib.identifiability.frozen_aware_covariance`).
+        (:func:`calib.calibration.identifiability.frozen_aware_covariance`).
     aliasing : ndarray
         The field between the nodes that the retained θ take up (zeros when the term is left out).
     fit_scale : float

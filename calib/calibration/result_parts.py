@@ -1,6 +1,6 @@
 """The parts of a calibration result: estimate, identifiability, uncertainty, fit, provenance.
 
-:class:`calib.result.CalibrationResult` holds one of each (pyPESTO-style nested results). Each
+:class:`calib.calibration.result.CalibrationResult` holds one of each (pyPESTO-style nested results). Each
 part is a plain data class; the calibrator builds it in one step. Shapes: n = n_params,
 m = n_points, c = n_channels, r = n_retained.
 """
@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from calib.result_io import package_versions
+from calib.calibration.result_io import package_versions
 
 
 def _empty(*shape):
@@ -65,19 +65,19 @@ class Identifiability:
         Per parameter: ``identified``, ``poorly observable``, ``at bound`` or ``confounded``, and why.
     confounding : dict
         Per non-field parameter, its information shared with the others
-        (:func:`calib.identifiability.confounding`).
+        (:func:`calib.calibration.identifiability.confounding`).
     truncation : dict
-        The automatic-truncation curve (:class:`calib.truncation.TruncationCurve`), empty for an
+        The automatic-truncation curve (:class:`calib.calibration.truncation.TruncationCurve`), empty for an
         explicit σ̄.
     fold_directions : list of dict
         Retained θ that a point with several roots of the BEM equations determines (more than
-        half of the θ's information, :func:`calib.identifiability.fold_dominated_directions`):
+        half of the θ's information, :func:`calib.calibration.identifiability.fold_dominated_directions`):
         ``point``, ``theta`` (1-based), ``share``, ``sensitivity_ratio`` and the σ along the
         direction before and after its prior variance was added, ``sigma_before``,
         ``sigma_after`` [scale units]. Empty when there is none.
     tightening : dict
         Which measurements would lower the σ of each parameter that is not a correction node
-        (:mod:`calib.tightening`).
+        (:mod:`calib.calibration.tightening`).
     """
 
     singular_values: np.ndarray
@@ -104,7 +104,7 @@ class Uncertainty:
     cov_p, std_p : ndarray, shapes (n, n), (n,)
         Covariance / standard deviation of p̂ [parameter units² / parameter units], including the
         prior variance of the directions the data do not determine
-        (:func:`calib.identifiability.frozen_aware_covariance`).
+        (:func:`calib.calibration.identifiability.frozen_aware_covariance`).
     cov_theta : ndarray, shape (r, r)
         Covariance of the retained θ [scale units²].
     prior_std : ndarray, shape (n,)
@@ -122,13 +122,13 @@ class Uncertainty:
         field or nothing retained for it to act on).
     curvature : dict
         The frozen directions' prior propagated through the model's curvature to the retained
-        θ (:func:`calib.identifiability.frozen_curvature_covariance`): ``samples`` drawn (0: the
+        θ (:func:`calib.calibration.identifiability.frozen_curvature_covariance`): ``samples`` drawn (0: the
         term is left out), ``used``, ``samples_with_failed_points``, and its variance against
         the noise part per retained θ, ``variance_ratio_mean`` and ``variance_ratio_max`` [-];
         empty when nothing was frozen or nothing retained.
     prior_check : dict
         The data's estimate of the correction field's prior amplitude
-        (:class:`calib.prior_check.PriorCheck` as a dict); empty without a correction field or
+        (:class:`calib.checks.prior_check.PriorCheck` as a dict); empty without a correction field or
         with the check off; ``{"failed": message}`` when it could not be computed.
     gain, cov_alias : ndarray, shapes (n, m·c) and (n, n)
         The MAP estimate's linear response to the whitened data [scale units] and the part of

@@ -1,4 +1,4 @@
-"""What the unit check (:mod:`calib.unit_check`) finds, and how it says so.
+"""What the unit check (:mod:`calib.checks.unit_check`) finds, and how it says so.
 
 The unit factors the check tries (:data:`CHANNEL_FACTORS`, :data:`CONDITION_FACTORS`); each
 finding (:class:`UnitFinding`) in words, with the unit meant and the fix to write
@@ -9,15 +9,11 @@ finding (:class:`UnitFinding`) in words, with the unit meant and the fix to writ
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from calib.errors import InputError
 from calib.measurements import UNITS, Measurements, quantity_of, si_unit
-
-if TYPE_CHECKING:
-    from calib.unit_check import _Fit
 
 _RPM = 30.0 / np.pi       # rpm per rad/s
 _DEG = 180.0 / np.pi      # deg per rad
@@ -77,7 +73,7 @@ class UnitFinding:
 
 @dataclass(frozen=True)
 class UnitCheckReport:
-    """Outcome of :func:`calib.unit_check.check_units`.
+    """Outcome of :func:`calib.checks.unit_check.check_units`.
 
     Attributes
     ----------
@@ -86,7 +82,7 @@ class UnitCheckReport:
     ratios : dict channel -> float
         Median measured/model per channel, as read [-].
     chi2_per_dof : dict channel -> float
-        χ²/dof per channel as read, with the σ of the :mod:`calib.unit_check` docstring [-].
+        χ²/dof per channel as read, with the σ of the :mod:`calib.checks.unit_check` docstring [-].
     chi2_threshold : float
     hypotheses : tuple of (str, float)
         Each hypothesis tried ("as read", "wind_speed x 3.6" ...) and its misfit [-].
@@ -234,20 +230,61 @@ def _model_side(name: str, model_units: str | None) -> str:
 
 
 # ----------------------------------------------------------------------------- the findings
-def findings_of(chosen: _Fit, base: _Fit, measurements: Measurements, units: dict, model_units: str | None,
+@dataclass
+class UnitFit:
+    """One unit hypothesis fitted by the unit check (:func:`calib.checks.unit_check.check_units`).
+
+    Attributes
+    ----------
+    label : str
+        The hypothesis in words ("as read", "power in kW", ...).
+    misfit : float
+        Mean squared whitened residual over all points and channels, a failed model evaluation
+        costing the check's failure cost per channel [-].
+    factors : ndarray, shape (n_channels,)
+        Unit factor per channel, read / meant (1 = as read) [-].
+    ratios : ndarray, shape (n_channels,)
+        Median measured / model per channel [-].
+    chi2_per_dof : ndarray, shape (n_channels,)
+        Per channel, after dividing by ``factors``, against the check's model-error allowance [-].
+    n_failed : int
+        Model evaluations that failed.
+    n_ratio : ndarray of int, shape (n_channels,)
+        Points behind each median ratio.
+    status_summary : str
+        The model's status counts in words.
+    condition : str or None
+        The operating condition whose unit the hypothesis changes, if any.
+    condition_factor : float
+        Its factor, read / meant [-].
+    """
+
+    label: str
+    misfit: float
+    factors: np.ndarray
+    ratios: np.ndarray
+    chi2_per_dof: np.ndarray
+    n_failed: int
+    n_ratio: np.ndarray
+    status_summary: str = ""
+    condition: str | None = None
+    condition_factor: float = 1.0
+
+
+def findings_of(chosen: UnitFit, base: UnitFit, measurements: Measurements, units: dict, model_units: str | None,
                 chi2_threshold: float, model_error: float) -> list:
     """What the chosen hypothesis says: a condition's unit factor, a channel's factor or sign, a misfit no
     factor explains (gross when beyond any polar correction), the model failing at most points.
 
     Parameters
     ----------
-    chosen, base : calib.unit_check._Fit
+    chosen, base : UnitFit
         The hypothesis chosen, and the one with the conditions as read.
     measurements : Measurements
     units : dict channel -> str
         The model's output units.
     model_units, chi2_threshold, model_error
-        As :func:`calib.unit_check.check_units`.
+        As :func:`calib.checks.unit_check.check_units`.
 
     Returns
     -------

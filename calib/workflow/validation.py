@@ -3,7 +3,7 @@
 A ``[validation]`` table makes each stage repeat its calibration with the points of one operating
 condition left out (e.g. one wind speed at a time), or with one band of it (calibrate at low wind,
 predict at high wind, and the reverse), and predict them with 95 % prediction intervals: the model
-output's interval (:meth:`calib.result.CalibrationResult.predict`, frozen directions included)
+output's interval (:meth:`calib.calibration.result.CalibrationResult.predict`, frozen directions included)
 combined with the noise σ of a new measurement. The stages run after the diagnosis of
 ``[diagnosis]`` (:mod:`calib.diagnosis.in_workflow`), whose named effects the figures here show.
 """
@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
-from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.calibrator import CalibrationSettings, Calibrator
 from calib.config import NUM, Key, in_open_unit_interval, names_list, settings_from_table
 from calib.diagnosis.in_workflow import diagnosis_sentence
 from calib.errors import CalibError, InputError

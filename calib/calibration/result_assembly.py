@@ -1,7 +1,7 @@
-"""The :class:`calib.result.CalibrationResult` of a finished calibration, part by part.
+"""The :class:`calib.calibration.result.CalibrationResult` of a finished calibration, part by part.
 
-:func:`assemble_result` builds each part (:mod:`calib.result_parts`) from the calibrator's state
-and the estimator's covariance; the calibrator (:class:`calib.calibration.Calibrator`) calls it
+:func:`assemble_result` builds each part (:mod:`calib.calibration.result_parts`) from the calibrator's state
+and the estimator's covariance; the calibrator (:class:`calib.calibration.calibrator.Calibrator`) calls it
 once, at the end of either estimator.
 """
 
@@ -11,12 +11,12 @@ from dataclasses import asdict
 
 import numpy as np
 
+from calib.calibration.identifiability import confounding, cramer_rao, fisher_matrix, parameter_verdicts
+from calib.calibration.result import CalibrationResult
+from calib.calibration.result_parts import Estimate, Fit, Identifiability, Provenance, Uncertainty
+from calib.calibration.uncertainty_terms import ModelTerms
 from calib.errors import InputError
-from calib.identifiability import confounding, cramer_rao, fisher_matrix, parameter_verdicts
-from calib.result import CalibrationResult
-from calib.result_parts import Estimate, Fit, Identifiability, Provenance, Uncertainty
 from calib.types import nominal_vector
-from calib.uncertainty_terms import ModelTerms
 
 
 def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,

@@ -5,7 +5,7 @@ Notes
 The bands of the directions the truncation froze are the stated prior's (docs/theory.md, Uncertainty), so the
 prior's amplitude sets their width. The data carry a check of it. Linearized at a point
 p̃ (the MAP under the stated prior, see below), the whitened pseudo-data
-(:mod:`calib.truncation`) are z̃ = Z_f f + Z_n n + ε with ε ~ N(0, I) (the stated noise),
+(:mod:`calib.calibration.truncation`) are z̃ = Z_f f + Z_n n + ε with ε ~ N(0, I) (the stated noise),
 f the correction field and n the other parameters. With the prior f ~ N(0, τ² K_f) (τ = 1
 is the stated prior) and n ~ N(0, K_n), z̃ is Gaussian with covariance
 

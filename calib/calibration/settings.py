@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.calibration.qp import get_optimizer
 from calib.errors import InputError
-from calib.estimation import get_optimizer
 
 NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
 RETAIN_MODES = ("threshold", "all")
@@ -26,17 +26,17 @@ class CalibrationSettings:
         ``prior_std``, ``prior_correlation``) and its Laplace covariance; every parameter moves,
         held by the prior where the data say little, and the SVD of the prior-whitened
         sensitivities gives the directions where the data beat the prior (s_i > 1), their
-        eigenshapes and verdicts (:meth:`Calibrator._fit_map`). ``"truncated"``: the truncated
+        eigenshapes and verdicts (:meth:`calib.calibration.map_fit.MapFit.fit`). ``"truncated"``: the truncated
         ML estimate of Bottasso et al. (2014), re-linearized until the retained set is stable,
         with the frozen directions' prior and the added terms below (``sigma_bar``, ``cv_*``,
         ``second_start``, ``curvature_samples``, ``representation_error``'s aliasing term).
     sigma_bar : float or "auto"
         ``"auto"`` (default): retain the number of θ chosen by the K-fold cross-validated
-        prediction error over operating points (:func:`calib.truncation.cv_curve`), among the
+        prediction error over operating points (:func:`calib.calibration.truncation.cv_curve`), among the
         leading directions the data determine better than the prior
-        (:func:`calib.truncation.prior_limit`). A number: retain θ_i with
+        (:func:`calib.calibration.truncation.prior_limit`). A number: retain θ_i with
         σ(θ_i) = 1/s_i <= σ̄, in units of the parameter scales [-]
-        (see :func:`calib.identifiability.sigma_bar_for`).
+        (see :func:`calib.calibration.identifiability.sigma_bar_for`).
     cv_folds : int
         K of the K-fold cross-validation over operating points that ``sigma_bar = "auto"`` uses.
     cv_one_se : bool
@@ -72,7 +72,7 @@ class CalibrationSettings:
     noise : {"known", "ml", "repeats", "relative", "relative_ml"}
         Where R comes from: the table's ``_sigma`` columns or ``sigma`` (known), the residuals
         (ml, per channel), repeated records (repeats), a stated fraction of each channel's
-        RMS (relative, :mod:`calib.noise`), or that with one common factor estimated by
+        RMS (relative, :mod:`calib.calibration.noise`), or that with one common factor estimated by
         maximum likelihood from the calibrated fit's residuals with N − k degrees of
         freedom (relative_ml: the stated fractions fix the channels' relative weights, the
         data their overall level). With ``ml``, ``relative_sigma`` (if given) is the start
@@ -105,7 +105,7 @@ class CalibrationSettings:
         construction. Default true (measured in ``benchmarks/bench_coverage.py``, docs/user_guide/calibration.md).
     curvature_samples : int
         Prior draws of the frozen directions propagated through the model to the retained θ
-        (:func:`calib.identifiability.frozen_curvature_covariance`): where the model is not
+        (:func:`calib.calibration.identifiability.frozen_curvature_covariance`): where the model is not
         linear over the prior's range, the frozen part of the truth biases the retained θ, and
         this adds that bias's second moment to their covariance (not scaled by the fit). Costs
         that many model evaluations per calibration; 0 leaves the term out (the report says so).
@@ -113,21 +113,21 @@ class CalibrationSettings:
         With ``sigma_bar = "auto"`` and a stated noise (``known``, ``relative``, ``repeats``):
         when the fit's χ² rejects the stated noise at the 1 % level, run the re-linearization
         loop again from a first estimate with every direction the data determine better than the
-        prior (:func:`calib.truncation.prior_limit`) and keep the result whose cross-validated
+        prior (:func:`calib.calibration.truncation.prior_limit`) and keep the result whose cross-validated
         criterion, each at its own final linearization, is lower by more than its standard error
         (the fewer θ otherwise). The choice made from the nominal linearization can settle on few
         θ because that linearization understates what a re-linearized fit with more θ achieves
         (docs/user_guide/calibration.md). Costs a second loop only for such fits; the report says which start was kept.
     prior_check : bool
         Estimate the correction field's prior amplitude from the data and say whether the stated
-        prior is consistent with it (:mod:`calib.prior_check`; about six model Jacobians to the MAP
+        prior is consistent with it (:mod:`calib.checks.prior_check`; about six model Jacobians to the MAP
         under the stated prior, and one on the fine grid). False skips it (the report says so);
         the refits of a leave-out validation and the candidate fits of the diagnosis
         skip it, as their results serve predictions and comparisons only.
     tightening : bool
         Say, for each parameter that is not a correction node, which measurements would tighten its
         σ most (another pitch line, points further into stall or towards runaway, a channel not
-        measured; :mod:`calib.tightening`): one model Jacobian per candidate group on the native BEM,
+        measured; :mod:`calib.calibration.tightening`): one model Jacobian per candidate group on the native BEM,
         skipped for an FMU. The refits of a leave-out validation and the candidate fits of the
         diagnosis skip it.
     identified_ratio : float

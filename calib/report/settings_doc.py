@@ -1,8 +1,8 @@
 """The workflow keys' reference, generated from the settings dataclasses (so it cannot drift).
 
-Each settings dataclass (:class:`calib.calibration.CalibrationSettings`,
+Each settings dataclass (:class:`calib.calibration.calibrator.CalibrationSettings`,
 :class:`calib.bem.BemSettings`, :class:`calib.diagnosis.core.DiagnosisSettings`,
-:class:`calib.validation.ValidationSettings`) documents its fields in the numpydoc ``Parameters``
+:class:`calib.workflow.validation.ValidationSettings`) documents its fields in the numpydoc ``Parameters``
 section of its docstring; :func:`settings_markdown` turns fields, defaults and those descriptions
 into the table of the documentation's settings page (``docs/hooks.py`` calls it when the site is
 built), and :func:`undocumented_fields` lists any field without a description (a test keeps it

@@ -10,7 +10,7 @@ points and names the channel or the condition that looks wrong, and by which fac
    the conditions corrected by that factor (a few model evaluations in all).
 2. Under each hypothesis, per channel, the robust ratio ρ_c = median_k (z_kc / y_kc) over the
    points where the model value is at least 10 % of the channel's largest; if ρ_c is within
-   ``factor_tolerance`` of a unit factor f ≠ 1 (:data:`CHANNEL_FACTORS`, either sign) and at
+   ``factor_tolerance`` of a unit factor f ≠ 1 (:data:`~calib.checks.unit_findings.CHANNEL_FACTORS`, either sign) and at
    least half of the points agree, the channel is taken to be off by f and divided by it.
 3. The misfit of a hypothesis is the mean of χ² over all values,
 
@@ -30,7 +30,7 @@ Findings. Those a unit factor (or a sign) explains stop the run through
 - ``condition``: a condition off by a unit factor (wind speed ×3.6: km/h read as m/s);
 - ``channel``: a channel off by a unit factor (power ×10⁻³: kW read as W);
 - ``sign``: a channel with the opposite sign of the model's (measured/model ≈ −1);
-- ``gross``: a channel misfit whose ratio lies outside 1/5 to 5 (:data:`GROSS_RATIO`) without
+- ``gross``: a channel misfit whose ratio lies outside 1/5 to 5 (:data:`~calib.checks.unit_findings.GROSS_RATIO`) without
   matching a unit factor (a kW table whose loads are also off): no polar correction explains it.
 
 Those no unit factor explains are warnings: a misfit is what calibration is for, so the run
@@ -49,24 +49,21 @@ misfit finding still stops the run); yaw and air density are not checked.
 
 Here: the hypotheses and their fits (:func:`check_units`) and the gate before a run
 (:func:`apply_unit_check`). The unit factors, the findings in words and the report are in
-:mod:`calib.unit_findings` (and importable from here).
+:mod:`calib.checks.unit_findings`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from calib.checks.unit_findings import CHANNEL_FACTORS, CONDITION_FACTORS, UnitCheckReport, UnitFit, findings_of
 from calib.errors import CalibError, InputError
 from calib.measurements import Measurements, check_channels
 from calib.types import CONDITION_FIELDS, OperatingConditions
-from calib.unit_findings import (CHANNEL_FACTORS, CONDITION_FACTORS, GROSS_RATIO, OVERRIDE_HINT, STOPPING_KINDS,
-                                 UnitCheckReport, UnitFinding, findings_of)
 
-__all__ = ["CHANNEL_FACTORS", "CONDITION_FACTORS", "GROSS_RATIO", "OVERRIDE_HINT", "STOPPING_KINDS",
-           "UnitCheckReport", "UnitFinding", "apply_unit_check", "check_units"]
+__all__ = ["apply_unit_check", "check_units"]
 
 _EXPLAIN_GAIN = 10.0       # a hypothesis must lower the misfit this many times to explain the data
 _USABLE = 0.1              # ratios from points with |model| >= this x the channel's largest |model|
@@ -74,20 +71,6 @@ _FLOOR = 1e-3              # σ floor as a fraction of the channel's RMS model v
 
 
 # ----------------------------------------------------------------------------- fitting one hypothesis
-@dataclass
-class _Fit:
-    label: str
-    misfit: float
-    factors: np.ndarray          # per channel, read / meant (1 = as read)
-    ratios: np.ndarray           # per channel, median measured/model
-    chi2_per_dof: np.ndarray     # per channel, after dividing by ``factors``
-    n_failed: int
-    n_ratio: np.ndarray          # per channel, points behind the median ratio
-    status_summary: str = ""
-    condition: str | None = None
-    condition_factor: float = 1.0
-
-
 def _nearest_factor(ratios: np.ndarray, tolerance: float) -> tuple[float, float]:
     """(median ratio, the signed unit factor it is near, or 1 when none) of one channel."""
     if ratios.size == 0:
@@ -108,7 +91,7 @@ def _nearest_factor(ratios: np.ndarray, tolerance: float) -> tuple[float, float]
 
 def _fit(label: str, y: np.ndarray, ok: np.ndarray, z: np.ndarray, sigma: np.ndarray | None, *,
          relative_sigma: float, model_error: float, factor_tolerance: float, failure_cost: float,
-         search_factors: bool = True) -> _Fit:
+         search_factors: bool = True) -> UnitFit:
     """Misfit of the data ``z`` against model values ``y`` (points ``ok``), per the module docstring;
     with ``search_factors`` each channel may be divided by a unit factor its ratio is near."""
     n_pts, n_ch = z.shape
@@ -132,7 +115,7 @@ def _fit(label: str, y: np.ndarray, ok: np.ndarray, z: np.ndarray, sigma: np.nda
         total += float(np.sum(r2))
     n_failed = int(np.count_nonzero(~ok))
     misfit = (total + failure_cost * n_failed * n_ch) / (n_pts * n_ch)
-    return _Fit(label, misfit, factors, ratios, chi2, n_failed, n_ratio)
+    return UnitFit(label, misfit, factors, ratios, chi2, n_failed, n_ratio)
 
 
 def _hypothesis_label(name: str, factor: float) -> str:
@@ -305,18 +288,18 @@ def _evaluator(model, p: np.ndarray, idx: list, s: np.ndarray | None, relative_s
 
 
 def _hypotheses(evaluate, measurements: Measurements, conditions: Sequence[str], kw: dict,
-                chi2_threshold: float, notes: list) -> tuple[_Fit, _Fit, list, _Fit]:
+                chi2_threshold: float, notes: list) -> tuple[UnitFit, UnitFit, list, UnitFit]:
     """Fit every hypothesis and choose the one that explains the data (steps 1–4 of the module docstring).
 
     Returns
     -------
-    as_read : _Fit
+    as_read : UnitFit
         The conditions and channels as read (no unit factor searched).
-    base : _Fit
+    base : UnitFit
         The conditions as read, each channel divided by the unit factor its ratio is near.
-    fits : list of _Fit
+    fits : list of UnitFit
         ``base``, then every condition hypothesis.
-    chosen : _Fit
+    chosen : UnitFit
         The best condition hypothesis where it explains the data, else ``base``.
     """
     z = measurements.values

@@ -1,11 +1,11 @@
 """The uncertainty terms that need the model, at an estimate: :class:`ModelTerms`.
 
 The field between the correction nodes (:mod:`calib.parametrizations.aliasing`), the data's
-check of the field's prior amplitude (:mod:`calib.prior_check`), the frozen directions' prior
+check of the field's prior amplitude (:mod:`calib.checks.prior_check`), the frozen directions' prior
 through the model's curvature, the retained directions that fold points determine
-(:mod:`calib.identifiability`), and which measurements would tighten the non-field parameters
-(:mod:`calib.tightening`). Each calls the model; :mod:`calib.uncertainty` assembles what they
-return into the covariance, and :class:`calib.calibration.Calibrator` orchestrates.
+(:mod:`calib.calibration.identifiability`), and which measurements would tighten the non-field parameters
+(:mod:`calib.calibration.tightening`). Each calls the model; :mod:`calib.calibration.uncertainty` assembles what they
+return into the covariance, and :class:`calib.calibration.calibrator.Calibrator` orchestrates.
 """
 
 from __future__ import annotations
@@ -14,9 +14,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from calib.calibration_settings import CalibrationSettings
+from calib.calibration.fold_directions import fold_dominated_directions
+from calib.calibration.identifiability import frozen_curvature_covariance
+from calib.calibration.settings import CalibrationSettings
 from calib.errors import InputError
-from calib.identifiability import fold_dominated_directions, frozen_curvature_covariance
 from calib.measurements import Measurements
 from calib.parametrizations.aliasing import FineSensitivities
 
@@ -25,7 +26,7 @@ from calib.parametrizations.aliasing import FineSensitivities
 class ModelTerms:
     """One calibration problem's statement (model, settings, measurements, parameters, prior,
     bounds) and its model-derived uncertainty terms; the result is assembled from it
-    (:func:`calib.result_assembly.assemble_result`).
+    (:func:`calib.calibration.result_assembly.assemble_result`).
 
     Parameters
     ----------
@@ -106,14 +107,14 @@ class ModelTerms:
         return cov, chi2, "", fine
 
     def prior_check(self, problem, lin, fine) -> dict:
-        """The data's estimate of the correction field's prior amplitude (:mod:`calib.prior_check`),
-        linearized at the MAP under the stated prior (:func:`calib.prior_check.map_point`, from the
+        """The data's estimate of the correction field's prior amplitude (:mod:`calib.checks.prior_check`),
+        linearized at the MAP under the stated prior (:func:`calib.checks.prior_check.map_point`, from the
         estimate): on the fine grid of the aliasing term when it was computed (``fine`` given),
         else on the calibration nodes; {} without a correction field or with ``prior_check`` off."""
         if self.field is None or self.field.grid is None or not self.settings.prior_check:
             return {}
+        from calib.checks.prior_check import map_point, prior_amplitude
         from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
-        from calib.prior_check import map_point, prior_amplitude
 
         n_ch = len(self.channel_index)
         P = self.prior_cov_scaled()
@@ -162,7 +163,7 @@ class ModelTerms:
 
     def curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:
         """The retained θ's covariance from the frozen directions' prior through the model's
-        curvature (:func:`calib.identifiability.frozen_curvature_covariance`) [scale units²],
+        curvature (:func:`calib.calibration.identifiability.frozen_curvature_covariance`) [scale units²],
         and what it adds relative to the noise part (``result.curvature``); (None, {}) when
         there is nothing to propagate, (None, {"samples": 0}) when the term is switched off."""
         st = self.settings
@@ -188,8 +189,8 @@ class ModelTerms:
 
     def fold_directions(self, lin, svd, multiple_roots) -> list:
         """Retained directions that points with several roots of the BEM equations determine
-        (:func:`calib.identifiability.fold_dominated_directions`): one record per (point, direction);
-        their stated covariance gets the prior variance along them added (:func:`calib.uncertainty.fold_inflation`),
+        (:func:`calib.calibration.identifiability.fold_dominated_directions`): one record per (point, direction);
+        their stated covariance gets the prior variance along them added (:func:`calib.calibration.uncertainty.fold_inflation`),
         so their σ is at least the prior's."""
         Vr = svd.V[:, svd.retained]
         return fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
@@ -197,7 +198,7 @@ class ModelTerms:
 
     def tightening(self, problem, lin, cov_p, radius) -> dict:
         """Which measurements would tighten the σ of each parameter that is not a correction node
-        (:mod:`calib.tightening`); {} without such parameters, without a rotor radius, or for a model
+        (:mod:`calib.calibration.tightening`); {} without such parameters, without a rotor radius, or for a model
         whose every probe is a simulation (one that cannot be refined, e.g. an FMU)."""
         field_cols = set()
         if self.field is not None:
@@ -207,7 +208,7 @@ class ModelTerms:
         if not self.settings.tightening or not names or radius is None \
                 or not self.model.capabilities.refinable:
             return {}
-        from calib.tightening import tightening
+        from calib.calibration.tightening import tightening
 
         m = self.measurements
         y = np.abs(lin.evaluation.values[:, self.channel_index])

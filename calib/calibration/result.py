@@ -1,7 +1,7 @@
 """The calibration result: one object, in parts, that serializes to JSON + NPZ and loads back.
 
 A :class:`CalibrationResult` holds the problem (parameters, channels, conditions) and five parts
-(:mod:`calib.result_parts`): ``estimate``, ``identifiability``, ``uncertainty``, ``fit`` and
+(:mod:`calib.calibration.result_parts`): ``estimate``, ``identifiability``, ``uncertainty``, ``fit`` and
 ``provenance``. ``result.json`` holds the settings, the scalar figures of merit, the verdicts, the
 history, the input SHA-256 hashes and the package versions; ``result.npz`` holds every array;
 both under the fields' flat names, as since schema 2. Both are written atomically (temporary
@@ -17,15 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.calibration.prediction import Prediction, predict_outputs
+from calib.calibration.result_io import atomic_write, jsonable, write_npz_synced, write_text_synced
+from calib.calibration.result_parts import (ARRAY_FIELDS, PART_OF, PARTS, Estimate, Fit, Identifiability, Provenance,
+                                            Uncertainty)
 from calib.errors import InputError
-from calib.identifiability import NodeLayout, eigenshapes, node_layout
-from calib.prediction import Prediction, predict_outputs
-from calib.result_io import atomic_write, jsonable, package_versions, write_npz_synced, write_text_synced
-from calib.result_parts import ARRAY_FIELDS, PART_OF, PARTS, Estimate, Fit, Identifiability, Provenance, Uncertainty
+from calib.parametrizations.correction_field import NodeLayout, eigenshapes, node_layout
 from calib.types import Parameter
 
-__all__ = ["CalibrationResult", "Prediction", "load_result", "package_versions", "fold_sentence",
-           "second_start_sentence", "Estimate", "Identifiability", "Uncertainty", "Fit", "Provenance"]
+__all__ = ["CalibrationResult", "load_result", "fold_sentence", "second_start_sentence"]
 
 SCHEMA_VERSION = 2
 _DICT_ARRAYS = {"conditions": "conditions__", "polar_bands": "polar__", "truncation": "truncation__"}
@@ -77,7 +77,7 @@ def second_start_sentence(truncation: dict) -> str:
 
 @dataclass(eq=False)
 class CalibrationResult:
-    """Everything a calibration produced, in parts (:mod:`calib.result_parts`).
+    """Everything a calibration produced, in parts (:mod:`calib.calibration.result_parts`).
 
     Attributes
     ----------
@@ -142,13 +142,13 @@ class CalibrationResult:
 
     # ------------------------------------------------------------------ derived
     def parameters_frame(self):
-        """The parameters, estimates, σ, priors and verdicts as a DataFrame (:func:`calib.frames.parameters_frame`)."""
-        from calib.frames import parameters_frame
+        """The parameters, estimates, σ, priors and verdicts as a DataFrame (:func:`calib.calibration.frames.parameters_frame`)."""
+        from calib.calibration.frames import parameters_frame
         return parameters_frame(self)
 
     def points_frame(self):
-        """Per point: measured, nominal, calibrated, residual, as a DataFrame (:func:`calib.frames.points_frame`)."""
-        from calib.frames import points_frame
+        """Per point: measured, nominal, calibrated, residual, as a DataFrame (:func:`calib.calibration.frames.points_frame`)."""
+        from calib.calibration.frames import points_frame
         return points_frame(self)
 
     @property
@@ -229,7 +229,7 @@ class CalibrationResult:
 
     def predict(self, conditions, model=None, confidence: float = 0.95) -> Prediction:
         """Model outputs at new conditions with intervals from the estimate's covariance
-        (:func:`calib.prediction.predict_outputs`; ``model`` default: rebuilt from ``model_spec``)."""
+        (:func:`calib.calibration.prediction.predict_outputs`; ``model`` default: rebuilt from ``model_spec``)."""
         return predict_outputs(self, conditions, self.rebuild_model() if model is None else model, confidence)
 
     def rebuild_model(self):

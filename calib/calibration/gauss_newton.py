@@ -1,0 +1,363 @@
+r"""The estimators: damped Gauss–Newton under bounds in a subspace of the scaled parameters,
+for maximum likelihood (:func:`estimate_ml`) and maximum a posteriori (:func:`estimate_map`).
+
+Notes
+-----
+In p = p₀ + D B θ (:mod:`calib.calibration.problem`) each iteration linearizes the model
+(exact model Jacobian, ``ForwardModel.jacobian``) and solves the Gauss–Newton
+(Levenberg–Marquardt damped) quadratic program
+
+.. math::  \min_δ ½ δᵀ(H + μ\,\mathrm{diag}(H))δ + gᵀδ
+           \quad\text{s.t.}\quad l̃ − Bθ ≤ Bδ ≤ ũ − Bθ,
+
+with H = JᵀJ and g = Jᵀr̃ for ML, H = JᵀJ + I and g = Jᵀr̃ + θ for the MAP (its prior term
+½‖θ‖² is exact in its Gauss–Newton model), where l̃, ũ are the parameter bounds (including
+C_D ≥ C_D,min at the grid points) in scaled units. The named optimizer of
+:mod:`calib.calibration.qp` solves that subproblem. The steps of one iteration:
+
+1. :func:`_normal_equations`: H, g and the damping's diagonal at the current θ;
+2. :func:`_damped_step`: the QP with growing damping until a step lowers the cost without
+   failing more model points (accepted, μ updated by the gain ratio ρ, Nielsen's rule) or the
+   tries run out;
+3. :func:`_take`: the accepted step becomes the state, recorded;
+4. :class:`StopRule`: stop on a small cost decrease or a small step.
+
+References
+----------
+C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
+from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+J. Nocedal, S.J. Wright, Numerical Optimization, 2nd ed., Springer (2006), ch. 10, 18.
+H.B. Nielsen, Damping parameter in Marquardt's method, IMM-REP-1999-05, DTU (1999).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Callable
+
+import numpy as np
+
+from calib.calibration.problem import LeastSquaresProblem, Linearization
+from calib.calibration.qp import QpSolution, get_optimizer
+
+
+class EstimationStatus(StrEnum):
+    """How an estimation ended (a ``str``: compares and prints as its value)."""
+
+    CONVERGED = "converged"
+    MAX_ITERATIONS = "max_iterations"
+    STALLED = "stalled"               # no step decreased the cost: not a minimum
+    QP_FAILED = "qp_failed"           # the subproblem solver failed or made no progress
+
+
+@dataclass(frozen=True)
+class StopRule:
+    """When the iteration stops.
+
+    Attributes
+    ----------
+    max_iterations : int
+    tolerance : float
+        Relative cost decrease (to 1 + cost) below which the iteration stops [-].
+    step_tolerance : float
+        Step norm, relative to 1 + ‖θ‖, below which the iteration stops [scale units].
+    decrease_tolerance : float
+        Stop also when an accepted step lowers the cost by at most this much [-]. The cost is
+        half a χ², so a decrease δ means the step was about √(2δ) standard deviations of the
+        estimate long (its Gauss–Newton model is ½ xᵀHx with H the inverse covariance).
+    """
+
+    max_iterations: int = 30
+    tolerance: float = 1e-9
+    step_tolerance: float = 1e-7
+    decrease_tolerance: float = 0.0
+
+    def small_step(self, step: float, theta: np.ndarray) -> bool:
+        """A step [scale units] below the tolerance, relative to 1 + ‖θ‖."""
+        return step <= self.step_tolerance * (1.0 + np.linalg.norm(theta))
+
+    def small_decrease(self, decrease: float, cost: float) -> bool:
+        """A cost decrease below the relative tolerance or ``decrease_tolerance``."""
+        return decrease <= max(self.tolerance * (1.0 + cost), self.decrease_tolerance)
+
+
+@dataclass
+class EstimationOutcome:
+    """Result of one constrained estimation in a fixed subspace.
+
+    Attributes
+    ----------
+    theta : ndarray, shape (n_theta,)
+        Estimated coordinates [scale units].
+    p : ndarray, shape (n_params,)
+        Estimated parameters.
+    cost : float
+        Half the χ² at ``p``, plus ½‖θ‖² for the MAP [-].
+    iterations : int
+    status : EstimationStatus
+    message : str
+        The status in words.
+    linearization : Linearization
+        Outputs and sensitivities at ``p``.
+    history : list of dict
+        Per iteration: cost, step, damping, failed points.
+    """
+
+    theta: np.ndarray
+    p: np.ndarray
+    cost: float
+    iterations: int
+    status: EstimationStatus
+    message: str
+    linearization: Linearization
+    history: list = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        return self.status == EstimationStatus.CONVERGED
+
+
+#: Damping increases (×4 each) tried before an iteration gives up: from μ = 1e-6 the last
+#: tries are steepest-descent steps far below ``step_tolerance``, so only a point where no
+#: smaller step decreases the cost (a stationary point) or every small step makes more points
+#: fail ends there. With 12 tries, measured on the coverage benchmark's twin (d) (seeds
+#: 5006, 5009: 55 and 54 θ retained at nominal, χ² 25 000), the first step stayed at 5 scale
+#: units, failed 17 points, and the estimator stopped at nominal.
+DAMPING_TRIES = 30
+
+#: A step component below this does not count when a step is cut back to the box [scale units].
+ROUNDOFF_STEP = 1e-12
+
+#: The damping μ at the start and after a rejected step, at least [-].
+MIN_DAMPING = 1e-6
+
+
+def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
+                optimizer: str = "sqpmethod", stop: StopRule = StopRule(),
+                callback: Callable[[dict], None] | None = None, stage: str = "estimate") -> EstimationOutcome:
+    """Constrained maximum-likelihood estimate of θ in p = p₀ + D B θ.
+
+    Parameters
+    ----------
+    problem : LeastSquaresProblem
+    basis : ndarray, shape (n_params, n_theta)
+        B (identity for full nodal ML, V_ID for the truncated-SVD estimator).
+    theta0 : ndarray, shape (n_theta,), optional
+        Start (default 0, i.e. nominal).
+    optimizer : str
+        Name in :data:`calib.calibration.qp.OPTIMIZERS`.
+    stop : StopRule
+    callback : callable(dict), optional
+        Called after every iteration with keys stage, iteration, cost, step, damping, n_failed, qp.
+    stage : str
+        Name of the estimation in the callback's records.
+
+    Returns
+    -------
+    EstimationOutcome
+    """
+    return _gauss_newton(problem, basis, theta0, optimizer, stop, callback, stage, prior_weight=0.0)
+
+
+def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.ndarray | None = None,
+                 optimizer: str = "sqpmethod", stop: StopRule = StopRule(),
+                 callback: Callable[[dict], None] | None = None, stage: str = "map") -> EstimationOutcome:
+    """Constrained maximum a posteriori estimate under the prior p̃ ~ N(0, P), P = L Lᵀ.
+
+    In the prior-whitened coordinates u (p̃ = L u) the prior term is ½‖u‖², added to the cost
+    (:class:`calib.calibration.calibrator.Calibrator`, ``estimator = "map"``).
+
+    Parameters
+    ----------
+    problem : LeastSquaresProblem
+    prior_root : ndarray, shape (n_params, n_u)
+        L.
+    u0 : ndarray, shape (n_u,), optional
+        Start (default 0, i.e. nominal).
+    optimizer, stop, callback, stage
+        As in :func:`estimate_ml`.
+
+    Returns
+    -------
+    EstimationOutcome
+        ``cost`` includes the prior term.
+    """
+    return _gauss_newton(problem, prior_root, u0, optimizer, stop, callback, stage, prior_weight=1.0)
+
+
+@dataclass
+class _Iteration:
+    """The state every step of the iteration reads and changes."""
+
+    problem: LeastSquaresProblem
+    basis: np.ndarray
+    lb: np.ndarray                 # bounds of p̃ [scale units]
+    ub: np.ndarray
+    prior_weight: float            # 1 for the MAP's ½‖θ‖², 0 for ML
+    theta: np.ndarray
+    lin: Linearization
+    mu: float = MIN_DAMPING
+    status: EstimationStatus = EstimationStatus.MAX_ITERATIONS
+    message: str = ""
+    history: list = field(default_factory=list)
+
+    def cost(self, at: Linearization, theta: np.ndarray) -> float:
+        """Half the χ² at ``at``, plus the prior term of ``theta``."""
+        return at.cost + 0.5 * self.prior_weight * float(theta @ theta)
+
+    def end(self, status: EstimationStatus, message: str) -> None:
+        self.status, self.message = status, message
+
+
+@dataclass
+class _Trial:
+    """One accepted damped step: the step, the model there and its cost, the QP's answer."""
+
+    x: np.ndarray
+    lin: Linearization
+    cost: float
+    qp: QpSolution
+
+
+def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight) -> EstimationOutcome:
+    """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map`."""
+    qp = get_optimizer(optimizer)
+    basis = np.asarray(basis, float)
+    lb = (problem.lower - problem.p0) / problem.scale
+    ub = (problem.upper - problem.p0) / problem.scale
+    theta = _feasible_start(basis, theta0, lb, ub)
+    run = _Iteration(problem, basis, lb, ub, prior_weight, theta, problem.linearize(problem.p_of(basis, theta)),
+                     message=f"stopped after {stop.max_iterations} iterations")
+    if basis.shape[1] == 0:
+        return EstimationOutcome(theta, run.lin.p, run.cost(run.lin, theta), 0, EstimationStatus.CONVERGED,
+                                 "nothing to estimate", run.lin, run.history)
+    # a damped trial is only evaluated when the model's Jacobian costs simulations of its own (finite
+    # differences: 2 n more per point); with exact derivatives the Jacobian comes with the values
+    linearize_trials = problem.model.capabilities.derivatives == "exact"
+    it = 0
+    for it in range(1, stop.max_iterations + 1):
+        H, g, dH = _normal_equations(run)
+        cost_now = run.cost(run.lin, run.theta)
+        trial, x = _damped_step(run, qp, optimizer, H, g, dH, cost_now, linearize_trials)
+        if run.status == EstimationStatus.QP_FAILED:
+            break
+        if trial is None:
+            _no_step(run, x, stop, it)
+            break
+        decrease, step = _take(run, trial, cost_now, stage, it, callback)
+        if stop.small_decrease(decrease, trial.cost) or stop.small_step(step, run.theta):
+            _stopped(run, trial.qp, stop, step, optimizer, it)
+            break
+    problem.remember(run.lin)
+    return EstimationOutcome(run.theta, run.lin.p, run.cost(run.lin, run.theta), it, run.status, run.message,
+                             run.lin, run.history)
+
+
+def _feasible_start(basis: np.ndarray, theta0, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """The start θ₀ (default 0), projected into the box; where the projection onto the subspace
+    leaves it again, pulled back toward nominal (θ = 0 is feasible) onto the boundary."""
+    n_theta = basis.shape[1]
+    theta = np.zeros(n_theta) if theta0 is None else np.asarray(theta0, float).copy()
+    pt = np.clip(basis @ theta, lb, ub)
+    if n_theta and not np.allclose(pt, basis @ theta):
+        theta = np.linalg.lstsq(basis, pt, rcond=None)[0]
+    if n_theta and np.any((basis @ theta < lb) | (basis @ theta > ub)):
+        theta = _feasible_step(basis, np.zeros(n_theta), theta, lb, ub)
+    return theta
+
+
+def _normal_equations(run: _Iteration) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """H, g of the Gauss–Newton model at the current θ, and the diagonal the damping scales."""
+    J = -(run.lin.M @ run.basis)
+    r = run.lin.residual.reshape(-1)
+    H = J.T @ J + run.prior_weight * np.eye(run.basis.shape[1])
+    g = J.T @ r + run.prior_weight * run.theta
+    dH = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
+    return H, g, dH
+
+
+def _damped_step(run: _Iteration, qp, optimizer: str, H, g, dH, cost_now: float,
+                 linearize_trials: bool) -> tuple[_Trial | None, np.ndarray | None]:
+    """The first damped step that lowers the cost without failing more points, with μ updated;
+    (None, the last step tried) when the tries run out; (None, None) with the status set when
+    the QP fails."""
+    x = None
+    for _ in range(DAMPING_TRIES):
+        sol = qp(H + run.mu * np.diag(dH), g, run.basis, run.lb - run.basis @ run.theta, run.ub - run.basis @ run.theta)
+        if not sol.success and not np.all(np.isfinite(sol.x)):
+            run.end(EstimationStatus.QP_FAILED, f"{optimizer}: {sol.message}")
+            return None, None
+        x = _feasible_step(run.basis, run.theta, sol.x, run.lb, run.ub)
+        p_trial = run.problem.p_of(run.basis, run.theta + x)
+        trial = run.problem.linearize(p_trial) if linearize_trials else run.problem.evaluate(p_trial)
+        predicted = -(g @ x + 0.5 * x @ H @ x)
+        cost_trial = run.cost(trial, run.theta + x)
+        if trial.n_failed <= run.lin.n_failed and cost_trial <= cost_now:
+            rho = (cost_now - cost_trial) / predicted if predicted > 0 else 1.0
+            run.mu = max(run.mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
+            return _Trial(x, trial, cost_trial, sol), x
+        run.mu = max(run.mu * 4.0, MIN_DAMPING)
+    return None, x
+
+
+def _no_step(run: _Iteration, x: np.ndarray, stop: StopRule, it: int) -> None:
+    """No damped step lowered the cost: a stationary point when even the last, smallest step is
+    below the tolerance, else a stall."""
+    run.problem.remember(run.lin)       # the cache may hold the last rejected trial
+    if float(np.linalg.norm(x)) <= stop.step_tolerance * (1.0 + np.linalg.norm(run.theta)):
+        run.end(EstimationStatus.CONVERGED, f"converged in {it - 1} iterations (no smaller step decreases the cost)")
+    else:
+        run.end(EstimationStatus.STALLED, "no step decreased the cost (damping exhausted)")
+
+
+def _take(run: _Iteration, trial: _Trial, cost_now: float, stage: str, it: int, callback) -> tuple[float, float]:
+    """Move to the accepted trial (linearized there if it was only evaluated); record the
+    iteration; return the cost decrease and the step length [scale units]."""
+    if trial.lin.M is None:             # the accepted trial's sensitivities
+        trial.lin = run.problem.linearize(trial.lin.p)
+        trial.cost = run.cost(trial.lin, run.theta + trial.x)
+    decrease = cost_now - trial.cost
+    run.theta = run.theta + trial.x
+    step = float(np.linalg.norm(trial.x))
+    run.lin = trial.lin
+    rec = {"stage": stage, "iteration": it, "cost": trial.cost, "step": step, "damping": run.mu,
+           "n_failed": run.lin.n_failed, "qp": trial.qp.message}
+    run.history.append(rec)
+    if callback:
+        callback(rec)
+    return decrease, step
+
+
+def _stopped(run: _Iteration, sol: QpSolution, stop: StopRule, step: float, optimizer: str, it: int) -> None:
+    """The status when the stop rule fired: converged, unless the subproblem solver gave up."""
+    if sol.success or (stop.small_step(step, run.theta) and "Search_Direction_Becomes_Too_Small" in sol.message):
+        # CasADi's SQP reports a vanishing search direction as a failure; at a step below the
+        # tolerance that is the optimality it was asked to find (and CasadiQp accepts it at
+        # larger steps when the iterate does not do worse than the start)
+        run.end(EstimationStatus.CONVERGED, f"converged in {it} iterations")
+    else:               # no progress because the subproblem solver gave up: not a converged estimate
+        run.end(EstimationStatus.QP_FAILED, f"{optimizer} made no progress: {sol.message}")
+
+
+def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """The step ``x`` shortened so that p̃ = B(θ + αx) stays within [lb, ub] (θ is feasible).
+
+    A QP solver that stops early (iteration limit, loose tolerance) can return a step that
+    leaves the bounds by more than round-off; the model refuses such a parameter vector, so
+    the step is cut back to the boundary (α ≤ 1) rather than evaluated outside it.
+    """
+    start, d = basis @ theta, basis @ x
+    alpha = 1.0
+    # a component that moves by round-off only (a start exactly on a bound and a step of 1e-17
+    # across it) does not cut the step: it cut the whole step to zero on the coverage
+    # benchmark's twin (d), seed 5006, and the estimator stopped at χ² 23 000 as "converged";
+    # what it leaves outside is far below the models' round-off margin (1e-9 scale units)
+    moving = np.abs(d) > ROUNDOFF_STEP
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = np.where((d > 0) & moving, np.maximum(ub - start, 0.0) / d, np.inf)
+        down = np.where((d < 0) & moving, np.minimum(lb - start, 0.0) / d, np.inf)
+    limit = float(np.min(np.concatenate([up, down]))) if d.size else np.inf
+    if limit < 1.0:
+        alpha = max(0.0, limit * (1.0 - 1e-12))
+    return alpha * x

@@ -1,0 +1,163 @@
+r"""The calibration problem as the estimators see it: measured outputs, their noise, the model,
+and the parameters' nominal values, scales and bounds (:class:`LeastSquaresProblem`), and the
+model linearized at one parameter vector (:class:`Linearization`).
+
+Notes
+-----
+Measured outputs z_k at operating points u_k, model outputs y_k(p), output noise
+v_k ~ N(0, R) with R diagonal per channel and point. The ML cost (known R) is
+
+.. math::  J(p) = ½ Σ_k r_kᵀ R⁻¹ r_k,\qquad r_k = z_k − y_k(p),
+
+i.e. half the sum of squared *whitened* residuals r̃ = R^(−½) r. The parameters are
+moved in a subspace of the scaled parameters p̃ = (p − p₀)/scale:
+
+.. math::  p = p₀ + D B θ,
+
+with B = I (full nodal ML), B = V_ID (the retained right singular vectors, the
+truncated-SVD estimator of Bottasso et al. 2014) or B = L with P = L Lᵀ (the MAP's
+prior-whitened coordinates). The estimators are in :mod:`calib.calibration.gauss_newton`.
+
+References
+----------
+C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
+from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from calib.calibration.identifiability import whitened_sensitivities
+from calib.types import Evaluation, OperatingConditions
+
+
+@dataclass(eq=False)
+class Linearization:
+    """Model outputs and whitened sensitivities at one parameter vector.
+
+    Attributes
+    ----------
+    p : ndarray, shape (n_params,)
+    residual : ndarray, shape (n_points, n_channels)
+        Whitened residuals (z − y)/σ [-]; 0 at failed points.
+    ok : ndarray of bool, shape (n_points,)
+        Converged points.
+    M : ndarray, shape (n_points * n_channels, n_params) or None
+        Whitened scaled sensitivities ∂y/∂p̃ / σ (zero rows at failed points).
+    evaluation : Evaluation
+    """
+
+    p: np.ndarray
+    residual: np.ndarray
+    ok: np.ndarray
+    M: np.ndarray | None
+    evaluation: Evaluation
+
+    @property
+    def cost(self) -> float:
+        """½ Σ r̃² over converged points."""
+        return 0.5 * float(np.sum(self.residual[self.ok] ** 2))
+
+    @property
+    def n_failed(self) -> int:
+        return int(np.count_nonzero(~self.ok))
+
+
+class LeastSquaresProblem:
+    """The weighted least-squares (ML, known R) problem on a ForwardModel.
+
+    Parameters
+    ----------
+    model : ForwardModel
+    conditions : OperatingConditions
+        n_points operating conditions.
+    measured : ndarray, shape (n_points, n_channels)
+        Measured outputs z [channel units].
+    sigma : ndarray, shape (n_points, n_channels)
+        1-σ noise [channel units].
+    channel_index : sequence of int
+        Column of each measured channel in the model's output.
+    p0, scale, lower, upper : ndarray, shape (n_params,)
+        Nominal values, scales and (effective) bounds.
+    """
+
+    def __init__(self, model, conditions: OperatingConditions, measured: np.ndarray, sigma: np.ndarray,
+                 channel_index: Sequence[int], p0, scale, lower, upper):
+        self.model = model
+        self.conditions = conditions
+        self.measured = np.asarray(measured, float)
+        self.sigma = np.asarray(sigma, float)
+        self.channel_index = np.asarray(channel_index, int)
+        self.p0 = np.asarray(p0, float)
+        self.scale = np.asarray(scale, float)
+        self.lower = np.asarray(lower, float)
+        self.upper = np.asarray(upper, float)
+        self.n_evaluations = 0
+        self.n_jacobians = 0
+        self.n_failed_points_total = 0
+        self._cache: Linearization | None = None
+
+    @property
+    def n_params(self) -> int:
+        return self.p0.size
+
+    def with_sigma(self, sigma: np.ndarray) -> "LeastSquaresProblem":
+        """The same problem with another noise level (the cache is dropped)."""
+        new = LeastSquaresProblem(self.model, self.conditions, self.measured, sigma, self.channel_index,
+                                  self.p0, self.scale, self.lower, self.upper)
+        new.n_evaluations, new.n_jacobians = self.n_evaluations, self.n_jacobians
+        new.n_failed_points_total = self.n_failed_points_total
+        return new
+
+    def p_of(self, basis: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """p = p₀ + D B θ."""
+        return self.p0 + self.scale * (basis @ theta)
+
+    def scaled(self, p: np.ndarray) -> np.ndarray:
+        """p̃ = (p − p₀)/scale."""
+        return (np.asarray(p, float) - self.p0) / self.scale
+
+    def unscaled(self, x: np.ndarray, clip: bool = False) -> np.ndarray:
+        """p = p₀ + scale · x (the inverse of :meth:`scaled`), held inside the bounds when ``clip``."""
+        p = self.p0 + self.scale * np.asarray(x, float)
+        return np.clip(p, self.lower, self.upper) if clip else p
+
+    def _residual(self, ev: Evaluation):
+        y = ev.values[:, self.channel_index]
+        ok = ev.ok & np.all(np.isfinite(y), axis=1)
+        r = np.where(ok[:, None], (self.measured - np.where(ok[:, None], y, 0.0)) / self.sigma, 0.0)
+        self.n_failed_points_total += int(np.count_nonzero(~ok))
+        return r, ok
+
+    def remember(self, lin: Linearization) -> None:
+        """Make ``lin``, a linearization of this problem computed earlier, the cached one, so that
+        going back to its point costs no model call (the cache holds one point)."""
+        if lin.M is None:
+            raise ValueError("remember() takes a linearization with sensitivities")
+        self._cache = lin
+
+    def evaluate(self, p: np.ndarray) -> Linearization:
+        """Outputs and residuals at ``p`` (no sensitivities)."""
+        p = np.asarray(p, float)
+        if self._cache is not None and np.array_equal(self._cache.p, p):
+            return self._cache
+        ev = self.model.evaluate(p, self.conditions)
+        self.n_evaluations += 1
+        r, ok = self._residual(ev)
+        return Linearization(p.copy(), r, ok, None, ev)
+
+    def linearize(self, p: np.ndarray) -> Linearization:
+        """Outputs, residuals and whitened scaled sensitivities at ``p`` (cached)."""
+        p = np.asarray(p, float)
+        if self._cache is not None and self._cache.M is not None and np.array_equal(self._cache.p, p):
+            return self._cache
+        ev, G = self.model.jacobian(p, self.conditions)
+        self.n_jacobians += 1
+        r, ok = self._residual(ev)
+        M = whitened_sensitivities(G[:, self.channel_index, :], self.sigma, self.scale, ok)
+        self._cache = Linearization(p.copy(), r, ok, M, ev)
+        return self._cache

@@ -1,0 +1,264 @@
+"""Step 3 of the diagnosis (:func:`calib.diagnosis.core.diagnose`): the naming rounds.
+
+Each round fits every remaining candidate effect on top of the effects named before
+(:func:`fit_task`, one per candidate, through the executor), scores it against the model
+without it (likelihood ratio, BIC, pattern agreement, effect size) and asks
+:func:`calib.diagnosis.verdict.judge_round` for the verdict; an ``ambiguous`` verdict comes
+with the measurement that would tell the two rivals apart (:func:`separation_of`).
+:class:`Namer` holds the rounds' state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from calib.calibration.calibrator import Calibrator
+from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
+from calib.diagnosis.figures_of_merit import effect_size, gap
+from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
+from calib.diagnosis.result import CandidateFit
+from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
+from calib.diagnosis.verdict import judge_round
+from calib.errors import CalibError, InputError
+from calib.types import CONDITION_FIELDS, OperatingConditions
+from calib.words import p_is
+
+
+def fit_task(task: dict) -> dict:
+    """Fit one candidate (module-level so executors can ship it to other processes).
+
+    A candidate's own parameter (``task["own"]``: its indices) that ends where it started, to
+    :data:`STUCK_TOLERANCE` of its scale, may sit on a stationary point of χ² (every derivative
+    of a zero-magnitude effect's shape parameters vanishes at nominal): the fit is started
+    again from :func:`away_start` and the one with the lower χ² is kept; the fit's status says
+    which ("second start kept" / "second start not kept").
+    """
+    model = task["model"]
+    meas = task["measurements"]
+    st = dataclasses.replace(task["settings"], prior_check=False, tightening=False)   # a comparison: no advice
+    names = [c.name for c in model.channels]
+    cols = [names.index(c) for c in meas.channels]
+
+    def fit(start=None):
+        res = Calibrator(model, meas, st, name=task["name"], start=start).run()
+        values = model.evaluate(res.p_hat, meas.conditions).values[:, cols]
+        ok = np.isfinite(values).all(axis=1)
+        chi2 = float(np.sum(((meas.values - values) / meas.sigma)[ok] ** 2)) if ok.any() else float("inf")
+        return res, values, chi2
+
+    try:
+        res, values, chi2 = fit()
+    except CalibError as exc:        # this candidate failed; the others are still compared
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    own = list(task.get("own", range(res.n_params)))
+    stuck = [j for j in own if abs(res.p_hat[j] - res.p_nominal[j]) <= STUCK_TOLERANCE * res.scale[j]]
+    note = ""
+    if stuck:
+        try:
+            res2, values2, chi2_2 = fit(away_start(res.p_hat, res.lower, res.upper, res.scale, stuck))
+        except CalibError as exc:
+            note = f"second start failed ({type(exc).__name__})"
+        else:
+            keep = chi2_2 < chi2
+            note = f"second start {'kept' if keep else 'not kept'} (χ² {chi2_2:.6g} against {chi2:.6g})"
+            if keep:
+                res, values = res2, values2
+    return {"result": res, "values": values, "start_note": note}
+
+
+class Namer:
+    """Step 3 of :func:`diagnose`: naming rounds, each on top of the effects named before.
+
+    A round that raises a :class:`~calib.errors.CalibError` (a fit that cannot run, an effect
+    that cannot take its fitted values) is recorded with verdict ``failed`` and the failure in
+    words; the naming stops there and what the earlier rounds found stands.
+    """
+
+    def __init__(self, family, meas, y0, chi2_nominal, field_change, dset, known, executor, wrap, fit_progress,
+                 say, tolerance=None):
+        self.family, self.meas, self.y0, self.field_change = family, meas, y0, field_change
+        self.dset, self.known, self.executor, self.wrap = dset, known, executor, wrap
+        self.fit_progress, self.say = fit_progress, say
+        self.base_effects, self.named, self.rounds, self.notes, self.failures = [], [], [], [], []
+        self.base_chi2, self.base_values = chi2_nominal, y0
+        self.n_res = int(np.isfinite(y0).all(axis=1).sum() * y0.shape[1])
+        self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
+        self._effects = {}                        # the current round's candidate effects by label
+        self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
+
+    def run(self, candidates) -> None:
+        self.remaining = list(candidates)
+        for round_no in range(self.dset.max_effects):
+            if not self.remaining:
+                break
+            self._fits = []
+            try:
+                if self._round(round_no):
+                    break
+            except CalibError as exc:
+                self.rounds.append({"base": self.family.names_of(self.base_effects), "candidates": self._fits,
+                                    "verdict": "failed", "reason": f"failed: {exc}"})
+                before = {0: "no effect was named", 1: "what round 1 found stands"}.get(
+                    round_no, f"what rounds 1-{round_no} found stands")
+                self.fail(f"naming round {round_no + 1} failed: {exc}; {before}")
+                break
+
+    def consistent(self, before: dict, within_tolerance: bool = False) -> None:
+        """The nominal model passes the global χ² test (noise plus model-form tolerance): nothing
+        is named (a likelihood ratio that is significant on top of a model that already fits is
+        code-to-code residue, not an effect the data demand)."""
+        what = ("within the model-form tolerance (it misses the noise alone, but not the noise plus the "
+                "tolerance)" if within_tolerance else "consistent with the noise")
+        reason = (f"the nominal model is {what} (χ²/dof {before['chi2_per_dof']:.3g} over {before['dof']} "
+                  f"residuals, {p_is(before['p_value'])} ≥ significance {self.dset.significance:g}): no effect is "
+                  "looked for")
+        self.rounds.append({"base": [], "candidates": [], "verdict": "none", "reason": reason})
+        self.say(f"name: {reason}")
+
+    def fail(self, message: str) -> None:
+        self.failures.append(message)
+        self.notes.append(message)
+        self.say(message)
+
+    def verdict(self) -> tuple[str, list]:
+        """The diagnosis' one-word result and the effects named (in order)."""
+        effects_named = [n for n in self.named if not n.startswith("ambiguous:")]
+        if self.named and self.named[0].startswith("ambiguous:"):
+            return "ambiguous", effects_named
+        return (effects_named[0] if effects_named else "none"), effects_named
+
+    def _round(self, round_no: int) -> bool:
+        """One naming round; True when the naming is over."""
+        labels, effects = self._applicable()
+        if not labels:
+            return True
+        self._effects = effects
+        self._fits = fits = self._fit(round_no, labels, effects)
+        rnd, best = self._judge(fits)
+        if best is None:
+            self.rounds.append(rnd)
+            if rnd["verdict"] == "ambiguous" and not self.named:
+                self.named.append("ambiguous:" + "+".join(rnd["ambiguous"]))
+            return True
+        new_base = self.family.add(self.base_effects, best)    # may raise: the round then fails
+        self.rounds.append(rnd)
+        self.named.append(best.effect)
+        self.base_effects = new_base
+        self.base_chi2, self.base_values = best.chi2, best.model_values
+        self.remaining = [c for c in self.remaining if c != best.effect]
+        # a further effect is looked for only while the model is still inconsistent with the noise
+        fit_now = gap(self.meas.values, self.base_values, self.meas.sigma, list(self.meas.channels),
+                      self.family.n_parameters(self.base_effects))
+        if fit_now["p_value"] >= self.dset.significance:
+            self.say(f"name: with {', '.join(self.named)} the model is consistent with the noise (χ²/dof "
+                     f"{fit_now['chi2_per_dof']:.3g}, {p_is(fit_now['p_value'])}); no further effect is looked for")
+            return True
+        return False
+
+    def _applicable(self) -> tuple[list, dict]:
+        """Labels and effects of the remaining candidates' variants that can act on this rotor."""
+        labels, effects = [], {}
+        for c in list(self.remaining):
+            try:
+                variants = self.family.variants(c, self.dset.candidate_options.get(c, {}))
+                for label, effect in variants:
+                    # an effect that cannot act on this rotor (e.g. no reference Reynolds number) is
+                    # reported as not applicable, not fitted
+                    self.family.check(self.base_effects, effect, self.meas.conditions)
+            except InputError as exc:
+                self.notes.append(f"candidate {c} not applicable: {exc}")
+                self.say(f"name: candidate {c} not applicable: {exc}")
+                self.remaining.remove(c)
+                continue
+            for label, effect in variants:
+                labels.append(label)
+                effects[label] = effect
+        return labels, effects
+
+    def _fit(self, round_no: int, labels: list, effects: dict) -> list:
+        """Every candidate fitted on top of the base effects, scored against the base model."""
+        n_base = self.family.n_parameters(self.base_effects)
+        tasks = [{"name": lab, "measurements": self.meas, "settings": self.known,
+                  "own": list(range(n_base, n_base + len(effects[lab].parameters()))),
+                  "model": self.wrap(self.family.candidate_model(self.base_effects, effects[lab]),
+                                     f"round {round_no + 1}: {lab}")} for lab in labels]
+        self.say(f"name (round {round_no + 1}): fitting {len(tasks)} candidates")
+        outs = self.executor.map(fit_task, tasks, self.fit_progress)
+        alpha = self.dset.significance / max(len(self.remaining), 1)
+        failed = [(lab, out["error"]) for lab, out in zip(labels, outs) if "error" in out]
+        for lab, message in failed:
+            self.notes.append(f"round {round_no + 1}: the fit of candidate {lab} failed and it is left out of the "
+                              f"comparison: {message}")
+            self.say(f"name: {self.notes[-1]}")
+        if len(failed) == len(labels):
+            raise CalibError(f"every candidate fit of round {round_no + 1} failed (first: {failed[0][1]})")
+        return [self._score(lab, out, effects[lab], alpha) for lab, out in zip(labels, outs) if "error" not in out]
+
+    def _score(self, label: str, out: dict, effect, alpha: float) -> CandidateFit:
+        res, values = out["result"], out["values"]
+        meas, sigma = self.meas, self.meas.sigma
+        own = list(range(self.family.n_parameters(self.base_effects), res.n_params))
+        chi2 = float(np.sum(((meas.values - values) / sigma)[np.isfinite(values).all(axis=1)] ** 2))
+        k = len(own)
+        lr, p = likelihood_ratio(self.base_chi2, chi2, k)
+        agree = pattern_agreement((values - self.base_values) / sigma,
+                                  self.field_change - (self.base_values - self.y0) / sigma)
+        params = parameter_records(res, own)
+        size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
+                                           meas.conditions.wind_speed)
+        return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
+                            p < alpha and exceeds, pattern_agreement=agree, status=res.status,
+                            start=out.get("start_note", ""), p_hat=np.array(res.p_hat, float),
+                            spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
+                            at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
+                            effect_text=words)
+
+    def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
+        """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
+        names (None for ``none`` and ``ambiguous``): :func:`calib.diagnosis.verdict.judge_round`."""
+        rnd, best = judge_round(fits, self.base_chi2, self.family.names_of(self.base_effects), self.dset,
+                                lambda a, b: separation_of(self, a, b))
+        self.say(f"name: {rnd['reason']}")
+        return rnd, best
+
+
+def separation_of(namer: Namer, a: CandidateFit, b: CandidateFit) -> dict:
+    """The measurement that would tell ``a`` from ``b`` (:mod:`calib.diagnosis.separation`): {"text", "probes",
+    "envelope", "fingerprints"}; a probe that cannot be evaluated is said, never raised."""
+    fam, meas = namer.family, namer.meas
+    names = (a.effect, b.effect)
+    fingerprints = {n: fam.fingerprint(n) for n in names if fam.fingerprint(n)}
+    envelope = envelope_words(meas.conditions, fam.rotor_radius)
+    out = {"probes": [], "envelope": envelope, "fingerprints": fingerprints}
+    try:
+        probes = probe_conditions(meas.conditions, fam.rotor_radius, fam.schedule)
+        both = OperatingConditions(*(np.concatenate([getattr(meas.conditions, f), getattr(probes, f)])
+                                     for f in CONDITION_FIELDS))
+        channels = fam.probe_channels(list(meas.channels))
+        va, units = fam.predict(namer.base_effects, namer._effects[a.name], a.p_hat, both, channels)
+        vb, _ = fam.predict(namer.base_effects, namer._effects[b.name], b.p_hat, both, channels)
+    except CalibError as exc:
+        out["text"] = f"the probes that would separate them could not be evaluated ({exc})"
+        return out
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = {c: float(np.nanmedian(np.where(namer.y0[:, j] != 0, meas.sigma[:, j] / np.abs(namer.y0[:, j]), np.nan)))
+               for j, c in enumerate(meas.channels)}
+    rel = {c: r for c, r in rel.items() if np.isfinite(r) and r > 0}
+    found = separating_probes(va, vb, both, channels, list(meas.channels), rel, len(meas.conditions),
+                              fam.rotor_radius)
+    unit = dict(zip(channels, units))
+    out["probes"] = [{**dataclasses.asdict(p), "words": p.words(names, unit[p.channel])} for p in found]
+    if not found:
+        text = "no probe could compare them"
+    elif found[0].separation > 1.0:
+        text = "to tell them apart, measure " + "; or ".join(p["words"] for p in out["probes"] if p["separation"] > 1)
+    else:
+        text = ("no probe considered separates them beyond the noise and model-form tolerance (closest: "
+                f"{out['probes'][0]['words']})")
+    text += f"; probes {probe_limits(meas.conditions, fam.schedule)[2]}; the campaign measured {envelope}"
+    if fingerprints:
+        text += "; fingerprints: " + "; ".join(f"{n}: {fp}" for n, fp in fingerprints.items())
+    out["text"] = text
+    return out
