@@ -16,6 +16,7 @@ from calib.types import nominal_vector
 from calib.report import figures as F
 from calib.report.diagnosis_figures import plot_candidates, plot_gap
 from calib.report.panels import spread, tile_labels, unit_prefix
+from calib.report.spectrum_figures import plot_spectra
 from calib.report.validation_figures import plot_campaign
 from figure_check import figure_problems
 from twin_model import TwinModel, twin_conditions
@@ -121,7 +122,7 @@ def test_calibration_figures_are_readable(result, variant):
 
 
 def test_spectra_and_campaign_figures_are_readable(result):
-    assert figure_problems(F.plot_spectra({"stage 1": result, "stage 2": result})) == []
+    assert figure_problems(plot_spectra({"stage 1": result, "stage 2": result})) == []
     rng = np.random.default_rng(0)
     channels = ["power", "thrust"] + [f"cn@{e:.2f}" for e in (0.3, 0.47, 0.63, 0.8, 0.95)]
     units = {"power": "W", "thrust": "N"}
