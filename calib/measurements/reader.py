@@ -22,7 +22,7 @@ Columns (order free; names are case-insensitive, spaces and hyphens count as ``_
 
 A header may give a unit as ``power [kW]``, ``Power_[kW]`` (OpenFAST style) or
 ``power (kW)``; units are case-insensitive (``kw`` is kW, ``mw`` is MW, never milliwatt)
-and converted to SI on load (see :data:`UNITS` and :data:`UNIT_ALIASES`). Without a unit
+and converted to SI on load (see :mod:`calib.measurements.units`). Without a unit
 SI is assumed. Rows with the same conditions are *repeated records*;
 :func:`noise_from_repeats` estimates the noise from them.
 
@@ -63,13 +63,13 @@ from typing import Sequence
 import numpy as np
 
 from calib.errors import InputError
-from calib.measurements.cells import (DECIMAL_COMMA, declared_unit, did_you_mean, is_number_cell, known_names_text,
-                                      short_list, split_line, to_float, unit_cell)
-from calib.measurements.data import (FIXED_QUANTITY, MISSING_CELLS, REQUIRED_CONDITIONS, UNITS, Measurements,
-                                     is_channel_name, quantity_of, sha256_of, si_unit)
+from calib.measurements.cells import (DECIMAL_COMMA, MISSING_CELLS, declared_unit, did_you_mean, is_number_cell,
+                                      known_names_text, short_list, split_line, to_float, unit_cell)
+from calib.measurements.data import Measurements, sha256_of
 from calib.measurements.openfast_out import CHANNELS as OPENFAST_CHANNELS
 from calib.measurements.openfast_out import TIME_SERIES_MODES, average, missing_hint, time_rows
 from calib.measurements.table import Table, read_table, read_text
+from calib.measurements.units import FIXED_QUANTITY, REQUIRED_CONDITIONS, UNITS, is_channel_name, quantity_of, si_unit
 from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, OperatingConditions
 
 
