@@ -4,6 +4,8 @@
 - :mod:`calib.measurements.units`   the unit table: column names, their quantities and accepted units;
 - :mod:`calib.measurements.reader`  :func:`read_measurements`: CSV and OpenFAST text output, with the
   checks and notes its docstring lists;
+- :mod:`calib.measurements.columns` which columns are read and in which unit (header and units row);
+- :mod:`calib.measurements.rows`    the data rows as numbers in SI units, with their checks;
 - :mod:`calib.measurements.dataframe` :func:`read_dataframe`: a pandas DataFrame, with the same checks;
 - :mod:`calib.measurements.table`   a file split into header, units row and data lines;
 - :mod:`calib.measurements.cells`   cells, headers and units: decoding, delimiters, numbers, missing values;
