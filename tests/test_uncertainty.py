@@ -287,7 +287,7 @@ def test_bounded_interval_is_the_shortest_interval_of_the_truncated_gaussian(mu,
     interval of that probability (a search over the lower end)."""
     from scipy import stats
 
-    from calib.parametrizations.correction_field import bounded_interval
+    from calib.parametrizations.field_bands import bounded_interval
 
     lo, hi = (float(v) for v in bounded_interval(mu, s, lower, 0.95))
     mass = stats.norm.sf((lower - mu) / s)
@@ -314,7 +314,7 @@ def test_bounded_interval_is_the_shortest_interval_of_the_truncated_gaussian(mu,
 def test_bounded_interval_far_in_the_tail_stays_finite():
     """An estimate 50σ below the bound (the Gaussian's mass above it underflows): the interval
     is the exponential tail's, [bound, bound + σ·ln 20 / 50], not infinite."""
-    from calib.parametrizations.correction_field import bounded_interval
+    from calib.parametrizations.field_bands import bounded_interval
 
     lo, hi = bounded_interval(np.array([0.0, 0.0]), np.array([1.0, 1.0]), np.array([50.0, 30.0]))
     assert lo[0] == 50.0 and hi[0] == pytest.approx(50.0 + np.log(20.0) / 50.0, rel=1e-12)
@@ -327,7 +327,7 @@ def test_the_drag_band_never_reaches_below_cd_min_and_coverage_counts_the_same_b
     of the truncated Gaussian, the lift band is unchanged, and the coverage count uses the
     same band (a truth below the bound is outside, one just under the upper end inside)."""
     from calib.parametrizations import CorrectionField
-    from calib.parametrizations.correction_field import bounded_interval
+    from calib.parametrizations.field_bands import bounded_interval
 
     grid = CorrectionGrid([0.0, 6.0, 12.0], [0.3, 0.7])
     field = CorrectionField(grid.parameters(), nominal_coefficients=lambda a, e: (0.5 + 0 * np.asarray(a),

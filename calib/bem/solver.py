@@ -5,33 +5,32 @@ presweep, tilt, yaw and shear per azimuth sector; Ning's residual solved by a
 bracketed vectorized iteration; loads integrated along the blade path and averaged
 over the sectors. Sensitivities come from the implicit-function theorem at the root
 with exact partials (forward-mode duals of the same equations).
+
+Here: the settings, the result, the station weights and :func:`solve_bem`, which sets a
+batch up and adds up the rotor quantities. The solve at an inflow and its fixed point when
+the inflow reads the thrust are :mod:`calib.bem.fixed_point`, the status of each point
+:mod:`calib.bem.point_status`, the derivatives :mod:`calib.bem.sensitivities`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from calib.bem import dual as dl
-from calib.bem.chain import BoundChain, EffectChain
-from calib.bem.jacobian import Block, SectionSensitivities, project
+from calib.bem.chain import EffectChain
+from calib.bem.fixed_point import BatchSolve
+from calib.bem.jacobian import SectionSensitivities
 from calib.bem.kinematics import curvature
-from calib.bem.point_status import check_conditions, check_inflow, section_fields, status_per_point
+from calib.bem.point_status import check_conditions, section_fields, status_per_point
 from calib.bem.polar_grid import AIR_KINEMATIC_VISCOSITY, SectionPolars, station_reynolds
-from calib.bem.sections import build_sections, eliminate_phi, find_roots, section_pass
-from calib.bem.stages import Inflow, PointContext, ProbeMap, RotorData
+from calib.bem.sensitivities import batch_sensitivities
+from calib.bem.stages import PointContext, RotorData
 from calib.errors import InputError
 from calib.types import OperatingConditions, Status, StatusCounts
 from calib.rotor.geometry import Rotor
 
 __all__ = ["BemResult", "BemSettings", "integration_weights", "interior_stations", "solve_bem"]
-
-FIXED_POINT_TOL = 1e-12
-"""Relative change of the inflow speed below which a thrust-dependent inflow has settled [-]."""
-
-FIXED_POINT_MAX_ITER = 30
-"""Most solves of a thrust-dependent inflow (the secant iteration takes about 5-7)."""
 
 
 @dataclass(frozen=True)
@@ -219,12 +218,14 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
     loads (:mod:`calib.bem.stages`). A conditions effect that reads the rotor thrust (e.g.
     wind-tunnel blockage) makes the inflow depend on the solution: the solve is then repeated
     with the thrust of the previous solve until the inflow speed changes by less than
-    :data:`FIXED_POINT_TOL` (relative) at every point, at most :data:`FIXED_POINT_MAX_ITER`
-    times (a point that does not settle is NOT_CONVERGED); the thrust is iterated by the secant
-    method per point (a fixed-point step first). Its derivatives follow from the
-    implicit function theorem at the fixed point, per point: with the thrust T(V, β, p) of
-    the BEM and the inflow (V, β) = C(T, p) of the conditions stage,
-    dT/dp = (∂T/∂p + ∂T/∂V ∂V/∂p + ∂T/∂β ∂β/∂p) / (1 − ∂T/∂V ∂V/∂T − ∂T/∂β ∂β/∂T).
+    :data:`~calib.bem.fixed_point.FIXED_POINT_TOL` (relative) at every point, at most
+    :data:`~calib.bem.fixed_point.FIXED_POINT_MAX_ITER` times (a point that does not settle
+    is NOT_CONVERGED); the thrust is iterated by the secant method per point (a fixed-point
+    step first; :mod:`calib.bem.fixed_point`). Its derivatives follow from the implicit
+    function theorem at the fixed point, per point: with the thrust T(V, β, p) of the BEM
+    and the inflow (V, β) = C(T, p) of the conditions stage,
+    dT/dp = (∂T/∂p + ∂T/∂V ∂V/∂p + ∂T/∂β ∂β/∂p) / (1 − ∂T/∂V ∂V/∂T − ∂T/∂β ∂β/∂T)
+    (:mod:`calib.bem.sensitivities`).
 
     A point is NOT_CONVERGED when a section has no converged root, and also when a converged
     section's axial induction lies outside ±:data:`INDUCTION_LIMIT` (= 2). Buhl's relation is
@@ -256,7 +257,7 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
 
     sens = None
     if sensitivities:
-        sens = _sensitivities(solve.chain, values, roots, sec, pctx, solve.thrust_weights)
+        sens = batch_sensitivities(solve.chain, values, roots, sec, pctx, solve.thrust_weights)
     return BemResult(*outs, status=status, messages=tuple(msgs), sections=sections, weights=w,
                      omega=omega, n_sectors=solve.n_sec, multiple_roots=multiple, n_multiple_root_sections=n_multiple,
                      rotor=rotor, sensitivities=sens,
@@ -265,7 +266,7 @@ def solve_bem(rotor: Rotor, conditions: OperatingConditions, settings: BemSettin
 
 
 def _set_up(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings, effects, p,
-            polars: SectionPolars | None) -> tuple[_Solve, PointContext, np.ndarray, list, dict]:
+            polars: SectionPolars | None) -> tuple[BatchSolve, PointContext, np.ndarray, list, dict]:
     """Everything a batch's solve needs before its conditions stage (see :func:`solve_bem`).
 
     Parameters
@@ -275,7 +276,7 @@ def _set_up(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings
 
     Returns
     -------
-    solve : _Solve
+    solve : BatchSolve
         Polars, bound effect chain, number of sectors, interior stations and thrust weights
         of the batch.
     pctx : PointContext
@@ -309,57 +310,8 @@ def _set_up(rotor: Rotor, conditions: OperatingConditions, settings: BemSettings
                 drag_in_tangential_induction=settings.drag_in_tangential_induction,
                 wake_rotation=settings.wake_rotation)
     thrust_weights = rotor.n_blades * w["thrust"] / n_sec
-    solve = _Solve(rotor, conditions, settings, chain, polars, opts, n_sec, interior, rotor_data, thrust_weights)
+    solve = BatchSolve(rotor, conditions, settings, chain, polars, opts, n_sec, interior, rotor_data, thrust_weights)
     return solve, pctx, bad_pt, msgs, w
-
-
-class _Solve:
-    """One batch's solve at a given inflow, and its repetition to a fixed point when the inflow reads the thrust."""
-
-    def __init__(self, rotor, conditions, settings, chain, polars, opts, n_sec, interior, rotor_data, thrust_weights):
-        self.rotor, self.conditions, self.settings, self.chain = rotor, conditions, settings, chain
-        self.polars, self.opts, self.n_sec, self.interior = polars, opts, n_sec, interior
-        self.rotor_data, self.thrust_weights = rotor_data, thrust_weights
-
-    def at(self, inflow: Inflow, bad, k: int):
-        """Sections, roots and section values at ``inflow`` (duals over ``k`` columns when k > 0)."""
-        sec = build_sections(self.rotor, self.conditions, self.settings, self.n_sec, self.rotor_data, self.interior,
-                             inflow.wind_speed, inflow.pitch, bad)
-        roots = find_roots(sec, self.chain, self.polars, self.settings, self.opts, self.rotor)
-        return sec, roots, section_pass(sec, roots, self.chain, self.polars, self.opts, k)
-
-    def to_fixed_point(self, pctx: PointContext, bad_pt, msgs, sensitivities: bool):
-        """The conditions stage and the solve; repeated while the inflow reads the thrust (see :func:`solve_bem`).
-
-        Returns
-        -------
-        inflow, bad, msgs, sec, roots, values, unsettled
-        """
-        chain = self.chain
-        k = chain.n_section_columns if sensitivities else 0
-        if not chain.reads_thrust:
-            inflow = _inflow(chain, pctx)
-            bad, msgs = check_inflow(inflow, bad_pt, msgs)
-            return (inflow, bad, msgs) + self.at(inflow, bad, k) + (np.zeros(bad.size, bool),)
-        thrust, previous = np.zeros(bad_pt.size), None          # first pass: no thrust yet
-        for iteration in range(FIXED_POINT_MAX_ITER + 1):
-            inflow = _inflow(chain, replace(pctx, thrust=thrust))
-            bad, point_msgs = check_inflow(inflow, bad_pt, msgs)
-            sec, roots, values = self.at(inflow, bad, 0)
-            solved = _per_point(dl.value(values.quantities["Np"]), roots, sec, self.thrust_weights)
-            settled = _inflow(chain, replace(pctx, thrust=np.nan_to_num(solved)))
-            with np.errstate(invalid="ignore"):
-                change = np.abs(settled.wind_speed - inflow.wind_speed) / np.abs(inflow.wind_speed)
-            unsettled = np.isfinite(solved) & ~bad & ~(change <= FIXED_POINT_TOL)
-            if not unsettled.any() or iteration == FIXED_POINT_MAX_ITER:
-                break
-            thrust, previous = _next_thrust(thrust, solved, previous), (thrust, solved)
-        if k:
-            values = section_pass(sec, roots, chain, self.polars, self.opts, k)
-        for kpt in np.flatnonzero(unsettled):
-            point_msgs[kpt] = (f"BEM: the inflow of the effect chain did not settle in {FIXED_POINT_MAX_ITER} "
-                               f"solves (relative change of the inflow speed above {FIXED_POINT_TOL:g})")
-        return inflow, bad, point_msgs, sec, roots, values, unsettled
 
 
 def _rotor_quantities(rotor, conditions, sections, w, n_sec, failed) -> list:
@@ -386,99 +338,6 @@ def _rotor_quantities(rotor, conditions, sections, w, n_sec, failed) -> list:
     return outs
 
 
-def _next_thrust(thrust, solved, previous) -> np.ndarray:
-    """Next thrust iterate of T = T_bem(C(T)) per point: secant on T_bem(C(T)) − T after the
-    first step (fixed-point steps where the secant is undefined)."""
-    step = np.nan_to_num(solved)
-    if previous is None:
-        return step
-    t0, s0 = previous
-    f1, f0 = np.nan_to_num(solved) - thrust, np.nan_to_num(s0) - t0
-    with np.errstate(all="ignore"):
-        secant = thrust - f1 * (thrust - t0) / (f1 - f0)
-    return np.where(np.isfinite(secant) & (f1 != f0), secant, step)
-
-
 def _rotor_data(rotor: Rotor, polars: SectionPolars, settings: BemSettings) -> RotorData:
     return RotorData(rotor.n_blades, rotor.tip_radius, rotor.hub_radius, rotor.rotor_radius, polars,
                      station_reynolds(rotor, settings.kinematic_viscosity), settings.kinematic_viscosity)
-
-
-def _inflow(chain: BoundChain, pctx: PointContext, k: int = 0) -> Inflow:
-    """The conditions stage: inflow speed [m/s] and pitch [deg] per point (plain, or duals over ``k`` columns)."""
-    inflow = Inflow(pctx.wind_speed, pctx.pitch)
-    if not chain.has("conditions"):
-        return inflow
-    out = chain.run("conditions", inflow, pctx, k)
-    if k:
-        return out
-    return Inflow(np.broadcast_to(dl.value(out.wind_speed), pctx.wind_speed.shape).astype(float),
-                  np.broadcast_to(dl.value(out.pitch), pctx.pitch.shape).astype(float))
-
-
-def _per_point(section_values, roots, sec, weights) -> np.ndarray:
-    """Σ_sectors Σ_stations w_i Q per point, NaN where a section did not converge."""
-    full = np.zeros(int(np.prod(sec.shape)))
-    full[sec.sel] = np.where(roots.converged, section_values, np.nan)
-    return np.einsum("ksi,i->k", full.reshape(sec.shape), weights)
-
-
-def _sensitivities(chain: BoundChain, values, roots, sec, pctx, thrust_weights) -> SectionSensitivities:
-    """Section derivatives (implicit function at the root) and the inflow's derivatives per point."""
-    columns = eliminate_phi(values, roots, sec)
-    n_pts, n_par = sec.shape[0], chain.n_params
-    blocks = []
-    for entry in chain.entries:
-        if entry.effect.stage == "conditions":
-            continue
-        pm = None
-        if entry.probed:
-            pm = _scatter_probe_map(entry.effect.probe_map(chain.theta(entry), values.alpha_deg, sec.ctx),
-                                    roots, sec)
-        blocks.append(Block(entry.offset, entry.n_params, entry.column - 1, entry.n_columns, pm))
-    # conditions stage on duals: columns of its parameters, then the thrust
-    k_pt = chain.n_point_columns + int(chain.reads_thrust)
-    V_p, B_p = np.zeros((n_pts, n_par)), np.zeros((n_pts, n_par))
-    V_T = B_T = np.zeros(n_pts)
-    if k_pt:
-        thrust = None
-        if chain.reads_thrust:
-            t = _per_point(dl.value(values.quantities["Np"]), roots, sec, thrust_weights)
-            thrust = dl.Dual.seed(np.nan_to_num(t), k_pt, chain.n_point_columns)
-        inflow = _inflow(chain, replace(pctx, thrust=thrust), k_pt)
-        dV, dB = (_point_derivative(x, n_pts, k_pt) for x in (inflow.wind_speed, inflow.pitch))
-        for entry in chain.stage("conditions"):
-            sl = slice(entry.offset, entry.offset + entry.n_params)
-            V_p[:, sl] = dV[:, entry.column:entry.column + entry.n_params]
-            B_p[:, sl] = dB[:, entry.column:entry.column + entry.n_params]
-        if chain.reads_thrust:
-            V_T, B_T = dV[:, -1], dB[:, -1]
-    sens = SectionSensitivities(columns, B_p, V_p, tuple(blocks), n_par)
-    if chain.reads_thrust:
-        # fixed point T = T_bem(C(T, p), p): implicit function per point
-        dT_direct = project(sens, "Np", thrust_weights)
-        Dw = np.einsum("ksic,i->kc", columns["Np"][..., :2], thrust_weights)
-        with np.errstate(all="ignore"):
-            dT = dT_direct / (1.0 - Dw[:, 1] * V_T - Dw[:, 0] * B_T)[:, None]
-        sens = SectionSensitivities(columns, B_p + B_T[:, None] * dT, V_p + V_T[:, None] * dT, tuple(blocks), n_par)
-    return sens
-
-
-def _point_derivative(x, n_pts: int, k: int) -> np.ndarray:
-    """The (n_points, k) derivative array of a per-point value (zeros for a plain value)."""
-    if isinstance(x, dl.Dual):
-        return np.broadcast_to(x.d, (n_pts, k))
-    return np.zeros((n_pts, k))
-
-
-def _scatter_probe_map(pm: ProbeMap, roots, sec) -> ProbeMap:
-    """A probe map of the active sections, placed in (n_points, n_sectors, n_stations, m) arrays."""
-    size = int(np.prod(sec.shape))
-    m = pm.index.shape[-1]
-    index = np.zeros((size, m), int)
-    weight = np.zeros((size, m))
-    index[sec.sel] = np.where(roots.converged[:, None], pm.index, 0)
-    weight[sec.sel] = np.where(roots.converged[:, None], pm.weight, 0.0)
-    return ProbeMap(index.reshape(sec.shape + (m,)), weight.reshape(sec.shape + (m,)), np.asarray(pm.probe))
-
-

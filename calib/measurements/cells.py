@@ -13,8 +13,10 @@ from typing import Sequence
 from calib.errors import InputError
 from calib.types import CONDITION_FIELDS
 
-from calib.measurements.data import (FIXED_QUANTITY, MISSING_CELLS, UNITS,
-                                     canonical_unit, normalize_name, quantity_of)
+from calib.measurements.units import FIXED_QUANTITY, UNITS, canonical_unit, normalize_name, quantity_of
+
+#: Cell texts that mean "no value" (compared lower-case, after stripping blanks).
+MISSING_CELLS = frozenset({"", "nan", "na", "n/a", "#n/a", "null", "none"})
 
 DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}

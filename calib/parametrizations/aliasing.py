@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.corrections import CorrectionGrid
-from calib.parametrizations.correction_field import se_correlation
+from calib.parametrizations.field_prior import se_correlation
 
 #: Each calibration interval is split in this many parts for the aliasing term.
 REFINEMENT = 3

@@ -5,7 +5,9 @@ node grid), this module knows how a parameter vector carries them: which entries
 lift and drag nodes (rebuilt from the parameters' ``kind``, ``alpha_deg`` and ``eta``),
 the dense field basis ΔC(α, η) = B p, the eigenshapes ψ_i(α, η) of right singular
 vectors (Bottasso, Cacciola & Iriarte 2014, §3), the bound C_D ≥ C_D,min at the nodes,
-and the confidence bands of the corrected polars.
+and the confidence bands of the corrected polars. The smooth-field prior (correlation of the
+nodes, the field between them) is computed in :mod:`calib.parametrizations.field_prior`, the
+bands in :mod:`calib.parametrizations.field_bands`.
 
 References
 ----------
@@ -19,10 +21,11 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import stats
 
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
+from calib.parametrizations.field_bands import band_coverage, polar_bands
+from calib.parametrizations.field_prior import se_correlation, spacing_lengths, unresolved_variance
 from calib.types import Evaluation, Parameter, ParameterKind
 
 FIELD_KINDS = (ParameterKind.LIFT_CORRECTION, ParameterKind.DRAG_CORRECTION)
@@ -135,62 +138,6 @@ def eigenshapes(V: np.ndarray, layout: NodeLayout, alpha_deg, eta, modes=None):
         B = field_basis(layout, A, E, block, n_params=n_total)
         out.append((B @ Vm).T.reshape(Vm.shape[1], eta.size, alpha_deg.size))
     return out[0], out[1]
-
-
-def se_correlation(d_alpha, d_eta, lengths: tuple[float, float]) -> np.ndarray:
-    """Correlation of the smooth-field prior between points Δα [deg] and Δη [-] apart: the
-    squared exponential exp(−Δα²/2ℓ_α² − Δη²/2ℓ_η²) with ``lengths`` = (ℓ_α, ℓ_η)
-    (Rasmussen & Williams 2006, §4.2) [-]."""
-    return np.exp(-0.5 * (np.asarray(d_alpha) / lengths[0]) ** 2 - 0.5 * (np.asarray(d_eta) / lengths[1]) ** 2)
-
-
-def bounded_interval(estimate, std, lower, confidence: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
-    """Shortest interval of probability ``confidence`` of a Gaussian N(estimate, std²)
-    truncated below at ``lower`` (the highest-density interval of the truncated density).
-
-    Where the bound lies far below the estimate this is the usual estimate ± z·std; where it
-    cuts into the Gaussian the interval starts at the bound and its upper end follows from
-    the renormalized mass, so no value the bound excludes is stated possible (e.g. C_D below
-    C_D,min) and the band is no wider than the truncated density needs.
-
-    Parameters
-    ----------
-    estimate, std : array_like
-        Mean and standard deviation of the untruncated Gaussian (broadcast).
-    lower : array_like
-        Lower bound; ``-inf`` for none.
-    confidence : float
-        Probability of the interval under the truncated density [-].
-
-    Returns
-    -------
-    lo, hi : ndarray
-        Interval ends (std = 0 gives the estimate raised to the bound).
-
-    References
-    ----------
-    N.L. Johnson, S. Kotz, N. Balakrishnan, Continuous Univariate Distributions, vol. 1,
-    2nd ed., Wiley 1994, §10.1 (the truncated normal).
-    """
-    mu, s, L = np.broadcast_arrays(np.asarray(estimate, float), np.asarray(std, float), np.asarray(lower, float))
-    lo, hi = np.empty(mu.shape), np.empty(mu.shape)
-    flat = s <= 0
-    lo[flat] = hi[flat] = np.maximum(mu[flat], L[flat])
-    k = ~flat
-    mu, s, L = mu[k], s[k], L[k]
-    a = (L - mu) / s                                   # the bound in standard units
-    mass = stats.norm.sf(a)                            # Gaussian mass above the bound
-    c = stats.norm.ppf(0.5 + 0.5 * confidence * mass)  # symmetric half-width holding `confidence` of it
-    symmetric = -c >= a
-    # otherwise the interval starts at the bound: P(a < Z < u) = confidence · mass
-    with np.errstate(divide="ignore"):
-        u = stats.norm.isf((1 - confidence) * mass)
-        # far in the tail (mass below the smallest double) the truncated density is the
-        # exponential of rate a/std beyond the bound (Mills' ratio)
-        tail = L + s * -np.log1p(-confidence) / np.maximum(a, 1.0)
-    lo[k] = np.where(symmetric, mu - c * s, L)
-    hi[k] = np.where(symmetric, mu + c * s, np.where(np.isfinite(u), mu + u * s, tail))
-    return lo, hi
 
 
 def drag_floor_values(cd0, cd_min: float | None) -> np.ndarray:
@@ -320,28 +267,15 @@ class CorrectionField:
     def correlation_lengths(self, length: float) -> tuple[float, float]:
         """ℓ_α [deg] and ℓ_η [-] of the smooth-field prior for ``length`` node spacings (the
         grid's mean spacings; :meth:`node_correlation`)."""
-        return (length * float(np.mean(np.diff(self.grid.alpha_nodes_deg))),
-                length * float(np.mean(np.diff(self.grid.eta_nodes))))
+        return spacing_lengths(self.grid, length)
 
     def representation_variance(self, alpha_deg, eta, block: str, prior_std: np.ndarray,
                                 correlation_length: float = DEFAULT_PRIOR_CORRELATION) -> np.ndarray:
         """Variance of the true field between the nodes that the hat functions cannot carry [-²].
 
-        The shape functions interpolate the nodal values bilinearly; a true correction varies
-        between the nodes too. With the smooth-field prior (a stationary field of variance
-        σ_p², the block's mean prior variance, and correlation ρ of :meth:`node_correlation`)
-        the error of the interpolant Σ_i N_i(x) f(x_i) at x = (α, η) has variance
-
-        .. math::  σ_{rep}^2(x) = σ_p^2 (1 − 2 Σ_i N_i(x) ρ(x, x_i)
-                                  + Σ_{ij} N_i(x) N_j(x) ρ(x_i, x_j)),
-
-        zero at the nodes and σ_p² far from every node (outside the grid, where no hat
-        reaches). With ``correlation_length = 0`` (independent nodes) the field between the
-        nodes is taken as uncertain as at a node and independent of the nodes beyond the
-        interpolation, σ_rep² = σ_p²(1 − Σ_i N_i²): 0.75 σ_p² at a cell centre, the roughest
-        field compatible with the node spacing. With the default correlation length of one
-        node spacing it is 0.098 σ_p² at a cell centre of the wind-tunnel study's grid: a
-        field that the chosen grid resolves.
+        σ_p² of the smooth-field prior is the block's mean prior variance (``prior_std``); the
+        variance, zero at the nodes and σ_p² far from every node, is
+        :func:`calib.parametrizations.field_prior.unresolved_variance` (its equation and limits).
 
         Parameters
         ----------
@@ -355,31 +289,13 @@ class CorrectionField:
         Returns
         -------
         ndarray, flat over the broadcast shape
-
-        References
-        ----------
-        C.E. Rasmussen, C.K.I. Williams, Gaussian Processes for Machine Learning, MIT Press
-        (2006), §2.2 and §4.2.
         """
         kind = ParameterKind.LIFT_CORRECTION if block == "lift" else ParameterKind.DRAG_CORRECTION
         idx = [j for j, q in enumerate(self.parameters) if q.kind == kind]
         if not idx or self.grid is None:
             return np.zeros(np.broadcast(np.asarray(alpha_deg), np.asarray(eta)).size)
         var_node = float(np.mean(np.asarray(prior_std, float)[idx] ** 2))
-        alpha_deg, eta = np.broadcast_arrays(np.asarray(alpha_deg, float), np.asarray(eta, float))
-        node, value, _ = self.grid.basis(alpha_deg, eta)
-        value = value.reshape(-1, 4)
-        if not correlation_length > 0:
-            return var_node * np.clip(1.0 - (value ** 2).sum(-1), 0.0, 1.0)
-        lengths = self.correlation_lengths(correlation_length)
-        node = node.reshape(-1, 4)
-        an = self.grid.alpha_nodes_deg[node // self.grid.n_eta]
-        en = self.grid.eta_nodes[node % self.grid.n_eta]
-        a, e = alpha_deg.reshape(-1, 1), eta.reshape(-1, 1)
-        rho_x = se_correlation(a - an, e - en, lengths)
-        rho_nn = se_correlation(an[:, :, None] - an[:, None, :], en[:, :, None] - en[:, None, :], lengths)
-        rel = 1.0 - 2.0 * (value * rho_x).sum(-1) + np.einsum("ki,kij,kj->k", value, rho_nn, value)
-        return var_node * np.clip(rel, 0.0, 1.0)
+        return unresolved_variance(self.grid, alpha_deg, eta, var_node, correlation_length)
 
     def bands(self, p_hat: np.ndarray, cov_p: np.ndarray, cov_frozen: np.ndarray | None = None,
               alpha_deg=None, eta=None, confidence: float = 0.95, prior_std: np.ndarray | None = None,
@@ -388,7 +304,8 @@ class CorrectionField:
 
         The band of ΔC_D respects the bound C_D ≥ ``cd_min`` the estimate obeys: where the
         Gaussian band would reach below it, the band is the shortest interval of the Gaussian
-        truncated there (:func:`bounded_interval`, :meth:`drag_floor`).
+        truncated there (:func:`calib.parametrizations.field_bands.bounded_interval`,
+        :meth:`drag_floor`).
 
         Parameters
         ----------
@@ -420,32 +337,8 @@ class CorrectionField:
             ``dcl_prior_fraction``/``dcd_prior_fraction`` (n_e, n_a); ``cl0``, ``cd0`` where
             nominal polars are known.
         """
-        grid = self.grid
-        if grid is None:
-            return {}
-        a_nodes = grid.alpha_nodes_deg
-        alpha = np.linspace(a_nodes[0], a_nodes[-1], 121) if alpha_deg is None else np.asarray(alpha_deg, float)
-        eta = grid.eta_nodes if eta is None else np.asarray(eta, float)
-        A, E = np.meshgrid(alpha, eta)
-        z = stats.norm.ppf(0.5 * (1 + confidence))
-        out = {"alpha_deg": alpha, "eta": eta, "confidence": np.array(confidence)}
-        for block, letter in (("lift", "cl"), ("drag", "cd")):
-            Bf = self.basis(A, E, block)
-            out[f"d{letter}"] = (Bf @ p_hat).reshape(A.shape)
-            rep = 0.0 if prior_std is None else \
-                self.representation_variance(A, E, block, prior_std, correlation_length).reshape(A.shape)
-            var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0).reshape(A.shape) + rep
-            out[f"d{letter}_half_width"] = z * np.sqrt(var)
-            floor = self.drag_floor(A, E, cd_min) if block == "drag" else -np.inf
-            out[f"d{letter}_lower"], out[f"d{letter}_upper"] = bounded_interval(out[f"d{letter}"], np.sqrt(var),
-                                                                                floor, confidence)
-            if cov_frozen is not None:
-                vf = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_frozen, Bf), 0.0).reshape(A.shape) + rep
-                out[f"d{letter}_prior_fraction"] = np.where(var > 0, vf / np.where(var > 0, var, 1.0), 1.0)
-        if self.nominal_coefficients is not None:
-            cl0, cd0 = self.nominal_coefficients(A, E)
-            out["cl0"], out["cd0"] = np.asarray(cl0, float), np.asarray(cd0, float)
-        return out
+        return polar_bands(self, p_hat, cov_p, cov_frozen, alpha_deg, eta, confidence, prior_std,
+                           correlation_length, cd_min)
 
     def drag_floor(self, alpha_deg, eta, cd_min: float | None) -> np.ndarray:
         """Least ΔC_D [-] the bound C_D ≥ ``cd_min`` allows at (α [deg], η [-])
@@ -480,15 +373,5 @@ class CorrectionField:
         dict
             ``lift``, ``drag``: covered fraction [-]; ``n_points``.
         """
-        out = {"n_points": int(np.size(alpha_deg)), "confidence": confidence}
-        for block, truth in (("lift", truth_dcl), ("drag", truth_dcd)):
-            Bf = self.basis(alpha_deg, eta, block)
-            est = Bf @ p_hat
-            var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0)
-            if prior_std is not None:
-                var = var + self.representation_variance(alpha_deg, eta, block, prior_std, correlation_length)
-            floor = self.drag_floor(alpha_deg, eta, cd_min).reshape(-1) if block == "drag" else -np.inf
-            lo, hi = bounded_interval(est, np.sqrt(var), floor, confidence)
-            t = np.asarray(truth, float).reshape(-1)
-            out[block] = float(np.mean((t >= lo) & (t <= hi))) if est.size else float("nan")
-        return out
+        return band_coverage(self, p_hat, cov_p, alpha_deg, eta, truth_dcl, truth_dcd, confidence, prior_std,
+                             correlation_length, cd_min)

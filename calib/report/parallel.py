@@ -143,56 +143,14 @@ def run_forked(costs: dict[str, float], render: Callable[[str], object], n_worke
         the parent, so their exceptions propagate from here.
     """
     groups = partition(costs, n_workers)
-    children: dict[int, int] = {}          # read fd -> pid
+    children: dict[int, int] = {}          # read fd -> pid, of the workers still running
     results: dict[str, object] = {}
     retry: list[str] = []
     try:
-        for group in groups:
-            read_fd, write_fd = os.pipe()
-            pid = os.fork()
-            if pid == 0:                   # the child never leaves this block
-                try:
-                    os.close(read_fd)
-                    for fd in children:
-                        os.close(fd)
-                    _worker(group, render, write_fd)
-                finally:
-                    os._exit(1)
-            os.close(write_fd)
-            children[read_fd] = pid
-        selector = selectors.DefaultSelector()
-        pending = {fd: b"" for fd in children}
-        for fd in children:
-            selector.register(fd, selectors.EVENT_READ)
-        while pending:
-            for key, _ in selector.select():
-                fd = key.fd
-                data = os.read(fd, 65536)
-                if not data:
-                    selector.unregister(fd)
-                    os.close(fd)
-                    del pending[fd]
-                    os.waitpid(children.pop(fd), 0)
-                    continue
-                *lines, pending[fd] = (pending[fd] + data).split(b"\n")
-                for line in lines:
-                    message = json.loads(line)
-                    if "error" in message:
-                        retry.append(message["name"])
-                        continue
-                    results[message["name"]] = message["value"]
-                    if on_done:
-                        on_done(message["name"], message["value"], message["seconds"])
-        selector.close()
+        _start_workers(groups, render, children)
+        _collect(children, results, retry, on_done)
     except BaseException:
-        for fd, pid in children.items():
-            try:
-                os.kill(pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-        for fd, pid in children.items():
-            os.waitpid(pid, 0)
-            os.close(fd)
+        _stop_workers(children)
         raise
     retry += [name for name in costs if name not in results and name not in retry]
     for name in [n for n in costs if n in retry]:
@@ -201,3 +159,90 @@ def run_forked(costs: dict[str, float], render: Callable[[str], object], n_worke
         if on_done:
             on_done(name, results[name], time.perf_counter() - t0)
     return {name: results[name] for name in costs}
+
+
+def _start_workers(groups: list[list[str]], render: Callable[[str], object], children: dict[int, int]) -> None:
+    """Fork one worker per group, each writing to its own pipe (:func:`_worker`).
+
+    Parameters
+    ----------
+    groups : list of list of str
+        The tasks of each worker (:func:`partition`).
+    render : callable
+        As :func:`run_forked`.
+    children : dict
+        Filled as the workers start: read end of the worker's pipe -> its pid (so that the
+        workers started before a failure can be stopped).
+    """
+    for group in groups:
+        read_fd, write_fd = os.pipe()
+        pid = os.fork()
+        if pid == 0:                   # the child never leaves this block
+            try:
+                os.close(read_fd)
+                for fd in children:
+                    os.close(fd)
+                _worker(group, render, write_fd)
+            finally:
+                os._exit(1)
+        os.close(write_fd)
+        children[read_fd] = pid
+
+
+def _collect(children: dict[int, int], results: dict[str, object], retry: list[str],
+             on_done: Callable[[str, object, float], None] | None) -> None:
+    """Read the workers' JSON lines until every pipe is closed, reaping each worker as it ends.
+
+    Parameters
+    ----------
+    children : dict
+        Read end of each worker's pipe -> its pid; a worker is removed once reaped.
+    results : dict
+        Filled: task name -> value.
+    retry : list of str
+        Appended to: the tasks a worker reported an error for.
+    on_done : callable or None
+        As :func:`run_forked`, called as each result arrives.
+    """
+    selector = selectors.DefaultSelector()
+    pending = {fd: b"" for fd in children}
+    for fd in children:
+        selector.register(fd, selectors.EVENT_READ)
+    while pending:
+        for key, _ in selector.select():
+            fd = key.fd
+            data = os.read(fd, 65536)
+            if not data:
+                selector.unregister(fd)
+                os.close(fd)
+                del pending[fd]
+                os.waitpid(children.pop(fd), 0)
+                continue
+            *lines, pending[fd] = (pending[fd] + data).split(b"\n")
+            for line in lines:
+                message = json.loads(line)
+                if "error" in message:
+                    retry.append(message["name"])
+                    continue
+                results[message["name"]] = message["value"]
+                if on_done:
+                    on_done(message["name"], message["value"], message["seconds"])
+    selector.close()
+
+
+def _stop_workers(children: dict[int, int]) -> None:
+    """Stop the workers still running with SIGTERM, wait for them and close their pipes.
+
+    Parameters
+    ----------
+    children : dict
+        Read end of each worker's pipe -> its pid.
+    """
+    for fd, pid in children.items():
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+    for fd, pid in children.items():
+        os.waitpid(pid, 0)
+        os.close(fd)

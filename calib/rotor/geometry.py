@@ -101,66 +101,21 @@ class Rotor:
     source: str = field(default="<rotor>", compare=False)
 
     def __post_init__(self):
-        src = self.source
-        def arr(name, value):
-            try:
-                a = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                raise InputError(f"expected numbers, got {value!r}", src, field=name) from None
-            if a.ndim != 1:
-                raise InputError(f"expected a 1-D array, got shape {a.shape}", src, field=name)
-            return a
-        r = arr("r", self.r)
-        n = r.size
-        chord = arr("chord", self.chord)
-        twist = arr("twist_deg", self.twist_deg)
-        precurve = np.zeros(n) if self.precurve is None else arr("precurve", self.precurve)
-        presweep = np.zeros(n) if self.presweep is None else arr("presweep", self.presweep)
-        ids = np.asarray(self.airfoil_id)
-        for name, a in (("chord", chord), ("twist_deg", twist), ("precurve", precurve),
-                        ("presweep", presweep), ("airfoil_id", ids)):
-            if a.shape != (n,):
-                raise InputError(f"has {a.size} values but there are {n} stations", src, field=name)
-        if n < 2:
-            raise InputError("a blade needs at least 2 stations", src, field="r")
-        for name, a in (("r", r), ("chord", chord), ("twist_deg", twist),
-                        ("precurve", precurve), ("presweep", presweep)):
-            bad = np.flatnonzero(~np.isfinite(a))
-            if bad.size:
-                raise InputError(f"station {bad[0]} is not finite ({a[bad[0]]!r})", src, field=name)
-        if not np.issubdtype(ids.dtype, np.integer):
-            raise InputError("airfoil ids must be integers", src, field="airfoil_id")
-        if int(self.n_blades) < 1:
-            raise InputError(f"n_blades must be >= 1, got {self.n_blades}", src, field="n_blades")
-        hub, tip = float(self.hub_radius), float(self.tip_radius)
-        if not (0.0 < hub < tip):
-            raise InputError(f"need 0 < hub_radius < tip_radius, got {hub:g} and {tip:g} m", src,
-                             field="hub_radius")
-        bad = np.flatnonzero(chord <= 0)
-        if bad.size:
-            raise InputError(f"chord must be > 0, station {bad[0]} has {chord[bad[0]]:g} m", src, field="chord")
-        bad = np.flatnonzero(np.diff(r) <= 0)
-        if bad.size:
-            raise InputError(f"radii must be strictly increasing (station {bad[0] + 1})", src, field="r")
-        tol = 1e-6 * tip
-        bad = np.flatnonzero((r < hub - tol) | (r > tip + tol))
-        if bad.size:
-            raise InputError(f"station {bad[0]} at r = {r[bad[0]]:g} m lies outside "
-                             f"[hub_radius, tip_radius] = [{hub:g}, {tip:g}] m", src, field="r")
-        if ids.min() < 0 or ids.max() >= len(self.airfoils):
-            raise InputError(f"airfoil ids must lie in 0..{len(self.airfoils) - 1}", src, field="airfoil_id")
-        for name, value in (("precone_deg", self.precone_deg), ("tilt_deg", self.tilt_deg)):
-            if not np.isfinite(value):
-                raise InputError("must be finite", src, field=name)
-        object.__setattr__(self, "r", r)
-        object.__setattr__(self, "chord", chord)
-        object.__setattr__(self, "twist_deg", twist)
-        object.__setattr__(self, "precurve", precurve)
-        object.__setattr__(self, "presweep", presweep)
-        object.__setattr__(self, "airfoil_id", ids.astype(int))
+        """Check the description and store its arrays as float (ids as int) and its radii as float.
+
+        Raises
+        ------
+        InputError
+            Naming the field: :func:`_station_arrays` and :func:`_check_layout` list the checks.
+        """
+        stations = _station_arrays(self)
+        _check_layout(self, stations["r"], stations["chord"], stations["airfoil_id"])
+        stations["airfoil_id"] = stations["airfoil_id"].astype(int)
+        for name, value in stations.items():
+            object.__setattr__(self, name, value)
         object.__setattr__(self, "airfoils", tuple(self.airfoils))
-        object.__setattr__(self, "hub_radius", hub)
-        object.__setattr__(self, "tip_radius", tip)
+        object.__setattr__(self, "hub_radius", float(self.hub_radius))
+        object.__setattr__(self, "tip_radius", float(self.tip_radius))
         object.__setattr__(self, "n_blades", int(self.n_blades))
 
     def __repr__(self) -> str:
@@ -188,3 +143,101 @@ class Rotor:
     def swept_area(self) -> float:
         """Swept area π R² [m^2] with R = :attr:`rotor_radius`."""
         return float(np.pi * self.rotor_radius ** 2)
+
+
+def _station_arrays(rotor: Rotor) -> dict[str, np.ndarray]:
+    """The per-station inputs of ``rotor`` as 1-D arrays, one value per station, all finite.
+
+    Parameters
+    ----------
+    rotor : Rotor
+        As given (before :meth:`Rotor.__post_init__` stores the arrays).
+
+    Returns
+    -------
+    dict of ndarray, shape (n_stations,)
+        ``r``, ``chord``, ``twist_deg``, ``precurve``, ``presweep`` as float (precurve and
+        presweep zero when not given) and ``airfoil_id`` as given (of an integer type).
+
+    Raises
+    ------
+    InputError
+        Naming the field: not numbers, not 1-D, a length other than that of ``r``, fewer than
+        2 stations, a value that is not finite, airfoil ids that are not integers.
+    """
+    src = rotor.source
+
+    def arr(name, value):
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"expected numbers, got {value!r}", src, field=name) from None
+        if a.ndim != 1:
+            raise InputError(f"expected a 1-D array, got shape {a.shape}", src, field=name)
+        return a
+    r = arr("r", rotor.r)
+    n = r.size
+    chord = arr("chord", rotor.chord)
+    twist = arr("twist_deg", rotor.twist_deg)
+    precurve = np.zeros(n) if rotor.precurve is None else arr("precurve", rotor.precurve)
+    presweep = np.zeros(n) if rotor.presweep is None else arr("presweep", rotor.presweep)
+    ids = np.asarray(rotor.airfoil_id)
+    for name, a in (("chord", chord), ("twist_deg", twist), ("precurve", precurve),
+                    ("presweep", presweep), ("airfoil_id", ids)):
+        if a.shape != (n,):
+            raise InputError(f"has {a.size} values but there are {n} stations", src, field=name)
+    if n < 2:
+        raise InputError("a blade needs at least 2 stations", src, field="r")
+    for name, a in (("r", r), ("chord", chord), ("twist_deg", twist),
+                    ("precurve", precurve), ("presweep", presweep)):
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise InputError(f"station {bad[0]} is not finite ({a[bad[0]]!r})", src, field=name)
+    if not np.issubdtype(ids.dtype, np.integer):
+        raise InputError("airfoil ids must be integers", src, field="airfoil_id")
+    return {"r": r, "chord": chord, "twist_deg": twist, "precurve": precurve, "presweep": presweep,
+            "airfoil_id": ids}
+
+
+def _check_layout(rotor: Rotor, r: np.ndarray, chord: np.ndarray, ids: np.ndarray) -> None:
+    """Refuse a blade layout that cannot be a rotor.
+
+    Parameters
+    ----------
+    rotor : Rotor
+        As given (its blade count, hub and tip radius [m], airfoils, precone and tilt [deg]).
+    r, chord : ndarray, shape (n_stations,)
+        Station radii and chords [m] (:func:`_station_arrays`).
+    ids : ndarray of int, shape (n_stations,)
+        Airfoil index of each station.
+
+    Raises
+    ------
+    InputError
+        Naming the field: fewer than 1 blade; not 0 < hub radius < tip radius; a chord <= 0;
+        radii not strictly increasing or outside [hub_radius, tip_radius] (to 1e-6 of the tip
+        radius); an airfoil id outside the airfoils; a precone or tilt that is not finite.
+    """
+    src = rotor.source
+    if int(rotor.n_blades) < 1:
+        raise InputError(f"n_blades must be >= 1, got {rotor.n_blades}", src, field="n_blades")
+    hub, tip = float(rotor.hub_radius), float(rotor.tip_radius)
+    if not (0.0 < hub < tip):
+        raise InputError(f"need 0 < hub_radius < tip_radius, got {hub:g} and {tip:g} m", src,
+                         field="hub_radius")
+    bad = np.flatnonzero(chord <= 0)
+    if bad.size:
+        raise InputError(f"chord must be > 0, station {bad[0]} has {chord[bad[0]]:g} m", src, field="chord")
+    bad = np.flatnonzero(np.diff(r) <= 0)
+    if bad.size:
+        raise InputError(f"radii must be strictly increasing (station {bad[0] + 1})", src, field="r")
+    tol = 1e-6 * tip
+    bad = np.flatnonzero((r < hub - tol) | (r > tip + tol))
+    if bad.size:
+        raise InputError(f"station {bad[0]} at r = {r[bad[0]]:g} m lies outside "
+                         f"[hub_radius, tip_radius] = [{hub:g}, {tip:g}] m", src, field="r")
+    if ids.min() < 0 or ids.max() >= len(rotor.airfoils):
+        raise InputError(f"airfoil ids must lie in 0..{len(rotor.airfoils) - 1}", src, field="airfoil_id")
+    for name, value in (("precone_deg", rotor.precone_deg), ("tilt_deg", rotor.tilt_deg)):
+        if not np.isfinite(value):
+            raise InputError("must be finite", src, field=name)
