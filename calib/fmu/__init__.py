@@ -11,7 +11,9 @@ The adapter, from the archive to the model:
 - :mod:`calib.fmu.plan`         picklable plans, tasks and outcomes; the adaptive timeout rule;
 - :mod:`calib.fmu.windows`      steady-window statistics (mean, halves, azimuth harmonics);
 - :mod:`calib.fmu.simulator`    one FMU instance driven in this process through fmpy;
-- :mod:`calib.fmu.worker`       worker processes, their pipe protocol, the per-process cache;
+- :mod:`calib.fmu.worker`       worker processes supervised: timeouts, faults, restarts; the per-process cache;
+- :mod:`calib.fmu.child`        the worker process itself: a simulator answering requests;
+- :mod:`calib.fmu.pipe`         the pipe protocol between them (length-prefixed pickles);
 - :mod:`calib.fmu.faults`       the fault ledger: quarantine and healthy wall times;
 - :mod:`calib.fmu.states`       settled FMU states saved to and read from files;
 - :mod:`calib.fmu.differences`  central differences: perturbed parameter vectors, sensitivities;
@@ -21,6 +23,6 @@ The adapter, from the archive to the model:
 The bundled FMUs' builder: :mod:`calib.fmu.build` (compiles ``fmu_models/``),
 :mod:`calib.fmu.model_description` and :mod:`calib.fmu.resources`.
 
-Nothing is imported here, so a worker process (``python -m calib.fmu.worker``) loads fmpy and
+Nothing is imported here, so a worker process (``python -m calib.fmu.child``) loads fmpy and
 numpy only, not the calibration stack.
 """
