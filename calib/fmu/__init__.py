@@ -21,7 +21,9 @@ The adapter, from the archive to the model:
 - :mod:`calib.fmu.bundled`      the bundled FMU of a workflow (``[model] variant``), built on demand.
 
 The bundled FMUs' builder: :mod:`calib.fmu.build` (compiles ``fmu_models/``),
-:mod:`calib.fmu.model_description` and :mod:`calib.fmu.resources`.
+:mod:`calib.fmu.variant_spec` (reads and expands a variant's ``variables.toml``),
+:mod:`calib.fmu.model_description` (renders ``modelDescription.xml`` and the C table) and
+:mod:`calib.fmu.resources`.
 
 Nothing is imported here, so a worker process (``python -m calib.fmu.child``) loads fmpy and
 numpy only, not the calibration stack.
