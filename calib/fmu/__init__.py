@@ -4,6 +4,7 @@ The adapter, from the archive to the model:
 
 - :mod:`calib.fmu.archive`      zip checks, the extraction cache, the platform binary;
 - :mod:`calib.fmu.mapping`      the declarative mapping file (inputs, outputs, parameters, nodes);
+- :mod:`calib.fmu.mapping_entries` its entries: a mapped variable each, with its unit conversion;
 - :mod:`calib.fmu.rules`        its ``[steady]`` and ``[jacobian]`` tables: the run and difference rules;
 - :mod:`calib.fmu.binding`      the mapping bound to the model description: variables, types, sizes;
 - :mod:`calib.fmu.channels`     channel names -> mapped signals, run outcomes -> channel values;
