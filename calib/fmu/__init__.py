@@ -6,7 +6,9 @@ The adapter, from the archive to the model:
 - :mod:`calib.fmu.mapping`      the declarative mapping file (inputs, outputs, parameters, nodes);
 - :mod:`calib.fmu.mapping_entries` its entries: a mapped variable each, with its unit conversion;
 - :mod:`calib.fmu.rules`        its ``[steady]`` and ``[jacobian]`` tables: the run and difference rules;
-- :mod:`calib.fmu.binding`      the mapping bound to the model description: variables, types, sizes;
+- :mod:`calib.fmu.variables`    the FMU's variables as a mapping uses them: lookup, roles, types, sizes;
+- :mod:`calib.fmu.binding`      the mapping bound to them: checks, settings, parameters, inputs (writes);
+- :mod:`calib.fmu.signals`      what a simulation reads (signals, counters) and the plan that carries it;
 - :mod:`calib.fmu.channels`     channel names -> mapped signals, run outcomes -> channel values;
 - :mod:`calib.fmu.stations`     which variables give the output-station and rotor radii, and the radii;
 - :mod:`calib.fmu.plan`         picklable plans, tasks and outcomes; the adaptive timeout rule;

@@ -89,7 +89,7 @@ def channel_values(outcomes: list, specs: list, keys_for_values: dict) -> np.nda
     specs : list of tuple
         The channels (:func:`channel_specs`).
     keys_for_values : dict
-        Signal key -> its index in the plan's signals (:func:`calib.fmu.binding.make_plan`).
+        Signal key -> its index in the plan's signals (:func:`calib.fmu.signals.make_plan`).
 
     Returns
     -------

@@ -55,13 +55,14 @@ from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
 from calib.fmu.archive import FmuInputError, check_archive, extract_once, platform_binary
-from calib.fmu.binding import (PlanSite, Variables, bind_inputs, bind_parameters, check_mapped_variables,
-                               fixed_assignments, make_plan)
+from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
 from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, channel_values
 from calib.fmu.differences import perturbed_vectors, sensitivities
 from calib.fmu.mapping import Mapping, load_mapping
+from calib.fmu.signals import PlanSite, make_plan
 from calib.fmu.states import read_states, write_states
 from calib.fmu.stations import radii_from_reads, radius_reads
+from calib.fmu.variables import Variables
 from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras

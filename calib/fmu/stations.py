@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.fmu.binding import Variables
 from calib.fmu.mapping import Mapping
+from calib.fmu.variables import Variables
 
 
 def radius_reads(m: Mapping, vs: Variables) -> list[tuple[int, int]]:
