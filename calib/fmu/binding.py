@@ -24,6 +24,7 @@ from calib.errors import InputError
 from calib.fmu import plan as fp
 from calib.fmu.archive import FmuInputError
 from calib.fmu.mapping import Mapping
+from calib.fmu.mapping_entries import ParameterEntry
 from calib.fmu.variables import Variables, type_class
 from calib.types import CONDITION_DEFAULTS, CONDITION_FIELDS, Parameter
 
@@ -206,66 +207,137 @@ def bind_parameters(m: Mapping, vs: Variables, names, corrections: bool, unzip_d
     params, index, conv = [], [], []   # conv: (scale, offset, sign) package -> fmu
     grid = None
     if corrections and m.corrections is not None:
-        c = m.corrections
-        if c.grid_file:
-            gpath = Path(unzip_dir) / c.grid_file
-            if not gpath.is_file():
-                raise FmuInputError(f"correction grid file {c.grid_file!r} is not in the FMU", m.source,
-                                    field="corrections.grid")
-            info = json.loads(gpath.read_text())
-            opts = {k: info[k] for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in info}
-            grid = CorrectionGrid(info["alpha_nodes_deg"], info["eta_nodes"], **(opts | c.grid_options))
-        else:
-            grid = CorrectionGrid(c.alpha_nodes_deg, c.eta_nodes, **c.grid_options)
-        lift, drag = c.variable_names(grid.n_alpha, grid.n_eta)
-        for block, vnames in (("lift", lift), ("drag", drag)):
-            where = f"corrections.{block}"
-            if c.layout == "array":
-                var = vs.get(vnames[0], where)
-                vs.expect(var, where, ("parameter",), ("tunable",))
-                if vs.size(var) != grid.n_lift:
-                    raise FmuInputError(f"array {var.name!r} has {vs.size(var)} elements, the correction grid "
-                                        f"{grid.n_lift} nodes", m.source, field=where)
-                index += [w.index(var, k, where) for k in range(grid.n_lift)]
-            else:
-                for vn in vnames:
-                    var = vs.get(vn, where)
-                    vs.expect(var, where, ("parameter",), ("tunable",))
-                    index.append(w.index(var, None, where))
-            conv += [(c.scale, 0.0, 1)] * grid.n_lift
+        grid = _correction_grid(m, unzip_dir)
+        index += _correction_indices(m, vs, w, grid)
+        conv += [(m.corrections.scale, 0.0, 1)] * (2 * grid.n_lift)     # lift block, then drag block
         params += list(grid.parameters())
+    for name in _selected_parameters(m, names):
+        e = m.parameters[name]
+        where = f"parameters.{name}"
+        var = vs.get(e.variable, where)
+        params.append(_scalar_parameter(name, e, var, vs, m.source, where))
+        index.append(w.index(var, e.element, where))
+        conv.append((e.scale, e.offset, e.sign))
+    return ParameterBinding(tuple(params), grid, w, np.array(index, int), np.array(conv, float).reshape(-1, 3),
+                            np.array(w.base, float))
+
+
+def _correction_grid(m: Mapping, unzip_dir: str) -> CorrectionGrid:
+    """The correction grid of ``[corrections]``: from its JSON file inside the FMU, or its own nodes.
+
+    Parameters
+    ----------
+    m : Mapping
+        A mapping with ``[corrections]``.
+    unzip_dir : str
+        The folder the FMU is extracted to (``grid`` names a file relative to it).
+
+    Returns
+    -------
+    CorrectionGrid
+        With the file's ``cl_scale``, ``cd_scale``, ``cl_bound``, ``cd_bound`` overridden by the mapping's.
+    """
+    c = m.corrections
+    if c.grid_file:
+        gpath = Path(unzip_dir) / c.grid_file
+        if not gpath.is_file():
+            raise FmuInputError(f"correction grid file {c.grid_file!r} is not in the FMU", m.source,
+                                field="corrections.grid")
+        info = json.loads(gpath.read_text())
+        opts = {k: info[k] for k in ("cl_scale", "cd_scale", "cl_bound", "cd_bound") if k in info}
+        return CorrectionGrid(info["alpha_nodes_deg"], info["eta_nodes"], **(opts | c.grid_options))
+    return CorrectionGrid(c.alpha_nodes_deg, c.eta_nodes, **c.grid_options)
+
+
+def _correction_indices(m: Mapping, vs: Variables, w: _Writer, grid: CorrectionGrid) -> list[int]:
+    """Where each correction node is written: its position in ``w``'s flat vector, lift block then drag block.
+
+    Parameters
+    ----------
+    m : Mapping
+        A mapping with ``[corrections]`` (layout ``"array"``: one tunable array per block with one element
+        per node; ``"scalar"``: one tunable scalar per node).
+    vs : Variables
+        The FMU's variables.
+    w : _Writer
+        The writer of the calibrated parameters (its slots are added here).
+    grid : CorrectionGrid
+        The correction grid (:func:`_correction_grid`).
+
+    Returns
+    -------
+    list of int
+        ``2 * grid.n_lift`` positions.
+    """
+    c = m.corrections
+    index = []
+    lift, drag = c.variable_names(grid.n_alpha, grid.n_eta)
+    for block, vnames in (("lift", lift), ("drag", drag)):
+        where = f"corrections.{block}"
+        if c.layout == "array":
+            var = vs.get(vnames[0], where)
+            vs.expect(var, where, ("parameter",), ("tunable",))
+            if vs.size(var) != grid.n_lift:
+                raise FmuInputError(f"array {var.name!r} has {vs.size(var)} elements, the correction grid "
+                                    f"{grid.n_lift} nodes", m.source, field=where)
+            index += [w.index(var, k, where) for k in range(grid.n_lift)]
+        else:
+            for vn in vnames:
+                var = vs.get(vn, where)
+                vs.expect(var, where, ("parameter",), ("tunable",))
+                index.append(w.index(var, None, where))
+    return index
+
+
+def _selected_parameters(m: Mapping, names) -> list[str]:
+    """The ``[parameters]`` names to calibrate: ``names`` (all when None), each one the mapping's."""
     selected = list(m.parameters) if names is None else list(names)
     unknown = [n for n in selected if n not in m.parameters]
     if unknown:
         raise InputError(f"unknown parameter(s) {', '.join(unknown)}; the mapping's [parameters]: "
                          f"{', '.join(m.parameters) or '(none)'}", m.source, field=f"parameters.{unknown[0]}")
-    for name in selected:
-        e = m.parameters[name]
-        where = f"parameters.{name}"
-        var = vs.get(e.variable, where)
-        lo_f = float(var.min) if var.min is not None else -np.inf
-        hi_f = float(var.max) if var.max is not None else np.inf
-        fmu_range = np.sort(e.to_package(np.array([lo_f, hi_f])))
-        start = vs.start_values(var, vs.size(var))[e.element or 0]
-        nominal = float(e.to_package(start)) if np.isnan(e.nominal) else e.nominal
-        lower = fmu_range[0] if np.isnan(e.lower) else e.lower
-        upper = fmu_range[1] if np.isnan(e.upper) else e.upper
-        if not (np.isfinite(lower) and np.isfinite(upper)):
-            raise FmuInputError("no finite bounds: give 'lower' and 'upper' (the FMU declares no min/max)",
-                                m.source, field=where)
-        if lower < fmu_range[0] - 1e-12 * abs(fmu_range[0]) or upper > fmu_range[1] + 1e-12 * abs(fmu_range[1]):
-            raise FmuInputError(f"bounds [{lower:g}, {upper:g}] exceed the FMU's range [{fmu_range[0]:g}, "
-                                f"{fmu_range[1]:g}] (package units)", m.source, field=where)
-        try:
-            params.append(Parameter(name, nominal, lower, upper, e.typical, e.package_unit or "-", e.kind,
-                                    description=e.description or f"FMU variable {e.variable}",
-                                    prior_std=e.prior_std))
-        except InputError as exc:
-            raise FmuInputError(exc.message, m.source, field=where) from None
-        index.append(w.index(var, e.element, where))
-        conv.append((e.scale, e.offset, e.sign))
-    return ParameterBinding(tuple(params), grid, w, np.array(index, int), np.array(conv, float).reshape(-1, 3),
-                            np.array(w.base, float))
+    return selected
+
+
+def _scalar_parameter(name: str, e: ParameterEntry, var, vs: Variables, source: str, where: str) -> Parameter:
+    """The calibrated :class:`~calib.types.Parameter` of one ``[parameters]`` entry [package units].
+
+    Parameters
+    ----------
+    name : str
+        Its name in ``[parameters]``.
+    e : ParameterEntry
+        The entry: its nominal value and bounds (NaN: take the FMU's start value, min and max, converted).
+    var : fmpy.model_description.ModelVariable
+        The FMU variable it is written to.
+    vs : Variables
+        The FMU's variables (for the start value).
+    source, where : str
+        The mapping file and the entry's key, which errors name.
+
+    Returns
+    -------
+    Parameter
+        Nominal and bounds inside the FMU's range (converted to package units).
+    """
+    lo_f = float(var.min) if var.min is not None else -np.inf
+    hi_f = float(var.max) if var.max is not None else np.inf
+    fmu_range = np.sort(e.to_package(np.array([lo_f, hi_f])))
+    start = vs.start_values(var, vs.size(var))[e.element or 0]
+    nominal = float(e.to_package(start)) if np.isnan(e.nominal) else e.nominal
+    lower = fmu_range[0] if np.isnan(e.lower) else e.lower
+    upper = fmu_range[1] if np.isnan(e.upper) else e.upper
+    if not (np.isfinite(lower) and np.isfinite(upper)):
+        raise FmuInputError("no finite bounds: give 'lower' and 'upper' (the FMU declares no min/max)",
+                            source, field=where)
+    if lower < fmu_range[0] - 1e-12 * abs(fmu_range[0]) or upper > fmu_range[1] + 1e-12 * abs(fmu_range[1]):
+        raise FmuInputError(f"bounds [{lower:g}, {upper:g}] exceed the FMU's range [{fmu_range[0]:g}, "
+                            f"{fmu_range[1]:g}] (package units)", source, field=where)
+    try:
+        return Parameter(name, nominal, lower, upper, e.typical, e.package_unit or "-", e.kind,
+                         description=e.description or f"FMU variable {e.variable}", prior_std=e.prior_std)
+    except InputError as exc:
+        raise FmuInputError(exc.message, source, field=where) from None
 
 
 def bind_inputs(m: Mapping, vs: Variables) -> InputBinding:
