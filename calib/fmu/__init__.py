@@ -6,6 +6,7 @@ The adapter, from the archive to the model:
 - :mod:`calib.fmu.mapping`      the declarative mapping file (inputs, outputs, parameters, nodes);
 - :mod:`calib.fmu.mapping_entries` its entries: a mapped variable each, with its unit conversion;
 - :mod:`calib.fmu.rules`        its ``[steady]`` and ``[jacobian]`` tables: the run and difference rules;
+- :mod:`calib.fmu.fmu_file`     the FMU opened: model description read, matched to the mapping, extracted;
 - :mod:`calib.fmu.variables`    the FMU's variables as a mapping uses them: lookup, roles, types, sizes;
 - :mod:`calib.fmu.binding`      the mapping bound to them: checks, settings, parameters, inputs (writes);
 - :mod:`calib.fmu.signals`      what a simulation reads (signals, counters) and the plan that carries it;
