@@ -4,7 +4,7 @@ A channel is the steady window mean of a mapped output (``power`` [W], ``thrust`
 a spanwise station (``fn@<r/R>`` [N/m]), or an azimuth harmonic of either: amplitude
 ``<output>_1p``, ``_2p``, ``_3p`` (unit of the output) and phase ``<output>_1p_phase`` ... [deg].
 :func:`channel_specs` resolves channel names against a :class:`~calib.fmu.mapping.Mapping`
-(:func:`signal_of` per base name); :func:`channel_values` reads the channels from the
+(:func:`signal_of` per base name) and :func:`offered_channels` lists them; :func:`channel_values` reads the channels from the
 :class:`~calib.fmu.plan.RunOutcome` of runs, and :func:`evaluation_of` makes the
 :class:`~calib.types.Evaluation` of a call from its results. Nothing here runs the FMU.
 """
@@ -79,6 +79,20 @@ def channel_specs(m: Mapping, channels, spanwise_eta: Callable, available: Calla
                              m.source, field="outputs")
         specs.append((name, key, kind, order, "deg" if kind == "phase" else unit))
     return specs
+
+
+def offered_channels(m: Mapping, spanwise_eta: Callable) -> list[str]:
+    """Channel names a mapping offers: its outputs, ``fn@<r/R>`` per station (when the stations and the
+    rotor radius are known), and the harmonics as patterns (``<output>_1p``, ``<output>_1p_phase`` ...).
+
+    ``spanwise_eta(name)``: the r/R of a spanwise output's stations (None when unknown).
+    """
+    base = [n for n in m.outputs if n not in NOT_CHANNELS]
+    if "normal_force" in m.spanwise and m.rotor_radius is not None:
+        eta = spanwise_eta("normal_force")
+        if eta is not None:
+            base += [f"fn@{e:.2f}" for e in eta]
+    return base + [f"<output>{s}" for s in HARMONIC_SUFFIXES] + [f"<output>{s}_phase" for s in HARMONIC_SUFFIXES]
 
 
 def channel_values(outcomes: list, specs: list, keys_for_values: dict) -> np.ndarray:

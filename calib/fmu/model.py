@@ -52,13 +52,13 @@ from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
 from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
-from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, evaluation_of
+from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
 from calib.fmu.differences import perturbed_vectors, sensitivities
 from calib.fmu.fmu_file import FmuFile, open_fmu
 from calib.fmu.mapping import Mapping, load_mapping
 from calib.fmu.signals import PlanSite, make_plan
 from calib.fmu.states import read_states, write_states
-from calib.fmu.stations import radii_from_reads, radius_reads
+from calib.fmu.stations import probe_radii
 from calib.fmu.variables import Variables
 from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
@@ -197,21 +197,11 @@ class FmuModel:
 
     # ------------------------------------------------------------------ channels
     def _probe(self) -> dict:
-        """Rotor radius and output-station radii, read from an initialized instance (once)."""
-        if self._probed is not None:
-            return self._probed
-        reads = radius_reads(self.mapping, self._variables)
-        values = []
-        if reads:
-            plan, _ = make_plan(self.mapping, self._variables, self._site, [], self.grid, signals_only=True)
-            worker = fw.worker_for(plan, self.isolate, self.timeout)
-            try:
-                values = worker.probe(reads)
-            except Exception as exc:  # noqa: BLE001
-                raise ModelError(f"{self.fmu_path.name}: could not initialize the FMU to read radii: {exc}") from None
-            finally:
-                fw.close_workers(plan.key)
-        self._probed = radii_from_reads(self.mapping, values)
+        """Rotor radius and output-station radii, read from an initialized instance (once):
+        :func:`calib.fmu.stations.probe_radii`."""
+        if self._probed is None:
+            self._probed = probe_radii(self.mapping, self._variables, self._site, self.isolate, self.timeout,
+                                       self.fmu_path.name)
         return self._probed
 
     def _spanwise_eta(self, name: str) -> np.ndarray | None:
@@ -222,12 +212,7 @@ class FmuModel:
 
     def available_channels(self) -> list[str]:
         """Channel names this FMU offers through its mapping (harmonics as patterns)."""
-        base = [n for n in self.mapping.outputs if n not in NOT_CHANNELS]
-        if "normal_force" in self.mapping.spanwise and self.mapping.rotor_radius is not None:
-            eta = self._spanwise_eta("normal_force")
-            if eta is not None:
-                base += [f"fn@{e:.2f}" for e in eta]
-        return base + [f"<output>{s}" for s in HARMONIC_SUFFIXES] + [f"<output>{s}_phase" for s in HARMONIC_SUFFIXES]
+        return offered_channels(self.mapping, self._spanwise_eta)
 
     # ------------------------------------------------------------------ contract
     @property
