@@ -52,6 +52,7 @@ from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
 from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
+from calib.fmu.bundled import spec_files
 from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
 from calib.fmu.differences import perturbed_vectors, sensitivities
 from calib.fmu.fmu_file import FmuFile, open_fmu
@@ -64,7 +65,6 @@ from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
-
 
 
 class FmuModel:
@@ -360,19 +360,12 @@ class FmuModel:
 
     @classmethod
     def from_spec(cls, spec: dict, base_dir=None) -> "FmuModel":
-        """Rebuild from :meth:`spec` (rebuilding a bundled variant when its file is gone)."""
-        def resolve(p):
-            q = Path(p)
-            return q if q.is_absolute() or base_dir is None else Path(base_dir) / q
-        fmu = resolve(spec["fmu"]) if spec.get("fmu") else None
-        if (fmu is None or not fmu.is_file()) and spec.get("build"):
-            from calib.fmu.bundled import build_variant
-            fmu = build_variant(spec["build"], "model spec", base_dir)
-        if fmu is None:
-            raise InputError("the spec names no FMU file", "model spec", field="fmu")
+        """Rebuild from :meth:`spec` (rebuilding a bundled variant when its file is gone:
+        :func:`calib.fmu.bundled.spec_files`)."""
+        fmu, mapping = spec_files(spec, base_dir)
         opts = {k: spec[k] for k in ("parameters", "corrections", "switches", "settings", "steady", "jacobian",
                                      "timeout", "isolate") if k in spec}
-        return cls(fmu, resolve(spec["mapping"]), spec.get("channels"), build=spec.get("build"), **opts)
+        return cls(fmu, mapping, spec.get("channels"), build=spec.get("build"), **opts)
 
     # ------------------------------------------------------------------ settled states
     def settled_states(self, p, conditions: OperatingConditions) -> list[bytes | None]:
