@@ -1,4 +1,5 @@
-"""The mapping bound to the model description (calib.fmu.binding): checked and planned without simulating.
+"""The mapping bound to the model description (calib.fmu.binding, calib.fmu.signals): checked and planned
+without simulating.
 
 The binding is pure: the bundled variant A's model description and mapping go in, parameters,
 inputs, channels and a simulation plan come out; no FMU instance is created. The expectations
@@ -16,11 +17,12 @@ import pytest
 
 from calib.corrections import CorrectionGrid
 from calib.fmu.archive import FmuInputError, check_archive, extract_once
-from calib.fmu.binding import (PlanSite, Variables, bind_inputs, bind_parameters, check_mapped_variables,
-                               fixed_assignments, make_plan)
+from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
 from calib.fmu.channels import channel_specs
 from calib.fmu.build import build_fmu, mapping_path
 from calib.fmu.mapping import load_mapping
+from calib.fmu.signals import PlanSite, make_plan
+from calib.fmu.variables import Variables
 from calib.measurements import sha256_of
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions

@@ -180,7 +180,8 @@ def test_spec_ranges_are_required_and_checked(tmp_path):
     the model description's range and the FMU's refusal rule); outputs and Booleans take none."""
     from calib.errors import InputError
     from calib.fmu import model_description as md
-    ids = md.core_variable_ids(fmu_build.CORE_DIR / "rotor_core.h")
+    from calib.fmu import variant_spec
+    ids = variant_spec.core_variable_ids(fmu_build.CORE_DIR / "rotor_core.h")
     kw = dict(n_nodes=1, alpha_nodes=[0.0], eta_nodes=[1.0], out_radius=[], out_eta=[], rotor_facts={})
     head = '[fmu]\nfmi_version = "2.0"\nmodel_identifier = "x"\nmodel_name = "x"\nwrapper = "w.c"\n'
     cases = {
@@ -194,10 +195,10 @@ def test_spec_ranges_are_required_and_checked(tmp_path):
         path = tmp_path / "v.toml"
         path.write_text(head + "[[variable]]\n" + body)
         with pytest.raises(InputError) as info:
-            md.load_spec(path, ids, **kw)
+            variant_spec.load_spec(path, ids, **kw)
         assert info.value.field == field, body
     path.write_text(head + "[[variable]]\n" + 'name = "v"\ncore = "WIND_SPEED"\nkind = "input"\nstart = 8.0\n'
                     'min = 0.0\nmax = 50.0\n')
-    spec = md.load_spec(path, ids, **kw)
+    spec = variant_spec.load_spec(path, ids, **kw)
     assert (spec.variables[0].min, spec.variables[0].max) == (0.0, 50.0)
     assert 'min="0.0" max="50.0"' in md.render_fmi2(spec, "{g}")

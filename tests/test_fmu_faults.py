@@ -21,6 +21,7 @@ from pythonfmu_export import export_fmu
 
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
+from calib.fmu.channels import channel_values
 from calib.fmu.faults import FaultLedger
 from calib.fmu.model import FmuModel
 from calib.types import OperatingConditions, Status
@@ -146,7 +147,7 @@ def test_after_a_fatal_status_the_process_is_replaced_and_later_points_are_unhar
     broken = [getattr(o, "message", "not run") for r in healthy for o in (r.base, *r.perturbations)
               if o is None or not o.ok]
     assert not broken, broken[:3]
-    values = faulty._values([r.base for r in healthy])
+    values = channel_values([r.base for r in healthy], faulty._channel_specs, faulty._keys_for_values)
     np.testing.assert_allclose(values, ref[[r.index for r in healthy]], rtol=1e-12)
     hit = [r for r in results if r.index == 5]
     assert all(r.base.fault == "fatal" and "fatal status" in r.base.message and r.restarts == 1 for r in hit)

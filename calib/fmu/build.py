@@ -30,6 +30,7 @@ from pathlib import Path
 from calib.corrections import CorrectionGrid
 from calib.errors import CalibError, InputError
 from calib.fmu import model_description as md
+from calib.fmu import variant_spec
 from calib.fmu.resources import default_grid, rotor_facts, write_resources
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -97,7 +98,7 @@ def _source_files(variant: str) -> list[Path]:
 def _generator_files() -> list[Path]:
     """The Python that writes the model description, C table and resources (part of the key)."""
     from calib.fmu import resources
-    return [Path(__file__), Path(md.__file__), Path(resources.__file__)]
+    return [Path(__file__), Path(variant_spec.__file__), Path(md.__file__), Path(resources.__file__)]
 
 
 def _fmpy_build_files() -> list[Path]:
@@ -184,8 +185,8 @@ def build_fmu(variant: str, rotor=None, grid: CorrectionGrid | None = None, out_
     spec_args = dict(n_nodes=facts["n_nodes"], alpha_nodes=list(grid.alpha_nodes_deg),
                      eta_nodes=list(grid.eta_nodes), out_radius=list(facts["out_radius"]),
                      out_eta=list(facts["out_eta"]), rotor_facts=rotor_facts(rotor))
-    core_ids = md.core_variable_ids(CORE_DIR / "rotor_core.h")
-    spec = md.load_spec(vdir / "variables.toml", core_ids, **spec_args)
+    core_ids = variant_spec.core_variable_ids(CORE_DIR / "rotor_core.h")
+    spec = variant_spec.load_spec(vdir / "variables.toml", core_ids, **spec_args)
     flavour = [SANITIZE_FLAGS.encode()] if sanitize else []
     digest = _hash(_source_files(key) + _generator_files() + _fmpy_build_files(),
                    resource_bytes + [Path(cc).name.encode()] + flavour)
@@ -258,7 +259,7 @@ def _write_cmake_cache(build_dir: Path, spec, stage: Path, sources: list[str], f
     (build_dir / "CMakeCache.txt").write_text("".join(f"{k}={v}\n" for k, v in entries.items()))
 
 
-def _build_into(work: Path, fmu_path: Path, spec: md.VariantSpec, token: str, rotor, grid, key: str,
+def _build_into(work: Path, fmu_path: Path, spec: variant_spec.VariantSpec, token: str, rotor, grid, key: str,
                 cmake: str, sanitize: bool = False):
     import fmpy
 

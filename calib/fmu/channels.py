@@ -4,8 +4,9 @@ A channel is the steady window mean of a mapped output (``power`` [W], ``thrust`
 a spanwise station (``fn@<r/R>`` [N/m]), or an azimuth harmonic of either: amplitude
 ``<output>_1p``, ``_2p``, ``_3p`` (unit of the output) and phase ``<output>_1p_phase`` ... [deg].
 :func:`channel_specs` resolves channel names against a :class:`~calib.fmu.mapping.Mapping`
-(:func:`signal_of` per base name); :func:`channel_values` reads the channels from the
-:class:`~calib.fmu.plan.RunOutcome` of runs. Nothing here runs the FMU.
+(:func:`signal_of` per base name) and :func:`offered_channels` lists them; :func:`channel_values` reads the channels from the
+:class:`~calib.fmu.plan.RunOutcome` of runs, and :func:`evaluation_of` makes the
+:class:`~calib.types.Evaluation` of a call from its results. Nothing here runs the FMU.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from calib.errors import InputError
 from calib.fmu import plan as fp
 from calib.fmu.mapping import Mapping
+from calib.types import Channel, Evaluation, OperatingConditions, Status
 
 #: azimuth-harmonic channel suffixes -> harmonic order
 HARMONIC_SUFFIXES = {f"_{n}p": n for n in fp.HARMONIC_ORDERS}
@@ -79,6 +81,20 @@ def channel_specs(m: Mapping, channels, spanwise_eta: Callable, available: Calla
     return specs
 
 
+def offered_channels(m: Mapping, spanwise_eta: Callable) -> list[str]:
+    """Channel names a mapping offers: its outputs, ``fn@<r/R>`` per station (when the stations and the
+    rotor radius are known), and the harmonics as patterns (``<output>_1p``, ``<output>_1p_phase`` ...).
+
+    ``spanwise_eta(name)``: the r/R of a spanwise output's stations (None when unknown).
+    """
+    base = [n for n in m.outputs if n not in NOT_CHANNELS]
+    if "normal_force" in m.spanwise and m.rotor_radius is not None:
+        eta = spanwise_eta("normal_force")
+        if eta is not None:
+            base += [f"fn@{e:.2f}" for e in eta]
+    return base + [f"<output>{s}" for s in HARMONIC_SUFFIXES] + [f"<output>{s}_phase" for s in HARMONIC_SUFFIXES]
+
+
 def channel_values(outcomes: list, specs: list, keys_for_values: dict) -> np.ndarray:
     """Channel values of run outcomes.
 
@@ -89,7 +105,7 @@ def channel_values(outcomes: list, specs: list, keys_for_values: dict) -> np.nda
     specs : list of tuple
         The channels (:func:`channel_specs`).
     keys_for_values : dict
-        Signal key -> its index in the plan's signals (:func:`calib.fmu.binding.make_plan`).
+        Signal key -> its index in the plan's signals (:func:`calib.fmu.signals.make_plan`).
 
     Returns
     -------
@@ -108,3 +124,57 @@ def channel_values(outcomes: list, specs: list, keys_for_values: dict) -> np.nda
         else:
             out[:, c] = np.degrees(np.angle(harm[:, i, order - 1]))
     return out
+
+
+def evaluation_of(results: list, conditions: OperatingConditions, specs: list, keys_for_values: dict,
+                  channels: tuple[Channel, ...], alpha_eta) -> Evaluation:
+    """The :class:`~calib.types.Evaluation` of a call: the channels of its base runs, a status per point.
+
+    Parameters
+    ----------
+    results : list of PointResult
+        One per operating point (its ``base`` run, ``perturbations``, ``restarts``).
+    conditions : OperatingConditions
+        The operating points.
+    specs : list of tuple
+        The channels (:func:`channel_specs`).
+    keys_for_values : dict
+        Signal key -> its index in the plan's signals (:func:`calib.fmu.signals.make_plan`).
+    channels : tuple of Channel
+        The channels' names and units.
+    alpha_eta : ndarray or None
+        r/R [-] of the stations whose angles of attack the extras carry (the correction field's), or None.
+
+    Returns
+    -------
+    Evaluation
+        Values NaN where the status is not converged; a point at rotor speed 0 is ``INVALID_INPUT``
+        when a channel is an azimuth harmonic. Extras: ``restarts`` (worker restarts), ``wall_time``
+        [s] (all runs of the point), and with ``alpha_eta`` and angles of attack read ``alpha_deg``
+        (n_points, n_stations) [deg] and ``eta`` [-].
+    """
+    outcomes = [r.base for r in results]
+    values = channel_values(outcomes, specs, keys_for_values)
+    status = np.array([o.status for o in outcomes], int)
+    messages = [o.message for o in outcomes]
+    needs_harmonics = any(kind != "mean" for _, _, kind, _, _ in specs)
+    if needs_harmonics:
+        for k in np.flatnonzero((conditions.rotor_speed <= 0) & (status == Status.CONVERGED)):
+            status[k] = Status.INVALID_INPUT
+            messages[k] = "azimuth harmonics need a turning rotor (rotor speed 0)"
+    values[status != Status.CONVERGED] = np.nan
+    return Evaluation(values, status, tuple(messages), channels, _extras(outcomes, results, keys_for_values, alpha_eta))
+
+
+def _extras(outcomes: list, results: list, keys_for_values: dict, alpha_eta) -> dict:
+    """Worker restarts, wall times and (with ``alpha_eta``) the angles of attack at the stations."""
+    extras = {"restarts": np.array([r.restarts for r in results], int),
+              "wall_time": np.array([sum(o.wall for o in [r.base, *[x for x in r.perturbations if x]] if o)
+                                     for r in results])}
+    if alpha_eta is not None:
+        keys = sorted((k for k in keys_for_values if k[0] == "span" and k[1] == "angle_of_attack"), key=lambda k: k[2])
+        idx = [keys_for_values[k] for k in keys]
+        if idx:
+            alpha = np.array([o.mean[idx] for o in outcomes])
+            extras["alpha_deg"], extras["eta"] = alpha, alpha_eta
+    return extras

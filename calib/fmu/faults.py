@@ -238,7 +238,30 @@ class FaultLedger:
 
     # -- report ---------------------------------------------------------------------
     def summary(self) -> dict:
-        """Plain dict (JSON-able) of the timeout in force, quarantined points, errors and counts."""
+        """Plain dict (JSON-able) of the timeout in force, quarantined points, errors and counts.
+
+        Returns
+        -------
+        dict
+            ``timeout``: ``configured_s``, ``start_timeout_s``, ``multiple`` [-], ``floor_s``,
+            ``in_force_s`` (the adaptive timeout now), ``median_healthy_s`` (None before any
+            healthy run), ``healthy_runs``, ``changes`` (list of ``{call, timeout_s,
+            median_healthy_s, healthy_runs}``, one per notable change, > 20 %);
+            ``quarantine``: one dict per quarantined point: ``index`` (its position in the
+            call where it failed), ``conditions`` (package units), ``status``,
+            ``status_name``, ``fault`` ("crash", "timeout", "fatal"), ``run`` (which run failed),
+            ``message``, ``p`` (parameters then), ``call``, ``timeout`` [s], ``faults``
+            (simulations that faulted), ``skipped`` (calls that did not simulate it),
+            ``retried``, ``retry_call``, ``retry_outcome`` (None, "failed again",
+            "recovered"), ``active`` (still quarantined);
+            ``errors``: points with an error status (fault "error": not quarantined; or
+            "fatal": also quarantined): ``conditions``,
+            ``count``, ``status``, ``status_name``, ``fault``, ``run``, ``message``, ``call``;
+            ``counts``: ``calls``, ``points_simulated``, ``points_skipped``, ``crashes``,
+            ``timeouts``, ``start_timeouts``, ``errors``, ``fatal`` (runs that met each),
+            ``retries``;
+            ``rules``: the quarantined fault kinds and the retry distance [parameter scales].
+        """
         med = float(np.median(self.walls)) if self.walls else None
         r = self._rule
         return {

@@ -1,16 +1,14 @@
 """Any vendor's co-simulation FMU behind the ForwardModel contract.
 
 :class:`FmuModel` is built from an FMU file and a mapping file
-(:mod:`calib.fmu.mapping`). At load time it checks, and refuses with
-:class:`~calib.errors.InputError` naming the file and the item:
-
-- the file is a zip archive whose entries all stay inside the extraction folder
-  (no absolute paths, no ``..``, no links);
-- the model description parses and offers co-simulation; a binary for this platform exists;
-- every mapped variable exists, inputs are inputs, outputs are outputs, calibrated
-  parameters and correction nodes are *tunable* parameters, settings and switches are
-  parameters, array elements are inside their arrays, setting values inside the FMU's range;
-- non-fatal findings of ``fmpy``'s validation are issued as warnings.
+(:mod:`calib.fmu.mapping`). At load time it opens the FMU (:func:`calib.fmu.fmu_file.open_fmu`:
+a zip archive whose entries all stay inside the extraction folder, a model description with
+co-simulation, a binary for this platform; ``fmpy``'s non-fatal findings issued as warnings) and
+binds the mapping to it (:mod:`calib.fmu.binding`: every mapped variable exists, inputs are
+inputs, outputs are outputs, calibrated parameters and correction nodes are *tunable*
+parameters, settings and switches are parameters, array elements are inside their arrays,
+setting values inside the FMU's range), refusing with :class:`~calib.errors.InputError`
+naming the file and the item.
 
 It extracts the FMU once (cached by the file's SHA-256), and hands workers a picklable
 :class:`~calib.fmu.worker.SimulationPlan` (paths and value references, never an
@@ -43,7 +41,6 @@ parameters; whether the FMU offers them is reported by :attr:`FmuModel.jacobian_
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -54,20 +51,20 @@ from calib.errors import InputError, ModelError
 from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
-from calib.fmu.archive import FmuInputError, check_archive, extract_once, platform_binary
-from calib.fmu.binding import (PlanSite, Variables, bind_inputs, bind_parameters, check_mapped_variables,
-                               fixed_assignments, make_plan)
-from calib.fmu.channels import HARMONIC_SUFFIXES, NOT_CHANNELS, channel_specs, channel_values
+from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
+from calib.fmu.bundled import spec_files
+from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
 from calib.fmu.differences import perturbed_vectors, sensitivities
+from calib.fmu.fmu_file import FmuFile, open_fmu
 from calib.fmu.mapping import Mapping, load_mapping
+from calib.fmu.signals import PlanSite, make_plan
 from calib.fmu.states import read_states, write_states
-from calib.fmu.stations import radii_from_reads, radius_reads
+from calib.fmu.stations import probe_radii
+from calib.fmu.variables import Variables
 from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
-from calib.types import (Channel, Evaluation, OperatingConditions, Parameter,
-                         Status, check_parameter_vector)
-
+from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 
 
 class FmuModel:
@@ -130,51 +127,10 @@ class FmuModel:
                  switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
                  jacobian: dict | None = None, executor=None, timeout: float = fp.DEFAULT_TIMEOUT, isolate: bool = True,
                  build: dict | None = None, progress=None, start_timeout: float = fp.DEFAULT_TIMEOUT):
-        from fmpy.model_description import read_model_description
-
         self.fmu_path = Path(fmu).resolve()
-        src = str(self.fmu_path)
         self.mapping: Mapping = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
-        msrc = self.mapping.source
-        names = check_archive(self.fmu_path)
-        try:
-            md = read_model_description(src, validate=False)
-        except Exception as exc:  # noqa: BLE001 - fmpy raises several kinds
-            raise FmuInputError(f"modelDescription.xml cannot be read: {exc}", src, field="modelDescription.xml") \
-                from None
-        if md.coSimulation is None:
-            raise FmuInputError("the FMU has no co-simulation interface (model exchange only); calib drives "
-                                "co-simulation FMUs", src, field="modelDescription.xml")
-        self.model_description = md
-        self.binary = platform_binary(md, names, src)
-        self._validation_warnings(src)
-        m = self.mapping
-        if m.fmi_version and m.fmi_version != md.fmiVersion:
-            raise FmuInputError(f"the mapping is for FMI {m.fmi_version}, the FMU {self.fmu_path.name} is FMI "
-                                f"{md.fmiVersion}", msrc, field="fmi_version")
-        ident = md.coSimulation.modelIdentifier
-        if m.model_identifier and m.model_identifier != ident:
-            raise FmuInputError(f"the mapping is for model identifier {m.model_identifier!r}, the FMU "
-                                f"{self.fmu_path.name} is {ident!r}", msrc, field="model_identifier")
-        self.sha256 = sha256_of(self.fmu_path)
-        self.unzip_dir = extract_once(self.fmu_path, self.sha256)
-        self._variables = Variables(md, self.fmu_path.name, msrc)
-        self.guid = md.guid if md.fmiVersion.startswith("2") else md.instantiationToken
-        cs = md.coSimulation
-        self.can_get_state = bool(getattr(cs, "canGetAndSetFMUstate", False))
-        self.can_serialize = bool(getattr(cs, "canSerializeFMUstate", False))
-        self.offers_directional_derivatives = bool(getattr(cs, "providesDirectionalDerivative", False))
-
-        steady_rule = m.steady.replace(**(steady or {})) if steady else m.steady
-        jac = dict(vars(m.jacobian))
-        for key, value in (jacobian or {}).items():
-            if key not in jac:
-                raise InputError(f"unknown jacobian option {key!r}; valid: {', '.join(jac)}", "FmuModel",
-                                 field="jacobian")
-            jac[key] = value
-        self.relative_step = float(jac["relative_step"])
-        self.warm_start = bool(jac["warm_start"])
-        self.steady = steady_rule
+        self._keep_file(open_fmu(self.fmu_path, self.mapping, warn_stacklevel=2))
+        self._read_rules(steady, jacobian)
         self.timeout = float(timeout)
         self.isolate = bool(isolate)
         self.build = build
@@ -187,51 +143,65 @@ class FmuModel:
             from calib.executors import SerialExecutor
             executor = SerialExecutor()
         self.executor = executor
+        self._bind(channels, parameters, corrections, switches or {}, settings or {})
+        self.start_timeout = float(start_timeout)
+        self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
+                                   self.timeout, self.start_timeout, self.fmu_path.name)
 
-        check_mapped_variables(m, self._variables)
-        self._site = PlanSite(md.fmiVersion, ident, self.guid, self.unzip_dir, self.sha256,
-                              fixed_assignments(m, self._variables, switches or {}, settings or {}), steady_rule,
-                              self.can_get_state, self.can_serialize)
-        self._params = bind_parameters(m, self._variables, parameters, corrections, self.unzip_dir)
+    # ------------------------------------------------------------------ load-time steps
+    def _keep_file(self, f: FmuFile) -> None:
+        """Keep what :func:`~calib.fmu.fmu_file.open_fmu` found (model description, identity, capabilities)
+        as attributes, and the FMU's variables as this model's mapping uses them."""
+        self.model_description = f.model_description
+        self.binary = f.binary
+        self.sha256 = f.sha256
+        self.unzip_dir = f.unzip_dir
+        self.guid = f.guid
+        self.can_get_state = f.can_get_state
+        self.can_serialize = f.can_serialize
+        self.offers_directional_derivatives = f.offers_directional_derivatives
+        self._variables = Variables(f.model_description, self.fmu_path.name, self.mapping.source)
+
+    def _read_rules(self, steady: dict | None, jacobian: dict | None) -> None:
+        """The steady window and the difference rule: the mapping's ``[steady]`` and ``[jacobian]``
+        with this model's overrides (an unknown jacobian option refused, naming the valid ones)."""
+        m = self.mapping
+        steady_rule = m.steady.replace(**(steady or {})) if steady else m.steady
+        jac = dict(vars(m.jacobian))
+        for key, value in (jacobian or {}).items():
+            if key not in jac:
+                raise InputError(f"unknown jacobian option {key!r}; valid: {', '.join(jac)}", "FmuModel",
+                                 field="jacobian")
+            jac[key] = value
+        self.relative_step = float(jac["relative_step"])
+        self.warm_start = bool(jac["warm_start"])
+        self.steady = steady_rule
+
+    def _bind(self, channels, parameters, corrections: bool, switches: dict, settings: dict) -> None:
+        """Bind the mapping to the FMU (:mod:`calib.fmu.binding`): the mapped variables checked, the fixed
+        assignments, the calibrated parameters and the inputs, the channels and the plan that reads them."""
+        m, vs, md = self.mapping, self._variables, self.model_description
+        check_mapped_variables(m, vs)
+        self._site = PlanSite(md.fmiVersion, md.coSimulation.modelIdentifier, self.guid, self.unzip_dir, self.sha256,
+                              fixed_assignments(m, vs, switches, settings), self.steady, self.can_get_state,
+                              self.can_serialize)
+        self._params = bind_parameters(m, vs, parameters, corrections, self.unzip_dir)
         self.grid = self._params.grid
         self._parameters = self._params.parameters
-        self._inputs = bind_inputs(m, self._variables)
+        self._inputs = bind_inputs(m, vs)
         self._probed: dict | None = None
         self._channel_specs = channel_specs(m, channels, self._spanwise_eta, self.available_channels,
                                             self.fmu_path.name)
         self._channels = tuple(Channel(n, u) for n, _, _, _, u in self._channel_specs)
-        self._plan, self._keys_for_values = make_plan(m, self._variables, self._site, self._channel_specs, self.grid)
-        self.start_timeout = float(start_timeout)
-        self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
-                                      self.timeout, self.start_timeout, self.fmu_path.name)
-
-    # ------------------------------------------------------------------ load-time checks
-    def _validation_warnings(self, src: str) -> None:
-        try:
-            from fmpy.validation import validate_fmu
-            problems = validate_fmu(src)
-        except Exception as exc:  # noqa: BLE001 - a validator crash is itself only a finding
-            problems = [f"fmpy validation could not run: {exc}"]
-        for problem in problems or []:
-            warnings.warn(f"{src}: fmpy validate: {problem}", stacklevel=3)
+        self._plan, self._keys_for_values = make_plan(m, vs, self._site, self._channel_specs, self.grid)
 
     # ------------------------------------------------------------------ channels
     def _probe(self) -> dict:
-        """Rotor radius and output-station radii, read from an initialized instance (once)."""
-        if self._probed is not None:
-            return self._probed
-        reads = radius_reads(self.mapping, self._variables)
-        values = []
-        if reads:
-            plan, _ = make_plan(self.mapping, self._variables, self._site, [], self.grid, signals_only=True)
-            worker = fw.worker_for(plan, self.isolate, self.timeout)
-            try:
-                values = worker.probe(reads)
-            except Exception as exc:  # noqa: BLE001
-                raise ModelError(f"{self.fmu_path.name}: could not initialize the FMU to read radii: {exc}") from None
-            finally:
-                fw.close_workers(plan.key)
-        self._probed = radii_from_reads(self.mapping, values)
+        """Rotor radius and output-station radii, read from an initialized instance (once):
+        :func:`calib.fmu.stations.probe_radii`."""
+        if self._probed is None:
+            self._probed = probe_radii(self.mapping, self._variables, self._site, self.isolate, self.timeout,
+                                       self.fmu_path.name)
         return self._probed
 
     def _spanwise_eta(self, name: str) -> np.ndarray | None:
@@ -242,12 +212,7 @@ class FmuModel:
 
     def available_channels(self) -> list[str]:
         """Channel names this FMU offers through its mapping (harmonics as patterns)."""
-        base = [n for n in self.mapping.outputs if n not in NOT_CHANNELS]
-        if "normal_force" in self.mapping.spanwise and self.mapping.rotor_radius is not None:
-            eta = self._spanwise_eta("normal_force")
-            if eta is not None:
-                base += [f"fn@{e:.2f}" for e in eta]
-        return base + [f"<output>{s}" for s in HARMONIC_SUFFIXES] + [f"<output>{s}_phase" for s in HARMONIC_SUFFIXES]
+        return offered_channels(self.mapping, self._spanwise_eta)
 
     # ------------------------------------------------------------------ contract
     @property
@@ -292,24 +257,11 @@ class FmuModel:
         Returns
         -------
         dict
-            ``timeout``: ``configured_s``, ``start_timeout_s``, ``multiple`` [-], ``floor_s``,
-            ``in_force_s`` (the adaptive timeout now), ``median_healthy_s`` (None before any
-            healthy run), ``healthy_runs``, ``changes`` (list of ``{call, timeout_s,
-            median_healthy_s, healthy_runs}``, one per notable change, > 20 %);
-            ``quarantine``: one dict per quarantined point: ``index`` (its position in the
-            call where it failed), ``conditions`` (package units), ``status``,
-            ``status_name``, ``fault`` ("crash", "timeout", "fatal"), ``run`` (which run failed),
-            ``message``, ``p`` (parameters then), ``call``, ``timeout`` [s], ``faults``
-            (simulations that faulted), ``skipped`` (calls that did not simulate it),
-            ``retried``, ``retry_call``, ``retry_outcome`` (None, "failed again",
-            "recovered"), ``active`` (still quarantined);
-            ``errors``: points with an error status (fault "error": not quarantined; or
-            "fatal": also quarantined): ``conditions``,
-            ``count``, ``status``, ``status_name``, ``fault``, ``run``, ``message``, ``call``;
-            ``counts``: ``calls``, ``points_simulated``, ``points_skipped``, ``crashes``,
-            ``timeouts``, ``start_timeouts``, ``errors``, ``fatal`` (runs that met each),
-            ``retries``;
-            ``rules``: the quarantined fault kinds and the retry distance [parameter scales].
+            ``fmu`` (the file's name), then :meth:`calib.fmu.faults.FaultLedger.summary`: ``timeout``
+            (configured, in force, the healthy runs' median and its changes), ``quarantine`` (one dict
+            per quarantined point: conditions, fault, message, retries), ``errors`` (points with an
+            error status), ``counts`` (calls, points simulated and skipped, runs per kind of fault) and
+            ``rules`` (the quarantined fault kinds and the retry distance).
         """
         return {"fmu": self.fmu_path.name, **self._faults.summary()}
 
@@ -317,24 +269,6 @@ class FmuModel:
         """Simulate quarantined points again from now on (e.g. a new stage with another
         model setting); the timeout statistics are kept."""
         self._faults.clear()
-
-    def _values(self, outcomes: list) -> np.ndarray:
-        """Channel values (n, n_channels) from run outcomes (:func:`calib.fmu.channels.channel_values`)."""
-        return channel_values(outcomes, self._channel_specs, self._keys_for_values)
-
-    def _extras(self, outcomes: list, results: list) -> dict:
-        extras = {"restarts": np.array([r.restarts for r in results], int),
-                  "wall_time": np.array([sum(o.wall for o in [r.base, *[x for x in r.perturbations if x]] if o)
-                                         for r in results])}
-        if self.grid is not None and "angle_of_attack" in self.mapping.spanwise:
-            eta = self._spanwise_eta("angle_of_attack")
-            keys = sorted((k for k in self._keys_for_values if k[0] == "span" and k[1] == "angle_of_attack"),
-                          key=lambda k: k[2])
-            idx = [self._keys_for_values[k] for k in keys]
-            if eta is not None and idx:
-                alpha = np.array([o.mean[idx] for o in outcomes])
-                extras["alpha_deg"], extras["eta"] = alpha, eta
-        return extras
 
     def _tasks(self, p, conditions, perturb: bool, start_states=None):
         p = check_parameter_vector(p, self._parameters, "FmuModel parameter vector")
@@ -353,17 +287,11 @@ class FmuModel:
         return p, tasks, steps
 
     def _evaluation(self, results, conditions) -> Evaluation:
-        outcomes = [r.base for r in results]
-        values = self._values(outcomes)
-        status = np.array([o.status for o in outcomes], int)
-        messages = [o.message for o in outcomes]
-        needs_harmonics = any(kind != "mean" for _, _, kind, _, _ in self._channel_specs)
-        if needs_harmonics:
-            for k in np.flatnonzero((conditions.rotor_speed <= 0) & (status == Status.CONVERGED)):
-                status[k] = Status.INVALID_INPUT
-                messages[k] = "azimuth harmonics need a turning rotor (rotor speed 0)"
-        values[status != Status.CONVERGED] = np.nan
-        return Evaluation(values, status, tuple(messages), self._channels, self._extras(outcomes, results))
+        """The :class:`~calib.types.Evaluation` of ``results`` (:func:`calib.fmu.channels.evaluation_of`), with
+        the angles of attack at the stations when this model calibrates a correction field."""
+        aoa = self.grid is not None and "angle_of_attack" in self.mapping.spanwise
+        return evaluation_of(results, conditions, self._channel_specs, self._keys_for_values, self._channels,
+                             self._spanwise_eta("angle_of_attack") if aoa else None)
 
     def evaluate(self, p, conditions: OperatingConditions, start_states=None) -> Evaluation:
         """Steady channel values (n_points, n_channels) and a status per point at ``p``.
@@ -432,19 +360,12 @@ class FmuModel:
 
     @classmethod
     def from_spec(cls, spec: dict, base_dir=None) -> "FmuModel":
-        """Rebuild from :meth:`spec` (rebuilding a bundled variant when its file is gone)."""
-        def resolve(p):
-            q = Path(p)
-            return q if q.is_absolute() or base_dir is None else Path(base_dir) / q
-        fmu = resolve(spec["fmu"]) if spec.get("fmu") else None
-        if (fmu is None or not fmu.is_file()) and spec.get("build"):
-            from calib.fmu.bundled import build_variant
-            fmu = build_variant(spec["build"], "model spec", base_dir)
-        if fmu is None:
-            raise InputError("the spec names no FMU file", "model spec", field="fmu")
+        """Rebuild from :meth:`spec` (rebuilding a bundled variant when its file is gone:
+        :func:`calib.fmu.bundled.spec_files`)."""
+        fmu, mapping = spec_files(spec, base_dir)
         opts = {k: spec[k] for k in ("parameters", "corrections", "switches", "settings", "steady", "jacobian",
                                      "timeout", "isolate") if k in spec}
-        return cls(fmu, resolve(spec["mapping"]), spec.get("channels"), build=spec.get("build"), **opts)
+        return cls(fmu, mapping, spec.get("channels"), build=spec.get("build"), **opts)
 
     # ------------------------------------------------------------------ settled states
     def settled_states(self, p, conditions: OperatingConditions) -> list[bytes | None]:

@@ -28,7 +28,7 @@ class Simulator:
     The instance is created on first use and reused: ``reset`` before every cold run; after
     an error the instance is freed and created again (a vendor FMU may be unusable after
     an error). After a fatal status ``fatal`` is set: FMI allows no further call of any
-    instance, so a worker process ends (:func:`child_main`); in process, the instance is
+    instance, so a worker process ends (:func:`calib.fmu.child.child_main`); in process, the instance is
     created again as after an error (nothing better is possible there). FMU log messages are
     kept (the last 20) and quoted in failure messages. ``notify`` (a callable, optional)
     receives ``("instantiating",)`` and ``("instantiated", seconds)`` around the creation of

@@ -6,8 +6,9 @@ Three layers, each usable alone, and the planner's record of faults:
   once, ``reset`` between runs, settle, average over whole revolutions, save / restore /
   serialize the FMU state, and turn what the FMU reports into a per-run status.
 - :class:`WorkerProcess` runs a :class:`Simulator` in a child process (a new Python
-  interpreter running :func:`child_main`) and talks to it over pipes. Every simulation has a
-  timeout; an error status, a crash of the process (e.g. ``abort()`` in the FMU) or a hang
+  interpreter running :func:`calib.fmu.child.child_main`) and talks to it over pipes
+  (:mod:`calib.fmu.pipe`). Every simulation has a timeout; an error status, a crash of the
+  process (e.g. ``abort()`` in the FMU) or a hang
   becomes that run's status, the child is rebuilt (after a crash, a hang or a fatal
   status), and the runs still to do go on from the serialized settled state (so nothing
   computed before is lost). The timeout adapts (:func:`adaptive_timeout`) to the healthy
@@ -27,119 +28,19 @@ from __future__ import annotations
 
 import logging
 import os
-import pickle
 import select
 import signal
-import struct
 import subprocess
 import sys
 from dataclasses import replace
 
-from calib.fmu.plan import (DEFAULT_TIMEOUT, FMI_FATAL, HEALTHY_WALLS_KEPT, PointResult, PointTask, RunOutcome,
+from calib.fmu.pipe import read_message, write_message
+from calib.fmu.plan import (DEFAULT_TIMEOUT, HEALTHY_WALLS_KEPT, PointResult, PointTask, RunOutcome,
                             SimulationPlan, policy_of)
 from calib.fmu.simulator import Simulator
 from calib.types import Status
 
 log = logging.getLogger(__name__)
-
-
-# ----------------------------------------------------------------------------- child process
-def _write_message(fd: int, obj) -> None:
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    payload = struct.pack("<Q", len(data)) + data
-    view = memoryview(payload)
-    while view:
-        n = os.write(fd, view)
-        view = view[n:]
-
-
-def _read_exact(fd: int, n: int) -> bytes | None:
-    chunks, got = [], 0
-    while got < n:
-        b = os.read(fd, n - got)
-        if not b:
-            return None
-        chunks.append(b)
-        got += len(b)
-    return b"".join(chunks)
-
-
-def _read_message(fd: int):
-    head = _read_exact(fd, 8)
-    if head is None:
-        return None
-    body = _read_exact(fd, struct.unpack("<Q", head)[0])
-    return None if body is None else pickle.loads(body)
-
-
-def child_main() -> int:
-    """Entry point of a worker process: read requests from stdin, answer on the original stdout.
-
-    File descriptor 1 is pointed at stderr first, so that an FMU printing to stdout cannot
-    corrupt the message stream. After a fatal FMI status the process answers ``("fatal",)``
-    and exits at once, without any further FMI call (the supervisor starts a new one).
-    """
-    out_fd = os.dup(1)
-    os.dup2(2, 1)
-    in_fd = 0
-    sim = None
-    while True:
-        msg = _read_message(in_fd)
-        if msg is None or msg[0] == "close":
-            if sim is not None:
-                sim.close()
-            _leave()
-        kind, payload = msg
-        if kind == "plan":
-            if sim is not None:
-                sim.close()
-            sim = Simulator(payload)
-            sim.notify = lambda m: _write_message(out_fd, m)
-            _write_message(out_fd, ("ready", os.getpid()))
-        elif kind == "probe":
-            _child_probe(sim, payload, out_fd)
-        elif kind == "point":
-            _child_point(sim, payload, out_fd)
-
-
-def _leave() -> None:
-    """End the child at once after its instance is freed: no interpreter finalization and no exit
-    handlers or static destructors of the FMU's shared library (or of an interpreter it embeds,
-    as PythonFMU's do) run in a process that loaded a vendor binary. Those ran at exit, after the
-    instance was freed, and are where a heap corrupted by the library shows itself ("corrupted
-    double-linked list", "double free"); nothing is lost by skipping them: every answer has been
-    written, and the supervisor reads the exit status."""
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(0)
-
-
-def _child_fatal(out_fd: int) -> None:
-    _write_message(out_fd, ("fatal",))
-    os._exit(0)
-
-
-def _child_probe(sim: Simulator, reads, out_fd: int) -> None:
-    try:
-        _write_message(out_fd, ("probe", sim.probe(reads)))
-    except Exception as exc:  # noqa: BLE001
-        _write_message(out_fd, ("error", f"{type(exc).__name__}: {exc}"))
-        if getattr(exc, "status", None) == FMI_FATAL:
-            _child_fatal(out_fd)
-
-
-def _child_point(sim: Simulator, task: PointTask, out_fd: int) -> None:
-    try:
-        for item in sim.runs(task):
-            _write_message(out_fd, item)
-            if sim.fatal:
-                _child_fatal(out_fd)
-    except Exception as exc:  # noqa: BLE001 - reported to the supervisor
-        _write_message(out_fd, ("error", f"{type(exc).__name__}: {exc}"))
-    _write_message(out_fd, ("done",))
 
 
 # ----------------------------------------------------------------------------- supervisor
@@ -209,11 +110,11 @@ class WorkerProcess:
         env.setdefault("PYTHONUNBUFFERED", "1")
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        # ``-m``: the child imports this module by its name (so pickled classes resolve alike); calib and
+        # ``-m``: the child imports calib's modules by their names (so pickled classes resolve alike); calib and
         # calib.fmu import nothing at package level, so the child loads fmpy and numpy, not the calibration stack
-        self.proc = subprocess.Popen([sys.executable, "-m", "calib.fmu.worker"], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "calib.fmu.child"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, env=env, close_fds=True)
-        _write_message(self.proc.stdin.fileno(), ("plan", self.plan))
+        write_message(self.proc.stdin.fileno(), ("plan", self.plan))
         reply = self._receive(self.start_timeout)
         if not (isinstance(reply, tuple) and reply[0] == "ready"):
             why = reply if isinstance(reply, str) else _signal_name(self.proc.poll())
@@ -231,7 +132,7 @@ class WorkerProcess:
         ready, _, _ = select.select([fd], [], [], timeout)
         if not ready:
             return "timeout"
-        msg = _read_message(fd)
+        msg = read_message(fd)
         if msg is None:
             self.proc.wait()
             return "died"
@@ -270,7 +171,7 @@ class WorkerProcess:
         logged as a warning naming the signal: the results it returned before stand."""
         if self.proc is not None and self.proc.poll() is None:
             try:
-                _write_message(self.proc.stdin.fileno(), ("close", None))
+                write_message(self.proc.stdin.fileno(), ("close", None))
                 code = self.proc.wait(timeout=5)
                 if code < 0:
                     log.warning("the FMU process %d ended with %s while freeing its instance of %s (the FMU's "
@@ -283,7 +184,7 @@ class WorkerProcess:
     def probe(self, reads) -> list:
         """:meth:`Simulator.probe` in the child (raises RuntimeError on any fault)."""
         self._ensure_started()
-        _write_message(self.proc.stdin.fileno(), ("probe", reads))
+        write_message(self.proc.stdin.fileno(), ("probe", reads))
         msg = self._next()
         if not (isinstance(msg, tuple) and msg[0] == "probe"):
             why = msg[1] if isinstance(msg, tuple) else msg
@@ -297,7 +198,7 @@ class WorkerProcess:
         pending = task
         while pending is not None:
             self._ensure_started()
-            _write_message(self.proc.stdin.fileno(), ("point", pending))
+            write_message(self.proc.stdin.fileno(), ("point", pending))
             fault = self._collect(pending, res)
             res.timeout = self.timeout
             pending = None if fault is None else self._after_fault(task, res, *fault)
@@ -403,6 +304,3 @@ def run_point(job) -> PointResult:
 import atexit  # noqa: E402
 
 atexit.register(close_workers)
-
-if __name__ == "__main__":
-    sys.exit(child_main())
