@@ -4,7 +4,7 @@
 tasks are planned, so that what is simulated does not depend on the executor: a point
 whose simulation crashed the FMU process, hung or got a fatal status is not simulated again
 (retried once at most, when the parameters have moved far), and the healthy runs' wall
-times set the adaptive timeout (:func:`calib.fmu.worker.adaptive_timeout`).
+times set the adaptive timeout (:func:`calib.fmu.plan.adaptive_timeout`).
 """
 
 from __future__ import annotations

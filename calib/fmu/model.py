@@ -11,7 +11,7 @@ setting values inside the FMU's range), refusing with :class:`~calib.errors.Inpu
 naming the file and the item.
 
 It extracts the FMU once (cached by the file's SHA-256), and hands workers a picklable
-:class:`~calib.fmu.worker.SimulationPlan` (paths and value references, never an
+:class:`~calib.fmu.plan.SimulationPlan` (paths and value references, never an
 instance). Simulations run through :func:`calib.fmu.worker.run_point` on the
 model's executor (serial by default), in worker processes with a per-simulation timeout
 that adapts to the measured cost of healthy runs; a point that crashed or hung is
@@ -99,7 +99,7 @@ class FmuModel:
     timeout : float
         Longest wall time of one simulation [s] (worker killed and rebuilt beyond it). Once
         healthy runs are measured the timeout in force adapts: 10 x their median wall time,
-        at least 5 s, never above this (:func:`calib.fmu.worker.adaptive_timeout`).
+        at least 5 s, never above this (:func:`calib.fmu.plan.adaptive_timeout`).
     start_timeout : float
         Longest wall time for a worker process to start and for an FMU instance to be
         created [s] (timed apart from the simulations).

@@ -3,8 +3,8 @@
 :class:`SteadyRule` says how long a run settles and averages (whole revolutions, the windows at a
 rotor speed) and :class:`JacobianRule` how the adapter takes central differences. Both are read and
 validated here (:func:`steady_rule`, :func:`jacobian_rule`) for :func:`calib.fmu.mapping.load_mapping`,
-which refuses a wrong key or value with :class:`~calib.errors.InputError` naming the file and the key;
-both are importable from :mod:`calib.fmu.mapping` too. A :class:`SteadyRule` travels to the worker
+which refuses a wrong key or value with :class:`~calib.errors.InputError` naming the file and the key.
+A :class:`SteadyRule` travels to the worker
 processes inside each :class:`~calib.fmu.plan.SimulationPlan`.
 """
 
