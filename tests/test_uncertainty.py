@@ -156,7 +156,7 @@ def _quadratic_toy(seed: int, curvature: np.ndarray):
 def test_frozen_curvature_covariance_is_the_second_moment_of_the_quadratic_bias():
     """y = M p̃ + b x² with x = v₃ᵀp̃ frozen, x ~ N(0, σ_f²): the retained θ take up
     Δθ = −S⁻² V_IDᵀ Mᵀ b x², whose second moment is 3 σ_f⁴ g gᵀ with g = S⁻² V_IDᵀ Mᵀ b."""
-    from calib.calibration.identifiability import frozen_curvature_covariance
+    from calib.calibration.frozen_curvature import frozen_curvature_covariance
 
     b = np.linspace(-1.0, 2.0, 12)
     M, V, sig, z, residual_at = _quadratic_toy(7020, b)
@@ -182,7 +182,7 @@ def test_frozen_curvature_covariance_is_the_second_moment_of_the_quadratic_bias(
 
 def test_frozen_curvature_covariance_leaves_out_rows_that_did_not_converge():
     """A draw at which some points fail contributes through its converged rows only, and is counted."""
-    from calib.calibration.identifiability import frozen_curvature_covariance
+    from calib.calibration.frozen_curvature import frozen_curvature_covariance
 
     b = np.ones(12)
     M, V, sig, z, residual_at = _quadratic_toy(7021, b)

@@ -7,6 +7,7 @@
 - :mod:`calib.calibration.qp`               the quadratic programs of its steps, by name;
 - :mod:`calib.calibration.noise`            the noise σ to start from;
 - :mod:`calib.calibration.identifiability`  Fisher information, SVD, verdicts, eigenshapes;
+- :mod:`calib.calibration.frozen_curvature` the covariance the frozen directions add through the curvature;
 - :mod:`calib.calibration.fold_directions`  retained directions a point near a fold of the BEM equations determines;
 - :mod:`calib.calibration.truncation`       the cross-validated choice of the retained count;
 - :mod:`calib.calibration.tightening`       which measurements would tighten a parameter's σ;

@@ -33,7 +33,7 @@ Truncated ML (``estimator = "truncated"``; Bottasso, Cacciola & Iriarte 2014)
    (:func:`calib.calibration.identifiability.frozen_aware_covariance`), plus, for the retained θ, the
    aliasing of the field between the nodes (:mod:`calib.parametrizations.aliasing`), the fit
    scale (``scale_by_fit``) and the frozen part's bias through the model's curvature
-   (:func:`calib.calibration.identifiability.frozen_curvature_covariance`); confidence bands on the corrected
+   (:func:`calib.calibration.frozen_curvature.frozen_curvature_covariance`); confidence bands on the corrected
    polars; confounding of the non-field parameters with the field; a verdict per parameter
    from posterior vs prior; goodness of fit (χ² before over N, after over N − n_retained,
    p-value, per channel, worst points).

@@ -122,7 +122,7 @@ class Uncertainty:
         field or nothing retained for it to act on).
     curvature : dict
         The frozen directions' prior propagated through the model's curvature to the retained
-        θ (:func:`calib.calibration.identifiability.frozen_curvature_covariance`): ``samples`` drawn (0: the
+        θ (:func:`calib.calibration.frozen_curvature.frozen_curvature_covariance`): ``samples`` drawn (0: the
         term is left out), ``used``, ``samples_with_failed_points``, and its variance against
         the noise part per retained θ, ``variance_ratio_mean`` and ``variance_ratio_max`` [-];
         empty when nothing was frozen or nothing retained.

@@ -105,7 +105,7 @@ class CalibrationSettings:
         construction. Default true (measured in ``benchmarks/bench_coverage.py``, docs/user_guide/calibration.md).
     curvature_samples : int
         Prior draws of the frozen directions propagated through the model to the retained θ
-        (:func:`calib.calibration.identifiability.frozen_curvature_covariance`): where the model is not
+        (:func:`calib.calibration.frozen_curvature.frozen_curvature_covariance`): where the model is not
         linear over the prior's range, the frozen part of the truth biases the retained θ, and
         this adds that bias's second moment to their covariance (not scaled by the fit). Costs
         that many model evaluations per calibration; 0 leaves the term out (the report says so).

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from calib.calibration.fold_directions import fold_dominated_directions
-from calib.calibration.identifiability import frozen_curvature_covariance
+from calib.calibration.frozen_curvature import frozen_curvature_covariance
 from calib.calibration.settings import CalibrationSettings
 from calib.errors import InputError
 from calib.measurements import Measurements
@@ -163,7 +163,7 @@ class ModelTerms:
 
     def curvature(self, problem, lin, svd, prior_cov) -> tuple[np.ndarray | None, dict]:
         """The retained θ's covariance from the frozen directions' prior through the model's
-        curvature (:func:`calib.calibration.identifiability.frozen_curvature_covariance`) [scale units²],
+        curvature (:func:`calib.calibration.frozen_curvature.frozen_curvature_covariance`) [scale units²],
         and what it adds relative to the noise part (``result.curvature``); (None, {}) when
         there is nothing to propagate, (None, {"samples": 0}) when the term is switched off."""
         st = self.settings
