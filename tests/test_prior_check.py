@@ -12,7 +12,7 @@ from calib.calibration import CalibrationSettings, Calibrator
 from calib.calibration.result import load_result
 from calib.checks.prior_check import PriorCheck, prior_amplitude
 from calib.measurements import synthesize
-from calib.report.html import _sentences
+from calib.report.result_sentences import sentences
 from calib.types import nominal_vector
 
 
@@ -99,7 +99,7 @@ def test_calibration_reports_the_prior_check_on_the_fine_grid_and_it_survives_sa
     res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
     pc = res.prior_check
     assert pc["between_nodes"] is True and pc["lower"] <= pc["amplitude"] <= pc["upper"]
-    assert PriorCheck(**pc).sentence() in _sentences(res)
+    assert PriorCheck(**pc).sentence() in sentences(res)
     assert f"prior check: field amplitude {pc['amplitude']:.2g} x stated" in res.summary()
     res.save(tmp_path)
     assert load_result(tmp_path).prior_check == pc
@@ -160,7 +160,7 @@ def test_prior_check_off_is_said_and_a_non_boolean_is_refused(bem_twin):
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7614)
     res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0, prior_check=False)).run()
     assert res.prior_check == {}
-    assert any(t.startswith("Prior check: not run (prior_check = false)") for t in _sentences(res))
+    assert any(t.startswith("Prior check: not run (prior_check = false)") for t in sentences(res))
     with pytest.raises(InputError, match="prior_check"):
         CalibrationSettings(prior_check="yes").validate()
 
@@ -180,5 +180,5 @@ def test_a_prior_check_that_cannot_be_computed_keeps_the_result(bem_twin, monkey
     res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
     assert res.status == "converged" and res.n_retained > 0
     assert res.prior_check == {"failed": "LinAlgError: SVD did not converge"}
-    assert any(t.startswith("Prior check: could not be computed (LinAlgError") for t in _sentences(res))
+    assert any(t.startswith("Prior check: could not be computed (LinAlgError") for t in sentences(res))
     assert "prior check: failed (LinAlgError: SVD did not converge)" in res.summary()

@@ -88,7 +88,7 @@ def test_report_says_where_the_drag_band_starts_at_cd_min(result):
     """The sentence counts the polar figure's points where the ΔC_D band starts at C_D,min and
     is absent where none does (and for a result saved before the bounded bands)."""
 
-    from calib.report.html import _sentences
+    from calib.report.result_sentences import sentences
 
     pb = dict(result.polar_bands)
     cd_min = 0.004
@@ -97,9 +97,9 @@ def test_report_says_where_the_drag_band_starts_at_cd_min(result):
     lower.flat[:7] = floor.flat[:7]                              # seven points cut by the bound
     pb["dcd_lower"] = lower
     cut = result.replace(polar_bands=pb, settings={**result.settings, "cd_min": cd_min})
-    [text] = [t for t in _sentences(cut) if "C_D,min" in t]
+    [text] = [t for t in sentences(cut) if "C_D,min" in t]
     assert text.startswith(f"The ΔC_D band starts at C_D,min = 0.004 at 7 of the {lower.size} points")
     none = cut.replace(polar_bands={**pb, "dcd_lower": floor - 1e-3})
-    assert not [t for t in _sentences(none) if "C_D,min" in t]
+    assert not [t for t in sentences(none) if "C_D,min" in t]
     old = cut.replace(polar_bands={k: v for k, v in pb.items() if k != "dcd_lower"})
-    assert not [t for t in _sentences(old) if "C_D,min" in t]
+    assert not [t for t in sentences(old) if "C_D,min" in t]

@@ -12,7 +12,7 @@ from calib.calibration.result import load_result, second_start_sentence
 from calib.calibration.truncated_fit import TruncatedFit
 from calib.calibration.truncation import keep_second_start
 from calib.measurements import synthesize
-from calib.report.html import _sentences
+from calib.report.result_sentences import sentences
 
 
 class TrappedAtOne(TruncatedFit):
@@ -82,7 +82,7 @@ def test_a_first_start_trapped_at_few_theta_is_replaced_by_the_start_from_the_pr
     assert np.isclose(t["second_cv"], np.asarray(t["cv"])[res.n_retained])
     assert res.chi2_per_dof_after < 0.5 * trapped.chi2_per_dof_after
     assert any(r.get("stage") == "second_start" for r in cal.history)
-    sentence = next(s for s in _sentences(res) if "started again" in s)
+    sentence = next(s for s in sentences(res) if "started again" in s)
     assert "ended at 1 θ" in sentence and f"at {res.n_retained} θ" in sentence and "the second was kept" in sentence
     assert "started again" in res.summary()
     res.save(tmp_path)

@@ -93,7 +93,7 @@ def test_a_calibration_retains_no_direction_the_prior_knows_better():
     from test_calibration import CHANNELS, twin_truth
     from twin_model import TwinModel, twin_conditions
 
-    from calib.report.html import _sentences
+    from calib.report.result_sentences import sentences
 
     model = TwinModel(channels=CHANNELS)
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 9))
@@ -107,7 +107,7 @@ def test_a_calibration_retains_no_direction_the_prior_knows_better():
     expected = int(np.argmax(data_var > prior_var)) if np.any(data_var > prior_var) else data_var.size
     assert res.truncation["prior_limit"] == expected
     assert res.n_retained <= expected
-    assert any("better than the prior" in t for t in _sentences(res))
+    assert any("better than the prior" in t for t in sentences(res))
 
 
 def test_frozen_directions_carry_prior_variance():
@@ -224,10 +224,10 @@ def test_the_frozen_part_of_an_in_span_truth_widens_the_retained_covariance_wher
     np.testing.assert_allclose(extra.mean(), cur["variance_ratio_mean"], rtol=1e-6)
     np.testing.assert_allclose(extra.max(), cur["variance_ratio_max"], rtol=1e-6)
     assert cur["variance_ratio_max"] > 0
-    from calib.report.html import _sentences
+    from calib.report.result_sentences import sentences
 
-    assert any("propagated through the model's curvature" in t for t in _sentences(with_term))
-    assert any("curvature_samples = 0" in t for t in _sentences(without))
+    assert any("propagated through the model's curvature" in t for t in sentences(with_term))
+    assert any("curvature_samples = 0" in t for t in sentences(without))
 
 
 def _field(alpha_nodes=(-4.0, 2.0, 8.0, 14.0), eta_nodes=(0.2, 0.5, 0.8, 1.0)):
@@ -726,14 +726,14 @@ def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_p
     from test_calibration import CHANNELS, twin_truth
     from twin_model import TwinModel, twin_conditions
 
-    from calib.report.html import _sentences
+    from calib.report.result_sentences import sentences
 
     model = TwinModel(channels=CHANNELS)
     meas = synthesize(model, twin_truth(model), twin_conditions(tsr=np.linspace(4.0, 10.0, 5)),
                       relative_sigma={c: 0.01 for c in CHANNELS}, seed=7123)
     res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)).run()
     assert res.aliasing_chi2 == 0.0 and "cannot be rebuilt on a finer correction grid" in res.aliasing_note
-    assert any(t.startswith("Not in the bands: ") and "TwinModel" in t for t in _sentences(res))
+    assert any(t.startswith("Not in the bands: ") and "TwinModel" in t for t in sentences(res))
     res.save(tmp_path)
     assert load_result(tmp_path).aliasing_note == res.aliasing_note
 
@@ -743,7 +743,7 @@ def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_p
     meas = synthesize(bem, p, cond, relative_sigma={c.name: 0.01 for c in bem.channels}, seed=7124)
     on = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0)).run()
     assert on.aliasing_note == "" and on.aliasing_chi2 > 0.0
-    assert not any(t.startswith("Not in the bands") for t in _sentences(on))
+    assert not any(t.startswith("Not in the bands") for t in sentences(on))
     off = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0, representation_error=False)).run()
     assert "representation_error = false" in off.aliasing_note and off.aliasing_chi2 == 0.0
 

@@ -14,7 +14,7 @@ def test_the_calibration_report_writes_no_zero_p_value():
     """A nominal model far off the data (χ² far beyond its dof): the report's sentence says p < 1e-16."""
     from calib.calibration import CalibrationSettings, Calibrator
     from calib.measurements import synthesize
-    from calib.report.html import _sentences
+    from calib.report.result_sentences import sentences
     from calib.types import nominal_vector
     from twin_model import TwinModel, twin_conditions
 
@@ -24,7 +24,7 @@ def test_the_calibration_report_writes_no_zero_p_value():
     meas = synthesize(model, p_true, twin_conditions(), relative_sigma={"power": 0.002, "thrust": 0.002}, seed=1)
     res = Calibrator(model, meas, CalibrationSettings(prior_check=False, tightening=False)).run()
     assert res.goodness_of_fit()["p_value_before"] < 1e-16
-    text = " ".join(_sentences(res))
+    text = " ".join(sentences(res))
     assert "(nothing fitted, p < 1e-16)" in text, text[:400]
     assert "p = 0 " not in text and "p = 0)" not in text and "p = 0;" not in text
     # the report section: units and a plain sentence for every statistic it tabulates
