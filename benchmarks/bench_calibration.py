@@ -18,9 +18,9 @@ from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.measurements import synthesize
 from calib.models.base import OperatingConditions
-from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
+from calib.types import nominal_vector
 
 CHANNELS = ("power", "thrust", "root_flap_moment", "root_edge_moment")
 
@@ -48,15 +48,15 @@ def run(repeats: int = 3) -> dict:
         t = time.perf_counter()
         res_map = Calibrator(model, meas, CalibrationSettings(estimator="map", optimizer="sqpmethod")).run()
         best_map = min(best_map, time.perf_counter() - t)
-    return {"calibration_map_seconds": best_map, "calibration_map_status": res_map.status,
-            "calibration_map_model_jacobians": int(res_map.failures["model_jacobians"]),
-            "calibration_map_chi2_dof_after": res_map.chi2_after / res_map.dof,
+    return {"calibration_map_seconds": best_map, "calibration_map_status": res_map.estimate.status,
+            "calibration_map_model_jacobians": int(res_map.fit.failures["model_jacobians"]),
+            "calibration_map_chi2_dof_after": res_map.fit.chi2_after / res_map.dof,
             "calibration_seconds": best, "calibration_params": len(model.parameters),
             "calibration_points": len(cond), "calibration_channels": len(CHANNELS),
-            "calibration_retained": int(res.n_retained), "calibration_status": res.status,
-            "calibration_chi2_dof_before": res.chi2_before / res.dof,
-            "calibration_chi2_dof_after": res.chi2_after / res.dof,
-            "calibration_model_jacobians": int(res.failures["model_jacobians"])}
+            "calibration_retained": int(res.n_retained), "calibration_status": res.estimate.status,
+            "calibration_chi2_dof_before": res.fit.chi2_before / res.dof,
+            "calibration_chi2_dof_after": res.fit.chi2_after / res.dof,
+            "calibration_model_jacobians": int(res.fit.failures["model_jacobians"])}
 
 
 if __name__ == "__main__":

@@ -197,16 +197,16 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                 p_true = _fine_prior_draw(tmodel, model, grid, cond, seed0 + k, settings_cd_min)
             meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=seed0 + k)
             res = Calibrator(model, meas, CalibrationSettings(cd_min=settings_cd_min, **calibration)).run()
-            if res.status != "converged":
+            if res.estimate.status != "converged":
                 failed += 1
-            a, e = res.alpha_seen, res.eta_seen
+            a, e = res.fit.alpha_seen, res.fit.eta_seen
             if tmodel is model:
                 tl, td = field.basis(a, e, "lift") @ p_true, field.basis(a, e, "drag") @ p_true
                 p_nodes = p_true
             elif p_fixed is None:
                 tfield = tmodel.correction_field()
                 tl, td = tfield.basis(a, e, "lift") @ p_true, tfield.basis(a, e, "drag") @ p_true
-                p_nodes = res.p_nominal.copy()
+                p_nodes = res.estimate.p_nominal.copy()
                 p_nodes[:grid.n_lift] = tfield.basis(A.ravel(), E.ravel(), "lift") @ p_true
                 p_nodes[grid.n_lift:grid.n_params] = tfield.basis(A.ravel(), E.ravel(), "drag") @ p_true
                 p_nodes[grid.n_params:] = p_true[-(len(p_nodes) - grid.n_params):]
@@ -216,54 +216,57 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
             # the retained θ against the truth's values at the calibration nodes, with the
             # covariance the result states (noise, the field between the nodes at its
             # estimated size, fit scale) and with the noise part alone
-            Vr = res.V[:, res.retained]
-            err = Vr.T @ ((res.p_hat - p_nodes) / res.scale)
-            C = Vr.T @ (res.cov_p / np.outer(res.scale, res.scale)) @ Vr
+            Vr = res.identifiability.V[:, res.identifiability.retained]
+            err = Vr.T @ ((res.estimate.p_hat - p_nodes) / res.estimate.scale)
+            C = Vr.T @ (res.uncertainty.cov_p / np.outer(res.estimate.scale, res.estimate.scale)) @ Vr
             nees.append(float(err @ np.linalg.solve(C, err)) if err.size else 0.0)
-            nees_noise.append(float(np.sum((err / res.sigma_theta[res.retained]) ** 2)))
+            nees_noise.append(float(np.sum((err / res.identifiability.sigma_theta[res.identifiability.retained]) ** 2)))
             # the whole scaled vector against the truth at the nodes (the posterior's own NEES)
-            e_all = (res.p_hat - p_nodes) / res.scale
-            full_nees.append(float(e_all @ np.linalg.lstsq(res.cov_p / np.outer(res.scale, res.scale), e_all,
+            e_all = (res.estimate.p_hat - p_nodes) / res.estimate.scale
+            full_nees.append(float(e_all @ np.linalg.lstsq(res.uncertainty.cov_p / np.outer(res.estimate.scale,
+                                                                                            res.estimate.scale), e_all,
                                                            rcond=None)[0]))
             # in-sample predictive check: measured against predicted with σ² = noise² + prediction variance
             pred = res.predict(cond, model)
             ok = pred.status == 0
-            sd = np.sqrt(res.sigma ** 2 + pred.std ** 2)[ok]
+            sd = np.sqrt(res.fit.sigma ** 2 + pred.std ** 2)[ok]
             zz = ((meas.values - pred.values)[ok] / sd).ravel()
             pred_chi2 += float(np.sum(zz ** 2))
             # degrees of freedom: rows less the parameters the fit used (the MAP's effective number
             # Σ s²/(1 + s²), the truncated estimate's retained count)
-            s_ = res.singular_values
+            s_ = res.identifiability.singular_values
             fitted = float(np.sum(s_ ** 2 / (1.0 + s_ ** 2))) if res.estimator == "map" else res.n_retained
             pred_dof += zz.size - fitted
             pred_cover += int(np.sum(np.abs(zz) <= stats.norm.ppf(0.975)))
             pred_rows += zz.size
             dims.append(err.size)
-            stable.append(res.status == "converged")
-            rep = res.prior_std if res.settings.get("representation_error", True) else None
-            length = res.settings.get("prior_correlation", 0.0)
-            c = field.coverage(res.p_hat, res.cov_p, a, e, tl, td, prior_std=rep, correlation_length=length,
-                               cd_min=res.settings.get("cd_min"))
+            stable.append(res.estimate.status == "converged")
+            rep = res.uncertainty.prior_std if res.provenance.settings.get("representation_error", True) else None
+            length = res.provenance.settings.get("prior_correlation", 0.0)
+            c = field.coverage(res.estimate.p_hat, res.uncertainty.cov_p, a, e, tl, td, prior_std=rep,
+                               correlation_length=length,
+                               cd_min=res.provenance.settings.get("cd_min"))
             inside = (a >= a_lo) & (a <= a_hi) & (e >= e_lo) & (e <= e_hi)
-            ci = field.coverage(res.p_hat, res.cov_p, a[inside], e[inside], tl[inside], td[inside], prior_std=rep,
-                                correlation_length=length, cd_min=res.settings.get("cd_min"))
+            ci = field.coverage(res.estimate.p_hat, res.uncertainty.cov_p, a[inside], e[inside], tl[inside],
+                                td[inside], prior_std=rep,
+                                correlation_length=length, cd_min=res.provenance.settings.get("cd_min"))
             for block in ("lift", "drag"):
                 cov[block].append(c[block])
                 cov[f"{block}_in_grid"].append(ci[block])
                 hits[block][0] += round(c[block] * c["n_points"])
                 hits[block][1] += c["n_points"]
             kept.append(res.n_retained)
-            prior_checks.append(res.prior_check)
-            if "second_retained" in res.truncation:      # the automatic choice's second start
+            prior_checks.append(res.uncertainty.prior_check)
+            if "second_retained" in res.identifiability.truncation:      # the automatic choice's second start
                 second[0] += 1
-                second[1] += int(res.truncation["second_kept"])
+                second[1] += int(res.identifiability.truncation["second_kept"])
             print(f"[coverage {label}] seed {seed0 + k}: lift {c['lift']:.3f} drag {c['drag']:.3f} (inside the node "
                   f"range {ci['lift']:.3f} {ci['drag']:.3f}) retained {res.n_retained} NEES {nees[-1]:.1f} "
-                  f"fit scale {res.fit_scale:.2f} prior amplitude {res.prior_check['amplitude']:.2f} "
-                  f"({res.prior_check['lower']:.2f}-{res.prior_check['upper']:.2f}) {res.status}"
-                  + (f" fold θ {sorted({d['theta'] for d in res.fold_directions})}" if res.fold_directions else ""),
+                  f"fit scale {res.uncertainty.fit_scale:.2f} prior amplitude {res.uncertainty.prior_check['amplitude']:.2f} "
+                  f"({res.uncertainty.prior_check['lower']:.2f}-{res.uncertainty.prior_check['upper']:.2f}) {res.estimate.status}"
+                  + (f" fold θ {sorted({d['theta'] for d in res.identifiability.fold_directions})}" if res.identifiability.fold_directions else ""),
                   flush=True)
-            fold_runs += bool(res.fold_directions)
+            fold_runs += bool(res.identifiability.fold_directions)
         fig = {"n_seeds": n_seeds, "seeds": [seed0, seed0 + n_seeds - 1]}
         for key, v in cov.items():
             fig[f"coverage_{key}_mean"] = float(np.mean(v))
@@ -278,9 +281,9 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
                                              for v in ("consistent", "larger", "smaller")},
                     "prior_check_amplitude_median_p10_p90": [float(np.median(amp)),
                                                              *np.percentile(amp, [10, 90]).tolist()]})
-        lo, hi = stats.chi2.ppf([0.025, 0.975], n_seeds * len(res.p_hat))
-        fig.update({"estimator": res.settings.get("estimator", "truncated"),
-                    "nees_full_vector_sum": float(np.sum(full_nees)), "nees_full_vector_dof": n_seeds * len(res.p_hat),
+        lo, hi = stats.chi2.ppf([0.025, 0.975], n_seeds * len(res.estimate.p_hat))
+        fig.update({"estimator": res.provenance.settings.get("estimator", "truncated"),
+                    "nees_full_vector_sum": float(np.sum(full_nees)), "nees_full_vector_dof": n_seeds * len(res.estimate.p_hat),
                     "nees_full_vector_band": [float(lo), float(hi)],
                     "in_sample_predictive_chi2_per_row": pred_chi2 / max(pred_rows, 1),
                     "in_sample_predictive_chi2_per_dof": pred_chi2 / max(pred_dof, 1.0),

@@ -90,6 +90,7 @@ def overhead(path, cond) -> dict:
     """Per steady evaluation: the adapter against a raw fmpy loop doing the same steps."""
     import fmpy
     from fmpy.fmi2 import FMU2Slave
+
     from calib.fmu.build import mapping_path
     from calib.fmu.mapping import load_mapping
 
@@ -207,8 +208,8 @@ def modestpy() -> dict:
     import fmpy
 
     from calib.calibration import calibrate
-    from calib.measurements import Measurements
     from calib.fmu.model import FmuModel
+    from calib.measurements import Measurements
     from calib.types import OperatingConditions
 
     venv = ROOT / ".bench-venv-modestpy"
@@ -281,7 +282,7 @@ def modestpy() -> dict:
         model = FmuModel(fmu, ROOT / "tests" / "data" / "fmu" / "generic_rotor_mapping.toml", ["power", "thrust"])
     res = calibrate(model, meas, retain="all")
     model.close()
-    v = {x["name"]: x for x in res.verdicts}
+    v = {x["name"]: x for x in res.identifiability.verdicts}
     out.update({"calib_wall_s": time.perf_counter() - t0,
                 "calib_cp_gain_error": abs(v["cp_gain"]["value"] - truth["cp_gain"]),
                 "calib_cp_gain_std": v["cp_gain"]["std"],

@@ -95,9 +95,9 @@ def _timed_run(model, meas, log: Path | None = None) -> dict:
     mark = len(_log_lines(log))
     res = calibrate(model, meas, retain="all", noise="known")
     t2 = time.perf_counter()
-    return {"unit_check_s": t1 - t0, "calibration_s": t2 - t1, "total_s": t2 - t0, "status": res.status,
-            "failed_points": int(res.failures["final"]), "p_hat": np.array([v["value"] for v in res.verdicts]),
-            "std": np.array([v["std"] for v in res.verdicts]), "log_mark": mark}
+    return {"unit_check_s": t1 - t0, "calibration_s": t2 - t1, "total_s": t2 - t0, "status": res.estimate.status,
+            "failed_points": int(res.fit.failures["final"]), "p_hat": np.array([v["value"] for v in res.identifiability.verdicts]),
+            "std": np.array([v["std"] for v in res.identifiability.verdicts]), "log_mark": mark}
 
 
 def _simulations(log: Path, mark: int) -> dict:

@@ -59,7 +59,7 @@ def workflow_figures(out_dir: str) -> dict:
 
     import numpy as np
 
-    from calib.calibration.result import load_result
+    from calib.calibration.result_files import load_result
     from calib.workflow.validation import INFORMED_LEVEL
 
     t0 = time.perf_counter()
@@ -72,7 +72,8 @@ def workflow_figures(out_dir: str) -> dict:
     runner = first[1] if len(first) > 1 else None
     figures = {"workflow_seconds": seconds, "named": diag["effect"], "effects": diag["effects"],
                "best": {k: best[k] for k in ("name", "lr_statistic", "p_value", "weight", "bic", "n_params")},
-               "runner_up": None if runner is None else {"name": runner["name"], "delta_bic": runner["bic"] - best["bic"]},
+               "runner_up": None if runner is None else {"name": runner["name"],
+                                                         "delta_bic": runner["bic"] - best["bic"]},
                "chi2_per_dof": {k: diag[k]["chi2_per_dof"] for k in ("before", "with_effects", "after")},
                "stages": {}}
     for o in outcomes:
@@ -80,17 +81,17 @@ def workflow_figures(out_dir: str) -> dict:
         res = load_result(o.out_dir)
         names = [q["name"] for q in res.parameters]
         i = names.index("stall_delay_strength")
-        rms = np.sqrt(np.mean(res.measured ** 2, axis=0))
-        sig = np.broadcast_to(res.noise_sigma, res.measured.shape)[0]
+        rms = np.sqrt(np.mean(res.fit.measured ** 2, axis=0))
+        sig = np.broadcast_to(res.fit.noise_sigma, res.fit.measured.shape)[0]
         with open(os.path.join(o.out_dir, "validation.json")) as fh:
             val = json.load(fh)
         figures["stages"][stage] = {
-            "estimator": res.estimator, "retained": int(np.sum(res.retained)),
-            "informed": int(np.sum(res.singular_values >= INFORMED_LEVEL)),
+            "estimator": res.estimator, "retained": int(np.sum(res.identifiability.retained)),
+            "informed": int(np.sum(res.identifiability.singular_values >= INFORMED_LEVEL)),
             "noise_percent_of_rms": {ch: float(100 * sig[k] / rms[k]) for k, ch in enumerate(res.channels)
                                      if ch in ("torque", "thrust")},
-            "stall_delay_strength": {"value": float(res.p_hat[i]), "std": float(res.std_p[i]),
-                                     "verdict": res.verdicts[i]["verdict"]},
+            "stall_delay_strength": {"value": float(res.estimate.p_hat[i]), "std": float(res.uncertainty.std_p[i]),
+                                     "verdict": res.identifiability.verdicts[i]["verdict"]},
             "leave_one_out": {s_["channel"]: s_ for s_ in val["summary"]}}
     return figures
 

@@ -154,12 +154,12 @@ def prior_draws(estimator: str, n_seeds: int, say=print) -> dict:
                                                               tightening=False)).run()
             test = cond.subset(~train)
             pred = res.predict(test, model)
-            nominal = model.evaluate(res.p_nominal, test).values[:, idx]
-            noise = res.sigma[0]
+            nominal = model.evaluate(res.estimate.p_nominal, test).values[:, idx]
+            noise = res.fit.sigma[0]
             ok = pred.status == 0
             z = (meas.values[~train] - pred.values) / np.sqrt(noise ** 2 + pred.std ** 2)
             out[label].append({
-                "seed": seed, "status": res.status,
+                "seed": seed, "status": res.estimate.status,
                 "chi2_per_n_calibrated": float(np.mean(((meas.values[~train] - pred.values)[ok] / noise) ** 2)),
                 "chi2_per_n_nominal": float(np.mean(((meas.values[~train] - nominal)[ok] / noise) ** 2)),
                 "inside": int(np.sum(np.abs(z[ok]) <= 1.959964)), "rows": int(z.size), "failed": int((~ok).sum())})

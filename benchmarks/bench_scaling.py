@@ -25,7 +25,7 @@ from calib.corrections import CorrectionGrid
 from calib.measurements import synthesize
 from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
-from calib.workflow import synthetic_conditions, load_workflow, truth_model
+from calib.workflow import load_workflow, synthetic_conditions, truth_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 WORKFLOW = "workflows/wind_tunnel_hub_loads.toml"
@@ -61,13 +61,13 @@ def run(everything: bool = False) -> dict:
             t = time.perf_counter()
             res = Calibrator(model, meas, CalibrationSettings(estimator=estimator, cd_min=0.003)).run()
             wall = time.perf_counter() - t
-            rec = {"points": n, "seconds": wall, "ms_per_point": 1e3 * wall / n, "status": res.status,
-                   "retained": res.n_retained, "chi2_per_dof_after": res.chi2_after / res.dof,
-                   "model_jacobians": res.failures["model_jacobians"],
-                   "model_evaluations": res.failures["model_evaluations"]}
+            rec = {"points": n, "seconds": wall, "ms_per_point": 1e3 * wall / n, "status": res.estimate.status,
+                   "retained": res.n_retained, "chi2_per_dof_after": res.fit.chi2_after / res.dof,
+                   "model_jacobians": res.fit.failures["model_jacobians"],
+                   "model_evaluations": res.fit.failures["model_evaluations"]}
             out[f"{estimator}_{n}"] = rec
             print(f"[scaling] {estimator} {n} points: {wall:.1f} s ({rec['ms_per_point']:.1f} ms/point), "
-                  f"{res.status}, {rec['model_jacobians']} Jacobians", flush=True)
+                  f"{res.estimate.status}, {rec['model_jacobians']} Jacobians", flush=True)
     return out
 
 

@@ -5,7 +5,8 @@ workflow in ``workflows/`` (Phase VI included) into ``DIR``; ``python benchmarks
 compare OLD NEW`` compares two snapshots: every number of every ``result.json``, ``result.npz``,
 ``diagnosis.json``, ``validation.json`` and ``summary.json`` (timings, dates, versions and paths
 left out; ``history/`` too: a cache keyed by hashes that include the checkout's paths) within ``--rtol`` (default 1e-10) relative, and the key sets (a name that disappeared or
-appeared is listed). Exit status 1 when anything differs. A development tool for the architecture
+appeared is listed); a schema-3 result (fields under their parts) compares field by field with a
+schema-2 snapshot. Exit status 1 when anything differs. A development tool for the architecture
 steps, not a test: its baseline is the code's own output.
 """
 
@@ -61,6 +62,25 @@ def _leaves(x, prefix=""):
         yield prefix, float(x)
 
 
+#: The parts a schema-3 ``result.json`` holds its fields under (``result.npz``: ``part.field``).
+RESULT_PARTS = ("estimate", "identifiability", "uncertainty", "fit", "provenance")
+
+
+def _as_flat_result(doc: dict) -> dict:
+    """A ``result.json`` with every part's fields under their own names, as schema 2 wrote them, so
+    that snapshots on both sides of the schema change compare field by field."""
+    out = {k: v for k, v in doc.items() if k not in RESULT_PARTS and k != "schema_version"}
+    for part in RESULT_PARTS:
+        out.update(doc.get(part, {}))
+    return out
+
+
+def _flat_array_name(name: str) -> str:
+    """``estimate.p_hat`` -> ``p_hat`` (schema 3's array names as schema 2's)."""
+    part, _, field = name.partition(".")
+    return field if part in RESULT_PARTS and field else name
+
+
 def _close(a, b, rtol: float) -> bool:
     """Equal within ``rtol`` relative (of the value, or of 1e-6 of the array's largest finite value), with
     NaN and infinities where the other has the same."""
@@ -89,7 +109,10 @@ def compare(old: Path, new: Path, rtol: float) -> int:
             if not g.exists():
                 problems.append(f"{rel}: missing in the new snapshot")
                 continue
-            a, b = dict(_leaves(json.loads(f.read_text()))), dict(_leaves(json.loads(g.read_text())))
+            docs = [json.loads(h.read_text()) for h in (f, g)]
+            if f.name == "result.json":
+                docs = [_as_flat_result(d) for d in docs]
+            a, b = dict(_leaves(docs[0])), dict(_leaves(docs[1]))
             for k in sorted(set(a) ^ set(b)):
                 problems.append(f"{rel}: key {k} only in the {'old' if k in a else 'new'} snapshot")
             for k in sorted(set(a) & set(b)):
@@ -106,15 +129,17 @@ def compare(old: Path, new: Path, rtol: float) -> int:
                 problems.append(f"{rel}: missing in the new snapshot")
                 continue
             with np.load(f, allow_pickle=False) as za, np.load(g, allow_pickle=False) as zb:
-                for k in sorted(set(za.files) ^ set(zb.files)):
-                    problems.append(f"{rel}: array {k} only in the {'old' if k in za.files else 'new'} snapshot")
-                for k in sorted(set(za.files) & set(zb.files)):
-                    checked += 1
-                    if za[k].dtype.kind in "fiub" and zb[k].dtype.kind in "fiub":
-                        if not _close(za[k], zb[k], rtol):
-                            problems.append(f"{rel}: array {k} differs beyond rtol {rtol:g}")
-                    elif not np.array_equal(za[k], zb[k]):
-                        problems.append(f"{rel}: array {k} differs")
+                xa = {_flat_array_name(k): za[k] for k in za.files}
+                xb = {_flat_array_name(k): zb[k] for k in zb.files}
+            for k in sorted(set(xa) ^ set(xb)):
+                problems.append(f"{rel}: array {k} only in the {'old' if k in xa else 'new'} snapshot")
+            for k in sorted(set(xa) & set(xb)):
+                checked += 1
+                if xa[k].dtype.kind in "fiub" and xb[k].dtype.kind in "fiub":
+                    if not _close(xa[k], xb[k], rtol):
+                        problems.append(f"{rel}: array {k} differs beyond rtol {rtol:g}")
+                elif not np.array_equal(xa[k], xb[k]):
+                    problems.append(f"{rel}: array {k} differs")
     print(f"[same results] {checked} numbers and arrays compared at rtol {rtol:g}: {len(problems)} differ")
     for p in problems[:200]:
         print("  " + p)

@@ -318,27 +318,27 @@ def run_cell(cell: Cell, workdir: Path) -> dict:
     wall = time.perf_counter() - t0
     names = [q["name"] for q in res.parameters]
     field = np.array([is_field(n) for n in names])
-    z = (res.p_hat - p_true) / res.std_p
+    z = (res.estimate.p_hat - p_true) / res.uncertainty.std_p
     others = np.flatnonzero(~field)
     worst = int(others[np.argmax(np.abs(z[others]))])
-    err = (res.p_hat - p_true) / res.scale
-    cov = res.cov_p / np.outer(res.scale, res.scale)
+    err = (res.estimate.p_hat - p_true) / res.estimate.scale
+    cov = res.uncertainty.cov_p / np.outer(res.estimate.scale, res.estimate.scale)
     nees = float(err @ np.linalg.solve(cov, err))
     n = err.size
     nees_bound = float(stats.chi2.ppf(NEES_LEVEL, n))
-    agreement = res.checks.get("MAP and ML", "")
+    agreement = res.provenance.checks.get("MAP and ML", "")
     why = []
-    if res.status != "converged":
-        why.append(f"status {res.status}: {res.message}")
-    if res.failures.get("final", 0):
-        why.append(f"{res.failures['final']} failed point(s)")
+    if res.estimate.status != "converged":
+        why.append(f"status {res.estimate.status}: {res.estimate.message}")
+    if res.fit.failures.get("final", 0):
+        why.append(f"{res.fit.failures['final']} failed point(s)")
     if abs(z[worst]) > Z_MAX:
         why.append(f"{names[worst]} {abs(z[worst]):.2f} σ from its truth")
     if nees > nees_bound:
         why.append(f"NEES {nees:.1f} above the {100 * NEES_LEVEL:g} % bound {nees_bound:.1f} ({n} dof)")
     if "WARNING" in agreement:
         why.append(agreement)
-    return {"cell": cell.id, **vars(cell), "status": res.status, "worst_parameter": names[worst],
+    return {"cell": cell.id, **vars(cell), "status": res.estimate.status, "worst_parameter": names[worst],
             "worst_z": float(abs(z[worst])), "nees": nees, "dof": n, "nees_bound": nees_bound,
-            "agreement": agreement, "p_hat": res.p_hat.tolist(), "std_p": res.std_p.tolist(),
+            "agreement": agreement, "p_hat": res.estimate.p_hat.tolist(), "std_p": res.uncertainty.std_p.tolist(),
             "names": names, "wall_s": wall, "passed": not why, "why": "; ".join(why)}

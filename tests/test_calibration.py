@@ -11,18 +11,18 @@ Truth inside the span of the shape functions, known Gaussian noise:
 import numpy as np
 import pytest
 from scipy import stats
+from twin_model import TwinModel, twin_conditions
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
-from calib.parametrizations.correction_field import eigenshapes
 from calib.measurements import synthesize
 from calib.models.base import OperatingConditions
-from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
+from calib.parametrizations.correction_field import eigenshapes
 from calib.rotor.library import load_rotor
-from twin_model import TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 CHANNELS = ("power", "thrust", "root_flap_moment")
 
@@ -49,9 +49,9 @@ def run_twin(model, cond, p_true, seed, **settings):
 
 def theta_error(res, p_true):
     """θ̂ − θ_true in the retained basis of the result, and its covariance."""
-    B = res.V[:, res.retained]
-    theta_true = B.T @ ((p_true - res.p_nominal) / res.scale)
-    return res.theta_hat - theta_true, res.cov_theta
+    B = res.identifiability.V[:, res.identifiability.retained]
+    theta_true = B.T @ ((p_true - res.estimate.p_nominal) / res.estimate.scale)
+    return res.estimate.theta_hat - theta_true, res.uncertainty.cov_theta
 
 
 def test_retained_theta_within_three_sigma():
@@ -66,12 +66,12 @@ def test_retained_theta_within_three_sigma():
     p_true = twin_truth(model)
     for seed in range(100, 105):
         res = run_twin(model, cond, p_true, seed=seed)
-        assert res.status == "converged", res.message
+        assert res.estimate.status == "converged", res.estimate.message
         assert 0 < res.n_retained < res.n_params
         err, cov = theta_error(res, p_true)
         z = np.abs(err) / np.sqrt(np.diag(cov))
         assert np.all(z < 3.0), (seed, z)
-        assert res.chi2_after / res.dof < 1.5 < res.chi2_before / res.dof
+        assert res.fit.chi2_after / res.dof < 1.5 < res.fit.chi2_before / res.dof
 
 
 @pytest.mark.parametrize("n_draws", [pytest.param(20, id="20 draws"),
@@ -95,9 +95,9 @@ def test_cramer_rao_bound_is_honest_monte_carlo(n_draws):
 
 def polar_error(res, grid, p_true):
     """RMS error of the corrected lift and drag (in scale units) at the (α, η) the data see."""
-    a, e = res.alpha_seen, res.eta_seen
+    a, e = res.fit.alpha_seen, res.fit.eta_seen
     n = grid.n_params
-    dl_hat, dd_hat, _, _ = grid.evaluate(res.p_hat[:n], a, e)
+    dl_hat, dd_hat, _, _ = grid.evaluate(res.estimate.p_hat[:n], a, e)
     dl_true, dd_true, _, _ = grid.evaluate(p_true[:n], a, e)
     return float(np.sqrt(np.mean(((dl_hat - dl_true) / grid.cl_scale) ** 2 +
                                  ((dd_hat - dd_true) / grid.cd_scale) ** 2)))
@@ -127,17 +127,17 @@ def test_unseen_region_gets_no_retained_eigenshape():
     cond = twin_conditions()
     p_true = nominal_vector(model.parameters)
     res = run_twin(model, cond, p_true, seed=3)
-    assert res.alpha_seen.max() < 28.0
+    assert res.fit.alpha_seen.max() < 28.0
     unseen = [j for j, q in enumerate(model.parameters) if q.kind.endswith("correction") and q.alpha_deg >= 36.0]
-    V_ret = res.V[:, res.retained]
+    V_ret = res.identifiability.V[:, res.identifiability.retained]
     assert np.abs(V_ret[unseen]).max() < 1e-8
     alpha = np.linspace(36.0, 50.0, 15)
     eta = np.linspace(0.0, 1.0, 11)
     for block in ("lift", "drag"):
-        shapes = eigenshapes(res.V[:, res.retained], res.layout, alpha, eta)
+        shapes = eigenshapes(res.identifiability.V[:, res.identifiability.retained], res.layout, alpha, eta)
         arr = shapes[block] if isinstance(shapes, dict) else shapes
         assert np.abs(np.asarray(arr)).max() < 1e-8
-    verdict = {v["name"]: v["verdict"] for v in res.verdicts}
+    verdict = {v["name"]: v["verdict"] for v in res.identifiability.verdicts}
     assert all(verdict[model.parameters[j].name] == "poorly observable" for j in unseen)
 
 
@@ -154,11 +154,11 @@ def test_bem_twin_single_draw():
     p_true[grid.n_lift:grid.n_params] = 0.002
     p_true[-1] = 0.3
     res = run_twin(model, cond, p_true, seed=21, cd_min=0.0)
-    assert res.status == "converged"
-    assert res.failures["final"] == 0
+    assert res.estimate.status == "converged"
+    assert res.fit.failures["final"] == 0
     err, cov = theta_error(res, p_true)
     assert np.all(np.abs(err) / np.sqrt(np.diag(cov)) < 3.0)
-    assert res.chi2_after / res.dof < 1.3
+    assert res.fit.chi2_after / res.dof < 1.3
 
 
 def test_unknown_optimizer_lists_valid_names():
@@ -177,7 +177,8 @@ def test_other_optimizers_agree_with_sqpmethod(optimizer):
     ref = run_twin(model, cond, p_true, seed=8)
     other = run_twin(model, cond, p_true, seed=8, optimizer=optimizer)
     assert other.n_retained == ref.n_retained
-    np.testing.assert_allclose(other.theta_hat, ref.theta_hat, atol=1e-3 * (1 + np.abs(ref.theta_hat).max()))
+    np.testing.assert_allclose(other.estimate.theta_hat, ref.estimate.theta_hat,
+                               atol=1e-3 * (1 + np.abs(ref.estimate.theta_hat).max()))
 
 
 def test_failed_model_points_are_counted_not_hidden():
@@ -187,6 +188,6 @@ def test_failed_model_points_are_counted_not_hidden():
     meas = synthesize(truth_model, twin_truth(truth_model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=2)
     res = Calibrator(model, meas, CalibrationSettings(cd_min=None)).run()
     n_fail = int(np.sum(cond.wind_speed > 8.5))
-    assert res.failures["final"] == n_fail > 0
-    assert np.sum(res.status_after != 0) == n_fail
+    assert res.fit.failures["final"] == n_fail > 0
+    assert np.sum(res.fit.status_after != 0) == n_fail
     assert "failed" in res.summary()

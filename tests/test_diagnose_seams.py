@@ -10,14 +10,13 @@ import json
 
 import numpy as np
 import pytest
+from test_diagnosis import campaign, hidden
 
-from calib.diagnosis import bem_family, candidate_parameters, naming, verdict
 from calib.cli import main as cli_main
+from calib.diagnosis import bem_family, candidate_parameters, naming, verdict
 from calib.diagnosis.result import CandidateFit
 from calib.effects import EFFECTS, make_effect
 from calib.errors import InputError, ModelError
-
-from test_diagnosis import campaign, hidden
 
 # in family (the library's own effects on its own BEM): no model-form tolerance
 CONFIG = ('[model]\nuse_tilt = false\n[grid]\nalpha_nodes_deg = "auto"\neta_nodes = [0.3, 0.6, 1.0]\n'
@@ -125,12 +124,12 @@ def _past_the_bound(fit_task):
     def task(t):
         out = fit_task(t)
         res = out["result"]
-        band = 1e-3 * res.scale          # within the at-bound band (written out: main has no bound_side)
+        band = 1e-3 * res.estimate.scale          # within the at-bound band (written out: main has no bound_side)
         for j in range(res.n_params):
-            if res.p_hat[j] <= res.lower[j] + band[j]:
-                res.p_hat[j] = _ulps_outside(res.lower[j], -np.inf)
-            elif res.p_hat[j] >= res.upper[j] - band[j]:
-                res.p_hat[j] = _ulps_outside(res.upper[j], np.inf)
+            if res.estimate.p_hat[j] <= res.estimate.lower[j] + band[j]:
+                res.estimate.p_hat[j] = _ulps_outside(res.estimate.lower[j], -np.inf)
+            elif res.estimate.p_hat[j] >= res.estimate.upper[j] - band[j]:
+                res.estimate.p_hat[j] = _ulps_outside(res.estimate.upper[j], np.inf)
         return out
     return task
 
@@ -253,7 +252,8 @@ def test_fluid_density_fills_a_table_without_air_density(tmp_path, lift_data, mo
     cfg = tmp_path / "c.toml"
     cfg.write_text(CONFIG + "[fluid]\ndensity = 1.1\n")
     with pytest.raises(Stop):
-        calib.diagnosis.command.run_diagnose("nrel5mw", str(data), str(tmp_path / "out"), str(cfg), printer=lambda s: None)
+        calib.diagnosis.command.run_diagnose("nrel5mw", str(data), str(tmp_path / "out"), str(cfg),
+                                             printer=lambda s: None)
     np.testing.assert_allclose(seen["density"], 1.1, rtol=1e-12)
 
 
@@ -264,7 +264,8 @@ def test_diagnose_states_the_set_up_in_force(tmp_path, lift_data):
         'candidates = ["pitch_offset"]\nmax_effects = 1\n'
     code, out = _diagnose(tmp_path, lift_data, text)
     assert code == 0
-    stated = {i["quantity"]: (i["value"], i["origin"]) for i in json.loads((out / "diagnosis.json").read_text())["setup"]}
+    stated = {i["quantity"]: (i["value"],
+                              i["origin"]) for i in json.loads((out / "diagnosis.json").read_text())["setup"]}
     assert stated["tilt"] == ("0 deg", "[model] tilt")
     assert stated["precone"] == ("2.5 deg", "embedded rotor 'nrel5mw'")
     assert stated["tilt in the BEM"] == ("ignored (use_tilt = false)", "[model] use_tilt")

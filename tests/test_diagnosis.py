@@ -143,7 +143,8 @@ def test_diagnose_cli_on_a_table_without_sigma_columns_takes_the_noise_model_fro
     (tmp_path / "data.csv").write_text("\n".join(",".join(row.split(",")[j] for j in keep) for row in lines) + "\n")
     (tmp_path / "cfg.toml").write_text('[model]\nuse_tilt = false\n[diagnosis]\ncandidates = ["pitch_offset", '
                                        '"wind_speed_scale"]\nrecalibrate = false\n')
-    args = ["diagnose", "--rotor", "nrel5mw", "--data", str(tmp_path / "data.csv"), "--config", str(tmp_path / "cfg.toml")]
+    args = ["diagnose", "--rotor", "nrel5mw", "--data", str(tmp_path / "data.csv"), "--config",
+            str(tmp_path / "cfg.toml")]
     assert cli_main(args + ["--out", str(tmp_path / "known")]) == 2
     assert "sigma" in capsys.readouterr().err
     assert cli_main(args + ["--out", str(tmp_path / "ml"), "--noise", "ml"]) == 0
@@ -272,7 +273,7 @@ def test_a_recalibration_that_ends_above_its_start_is_not_kept(monkeypatch):
         def run(self):
             res = super().run()
             if self.name == "recalibration":
-                res.model_after = res.model_after * 1.05
+                res.fit.model_after = res.fit.model_after * 1.05
             return res
 
     monkeypatch.setattr(D, "Calibrator", Worse)
@@ -375,7 +376,7 @@ def test_a_candidate_whose_every_derivative_vanishes_at_nominal_is_started_again
                       seed=9611)
     known = CalibrationSettings(noise="known", retain="all")
     out = fit_task({"name": "product", "model": model, "measurements": meas, "settings": known, "own": [0, 1]})
-    a, b = out["result"].p_hat
+    a, b = out["result"].estimate.p_hat
     assert out["start_note"].startswith("second start kept"), out["start_note"]
     assert abs(a * b - 0.5) < 0.05 and abs(a * a - 1.0) < 0.1, (a, b)
     from calib.calibration import Calibrator

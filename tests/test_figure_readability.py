@@ -3,23 +3,24 @@ no overlapping or cut-off text, no panel narrower than a readable width, no text
 no "1e6" at an axis end instead of a unit prefix. First the check itself, on figures made
 to fail it; then the calibration, campaign, diagnosis and demo figures."""
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from figure_check import figure_problems
 from matplotlib.figure import Figure
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.demo import DEMO_DPI, plot_cp_surface, plot_power_curve
 from calib.measurements import synthesize
-from calib.types import nominal_vector
 from calib.report import figures as F
 from calib.report.diagnosis_figures import plot_candidates, plot_gap
 from calib.report.panels import spread, tile_labels, unit_prefix
 from calib.report.spectrum_figures import plot_spectra
 from calib.report.validation_figures import plot_campaign
-from figure_check import figure_problems
-from twin_model import TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 
 # ----------------------------------------------------------------------------- the check fails where it should
@@ -100,13 +101,15 @@ def result():
 def _megawatt(result):
     """The same fit on a rotor a hundred times larger in load (power in MW, moments in MN m)."""
     k = 100.0
-    return result.replace(measured=result.measured * k, model_before=result.model_before * k,
-                          model_after=result.model_after * k, sigma=result.sigma * k)
+    return result.replace(fit=dataclasses.replace(result.fit, measured=result.fit.measured * k,
+                                                  model_before=result.fit.model_before * k, model_after=result.fit.model_after * k, sigma=result.fit.sigma * k))
 
 
 @pytest.mark.parametrize("variant", ["as fitted", "every direction retained", "megawatt rotor"])
 def test_calibration_figures_are_readable(result, variant):
-    r = {"as fitted": result, "every direction retained": result.replace(retained=np.ones(result.n_params, bool)),
+    r = {"as fitted": result,
+         "every direction retained": result.replace(identifiability=dataclasses.replace(result.identifiability,
+                                                                                        retained=np.ones(result.n_params, bool))),
          "megawatt rotor": _megawatt(result)}[variant]
     drawn = 0
     for name, make in F.FIGURES.items():

@@ -306,7 +306,7 @@ def test_quarantine_with_a_process_executor(faulty_fmu, tmp_path, monkeypatch):
 def test_calib_run_reports_the_timeout_and_the_quarantined_points(faulty_fmu, tmp_path):
     """calib run on the faulty FMU (crash and hang on; 3 s timeout) finishes, and the stage's
     report lines state the timeout in force and each quarantined point with its status."""
-    from calib.calibration.result import load_result
+    from calib.calibration.result_files import load_result
     from calib.cli import main
     from calib.measurements import synthesize
 
@@ -335,7 +335,7 @@ retain = "all"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(["run", str(tmp_path / "faulty.toml"), "--out", str(tmp_path / "out"), "-q"]) == 0
-    checks = load_result(tmp_path / "out" / "stage1_loads").checks
+    checks = load_result(tmp_path / "out" / "stage1_loads").provenance.checks
     assert "s in force" in checks["FMU simulation timeout"] and "configured 3 s" in checks["FMU simulation timeout"]
     quarantined = checks["FMU points quarantined"]
     assert f"wind_speed {FAULTS['crash']:g}" in quarantined and f"wind_speed {FAULTS['hang']:g}" in quarantined

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pythonfmu_export import export_fmu
 
 from calib.calibration import calibrate
-from calib.measurements import synthesize
 from calib.fmu.model import FmuModel
+from calib.measurements import synthesize
 from calib.types import OperatingConditions
-from pythonfmu_export import export_fmu
 
 DATA = Path(__file__).parent / "data" / "fmu"
 
@@ -47,8 +47,8 @@ def test_generic_fmu_from_another_exporter_recovers_its_parameters(generic_fmu):
     meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=5)
     res = calibrate(model, meas, retain="all", noise="known")
     model.close()
-    assert res.status == "converged" and res.failures["final"] == 0
-    for v, truth, useful in zip(res.verdicts, p_true, (0.025, 0.025, 1.0)):
+    assert res.estimate.status == "converged" and res.fit.failures["final"] == 0
+    for v, truth, useful in zip(res.identifiability.verdicts, p_true, (0.025, 0.025, 1.0)):
         assert abs(v["value"] - truth) < 3 * v["std"], (v["name"], v["value"], truth, v["std"])
         assert v["std"] < useful, (v["name"], v["std"])     # informative: well inside the prior
 
@@ -69,9 +69,9 @@ def test_stated_priors_with_the_default_estimator_keep_the_parameters_independen
     meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=5)
     res = calibrate(model, meas, noise="known")
     model.close()
-    assert res.provenance.settings["estimator"] == "map" and res.status == "converged"
-    values = [v["value"] for v in res.verdicts]
-    for v, truth in zip(res.verdicts, p_true):
+    assert res.provenance.settings["estimator"] == "map" and res.estimate.status == "converged"
+    values = [v["value"] for v in res.identifiability.verdicts]
+    for v, truth in zip(res.identifiability.verdicts, p_true):
         assert abs(v["value"] - truth) < 3 * v["std"], (v["name"], v["value"], truth, v["std"])
     # the two gains are distinct: their difference is resolved, as the truth's 0.14 is
     assert abs(values[0] - values[1]) > 0.1, values

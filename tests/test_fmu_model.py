@@ -19,8 +19,8 @@ from calib.bem import BemSettings
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.fmu.build import build_fmu, mapping_path
-from calib.models.bem_model import BemModel
 from calib.fmu.model import FmuModel
+from calib.models.bem_model import BemModel
 from calib.rotor.library import load_rotor
 from calib.types import OperatingConditions, Status
 
@@ -249,10 +249,10 @@ def test_calibration_finishes_past_a_crashing_point(small_fmus, rotor):
     res = calibrate(m, meas, retain="all", cd_min=None)
     crashed = cond.wind_speed > threshold
     assert crashed.sum() == 2
-    assert np.all(res.status_after[crashed] == Status.SIMULATION_FAILED) and np.all(res.status_after[~crashed] == 0)
-    assert np.all(res.status_before[crashed] == Status.SIMULATION_FAILED)
-    assert res.failures["final"] == 2 and res.status == "converged"
-    v = res.verdicts[0]
+    assert np.all(res.fit.status_after[crashed] == Status.SIMULATION_FAILED) and np.all(res.fit.status_after[~crashed] == 0)
+    assert np.all(res.fit.status_before[crashed] == Status.SIMULATION_FAILED)
+    assert res.fit.failures["final"] == 2 and res.estimate.status == "converged"
+    v = res.identifiability.verdicts[0]
     assert abs(v["value"] - p_true[0]) < 3 * v["std"]
     truth.close()
     m.close()
@@ -329,6 +329,7 @@ def test_fault_in_a_perturbed_run_keeps_the_others(small_fmus, rotor, fault, sta
     skipped). The fault is provoked by a perturbed run that also raises the wind speed input above
     the debug threshold."""
     import dataclasses
+
     from calib.fmu import worker as fw
     from calib.fmu.simulator import Simulator
 

@@ -15,14 +15,15 @@ mapping would move its estimate by many σ.
 from __future__ import annotations
 
 import numpy as np
-from calib.calibration import calibrate
-from calib.fmu.build import build_fmu, mapping_path
-from calib.measurements import synthesize
-from calib.models.bem_model import BemModel
-from calib.fmu.model import FmuModel
-from calib.types import nominal_vector
 from synthetic import synthetic_rotor
 from test_fmu_model import BEM_SETTINGS, CHANNELS, FAST, GRID, QUIET, WINDOW, conditions
+
+from calib.calibration import calibrate
+from calib.fmu.build import build_fmu, mapping_path
+from calib.fmu.model import FmuModel
+from calib.measurements import synthesize
+from calib.models.bem_model import BemModel
+from calib.types import nominal_vector
 
 SETTINGS = dict(sigma_bar=1.0, cd_min=None, max_relinearizations=3)
 
@@ -43,20 +44,20 @@ def test_same_twin_same_theta_on_bem_and_both_fmu_variants():
         results[v] = calibrate(model, meas, **SETTINGS)
         model.close()
     ref = results["bem"]
-    V = ref.V[:, ref.retained]
-    sigma = ref.sigma_theta[ref.retained]
+    V = ref.identifiability.V[:, ref.identifiability.retained]
+    sigma = ref.identifiability.sigma_theta[ref.identifiability.retained]
     assert 2 <= sigma.size < GRID.n_params
 
     def theta(p):
-        return V.T @ ((np.asarray(p) - ref.p_nominal) / ref.scale)
+        return V.T @ ((np.asarray(p) - ref.estimate.p_nominal) / ref.estimate.scale)
 
-    t_true, t_bem = theta(p_true), theta(ref.p_hat)
+    t_true, t_bem = theta(p_true), theta(ref.estimate.p_hat)
     assert np.all(np.abs(t_bem - t_true) < 3 * sigma)
     for v in "AB":
         r = results[v]
-        assert r.status == "converged" and r.failures["final"] == 0
-        assert int(np.count_nonzero(r.retained)) == sigma.size
-        np.testing.assert_allclose(r.sigma_theta[r.retained], sigma, rtol=0.05)
-        t = theta(r.p_hat)
+        assert r.estimate.status == "converged" and r.fit.failures["final"] == 0
+        assert int(np.count_nonzero(r.identifiability.retained)) == sigma.size
+        np.testing.assert_allclose(r.identifiability.sigma_theta[r.identifiability.retained], sigma, rtol=0.05)
+        t = theta(r.estimate.p_hat)
         assert np.all(np.abs(t - t_bem) < sigma), (v, (t - t_bem) / sigma)
         assert np.all(np.abs(t - t_true) < 3 * sigma)

@@ -15,7 +15,8 @@ from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.calibration.fold_directions import FOLD_SHARE, fold_dominated_directions
-from calib.calibration.result import fold_sentence, load_result
+from calib.calibration.result import fold_sentence
+from calib.calibration.result_files import load_result
 from calib.measurements import Measurements, synthesize
 from calib.report.html import result_section
 
@@ -94,26 +95,27 @@ def _calibrate(flagged, tmp_path=None):
     values[0] = model.evaluate(truth, cond).values[0]
     sigma[0] /= 300.0
     meas = Measurements(meas.conditions, meas.channels, values, sigma, "fold twin")
-    return Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0, prior_check=False,
+    return Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0,
+                                                       prior_check=False,
                                                       curvature_samples=0)).run()
 
 
 def test_a_direction_a_flagged_point_determines_is_stated_with_at_least_its_prior_variance(tmp_path):
     plain, fold = _calibrate(()), _calibrate((0,))
-    assert plain.fold_directions == []
+    assert plain.identifiability.fold_directions == []
     # the point carries the leading direction (and others: its three channels' rows hold at most
     # 3 units of information, so at most 5 directions can take more than half of theirs from it)
-    assert {d["point"] for d in fold.fold_directions} == {0}
-    thetas = sorted(d["theta"] for d in fold.fold_directions)
+    assert {d["point"] for d in fold.identifiability.fold_directions} == {0}
+    thetas = sorted(d["theta"] for d in fold.identifiability.fold_directions)
     assert thetas[0] == 1 and len(thetas) <= 5
-    first = next(d for d in fold.fold_directions if d["theta"] == 1)
-    v = fold.V[:, 0]
-    prior_var = float(v @ np.diag((fold.prior_std / fold.scale) ** 2) @ v)
+    first = next(d for d in fold.identifiability.fold_directions if d["theta"] == 1)
+    v = fold.identifiability.V[:, 0]
+    prior_var = float(v @ np.diag((fold.uncertainty.prior_std / fold.estimate.scale) ** 2) @ v)
 
     def sd_along(res):
-        return float(np.sqrt(v @ (res.cov_p / np.outer(res.scale, res.scale)) @ v))
+        return float(np.sqrt(v @ (res.uncertainty.cov_p / np.outer(res.estimate.scale, res.estimate.scale)) @ v))
     # the same estimate; along θ1 the stated σ goes from the noise's to at least the prior's
-    assert np.allclose(fold.p_hat, plain.p_hat)
+    assert np.allclose(fold.estimate.p_hat, plain.estimate.p_hat)
     assert sd_along(plain) < 0.1 * np.sqrt(prior_var) <= sd_along(fold)
     assert np.isclose(first["sigma_after"], sd_along(fold), rtol=1e-9)
     assert np.isclose(first["sigma_before"], sd_along(plain), rtol=1e-9)
@@ -121,7 +123,7 @@ def test_a_direction_a_flagged_point_determines_is_stated_with_at_least_its_prio
     assert "θ1 takes" in fold.summary() and "point 1 (" in fold.summary()
     assert "θ1 takes" in result_section(fold) and "θ1 takes" not in result_section(plain)
     fold.save(tmp_path)
-    assert load_result(tmp_path).fold_directions == fold.fold_directions
+    assert load_result(tmp_path).identifiability.fold_directions == fold.identifiability.fold_directions
 
 
 def test_the_sentence_names_the_point_its_share_and_the_sigma_it_was_stated_with():

@@ -71,8 +71,8 @@ def test_results_and_predictions_as_dataframes():
     assert list(params.index) == [q.name for q in model.parameters]
     assert params.loc["pitch_offset", "unit"] == "deg" and params.loc["pitch_offset", "kind"] == "nuisance"
     # the frame holds the result's own arrays (a copy, no arithmetic): equal bit for bit
-    np.testing.assert_array_equal(params["value"].to_numpy(), res.p_hat)
-    np.testing.assert_array_equal(params["std"].to_numpy(), res.std_p)
+    np.testing.assert_array_equal(params["value"].to_numpy(), res.estimate.p_hat)
+    np.testing.assert_array_equal(params["std"].to_numpy(), res.uncertainty.std_p)
     points = res.points_frame()
     assert len(points) == 6 and "power_calibrated [W]" in points and "tip_speed_ratio [-]" in points
     np.testing.assert_allclose(points["tip_speed_ratio [-]"], tsr, rtol=1e-12)

@@ -99,19 +99,19 @@ def test_the_calibrator_warns_when_its_map_is_planted_off_the_maximum(monkeypatc
     settings = CalibrationSettings(estimator="map", prior_std={"pitch_offset": 0.3}, cd_min=None,
                                    representation_error=False, prior_check=False, scale_by_fit=False)
     honest = Calibrator(model, meas, settings).run()
-    assert honest.status == "converged" and "WARNING" not in honest.message
-    assert honest.checks["MAP and ML"].startswith("MAP and ML agree within")
+    assert honest.estimate.status == "converged" and "WARNING" not in honest.estimate.message
+    assert honest.provenance.checks["MAP and ML"].startswith("MAP and ML agree within")
     j = [q.name for q in model.parameters].index("pitch_offset")
     real = calibration.estimate_map
 
     def stopped_short(problem, *args, **kwargs):
         out = real(problem, *args, **kwargs)
         p = out.p.copy()
-        p[j] += 5.0 * honest.std_p[j]
+        p[j] += 5.0 * honest.uncertainty.std_p[j]
         return dataclasses.replace(out, p=p, linearization=problem.linearize(p), status="converged")
 
     monkeypatch.setattr(calibration, "estimate_map", stopped_short)
     planted = Calibrator(model, meas, settings).run()
-    assert planted.status == "converged"
-    assert "WARNING" in planted.message and "pitch_offset" in planted.checks["MAP and ML"], planted.checks
-    assert f"s ≥ {DOMINANT_S:g}" in planted.checks["MAP and ML"]
+    assert planted.estimate.status == "converged"
+    assert "WARNING" in planted.estimate.message and "pitch_offset" in planted.provenance.checks["MAP and ML"], planted.provenance.checks
+    assert f"s ≥ {DOMINANT_S:g}" in planted.provenance.checks["MAP and ML"]

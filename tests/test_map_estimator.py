@@ -50,18 +50,18 @@ def test_map_is_the_exact_posterior_on_a_linear_model(correlation):
     model, cond, meas, p0, scale = _linear_problem()
     cal = Calibrator(model, meas, CalibrationSettings(prior_correlation=correlation, **LINEAR))
     res = cal.run()
-    assert res.status == "converged", res.message
+    assert res.estimate.status == "converged", res.estimate.message
     p_map, cov, M = _closed_form(model, cond, meas, p0, scale, cal.prior_cov_scaled())
     # the Gauss–Newton of a linear least-squares problem with a quadratic prior lands on the
     # normal equations' solution; the tolerance is that of the iteration's stopping rule
-    assert np.max(np.abs(res.p_hat - p_map) / np.sqrt(np.diag(cov))) < 1e-3
+    assert np.max(np.abs(res.estimate.p_hat - p_map) / np.sqrt(np.diag(cov))) < 1e-3
     # the twin's Jacobian is a central difference: exact for a linear model up to its round-off
     d = np.sqrt(np.diag(cov))
-    assert np.max(np.abs(res.cov_p - cov) / np.outer(d, d)) < 1e-6
+    assert np.max(np.abs(res.uncertainty.cov_p - cov) / np.outer(d, d)) < 1e-6
     # the directions where the data beat the prior: s² are the eigenvalues of LᵀMᵀML
     L = np.linalg.cholesky(cal.prior_cov_scaled() + 1e-14 * np.eye(p0.size))
     s2 = np.sort(np.linalg.eigvalsh(L.T @ M.T @ M @ L))[::-1]
-    assert np.allclose(res.singular_values ** 2, s2, rtol=1e-6, atol=1e-9 * s2[0])
+    assert np.allclose(res.identifiability.singular_values ** 2, s2, rtol=1e-6, atol=1e-9 * s2[0])
     assert res.n_retained == int(np.sum(s2 > 1.0))
     assert 0 < res.n_retained < res.n_params
 
@@ -71,16 +71,16 @@ def test_map_moves_every_parameter_and_keeps_the_prior_where_the_data_say_nothin
     grid = CorrectionGrid([-4.0, 2.0, 8.0, 14.0, 20.0, 40.0, 60.0], [0.2, 0.6, 1.0])   # 60°: no point reaches it
     model, cond, meas, p0, scale = _linear_problem(seed=5, grid=grid)
     res = Calibrator(model, meas, CalibrationSettings(prior_correlation=0.0, **LINEAR)).run()
-    ev = model.evaluate(res.p_hat, cond)
+    ev = model.evaluate(res.estimate.p_hat, cond)
     a, e = model.correction_field().seen(ev)
     field = model.correction_field()
     reached = np.zeros(res.n_params, bool)
     for block in ("lift", "drag"):
         reached |= np.any(np.abs(field.basis(a, e, block)) > 0, axis=0)
     assert (~reached).any() and reached.any()
-    assert np.allclose(res.p_hat[~reached], p0[~reached], atol=1e-12)
-    assert np.allclose(res.std_p[~reached], res.prior_std[~reached], rtol=1e-9)
-    assert np.all(res.std_p[reached] < res.prior_std[reached])
+    assert np.allclose(res.estimate.p_hat[~reached], p0[~reached], atol=1e-12)
+    assert np.allclose(res.uncertainty.std_p[~reached], res.uncertainty.prior_std[~reached], rtol=1e-9)
+    assert np.all(res.uncertainty.std_p[reached] < res.uncertainty.prior_std[reached])
 
 
 def test_the_estimator_setting_is_checked():
@@ -108,9 +108,9 @@ def test_map_covers_prior_draws_on_the_nonlinear_twin():
         meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01,
                                                                "root_flap_moment": 0.01}, seed=seed)
         res = Calibrator(model, meas, settings).run()
-        assert res.status == "converged", res.message
-        err = res.p_hat - p_true
-        nees += float(err @ np.linalg.solve(res.cov_p, err))
+        assert res.estimate.status == "converged", res.estimate.message
+        err = res.estimate.p_hat - p_true
+        nees += float(err @ np.linalg.solve(res.uncertainty.cov_p, err))
         dof += err.size
     lo, hi = stats.chi2.ppf([0.005, 0.995], dof)
     assert lo < nees < hi, (nees, dof, lo, hi)
@@ -125,8 +125,8 @@ def test_a_stated_prior_in_physical_units_holds_a_nuisance_and_names_unknown_par
     base = dict(estimator="map", cd_min=None, prior_check=False, representation_error=False)
     loose = Calibrator(model, meas, CalibrationSettings(**base)).run()
     tight = Calibrator(model, meas, CalibrationSettings(prior_std={"pitch_offset": 0.05}, **base)).run()
-    assert tight.prior_std[j] == 0.05 and np.isnan(model.parameters[j].prior_std)     # the twin states none: flat
-    assert tight.std_p[j] < 0.05 < loose.std_p[j]
+    assert tight.uncertainty.prior_std[j] == 0.05 and np.isnan(model.parameters[j].prior_std)     # the twin states none: flat
+    assert tight.uncertainty.std_p[j] < 0.05 < loose.uncertainty.std_p[j]
     with pytest.raises(InputError, match="no parameter 'pitch_ofset' in this model; did you mean 'pitch_offset'"):
         Calibrator(model, meas, CalibrationSettings(prior_std={"pitch_ofset": 0.3}, **base))
     with pytest.raises(InputError, match="prior_std.pitch_offset.*must be a number > 0"):
@@ -197,7 +197,7 @@ def test_map_predictive_intervals_are_sharp_at_the_calibration_points():
         meas = synthesize(model, p, cond, relative_sigma={"power": 0.01, "thrust": 0.01}, seed=seed)
         res = Calibrator(model, meas, st).run()
         pred = res.predict(cond, model)
-        z = ((meas.values - pred.values) / np.sqrt(res.sigma ** 2 + pred.std ** 2))[pred.status == 0]
+        z = ((meas.values - pred.values) / np.sqrt(res.fit.sigma ** 2 + pred.std ** 2))[pred.status == 0]
         chi2, inside, rows = chi2 + float(np.sum(z ** 2)), inside + int(np.sum(np.abs(z) < 1.96)), rows + z.size
     print(f"in-sample χ² per row {chi2 / rows:.3f}, inside {inside / rows:.3f} of {rows} rows")
     assert 0.55 < chi2 / rows < 1.1
@@ -214,9 +214,9 @@ def test_an_estimated_noise_says_how_many_fits_it_took_and_whether_it_settled(es
                       seed=4)
     base = dict(estimator=estimator, noise="ml", cd_min=None, prior_check=False, representation_error=False)
     res = Calibrator(model, meas, CalibrationSettings(**base)).run()
-    assert "noise σ estimated over" in res.message and ", settled (last change" in res.message, res.message
+    assert "noise σ estimated over" in res.estimate.message and ", settled (last change" in res.estimate.message, res.estimate.message
     short = Calibrator(model, meas, CalibrationSettings(max_noise_iterations=1, **base)).run()
-    assert "noise σ estimated over 1 fit(s), NOT settled" in short.message, short.message
+    assert "noise σ estimated over 1 fit(s), NOT settled" in short.estimate.message, short.message
 
 
 def test_the_wall_time_of_a_result_is_that_of_the_whole_run():
@@ -231,4 +231,4 @@ def test_the_wall_time_of_a_result_is_that_of_the_whole_run():
     t0 = time.perf_counter()
     res = cal.run()
     elapsed = time.perf_counter() - t0
-    assert 0.95 * elapsed <= res.wall_time <= elapsed, (res.wall_time, elapsed)
+    assert 0.95 * elapsed <= res.provenance.wall_time <= elapsed, (res.provenance.wall_time, elapsed)

@@ -5,12 +5,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.errors import InputError
 from calib.measurements import Measurements, ml_noise, noise_from_repeats, read_measurements, synthesize
 from calib.types import nominal_vector
-from twin_model import TwinModel, twin_conditions
 
 GOOD = """# a comment line
 wind_speed,rotor_speed [rad/s],pitch [deg],air_density,power [kW],thrust [kN],power_sigma [kW],thrust_sigma [kN],cn@0.30,cn@0.30_sigma
@@ -45,7 +45,7 @@ def test_round_trip_through_write_csv(tmp_path):
 def test_write_csv_puts_the_bytes_on_disk_before_the_rename(tmp_path, monkeypatch):
     """The temporary file is fsynced, complete, before ``os.replace`` makes it the file: a crash
     after the rename cannot leave an empty or half-written table."""
-    import calib.measurements.data as mm      # where Measurements.write_csv lives
+    import calib.measurements.data as mm  # where Measurements.write_csv lives
 
     m = read_measurements(write(tmp_path, GOOD), ["power", "thrust"])
     events = []
@@ -137,8 +137,8 @@ def test_unknown_noise_is_estimated_by_iterated_ml():
     blind = Measurements(meas.conditions, meas.channels, meas.values, None, source="blind")
     res = Calibrator(model, blind, CalibrationSettings(noise="ml", cd_min=None)).run()
     # ML noise is biased low by the fitted degrees of freedom, sqrt(1 - n_ret/N) per channel
-    np.testing.assert_allclose(res.noise_sigma, true_sigma, rtol=0.25)
-    assert any(h.get("stage") == "noise" for h in res.history)
+    np.testing.assert_allclose(res.fit.noise_sigma, true_sigma, rtol=0.25)
+    assert any(h.get("stage") == "noise" for h in res.estimate.history)
 
 
 # ----------------------------------------------------------------------------- field exports

@@ -62,7 +62,7 @@ def test_relative_ml_finds_the_noise_level_the_stated_model_got_wrong(twin):
     model, meas, rms = twin
     st = CalibrationSettings(noise="relative_ml", relative_sigma={"torque": 0.005, "thrust": 0.005}, cd_min=None)
     res = Calibrator(model, meas, st).run()
-    ratio = res.sigma[0] / (0.02 * rms)
+    ratio = res.fit.sigma[0] / (0.02 * rms)
     assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio     # 20 residuals: k̂ within about ±35 % of the truth
     assert res.chi2_per_dof_after == pytest.approx(1.0, abs=0.05)
     fixed = Calibrator(model, meas, CalibrationSettings(noise="relative", relative_sigma={"torque": 0.005,

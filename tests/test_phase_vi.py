@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.workflow import run_workflow
 from calib.workflow.validation import \
     INFORMED_LEVEL as INFORMED  # s_i >= this: informed by the data (σ_θ <= 2 prior units)
@@ -57,8 +57,8 @@ def test_the_discrepancy_workflow_names_stall_delay(run):
     # the JSON result of each stage carries the named effect: in its model and in its statements
     for stage in (HUB, TAPS):
         res = load_result(out / stage)
-        assert [e["name"] for e in res.model_spec["effects"]] == ["rotational_augmentation"]
-        assert "named rotational_augmentation" in res.checks["diagnosis"]
+        assert [e["name"] for e in res.provenance.model_spec["effects"]] == ["rotational_augmentation"]
+        assert "named rotational_augmentation" in res.provenance.checks["diagnosis"]
         assert "stall_delay_strength" in [q["name"] for q in res.parameters]
 
 
@@ -80,8 +80,8 @@ def _field_modes(res):
     field = np.array([n.startswith(("dCL", "dCD")) for n in names])
     eta = np.array([float(n.split("eta=")[1].rstrip("]")) if f else np.nan for n, f in zip(names, field)])
     modes = []
-    for k in np.flatnonzero(res.singular_values >= INFORMED):
-        w = res.V[:, k] ** 2
+    for k in np.flatnonzero(res.identifiability.singular_values >= INFORMED):
+        w = res.identifiability.V[:, k] ** 2
         share = w[field].sum() / w.sum()
         if share >= 0.5:   # a direction of the correction field (not of the effect or the pitch offset)
             modes.append(w[field & (eta <= INBOARD_ETA)].sum() / w[field].sum())
@@ -91,12 +91,12 @@ def _field_modes(res):
 def test_pressure_taps_inform_more_directions_and_localize_the_inboard_correction(run):
     out, _ = run
     hub, taps = load_result(out / HUB), load_result(out / TAPS)
-    assert np.sum(taps.singular_values >= INFORMED) > np.sum(hub.singular_values >= INFORMED)
-    assert np.sum(taps.singular_values >= 1.0) > np.sum(hub.singular_values >= 1.0)
+    assert np.sum(taps.identifiability.singular_values >= INFORMED) > np.sum(hub.identifiability.singular_values >= INFORMED)
+    assert np.sum(taps.identifiability.singular_values >= 1.0) > np.sum(hub.identifiability.singular_values >= 1.0)
     # the stall-delay strength: confounded from hub loads, identified with the taps
     i = [q["name"] for q in hub.parameters].index("stall_delay_strength")
-    assert taps.std_p[i] < 0.5 * hub.std_p[i]
-    assert taps.verdicts[i]["verdict"] == "identified"
+    assert taps.uncertainty.std_p[i] < 0.5 * hub.uncertainty.std_p[i]
+    assert taps.identifiability.verdicts[i]["verdict"] == "identified"
     # field directions informed by the hub loads sit outboard (torque arm); with the taps one
     # is concentrated on the inboard nodes, where the measured c_n exceeds the 2-D polar most
     assert max(_field_modes(hub), default=0.0) < 0.5

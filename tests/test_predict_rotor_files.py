@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from floats import assert_same_numbers
 
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.cli import main as cli_main
 from calib.errors import InputError
 from calib.history import content_digest
@@ -151,7 +151,7 @@ def strip_rotor_data(stage: Path, keep_files: bool = True) -> None:
     file provenance either)."""
     path = stage / "result.json"
     meta = json.loads(path.read_text())
-    spec = meta["model_spec"]
+    spec = meta["provenance"]["model_spec"]
     del spec["rotor_data"]
     if not keep_files:
         spec.pop("rotor_files", None)
@@ -173,7 +173,7 @@ def test_result_predicts_after_its_rotor_files_are_gone_and_its_folder_moved(run
 
 def check_moved_result(run, target, tmp_path, monkeypatch, capsys):
     project = run["project"]
-    spec = json.loads((target / "result.json").read_text())["model_spec"]
+    spec = json.loads((target / "result.json").read_text())["provenance"]["model_spec"]
     assert spec["rotor_data"]["format"] == "calib.rotor/1"
     if run["kind"] != "name":                               # provenance: every file, absolute and relative, digest
         files = spec["rotor_files"]["files"]
@@ -203,9 +203,9 @@ def test_rebuilt_model_reproduces_the_values_the_run_computed(run):
     run recorded with its model built from the files (an independent reference)."""
     res = load_result(run["stage"])
     pred = res.predict(OperatingConditions(**res.conditions))
-    ok = res.status_after == 0
+    ok = res.fit.status_after == 0
     assert ok.any()
-    np.testing.assert_allclose(pred.values[ok], res.model_after[ok], rtol=1e-10, atol=0.0)
+    np.testing.assert_allclose(pred.values[ok], res.fit.model_after[ok], rtol=1e-10, atol=0.0)
 
 
 # ----------------------------------------------------------------------------- results without rotor data

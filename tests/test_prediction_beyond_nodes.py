@@ -10,6 +10,8 @@ linearized formula :meth:`calib.calibration.result.CalibrationResult._field_betw
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -42,33 +44,36 @@ def calibrated():
 
 def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
     model, res, far = calibrated
-    assert res.status == "converged" and res.gain.size
+    assert res.estimate.status == "converged" and res.uncertainty.gain.size
     pred = res.predict(far, model)
-    ev = model.evaluate(res.p_hat, far)
+    ev = model.evaluate(res.estimate.p_hat, far)
     alpha, eta = model.correction_field().seen(ev)
     assert np.min(alpha[eta > 0.35]) > 8.0 + 4.0            # every outboard section beyond the last hat
     assert "include the field between and beyond" in pred.representation
-    without = res.replace(gain=np.zeros((0, 0))).predict(far, model)
+    without = res.replace(uncertainty=dataclasses.replace(res.uncertainty, gain=np.zeros((0, 0)))).predict(far, model)
     assert np.all(without.std[0] < 0.2 * pred.std[0])       # the nodes alone say the nominal polar is exact there
 
     # Monte Carlo: fields drawn from the prior on the fine grid, through the nonlinear model
     field = model.correction_field()
-    fine = refined_grid(field.grid, np.concatenate([alpha, res.alpha_seen]), np.concatenate([eta, res.eta_seen]))
+    fine = refined_grid(field.grid, np.concatenate([alpha, res.fit.alpha_seen]),
+                        np.concatenate([eta, res.fit.eta_seen]))
     fmodel = model.with_grid(fine)
     flay = fmodel.correction_field().layout
     T = interpolation_matrix(field.grid, fine)
-    D = discrepancy_correlation(field.grid, fine, field.correlation_lengths(res.settings["prior_correlation"]))
+    D = discrepancy_correlation(field.grid, fine,
+                                field.correlation_lengths(res.provenance.settings["prior_correlation"]))
     w, Q = np.linalg.eigh(D)
     root = Q * np.sqrt(np.clip(w, 0.0, None))
     lay = field.layout
     base = nominal_vector(fmodel.parameters)
-    sd = [float(np.sqrt(np.mean(res.prior_std[idx.ravel()] ** 2))) for idx in (lay.lift_index, lay.drag_index)]
+    sd = [float(np.sqrt(np.mean(res.uncertainty.prior_std[idx.ravel()] ** 2))) for idx in (lay.lift_index,
+                                                                                           lay.drag_index)]
     rng = np.random.default_rng(20261126)
     outs = []
     for _ in range(160):
         p = base.copy()
         for k, (f_idx, c_idx) in enumerate(((flay.lift_index, lay.lift_index), (flay.drag_index, lay.drag_index))):
-            p[f_idx.ravel()] = T @ res.p_hat[c_idx.ravel()] + sd[k] * root @ rng.standard_normal(root.shape[1])
+            p[f_idx.ravel()] = T @ res.estimate.p_hat[c_idx.ravel()] + sd[k] * root @ rng.standard_normal(root.shape[1])
         p = np.clip(p, [q.lower for q in fmodel.parameters], [q.upper for q in fmodel.parameters])
         e = fmodel.evaluate(p, far)
         if e.ok[0]:
@@ -85,5 +90,5 @@ def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
 
 def test_a_result_without_gain_says_its_bands_leave_the_field_out(calibrated):
     model, res, far = calibrated
-    pred = res.replace(gain=np.zeros((0, 0))).predict(far, model)
+    pred = res.replace(uncertainty=dataclasses.replace(res.uncertainty, gain=np.zeros((0, 0)))).predict(far, model)
     assert "leave out the field between and beyond" in pred.representation

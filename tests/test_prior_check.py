@@ -9,7 +9,7 @@ from scipy import stats
 from test_uncertainty import bem_twin  # noqa: F401 (the module's BEM twin fixture)
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.checks.prior_check import PriorCheck, prior_amplitude
 from calib.measurements import synthesize
 from calib.report.result_sentences import sentences
@@ -97,23 +97,23 @@ def test_calibration_reports_the_prior_check_on_the_fine_grid_and_it_survives_sa
     p[:grid.n_lift] = 0.1 * rng.standard_normal(grid.n_lift)       # one prior σ (0.1) per node
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7612)
     res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
-    pc = res.prior_check
+    pc = res.uncertainty.prior_check
     assert pc["between_nodes"] is True and pc["lower"] <= pc["amplitude"] <= pc["upper"]
     assert PriorCheck(**pc).sentence() in sentences(res)
     assert f"prior check: field amplitude {pc['amplitude']:.2g} x stated" in res.summary()
     res.save(tmp_path)
-    assert load_result(tmp_path).prior_check == pc
+    assert load_result(tmp_path).uncertainty.prior_check == pc
 
     coarse = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0,
                                                          representation_error=False)).run()
-    assert coarse.prior_check["between_nodes"] is False
-    assert "on the calibration nodes only" in PriorCheck(**coarse.prior_check).sentence()
+    assert coarse.uncertainty.prior_check["between_nodes"] is False
+    assert "on the calibration nodes only" in PriorCheck(**coarse.uncertainty.prior_check).sentence()
 
     p_big = nominal_vector(model.parameters)
     p_big[:grid.n_lift] = 0.3 * rng.standard_normal(grid.n_lift)
     meas = synthesize(model, p_big, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7613)
     big = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
-    assert big.prior_check["verdict"] == "larger", big.prior_check
+    assert big.uncertainty.prior_check["verdict"] == "larger", big.uncertainty.prior_check
 
 
 def test_map_point_against_the_closed_form_and_a_general_minimizer():
@@ -159,7 +159,7 @@ def test_prior_check_off_is_said_and_a_non_boolean_is_refused(bem_twin):
     p[:grid.n_lift] = 0.05
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7614)
     res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0, prior_check=False)).run()
-    assert res.prior_check == {}
+    assert res.uncertainty.prior_check == {}
     assert any(t.startswith("Prior check: not run (prior_check = false)") for t in sentences(res))
     with pytest.raises(InputError, match="prior_check"):
         CalibrationSettings(prior_check="yes").validate()
@@ -178,7 +178,7 @@ def test_a_prior_check_that_cannot_be_computed_keeps_the_result(bem_twin, monkey
     p[:grid.n_lift] = 0.05
     meas = synthesize(model, p, cond, relative_sigma={c.name: 0.01 for c in model.channels}, seed=7615)
     res = Calibrator(model, meas, CalibrationSettings(cd_min=0.003, curvature_samples=0)).run()
-    assert res.status == "converged" and res.n_retained > 0
-    assert res.prior_check == {"failed": "LinAlgError: SVD did not converge"}
+    assert res.estimate.status == "converged" and res.n_retained > 0
+    assert res.uncertainty.prior_check == {"failed": "LinAlgError: SVD did not converge"}
     assert any(t.startswith("Prior check: could not be computed (LinAlgError") for t in sentences(res))
     assert "prior check: failed (LinAlgError: SVD did not converge)" in res.summary()

@@ -1,5 +1,6 @@
 """Result serialization round trip, figures (PNG and SVG) and the self-contained HTML report."""
 
+import dataclasses
 import json
 import re
 
@@ -8,7 +9,7 @@ import pytest
 from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.calibration.result_parts import ARRAY_FIELDS
 from calib.errors import InputError
 from calib.measurements import synthesize
@@ -36,18 +37,19 @@ def figure_paths(result, tmp_path_factory):
 def test_result_round_trip(result, tmp_path):
     jpath, npath = result.save(tmp_path)
     back = load_result(tmp_path)
-    for name in ARRAY_FIELDS:
-        np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(result, name)),
-                                      err_msg=name)
+    for part, name in ARRAY_FIELDS:
+        np.testing.assert_array_equal(np.asarray(getattr(getattr(back, part), name)),
+                                      np.asarray(getattr(getattr(result, part), name)), err_msg=f"{part}.{name}")
     for k, v in result.conditions.items():
         np.testing.assert_array_equal(back.conditions[k], v)
-    for k, v in result.polar_bands.items():
-        np.testing.assert_array_equal(back.polar_bands[k], v)
-    assert back.verdicts == result.verdicts and back.status == result.status
+    for k, v in result.uncertainty.polar_bands.items():
+        np.testing.assert_array_equal(back.uncertainty.polar_bands[k], v)
+    assert back.identifiability.verdicts == result.identifiability.verdicts and back.estimate.status == result.estimate.status
     assert back.n_retained == result.n_retained and back.summary() == result.summary()
     data = json.loads(jpath.read_text())
-    assert {"settings", "versions", "inputs", "failures", "verdicts", "summary"} <= set(data)
-    assert {"numpy", "scipy", "casadi", "python"} <= set(data["versions"])
+    assert {"estimate", "identifiability", "uncertainty", "fit", "provenance", "summary"} <= set(data)
+    assert {"settings", "versions", "inputs"} <= set(data["provenance"]) and "verdicts" in data["identifiability"]
+    assert "failures" in data["fit"] and {"numpy", "scipy", "casadi", "python"} <= set(data["provenance"]["versions"])
     assert load_result(jpath).n_params == result.n_params          # the file path works too
 
 
@@ -59,7 +61,7 @@ def test_load_result_names_the_missing_file(tmp_path):
 def test_every_figure_is_written(result, figure_paths, tmp_path):
     paths = figure_paths
     # the truncation curve exists only for sigma_bar = 'auto'
-    assert set(paths) == set(F.FIGURES) - (set() if result.truncation else {"truncation"})
+    assert set(paths) == set(F.FIGURES) - (set() if result.identifiability.truncation else {"truncation"})
     for p in paths.values():
         assert set(p) == {"png"}                                   # SVG only on request
         assert p["png"].stat().st_size > 5000
@@ -81,7 +83,7 @@ def test_html_report_is_self_contained_with_key_numbers(result, figure_paths, tm
     assert text.count("data:image/png;base64,") == len(figs["twin"])
     assert not re.search(r'src="(?!data:)', text)            # nothing loaded from elsewhere
     assert f"{result.n_retained}" in text and "χ²/dof after" in text
-    assert "Failed model points" in text and result.status in text
+    assert "Failed model points" in text and result.estimate.status in text
 
 
 def test_report_says_where_the_drag_band_starts_at_cd_min(result):
@@ -90,16 +92,19 @@ def test_report_says_where_the_drag_band_starts_at_cd_min(result):
 
     from calib.report.result_sentences import sentences
 
-    pb = dict(result.polar_bands)
+    pb = dict(result.uncertainty.polar_bands)
     cd_min = 0.004
     floor = np.minimum(cd_min - np.asarray(pb["cd0"]), 0.0)
     lower = np.asarray(pb["dcd_lower"], float).copy()
     lower.flat[:7] = floor.flat[:7]                              # seven points cut by the bound
     pb["dcd_lower"] = lower
-    cut = result.replace(polar_bands=pb, settings={**result.settings, "cd_min": cd_min})
+    cut = result.replace(uncertainty=dataclasses.replace(result.uncertainty, polar_bands=pb),
+                         provenance=dataclasses.replace(result.provenance, settings={**result.provenance.settings,
+                                                                                     "cd_min": cd_min}))
     [text] = [t for t in sentences(cut) if "C_D,min" in t]
     assert text.startswith(f"The ΔC_D band starts at C_D,min = 0.004 at 7 of the {lower.size} points")
-    none = cut.replace(polar_bands={**pb, "dcd_lower": floor - 1e-3})
+    none = cut.replace(uncertainty=dataclasses.replace(cut.uncertainty, polar_bands={**pb, "dcd_lower": floor - 1e-3}))
     assert not [t for t in sentences(none) if "C_D,min" in t]
-    old = cut.replace(polar_bands={k: v for k, v in pb.items() if k != "dcd_lower"})
+    old = cut.replace(uncertainty=dataclasses.replace(cut.uncertainty, polar_bands={k: v for k,
+                                                                                    v in pb.items() if k != "dcd_lower"}))
     assert not [t for t in sentences(old) if "C_D,min" in t]

@@ -205,7 +205,7 @@ CHILD = textwrap.dedent('''
     from calib.report import figures as F
     from calib.report.interrupts import interrupts_as_keyboard_interrupt
     from calib.report.html import write_report
-    from calib.calibration.result import load_result
+    from calib.calibration.result_files import load_result
 
     result_dir, out, mode, rounds = sys.argv[1], Path(sys.argv[2]), sys.argv[3], int(sys.argv[4])
     res = load_result(result_dir)

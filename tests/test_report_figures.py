@@ -1,22 +1,23 @@
 """What the report figures show: every retained eigenshape, α on the node range, residual
 panels, the fit's abscissa, parameter-labelled correlations, a known truth, progress."""
 
+import dataclasses
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 from PIL import Image
+from twin_model import RADIUS, TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.measurements import synthesize
-from calib.types import nominal_vector
 from calib.report import eigenshape_figures
 from calib.report import figures as F
 from calib.report.correlation_figure import display_order
 from calib.report.eigenshape_figures import seen_inside
 from calib.report.fit_figures import fit_abscissa, whitened_residual
 from calib.report.polar_figures import station_columns
-from twin_model import RADIUS, TwinModel, twin_conditions
+from calib.types import nominal_vector
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +41,8 @@ def _map_titles(fig) -> list[str]:
 
 def test_every_retained_eigenshape_is_drawn_and_counted(result):
     # more retained directions than the 12 the old figure drew
-    many = result.replace(retained=np.ones(result.n_params, bool))
+    many = result.replace(identifiability=dataclasses.replace(result.identifiability, retained=np.ones(result.n_params,
+                                                                                                       bool)))
     assert many.n_retained > 12
     for block in ("lift", "drag"):
         fig = F.plot_eigenshapes(many, block)
@@ -55,8 +57,9 @@ def test_every_retained_eigenshape_is_drawn_and_counted(result):
 def test_eigenshape_maps_stay_on_the_node_range(result):
     grid = result.layout.grid
     # the data see α beyond the last node (up to 80 deg here): they are counted, not drawn
-    wide = result.replace(alpha_seen=np.concatenate([result.alpha_seen, [50.0, 65.0, 80.0]]),
-                               eta_seen=np.concatenate([result.eta_seen, [0.5, 0.6, 0.7]]))
+    wide = result.replace(fit=dataclasses.replace(result.fit, alpha_seen=np.concatenate([result.fit.alpha_seen,
+                                                                                         [50.0, 65.0,
+                                                                                          80.0]]), eta_seen=np.concatenate([result.fit.eta_seen, [0.5, 0.6, 0.7]])))
     a_in, e_in, n_out = seen_inside(wide)
     assert n_out >= 3 and a_in.max() <= grid.alpha_nodes_deg[-1]
     fig = F.plot_eigenshapes(wide, "lift")
@@ -81,8 +84,8 @@ def _lines(fig, kind):
 
 
 def test_polar_axes_cover_the_node_range_only(result):
-    wide = result.replace(alpha_seen=np.concatenate([result.alpha_seen, [80.0]]),
-                               eta_seen=np.concatenate([result.eta_seen, [0.6]]))
+    wide = result.replace(fit=dataclasses.replace(result.fit, alpha_seen=np.concatenate([result.fit.alpha_seen,
+                                                                                         [80.0]]), eta_seen=np.concatenate([result.fit.eta_seen, [0.6]])))
     fig = F.plot_polars(wide)
     n = min(5, wide.layout.grid.eta_nodes.size)
     gap = 0.15 / 2.6
@@ -132,13 +135,13 @@ def test_fit_abscissa_follows_the_rotor_speed(result):
     # constant rotor speed and a known radius -> tip-speed ratio
     cond = dict(result.conditions)
     cond["rotor_speed"] = np.full_like(cond["wind_speed"], 20.0)
-    sweep = result.replace(conditions=cond, rotor_radius=RADIUS)
+    sweep = result.replace(provenance=dataclasses.replace(result.provenance, rotor_radius=RADIUS), conditions=cond)
     x, label, _ = fit_abscissa(sweep)
     np.testing.assert_allclose(x, 20.0 * np.pi / 30 * RADIUS / cond["wind_speed"])
     assert label.startswith("tip-speed ratio")
     assert _xlabel(F.plot_fit(sweep)).startswith("tip-speed ratio")
     # constant rotor speed, radius unknown -> wind speed, and the reason says why
-    x, label, reason = fit_abscissa(sweep.replace(rotor_radius=None))
+    x, label, reason = fit_abscissa(sweep.replace(provenance=dataclasses.replace(sweep.provenance, rotor_radius=None)))
     assert label.startswith("wind speed") and "radius unknown" in reason
 
 
@@ -157,7 +160,7 @@ def test_correlation_axes_are_labelled_by_parameter(result):
     assert [t.get_text() for t in ax.get_xticklabels()] == labels
     # the matrix is drawn in the labelled order
     drawn = ax.images[0].get_array()
-    expected = np.asarray(result.correlation)[np.ix_(order, order)]
+    expected = np.asarray(result.identifiability.correlation)[np.ix_(order, order)]
     np.testing.assert_array_equal(np.ma.filled(drawn, np.nan), np.where(np.isfinite(expected), expected, np.nan))
     # each row sits in its group: the lift node at (alpha=8, eta=0.6) is inside the "alpha=8" group
     idx = int(result.layout.lift_index[2, 1])
@@ -181,10 +184,10 @@ def _bands(fig):
 def test_polar_bands_drawn_are_the_bounded_bands_and_older_results_fall_back_to_the_half_width(result):
     """The figure draws the band's stated ends (the drag band bounded by C_D,min); a result saved
     before the bounded bands (no ``d*_lower``/``d*_upper``) gets ± the half width."""
-    pb = dict(result.polar_bands)
+    pb = dict(result.uncertainty.polar_bands)
     # ends that are not ± the half width (as where C_D,min cuts the drag band)
     pb["dcd_lower"] = np.asarray(pb["dcd"]) - 0.3 * np.asarray(pb["dcd_half_width"])
-    result = result.replace(polar_bands=pb)
+    result = result.replace(uncertainty=dataclasses.replace(result.uncertainty, polar_bands=pb))
     cols = station_columns(np.asarray(pb["eta"]), 5)
     drawn = _bands(F.plot_polars(result))
     assert sorted(drawn) == [(r, c) for r in (0, 1) for c in range(cols.size)]
@@ -193,8 +196,8 @@ def test_polar_bands_drawn_are_the_bounded_bands_and_older_results_fall_back_to_
         base = np.asarray(pb[f"{letter}0"])[j]
         assert lo == pytest.approx(np.min(base + np.asarray(pb[f"d{letter}_lower"])[j]))
         assert hi == pytest.approx(np.max(base + np.asarray(pb[f"d{letter}_upper"])[j]))
-    old = result.replace(polar_bands={k: v for k, v in pb.items()
-                                                   if not k.endswith(("_lower", "_upper"))})
+    old = result.replace(uncertainty=dataclasses.replace(result.uncertainty, polar_bands={k: v for k, v in pb.items()
+                                                   if not k.endswith(("_lower", "_upper"))}))
     for (row, col), (lo, hi) in _bands(F.plot_polars(old)).items():
         j, letter = cols[col], ("cl", "cd")[row]
         base, d = np.asarray(pb[f"{letter}0"])[j], np.asarray(pb[f"d{letter}"])[j]
@@ -207,7 +210,7 @@ def test_known_truth_is_overlaid_on_the_polars(result):
         return 0.1 * np.sin(np.radians(alpha_deg)) * eta, 0.002 + 0 * alpha_deg
 
     fig = F.plot_polars(result, truth=truth)
-    pb = result.polar_bands
+    pb = result.uncertainty.polar_bands
     cols = station_columns(np.asarray(pb["eta"]), 5)
     lines = _lines(fig, "truth")
     assert sorted(lines) == [(r, c) for r in (0, 1) for c in range(cols.size)]

@@ -35,7 +35,8 @@ def fresh_outcomes():
     if os.environ.get("CALIB_FRESH_FORK_TESTS"):
         pytest.fail("threads are running even in a fresh interpreter: the fork tests cannot run")
     env = dict(os.environ, CALIB_FRESH_FORK_TESTS="1")
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", "-m", "not statistics",
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rA", "-p", "no:cacheprovider", "-m",
+                           "not statistics",
                            __file__, "-k", " or ".join(FORK_TESTS)], capture_output=True, text=True, cwd=ROOT,
                           env=env, timeout=600)
     outcomes = {}
@@ -57,7 +58,8 @@ def forks_here(request, fresh_outcomes) -> bool:
     return False
 
 
-FORK_TESTS = ("test_workers_write_the_same_files_as_one_process", "test_a_figure_failing_in_a_worker_raises_its_own_error",
+FORK_TESTS = ("test_workers_write_the_same_files_as_one_process",
+              "test_a_figure_failing_in_a_worker_raises_its_own_error",
               "test_sigint_stops_the_workers_and_leaves_no_truncated_file")
 
 
@@ -121,7 +123,7 @@ CHILD = textwrap.dedent('''
 
     signal.signal(signal.SIGINT, signal.default_int_handler)   # even if started with SIGINT ignored
     from calib.report import figures as F
-    from calib.calibration.result import load_result
+    from calib.calibration.result_files import load_result
 
     res = load_result(sys.argv[1])
     print("ready", flush=True)
@@ -176,7 +178,7 @@ def test_sigint_stops_the_workers_and_leaves_no_truncated_file(result, tmp_path,
     out = _interrupt(tmp_path, saved, whole_group)
     assert broken_files(out) == []
     written = {p.stem for p in out.iterdir()}
-    applicable = len(F.FIGURES) - (not result.truncation)  # the truncation curve needs sigma_bar = "auto"
+    applicable = len(F.FIGURES) - (not result.identifiability.truncation)  # the truncation curve needs sigma_bar = "auto"
     assert 1 <= len(written) < applicable                  # stopped part-way, not finished
 
 

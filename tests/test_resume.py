@@ -154,14 +154,14 @@ def test_killed_calibration_resumes_to_the_uninterrupted_result(tmp_path, capsys
     full_res = json.loads((full_dir / stage / "result.json").read_text())
     resumed = json.loads((cut_dir / stage / "result.json").read_text())
     with np.load(full_dir / stage / "result.npz") as a, np.load(cut_dir / stage / "result.npz") as b:
-        p_full, p_res = a["p_hat"], b["p_hat"]
-        scale = a["scale"]
-        np.testing.assert_array_equal(b["retained"], a["retained"])
-        np.testing.assert_allclose(b["cov_p"], a["cov_p"], rtol=1e-6, atol=0)
+        p_full, p_res = a["estimate.p_hat"], b["estimate.p_hat"]
+        scale = a["estimate.scale"]
+        np.testing.assert_array_equal(b["identifiability.retained"], a["identifiability.retained"])
+        np.testing.assert_allclose(b["uncertainty.cov_p"], a["uncertainty.cov_p"], rtol=1e-6, atol=0)
     # the optimizer stops at a relative cost decrease of `tolerance`; the replay is exact, so far inside it
     assert np.max(np.abs(p_res - p_full) / scale) <= 1e-6
-    assert resumed["status"] == full_res["status"] == "converged"
-    assert resumed["chi2_after"] == pytest.approx(full_res["chi2_after"], rel=1e-9)
+    assert resumed["estimate"]["status"] == full_res["estimate"]["status"] == "converged"
+    assert resumed["fit"]["chi2_after"] == pytest.approx(full_res["fit"]["chi2_after"], rel=1e-9)
 
     n_full = count_model_calls(read_events(full_dir))
     resumed_calls = count_model_calls(read_events(cut_dir), since_last_start=True)

@@ -8,7 +8,8 @@ from test_calibration import CHANNELS, twin_truth
 from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.calibration.result import load_result, second_start_sentence
+from calib.calibration.result import second_start_sentence
+from calib.calibration.result_files import load_result
 from calib.calibration.truncated_fit import TruncatedFit
 from calib.calibration.truncation import keep_second_start
 from calib.measurements import synthesize
@@ -67,11 +68,11 @@ def _settings(**kw):
 def test_a_first_start_trapped_at_few_theta_is_replaced_by_the_start_from_the_prior_limit(twin, tmp_path):
     model, meas = twin
     trapped = trapped_at_one(model, meas, _settings(second_start=False)).run()
-    assert trapped.n_retained == 1 and "second_retained" not in trapped.truncation
+    assert trapped.n_retained == 1 and "second_retained" not in trapped.identifiability.truncation
     model.jacobian_points.clear()
     cal = trapped_at_one(model, meas, _settings())
     res = cal.run()
-    t = res.truncation
+    t = res.identifiability.truncation
     # the second start begins from the first's linearization at the start point, and the kept
     # start's last linearization is reused: no Jacobian is computed twice at the same point
     assert len(set(model.jacobian_points)) == len(model.jacobian_points)
@@ -87,7 +88,7 @@ def test_a_first_start_trapped_at_few_theta_is_replaced_by_the_start_from_the_pr
     assert "started again" in res.summary()
     res.save(tmp_path)
     back = load_result(tmp_path)
-    assert {k: back.truncation[k] for k in t if k.startswith(("first", "second"))} == \
+    assert {k: back.identifiability.truncation[k] for k in t if k.startswith(("first", "second"))} == \
         pytest.approx({k: t[k] for k in t if k.startswith(("first", "second"))})
 
 
@@ -97,7 +98,7 @@ def test_a_fit_the_stated_noise_explains_is_not_started_again(twin):
     res = cal.run()
     gof = res.goodness_of_fit()
     assert gof["p_value_after"] >= 0.01, gof
-    assert not any(k.startswith("second") for k in res.truncation)
+    assert not any(k.startswith("second") for k in res.identifiability.truncation)
     assert not any(r.get("stage") == "second_start" for r in cal.history)
 
 
@@ -105,7 +106,7 @@ def test_no_second_start_with_noise_from_the_residuals(twin):
     """With ML noise χ²/dof is 1 by construction: there is no test to reject it."""
     model, meas = twin
     res = trapped_at_one(model, meas, _settings(noise="ml")).run()
-    assert "second_retained" not in res.truncation and res.n_retained == 1
+    assert "second_retained" not in res.identifiability.truncation and res.n_retained == 1
 
 
 def test_second_start_must_be_a_boolean():

@@ -42,10 +42,10 @@ def offset_case():
 
 def test_a_pitch_offset_under_a_free_field_is_recovered_and_the_advice_names_what_tightens_it(offset_case):
     model, meas, res, j, _ = offset_case
-    assert res.settings["estimator"] == "map" and res.status == "converged", res.message
-    assert abs(res.p_hat[j] - 1.5) < 3 * res.std_p[j], (res.p_hat[j], res.std_p[j])
-    advice = res.tightening["pitch_offset"]
-    assert advice["sigma"] == pytest.approx(res.std_p[j], rel=1e-9)
+    assert res.provenance.settings["estimator"] == "map" and res.estimate.status == "converged", res.estimate.message
+    assert abs(res.estimate.p_hat[j] - 1.5) < 3 * res.uncertainty.std_p[j], (res.estimate.p_hat[j], res.uncertainty.std_p[j])
+    advice = res.identifiability.tightening["pitch_offset"]
+    assert advice["sigma"] == pytest.approx(res.uncertainty.std_p[j], rel=1e-9)
     assert advice["groups"] and all(g["ratio"] < 0.95 for g in advice["groups"])
     words = sentence("pitch_offset", advice, "deg")
     assert words.startswith("To tighten pitch_offset's σ, measure ") and "deg" in words
@@ -56,7 +56,7 @@ def test_the_promised_sigma_is_what_a_refit_with_those_measurements_states(offse
     """Add the best group's points (noise-free, at the campaign's relative noise) and refit: the
     refit's σ of the pitch offset is the advice's, within what the re-linearization moves."""
     model, meas, res, j, rotor = offset_case
-    best = res.tightening["pitch_offset"]["groups"][0]
+    best = res.identifiability.tightening["pitch_offset"]["groups"][0]
     groups = {what: (cond, chans) for what, cond, chans in
               candidate_groups(meas.conditions, rotor.rotor_radius, [c.name for c in model.channels],
                                list(meas.channels))}
@@ -64,14 +64,14 @@ def test_the_promised_sigma_is_what_a_refit_with_those_measurements_states(offse
     if list(chans) != list(meas.channels):
         pytest.skip(f"best group is another channel ({best['what']}): not refittable with this campaign's table")
     # the noise the advice assumes: the campaign's median relative σ on max(|y|, 0.1 max|y|)
-    rel = np.median(res.sigma / np.abs(res.model_after), axis=0)
-    y = model.evaluate(res.p_hat, cond).values[:, :2]
+    rel = np.median(res.fit.sigma / np.abs(res.fit.model_after), axis=0)
+    y = model.evaluate(res.estimate.p_hat, cond).values[:, :2]
     both = dataclasses.replace(
         meas, conditions=OperatingConditions(*(np.concatenate([getattr(meas.conditions, f), getattr(cond, f)])
                                                for f in ("wind_speed", "rotor_speed", "pitch", "air_density", "yaw"))),
         values=np.vstack([meas.values, y]),
         sigma=np.vstack([meas.sigma, rel * np.maximum(np.abs(y), 0.1 * np.abs(y).max(axis=0))]))
     refit = Calibrator(model, both, CalibrationSettings(cd_min=0.003, tightening=False)).run()
-    print(f"promised σ {best['sigma']:.3g}, refit σ {refit.std_p[j]:.3g} deg ({best['what']})")
-    assert refit.std_p[j] == pytest.approx(best["sigma"], rel=0.25), (refit.std_p[j], best)
-    assert refit.std_p[j] < 0.9 * res.std_p[j]
+    print(f"promised σ {best['sigma']:.3g}, refit σ {refit.uncertainty.std_p[j]:.3g} deg ({best['what']})")
+    assert refit.uncertainty.std_p[j] == pytest.approx(best["sigma"], rel=0.25), (refit.uncertainty.std_p[j], best)
+    assert refit.uncertainty.std_p[j] < 0.9 * res.uncertainty.std_p[j]

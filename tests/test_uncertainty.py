@@ -12,7 +12,7 @@ import pytest
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.calibration.identifiability import frozen_aware_covariance
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.calibration.truncation import cv_curve, prior_limit
 from calib.cli import main as cli_main
 from calib.corrections import CorrectionGrid
@@ -100,12 +100,12 @@ def test_a_calibration_retains_no_direction_the_prior_knows_better():
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7122)
     res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None)).run()
     field = model.correction_field()
-    std = res.prior_std / res.scale
-    P = np.outer(std, std) * field.node_correlation(res.settings["prior_correlation"])
-    data_var = 1.0 / res.singular_values ** 2
-    prior_var = np.einsum("ji,jk,ki->i", res.V, P, res.V)
+    std = res.uncertainty.prior_std / res.estimate.scale
+    P = np.outer(std, std) * field.node_correlation(res.provenance.settings["prior_correlation"])
+    data_var = 1.0 / res.identifiability.singular_values ** 2
+    prior_var = np.einsum("ji,jk,ki->i", res.identifiability.V, P, res.identifiability.V)
     expected = int(np.argmax(data_var > prior_var)) if np.any(data_var > prior_var) else data_var.size
-    assert res.truncation["prior_limit"] == expected
+    assert res.identifiability.truncation["prior_limit"] == expected
     assert res.n_retained <= expected
     assert any("better than the prior" in t for t in sentences(res))
 
@@ -215,11 +215,11 @@ def test_the_frozen_part_of_an_in_span_truth_widens_the_retained_covariance_wher
     with_term = Calibrator(model, meas, st).run()
     without = Calibrator(model, meas, dataclasses.replace(st, curvature_samples=0)).run()
     assert 0 < with_term.n_retained < with_term.n_params
-    np.testing.assert_allclose(with_term.p_hat, without.p_hat)
-    Vr = with_term.V[:, with_term.retained]
-    D = np.outer(with_term.scale, with_term.scale)
-    extra = np.diag(Vr.T @ ((with_term.cov_p - without.cov_p) / D) @ Vr) / with_term.sigma_theta[with_term.retained] ** 2
-    cur = with_term.curvature
+    np.testing.assert_allclose(with_term.estimate.p_hat, without.estimate.p_hat)
+    Vr = with_term.identifiability.V[:, with_term.identifiability.retained]
+    D = np.outer(with_term.estimate.scale, with_term.estimate.scale)
+    extra = np.diag(Vr.T @ ((with_term.uncertainty.cov_p - without.uncertainty.cov_p) / D) @ Vr) / with_term.identifiability.sigma_theta[with_term.identifiability.retained] ** 2
+    cur = with_term.uncertainty.curvature
     assert cur["samples"] == 32 and cur["used"] >= 1
     np.testing.assert_allclose(extra.mean(), cur["variance_ratio_mean"], rtol=1e-6)
     np.testing.assert_allclose(extra.max(), cur["variance_ratio_max"], rtol=1e-6)
@@ -376,7 +376,7 @@ def bem_twin():
 
 def _nuisance_z(res, truth):
     return {v["name"]: (v["value"] - truth.get(v["name"], v["nominal"])) / v["std"]
-            for v in res.verdicts if v["kind"] == "nuisance"}
+            for v in res.identifiability.verdicts if v["kind"] == "nuisance"}
 
 
 def test_pure_polar_change_is_not_absorbed_by_the_nuisance_parameters(bem_twin):
@@ -402,7 +402,7 @@ def test_pure_pitch_offset_is_recovered_within_three_sigma(bem_twin):
         z = _nuisance_z(res, {"pitch_offset": 1.5})
         assert abs(z["pitch_offset"]) <= 3.0 and abs(z["wind_scale"]) <= 3.0, (seed, z)
         # the report says how much the pitch offset shares with the field instead of hiding it
-        v = next(v for v in res.verdicts if v["name"] == "pitch_offset")
+        v = next(v for v in res.identifiability.verdicts if v["name"] == "pitch_offset")
         assert 0.0 <= v["shared_information"] <= 1.0 and "confounded_with" in v
 
 
@@ -415,7 +415,7 @@ def test_goodness_of_fit_counts_dof_right(bem_twin):
     gof = res.goodness_of_fit()
     n = len(cond) * len(model.channels)
     assert gof["dof_before"] == n and gof["dof_after"] == n - res.n_retained
-    assert gof["chi2_per_dof_before"] == pytest.approx(res.chi2_before / n)
+    assert gof["chi2_per_dof_before"] == pytest.approx(res.fit.chi2_before / n)
     assert 0.0 <= gof["p_value_after"] <= 1.0 and len(gof["worst"]) == 5
     assert abs(gof["worst"][0]["whitened_residual"]) >= abs(gof["worst"][-1]["whitened_residual"])
 
@@ -648,10 +648,10 @@ def test_a_result_whose_retained_set_did_not_settle_says_its_bands_can_be_too_na
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
     res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, max_relinearizations=2,
                                                       stability_cosine=1.0 - 1e-12)).run()
-    assert res.status == "not_stable"
-    assert "can be too narrow" in res.message and "sigma_bar" in res.message
-    assert "after 2 re-linearizations; between the last two re-linearizations" in res.message
-    assert "turned by" in res.message
+    assert res.estimate.status == "not_stable"
+    assert "can be too narrow" in res.estimate.message and "sigma_bar" in res.estimate.message
+    assert "after 2 re-linearizations; between the last two re-linearizations" in res.estimate.message
+    assert "turned by" in res.estimate.message
 
 
 def test_the_last_allowed_re_linearization_is_checked_for_stability():
@@ -666,9 +666,9 @@ def test_the_last_allowed_re_linearization_is_checked_for_stability():
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7120)
     one = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, max_relinearizations=1)).run()
     more = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None)).run()
-    assert more.status == "converged" and "stable after 1 re-linearization(s)" in more.message
-    assert one.status == "converged" and "stable after 1 re-linearization(s)" in one.message
-    np.testing.assert_allclose(one.p_hat, more.p_hat)
+    assert more.estimate.status == "converged" and "stable after 1 re-linearization(s)" in more.estimate.message
+    assert one.estimate.status == "converged" and "stable after 1 re-linearization(s)" in one.estimate.message
+    np.testing.assert_allclose(one.estimate.p_hat, more.estimate.p_hat)
 
 
 def test_misfit_beyond_the_stated_noise_scales_the_retained_covariance():
@@ -684,14 +684,14 @@ def test_misfit_beyond_the_stated_noise_scales_the_retained_covariance():
     base = CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)
     res = Calibrator(model, stated, base).run()
     off = Calibrator(model, stated, dataclasses.replace(base, scale_by_fit=False)).run()
-    ratio = res.chi2_after / res.dof
+    ratio = res.fit.chi2_after / res.dof
     assert 2.5 < ratio < 6.0
-    assert res.fit_scale == pytest.approx(ratio) and off.fit_scale == 1.0
-    np.testing.assert_allclose(res.cov_theta, ratio * off.cov_theta, rtol=1e-9)
-    np.testing.assert_allclose(res.cov_frozen, off.cov_frozen, rtol=1e-9, atol=1e-15)
+    assert res.uncertainty.fit_scale == pytest.approx(ratio) and off.uncertainty.fit_scale == 1.0
+    np.testing.assert_allclose(res.uncertainty.cov_theta, ratio * off.uncertainty.cov_theta, rtol=1e-9)
+    np.testing.assert_allclose(res.uncertainty.cov_frozen, off.uncertainty.cov_frozen, rtol=1e-9, atol=1e-15)
     # a fit consistent with its noise is left alone
     fine = Calibrator(model, meas, base).run()
-    assert fine.fit_scale == max(1.0, fine.chi2_after / fine.dof) and fine.fit_scale < 1.5
+    assert fine.uncertainty.fit_scale == max(1.0, fine.fit.chi2_after / fine.dof) and fine.uncertainty.fit_scale < 1.5
 
 
 def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monkeypatch):
@@ -714,9 +714,9 @@ def test_a_calibration_whose_estimator_did_not_move_is_not_called_converged(monk
     cond = twin_conditions(tsr=np.linspace(4.0, 10.0, 5))
     meas = synthesize(model, twin_truth(model), cond, relative_sigma={c: 0.01 for c in CHANNELS}, seed=7121)
     res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)).run()
-    assert res.status == "stalled", res.message
-    assert "not of a minimum" in res.message
-    np.testing.assert_allclose(res.p_hat, res.p_nominal)
+    assert res.estimate.status == "stalled", res.message
+    assert "not of a minimum" in res.estimate.message
+    np.testing.assert_allclose(res.estimate.p_hat, res.estimate.p_nominal)
 
 
 def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_path):
@@ -732,20 +732,21 @@ def test_bands_that_leave_out_the_field_between_the_nodes_say_so(bem_twin, tmp_p
     meas = synthesize(model, twin_truth(model), twin_conditions(tsr=np.linspace(4.0, 10.0, 5)),
                       relative_sigma={c: 0.01 for c in CHANNELS}, seed=7123)
     res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", cd_min=None, sigma_bar=1.0)).run()
-    assert res.aliasing_chi2 == 0.0 and "cannot be rebuilt on a finer correction grid" in res.aliasing_note
+    assert res.uncertainty.aliasing_chi2 == 0.0 and "cannot be rebuilt on a finer correction grid" in res.uncertainty.aliasing_note
     assert any(t.startswith("Not in the bands: ") and "TwinModel" in t for t in sentences(res))
     res.save(tmp_path)
-    assert load_result(tmp_path).aliasing_note == res.aliasing_note
+    assert load_result(tmp_path).uncertainty.aliasing_note == res.uncertainty.aliasing_note
 
     bem, cond, grid = bem_twin
     p = nominal_vector(bem.parameters)
     p[:grid.n_lift] = -0.05
     meas = synthesize(bem, p, cond, relative_sigma={c.name: 0.01 for c in bem.channels}, seed=7124)
     on = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0)).run()
-    assert on.aliasing_note == "" and on.aliasing_chi2 > 0.0
+    assert on.uncertainty.aliasing_note == "" and on.uncertainty.aliasing_chi2 > 0.0
     assert not any(t.startswith("Not in the bands") for t in sentences(on))
-    off = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0, representation_error=False)).run()
-    assert "representation_error = false" in off.aliasing_note and off.aliasing_chi2 == 0.0
+    off = Calibrator(bem, meas, CalibrationSettings(estimator="truncated", cd_min=0.003, sigma_bar=1.0,
+                                                    representation_error=False)).run()
+    assert "representation_error = false" in off.uncertainty.aliasing_note and off.uncertainty.aliasing_chi2 == 0.0
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.cli import main as cli_main
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
@@ -99,9 +99,9 @@ def test_small_workflow_writes_results_figures_and_report(tmp_path):
     assert "data:image/png;base64," in html
     assert "χ²/dof" in html and "identified" in html
     back = load_result(stage_dir)
-    np.testing.assert_allclose(back.p_hat, outcomes[0].result.p_hat)
+    np.testing.assert_allclose(back.estimate.p_hat, outcomes[0].result.estimate.p_hat)
     meta = json.loads((stage_dir / "result.json").read_text())
-    assert "versions" in meta and "numpy" in meta["versions"]
+    assert "numpy" in meta["provenance"]["versions"]
     assert (out / "measurements.csv").is_file()
 
 
@@ -117,9 +117,9 @@ def test_the_bundled_fmu_workflow_runs_as_the_readme_says(tmp_path):
     the known truth."""
     [stage] = run_workflow(WORKFLOWS / "bundled_fmu.toml", tmp_path, progress=False)
     res = stage.result
-    assert res.status == "converged" and res.failures["total_failed_point_evaluations"] == 0
-    assert res.chi2_before / res.dof > 5 and res.chi2_after / res.dof < 1.5
-    coverage = res.checks["coverage of the known truth"]
+    assert res.estimate.status == "converged" and res.fit.failures["total_failed_point_evaluations"] == 0
+    assert res.fit.chi2_before / res.dof > 5 and res.fit.chi2_after / res.dof < 1.5
+    coverage = res.provenance.checks["coverage of the known truth"]
     lift, drag = (float(x) for x in re.findall(r"at ([0-9.]+) %", coverage))
     assert lift >= 90 and drag >= 90, coverage
 
@@ -127,9 +127,9 @@ def test_the_bundled_fmu_workflow_runs_as_the_readme_says(tmp_path):
 def test_wind_tunnel_study_improves_fit_from_hub_loads(tmp_path):
     [stage] = run_workflow(WORKFLOWS / "wind_tunnel_hub_loads.toml", tmp_path, progress=False)
     res = stage.result
-    assert res.status == "converged"
-    assert res.chi2_before / res.dof > 50            # nominal polars substantially wrong
-    assert res.chi2_after / res.dof < 2.0            # truth not in the span: close to, not at, 1
+    assert res.estimate.status == "converged"
+    assert res.fit.chi2_before / res.dof > 50            # nominal polars substantially wrong
+    assert res.fit.chi2_after / res.dof < 2.0            # truth not in the span: close to, not at, 1
     assert 0 < res.n_retained < res.n_params         # hub loads identify only some combinations
 
 
@@ -141,7 +141,7 @@ def test_blade_loads_localize_the_correction(tmp_path):
     alpha = np.linspace(3.0, 11.0, 9)
 
     def lift_error(res, eta):
-        est, _, _, _ = grid.evaluate(res.p_hat[:grid.n_params], alpha, np.full(alpha.size, eta))
+        est, _, _, _ = grid.evaluate(res.estimate.p_hat[:grid.n_params], alpha, np.full(alpha.size, eta))
         truth, _ = smooth_field(cfg["truth"]["bumps"], alpha, np.full(alpha.size, eta))
         return est, truth
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from pythonfmu_export import export_fmu
 
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.cli import main
 from calib.errors import InputError
 from calib.fmu.model import FmuModel
@@ -71,8 +71,8 @@ def test_fmu_workflow_needs_no_rotor_and_no_grid(campaign, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["run", str(workflow(campaign)), "--out", str(out), "-q"]) == 0
     res = load_result(out / "stage1_loads")
-    assert res.status == "converged"
-    for v in res.verdicts:
+    assert res.estimate.status == "converged"
+    for v in res.identifiability.verdicts:
         assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v
     report = (out / "report.html").read_text()
     assert "correction node" not in report and "Every parameter of the model" in report
@@ -144,9 +144,9 @@ def test_calib_run_takes_the_noise_model_from_the_command_line(campaign, tmp_pat
     assert "sigma" in capsys.readouterr().err
     assert main(["run", str(wf), "--out", str(tmp_path / "ml"), "-q", "--noise", "ml"]) == 0
     res = load_result(tmp_path / "ml" / "stage1_loads")
-    assert res.provenance.settings["noise"] == "ml" and res.status == "converged"
+    assert res.provenance.settings["noise"] == "ml" and res.estimate.status == "converged"
     assert "against the σ estimated with the fit (ml): shaft_power " in (tmp_path / "ml" / "calib.log").read_text()
-    for v in res.verdicts:
+    for v in res.identifiability.verdicts:
         assert abs(v["value"] - TRUTH[v["name"]]) < 3 * v["std"], v
 
 

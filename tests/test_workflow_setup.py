@@ -9,7 +9,7 @@ import pytest
 
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import read_measurements, synthesize
@@ -102,7 +102,7 @@ def test_openfast_deck_workflow_gives_the_embedded_rotor_nominal_outputs(tmp_pat
     run_workflow(path, tmp_path / "out", progress=False)
     res = load_result(tmp_path / "out" / "stage1_hub")
     ref = BemModel(embedded, None, ("power", "thrust"), deck_setup, ()).evaluate(np.zeros(0), cond).values
-    np.testing.assert_allclose(res.model_before, ref, rtol=5e-3)
+    np.testing.assert_allclose(res.fit.model_before, ref, rtol=5e-3)
     # and the set-up matters at this level: the default (drag in the induction, no shear) differs
     plain = BemModel(embedded, None, ("power", "thrust"), BemSettings(), ()).evaluate(np.zeros(0), cond).values
     assert np.max(np.abs(plain / ref - 1)) > 5e-3
@@ -127,13 +127,13 @@ def test_water_rotor_follows_the_fluid(tmp_path):
     res = load_result(tmp_path / "out" / "stage1_hub")
     assert np.allclose(res.conditions["air_density"], 1000.0)
     api = BemModel(rotor, None, ("power", "thrust"), water, ()).evaluate(np.zeros(0), cond).values
-    np.testing.assert_allclose(res.model_before, api, rtol=1e-9)
+    np.testing.assert_allclose(res.fit.model_before, api, rtol=1e-9)
     air = BemModel(rotor, None, ("power", "thrust"), BemSettings(), ()).evaluate(
         np.zeros(0), OperatingConditions(cond.wind_speed, cond.rotor_speed, cond.pitch, 1.225)).values
     np.testing.assert_allclose(api / air, 1000.0 / 1.225, rtol=1e-6)
     # alpha nodes placed by the data lie inside the reached range and are stated
     grid_alpha = sorted({p["alpha_deg"] for p in res.parameters if p["kind"] == "lift_correction"})
-    assert len(grid_alpha) == 6 and grid_alpha[0] >= np.min(res.alpha_seen) - 5
+    assert len(grid_alpha) == 6 and grid_alpha[0] >= np.min(res.fit.alpha_seen) - 5
 
 
 def test_workflow_and_api_give_identical_results(tmp_path):
@@ -147,8 +147,8 @@ def test_workflow_and_api_give_identical_results(tmp_path):
     model = BemModel(rotor, grid, ("power", "thrust"), settings, ("pitch_offset",))
     meas = read_measurements(tmp_path / "data.csv", ["power", "thrust"])
     api = Calibrator(model, meas, CalibrationSettings(noise="ml")).run()
-    np.testing.assert_array_equal(wf.p_hat, api.p_hat)
-    np.testing.assert_array_equal(wf.cov_p, api.cov_p)
+    np.testing.assert_array_equal(wf.estimate.p_hat, api.estimate.p_hat)
+    np.testing.assert_array_equal(wf.uncertainty.cov_p, api.uncertainty.cov_p)
     assert np.allclose(cond.wind_speed, wf.conditions["wind_speed"])
     assert nominal_vector(model.parameters).size == wf.n_params
 
@@ -161,7 +161,7 @@ def test_shipped_own_turbine_workflow_runs(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "delimiter: semicolon" in out and "timestamp, turbine_id" in out and "unit check: passed" in out
     res = outcomes[0].result
-    assert res.status == "converged" and res.n_retained >= 1
+    assert res.estimate.status == "converged" and res.n_retained >= 1
     assert res.chi2_per_dof_before > 5 and res.chi2_per_dof_after < 1.5
     assert (tmp_path / "report.html").is_file()
 

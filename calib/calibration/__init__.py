@@ -15,8 +15,8 @@
 - :mod:`calib.calibration.uncertainty_terms` the terms of the problem that need the model;
 - :mod:`calib.calibration.map_agreement`    the MAP's self-check against the ML fit;
 - :mod:`calib.calibration.result`           :class:`CalibrationResult`, with its parts in
-  :mod:`~calib.calibration.result_parts`, built by :mod:`~calib.calibration.result_assembly` and
-  written and read by :mod:`~calib.calibration.result_io`;
+  :mod:`~calib.calibration.result_parts`, built by :mod:`~calib.calibration.result_assembly`,
+  written with :mod:`~calib.calibration.result_io` and read back by :mod:`~calib.calibration.result_files`;
 - :mod:`calib.calibration.prediction`       predictions with intervals; ``calib predict`` is
   :mod:`~calib.calibration.predict_command`;
 - :mod:`calib.calibration.frames`           results and predictions as pandas DataFrames.
@@ -27,7 +27,8 @@ Calibrator, CalibrationSettings``.
 
 from calib.calibration.calibrator import Calibrator, calibrate
 from calib.calibration.prediction import Prediction
-from calib.calibration.result import CalibrationResult, load_result
+from calib.calibration.result import CalibrationResult
+from calib.calibration.result_files import load_result
 from calib.calibration.settings import ESTIMATORS, NOISE_MODES, CalibrationSettings
 
 __all__ = ["ESTIMATORS", "NOISE_MODES", "CalibrationResult", "CalibrationSettings", "Calibrator", "Prediction",

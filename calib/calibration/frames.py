@@ -79,15 +79,15 @@ def parameters_frame(result):
         ``prior_std``, ``lower``, ``upper``, ``verdict``, ``shared_information``, ``note``.
     """
     pd = require_pandas()
-    by_name = {v["name"]: v for v in result.verdicts}
+    by_name = {v["name"]: v for v in result.identifiability.verdicts}
     rows = []
     for j, q in enumerate(result.parameters):
         v = by_name.get(q["name"], {})
         kind = q.get("kind", "")
         rows.append({"name": q["name"], "kind": str(getattr(kind, "value", kind)), "unit": q.get("unit", ""),
-                     "nominal": float(result.p_nominal[j]), "value": float(result.p_hat[j]),
-                     "std": float(result.std_p[j]), "prior_std": float(result.prior_std[j]),
-                     "lower": float(result.lower[j]), "upper": float(result.upper[j]),
+                     "nominal": float(result.estimate.p_nominal[j]), "value": float(result.estimate.p_hat[j]),
+                     "std": float(result.uncertainty.std_p[j]), "prior_std": float(result.uncertainty.prior_std[j]),
+                     "lower": float(result.estimate.lower[j]), "upper": float(result.estimate.upper[j]),
                      "verdict": v.get("verdict", ""), "shared_information": v.get("shared_information", np.nan),
                      "note": v.get("note", "")})
     return pd.DataFrame(rows).set_index("name")
@@ -109,15 +109,15 @@ def points_frame(result):
         ``power_residual [-]``; ``status``.
     """
     pd = require_pandas()
-    n = result.measured.shape[0]
+    n = result.fit.measured.shape[0]
     cols = {f"{f} [{CONDITION_UNITS[f]}]": np.broadcast_to(np.asarray(result.conditions[f], float), (n,))
             for f in CONDITION_FIELDS if f in result.conditions}
-    if result.rotor_radius:
+    if result.provenance.rotor_radius:
         cols["tip_speed_ratio [-]"] = result.tip_speed_ratio()
     for j, (c, u) in enumerate(zip(result.channels, result.channel_units)):
-        cols[f"{c} [{u}]"] = result.measured[:, j]
-        cols[f"{c}_nominal [{u}]"] = result.model_before[:, j]
-        cols[f"{c}_calibrated [{u}]"] = result.model_after[:, j]
-        cols[f"{c}_residual [-]"] = (result.measured[:, j] - result.model_after[:, j]) / result.sigma[:, j]
-    cols["status"] = [Status(int(s)).name for s in result.status_after]
+        cols[f"{c} [{u}]"] = result.fit.measured[:, j]
+        cols[f"{c}_nominal [{u}]"] = result.fit.model_before[:, j]
+        cols[f"{c}_calibrated [{u}]"] = result.fit.model_after[:, j]
+        cols[f"{c}_residual [-]"] = (result.fit.measured[:, j] - result.fit.model_after[:, j]) / result.fit.sigma[:, j]
+    cols["status"] = [Status(int(s)).name for s in result.fit.status_after]
     return pd.DataFrame(cols)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from calib.calibration.prediction import Prediction
-from calib.calibration.result import load_result
+from calib.calibration.result_files import load_result
 from calib.measurements import read_measurements
 from calib.types import CONDITION_FIELDS, Status
 
@@ -170,8 +170,10 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     result = load_result(result_dir)
     meas = calibration_fluid(read_measurements(data, None, allow_no_channels=True), result.conditions, printer)
     model = result.rebuild_model()
-    rotor_name = ((result.model_spec or {}).get("rotor_data") or {}).get("name")   # the native BEM's rotor, if any
-    for line in setup_lines(result.model_spec, result.conditions, meas.conditions.as_dict(), str(data), rotor_name):
+    spec = result.provenance.model_spec or {}
+    rotor_name = (spec.get("rotor_data") or {}).get("name")   # the native BEM's rotor, if any
+    for line in setup_lines(result.provenance.model_spec, result.conditions, meas.conditions.as_dict(), str(data),
+                            rotor_name):
         printer(line)
     pred = result.predict(meas.conditions, model=model, confidence=confidence)
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})
@@ -197,7 +199,7 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
         for c in common:
             j = pred.channels.index(c)
             sig_meas = meas.sigma[:, meas.channels.index(c)] if meas.sigma is not None else \
-                np.full(len(ok), float(result.noise_sigma[result.channels.index(c)]))
+                np.full(len(ok), float(result.fit.noise_sigma[result.channels.index(c)]))
             var = sig_meas ** 2 + pred.std[:, j] ** 2
             r2 = (meas.channel(c) - pred.values[:, j]) ** 2 / var
             chi[c] = float(np.mean(r2[ok]))

@@ -3,9 +3,10 @@
 A :class:`CalibrationResult` holds the problem (parameters, channels, conditions) and five parts
 (:mod:`calib.calibration.result_parts`): ``estimate``, ``identifiability``, ``uncertainty``, ``fit`` and
 ``provenance``. ``result.json`` holds the settings, the scalar figures of merit, the verdicts, the
-history, the input SHA-256 hashes and the package versions; ``result.npz`` holds every array;
-both under the fields' flat names, as since schema 2. Both are written atomically (temporary
-file, then rename).
+history, the input SHA-256 hashes and the package versions, each under its part's name;
+``result.npz`` holds every array as ``part.field`` (schema 3; a schema-2 file, every field under
+its flat name, is read through :func:`calib.calibration.result_files.migrate_v2`). Both are written
+atomically (temporary file, then rename); :func:`calib.calibration.result_files.load_result` reads them.
 """
 
 from __future__ import annotations
@@ -19,17 +20,17 @@ import numpy as np
 
 from calib.calibration.prediction import Prediction, predict_outputs
 from calib.calibration.result_io import atomic_write, jsonable, write_npz_synced, write_text_synced
-from calib.calibration.result_parts import (ARRAY_FIELDS, PART_OF, PARTS, Estimate, Fit, Identifiability, Provenance,
-                                            Uncertainty)
+from calib.calibration.result_parts import ARRAY_FIELDS, PARTS, Estimate, Fit, Identifiability, Provenance, Uncertainty
 from calib.errors import InputError
 from calib.parametrizations.correction_field import NodeLayout, eigenshapes, node_layout
 from calib.types import Parameter
 
-__all__ = ["CalibrationResult", "load_result", "fold_sentence", "second_start_sentence"]
+__all__ = ["CalibrationResult", "DICT_ARRAYS", "SCHEMA_VERSION", "fold_sentence", "second_start_sentence"]
 
-SCHEMA_VERSION = 2
-_DICT_ARRAYS = {"conditions": "conditions__", "polar_bands": "polar__", "truncation": "truncation__"}
-"""Dicts of arrays stored in ``result.npz``, each key under its prefix."""
+SCHEMA_VERSION = 3
+DICT_ARRAYS = {"conditions": (None, "conditions__"), "polar_bands": ("uncertainty", "polar__"),
+                "truncation": ("identifiability", "truncation__")}
+"""Dicts of arrays stored in ``result.npz`` (the result's own, or its part's), each key under its prefix."""
 
 
 def fold_sentence(fold_directions: list, conditions: dict | None = None, tsr=None) -> str:
@@ -99,9 +100,8 @@ class CalibrationResult:
 
     Notes
     -----
-    Every field of a part can also be read (and set) under its flat name, ``result.p_hat`` for
-    ``result.estimate.p_hat``: the names of ``result.json`` and ``result.npz`` and of scripts
-    written before the parts existed. :meth:`replace` takes flat names too.
+    A field is read and set through its part, ``result.estimate.p_hat``; there are no flat
+    names (``result.p_hat`` is an ``AttributeError`` that names the part).
     """
 
     parameters: list[dict]
@@ -117,27 +117,20 @@ class CalibrationResult:
     json_path: Path | None = field(default=None, repr=False)
 
     def __getattr__(self, name: str):
-        # only called when the normal lookup fails: a part's field under its flat name
-        part = PART_OF.get(name)
-        parts = self.__dict__
-        if part is None or part not in parts:
-            raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
-        return getattr(parts[part], name)
-
-    def __setattr__(self, name: str, value) -> None:
-        part = PART_OF.get(name)
-        if part is None:
-            object.__setattr__(self, name, value)
-        else:
-            setattr(self.__dict__[part], name, value)
+        # only called when the normal lookup fails: say which part holds a field of the old flat names
+        for part, cls in PARTS.items():
+            if name in {f.name for f in fields(cls)}:
+                raise AttributeError(f"{type(self).__name__} has no attribute {name!r}: it is "
+                                     f"result.{part}.{name}")
+        raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
 
     def replace(self, **changes) -> "CalibrationResult":
-        """A copy with ``changes``: the result's own fields (a whole part included) or a part's fields by
-        flat name. Every part is copied (shallow), so setting a field of the copy leaves this one alone."""
-        own = {k: v for k, v in changes.items() if k not in PART_OF}
+        """A copy with ``changes`` to the result's own fields or whole parts
+        (``result.replace(fit=dataclasses.replace(result.fit, sigma=s))``). Every part is copied
+        (shallow), so setting a field of the copy leaves this one alone."""
+        own = dict(changes)
         for part in PARTS:
-            mine = {k: v for k, v in changes.items() if PART_OF.get(k) == part}
-            own[part] = dataclasses.replace(own.get(part, getattr(self, part)), **mine)
+            own[part] = dataclasses.replace(own.get(part, getattr(self, part)))
         return dataclasses.replace(self, **own)
 
     # ------------------------------------------------------------------ derived
@@ -254,7 +247,7 @@ class CalibrationResult:
                              field="model_spec")
         from calib.models.registry import build_model
 
-        return build_model(self.provenance.model_spec, base_dir=folder, source=f"{where}: model_spec")
+        return build_model(self.provenance.model_spec, base_dir=folder, source=f"{where}: provenance.model_spec")
 
     @property
     def parameter_objects(self) -> tuple[Parameter, ...]:
@@ -296,8 +289,9 @@ class CalibrationResult:
         """Which noise the χ² figures are taken against, with its σ per channel: "the σ estimated with
         the fit (ml): power 1.2e+04 W, thrust 3.1e+03 N" (two χ² of one run, the unit check's and the
         calibration's, are read apart by it)."""
-        noise = str(self.settings.get("noise", "known"))
-        how = {"known": "the stated σ", "repeats": "the σ of the repeated records", "ml": "the σ estimated with the fit",
+        noise = str(self.provenance.settings.get("noise", "known"))
+        how = {"known": "the stated σ", "repeats": "the σ of the repeated records",
+               "ml": "the σ estimated with the fit",
                "relative": "the stated σ relative to each point's value",
                "relative_ml": "the stated relative σ times a factor estimated with the fit"}.get(noise, noise)
         if noise in ("relative", "relative_ml"):
@@ -340,87 +334,31 @@ class CalibrationResult:
         return "\n".join(lines)
 
     # ------------------------------------------------------------------ i/o
-    def flat_fields(self) -> dict:
-        """Every field under its flat name (the names of ``result.json`` and ``result.npz``)."""
-        out = {k: getattr(self, k) for k in ("parameters", "channels", "channel_units", "conditions", "name")}
-        for part in PARTS:
-            out.update(vars(getattr(self, part)))
-        return out
-
     def to_json_dict(self) -> dict:
-        """``result.json``: every field that is not an array, under its flat name, and a summary."""
-        scalars = {k: v for k, v in self.flat_fields().items() if k not in ARRAY_FIELDS and k not in _DICT_ARRAYS}
-        scalars["schema_version"] = SCHEMA_VERSION
+        """``result.json``: the problem, each part's fields that are not arrays (under the part's
+        name) and a summary."""
+        doc = {"schema_version": SCHEMA_VERSION, "parameters": self.parameters, "channels": self.channels,
+               "channel_units": self.channel_units, "name": self.name}
+        for part in PARTS:
+            doc[part] = {k: v for k, v in vars(getattr(self, part)).items()
+                         if (part, k) not in ARRAY_FIELDS and k not in DICT_ARRAYS}
         ident = self.identifiability
         truncation = {"criterion": f"{ident.truncation.get('criterion')} cross-validation",
                       "chosen": ident.truncation.get("chosen"), "sigma_bar": ident.sigma_bar} if ident.truncation \
             else {"criterion": "threshold", "sigma_bar": ident.sigma_bar}
-        scalars["summary"] = {"n_params": self.n_params, "n_retained": self.n_retained, "dof": self.dof,
-                              "goodness_of_fit": self.goodness_of_fit(), "truncation": truncation,
-                              "verdict_counts": self.verdict_counts()}
-        return jsonable(scalars)
+        doc["summary"] = {"n_params": self.n_params, "n_retained": self.n_retained, "dof": self.dof,
+                          "goodness_of_fit": self.goodness_of_fit(), "truncation": truncation,
+                          "verdict_counts": self.verdict_counts()}
+        return jsonable(doc)
 
     def save(self, out_dir: str | Path, stem: str = "result") -> tuple[Path, Path]:
         """Write ``<stem>.json`` and ``<stem>.npz`` into ``out_dir`` (atomically)."""
         out_dir = Path(out_dir)
         jpath, npath = out_dir / f"{stem}.json", out_dir / f"{stem}.npz"
         atomic_write(jpath, write_text_synced(json.dumps(self.to_json_dict(), indent=1, allow_nan=True)))
-        flat = self.flat_fields()
-        arrays = {k: np.asarray(flat[k]) for k in ARRAY_FIELDS}
-        for name, prefix in _DICT_ARRAYS.items():
-            arrays.update({f"{prefix}{k}": np.asarray(v) for k, v in flat[name].items()})
+        arrays = {f"{part}.{k}": np.asarray(getattr(getattr(self, part), k)) for part, k in ARRAY_FIELDS}
+        for name, (owner, prefix) in DICT_ARRAYS.items():
+            values = self.conditions if owner is None else getattr(getattr(self, owner), name)
+            arrays.update({f"{prefix}{k}": np.asarray(v) for k, v in values.items()})
         atomic_write(npath, write_npz_synced(arrays))
         return jpath, npath
-
-
-def _result_files(path: Path, stem: str) -> tuple[Path, Path]:
-    if path.is_dir():
-        jpath, npath = path / f"{stem}.json", path / f"{stem}.npz"
-    else:
-        jpath, npath = path.with_suffix(".json"), path.with_suffix(".npz")
-    for p in (jpath, npath):
-        if not p.is_file():
-            stages = sorted(d.name for d in path.iterdir() if (d / f"{stem}.json").is_file()) if path.is_dir() else []
-            hint = (f"; this is a run's folder: give one of its stage folders, {', '.join(str(path / d) for d in stages)}"
-                    if stages else "")
-            raise InputError(f"result file not found (a folder holding {stem}.json and {stem}.npz, or their path)"
-                             + hint, p)
-    return jpath, npath
-
-
-def load_result(path: str | Path, stem: str = "result") -> CalibrationResult:
-    """Load a result written by :meth:`CalibrationResult.save`.
-
-    Parameters
-    ----------
-    path : str or Path
-        The output directory, or the ``.json`` / ``.npz`` file.
-
-    Raises
-    ------
-    InputError
-        A file missing, another schema version (named), or a field the result needs missing.
-    """
-    jpath, npath = _result_files(Path(path), stem)
-    data = json.loads(jpath.read_text())
-    if data.get("schema_version") != SCHEMA_VERSION:
-        raise InputError(f"unsupported result schema {data.get('schema_version')!r}, expected {SCHEMA_VERSION}",
-                         jpath, field="schema_version")
-    with np.load(npath) as z:
-        arrays = {k: z[k] for k in z.files}
-    flat = {k: v for k, v in data.items() if k in PART_OF or k in ("parameters", "channels", "channel_units", "name")}
-    flat.update({k: arrays[k] for k in ARRAY_FIELDS if k in arrays})   # (gain, cov_alias: not before MAP)
-    for name, prefix in _DICT_ARRAYS.items():
-        flat[name] = {k[len(prefix):]: (v.item() if v.ndim == 0 and name == "truncation" else v)
-                      for k, v in arrays.items() if k.startswith(prefix)}
-    for name in ("retained", "multiple_roots"):
-        if name in flat:
-            flat[name] = flat[name].astype(bool)
-    parts = {}
-    for part, cls in PARTS.items():
-        mine = {f.name: flat.pop(f.name) for f in fields(cls) if f.name in flat}
-        try:
-            parts[part] = cls(**mine)
-        except TypeError as exc:      # a required field missing
-            raise InputError(f"not a complete calibration result ({part}: {exc})", jpath) from None
-    return CalibrationResult(**flat, **parts, json_path=jpath.resolve())

@@ -7,13 +7,13 @@ once, at the end of either estimator.
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, fields, replace
 
 import numpy as np
 
 from calib.calibration.identifiability import confounding, cramer_rao, fisher_matrix, parameter_verdicts
 from calib.calibration.result import CalibrationResult
-from calib.calibration.result_parts import Estimate, Fit, Identifiability, Provenance, Uncertainty
+from calib.calibration.result_parts import PARTS, Estimate, Fit, Identifiability, Provenance, Uncertainty
 from calib.calibration.uncertainty_terms import ModelTerms
 from calib.errors import InputError
 from calib.types import nominal_vector
@@ -41,7 +41,8 @@ def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_fr
     wall : float
         Duration [s].
     **extra
-        The result's other fields by flat name: the estimator's own, and the calibrator's (``history``,
+        The result's other fields, each put into the part that has a field of that name
+        (:func:`_into_parts`): the estimator's own, and the calibrator's (``history``,
         ``truncation``, ``name``).
     """
     m = terms.measurements
@@ -59,7 +60,8 @@ def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_fr
                                 cov_frozen),
         fit=fit,
         provenance=Provenance(_settings_record(terms), spec, radius, wall_time=wall,
-                              inputs={m.source: m.sha256} if m.sha256 else {})).replace(**extra)
+                              inputs={m.source: m.sha256} if m.sha256 else {}))
+    res = _into_parts(res, extra)
     st, field = terms.settings, terms.field
     if field is not None and field.grid is not None:
         res.uncertainty.polar_bands = field.bands(
@@ -114,3 +116,18 @@ def _settings_record(terms: ModelTerms) -> dict:
     settings["model"] = terms.model.capabilities.name
     settings["lower_effective"] = terms.lower.tolist()
     return settings
+
+
+def _into_parts(res: CalibrationResult, extra: dict) -> CalibrationResult:
+    """``res`` with each value of ``extra`` set in the part that has a field of its name (``name``
+    on the result itself); a name no part has is an error of the caller."""
+    extra = dict(extra)
+    own = {k: extra.pop(k) for k in ("name",) if k in extra}
+    parts = {}
+    for part, cls in PARTS.items():
+        mine = {f.name: extra.pop(f.name) for f in fields(cls) if f.name in extra}
+        if mine:
+            parts[part] = replace(getattr(res, part), **mine)
+    if extra:
+        raise TypeError(f"no part of a result has the field(s) {', '.join(sorted(extra))}")
+    return res.replace(**own, **parts)

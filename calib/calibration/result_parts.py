@@ -227,9 +227,6 @@ PARTS = {"estimate": Estimate, "identifiability": Identifiability, "uncertainty"
          "provenance": Provenance}
 """The parts of a result by attribute name."""
 
-PART_OF = {f.name: part for part, cls in PARTS.items() for f in fields(cls)}
-"""The part that holds each field, by field name (the result's flat names)."""
-
-ARRAY_FIELDS = tuple(f.name for cls in PARTS.values() for f in fields(cls)
+ARRAY_FIELDS = tuple((part, f.name) for part, cls in PARTS.items() for f in fields(cls)
                      if f.type in ("np.ndarray", np.ndarray))
-"""The fields stored in ``result.npz`` (the others go to ``result.json``)."""
+"""The (part, field) pairs stored in ``result.npz`` as ``part.field`` (the others go to ``result.json``)."""

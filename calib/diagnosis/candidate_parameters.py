@@ -67,9 +67,9 @@ def parameter_records(res, own: list) -> list[dict]:
     """{name, value, std, unit, nominal, lower, upper, at_bound} of a candidate's own parameters."""
     out = []
     for j in own:
-        lo, hi = float(res.lower[j]), float(res.upper[j])
-        value = float(res.p_hat[j])
-        out.append({"name": res.parameters[j]["name"], "value": value, "std": float(res.std_p[j]),
-                    "unit": res.parameters[j]["unit"], "nominal": float(res.p_nominal[j]), "lower": lo, "upper": hi,
-                    "at_bound": bound_side(value, lo, hi, float(res.scale[j]))})
+        lo, hi = float(res.estimate.lower[j]), float(res.estimate.upper[j])
+        value = float(res.estimate.p_hat[j])
+        out.append({"name": res.parameters[j]["name"], "value": value, "std": float(res.uncertainty.std_p[j]),
+                    "unit": res.parameters[j]["unit"], "nominal": float(res.estimate.p_nominal[j]), "lower": lo, "upper": hi,
+                    "at_bound": bound_side(value, lo, hi, float(res.estimate.scale[j]))})
     return out

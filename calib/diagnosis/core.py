@@ -137,21 +137,21 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
 
     # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
     loc, meas = _localize(family, measurements, cal, wrap, on_iteration, say)
-    sigma = loc.sigma
+    sigma = loc.fit.sigma
 
     # 1. find
     y0, before, findings = _find_disagreement(family, meas, wrap, say, loc.noise_words())
 
     # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand),
     # against the noise plus the model-form tolerance
-    namer = _name_effects(family, meas, y0, before, loc.model_after, cal, dset, executor, wrap, fit_progress, say)
+    namer = _name_effects(family, meas, y0, before, loc.fit.model_after, cal, dset, executor, wrap, fit_progress, say)
     effect, effects_named = namer.verdict()
     n_fit = family.n_parameters(namer.base_effects)
     with_effects = gap(meas.values, namer.base_values, sigma, channels, n_fit)
 
     # 4. add + recalibrate the field on top
     recal = _recalibrate(family, namer, meas, cal, dset, wrap, on_iteration, say, effects_named)
-    y_after = None if recal is None else recal.model_after
+    y_after = None if recal is None else recal.fit.model_after
     after = with_effects if recal is None else gap(meas.values, y_after, sigma, channels, n_fit + recal.n_retained)
     say(f"show: χ²/dof {before['chi2_per_dof']:.3g} -> {with_effects['chi2_per_dof']:.3g} with "
         f"{', '.join(effects_named) or 'no effect'}" + ("" if recal is None else
@@ -180,7 +180,7 @@ def _localize(family, measurements: Measurements, cal: CalibrationSettings, wrap
     field_model = wrap(family.field_model(), "localization")
     say(f"localize: correction field, {len(field_model.parameters)} parameters")
     loc = Calibrator(field_model, measurements, cal, _tagged(on_iteration, "localization"), name="localization").run()
-    meas = dataclasses.replace(measurements, sigma=loc.sigma)
+    meas = dataclasses.replace(measurements, sigma=loc.fit.sigma)
     say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")
     return loc, meas
 
@@ -250,13 +250,13 @@ def _recalibrate(family, namer: Namer, meas, cal, dset, wrap, on_iteration, say,
     except CalibError as exc:
         namer.fail(f"the recalibration failed: {exc}; the figures after it are those with the named effect(s)")
         return None
-    chi2 = gap(meas.values, recal.model_after, meas.sigma, list(meas.channels))["chi2"]
+    chi2 = gap(meas.values, recal.fit.model_after, meas.sigma, list(meas.channels))["chi2"]
     start = gap(meas.values, namer.base_values, meas.sigma, list(meas.channels))["chi2"]
     if not chi2 <= start * (1 + RECALIBRATION_SLACK):
         # the nominal field is inside the search space: a larger χ² is an optimizer that ended
         # worse than where it started, never a better model
         namer.notes.append(f"the recalibration ended with χ² {chi2:.6g} above the {start:.6g} of the model "
-                           f"with {', '.join(effects_named) or 'no effect'} ({recal.status}); it is not kept")
+                           f"with {', '.join(effects_named) or 'no effect'} ({recal.estimate.status}); it is not kept")
         say(f"recalibrate: {namer.notes[-1]}")
         return None
     return recal

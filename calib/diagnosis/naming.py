@@ -43,7 +43,7 @@ def fit_task(task: dict) -> dict:
 
     def fit(start=None):
         res = Calibrator(model, meas, st, name=task["name"], start=start).run()
-        values = model.evaluate(res.p_hat, meas.conditions).values[:, cols]
+        values = model.evaluate(res.estimate.p_hat, meas.conditions).values[:, cols]
         ok = np.isfinite(values).all(axis=1)
         chi2 = float(np.sum(((meas.values - values) / meas.sigma)[ok] ** 2)) if ok.any() else float("inf")
         return res, values, chi2
@@ -53,11 +53,13 @@ def fit_task(task: dict) -> dict:
     except CalibError as exc:        # this candidate failed; the others are still compared
         return {"error": f"{type(exc).__name__}: {exc}"}
     own = list(task.get("own", range(res.n_params)))
-    stuck = [j for j in own if abs(res.p_hat[j] - res.p_nominal[j]) <= STUCK_TOLERANCE * res.scale[j]]
+    est = res.estimate
+    stuck = [j for j in own if abs(est.p_hat[j] - est.p_nominal[j]) <= STUCK_TOLERANCE * est.scale[j]]
     note = ""
     if stuck:
         try:
-            res2, values2, chi2_2 = fit(away_start(res.p_hat, res.lower, res.upper, res.scale, stuck))
+            res2, values2, chi2_2 = fit(away_start(res.estimate.p_hat, res.estimate.lower, res.estimate.upper,
+                                                   res.estimate.scale, stuck))
         except CalibError as exc:
             note = f"second start failed ({type(exc).__name__})"
         else:
@@ -209,8 +211,8 @@ class Namer:
         size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
                                            meas.conditions.wind_speed)
         return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
-                            p < alpha and exceeds, pattern_agreement=agree, status=res.status,
-                            start=out.get("start_note", ""), p_hat=np.array(res.p_hat, float),
+                            p < alpha and exceeds, pattern_agreement=agree, status=res.estimate.status,
+                            start=out.get("start_note", ""), p_hat=np.array(res.estimate.p_hat, float),
                             spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
                             at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
                             effect_text=words)

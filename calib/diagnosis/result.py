@@ -98,7 +98,7 @@ class Diagnosis:
                 "failure": self.failure, "setup": [i.as_dict() for i in self.setup],
                 "localization": {"n_retained": self.localization.n_retained,
                                  "chi2_per_dof_after": self.localization.chi2_per_dof_after,
-                                 "status": self.localization.status},
+                                 "status": self.localization.estimate.status},
                 "recalibration": None if self.recalibration is None else {
-                    "n_retained": self.recalibration.n_retained, "status": self.recalibration.status,
+                    "n_retained": self.recalibration.n_retained, "status": self.recalibration.estimate.status,
                     "chi2_per_dof_after": self.recalibration.chi2_per_dof_after}}

@@ -84,7 +84,7 @@ def plot_correlation(result: CalibrationResult):
     n = order.size
     fig, axes = panel_grid(1, 1, (MATRIX_SIZE, MATRIX_SIZE), Margins(left=1.5, right=1.1, bottom=1.5, top=0.75))
     ax = axes[0, 0]
-    c = np.ma.masked_invalid(np.asarray(result.correlation)[np.ix_(order, order)])
+    c = np.ma.masked_invalid(np.asarray(result.identifiability.correlation)[np.ix_(order, order)])
     im = ax.imshow(c, cmap="RdBu_r", vmin=-1, vmax=1, interpolation="nearest", extent=(-0.5, n - 0.5, n - 0.5, -0.5))
     _label_groups(ax, groups, n)
     ax.set_xlim(-0.5, n - 0.5)

@@ -57,7 +57,7 @@ def seen_inside(result: CalibrationResult, layout=None):
     n_outside : int
     """
     grid = (layout or result.layout).grid
-    a, e = result.alpha_seen, result.eta_seen
+    a, e = result.fit.alpha_seen, result.fit.eta_seen
     inside = ((a >= grid.alpha_nodes_deg[0]) & (a <= grid.alpha_nodes_deg[-1])
               & (e >= grid.eta_nodes[0]) & (e <= grid.eta_nodes[-1]))
     return a[inside], e[inside], int(np.count_nonzero(~inside))
@@ -114,7 +114,7 @@ def plot_eigenshapes(result: CalibrationResult, block: str = "lift", max_modes: 
     layout = result.layout
     if not layout.has_field:
         return None
-    retained = np.flatnonzero(result.retained) if modes is None else np.asarray(modes, int)
+    retained = np.flatnonzero(result.identifiability.retained) if modes is None else np.asarray(modes, int)
     modes = retained if max_modes is None else retained[:max_modes]
     a_seen, e_seen, n_out = seen_inside(result, layout)
     kind = which or "retained θ"
@@ -241,8 +241,9 @@ def _draw_tiles(ax: Axes, result: CalibrationResult, block: str, modes: np.ndarr
         frames.append(Rectangle((x0, y0), 1, 1))
         dots_x.append(x0 + us_a)
         dots_y.append(y0 + us_e)
-        share = block_share(result.V, layout, i, block)
-        ax.text(x0 + 0.5, y1 + 0.03, f"θ{i + 1}  σ={result.sigma_theta[i]:.2g}  {100 * share:.0f}% {block}",
+        share = block_share(result.identifiability.V, layout, i, block)
+        ax.text(x0 + 0.5, y1 + 0.03,
+                f"θ{i + 1}  σ={result.identifiability.sigma_theta[i]:.2g}  {100 * share:.0f}% {block}",
                 ha="center", va="bottom", fontsize=7)
         if k + tiles.ncol >= len(modes):       # lowest tile of its column: α node values under it
             ticks += _alpha_node_values(ax, x0, y0, ua, a_nodes)

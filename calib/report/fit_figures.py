@@ -70,9 +70,9 @@ def _pitch_groups(x: np.ndarray, pitch: np.ndarray) -> list[np.ndarray]:
 
 def whitened_residual(result: CalibrationResult, which: str = "after") -> np.ndarray:
     """(measured − model)/σ per point and channel [-]; NaN where the model failed."""
-    model = result.model_after if which == "after" else result.model_before
-    status = result.status_after if which == "after" else result.status_before
-    r = (result.measured - model) / result.sigma
+    model = result.fit.model_after if which == "after" else result.fit.model_before
+    status = result.fit.status_after if which == "after" else result.fit.status_before
+    r = (result.fit.measured - model) / result.fit.sigma
     return np.where((status == 0)[:, None], r, np.nan)
 
 
@@ -105,7 +105,7 @@ def plot_fit(result: CalibrationResult):
                        f"calibration, bands ±1 and ±2", width, 9)
     fig, axes = panel_grid(nrow, ncol, PANEL_SIZE, replace(margins, top=title_height(title, 9) + 0.3), n_panels=nc)
     fig.suptitle(title, fontsize=9, y=1 - 0.06 / fig.get_size_inches()[1])
-    okb, oka = result.status_before == 0, result.status_after == 0
+    okb, oka = result.fit.status_before == 0, result.fit.status_after == 0
     res_after = whitened_residual(result, "after")
     gof = result.goodness_of_fit()["per_channel"]
     span = float(np.ptp(x)) or 1.0
@@ -113,14 +113,15 @@ def plot_fit(result: CalibrationResult):
     g, s = gap / h, strip / h                              # strip position in axes fraction
     for k, (ch, unit) in enumerate(zip(result.channels, result.channel_units)):
         ax = axes[k // ncol, k % ncol]
-        div, unit = unit_prefix(unit, result.measured[:, k])      # 5.1 MW, not 5.1 with "1e6" at the axis end
-        ax.errorbar(x, result.measured[:, k] / div, yerr=result.sigma[:, k] / div, fmt=".", color="k", ms=3, lw=0.6,
+        div, unit = unit_prefix(unit, result.fit.measured[:, k])      # 5.1 MW, not 5.1 with "1e6" at the axis end
+        ax.errorbar(x, result.fit.measured[:, k] / div, yerr=result.fit.sigma[:, k] / div, fmt=".", color="k", ms=3,
+                    lw=0.6,
                     label="measured ±σ")
-        ax.plot(x[okb], result.model_before[okb, k] / div, "x", color="C3", ms=4, label="model before")
-        ax.plot(x[oka], result.model_after[oka, k] / div, "o", mfc="none", color="C0", ms=4, label="model after")
+        ax.plot(x[okb], result.fit.model_before[okb, k] / div, "x", color="C3", ms=4, label="model before")
+        ax.plot(x[oka], result.fit.model_after[oka, k] / div, "o", mfc="none", color="C0", ms=4, label="model after")
         for idx in groups:
             idx = idx[oka[idx]]
-            ax.plot(x[idx], result.model_after[idx, k] / div, "-", color="C0", lw=0.5, alpha=0.6)
+            ax.plot(x[idx], result.fit.model_after[idx, k] / div, "-", color="C0", lw=0.5, alpha=0.6)
         ax.set_xlim(xlo, xhi)
         lean_ticks(ax)
         plain_numbers(ax)

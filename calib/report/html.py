@@ -76,7 +76,7 @@ def _captions(r: CalibrationResult) -> dict[str, str]:
 
 def _has_field(r: CalibrationResult) -> bool:
     """Whether the calibrated model has a correction field (an FMU may offer scalar parameters only)."""
-    return any(v["kind"] in ("lift_correction", "drag_correction") for v in r.verdicts)
+    return any(v["kind"] in ("lift_correction", "drag_correction") for v in r.identifiability.verdicts)
 
 
 def _table(header, rows, left=1, details=()) -> str:
@@ -120,10 +120,11 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
     """
     r = result
     gof = r.goodness_of_fit()
-    status_cls = "ok" if r.status == "converged" else "bad"
+    status_cls = "ok" if r.estimate.status == "converged" else "bad"
     parts = [f"<h2>{html.escape(r.name)}</h2>",
-             f'<p>Status: <b class="{status_cls}">{html.escape(r.status)}</b> — {html.escape(r.message)}. '
-             f"Wall time {r.wall_time:.2f} s.</p>"]
+             f'<p>Status: <b class="{status_cls}">{html.escape(r.estimate.status)}</b> — '
+             f'{html.escape(r.estimate.message)}. '
+             f"Wall time {r.provenance.wall_time:.2f} s.</p>"]
     parts.append("<ul>" + "".join(f"<li>{html.escape(t)}</li>" for t in sentences(r)) + "".join(
         f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>" for k, v in (checks or {}).items()) + "</ul>")
     parts += _key_numbers_html(r, gof)
@@ -136,8 +137,8 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
         for name, paths in figures.items():
             parts.append(_figure_html(name, paths, captions.get(name, "")))
     parts.append("<details><summary>Reproducibility</summary><pre>" + html.escape(
-        "\n".join([f"inputs: {r.inputs}", f"versions: {r.versions}",
-                   f"settings: { {k: v for k, v in r.settings.items() if k != 'lower_effective'} }"])) +
+        "\n".join([f"inputs: {r.provenance.inputs}", f"versions: {r.provenance.versions}",
+                   f"settings: { {k: v for k, v in r.provenance.settings.items() if k != 'lower_effective'} }"])) +
         "</pre></details>")
     return "\n".join(parts)
 
@@ -145,20 +146,21 @@ def result_section(result: CalibrationResult, figures: Mapping[str, Mapping[str,
 def _key_numbers_html(r: CalibrationResult, gof: dict) -> list[str]:
     """The key-number table (estimator, directions, χ² before and after, settings, verdict counts)
     and the paragraph that explains it; ``gof`` is the result's goodness of fit."""
+    ident = r.identifiability
     if r.estimator == "map":
         how = [("estimator", "MAP under the stated prior"),
                ("directions the data determine better than the prior (s > 1)", r.n_retained)]
     else:
         how = [("estimator", "truncated ML"), ("retained θ", r.n_retained),
-               ("truncation", f"{r.truncation.get('criterion', 'K-fold')} cross-validation" if r.truncation
-                else "threshold σ̄"), ("σ̄ [scale units]", r.sigma_bar)]
+               ("truncation", f"{ident.truncation.get('criterion', 'K-fold')} cross-validation" if ident.truncation
+                else "threshold σ̄"), ("σ̄ [scale units]", ident.sigma_bar)]
     key = [("operating points", r.n_points), ("channels", ", ".join(r.channels)), ("parameters", r.n_params)] + how
     key += [("χ²/dof before (dof = N)", gof["chi2_per_dof_before"]), ("N", gof["dof_before"]),
             ("χ²/dof after (dof = N − fitted directions)", gof["chi2_per_dof_after"]), ("dof after", gof["dof_after"]),
             ("p-value after", p_text(gof["p_value_after"])),
-            ("optimizer", r.settings.get("optimizer")), ("noise", r.settings.get("noise")),
+            ("optimizer", r.provenance.settings.get("optimizer")), ("noise", r.provenance.settings.get("noise")),
             ("prior σ of correction nodes [scale units]" if _has_field(r) else "prior σ [scale units]",
-             r.settings.get("prior_sigma"))]
+             r.provenance.settings.get("prior_sigma"))]
     key += [(f"verdict: {k}", v) for k, v in r.verdict_counts().items()]
     return [_table(["quantity", "value"], [(html.escape(k), _fmt(v)) for k, v in key]),
             "<p class='explain'>" + html.escape(_directions_words(r.estimator)) +
@@ -169,7 +171,7 @@ def _key_numbers_html(r: CalibrationResult, gof: dict) -> list[str]:
 
 def _failures_html(r: CalibrationResult) -> str:
     """The failed model points of the run, in red when any remain."""
-    fail = r.failures
+    fail = r.fit.failures
     fail_cls = "bad" if fail.get("final", 0) or fail.get("total_failed_point_evaluations", 0) else "ok"
     return (f'<p class="{fail_cls}">Failed model points: nominal {fail.get("nominal", 0)}, final '
             f'{fail.get("final", 0)}, over all evaluations {fail.get("total_failed_point_evaluations", 0)} '
@@ -185,7 +187,7 @@ def _fit_tables_html(r: CalibrationResult, gof: dict) -> list[str]:
         [(html.escape(c), html.escape(u), _fmt(float(s)), _fmt(gof["per_channel"][c]["chi2_per_point_before"]),
           _fmt(gof["per_channel"][c]["chi2_per_point_after"]), _fmt(gof["per_channel"][c]["rms_before"]),
           _fmt(gof["per_channel"][c]["rms_after"]))
-         for c, u, s in zip(r.channels, r.channel_units, r.noise_sigma)])
+         for c, u, s in zip(r.channels, r.channel_units, r.fit.noise_sigma)])
     worst = "<h3>Worst points after calibration</h3>" + _table(
         ["point", "channel", "whitened residual [σ]", "conditions"],
         [(w["point"], html.escape(w["channel"]), _fmt(w["whitened_residual"], 3),
@@ -198,7 +200,7 @@ def _verdicts_html(r: CalibrationResult) -> str:
     """The verdict table (every parameter but the poorly observable nodes within 2σ of nominal) and
     what the verdicts mean."""
     rows, details = [], []
-    for v in r.verdicts:
+    for v in r.identifiability.verdicts:
         if v["kind"] in ("lift_correction", "drag_correction") and v["verdict"] == "poorly observable" \
                 and not v["note"]:
             continue
@@ -206,7 +208,7 @@ def _verdicts_html(r: CalibrationResult) -> str:
                      _fmt(v["nominal"]), _fmt(v["value"]),
                      _fmt(v["std"]), _fmt(v["prior_std"]), _fmt(v["std_ratio"], 2), html.escape(v.get("note", ""))))
         details.append(html.escape(_shared_words(v)))
-    n_hidden = len(r.verdicts) - len(rows)
+    n_hidden = len(r.identifiability.verdicts) - len(rows)
     which = (f"Every non-field parameter, and every correction node that is identified, at a bound, or moved more "
              f"than 2σ; {n_hidden} poorly observable nodes within 2σ of nominal are not listed (their bands are as "
              f"wide as the prior)." if _has_field(r) else "Every parameter of the model.")
@@ -236,14 +238,14 @@ def decision_html(r: CalibrationResult) -> str:
     after, what the data determined, and every warning the run raised."""
     gof = r.goodness_of_fit()
     counts = r.verdict_counts()
-    ended = "ended converged" if r.status == "converged" else f"did NOT converge (status {r.status})"
+    ended = "ended converged" if r.estimate.status == "converged" else f"did NOT converge (status {r.estimate.status})"
     fit = ("consistent with the noise" if gof["p_value_after"] > 0.01 else "worse than the stated noise explains")
     verdicts = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v)
-    warnings = [t for t in [r.message, *r.checks.values()] if "WARNING" in t]
+    warnings = [t for t in [r.estimate.message, *r.provenance.checks.values()] if "WARNING" in t]
     text = (f"{r.name}: the calibration {ended}; χ²/dof {gof['chi2_per_dof_before']:.3g} before → "
             f"{gof['chi2_per_dof_after']:.3g} after against {r.noise_words()}, {fit}; of {r.n_params} parameters: "
             f"{verdicts}.")
-    failed = r.failures.get("final", 0)
+    failed = r.fit.failures.get("final", 0)
     if failed:
         text += f" {failed} operating point(s) failed at the estimate."
     body = f"<p class='decision'><b>{html.escape(text)}</b>"
@@ -283,7 +285,7 @@ def write_report(path: str | Path, sections: list[str] | None = None, title: str
             ["calibration", "channels", "retained θ", "identified", "χ²/dof before", "χ²/dof after", "failed"],
             [(html.escape(n), html.escape(", ".join(r.channels)), r.n_retained, r.verdict_counts()["identified"],
               _fmt(r.chi2_per_dof_before), _fmt(r.chi2_per_dof_after),
-              r.failures.get("total_failed_point_evaluations", 0)) for n, r in results.items()]))
+              r.fit.failures.get("total_failed_point_evaluations", 0)) for n, r in results.items()]))
     for name, paths in (extra_figures or {}).items():
         body.append(_figure_html(name, paths))
     body += list(sections or [])

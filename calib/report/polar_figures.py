@@ -35,10 +35,10 @@ def station_columns(eta: np.ndarray, max_stations: int) -> np.ndarray:
 
 def _seen_near(result: CalibrationResult, eta: np.ndarray, j: int) -> np.ndarray:
     """α [deg] seen by the data within half a station spacing of ``eta[j]``."""
-    if not result.alpha_seen.size:
+    if not result.fit.alpha_seen.size:
         return np.zeros(0)
     half = 0.5 * float(np.min(np.diff(eta))) if eta.size > 1 else 1.0
-    return result.alpha_seen[np.abs(result.eta_seen - eta[j]) <= half]
+    return result.fit.alpha_seen[np.abs(result.fit.eta_seen - eta[j]) <= half]
 
 
 def alpha_ticks(a0: float, a1: float) -> np.ndarray:
@@ -73,7 +73,7 @@ def plot_polars(result: CalibrationResult, max_stations: int = 5, truth: TruthFi
         x = (α − α₀)/(α₁ − α₀) inside; every drawn line carries the gid
         ``"<kind>:<row>:<col>"`` (kind: nominal, calibrated, truth).
     """
-    pb = result.polar_bands
+    pb = result.uncertainty.polar_bands
     if not pb:
         return None
     alpha_deg, eta = np.asarray(pb["alpha_deg"], float), np.asarray(pb["eta"], float)
@@ -107,7 +107,7 @@ def _polar_canvas(result: CalibrationResult, alpha_deg: np.ndarray, n: int, with
     """
     tile_w, tile_h = TILE_SIZE
     row_w = n * tile_w + (n - 1) * TILE_GAP
-    what = "corrected polars" + ("" if "cl0" in result.polar_bands else " (corrections only)")
+    what = "corrected polars" + ("" if "cl0" in result.uncertainty.polar_bands else " (corrections only)")
     width = MARGINS.left + row_w + MARGINS.right
     span = f"{alpha_deg[0]:g}…{alpha_deg[-1]:g}°"
     title = wrap_title(f"{result.name}: {what} on the α range of the correction nodes ({span})"
@@ -158,7 +158,7 @@ class _Stations:
 def _stations(result: CalibrationResult, alpha_deg: np.ndarray, eta: np.ndarray, idx: np.ndarray,
               truth: TruthField | None) -> _Stations:
     """The shared quantities of :class:`_Stations` for the drawn stations ``idx``."""
-    pb = result.polar_bands
+    pb = result.uncertainty.polar_bands
     conf = float(pb.get("confidence", 0.95))
     truth_d = None
     if truth is not None:

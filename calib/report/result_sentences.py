@@ -16,11 +16,11 @@ from calib.words import p_is
 
 def _prior_limit_clause(r: CalibrationResult) -> str:
     """How the prior limited the automatic choice, from the recorded curve ('' when not recorded)."""
-    limit = r.truncation.get("prior_limit")
+    limit = r.identifiability.truncation.get("prior_limit")
     if limit is None:
         return ""
     limit = int(limit)
-    cv = np.asarray(r.truncation["cv"], float)
+    cv = np.asarray(r.identifiability.truncation["cv"], float)
     if limit + 1 < cv.size and np.nanmin(cv[limit + 1:]) < np.nanmin(cv[:limit + 1]):
         return (f"; only the first {limit} directions are determined better by the data than by the prior, "
                 f"and the criterion's lower values beyond them ({np.nanmin(cv[limit + 1:]):.3g}) were not taken")
@@ -56,17 +56,18 @@ def sentences(r: CalibrationResult) -> list[str]:
 
 def _retained_sentences(r: CalibrationResult) -> list[str]:
     """How many θ were retained and how they were chosen (cross-validation or the threshold σ̄)."""
-    if r.truncation:
-        out = [f"The number of retained θ was chosen by {r.truncation.get('criterion', 'K-fold')} cross-validation "
+    ident = r.identifiability
+    if ident.truncation:
+        out = [f"The number of retained θ was chosen by {ident.truncation.get('criterion', 'K-fold')} cross-validation "
                f"over operating points (the fewest within one standard error of the minimum): "
-               f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {r.sigma_bar:.3g} scale units; criterion "
-               f"{float(np.asarray(r.truncation['cv'])[r.n_retained]):.3g} against "
-               f"{float(np.asarray(r.truncation['cv'])[0]):.3g} with none retained)"
+               f"{r.n_retained} of {r.n_params} (equivalent σ̄ = {ident.sigma_bar:.3g} scale units; criterion "
+               f"{float(np.asarray(ident.truncation['cv'])[r.n_retained]):.3g} against "
+               f"{float(np.asarray(ident.truncation['cv'])[0]):.3g} with none retained)"
                + _prior_limit_clause(r) + "."]
-        if "second_retained" in r.truncation:
-            out.append(second_start_sentence(r.truncation))
+        if "second_retained" in ident.truncation:
+            out.append(second_start_sentence(ident.truncation))
         return out
-    return [(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {r.sigma_bar:.3g} scale units and were "
+    return [(f"{r.n_retained} of {r.n_params} θ have σ(θ) ≤ σ̄ = {ident.sigma_bar:.3g} scale units and were "
              f"estimated; the other {r.n_params - r.n_retained} directions stay at nominal.")]
 
 
@@ -82,34 +83,35 @@ def _fit_sentence(gof: dict) -> str:
 
 def _band_sentences(r: CalibrationResult) -> list[str]:
     """What the bands include and leave out: aliasing, the C_D,min bound, the fit scale."""
-    out = []
-    if r.aliasing_chi2 > 0:
+    unc, out = r.uncertainty, []
+    if unc.aliasing_chi2 > 0:
         out.append(f"A field between the correction nodes of the prior's typical size would add about "
-                   f"{r.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.chi2_after:.3g}); the bands include "
+                   f"{unc.aliasing_chi2:.3g} to χ² on average (χ² after here: {r.fit.chi2_after:.3g}); the bands include "
                    f"its effect on the estimate.")
-    if r.aliasing_note:
-        out.append(f"Not in the bands: {r.aliasing_note}")
-    bounded = _bounded_drag_points(r.polar_bands, r.settings.get("cd_min"))
+    if unc.aliasing_note:
+        out.append(f"Not in the bands: {unc.aliasing_note}")
+    bounded = _bounded_drag_points(unc.polar_bands, r.provenance.settings.get("cd_min"))
     if bounded:
-        out.append(f"The ΔC_D band starts at C_D,min = {r.settings['cd_min']:.3g} at {bounded[0]} of the "
+        out.append(f"The ΔC_D band starts at C_D,min = {r.provenance.settings['cd_min']:.3g} at {bounded[0]} of the "
                    f"{bounded[1]} points of the polar figure, where the Gaussian band would reach below it: the band "
-                   f"is the shortest {100 * float(r.polar_bands.get('confidence', 0.95)):.0f} % interval of the "
+                   f"is the shortest {100 * float(unc.polar_bands.get('confidence', 0.95)):.0f} % interval of the "
                    f"Gaussian truncated at that bound.")
-    if r.fit_scale > 1.0:
-        out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {r.fit_scale:.3g} (the misfit counts "
+    if unc.fit_scale > 1.0:
+        out.append(f"The covariance of the retained θ is multiplied by χ²/dof = {unc.fit_scale:.3g} (the misfit counts "
                    f"as noise; setting scale_by_fit), so their σ and the data part of every band are "
-                   f"{np.sqrt(r.fit_scale):.3g}× what they would be without it.")
+                   f"{np.sqrt(unc.fit_scale):.3g}× what they would be without it.")
     return out
 
 
 def _prior_check_sentences(r: CalibrationResult) -> list[str]:
     """The prior check's outcome, why it failed, or that it was not run (none without bands)."""
-    if r.prior_check.get("failed"):
-        return [(f"Prior check: could not be computed ({r.prior_check['failed']}); whether the data support the "
+    unc = r.uncertainty
+    if unc.prior_check.get("failed"):
+        return [(f"Prior check: could not be computed ({unc.prior_check['failed']}); whether the data support the "
                  f"stated prior was not tested.")]
-    if r.prior_check:
-        return [PriorCheck(**r.prior_check).sentence()]
-    if r.settings.get("prior_check") is False and r.polar_bands:
+    if unc.prior_check:
+        return [PriorCheck(**unc.prior_check).sentence()]
+    if r.provenance.settings.get("prior_check") is False and unc.polar_bands:
         return [("Prior check: not run (prior_check = false): whether the data support the stated prior, which "
                  "sets the width of the bands in the directions the data leave to it, was not tested.")]
     return []
@@ -117,7 +119,7 @@ def _prior_check_sentences(r: CalibrationResult) -> list[str]:
 
 def _curvature_sentences(r: CalibrationResult) -> list[str]:
     """What the frozen directions' prior adds through the model's curvature, or that it was left out."""
-    cur = r.curvature
+    cur = r.uncertainty.curvature
     if cur.get("samples", 0) > 0 and "variance_ratio_mean" in cur:
         return [(f"The frozen directions' prior, propagated through the model's curvature ({cur['used']} of "
                  f"{cur['samples']} draws), adds to the variance of each retained θ on average "
@@ -131,13 +133,13 @@ def _curvature_sentences(r: CalibrationResult) -> list[str]:
 
 def _field_sentences(r: CalibrationResult) -> list[str]:
     """The correction nodes' verdicts counted (none without a correction field)."""
-    field = [v for v in r.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
+    field = [v for v in r.identifiability.verdicts if v["kind"] in ("lift_correction", "drag_correction")]
     if not field:
         return []
     poor = [v for v in field if v["verdict"] == "poorly observable"]
     moved = [v for v in poor if v["note"]]
     txt = (f"Of {len(field)} correction nodes, {sum(v['verdict'] == 'identified' for v in field)} are identified "
-           f"(posterior σ at most {r.settings.get('identified_ratio', 0.5):g} × prior σ), "
+           f"(posterior σ at most {r.provenance.settings.get('identified_ratio', 0.5):g} × prior σ), "
            f"{sum(v['verdict'] == 'at bound' for v in field)} at a bound and {len(poor)} poorly observable: "
            f"their bands stay close to the prior's width")
     txt += (f"; {len(moved)} of these nevertheless moved more than 2σ from nominal (listed below)." if moved
@@ -149,7 +151,7 @@ def _parameter_sentences(r: CalibrationResult) -> list[str]:
     """Each parameter other than the correction nodes: estimate, verdict, shared information, and
     how to tighten it where there is advice."""
     out = []
-    for v in r.verdicts:
+    for v in r.identifiability.verdicts:
         if v["kind"] in ("lift_correction", "drag_correction"):
             continue
         line = (f"{v['name']} = {v['value']:.4g} ± {v['std']:.2g} {v['unit']} (1σ; prior σ {v['prior_std']:.3g}, "
@@ -159,7 +161,7 @@ def _parameter_sentences(r: CalibrationResult) -> list[str]:
             if v.get("confounded_with"):
                 line += f" (most with {v['confounded_with']})"
         out.append(line + ".")
-        advice = tightening_sentence(v["name"], (r.tightening or {}).get(v["name"], {}), v["unit"])
+        advice = tightening_sentence(v["name"], (r.identifiability.tightening or {}).get(v["name"], {}), v["unit"])
         if advice:
             out.append(advice)
     return out
@@ -168,14 +170,14 @@ def _parameter_sentences(r: CalibrationResult) -> list[str]:
 def _solver_sentences(r: CalibrationResult) -> list[str]:
     """Failed point evaluations, operating points with several BEM roots, and folds of the solution."""
     out = []
-    fail = r.failures
+    fail = r.fit.failures
     if fail.get("total_failed_point_evaluations", 0):
         out.append(f"{fail['total_failed_point_evaluations']} point evaluations failed over the run "
                    f"({fail.get('final', 0)} at the estimate); failed points are left out of the cost.")
-    n_multi = int(np.count_nonzero(r.multiple_roots)) if r.multiple_roots.size else 0
+    n_multi = int(np.count_nonzero(r.fit.multiple_roots)) if r.fit.multiple_roots.size else 0
     if n_multi:
         out.append(f"At {n_multi} operating points the BEM residual has several roots at some station; the "
                    f"root was chosen by the solver's documented rule and those points are flagged.")
-    if r.fold_directions:
-        out.append(fold_sentence(r.fold_directions, r.conditions, r.tip_speed_ratio()))
+    if r.identifiability.fold_directions:
+        out.append(fold_sentence(r.identifiability.fold_directions, r.conditions, r.tip_speed_ratio()))
     return out

@@ -38,14 +38,14 @@ def plot_singular_values(result: CalibrationResult, ax=None):
     """
     own = ax is None
     fig, ax = _fig_ax(ax)
-    s = result.singular_values
+    s = result.identifiability.singular_values
     i = np.arange(1, s.size + 1)
-    keep = result.retained
+    keep = result.identifiability.retained
     ax.semilogy(i[keep], np.maximum(s[keep], 1e-16), "o", color="C0", label=f"retained ({keep.sum()})")
     ax.semilogy(i[~keep], np.maximum(s[~keep], 1e-16), "x", color="C3", label=f"frozen ({(~keep).sum()})")
-    if np.isfinite(result.sigma_bar):
-        ax.axhline(1.0 / result.sigma_bar, color="k", ls="--", lw=1,
-                   label=f"cut 1/σ̄ = {1 / result.sigma_bar:.3g}")
+    if np.isfinite(result.identifiability.sigma_bar):
+        ax.axhline(1.0 / result.identifiability.sigma_bar, color="k", ls="--", lw=1,
+                   label=f"cut 1/σ̄ = {1 / result.identifiability.sigma_bar:.3g}")
     ax.set_xlabel("index i")
     ax.set_ylabel("s_i = 1/σ(θ_i) [1/scale]")
     ax.set_title(f"{result.name}: singular-value spectrum ({result.n_retained} of {s.size} retained)", fontsize=10,
@@ -71,11 +71,11 @@ def plot_spectra(results: Mapping[str, CalibrationResult], ax=None):
     own = ax is None
     fig, ax = _fig_ax(ax)
     for k, (name, r) in enumerate(results.items()):
-        s = np.maximum(r.singular_values, 1e-16)
+        s = np.maximum(r.identifiability.singular_values, 1e-16)
         ax.semilogy(np.arange(1, s.size + 1), s, "o-", ms=3, color=f"C{k}",
                     label=f"{name}: {r.n_retained} retained")
-        if np.isfinite(r.sigma_bar):
-            ax.axhline(1 / r.sigma_bar, color=f"C{k}", ls="--", lw=0.8)
+        if np.isfinite(r.identifiability.sigma_bar):
+            ax.axhline(1 / r.identifiability.sigma_bar, color=f"C{k}", ls="--", lw=0.8)
     ax.set_xlabel("index i")
     ax.set_ylabel("s_i [1/scale]")
     ax.set_title("singular-value spectra by sensor set (dashed: each cut 1/σ̄)", fontsize=10, y=1.0)
@@ -93,7 +93,7 @@ def plot_truncation(result: CalibrationResult, ax=None):
     matplotlib.figure.Figure or None
         None for an explicit σ̄ (no truncation curve).
     """
-    t = result.truncation
+    t = result.identifiability.truncation
     if not t:
         return None
     own = ax is None

@@ -31,8 +31,8 @@ def predict_channels(result: CalibrationResult, model, conditions, confidence: f
     values, half_width : ndarray, shape (n_points, n_channels)
         Prediction and half-width of the interval [channel units]; NaN where the model failed.
     """
-    ev, G = model.jacobian(result.p_hat, conditions)
-    var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), result.cov_p, np.nan_to_num(G))
+    ev, G = model.jacobian(result.estimate.p_hat, conditions)
+    var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), result.uncertainty.cov_p, np.nan_to_num(G))
     z = float(stats.norm.ppf(0.5 * (1 + confidence)))
     half = np.where(ev.ok[:, None], z * np.sqrt(np.maximum(var, 0.0)), np.nan)
     values = np.where(ev.ok[:, None], ev.values, np.nan)

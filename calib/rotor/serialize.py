@@ -103,7 +103,7 @@ def rotor_from_dict(data: dict, source: str = "recorded rotor") -> Rotor:
     data : dict
         As written by :func:`rotor_to_dict` (and read back from JSON).
     source : str
-        Where the dict came from (named in errors, e.g. ``"result.json: model_spec.rotor_data"``).
+        Where the dict came from (named in errors, e.g. ``"result.json: provenance.model_spec.rotor_data"``).
 
     Raises
     ------

@@ -118,7 +118,7 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
                           results={o.name: o.result for o in outcomes},
                           figures={o.name: o.figures for o in outcomes}, intro=intro,
                           extra_figures=run.study_figures(outcomes),
-                          checks={o.name: o.result.checks for o in outcomes})
+                          checks={o.name: o.result.provenance.checks for o in outcomes})
     echo(f"[calib run] report: {report}")
     return outcomes
 
@@ -229,14 +229,14 @@ class _Run:
         t_cal = time.perf_counter()
         res = cal.run()
         t_cal = time.perf_counter() - t_cal
-        res.inputs[src] = sha256_of(src)
-        res.inputs["workflow"] = cfg["name"]
-        res.checks.update(self.unit_notes)
-        res.checks.update(_fault_checks(raw_model))
+        res.provenance.inputs[src] = sha256_of(src)
+        res.provenance.inputs["workflow"] = cfg["name"]
+        res.provenance.checks.update(self.unit_notes)
+        res.provenance.checks.update(_fault_checks(raw_model))
         if self.truth_p is not None:
-            res.checks.update(truth_checks(model, res, cfg["truth"]))
+            res.provenance.checks.update(truth_checks(model, res, cfg["truth"]))
         if self.diag is not None:
-            res.checks["diagnosis"] = in_workflow.diagnosis_sentence(self.diag)
+            res.provenance.checks["diagnosis"] = in_workflow.diagnosis_sentence(self.diag)
         if setup.validation is not None:
             kind = "leave-one-out" if setup.validation.split == "one" else "band split"
             val = validation.leave_one_out(
@@ -244,7 +244,7 @@ class _Run:
                 meas.select_channels(stage["channels"]), st, setup.validation,
                 progress=lambda line, _n=name, _k=kind: echo(f"[calib run] {_n}: {_k}: {line}"))
             self.validations[name] = val
-            res.checks.update({f"{kind} ({c})": val.sentence(c) for c in val.channels()})
+            res.provenance.checks.update({f"{kind} ({c})": val.sentence(c) for c in val.channels()})
         stage_dir = self.out / f"stage{k + 1}_{''.join(ch if ch.isalnum() else '_' for ch in name)}"
         stage_dir.mkdir(exist_ok=True)
         t_rep = time.perf_counter()
@@ -255,15 +255,15 @@ class _Run:
         figs = write_figures(res, stage_dir, truth=truth, progress=lambda line: echo(f"[calib run] {line}"))
         t_rep = time.perf_counter() - t_rep
         if self.hist is not None:
-            self.hist.event("stage_done", run=name, folder=stage_dir.name, status=res.status,
-                            model_evaluations=res.failures.get("model_evaluations"),
-                            model_jacobians=res.failures.get("model_jacobians"))
+            self.hist.event("stage_done", run=name, folder=stage_dir.name, status=res.estimate.status,
+                            model_evaluations=res.fit.failures.get("model_evaluations"),
+                            model_jacobians=res.fit.failures.get("model_jacobians"))
         kept = (f"the data beat the prior in {res.n_retained} of {res.n_params} directions" if res.estimator == "map"
                 else f"{res.n_retained} of {res.n_params} retained")
         echo(f"[calib run] {name}: {res.summary().splitlines()[0].split(': ', 1)[-1]}; {kept}; "
              f"chi2/dof {res.chi2_per_dof_before:.3g} -> {res.chi2_per_dof_after:.3g} against {res.noise_words()}; "
              f"calibration {t_cal:.1f} s, figures {t_rep:.1f} s; results in {stage_dir}")
-        for label, text in res.checks.items():
+        for label, text in res.provenance.checks.items():
             echo(f"[calib run] {name}: {label}: {text}")
         return StageOutcome(name, res, figs, stage_dir)
 

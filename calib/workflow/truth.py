@@ -3,15 +3,11 @@ model, and statements of a result against it (band coverage, nuisance errors).""
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from calib.corrections import CorrectionGrid
-from calib.types import nominal_vector
 from calib.models.bem_model import BemModel
-
-
-
+from calib.types import nominal_vector
 
 
 def smooth_field(bumps: list[dict], alpha_deg, eta):
@@ -59,19 +55,20 @@ def truth_checks(model, result, truth: dict) -> dict[str, str]:
     the report draws (frozen-direction prior and representation variance included).
     """
     out = {}
-    if model.capabilities.correction_field and result.alpha_seen.size:
+    if model.capabilities.correction_field and result.fit.alpha_seen.size:
         field = model.correction_field()
-        a, e = result.alpha_seen, result.eta_seen
+        a, e = result.fit.alpha_seen, result.fit.eta_seen
         tl, td = smooth_field(truth["bumps"], a, e)
-        prior = result.prior_std if result.settings.get("representation_error", True) else None
+        prior = result.uncertainty.prior_std if result.provenance.settings.get("representation_error", True) else None
         # a result saved before the smooth-field prior had independent nodes (correlation length 0)
-        cov = field.coverage(result.p_hat, result.cov_p, a, e, tl, td, result.settings.get("band_confidence", 0.95),
-                             prior, correlation_length=float(result.settings.get("prior_correlation", 0.0)),
-                             cd_min=result.settings.get("cd_min"))
+        cov = field.coverage(result.estimate.p_hat, result.uncertainty.cov_p, a, e, tl, td,
+                             result.provenance.settings.get("band_confidence", 0.95),
+                             prior, correlation_length=float(result.provenance.settings.get("prior_correlation", 0.0)),
+                             cd_min=result.provenance.settings.get("cd_min"))
         out["coverage of the known truth"] = (
             f"the {100 * cov['confidence']:.0f} % bands contain the true ΔC_L at {100 * cov['lift']:.1f} % and the "
             f"true ΔC_D at {100 * cov['drag']:.1f} % of the {cov['n_points']} (α, η) points the operating points reach")
-    for v in result.verdicts:
+    for v in result.identifiability.verdicts:
         if v["name"] in truth and v["std"] > 0:
             z = (v["value"] - float(truth[v["name"]])) / v["std"]
             out[f"{v['name']} against its truth"] = (f"estimate {v['value']:.4g} ± {v['std']:.2g} {v['unit']}, truth "

@@ -242,7 +242,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
                              name=f"fold {i + 1}").run()
             pred = res.predict(measurements.conditions.subset(test), model=make_model(),
                                confidence=validation.confidence)
-            status = res.status
+            status = res.estimate.status
         except CalibError as exc:   # a failed fold is counted and shown, the others go on
             say(f"fold {i + 1}/{len(folds)} ({label}) failed: {exc}")
             res, pred, status = None, None, f"failed: {type(exc).__name__}"
@@ -256,7 +256,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
                                             -1 if res is None else res.n_retained, status, label))
                     continue
                 noise = float(measurements.sigma[k, j]) if measurements.sigma is not None else float(
-                    np.median(res.sigma[:, j]))
+                    np.median(res.fit.sigma[:, j]))
                 sd = float(pred.std[kk, j])
                 half = z * float(np.hypot(sd, noise))
                 yk = float(pred.values[kk, j])
@@ -264,7 +264,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
                 out.rows.append(FoldRow(g, c, float(measurements.values[k, j]), float(y_nom[k, j]), yk,
                                         yk - half, yk + half, sd, noise, res.n_retained, status, label, why))
         if res is not None:
-            say(f"fold {i + 1}/{len(folds)} ({label}): {res.n_retained} θ retained, {res.status}")
+            say(f"fold {i + 1}/{len(folds)} ({label}): {res.n_retained} θ retained, {res.estimate.status}")
     return out
 
 
@@ -341,6 +341,6 @@ def informed_eigenshapes(result, block: str = "lift", level: float = INFORMED_LE
     not show. None when the result has no correction field."""
     from calib.report.eigenshape_figures import plot_eigenshapes
 
-    modes = np.flatnonzero(np.asarray(result.singular_values) >= level)[:max_modes]
+    modes = np.flatnonzero(np.asarray(result.identifiability.singular_values) >= level)[:max_modes]
     return plot_eigenshapes(result, block, modes=modes,
                             which=f"directions the data inform (s_i ≥ {level:g}, retained or not)")
