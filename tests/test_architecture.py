@@ -1,4 +1,4 @@
-"""The package's import structure, read from the source (every ``import`` statement counts:
+"""The package's structure, read from the source. Imports (every ``import`` statement counts:
 module level, inside functions and under ``TYPE_CHECKING``):
 
 - no import cycle among ``calib`` modules;
@@ -6,6 +6,9 @@ module level, inside functions and under ``TYPE_CHECKING``):
 - no module re-exports a name it imports from another ``calib`` module (a "shim": the name is
   imported and never used, or listed in ``__all__``) — except a package's ``__init__``, whose
   imports are the package's public face.
+
+Sizes: at most a dozen modules at the top level, no module over 400 lines, no function over 60
+lines without its docstring.
 
 Edges are explicit imports only: importing ``calib.a.b`` runs ``calib/a/__init__.py`` first, but
 that implicit edge is not a dependency the module states.
@@ -172,6 +175,34 @@ def test_the_checks_see_a_cycle_a_private_import_and_a_shim(tmp_path):
     assert cycles(import_graph(tmp_path)) == [["calib.a", "calib.sub.b"]]
     assert private_imports(tmp_path) == ["calib.sub.b: from calib.a import _helper"]
     assert reexports(tmp_path) == ["calib.a: B (from calib.sub.b)", "calib.sub.b: shown (from calib.c)"]
+
+
+MAX_TOP_LEVEL_MODULES = 12
+MAX_MODULE_LINES = 400
+MAX_FUNCTION_LINES = 60        # without its docstring
+
+
+def test_a_handful_of_modules_at_the_top_level_and_none_too_long():
+    top = sorted(p.name for p in (ROOT / "calib").glob("*.py"))
+    assert len(top) <= MAX_TOP_LEVEL_MODULES, top
+    long = {str(p.relative_to(ROOT)): n for p in (ROOT / "calib").rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert long == {}
+
+
+def _code_lines(fn: ast.AST) -> int:
+    """Lines of a function without its docstring."""
+    body = fn.body
+    doc = body[0] if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+        and isinstance(body[0].value.value, str) else None
+    return fn.end_lineno - fn.lineno + 1 - (doc.end_lineno - doc.lineno + 1 if doc else 0)
+
+
+def test_no_function_longer_than_a_screen():
+    long = [f"{p.relative_to(ROOT)}:{n.lineno} {n.name} ({_code_lines(n)} lines)"
+            for p in (ROOT / "calib").rglob("*.py") for n in ast.walk(ast.parse(p.read_text()))
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and _code_lines(n) > MAX_FUNCTION_LINES]
+    assert long == []
 
 
 @pytest.mark.parametrize("doc", ["docs/layout.md"])
