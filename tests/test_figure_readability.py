@@ -10,17 +10,14 @@ import numpy as np
 import pytest
 from figure_check import figure_problems
 from matplotlib.figure import Figure
-from twin_model import TwinModel, twin_conditions
+from test_report_figures import result  # noqa: F401  (the fixture)
 
-from calib.calibration import CalibrationSettings, Calibrator
 from calib.demo import DEMO_DPI, plot_cp_surface, plot_power_curve
-from calib.measurements import synthesize
 from calib.report import figures as F
 from calib.report.diagnosis_figures import plot_candidates, plot_gap
 from calib.report.panels import spread, tile_labels, unit_prefix
 from calib.report.spectrum_figures import plot_spectra
 from calib.report.validation_figures import plot_campaign
-from calib.types import nominal_vector
 
 
 # ----------------------------------------------------------------------------- the check fails where it should
@@ -87,15 +84,7 @@ def test_unit_prefix_spread_and_tile_labels():
 
 
 # ----------------------------------------------------------------------------- the figures pass it
-@pytest.fixture(scope="module")
-def result():
-    model = TwinModel(channels=("power", "thrust", "root_flap_moment"))
-    p_true = nominal_vector(model.parameters)
-    n = model.grid.n_lift
-    p_true[:n] = 0.05 * np.sin(np.arange(n))
-    meas = synthesize(model, p_true, twin_conditions(),
-                      relative_sigma={"power": 0.005, "thrust": 0.005, "root_flap_moment": 0.005}, seed=2)
-    return Calibrator(model, meas, CalibrationSettings(sigma_bar=0.3), name="twin").run()
+# ``result``: the twin calibration of tests/test_report_figures.py (its module-scoped fixture)
 
 
 def _megawatt(result):
