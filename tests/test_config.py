@@ -89,3 +89,23 @@ def test_an_executor_table_becomes_its_executor():
     ex = executor_from_table({"kind": "serial"}, "wf.toml")
     assert isinstance(ex, SerialExecutor) and ex.map(lambda x: 2 * x, [1, 2]) == [2, 4]
     ex.close()
+
+
+def test_an_unknown_model_kind_gets_one_message_from_every_entry_point():
+    """A recorded spec, a workflow's [model] table and a model built from a table refuse an unknown
+    kind with the same words (calib.models.registry.model_kind), written once in the package."""
+    from pathlib import Path
+
+    from calib.models.registry import build_model
+    from calib.workflow.setup import _model_kind
+
+    words = r"unknown model kind 'ccblade'; valid kinds: bem, fmu"
+    with pytest.raises(InputError, match=words) as spec:
+        build_model({"kind": "ccblade"}, source="result.json: provenance.model_spec")
+    with pytest.raises(InputError, match=words) as table:
+        model_from_workflow({"kind": "ccblade"}, {"name": "nrel5mw"}, ["power"], "w.toml")
+    with pytest.raises(InputError, match=words) as workflow:
+        _model_kind({"model": {"kind": "ccblade"}}, "w.toml", [])
+    assert spec.value.field == "kind" and table.value.field == workflow.value.field == "model.kind"
+    package = Path(__file__).resolve().parents[1] / "calib"
+    assert sum(p.read_text().count('"unknown model kind') for p in package.rglob("*.py")) == 1

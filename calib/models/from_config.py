@@ -40,7 +40,7 @@ from calib.bem.solver import BemSettings
 from calib.config import NUM, Key, names_list, schema_of, settings_from_table
 from calib.errors import InputError
 from calib.fmu.plan import DEFAULT_TIMEOUT
-from calib.models.registry import MODEL_KINDS
+from calib.models.registry import model_kind
 
 @dataclass(frozen=True)
 class FmuModelTable:
@@ -142,10 +142,7 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
     BemModel or FmuModel
     """
     cfg = dict(cfg_model or {})
-    kind = cfg.get("kind", "bem")
-    if kind not in MODEL_KINDS:
-        raise InputError(f"unknown model kind {kind!r}; valid kinds: {', '.join(MODEL_KINDS)}", source,
-                         field="model.kind")
+    kind = model_kind(cfg.get("kind", "bem"), source, "model.kind")
     if kind == "bem":
         return _bem_model(cfg, rotor_table, grid, channels, source, base_dir)
     t = settings_from_table(FmuModelTable, cfg, "model", source, FMU_KEYS, table_label="[model]")

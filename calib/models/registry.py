@@ -24,6 +24,29 @@ def _fmu(spec, base_dir, source):
 MODEL_KINDS = {"bem": _bem, "fmu": _fmu}
 
 
+def model_kind(kind, source, field: str = "kind") -> str:
+    """``kind`` when it names a model kind of :data:`MODEL_KINDS`, else the one error every entry
+    point gives (a recorded spec, a workflow's ``[model]`` table, a model built from a table).
+
+    Parameters
+    ----------
+    kind : object
+        The value given.
+    source : str or Path
+        Where it was given (named in the error).
+    field : str
+        Its key there (``kind`` or ``model.kind``).
+
+    Raises
+    ------
+    InputError
+        Not a model kind; the message lists the valid ones.
+    """
+    if kind not in MODEL_KINDS:
+        raise InputError(f"unknown model kind {kind!r}; valid kinds: {', '.join(MODEL_KINDS)}", source, field=field)
+    return kind
+
+
 def check_fmu_files(spec: dict, base_dir=None, source: str = "model spec") -> None:
     """Refuse an FMU spec whose recorded FMU or mapping file is missing or changed.
 
@@ -83,10 +106,7 @@ def build_model(spec: dict, base_dir=None, source: str = "model spec"):
     InputError
         Unknown kind, a missing key, or recorded files missing or changed (named).
     """
-    kind = spec.get("kind") if isinstance(spec, dict) else None
-    if kind not in MODEL_KINDS:
-        raise InputError(f"unknown model kind {kind!r}; valid kinds: {', '.join(MODEL_KINDS)}", source,
-                         field="kind")
+    kind = model_kind(spec.get("kind") if isinstance(spec, dict) else None, source)
     try:
         return MODEL_KINDS[kind](spec, base_dir, source)
     except KeyError as exc:

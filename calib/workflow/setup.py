@@ -20,7 +20,7 @@ from calib.logs import say
 from calib.measurements import Measurements, read_measurements, sha256_of
 from calib.models.bem_model import BemModel
 from calib.models.from_config import angle_overrides
-from calib.models.registry import MODEL_KINDS
+from calib.models.registry import model_kind
 from calib.rotor.provenance import absolute_table, file_provenance
 from calib.rotor.sources import rotor_from_table
 from calib.types import STANDARD_AIR_DENSITY, OperatingConditions
@@ -221,9 +221,7 @@ def _model_kind(cfg: dict, src: str, notes: list) -> tuple[dict | None, dict]:
     """The FMU table of ``[model] kind = "fmu"`` (None for the native BEM) and the ``[model]``
     keys left for the native BEM (none for an FMU)."""
     mcfg = dict(cfg.get("model", {}))
-    kind = mcfg.pop("kind", "bem")
-    if kind not in MODEL_KINDS:
-        raise InputError(f"unknown model kind {kind!r}; valid: {', '.join(MODEL_KINDS)}", src, field="model.kind")
+    kind = model_kind(mcfg.pop("kind", "bem"), src, "model.kind")
     fmu_table = None
     if kind == "fmu":
         fmu_table, mcfg = {"kind": "fmu", **mcfg}, {}
