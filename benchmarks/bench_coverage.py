@@ -9,7 +9,7 @@ nodes and a pitch offset; truth pitch offset 0.2 deg), two truths:
     calibration nodes (the calibrated model can represent it exactly);
 (b) outside it: the same smooth field sampled on a 1 deg × 0.025 grid (as the workflow);
 (c) a check of the bands themselves: a truth drawn, for each seed, from the stated prior
-    (the smooth-field prior of ``calib.calibration.calibrator.CalibrationSettings``: 1 scale unit per
+    (the smooth-field prior of ``calib.calibration.settings.CalibrationSettings``: 1 scale unit per
     node, correlation length one node spacing) at the calibration nodes, pitch offset 0.2 deg.
     Draws that make C_D < C_D,min (the calibration's bound, 0.003) at a reached section are
     drawn again (the prior conditioned on the polars the calibration states possible; its drag
@@ -161,7 +161,7 @@ def _fine_prior_draw(tmodel, model, grid, cond, seed: int, cd_min: float | None)
 
 def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calibration) -> dict:
     """Coverage of the polar bands and NEES over ``n_seeds`` noise seeds, twins (a)–(d);
-    ``calibration`` overrides :class:`calib.calibration.calibrator.CalibrationSettings` fields (default
+    ``calibration`` overrides :class:`calib.calibration.settings.CalibrationSettings` fields (default
     ``cd_min = 0.003``)."""
     cfg, rotor, settings, channels, cond, grid, model = _setup()
     bumps = cfg["truth"]["bumps"]

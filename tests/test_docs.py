@@ -140,5 +140,5 @@ def test_every_setting_is_documented_where_the_reference_is_generated_from():
         assert all(desc for _, desc in parameter_docs(cls).values()), cls.__name__
     table = settings_markdown(CalibrationSettings, "calibration")
     assert '| `calibration.estimator` | `"map"` |' in table and "(undocumented)" not in table
-    assert "<!-- settings: calib.calibration.calibrator.CalibrationSettings calibration -->" in \
+    assert "<!-- settings: calib.calibration.settings.CalibrationSettings calibration -->" in \
         (ROOT / "docs" / "reference" / "settings.md").read_text()

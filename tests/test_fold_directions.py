@@ -4,7 +4,7 @@ Near a fold of the BEM residual the kept root's sensitivity grows without bound,
 direction that such a point alone determines gets a σ that holds only on a narrow ridge
 (coverage twin (d), tuning seed 8301: 99.5 % of the leading direction from one point, the
 estimate 8.9 σ from the truth along it). Such a direction is stated with its prior variance
-added, and the result and report say so (``calib.calibration.identifiability.fold_dominated_directions``).
+added, and the result and report say so (``calib.calibration.fold_directions.fold_dominated_directions``).
 """
 
 import dataclasses

@@ -5,7 +5,7 @@ a low tip-speed-ratio point whose sections sit at 15–30°, beyond the last nod
 correction field is the prior's: its interval must carry the variance of the outputs under
 fields drawn from the smooth-field prior. That variance is measured here by Monte Carlo through
 the nonlinear model (fields drawn on the fine grid, each evaluated), independently of the
-linearized formula :meth:`calib.calibration.result.CalibrationResult._field_between_nodes` uses.
+linearized formula :func:`calib.calibration.prediction.field_between_nodes` uses.
 """
 
 from __future__ import annotations

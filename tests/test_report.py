@@ -37,6 +37,7 @@ def figure_paths(result, tmp_path_factory):
 def test_result_round_trip(result, tmp_path):
     jpath, npath = result.save(tmp_path)
     back = load_result(tmp_path)
+    # exact: save writes the arrays' bytes and load hands them back, no arithmetic in between
     for part, name in ARRAY_FIELDS:
         np.testing.assert_array_equal(np.asarray(getattr(getattr(back, part), name)),
                                       np.asarray(getattr(getattr(result, part), name)), err_msg=f"{part}.{name}")

@@ -41,6 +41,7 @@ def test_a_schema_2_result_saved_again_is_schema_3_with_the_same_content(tmp_pat
     with np.load(tmp_path / "result.npz") as z:
         assert "estimate.p_hat" in z.files and "p_hat" not in z.files
     new = load_result(tmp_path)
+    # exact: the migration and the new files move the stored bytes, no arithmetic in between
     for part, name in ARRAY_FIELDS:
         np.testing.assert_array_equal(np.asarray(getattr(getattr(new, part), name)),
                                       np.asarray(getattr(getattr(old, part), name)), err_msg=f"{part}.{name}")

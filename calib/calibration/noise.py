@@ -1,6 +1,6 @@
 """Stated noise models for measurement tables without a 1-σ column.
 
-``noise = "relative"`` in :class:`calib.calibration.calibrator.CalibrationSettings`: the 1-σ error of
+``noise = "relative"`` in :class:`calib.calibration.settings.CalibrationSettings`: the 1-σ error of
 every value of a channel is a stated fraction of that channel's RMS value over the table,
 
     σ_c = r_g · sqrt(mean_k y_kc²),

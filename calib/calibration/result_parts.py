@@ -71,7 +71,7 @@ class Identifiability:
         explicit σ̄.
     fold_directions : list of dict
         Retained θ that a point with several roots of the BEM equations determines (more than
-        half of the θ's information, :func:`calib.calibration.identifiability.fold_dominated_directions`):
+        half of the θ's information, :func:`calib.calibration.fold_directions.fold_dominated_directions`):
         ``point``, ``theta`` (1-based), ``share``, ``sensitivity_ratio`` and the σ along the
         direction before and after its prior variance was added, ``sigma_before``,
         ``sigma_after`` [scale units]. Empty when there is none.

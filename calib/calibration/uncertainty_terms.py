@@ -189,7 +189,7 @@ class ModelTerms:
 
     def fold_directions(self, lin, svd, multiple_roots) -> list:
         """Retained directions that points with several roots of the BEM equations determine
-        (:func:`calib.calibration.identifiability.fold_dominated_directions`): one record per (point, direction);
+        (:func:`calib.calibration.fold_directions.fold_dominated_directions`): one record per (point, direction);
         their stated covariance gets the prior variance along them added (:func:`calib.calibration.uncertainty.fold_inflation`),
         so their σ is at least the prior's."""
         Vr = svd.V[:, svd.retained]

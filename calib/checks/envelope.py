@@ -3,7 +3,7 @@
 A calibrated model is trusted where its data were: at tip-speed ratios, pitch angles and wind
 speeds inside the ranges of the calibration's operating points, and where each blade
 station meets angles of attack the calibration's points reached there (the (α, η) the fit
-was informed on; :attr:`calib.calibration.result.CalibrationResult.alpha_seen`). A predicted point
+was informed on; :attr:`calib.calibration.result_parts.Fit.alpha_seen`). A predicted point
 outside either is an extrapolation: :func:`envelope_of` says which way, per point, in words
 an engineer reads ("λ 12.3 above 10.5; 4 of 17 stations at α outside the calibrated range").
 """

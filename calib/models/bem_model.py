@@ -56,7 +56,7 @@ class BemModel:
         registry names, or ``{"name": ..., "options": {...}}`` tables. Their parameters follow
         the nuisance parameters in ``p``, in this order.
     rotor_files : dict, optional
-        Provenance of the rotor files as read (:func:`calib.rotor.sources.file_provenance`:
+        Provenance of the rotor files as read (:func:`calib.rotor.provenance.file_provenance`:
         every file with its SHA-256 and path relative to the workflow); without it
         :meth:`spec` hashes the files ``rotor_source`` names when called.
 
@@ -191,7 +191,7 @@ class BemModel:
         digest (``rotor_sha256``, :func:`calib.rotor.serialize.rotor_digest`), so the model is
         rebuilt without the rotor files; ``rotor`` keeps the ``[rotor]`` table it came from
         (absolute paths) and ``rotor_files`` each file's absolute path, path relative to the
-        workflow's folder and SHA-256 (:func:`calib.rotor.sources.recorded_rotor_files`),
+        workflow's folder and SHA-256 (:func:`calib.rotor.provenance.recorded_rotor_files`),
         for provenance.
         """
         from calib.rotor.serialize import rotor_digest, rotor_to_dict

@@ -8,7 +8,7 @@ drawn by :mod:`calib.report.diagnosis_figures`.
 - how much the gap shrank: χ²/dof and per-channel RMS before and after.
 
 Every candidate's fit status is shown, and a fitted parameter at a bound
-(:func:`calib.diagnosis.core.bound_side`) is marked "at lower/upper bound"; a diagnosis that
+(:func:`calib.diagnosis.candidate_parameters.bound_side`) is marked "at lower/upper bound"; a diagnosis that
 stopped early (``Diagnosis.failure``) says so at the top of the page.
 """
 

@@ -1,6 +1,6 @@
 """The workflow keys' reference, generated from the settings dataclasses (so it cannot drift).
 
-Each settings dataclass (:class:`calib.calibration.calibrator.CalibrationSettings`,
+Each settings dataclass (:class:`calib.calibration.settings.CalibrationSettings`,
 :class:`calib.bem.BemSettings`, :class:`calib.diagnosis.core.DiagnosisSettings`,
 :class:`calib.workflow.validation.ValidationSettings`) documents its fields in the numpydoc ``Parameters``
 section of its docstring; :func:`settings_markdown` turns fields, defaults and those descriptions

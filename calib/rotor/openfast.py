@@ -6,7 +6,7 @@
 Only the files the rotor needs are opened: ServoDyn, BeamDyn, tower, controller and wind
 files may be absent.
 
-Values are looked up by keyword (:class:`~calib.rotor.aerodyn.InputFileValues`), not by line
+Values are looked up by keyword (:class:`~calib.rotor.input_file.InputFileValues`), not by line
 position, so decks of several OpenFAST generations read alike (``.fst`` with or without the
 ``ENVIRONMENTAL CONDITIONS`` section, ElastoDyn with or without ``Gravity``, AeroDyn 15 with
 ``WakeMod``/``AFAeroMod`` or ``Wake_Mod``/``UA_Mod``). NREL's ``openfast-io`` was not used: it

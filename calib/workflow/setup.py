@@ -90,7 +90,7 @@ class WorkflowSetup:
     diagnosis: tuple | None = None        # (DiagnosisSettings, channels or None) of [diagnosis]
     validation: object = None             # calib.workflow.validation.ValidationSettings of [validation]
     strict_units: bool = False            # [calibration] strict_units: a misfit no unit factor explains stops
-    rotor_files: dict | None = None       # provenance of the rotor files read (calib.rotor.sources.file_provenance)
+    rotor_files: dict | None = None       # provenance of the rotor files read (calib.rotor.provenance.file_provenance)
     origins: dict = dataclasses.field(default_factory=dict)   # set-up key -> where its value came from
 
     def model(self, grid: CorrectionGrid, channels, executor=None, effects=()):
