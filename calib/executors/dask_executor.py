@@ -75,6 +75,14 @@ class DaskExecutor:
 
     def close(self) -> None:
         if self._client is not None:
+            if self._cluster is not None:
+                # A local cluster's workers may still send a heartbeat while the scheduler closes;
+                # distributed logs that race as an ERROR with a traceback (dask/distributed#7192).
+                # Every result has been collected by now, so the workers keep quiet from here on.
+                try:
+                    self._client.run(_quiet_shutdown)
+                except Exception:  # noqa: BLE001 - a worker already gone needs no quieting
+                    pass
             self._client.close()
             self._client = None
         if self._cluster is not None:
@@ -89,3 +97,11 @@ class DaskExecutor:
 
     def __repr__(self) -> str:
         return f"DaskExecutor(address={self.address!r}, workers={self.workers})"
+
+
+def _quiet_shutdown() -> None:
+    """Raise the log level of a closing worker's own loggers (runs on each worker)."""
+    import logging
+
+    for name in ("distributed.worker", "distributed.nanny", "distributed.core", "distributed.comm"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
