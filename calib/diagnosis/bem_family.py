@@ -12,6 +12,7 @@ import numpy as np
 
 from calib.diagnosis.settings import NAMEABLE
 from calib.effects import EFFECTS, make_effect
+from calib.errors import InputError
 from calib.models.bem_model import BemModel
 
 if TYPE_CHECKING:
@@ -32,8 +33,17 @@ def _variants(name: str, options: dict) -> list:
     return [(f"{name}:{v}", make_effect(name, **{**options, "variant": v})) for v in choices]
 
 
-def _candidate_model(rotor, channels, settings, base_effects, effect):
-    return BemModel(rotor, None, channels, settings, (), effects=list(base_effects) + [effect])
+def facility_effects(dset, rotor) -> list:
+    """The corrections the campaign's facility makes known (applied to every model, no free
+    parameter): Glauert's blockage at β = swept area / cross-section when ``dset.cross_section``
+    [m²] is stated (:class:`calib.effects.wind_tunnel_blockage.WindTunnelBlockage`)."""
+    if dset.cross_section is None:
+        return []
+    ratio = rotor.swept_area / dset.cross_section
+    if not ratio < 1.0:
+        raise InputError(f"the rotor's swept area {rotor.swept_area:.4g} m² does not fit a cross-section of "
+                         f"{dset.cross_section:g} m²", "DiagnosisSettings", field="diagnosis.cross_section")
+    return [make_effect("wind_tunnel_blockage", area_ratio=ratio)]
 
 
 def _fixed_effect(effect_spec: dict, fitted: dict):
@@ -58,8 +68,9 @@ class BemFamily:
     unchanged on another kind of model (:class:`calib.diagnosis.fmu.FmuFamily`).
     """
 
-    def __init__(self, rotor, channels, grid, settings, rotor_source=None):
+    def __init__(self, rotor, channels, grid, settings, rotor_source=None, fixed=()):
         self.rotor, self.channels, self.grid, self.settings = rotor, list(channels), grid, settings
+        self.fixed = list(fixed)            # the facility's known corrections (facility_effects), in every model
         self.rotor_source = rotor_source
         self.rotor_radius = rotor.rotor_radius
         self.schedule = rotor.schedule      # the operating limits separation probes keep to (None: unknown)
@@ -67,17 +78,18 @@ class BemFamily:
 
     def field_model(self, base=()):
         """The correction field on top of the fixed ``base`` effects (localize, recalibrate)."""
-        return BemModel(self.rotor, self.grid, self.channels, self.settings, (), effects=list(base),
+        return BemModel(self.rotor, self.grid, self.channels, self.settings, (), effects=self.fixed + list(base),
                         rotor_source=self.rotor_source)
 
     def nominal_model(self):
-        return BemModel(self.rotor, None, self.channels, self.settings, (), rotor_source=self.rotor_source)
+        return BemModel(self.rotor, None, self.channels, self.settings, (), effects=self.fixed,
+                        rotor_source=self.rotor_source)
 
     def variants(self, name: str, options: dict) -> list:
         return _variants(name, options)
 
     def candidate_model(self, base, effect):
-        return _candidate_model(self.rotor, self.channels, self.settings, base, effect)
+        return BemModel(self.rotor, None, self.channels, self.settings, (), effects=self.fixed + list(base) + [effect])
 
     def check(self, base, effect, conditions) -> None:
         """Raise InputError when ``effect`` cannot act on this rotor (reported not applicable)."""
@@ -105,7 +117,7 @@ class BemFamily:
 
     def predict(self, base, effect, p: np.ndarray, conditions, channels: list) -> tuple[np.ndarray, list]:
         """A fitted candidate's outputs and their units at ``conditions``."""
-        model = BemModel(self.rotor, None, channels, self.settings, (), effects=list(base) + [effect],
+        model = BemModel(self.rotor, None, channels, self.settings, (), effects=self.fixed + list(base) + [effect],
                          rotor_source=self.rotor_source)
         ev = model.evaluate(p, conditions)
         return ev.values, [c.unit for c in model.channels]

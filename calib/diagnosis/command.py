@@ -56,7 +56,7 @@ def diagnose_inputs(rotor: str | None, data: str, config: str | None) -> dict:
 
 def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = None, printer=None,
                  resume: bool = False, history: bool = True, force: bool = False, strict_units: bool = False,
-                 noise: str | None = None, prefix: str = "[calib diagnose]"):
+                 noise: str | None = None, prefix: str = "[calib diagnose]", facility: str | None = None):
     """Run the diagnosis from the command line's arguments; returns the Diagnosis.
 
     Parameters
@@ -77,6 +77,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         refused when the data, config, rotor or noise model changed.
     noise : str, optional
         The noise model (``--noise``), replacing ``[calibration] noise`` of the config.
+    facility : str, optional
+        Where the campaign was measured (``--facility``), replacing ``[diagnosis] facility``.
     prefix : str
         What the progress lines start with (``calib demo`` runs the diagnosis under its own).
     history : bool
@@ -97,6 +99,8 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     cfg, src, base_dir = _read_config(config, rotor)
     if noise is not None:
         cfg["calibration"] = {**cfg.get("calibration", {}), "noise": noise}
+    if facility is not None:
+        cfg["diagnosis"] = {**cfg.get("diagnosis", {}), "facility": facility}
     is_fmu = isinstance(cfg.get("model"), dict) and cfg["model"].get("kind") == "fmu"
     dset, channels = _diagnosis_table(cfg.pop("diagnosis", {}), src, is_fmu)
     meas = read_measurements(data)
@@ -112,7 +116,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     grid = setup.grid(meas.conditions, prefix=prefix)
     hist = None
     if history or resume:
-        hist = _open_history(out, rotor, data, config, force, setup, resume, printer, noise)
+        hist = _open_history(out, rotor, data, config, force, setup, resume, printer, noise, facility)
     diag, unit_notes = _checked_diagnosis(setup, grid, meas, dset, hist, is_fmu=is_fmu, src=src, data=data,
                                           force=force or setup.force, strict=strict_units or setup.strict_units,
                                           printer=printer, prefix=prefix)
@@ -181,7 +185,7 @@ def _workflow_table(cfg: dict, channels: list, src: str, base_dir: Path, is_fmu:
 
 
 def _open_history(out: str, rotor: str | None, data: str, config: str | None, force: bool, setup, resume: bool,
-                  printer, noise: str | None = None):
+                  printer, noise: str | None = None, facility: str | None = None):
     """Open (or, with ``resume``, continue) the history in ``out/history``, with the arguments and
     input digests that a resumed diagnosis must match (:func:`calib.history.open_history`)."""
     from calib.history import content_digest, open_history
@@ -191,7 +195,8 @@ def _open_history(out: str, rotor: str | None, data: str, config: str | None, fo
     rotor_arg = str(Path(rotor).resolve()) if rotor is not None and Path(rotor).is_file() else rotor
     hist = open_history(out, {"command": "diagnose", "arguments": {
         "rotor": rotor_arg, "data": str(Path(data).resolve()),
-        "config": str(Path(config).resolve()) if config else None, "force": bool(force), "noise": noise},
+        "config": str(Path(config).resolve()) if config else None, "force": bool(force), "noise": noise,
+        "facility": facility},
         "inputs": {**diagnose_inputs(rotor_arg, data, config),
                    "rotor (geometry and polars)": content_digest(setup.rotor)}}, resume)
     hist.event("start", resumed=resume, records=hist.n_records)
@@ -326,7 +331,8 @@ def add_diagnose_arguments(parser) -> None:
     parser.add_argument("--out", default=None, help="output folder (required unless --resume DIR)")
     parser.add_argument("--config", default=None, help="TOML with [rotor], [model], [fluid], [grid], [calibration] "
                         "tables of the workflow schema and a [diagnosis] table (candidates, candidate_options, "
-                        "max_effects, significance, ambiguity_bic, ambiguity_pattern, model_form_tolerance, recalibrate, channels)")
+                        "max_effects, significance, ambiguity_bic, ambiguity_pattern, model_form_tolerance, recalibrate, "
+                        "facility, cross_section, channels)")
     parser.add_argument("--resume", metavar="DIR", default=None, help="continue the killed diagnosis whose output "
                         "folder is DIR with the arguments it started with: model calls on record in DIR/history are "
                         "read back, not computed again; refused if the data, config or rotor changed")
@@ -339,6 +345,10 @@ def add_diagnose_arguments(parser) -> None:
     parser.add_argument("--noise", choices=NOISE_MODES, default=None, help="the noise model, as [calibration] noise "
                         "(which it replaces): 'ml' estimates one σ per channel from the fit, for a table without "
                         "_sigma columns; default: the config's, else 'known' (the _sigma columns)")
+    from calib.diagnosis.settings import FACILITIES
+    parser.add_argument("--facility", choices=FACILITIES[1:], default=None, help="where the campaign was measured, "
+                        "as [diagnosis] facility (which it replaces): in the 'field' wind-tunnel blockage is not a "
+                        "candidate; default: the config's, else unstated (every candidate tried)")
     add_output_arguments(parser, "also print every model call (the log file DIR/calib.log always has them)")
 
 
@@ -349,6 +359,7 @@ def diagnose_from_args(args) -> int:
     rotor, data, config, out = args.rotor, args.data, args.config, args.out
     force = bool(getattr(args, "force", False))
     noise = getattr(args, "noise", None)
+    facility = getattr(args, "facility", None)
     if args.resume is not None:
         if out is not None and Path(out).resolve() != Path(args.resume).resolve():
             raise InputError(f"--out {out} and --resume {args.resume} name different folders; give one",
@@ -363,13 +374,15 @@ def diagnose_from_args(args) -> int:
         config = config if config is not None else recorded_args.get("config")
         force = force or bool(recorded_args.get("force", False))
         noise = noise if noise is not None else recorded_args.get("noise")
+        facility = facility if facility is not None else recorded_args.get("facility")
     if data is None or out is None:
         raise InputError("give --data FILE and --out DIR (or --resume DIR)", "calib diagnose",
                          field="--data" if data is None else "--out")
     with command_logging(out, args.verbose, args.quiet):
         try:
             run_diagnose(rotor, data, out, config, resume=args.resume is not None, history=not args.no_history,
-                         force=force, strict_units=bool(getattr(args, "strict_units", False)), noise=noise)
+                         force=force, strict_units=bool(getattr(args, "strict_units", False)), noise=noise,
+                         facility=facility)
         except CalibError as exc:      # printed on stderr by the caller; the log file keeps it too
             log.debug(f"calib: error: {exc}", exc_info=True)
             raise

@@ -70,12 +70,12 @@ import numpy as np
 from calib.bem import BemSettings
 from calib.calibration.calibrator import CalibrationSettings, Calibrator
 from calib.corrections import CorrectionGrid
-from calib.diagnosis.bem_family import BemFamily
+from calib.diagnosis.bem_family import BemFamily, facility_effects
 from calib.diagnosis.figures_of_merit import find, gap
 from calib.diagnosis.naming import Namer
 from calib.diagnosis.result import Diagnosis
 from calib.diagnosis.settings import DiagnosisSettings
-from calib.errors import CalibError
+from calib.errors import CalibError, InputError
 from calib.measurements import Measurements
 from calib.words import p_is
 
@@ -130,7 +130,9 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     t0 = time.perf_counter()
     settings = settings or BemSettings()
     channels = list(measurements.channels)
-    family = family or BemFamily(rotor, channels, grid, settings, rotor_source)
+    if family is None:
+        fixed = facility_effects((diagnosis or DiagnosisSettings()).validate(), rotor)
+        family = BemFamily(rotor, channels, grid, settings, rotor_source, fixed=fixed)
     cal, dset = _fit_settings(calibration, diagnosis, family)
     say = progress or (lambda s: None)
     wrap = wrap or (lambda model, label: model)
@@ -170,6 +172,10 @@ def _fit_settings(calibration: CalibrationSettings | None, diagnosis: DiagnosisS
     # out of family; the MAP estimator is not yet measured there
     cal = dataclasses.replace(calibration or CalibrationSettings(), estimator="truncated").validate()
     dset = (diagnosis or DiagnosisSettings()).validate(valid=family.names)
+    if dset.cross_section is not None and not hasattr(family, "fixed"):
+        raise InputError("a stated cross-section applies Glauert's blockage to the native BEM; this model family "
+                         "cannot take it (model the facility in the FMU, or leave cross_section out to estimate "
+                         "blockage where the FMU maps it)", "DiagnosisSettings", field="diagnosis.cross_section")
     return cal, dset
 
 
@@ -217,7 +223,9 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
         With the rounds, the effects named and the model with them.
     """
     channels = list(meas.channels)
-    candidates = tuple(dset.candidates) if dset.candidates is not None else tuple(family.names)
+    excluded = dset.excluded()
+    candidates = tuple(c for c in (dset.candidates if dset.candidates is not None else family.names)
+                       if c not in excluded)
     if executor is None:
         from calib.executors import SerialExecutor
         executor = SerialExecutor()
@@ -227,6 +235,13 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
     before_name = gap(meas.values, y0, meas_name.sigma, channels)
     namer = Namer(family, meas_name, y0, before_name["chi2"], (field_after - y0) / meas_name.sigma, dset,
                    known, executor, wrap, fit_progress, say, tol)
+    for effect in getattr(family, "fixed", ()):
+        namer.notes.append(f"every model includes Glauert's blockage at the known area ratio "
+                           f"{effect.options['area_ratio']:.4g} (swept area over the stated cross-section)")
+    for name, why in excluded.items():
+        if name in family.names:
+            namer.notes.append(f"{name} is not a candidate: {why}")
+            say(f"name: {namer.notes[-1]}")
     # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
     # localization's residuals, so the nominal model would pass against it by construction
     if cal.noise not in ESTIMATED_NOISE and before_name["p_value"] >= dset.significance:

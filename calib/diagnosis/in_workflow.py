@@ -67,13 +67,15 @@ def named_effect_specs(diag, skip=()) -> list[dict]:
 def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=None,
                   echo: Callable[[str], None] = print, history=None):
     """The ``[diagnosis]`` step of a workflow: diagnose, write ``DIR/diagnosis/``, return the
-    named effects' specs (default nominal values) and the :class:`~calib.diagnosis.core.Diagnosis`.
+    named effects' specs (default nominal values; first the facility's known corrections, a stated
+    cross-section's blockage) and the :class:`~calib.diagnosis.core.Diagnosis`.
 
     With ``history`` (:mod:`calib.history`), every model call and optimizer iteration of the
     diagnosis is recorded, so ``calib run --resume`` replays it instead of computing it again.
     """
     from pathlib import Path
 
+    from calib.diagnosis.bem_family import facility_effects
     from calib.diagnosis.core import diagnose
     from calib.report.diagnosis_report import write_diagnosis
 
@@ -89,7 +91,8 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
                     progress=lambda line: echo(f"[calib run] diagnosis: {line}"), rotor_source=setup.rotor_spec,
                     wrap=wrap, on_iteration=on_iteration)
     paths = write_diagnosis(diag, Path(out_dir) / "diagnosis")
-    specs = named_effect_specs(diag, skip=setup.nuisance)
+    # the facility's known corrections (a stated cross-section) join every stage's model too
+    specs = [e.spec() for e in facility_effects(dset, setup.rotor)] + named_effect_specs(diag, skip=setup.nuisance)
     echo(f"[calib run] diagnosis: named {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else "")
          + f"; report {paths['report']}")
     return specs, diag

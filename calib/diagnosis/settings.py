@@ -27,6 +27,12 @@ MODEL_FORM_TOLERANCE = {"power": 0.0097, "torque": 0.0097, "thrust": 0.0024, "hu
                         "root_flap_moment": 0.0029, "default": 0.0097}
 
 
+#: Where a campaign was measured (``[diagnosis] facility``): "unstated" keeps every candidate.
+FACILITIES = ("unstated", "field", "wind_tunnel", "towing_tank")
+#: Effects that need walls around the flow: not candidates of a campaign in the field.
+WALLED_EFFECTS = ("wind_tunnel_blockage",)
+
+
 @dataclass(frozen=True)
 class DiagnosisSettings:
     """Settings of :func:`calib.diagnosis.core.diagnose`.
@@ -58,6 +64,15 @@ class DiagnosisSettings:
         σ² + (tolerance · |y|)², and a candidate is named only when its change of the outputs
         exceeds it somewhere (practical significance, reported as an effect size). 0 leaves
         both out. Default :data:`MODEL_FORM_TOLERANCE`.
+    facility : str
+        Where the campaign was measured (:data:`FACILITIES`): in the ``field`` no effect of
+        :data:`WALLED_EFFECTS` is a candidate (a free-field rotor has no tunnel walls); in a
+        ``wind_tunnel`` or ``towing_tank`` blockage is estimated, or applied at the known area
+        ratio when ``cross_section`` is stated. Default "unstated" (every candidate is tried).
+    cross_section : float, optional
+        The test section's (or tank's) cross-section area [m²], ``wind_tunnel`` and
+        ``towing_tank`` only: Glauert's blockage correction is then part of every model at
+        β = swept area / cross-section, and blockage is no longer a candidate.
     """
 
     candidates: tuple | None = None
@@ -68,6 +83,17 @@ class DiagnosisSettings:
     ambiguity_pattern: float = 0.1
     recalibrate: bool = True
     model_form_tolerance: float | dict = field(default_factory=lambda: dict(MODEL_FORM_TOLERANCE))
+    facility: str = "unstated"
+    cross_section: float | None = None
+
+    def excluded(self) -> dict[str, str]:
+        """The candidates the facility rules out: {effect: why}."""
+        if self.facility == "field":
+            return {n: "a field campaign has no tunnel walls (facility = \"field\")" for n in WALLED_EFFECTS}
+        if self.cross_section is not None:
+            return {n: f"its area ratio is known from the stated cross-section ({self.cross_section:g} m²) and "
+                       "applied to every model" for n in WALLED_EFFECTS}
+        return {}
 
     def tolerance_of(self, channels: Sequence[str]) -> np.ndarray:
         """The model-form tolerance of each channel [-] (see the class docstring)."""
@@ -104,7 +130,17 @@ class DiagnosisSettings:
         values = list(tol.values()) if isinstance(tol, dict) else [tol]
         need(all(number(v) and 0 <= v < 1 for v in values), "model_form_tolerance",
              "a fraction in [0, 1) or a table channel -> fraction")
+        need(self.facility in FACILITIES, "facility", "one of " + ", ".join(FACILITIES))
+        need(self.cross_section is None or (number(self.cross_section) and self.cross_section > 0),
+             "cross_section", "a cross-section area > 0 [m²]")
+        if self.cross_section is not None and self.facility not in ("wind_tunnel", "towing_tank"):
+            raise InputError(f"a cross-section needs facility = \"wind_tunnel\" or \"towing_tank\", got "
+                             f"facility = {self.facility!r}", source, field=f"{prefix}cross_section")
         names = self.candidates if self.candidates is not None else valid
+        ruled_out = [c for c in names if c in self.excluded()] if self.candidates is not None else []
+        if ruled_out:
+            raise InputError(f"candidate {ruled_out[0]} is ruled out: {self.excluded()[ruled_out[0]]}; remove it "
+                             "from candidates", source, field=f"{prefix}candidates")
         unknown = [c for c in names if c not in valid]
         if unknown:
             raise InputError(f"unknown candidate effect(s) {', '.join(unknown)}; valid: {', '.join(valid)}",

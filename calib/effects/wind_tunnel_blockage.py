@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from calib.bem import dual as dl
 from calib.effects.base import Effect
+from calib.errors import InputError
 from calib.types import Parameter
 
 
@@ -15,6 +16,9 @@ class WindTunnelBlockage(Effect):
     ct_limit : float
         Above this C_T Glauert's factor C_T/√(1 − C_T), singular at 1, is continued along its
         tangent (C¹) [-]. Default 0.8.
+    area_ratio : float, optional
+        A known area ratio β = A/C (the facility's cross-section stated): the correction is then
+        applied at this value and the effect has no free parameter. Default None (β estimated).
     nominal : dict, optional
         ``{"blockage_area_ratio": β}``.
 
@@ -59,10 +63,22 @@ class WindTunnelBlockage(Effect):
     reads_thrust = True
     fingerprint = ("power and thrust under-predicted by an amount growing with the thrust coefficient; like a "
                    "wind-speed scale, but not uniform")
-    OPTIONS = {"ct_limit": 0.8}
+    OPTIONS = {"ct_limit": 0.8, "area_ratio": None}
     PARAMETERS = (Parameter("blockage_area_ratio", 0.0, -0.3, 0.6, 0.05, "-", "effect",
                             description="rotor swept area over tunnel cross-section (Glauert's blockage)",
                             prior_std=0.1),)
+
+    def __init__(self, **options):
+        ratio = options.get("area_ratio")
+        if ratio is not None and (isinstance(ratio, bool) or not isinstance(ratio, (int, float))
+                                  or not 0.0 < ratio < 1.0):
+            raise InputError(f"must be the rotor's swept area over the test section's, in (0, 1), got {ratio!r}",
+                             f"effect {self.name!r}", field="area_ratio")
+        super().__init__(**options)
+
+    def _parameters(self):
+        """No free parameter when the area ratio is known (``area_ratio``)."""
+        return () if self.options["area_ratio"] is not None else tuple(self.PARAMETERS)
 
     def glauert(self, ct):
         """C_T/√(1 − C_T), continued along its tangent above ``ct_limit`` [-] (array or Dual)."""
@@ -74,7 +90,8 @@ class WindTunnelBlockage(Effect):
         return dl.where(below, safe / dl.sqrt(1.0 - safe), value + slope * (ct - lim))
 
     def apply(self, theta, inflow, ctx):
-        (beta,) = theta
+        known = self.options["area_ratio"]
+        (beta,) = theta if known is None else (float(known),)
         v = inflow.wind_speed
         ct = ctx.thrust / (0.5 * ctx.air_density * ctx.swept_area * v * v)
         return inflow.replace(wind_speed=v * (1.0 + 0.25 * beta * self.glauert(ct)))
