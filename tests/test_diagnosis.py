@@ -426,6 +426,46 @@ def test_two_candidates_equal_by_bic_are_told_apart_by_their_pattern_or_called_a
         DiagnosisSettings(ambiguity_pattern=-1).validate()
 
 
+def test_a_later_effect_is_named_only_when_it_explains_most_of_the_misfit_left(monkeypatch):
+    """Issue 37, item 4: after a first effect, a candidate must explain (Λ) at least
+    LATER_EFFECT_SHARE of χ² − dof of the model with the first effect; a first effect at a bound
+    is said to may not fit in form."""
+    from calib.diagnosis.naming import LATER_EFFECT_SHARE
+
+    class Family:
+        def names_of(self, base):
+            return list(base)
+
+        def n_parameters(self, base):
+            return len(base)
+
+    def namer(first_at_bound=False):
+        n = _namer(monkeypatch)
+        n.family = Family()
+        first = _fit("rotational_augmentation", 10.0, 0.9)
+        if first_at_bound:
+            first.parameters = [{"name": "stall_delay_strength", "at_bound": "upper", "upper": 3.0, "unit": "-"}]
+            first.at_bound = ["stall_delay_strength"]
+        n.named, n._named_fits, n.base_effects = ["rotational_augmentation"], [first], ["ra"]
+        n.base_chi2 = n.n_res - 1 + 100.0          # χ² − dof = 100 left with the first effect
+        return n
+
+    for lr, named in ((LATER_EFFECT_SHARE * 100 - 1, False), (LATER_EFFECT_SHARE * 100 + 1, True)):
+        fit = _fit("lift_offset", 20.0, 0.6)
+        fit.lr_statistic = lr
+        rnd = {"verdict": "lift_offset", "reason": "lift_offset: ..."}
+        best = namer()._earns_place(rnd, fit)
+        assert (best is fit) == named and rnd["verdict"] == ("lift_offset" if named else "none")
+        if not named:
+            assert f"would explain only {lr:.0f} % of the misfit left with rotational_augmentation" in rnd["reason"]
+    fit = _fit("lift_offset", 20.0, 0.6)
+    fit.lr_statistic = 99.0
+    rnd = {"verdict": "lift_offset", "reason": "lift_offset: ..."}
+    assert namer(first_at_bound=True)._earns_place(rnd, fit) is fit
+    assert ("rotational_augmentation sits at a bound (at bound: stall_delay_strength = 3 (upper bound)): its form "
+            "may not fit the data, and lift_offset may stand in for that mismatch") in rnd["reason"]
+
+
 def test_the_separating_probe_is_where_the_two_predictions_differ_most_against_the_noise():
     from calib.diagnosis.separation import probe_conditions, separating_probes
     measured = OperatingConditions(np.array([8.0, 10.0]), np.array([10.0, 12.0]), np.array([0.0, 0.0]))
