@@ -39,8 +39,9 @@ def run_bench(n_seeds: int = 3) -> dict:
         for k in range(n_seeds):
             meas = hidden({} if effect == "none" else {effect: TRUTH[effect]}, cond, 9500 + k)
             d = diagnose_data(meas, recalibrate=False)
-            named[d.effect] += 1
-            print(f"[discrepancy] truth {effect}, seed {9500 + k}: named {d.effect}", flush=True)
+            named[d.named_first] += 1       # a model-form parameter (tip_loss, momentum_balance) is named as such
+            print(f"[discrepancy] truth {effect}, seed {9500 + k}: named {d.named_first}"
+                  + (f" (model form: {', '.join(d.model_form)})" if d.model_form else ""), flush=True)
         out[effect] = {"right": named[effect] / n_seeds, "named": dict(named), "seeds": n_seeds,
                        "seconds_per_diagnosis": (time.perf_counter() - t0) / n_seeds}
     return out

@@ -124,3 +124,8 @@ class BemFamily:
 
     def fingerprint(self, name: str) -> str:
         return EFFECTS[name].fingerprint if name in EFFECTS else ""
+
+    def kind(self, name: str) -> str:
+        """"model_form" for a parameter of the BEM's own approximation (its induction model),
+        "physical" for a missing effect (:attr:`calib.effects.base.Effect.kind`)."""
+        return EFFECTS[name].kind if name in EFFECTS else "physical"

@@ -129,6 +129,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
         hist.event("finished", computed=hist.computed, replayed=hist.replayed, effect=diag.effect)
         printer(f"[calib diagnose] model calls: {hist.calls_sentence()}")
     printer(f"[calib diagnose] named: {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else "")
+            + (f"; model form: {', '.join(diag.model_form)}" if diag.model_form else "")
             + (f" between {' and '.join(diag.ambiguous)}" if diag.ambiguous else ""))
     printer(f"[calib diagnose] report: {paths['report']}")
     return diag

@@ -160,7 +160,8 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
                                                         f" -> {after['chi2_per_dof']:.3g} after recalibration"))
     return Diagnosis(effect, effects_named, namer.rounds, before, with_effects, after, findings, loc, recal, channels,
                      meas.values, sigma, meas.conditions.as_dict(), y0, namer.base_values, y_after,
-                     family.rotor_radius, time.perf_counter() - t0, namer.notes, "; ".join(namer.failures))
+                     family.rotor_radius, time.perf_counter() - t0, namer.notes, "; ".join(namer.failures),
+                     model_form=namer.model_form)
 
 
 def _fit_settings(calibration: CalibrationSettings | None, diagnosis: DiagnosisSettings | None,

@@ -114,3 +114,7 @@ class FmuFamily:
     def fingerprint(self, name: str) -> str:
         """A mapped parameter carries no fingerprint (its physics is the vendor's)."""
         return ""
+
+    def kind(self, name: str) -> str:
+        """A mapped parameter is a candidate physical effect (the mapping states no model form)."""
+        return "physical"

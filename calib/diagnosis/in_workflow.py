@@ -94,6 +94,7 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
     # the facility's known corrections (a stated cross-section) join every stage's model too
     specs = [e.spec() for e in facility_effects(dset, setup.rotor)] + named_effect_specs(diag, skip=setup.nuisance)
     echo(f"[calib run] diagnosis: named {diag.effect}" + (f" ({', '.join(diag.effects)})" if diag.effects else "")
+         + (f"; model form: {', '.join(diag.model_form)}" if diag.model_form else "")
          + f"; report {paths['report']}")
     return specs, diag
 

@@ -104,9 +104,12 @@ class Namer:
         self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
 
     def run(self, candidates) -> None:
+        """The naming rounds over ``candidates``: up to ``max_effects`` physical effects, and the
+        model-form parameters among them besides (they do not count against it)."""
         self.remaining = list(candidates)
-        for round_no in range(self.dset.max_effects):
-            if not self.remaining:
+        n_form = sum(self.family.kind(c) == "model_form" for c in candidates)
+        for round_no in range(self.dset.max_effects + n_form):
+            if not self.remaining or len(self.named) - len(self.model_form) >= self.dset.max_effects:
                 break
             self._fits = []
             try:
@@ -137,12 +140,19 @@ class Namer:
         self.notes.append(message)
         self.say(message)
 
+    @property
+    def model_form(self) -> list:
+        """The model-form parameters named (the induction model's, not physical effects), in order."""
+        return [f.effect for f in self._named_fits if f.kind == "model_form"]
+
     def verdict(self) -> tuple[str, list]:
-        """The diagnosis' one-word result and the effects named (in order)."""
+        """The diagnosis' one-word result (the first physical effect named, ``ambiguous`` or
+        ``none``) and every effect named, model form included (in order)."""
         effects_named = [n for n in self.named if not n.startswith("ambiguous:")]
         if self.named and self.named[0].startswith("ambiguous:"):
             return "ambiguous", effects_named
-        return (effects_named[0] if effects_named else "none"), effects_named
+        physical = [n for n in effects_named if n not in self.model_form]
+        return (physical[0] if physical else "none"), effects_named
 
     def _round(self, round_no: int) -> bool:
         """One naming round; True when the naming is over."""
@@ -152,8 +162,18 @@ class Namer:
         self._effects = effects
         self._fits = fits = self._fit(round_no, labels, effects)
         rnd, best = self._judge(fits)
-        if best is not None and self._named_fits:
+        if best is not None and best.kind != "model_form" and self._named_fits:
             best = self._earns_place(rnd, best)
+            form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
+            if best is None and form is not None:
+                # what is left is the model's form: the best significant model-form candidate names it
+                rnd.update(verdict=form.effect, reason=(
+                    f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), "
+                    f"{p_is(form.p_value)}; effect {form.effect_text}; " + rnd["reason"]))
+                best = form
+        if best is not None and best.kind == "model_form":
+            rnd["reason"] = ("model form (the BEM's own induction model, not a missing physical effect): "
+                             + rnd["reason"])
         if best is None:
             self.rounds.append(rnd)
             if rnd["verdict"] == "ambiguous" and not self.named:
@@ -256,7 +276,7 @@ class Namer:
                             start=out.get("start_note", ""), p_hat=np.array(res.estimate.p_hat, float),
                             spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
                             at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
-                            effect_text=words)
+                            effect_text=words, kind=self.family.kind(label.split(":")[0]))
 
     def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
         """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it

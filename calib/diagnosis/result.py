@@ -33,6 +33,7 @@ class CandidateFit:
     effect_text: str = ""               # the same in words: "-2.1 % power at 7.3 m/s (tolerance 1 %)"
     start: str = ""                     # the second start, when one ran (calib.diagnosis.naming.fit_task): "second start kept (...)"
     p_hat: np.ndarray | None = None     # every fitted parameter (base effects' too) [parameter units]
+    kind: str = "physical"              # "model_form": the BEM's own approximation (calib.effects.base.Effect.kind)
 
     def bound_phrase(self) -> str:
         """The parameters at a bound in words ("" when none): their value is the bound, not an estimate."""
@@ -75,11 +76,17 @@ class Diagnosis:
     notes: list = field(default_factory=list)
     failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
     setup: list = field(default_factory=list)   # calib.report.setup_statement.SetupItem: the set-up in force
+    model_form: list = field(default_factory=list)  # model-form parameters named (in ``effects`` too), in order
 
     @property
     def candidates(self) -> list:
         """The first round's candidates (the comparison against the nominal model)."""
         return self.rounds[0]["candidates"] if self.rounds else []
+
+    @property
+    def named_first(self) -> str:
+        """The first effect named, physical or model form; else ``effect`` (``none``, ``ambiguous``)."""
+        return self.effects[0] if self.effects and self.effect != "ambiguous" else self.effect
 
     @property
     def ambiguous(self) -> list:
@@ -88,7 +95,8 @@ class Diagnosis:
         return list(self.rounds[-1].get("ambiguous", [])) if self.rounds and self.effect == "ambiguous" else []
 
     def to_dict(self) -> dict:
-        return {"effect": self.effect, "effects": self.effects, "ambiguous": self.ambiguous,
+        return {"effect": self.effect, "effects": self.effects, "model_form": self.model_form,
+                "ambiguous": self.ambiguous,
                 "candidates": [c.to_dict() for c in self.candidates],
                 "rounds": [{"base": r["base"], "verdict": r["verdict"], "reason": r["reason"],
                             **{k: r[k] for k in ("ambiguous", "separate") if k in r},

@@ -15,6 +15,7 @@ from calib.effects.base import Effect
 from calib.effects.correction_field import CorrectionFieldEffect
 from calib.effects.leading_edge_erosion import LeadingEdgeErosion
 from calib.effects.lift_offset import LiftOffset
+from calib.effects.momentum_balance import MomentumBalance
 from calib.effects.pitch_offset import PitchOffset
 from calib.effects.reynolds_number import ReynoldsNumber
 from calib.effects.rotational_augmentation import RotationalAugmentation
@@ -34,6 +35,7 @@ EFFECTS = {
     "tip_loss": TipLoss,
     "wind_tunnel_blockage": WindTunnelBlockage,
     "lift_offset": LiftOffset,
+    "momentum_balance": MomentumBalance,
 }
 
 

@@ -56,6 +56,9 @@ class Effect:
     stage: ClassVar[str] = ""
     fingerprint: ClassVar[str] = ""
     order: ClassVar[int] = 0
+    #: "physical" (a missing effect of the flow or the rotor) or "model_form" (the BEM's own
+    #: approximation, e.g. its induction model): a diagnosis names the second kind as model form
+    kind: ClassVar[str] = "physical"
     #: declared capabilities (the chain reads them; it never probes): section probes the effect
     #: tabulates its θ-derivatives on (section stages only), whether it reads the rotor thrust
     #: (conditions stage only) and whether its polar depends on the local flow (Re, chord/r)

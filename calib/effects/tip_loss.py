@@ -32,6 +32,10 @@ class TipLoss(Effect):
     makes the loads vanish at the tip), s > 1 stronger still; s < 0 (weaker) is allowed so
     that s = 0 lies inside the bounds.
 
+    A **model-form** parameter (``kind = "model_form"``): Prandtl's factor is the BEM's own
+    approximation of a finite number of blades, so a diagnosis that names it says the misfit is
+    the induction model's, not a missing physical effect.
+
     Fingerprint: the error sits at η > 0.9 and grows with λ; tip-gauge loads (``fn@0.95``,
     ``ft@0.95``) are off while root loads and spanwise loads inboard fit.
 
@@ -43,6 +47,7 @@ class TipLoss(Effect):
 
     name = "tip_loss"
     stage = "induction"
+    kind = "model_form"
     fingerprint = ("error at r/R > 0.9 growing with tip-speed ratio; tip-gauge loads (fn@0.95) off while root "
                    "loads fit")
     OPTIONS = {"c1": 0.125, "c2": 21.0, "c3": 0.1}

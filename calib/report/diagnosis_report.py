@@ -88,6 +88,13 @@ def decision_words(d) -> str:
     gap = gap_words(d)
     last = d.rounds[-1] if d.rounds else {}
     fits = sorted(last.get("candidates", []), key=lambda f: f.bic)
+    if d.effect == "none" and d.model_form and fits:
+        # only the model's own form was named: say so, with the fitted strength
+        named = [g for r in d.rounds for g in r.get("candidates", []) if g.effect in d.model_form
+                 and g.effect == r.get("verdict")]
+        text = ((gap + "; " if gap else "") + "no physical effect is named; the misfit is the model's form "
+                "(its induction model): " + "; ".join(_with_strength(g) for g in named[:2]))
+        return text[0].upper() + text[1:].rstrip(".") + "."
     if d.effect == "none" or not fits:
         text = ((gap + "; " if gap else "") + "no effect is named: " +
                 (last.get("reason", "the nominal model is consistent with the noise") if last else
@@ -252,13 +259,14 @@ def _img(p: Path) -> str:
 
 def _summary_html(d) -> list[str]:
     """The page's title, the decision in words, an early stop, and χ²/dof through the steps."""
-    body = [f"<h1>calib diagnose: {html.escape(d.effect)}</h1>",
+    form = f" (model form: {', '.join(d.model_form)})" if d.model_form else ""
+    body = [f"<h1>calib diagnose: {html.escape(d.effect + form)}</h1>",
             f"<p class='decision'><b>{html.escape(decision_words(d))}</b></p>"]
     failure = d.failure
     if failure:
         body.append(f'<p class="failed"><b>Stopped early:</b> {html.escape(failure)}. What the rounds before '
                     "found is reported below.</p>")
-    named = ", ".join(d.effects) or "none"
+    named = ", ".join(e + (" (model form)" if e in d.model_form else "") for e in d.effects) or "none"
     if d.ambiguous:
         named += f" (the last round: ambiguous between {' and '.join(d.ambiguous)}, neither added)"
     steps = f"χ²/dof {d.before['chi2_per_dof']:.3g} (nominal)"
