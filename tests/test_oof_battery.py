@@ -109,9 +109,15 @@ def test_erosion_ramp_is_linear_from_its_start_to_the_tip():
 def test_battery_rule_of_right():
     """Control: only none. Effect: the first verdict, or an ambiguous pair holding it; the uniform
     table change takes either Reynolds number or erosion; alone = no further effect."""
-    def rec(data_set, effect, effects=(), ambiguous=()):
-        return {"data_set": data_set, "effect": effect, "effects": list(effects), "ambiguous": list(ambiguous)}
+    def rec(data_set, effect, effects=(), ambiguous=(), model_form=()):
+        return {"data_set": data_set, "effect": effect, "effects": list(effects), "ambiguous": list(ambiguous),
+                "model_form": list(model_form)}
     assert runner.score(rec("control", "none"))["right"]
+    # a model-form parameter (the induction model's) is no physical effect: right, alone, shown beside
+    s = runner.score(rec("control", "none", ["momentum_balance"], model_form=["momentum_balance"]))
+    assert s["right"] and s["first"] == "none (model form: momentum_balance)"
+    assert runner.score(rec("leading_edge_erosion", "leading_edge_erosion", ["tip_loss", "leading_edge_erosion"],
+                            model_form=["tip_loss"]))["alone"]
     assert not runner.score(rec("control", "tip_loss", ["tip_loss"]))["right"]
     s = runner.score(rec("leading_edge_erosion", "leading_edge_erosion", ["leading_edge_erosion", "tip_loss"]))
     assert s["right"] and not s["alone"]

@@ -18,7 +18,9 @@ What counts as right (``campaign.DATA_SETS[...]["right"]``):
   taken at another Reynolds number from roughness on the whole blade (calib's erosion onset
   reaches down to r/R = 0.3).
 
-``alone`` counts the right verdicts that name nothing else (no second effect).
+``alone`` counts the right verdicts that name nothing else (no second physical effect; a model-form
+parameter of the induction model, ``model_form`` in ``diagnosis.json``, is shown beside the verdict
+and is not a second effect).
 
 Verdict keys read from ``diagnosis.json``: ``effect``, ``effects``, ``rounds`` (``verdict``,
 ``reason``, candidates), ``before`` (χ²/dof, p), ``with_effects``, ``failure``.
@@ -43,7 +45,7 @@ from oof_battery import campaign  # noqa: E402
 
 #: calib's candidate effects (for reading an ``ambiguous`` pair from a verdict's reason).
 CANDIDATES = ("rotational_augmentation", "leading_edge_erosion", "pitch_offset", "reynolds_number", "tip_loss",
-              "wind_tunnel_blockage", "wind_speed_scale", "lift_offset")
+              "wind_tunnel_blockage", "wind_speed_scale", "lift_offset", "momentum_balance")
 MAX_WORKERS = 2
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -99,7 +101,8 @@ def verdict_of(doc: dict) -> dict:
                                  "values": {q["name"]: q["value"] for q in c.get("parameters", [])}} for c in cands]})
     ambiguous = next((r["ambiguous"] for r in rounds if r["verdict"] == "ambiguous"), [])
     before, with_fx = doc.get("before", {}), doc.get("with_effects", {})
-    return {"effect": doc.get("effect"), "effects": list(doc.get("effects", [])), "ambiguous": ambiguous,
+    return {"effect": doc.get("effect"), "effects": list(doc.get("effects", [])),
+            "model_form": list(doc.get("model_form", [])), "ambiguous": ambiguous,
             "rounds": rounds, "chi2_per_dof_before": before.get("chi2_per_dof"), "p_before": before.get("p_value"),
             "chi2_per_dof_with_effects": with_fx.get("chi2_per_dof"), "failure": doc.get("failure", "")}
 
@@ -125,7 +128,13 @@ def score(rec: dict) -> dict:
     else:
         first = effect
         right = effect in right_names
-    further = [e for e in rec["effects"][1:]] if effect != "ambiguous" else list(rec["effects"])
+    # a model-form parameter (the induction model's) is no physical effect: it is neither the verdict nor a
+    # further effect, and it is shown beside the verdict
+    form = rec.get("model_form", [])
+    physical = [e for e in rec["effects"] if e not in form]
+    further = physical[1:] if effect != "ambiguous" else physical
+    if form:
+        first += " (model form: " + "+".join(form) + ")"
     return {"right": right, "alone": right and not further, "first": first}
 
 
@@ -142,7 +151,8 @@ def tabulate(records: list) -> dict:
                 continue
             sc = [score(r) for r in recs]
             named = collections.Counter(s["first"] for s in sc)
-            full = collections.Counter("+".join(r["effects"]) if r.get("effects") else s["first"]
+            full = collections.Counter("+".join(e + ("(model form)" if e in r.get("model_form", []) else "")
+                                                for e in r["effects"]) if r.get("effects") else s["first"]
                                        for r, s in zip(recs, sc))
             chi2 = sorted(r["chi2_per_dof_before"] for r in recs if r.get("chi2_per_dof_before") is not None)
             table[f"{setup}/{ds}"] = {
