@@ -82,15 +82,14 @@ SWEEP = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0)
 
 
 def _setup():
-    cfg = load_workflow(os.path.join(ROOT, WORKFLOW))
-    rotor = load_rotor(cfg["rotor"]["name"])
+    workflow = load_workflow(os.path.join(ROOT, WORKFLOW))
+    rotor = load_rotor(workflow.rotor["name"])
     settings = BemSettings(use_tilt=False)
-    channels = list(cfg["stages"][0]["channels"])
-    cond = synthetic_conditions(cfg["conditions"], rotor, WORKFLOW)
-    g = cfg["grid"]
-    grid = CorrectionGrid(g["alpha_nodes_deg"], g["eta_nodes"])
+    channels = list(workflow.stages[0].channels)
+    cond = synthetic_conditions(workflow.conditions, rotor)
+    grid = CorrectionGrid(workflow.grid.alpha_nodes_deg, workflow.grid.eta_nodes)
     model = BemModel(rotor, grid, channels, settings, ("pitch_offset",))
-    return cfg, rotor, settings, channels, cond, grid, model
+    return workflow, rotor, settings, channels, cond, grid, model
 
 
 def _physical(tmodel, p: np.ndarray, cond, cd_min: float | None) -> bool:
@@ -163,19 +162,19 @@ def coverage(n_seeds: int = 30, seed0: int = SEED0, twins: str = "abcd", **calib
     """Coverage of the polar bands and NEES over ``n_seeds`` noise seeds, twins (a)–(d);
     ``calibration`` overrides :class:`calib.calibration.settings.CalibrationSettings` fields (default
     ``cd_min = 0.003``)."""
-    cfg, rotor, settings, channels, cond, grid, model = _setup()
-    bumps = cfg["truth"]["bumps"]
-    rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
+    workflow, rotor, settings, channels, cond, grid, model = _setup()
+    bumps = workflow.truth.bumps
+    rel = {c: float(workflow.noise.relative[c]) for c in channels}
     field = model.correction_field()
     settings_cd_min = calibration.pop("cd_min", 0.003)
     # (b) outside the span: the workflow's fine-grid truth model
-    tmodel_b, p_b = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
+    tmodel_b, p_b = truth_model(rotor, channels, settings, workflow.truth, ("pitch_offset",))
     # (a) inside the span: the smooth field at the calibration nodes
     A, E = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
     dl, dd = smooth_field(bumps, A, E)
     p_a = np.zeros(len(model.parameters))
     p_a[:grid.n_lift], p_a[grid.n_lift:grid.n_params] = dl.ravel(), dd.ravel()
-    p_a[-1] = float(cfg["truth"].get("pitch_offset", 0.0))
+    p_a[-1] = float(workflow.truth.nuisance_values().get("pitch_offset", 0.0))
     a_lo, a_hi = grid.alpha_nodes_deg[[0, -1]]
     e_lo, e_hi = grid.eta_nodes[[0, -1]]
     out = {}
@@ -326,16 +325,16 @@ def _held_back_case(name: str, seed: int | None = None):
         return model, cond, meas, CalibrationSettings(cd_min=None)
     workflow, stage = {"wind_tunnel": ("wind_tunnel_hub_loads.toml", 0),
                        "localization": ("blade_loads_localization.toml", 1)}[name]
-    cfg = load_workflow(os.path.join(ROOT, "workflows", workflow))
-    setup = prepare(cfg)
-    cond = synthetic_conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
-    channels = cfg["stages"][stage]["channels"]
-    tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, cfg["truth"], setup.nuisance)
-    rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
+    loaded = load_workflow(os.path.join(ROOT, "workflows", workflow))
+    setup = prepare(loaded)
+    cond = synthetic_conditions(loaded.conditions, setup.rotor, setup.density)
+    channels = list(loaded.stages[stage].channels)
+    tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, loaded.truth, setup.nuisance)
+    rel = {c: float(loaded.noise.relative[c]) for c in channels}
     meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels,
-                      seed=int(cfg["noise"]["seed"]) if seed is None else seed)
+                      seed=loaded.noise.seed if seed is None else seed)
     model = BemModel(setup.rotor, setup.grid(cond), channels, setup.settings, setup.nuisance)
-    return model, cond, meas, setup.calibration_settings
+    return model, cond, meas, setup.calibration
 
 
 def held_back_mask(n_points: int, split: str = "rows", n_pitch: int = 6) -> np.ndarray:

@@ -144,9 +144,9 @@ def run() -> dict:
 
 
 def noise_models() -> dict:
-    cfg = load_workflow(WORKFLOW)
-    setup = prepare(cfg)
-    file = os.path.join(cfg["_dir"], cfg["measurements"]["file"])
+    workflow = load_workflow(WORKFLOW)
+    setup = prepare(workflow)
+    file = os.path.join(workflow.base_dir, workflow.measurements.file)
     meas = read_measurements(file, setup.channels)
     grid = setup.grid(meas.conditions)
     dset, _ = setup.diagnosis
@@ -154,7 +154,7 @@ def noise_models() -> dict:
     out = {}
     for label, (noise, rel) in MODELS.items():
         t0 = time.perf_counter()
-        st = dataclasses.replace(setup.calibration_settings, noise=noise, relative_sigma=rel).validate()
+        st = dataclasses.replace(setup.calibration, noise=noise, relative_sigma=rel).validate()
         diag = diagnose(setup.rotor, meas, grid, setup.settings, st, dset, rotor_source=setup.rotor_spec)
         effects = named_effect_specs(diag, skip=setup.nuisance)
         lam = diag.rounds[0]["candidates"][0].lr_statistic if diag.rounds else float("nan")

@@ -138,9 +138,9 @@ def prior_draws(estimator: str, n_seeds: int, say=print) -> dict:
     from calib.measurements import synthesize
     from calib.workflow import truth_model
 
-    cfg, rotor, settings, channels, cond, grid, model = _setup()
-    rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
-    tmodel, _ = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
+    workflow, rotor, settings, channels, cond, grid, model = _setup()
+    rel = {c: float(workflow.noise.relative[c]) for c in channels}
+    tmodel, _ = truth_model(rotor, channels, settings, workflow.truth, ("pitch_offset",))
     lam = cond.tip_speed_ratio(rotor.rotor_radius)
     idx = [[c.name for c in model.channels].index(c) for c in channels]
     out = {"low to high": [], "high to low": []}

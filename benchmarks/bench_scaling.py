@@ -13,6 +13,7 @@ Run: ``python benchmarks/bench_scaling.py [--all]`` (make bench).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -33,20 +34,20 @@ SIZES = ((12, 6), (36, 18), (72, 36))
 
 
 def _case(n_tsr: int, n_pitch: int):
-    cfg = load_workflow(os.path.join(ROOT, WORKFLOW))
-    rotor = load_rotor(cfg["rotor"]["name"])
+    workflow = load_workflow(os.path.join(ROOT, WORKFLOW))
+    rotor = load_rotor(workflow.rotor["name"])
     settings = BemSettings(use_tilt=False)
-    channels = list(cfg["stages"][0]["channels"])
-    c = dict(cfg["conditions"])
-    c["tsr"] = np.linspace(min(c["tsr"]), max(c["tsr"]), n_tsr).tolist()
-    c["pitch"] = np.linspace(min(c["pitch"]), max(c["pitch"]), n_pitch).tolist()
-    cond = synthetic_conditions(c, rotor, WORKFLOW)
-    g = cfg["grid"]
-    model = BemModel(rotor, CorrectionGrid(g["alpha_nodes_deg"], g["eta_nodes"]), channels, settings,
+    channels = list(workflow.stages[0].channels)
+    c = workflow.conditions
+    c = dataclasses.replace(c, tsr=tuple(np.linspace(min(c.tsr), max(c.tsr), n_tsr).tolist()),
+                            pitch=tuple(np.linspace(min(c.pitch), max(c.pitch), n_pitch).tolist()))
+    cond = synthetic_conditions(c, rotor)
+    g = workflow.grid
+    model = BemModel(rotor, CorrectionGrid(g.alpha_nodes_deg, g.eta_nodes), channels, settings,
                      nuisance=("pitch_offset",))
-    tmodel, p_true = truth_model(rotor, channels, settings, cfg["truth"], ("pitch_offset",))
-    rel = {ch: float(cfg["noise"]["relative"][ch]) for ch in channels}
-    meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=int(cfg["noise"]["seed"]))
+    tmodel, p_true = truth_model(rotor, channels, settings, workflow.truth, ("pitch_offset",))
+    rel = {ch: float(workflow.noise.relative[ch]) for ch in channels}
+    meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=workflow.noise.seed)
     return model, meas
 
 

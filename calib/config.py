@@ -51,15 +51,6 @@ class Key:
     check: Callable[[Any], str | None] | None = None
 
 
-def _key(spec) -> Key:
-    """A :class:`Key` from a schema entry: a Key, a ``(types, required)`` pair or a bare type."""
-    if isinstance(spec, Key):
-        return spec
-    if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[1], bool):
-        return Key(spec[0], spec[1])
-    return Key(spec)
-
-
 def type_ok(value, types) -> bool:
     """``value`` is one of ``types``, where true/false counts only where ``bool`` is accepted."""
     accepted = types if isinstance(types, tuple) else (types,)
@@ -77,7 +68,7 @@ def check_table(table, schema: dict, section: str, source: str, *, table_label: 
     ----------
     table : dict
     schema : dict
-        key -> :class:`Key` (or ``(types, required)``, or a type).
+        key -> :class:`Key` (the one schema form).
     section : str
         The table's key path ("" for the top level), which prefixes every key in the errors.
     source : str
@@ -87,19 +78,24 @@ def check_table(table, schema: dict, section: str, source: str, *, table_label: 
 
     Raises
     ------
+    TypeError
+        A schema entry is not a :class:`Key` (a programming error, not the user's).
     InputError
         The table is not a table; an unknown key (with "did you mean"); a value of another type, outside
         its choices or breaking its check; a required key missing. ``field`` is the key path.
     """
     where = f"{section}." if section else ""
+    not_keys = [name for name, key in schema.items() if not isinstance(key, Key)]
+    if not_keys:
+        raise TypeError(f"schema entries must be calib.config.Key, not {schema[not_keys[0]]!r} "
+                        f"(key {where}{not_keys[0]!r})")
     if not isinstance(table, dict):
         raise InputError(f"{table_label or repr(section)} must be a table, got {table!r:.60}", source,
                          field=section or None)
-    keys = {k: _key(v) for k, v in schema.items()}
     for name, value in table.items():
-        if name not in keys:
-            raise InputError(unknown_key(name, sorted(keys), where), source, field=f"{where}{name}")
-        key = keys[name]
+        if name not in schema:
+            raise InputError(unknown_key(name, sorted(schema), where), source, field=f"{where}{name}")
+        key = schema[name]
         if not type_ok(value, key.types):
             raise InputError(f"'{where}{name}' must be {TYPE_NAMES.get(key.types, key.types)}, got {value!r}",
                              source, field=f"{where}{name}")
@@ -110,7 +106,7 @@ def check_table(table, schema: dict, section: str, source: str, *, table_label: 
             expected = key.check(value)
             if expected:
                 raise InputError(f"{expected}, got {value!r}", source, field=f"{where}{name}")
-    for name, key in keys.items():
+    for name, key in schema.items():
         if key.required and name not in table:
             raise InputError(f"missing required key '{where}{name}'", source, field=f"{where}{name}")
     return table

@@ -97,7 +97,7 @@ def test_an_unknown_model_kind_gets_one_message_from_every_entry_point():
     from pathlib import Path
 
     from calib.models.registry import build_model
-    from calib.workflow.setup import _model_kind
+    from calib.workflow.schema import workflow_from_table
 
     words = r"unknown model kind 'ccblade'; valid kinds: bem, fmu"
     with pytest.raises(InputError, match=words) as spec:
@@ -105,7 +105,19 @@ def test_an_unknown_model_kind_gets_one_message_from_every_entry_point():
     with pytest.raises(InputError, match=words) as table:
         model_from_workflow({"kind": "ccblade"}, {"name": "nrel5mw"}, ["power"], "w.toml")
     with pytest.raises(InputError, match=words) as workflow:
-        _model_kind({"model": {"kind": "ccblade"}}, "w.toml", [])
+        workflow_from_table({"name": "x", "model": {"kind": "ccblade"}, "stages": [{"name": "s", "channels": ["power"]}]},
+                            "w.toml", ".")
     assert spec.value.field == "kind" and table.value.field == workflow.value.field == "model.kind"
     package = Path(__file__).resolve().parents[1] / "calib"
     assert sum(p.read_text().count('"unknown model kind') for p in package.rglob("*.py")) == 1
+
+
+@pytest.mark.parametrize("entry", [(str, True), str, (str,)])
+def test_a_schema_entry_that_is_not_a_key_is_a_programming_error(entry):
+    """One schema form: check_table refuses a (type, required) pair or a bare type (TypeError, not the
+    user's InputError), even for a table that would pass."""
+    from calib.config import Key, check_table
+
+    with pytest.raises(TypeError, match="calib.config.Key"):
+        check_table({"name": "x"}, {"name": entry}, "", "wf.toml")
+    assert check_table({"name": "x"}, {"name": Key(str, True)}, "", "wf.toml") == {"name": "x"}

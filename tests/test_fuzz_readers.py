@@ -47,7 +47,8 @@ from calib.rotor.openfast import read_elastodyn, read_openfast
 from calib.rotor.polar import Airfoil
 from calib.rotor.windio import read_windio
 from calib.tomlfile import read_toml
-from calib.workflow import load_workflow
+from calib.workflow import Workflow, load_workflow
+from calib.workflow.sections import Stage
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "calib" / "data"
@@ -678,7 +679,7 @@ def test_fuzz_load_workflow(work_dir, case):
     path.write_bytes(data)
     wf = call_reader(lambda: load_workflow(path), [path])
     if wf is not None:
-        assert isinstance(wf, dict) and wf["stages"] and all(isinstance(s, dict) for s in wf["stages"])
+        assert isinstance(wf, Workflow) and wf.stages and all(isinstance(s, Stage) for s in wf.stages)
         assert_finite(wf, "workflow")
 
 

@@ -231,17 +231,22 @@ def test_fuzzed_units_rows_and_openfast_output_never_crash(tmp_path, case, mode)
 
 def test_workflow_passes_the_time_series_options(tmp_path):
     """[measurements] time_series / average_from reach the reader; a bad value names the workflow key."""
-    from calib.workflow import measurements_of
+    import dataclasses
+
+    from calib.workflow import measurements_of, workflow_from_table
 
     write(tmp_path, openfast_text(), "5MW_Land.out")
-    cfg = {"_dir": str(tmp_path), "_source": "wf.toml",
-           "measurements": {"file": "5MW_Land.out", "time_series": "mean", "average_from": 10.0}}
-    m = measurements_of(cfg, ["power"])
+    wf = workflow_from_table({"name": "t", "rotor": {"name": "nrel5mw"}, "stages": [{"name": "s", "channels": ["power"]}],
+                              "grid": {"alpha_nodes_deg": "auto", "eta_nodes": [0.5, 1.0]},
+                              "measurements": {"file": "5MW_Land.out", "time_series": "mean", "average_from": 10.0}},
+                             "wf.toml", tmp_path)
+    m = measurements_of(wf, ["power"])
     assert m.n_points == 1 and m.metadata["time_rows"] == 10
-    cfg["measurements"]["time_series"] = "median"
+    median = dataclasses.replace(wf, measurements=dataclasses.replace(wf.measurements, time_series="median"))
     with pytest.raises(InputError, match="time_series must be") as err:
-        measurements_of(cfg, ["power"])
+        measurements_of(median, ["power"])
     assert err.value.source == "wf.toml" and err.value.field == "measurements.time_series"
-    del cfg["measurements"]["time_series"], cfg["measurements"]["average_from"]
+    plain = dataclasses.replace(wf, measurements=dataclasses.replace(wf.measurements, time_series=None,
+                                                                     average_from=None))
     with pytest.raises(InputError, match=r'\[measurements\] time_series = "mean"'):
-        measurements_of(cfg, ["power"])
+        measurements_of(plain, ["power"])

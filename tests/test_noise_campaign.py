@@ -100,7 +100,7 @@ def test_validation_and_diagnosis_tables_name_the_bad_key():
     assert info.value.field == "diagnosis.significance"
 
 
-def _workflow(tmp_path, extra: str) -> dict:
+def _workflow(tmp_path, edit: tuple):
     from pathlib import Path
 
     from calib.workflow import load_workflow
@@ -109,25 +109,18 @@ def _workflow(tmp_path, extra: str) -> dict:
     text = (root / "workflows" / "phase_vi.toml").read_text().replace(
         'file = "data/phase_vi_sequence_H.csv"', f'file = "{root / "workflows" / "data" / "phase_vi_sequence_H.csv"}"')
     path = tmp_path / "wf.toml"
-    path.write_text(text + extra)
+    path.write_text(text.replace(*edit))
     return load_workflow(path)
 
 
 def test_workflow_diagnosis_and_validation_errors_name_the_key(tmp_path):
-    from calib.workflow import prepare
-
-    cfg = _workflow(tmp_path, "")
-    cfg["validation"] = {"leave_out": "wind_speed", "fold": 2}
+    # checked when the workflow is loaded, as every other table
     with pytest.raises(InputError) as info:
-        prepare(cfg)
+        _workflow(tmp_path, edit=("[validation]\n", "[validation]\nfold = 2\n"))
     assert info.value.field == "validation.fold" and "wf.toml" in str(info.value)
-    cfg = _workflow(tmp_path, "")
-    cfg["diagnosis"] = {"max_effects": -1}
     with pytest.raises(InputError) as info:
-        prepare(cfg)
+        _workflow(tmp_path, edit=("[diagnosis]\n", "[diagnosis]\nmax_effects = -1\n"))
     assert info.value.field == "diagnosis.max_effects"
-    cfg = _workflow(tmp_path, "")
-    cfg["model"] = {"kind": "fmu", "variant": "A"}
     with pytest.raises(InputError, match="native BEM only") as info:
-        prepare(cfg)
+        _workflow(tmp_path, edit=("[grid]\n", '[model]\nkind = "fmu"\nvariant = "A"\n\n[grid]\n'))
     assert info.value.field == "diagnosis"

@@ -12,8 +12,8 @@ from calib.types import OperatingConditions
 from calib.workflow import load_workflow, prepare
 
 
-def items_of(cfg, meas=None) -> dict:
-    return {i.quantity: (i.value, i.origin) for i in statement(prepare(cfg), cfg, meas)}
+def items_of(workflow, meas=None) -> dict:
+    return {i.quantity: (i.value, i.origin) for i in statement(prepare(workflow), workflow, meas)}
 
 
 def test_embedded_rotor_values_and_their_origins(tmp_path):

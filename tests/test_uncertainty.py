@@ -468,20 +468,20 @@ def test_auto_truncation_on_the_shipped_workflows_held_back(workflow, stage):
 
     from calib.workflow import load_workflow, prepare, synthetic_conditions, truth_model
 
-    cfg = load_workflow(Path(__file__).resolve().parents[1] / "workflows" / workflow)
-    setup = prepare(cfg)
-    cond = synthetic_conditions(cfg["conditions"], setup.rotor, workflow, setup.density)
+    loaded = load_workflow(Path(__file__).resolve().parents[1] / "workflows" / workflow)
+    setup = prepare(loaded)
+    cond = synthetic_conditions(loaded.conditions, setup.rotor, setup.density)
     grid = setup.grid(cond)
-    channels = cfg["stages"][stage]["channels"]
-    tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, cfg["truth"], setup.nuisance)
-    rel = {c: float(cfg["noise"]["relative"][c]) for c in channels}
+    channels = list(loaded.stages[stage].channels)
+    tmodel, p_true = truth_model(setup.rotor, channels, setup.settings, loaded.truth, setup.nuisance)
+    rel = {c: float(loaded.noise.relative[c]) for c in channels}
     meas = synthesize(tmodel, p_true, cond, relative_sigma=rel, channels=channels, seed=7100)
     model = BemModel(setup.rotor, grid, channels, setup.settings, setup.nuisance)
     test = np.arange(len(cond)) % 3 == 1
     train = type(meas)(cond.subset(~test), meas.channels, meas.values[~test], meas.sigma[~test], "train")
     scores = {}
     for sb in ("auto", 0.1, 0.3, 1.0, 2.0, 5.0):
-        st = dataclasses.replace(setup.calibration_settings, sigma_bar=sb, estimator="truncated")   # σ̄: its setting
+        st = dataclasses.replace(setup.calibration, sigma_bar=sb, estimator="truncated")   # σ̄: its setting
         res = Calibrator(model, train, st).run()
         scores[sb] = _held_back_chi2(res, model, cond.subset(test), meas.values[test], meas.sigma[test])
     best = min(v for k, v in scores.items() if k != "auto")

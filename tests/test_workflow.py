@@ -59,7 +59,7 @@ def write(tmp_path, text):
     (("seed = 3", "seed = 3.5"), "noise.seed", "must be an integer"),
     (("use_tilt = false", "use_tilt = 1"), "model.use_tilt", "must be true/false"),
     (('block = "lift"', 'block = "moment"'), "truth.bumps[0].block", "'lift' or 'drag'"),
-    (('[[stages]]\nname = "hub"\n', '[[stages]]\n'), "stages.name", "missing required key"),
+    (('[[stages]]\nname = "hub"\n', '[[stages]]\n'), "stages[0].name", "missing required key"),
 ])
 def test_schema_errors_name_file_and_key(tmp_path, edit, field, words):
     path = write(tmp_path, SMALL.replace(*edit))
@@ -67,6 +67,45 @@ def test_schema_errors_name_file_and_key(tmp_path, edit, field, words):
         load_workflow(path)
     assert err.value.field == field
     assert str(path) in str(err.value) and words in str(err.value)
+
+
+@pytest.mark.parametrize("edit, field, words", [
+    (("alpha_width = 4.0", "alpha_width = -4.0"), "truth.bumps[0].alpha_width", "must be > 0, got -4.0"),
+    (("use_tilt = false", "use_tilt = false\nyaw = 95.0"), "model.yaw", "within ±90, got 95.0"),
+    (("use_tilt = false", 'use_tilt = false\nnuisance = ["yaw_offset"]'), "model.nuisance", "'yaw_offset' is not one"),
+    (("[grid]\nalpha_nodes_deg = [-4.0, 4.0, 12.0]", '[grid]\nalpha_nodes_deg = "automatic"'), "grid.alpha_nodes_deg",
+     'or "auto"'),
+    (("rotor_speed = 10.0", "rotor_speed = 10.0\nyaw = 5.0\nair_density = 0.0"), "conditions.air_density",
+     "must be > 0"),
+    (("tsr = [5.0, 7.0, 9.0]", "tsr = [5.0, -7.0]"), "conditions.tsr", "tip-speed ratios must be > 0"),
+    (("seed = 3", 'seed = 3\n[calibration]\nnoise = "loud"'), "calibration.noise", "unknown noise mode"),
+    (('name = "hub"', 'name = "hub"\nretain = "some"'), "stages[0].retain", "must be one of threshold, all"),
+])
+def test_value_rules_run_once_at_load(tmp_path, edit, field, words):
+    """A rule on a value is the key's (or its section's): it fails when the file is loaded, naming the file and
+    the key path, before any rotor, model or data is read."""
+    path = write(tmp_path, SMALL.replace(*edit))
+    with pytest.raises(InputError) as err:
+        load_workflow(path)
+    assert err.value.field == field and err.value.source == str(path), str(err.value)
+    assert words in str(err.value)
+
+
+def test_a_loaded_workflow_is_typed_and_frozen(tmp_path):
+    import dataclasses
+
+    workflow = load_workflow(write(tmp_path, SMALL))
+    assert workflow.name == "small" and workflow.source == str(tmp_path / "wf.toml")
+    assert workflow.base_dir == str(tmp_path)
+    assert workflow.stages[0].channels == ("power", "thrust") and workflow.truth.bumps[0].block == "lift"
+    assert workflow.model.nuisance == ("pitch_offset",) and workflow.model.options == {"use_tilt": False}
+    assert workflow.calibration.settings.noise == "known" and workflow.calibration.force is False
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        workflow.name = "other"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        workflow.grid.eta_nodes = (0.5, 1.0)
+    with pytest.raises(TypeError):
+        workflow["stages"]       # the dict of before: no item access
 
 
 def test_toml_syntax_error_gives_line_and_column(tmp_path):
@@ -107,8 +146,8 @@ def test_small_workflow_writes_results_figures_and_report(tmp_path):
 
 def test_shipped_workflows_validate():
     for path in sorted(WORKFLOWS.glob("*.toml")):
-        cfg = load_workflow(path)
-        assert cfg["stages"]
+        workflow = load_workflow(path)
+        assert workflow.stages
 
 
 def test_the_bundled_fmu_workflow_runs_as_the_readme_says(tmp_path):
@@ -136,13 +175,13 @@ def test_wind_tunnel_study_improves_fit_from_hub_loads(tmp_path):
 def test_blade_loads_localize_the_correction(tmp_path):
     hub, blade = run_workflow(WORKFLOWS / "blade_loads_localization.toml", tmp_path, progress=False)
     assert blade.result.n_retained > hub.result.n_retained
-    cfg = load_workflow(WORKFLOWS / "blade_loads_localization.toml")
-    grid = CorrectionGrid(cfg["grid"]["alpha_nodes_deg"], cfg["grid"]["eta_nodes"])
+    workflow = load_workflow(WORKFLOWS / "blade_loads_localization.toml")
+    grid = CorrectionGrid(workflow.grid.alpha_nodes_deg, workflow.grid.eta_nodes)
     alpha = np.linspace(3.0, 11.0, 9)
 
     def lift_error(res, eta):
         est, _, _, _ = grid.evaluate(res.estimate.p_hat[:grid.n_params], alpha, np.full(alpha.size, eta))
-        truth, _ = smooth_field(cfg["truth"]["bumps"], alpha, np.full(alpha.size, eta))
+        truth, _ = smooth_field(workflow.truth.bumps, alpha, np.full(alpha.size, eta))
         return est, truth
 
     # inside the DU25 span range: blade sensors recover the lift loss, hub loads smear it out

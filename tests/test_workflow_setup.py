@@ -45,7 +45,7 @@ def workflow(tmp_path, rotor='name = "nrel5mw"', extra="", alpha="[-4.0, 4.0, 12
 def test_api_and_toml_defaults_are_the_same(tmp_path):
     setup = prepare(load_workflow(workflow(tmp_path)))
     assert setup.settings == BemSettings()
-    assert dataclasses.replace(setup.calibration_settings, verbose=False) == CalibrationSettings()
+    assert dataclasses.replace(setup.calibration, verbose=False) == CalibrationSettings()
     # every BemSettings / CalibrationSettings field has a workflow key of the same name
     assert {f.name for f in dataclasses.fields(BemSettings)} - set(MODEL_KEYS) == {"kinematic_viscosity"}
     assert {f.name for f in dataclasses.fields(CalibrationSettings)} - set(CALIBRATION_KEYS) == {"verbose"}

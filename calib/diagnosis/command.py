@@ -107,7 +107,7 @@ def run_diagnose(rotor: str | None, data: str, out: str, config: str | None = No
     for note in meas.notes:
         printer(f"[calib diagnose] {Path(data).name}: {note}")
     meas = _select_channels(meas, channels, src)
-    wf = _workflow_table(cfg, list(meas.channels), src, base_dir, is_fmu)
+    wf = _workflow(cfg, list(meas.channels), src, base_dir)
     setup = prepare(wf)
     meas = _fill_conditions(meas, setup)
     set_up = statement(setup, wf, meas)
@@ -170,19 +170,17 @@ def _read_config(config: str | None, rotor: str | None) -> tuple[dict, str, Path
     return cfg, src, base_dir
 
 
-def _workflow_table(cfg: dict, channels: list, src: str, base_dir: Path, is_fmu: bool) -> dict:
-    """The one-stage workflow of the diagnosis (``channels`` measured), sections checked as ``calib run`` does."""
-    from calib.workflow import check_section
+def _workflow(cfg: dict, channels: list, src: str, base_dir: Path):
+    """The one-stage workflow of the diagnosis (``channels`` measured), its tables checked as ``calib run``
+    checks them (:func:`calib.workflow.schema.workflow_from_table`)."""
+    from calib.workflow.schema import workflow_from_table
 
     wf = {"name": "diagnose", "rotor": cfg["rotor"], "grid": cfg.get("grid", DEFAULT_GRID),
-          "stages": [{"name": "diagnose", "channels": channels}], "_source": src, "_dir": str(base_dir)}
+          "stages": [{"name": "diagnose", "channels": channels}]}
     for key in ("model", "fluid", "calibration", "executor"):
         if key in cfg:
             wf[key] = cfg[key]
-    for key in ("model", "fluid", "grid", "calibration"):
-        if key in wf and not (key == "model" and is_fmu):   # an FMU's [model]: checked by calib.models.from_config
-            check_section(wf[key], key, src)
-    return wf
+    return workflow_from_table(wf, src, base_dir, measured_elsewhere=True)
 
 
 def _open_history(out: str, rotor: str | None, data: str, config: str | None, force: bool, setup, resume: bool,
@@ -231,7 +229,7 @@ def _checked_diagnosis(setup, grid, meas, dset, hist, *, is_fmu: bool, src: str,
 
     try:
         unit_notes = _unit_check(setup, family, meas, wrap, data, force, strict, printer, prefix)
-        diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset,
+        diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration, dset,
                         progress=lambda s: printer(f"[calib diagnose] {s}"), rotor_source=setup.rotor_spec,
                         wrap=wrap, fit_progress=lambda done, total: progress_line(done, total, "candidate fits"),
                         family=family,
@@ -298,7 +296,7 @@ def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool,
     model = wrap(family.nominal_model() if family is not None else setup.model(None, list(meas.channels)),
                  "unit check")
     p = np.array([q.nominal for q in model.parameters], float)
-    _, notes = apply_unit_check(model, p, meas, sigma=setup.calibration.get("sigma"), force=force,
+    _, notes = apply_unit_check(model, p, meas, sigma=setup.calibration.sigma, force=force,
                                 strict=strict, source=str(data), printer=printer,
                                 prefix=prefix, model_units=setup.model_units())
     return notes
@@ -307,14 +305,16 @@ def _unit_check(setup, family, meas, wrap, data: str, force: bool, strict: bool,
 def _fmu_family(setup, grid, channels: list, dset, src: str):
     """The FMU family of a ``[model] kind = "fmu"`` config and the executor its simulations run on."""
     from calib.diagnosis.fmu import FmuFamily
-    from calib.models.from_config import executor_from_table, model_from_workflow
+    import dataclasses
 
-    executor = executor_from_table(setup.executor_table, src)
+    from calib.models.from_config import executor_of, fmu_model
+
+    executor = executor_of(setup.executor, src)
 
     def build(parameters, corrections, probe_channels=None):
-        table = {**setup.fmu_table, "parameters": list(parameters), "corrections": bool(corrections)}
-        return model_from_workflow(table, setup.rotor_spec, probe_channels or channels, src, setup.base_dir,
-                                   grid=grid, executor=executor)
+        table = dataclasses.replace(setup.model_table, parameters=tuple(parameters), corrections=bool(corrections))
+        return fmu_model(table, setup.rotor_spec, probe_channels or channels, src, setup.base_dir, grid=grid,
+                         executor=executor)
 
     try:
         family = FmuFamily(build, dset.candidates)

@@ -87,7 +87,7 @@ def run_diagnosis(setup, measurements: Measurements, grid, out_dir, executor=Non
 
         wrap = lambda model, label: recorded(model, history, f"diagnosis: {label}")  # noqa: E731
         on_iteration = lambda rec: history.event("iteration", **{"run": "diagnosis", **rec})  # noqa: E731
-    diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration_settings, dset, executor=None,
+    diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration, dset, executor=None,
                     progress=lambda line: echo(f"[calib run] diagnosis: {line}"), rotor_source=setup.rotor_spec,
                     wrap=wrap, on_iteration=on_iteration)
     paths = write_diagnosis(diag, Path(out_dir) / "diagnosis")

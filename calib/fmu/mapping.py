@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.config import NUM as _NUM, NUM_OR_BOOL, check_table
+from calib.config import NUM as _NUM, NUM_OR_BOOL, Key, check_table
 from calib.errors import InputError, unknown_key
 from calib.fmu.mapping_entries import (Corrections, Entry, OutputEntry, ParameterEntry, SettingEntry,
                                        SpanwiseOutput, Switch)
@@ -48,22 +48,22 @@ SWITCH_EFFECTS = ("tip_loss", "hub_loss", "tower_shadow", "shear", "yaw", "skewe
 
 _TOP_KEYS = {"schema", "variant", "fmi_version", "model_identifier", "fmu_file", "description", "inputs",
              "outputs", "corrections", "parameters", "switches", "settings", "steady", "jacobian", "rotor"}
-_ENTRY_KEYS = {"variable": (str, True), "element": (int, False), "unit": (str, False), "scale": (_NUM, False),
-               "offset": (_NUM, False), "sign": (int, False), "wrap": (_NUM, False), "description": (str, False)}
-_OUTPUT_KEYS = {**_ENTRY_KEYS, "channel_unit": (str, False)}
-_SETTING_KEYS = {**_ENTRY_KEYS, "value": (NUM_OR_BOOL, False)}
-_PARAMETER_KEYS = {**{k: v for k, v in _ENTRY_KEYS.items() if k != "scale"}, "conversion_scale": (_NUM, False),
-                   "kind": (str, False), "nominal": (_NUM, False), "lower": (_NUM, False), "upper": (_NUM, False),
-                   "scale": (_NUM, True), "prior_std": (_NUM, False), "package_unit": (str, False)}
-_SPANWISE_KEYS = {"variables": (list, False), "variable": (str, False), "radius_variables": (list, False),
-                  "radius_variable": (str, False), "unit": (str, False), "scale": (_NUM, False),
-                  "offset": (_NUM, False), "description": (str, False)}
-_CORRECTION_KEYS = {"grid": (str, False), "alpha_nodes_deg": (list, False), "eta_nodes": (list, False),
-                    "layout": (str, True), "lift": (str, True), "drag": (str, True), "scale": (_NUM, False),
-                    "cl_scale": (_NUM, False), "cd_scale": (_NUM, False), "cl_bound": (_NUM, False),
-                    "cd_bound": (_NUM, False)}
-_SWITCH_KEYS = {"variable": (str, True), "on": (NUM_OR_BOOL, True), "off": (NUM_OR_BOOL, True),
-                "values": (dict, False), "description": (str, False)}
+_ENTRY_KEYS = {"variable": Key(str, True), "element": Key(int), "unit": Key(str), "scale": Key(_NUM),
+               "offset": Key(_NUM), "sign": Key(int), "wrap": Key(_NUM), "description": Key(str)}
+_OUTPUT_KEYS = {**_ENTRY_KEYS, "channel_unit": Key(str)}
+_SETTING_KEYS = {**_ENTRY_KEYS, "value": Key(NUM_OR_BOOL)}
+_PARAMETER_KEYS = {**{k: v for k, v in _ENTRY_KEYS.items() if k != "scale"}, "conversion_scale": Key(_NUM),
+                   "kind": Key(str), "nominal": Key(_NUM), "lower": Key(_NUM), "upper": Key(_NUM),
+                   "scale": Key(_NUM, True), "prior_std": Key(_NUM), "package_unit": Key(str)}
+_SPANWISE_KEYS = {"variables": Key(list), "variable": Key(str), "radius_variables": Key(list),
+                  "radius_variable": Key(str), "unit": Key(str), "scale": Key(_NUM),
+                  "offset": Key(_NUM), "description": Key(str)}
+_CORRECTION_KEYS = {"grid": Key(str), "alpha_nodes_deg": Key(list), "eta_nodes": Key(list),
+                    "layout": Key(str, True), "lift": Key(str, True), "drag": Key(str, True), "scale": Key(_NUM),
+                    "cl_scale": Key(_NUM), "cd_scale": Key(_NUM), "cl_bound": Key(_NUM),
+                    "cd_bound": Key(_NUM)}
+_SWITCH_KEYS = {"variable": Key(str, True), "on": Key(NUM_OR_BOOL, True), "off": Key(NUM_OR_BOOL, True),
+                "values": Key(dict), "description": Key(str)}
 
 
 def _check_list(values, kind, where: str, source: str) -> None:
@@ -132,7 +132,7 @@ def _entry(cls, name: str, e: dict, where: str, source: str, allowed: dict, **ex
 def _inputs(data: dict, src: str):
     """``[inputs]``: the operating conditions the FMU takes (wind and rotor speed required)."""
     inputs = {}
-    _check(data["inputs"], {f: (dict, False) for f in CONDITION_FIELDS}, "inputs", src)
+    _check(data["inputs"], {f: Key(dict) for f in CONDITION_FIELDS}, "inputs", src)
     for name, e in data["inputs"].items():
         inputs[name] = _entry(Entry, name, e, f"inputs.{name}", src, _ENTRY_KEYS)
     for req in ("wind_speed", "rotor_speed"):
@@ -245,7 +245,7 @@ def _rotor_radius(data: dict, src: str):
     """``[rotor] radius``: a number [m] or an output entry (None without the table)."""
     radius = None
     if "rotor" in data:
-        _check(data["rotor"], {"radius": ((int, float, dict), True)}, "rotor", src)
+        _check(data["rotor"], {"radius": Key((int, float, dict), True)}, "rotor", src)
         r = data["rotor"]["radius"]
         radius = (float(r) if not isinstance(r, dict) else
                   _entry(Entry, "rotor_radius", r, "rotor.radius", src, _ENTRY_KEYS))

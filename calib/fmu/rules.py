@@ -13,17 +13,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from calib.config import NUM, settings_from_table
+from calib.config import NUM, Key, settings_from_table
 from calib.errors import InputError
 
-_STEADY_KEYS = {"steps_per_revolution": (int, True), "settle_revolutions": (int, True),
-                "average_revolutions": (int, True), "standstill_step_size": (NUM, False),
-                "convergence_rtol": (NUM, False), "perturbation_settle_revolutions": (int, False),
-                "perturbation_average_revolutions": (int, False)}
+_STEADY_KEYS = {"steps_per_revolution": Key(int, True), "settle_revolutions": Key(int, True),
+                "average_revolutions": Key(int, True), "standstill_step_size": Key(NUM),
+                "convergence_rtol": Key(NUM), "perturbation_settle_revolutions": Key(int),
+                "perturbation_average_revolutions": Key(int)}
 #: upper bounds of the step counts: a larger one is a typo, and would run the FMU for days
 _STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
                "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
-_JACOBIAN_KEYS = {"relative_step": (NUM, False), "warm_start": (bool, False)}
+_JACOBIAN_KEYS = {"relative_step": Key(NUM), "warm_start": Key(bool)}
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,9 @@ NUISANCE: dict[str, Parameter] = {name: make_effect(effect).parameters()[0]
                                   for name, effect in NUISANCE_EFFECTS.items()}
 """The nuisance parameters a :class:`BemModel` accepts in ``nuisance``, by name."""
 
+DEFAULT_NUISANCE: tuple[str, ...] = ("pitch_offset",)
+"""The nuisance parameters of a ``[model]`` table that names none (a workflow's, ``calib diagnose --config``'s)."""
+
 
 class BemModel:
     """Native steady BEM with a chain of effects: a polar-correction field, nuisance parameters and more.

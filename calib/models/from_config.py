@@ -37,14 +37,23 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from calib.bem.solver import BemSettings
-from calib.config import NUM, Key, names_list, schema_of, settings_from_table
+from calib.config import NUM, Key, check_table, field_values, names_list, schema_of, settings_from_table
 from calib.errors import InputError
 from calib.fmu.plan import DEFAULT_TIMEOUT
+from calib.models.bem_model import DEFAULT_NUISANCE, NUISANCE, BemModel
 from calib.models.registry import model_kind
+from calib.types import OperatingConditions
+
+#: [model] keys a rotor file may set (AeroDyn TipLoss/HubLoss/AIDrag/TIDrag/TanInd, InflowWind PLExp):
+#: [model] key -> the :class:`calib.rotor.sources.RotorSource` attribute.
+FILE_SETUP = {"tip_loss": "tip_loss", "hub_loss": "hub_loss", "drag_in_axial_induction": "drag_in_axial_induction",
+              "drag_in_tangential_induction": "drag_in_tangential_induction", "wake_rotation": "tangential_induction",
+              "shear_exponent": "shear_exponent"}
+
 
 @dataclass(frozen=True)
 class FmuModelTable:
-    """A ``[model] kind = "fmu"`` table (the module docstring shows one).
+    """A ``[model] kind = "fmu"`` table (the module docstring shows one), checked.
 
     Parameters
     ----------
@@ -80,6 +89,59 @@ class FmuModelTable:
     timeout: float = DEFAULT_TIMEOUT
     isolate: bool = True
 
+    @classmethod
+    def from_table(cls, table: dict, source: str) -> "FmuModelTable":
+        """The checked table (:data:`FMU_KEYS`): exactly one of ``fmu`` and ``variant``; ``mapping`` with ``fmu``.
+
+        Raises
+        ------
+        InputError
+            Naming ``source`` and the key (``model.fmu``, ``model.mapping`` ...).
+        """
+        t = settings_from_table(cls, table, "model", source, FMU_KEYS, table_label="[model]")
+        if (t.fmu is None) == (t.variant is None):
+            raise InputError("[model] kind = \"fmu\" needs either fmu = \"PATH\" or variant = \"A\" | \"B\"", source,
+                             field="model.fmu")
+        if t.fmu is not None and t.mapping is None:
+            raise InputError("[model] kind = \"fmu\" with fmu = ... needs mapping = \"PATH\" (the mapping file "
+                             "that tells calib how to reach the FMU's variables)", source, field="model.mapping")
+        return t
+
+
+@dataclass(frozen=True)
+class BemModelTable:
+    """A ``[model] kind = "bem"`` table (:data:`BEM_KEYS`), checked.
+
+    Parameters
+    ----------
+    options : dict
+        The :class:`calib.bem.BemSettings` keywords the table gives, as the fields hold them.
+    tilt, precone : float, optional
+        Overrides of the rotor's shaft tilt and precone [deg], each within ±30°.
+    yaw : float
+        The workflow's yaw misalignment [deg], within ±90° (a condition of its points).
+    nuisance : tuple of str
+        The nuisance parameters (:data:`calib.models.bem_model.NUISANCE`); default
+        :data:`calib.models.bem_model.DEFAULT_NUISANCE`.
+    given : frozenset of str
+        The keys the table gave (where a setting came from, for the set-up statement).
+    """
+
+    options: dict = dataclasses.field(default_factory=dict)
+    tilt: float | None = None
+    precone: float | None = None
+    yaw: float = 0.0
+    nuisance: tuple = DEFAULT_NUISANCE
+    given: frozenset = frozenset()
+
+    @classmethod
+    def from_table(cls, table: dict, source: str) -> "BemModelTable":
+        """The checked ``[model]`` table of the native BEM (errors name ``source`` and ``model.KEY``)."""
+        check_table(table, BEM_KEYS, "model", source)
+        angles = {k: float(table[k]) for k in ("tilt", "precone") if k in table}
+        return cls(field_values(BemSettings, table), yaw=float(table.get("yaw", 0.0)),
+                   nuisance=tuple(table.get("nuisance", DEFAULT_NUISANCE)), given=frozenset(table), **angles)
+
 
 @dataclass(frozen=True)
 class ExecutorSettings:
@@ -90,6 +152,33 @@ class ExecutorSettings:
     workers: int | None = None
     address: str | None = None
 
+    @classmethod
+    def from_table(cls, table: dict | None, source: str) -> "ExecutorSettings":
+        """The checked ``[executor]`` table (serial without one).
+
+        Raises
+        ------
+        InputError
+            Unknown key, wrong type, ``address`` without ``kind = "dask"``.
+        """
+        st = settings_from_table(cls, dict(table or {}), "executor", source, EXECUTOR_KEYS, table_label="[executor]")
+        if st.address is not None and st.kind != "dask":
+            raise InputError("'executor.address' applies to kind = \"dask\" only", source, field="executor.address")
+        return st
+
+
+def _angle_within(limit: float):
+    """A :class:`calib.config.Key` check: an angle [deg] within ±``limit``."""
+    return lambda v: None if -limit <= v <= limit else f"must be an angle in degrees within ±{limit:g}"
+
+
+def _nuisance_names(value) -> str | None:
+    """A :class:`calib.config.Key` check: names of :data:`calib.models.bem_model.NUISANCE`."""
+    if names_list(value):
+        return names_list(value)
+    unknown = [v for v in value if v not in NUISANCE]
+    return f"must name nuisance parameters ({', '.join(NUISANCE)}); {unknown[0]!r} is not one" if unknown else None
+
 
 FMU_KEYS = schema_of(FmuModelTable, overrides={
     "fmu": str, "variant": str, "mapping": str, "switches": dict, "settings": dict, "steady": dict, "jacobian": dict,
@@ -99,8 +188,11 @@ FMU_KEYS = schema_of(FmuModelTable, overrides={
 #: viscosity (in [fluid]), plus rotor overrides, the workflow's yaw and the nuisance list.
 BEM_KEYS = {**schema_of(BemSettings, exclude=("kinematic_viscosity",),
                         overrides={"n_sectors": int, "polar_smoothing": list}),
-            "kind": (str, False), "tilt": (NUM, False), "precone": (NUM, False), "yaw": (NUM, False),
-            "nuisance": (list, False)}
+            "kind": Key(str), "tilt": Key(NUM, check=_angle_within(30.0)),
+            "precone": Key(NUM, check=_angle_within(30.0)),
+            "yaw": Key(NUM, check=lambda v: None if -90.0 < v < 90.0 else
+                       "must be a yaw misalignment in degrees within ±90"),
+            "nuisance": Key(list, check=_nuisance_names)}
 EXECUTOR_KEYS = schema_of(ExecutorSettings, overrides={
     "workers": Key(int, check=lambda v: None if v >= 1 else "must be >= 1"), "address": str})
 """[executor] keys: the :class:`ExecutorSettings` fields."""
@@ -115,9 +207,17 @@ def _path(value: str, base_dir) -> Path:
     return p if p.is_absolute() or base_dir is None else Path(base_dir) / p
 
 
+def model_table(table: dict | None, source: str) -> BemModelTable | FmuModelTable:
+    """The checked ``[model]`` table of either kind (an empty or missing one: the native BEM's defaults)."""
+    table = dict(table or {})
+    if model_kind(table.get("kind", "bem"), source, "model.kind") == "fmu":
+        return FmuModelTable.from_table(table, source)
+    return BemModelTable.from_table(table, source)
+
+
 def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: str, base_dir=None, *,
                         grid=None, executor=None):
-    """The ForwardModel of a workflow's ``[model]`` table.
+    """The ForwardModel of a workflow's ``[model]`` table (:func:`model_table`, then :func:`build_model`).
 
     Parameters
     ----------
@@ -135,22 +235,30 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         The workflow's correction grid: the native BEM's parameters, and the grid a bundled
         variant is built with (an FMU file carries its own grid in its mapping).
     executor : Executor, optional
-        Where FMU simulations run (:func:`executor_from_table`); default serial.
+        Where FMU simulations run (:func:`executor_of`); default serial.
 
     Returns
     -------
     BemModel or FmuModel
     """
-    cfg = dict(cfg_model or {})
-    kind = model_kind(cfg.get("kind", "bem"), source, "model.kind")
-    if kind == "bem":
-        return _bem_model(cfg, rotor_table, grid, channels, source, base_dir)
-    t = settings_from_table(FmuModelTable, cfg, "model", source, FMU_KEYS, table_label="[model]")
+    table = model_table(cfg_model, source)
+    if isinstance(table, BemModelTable):
+        if "yaw" in table.given:
+            raise InputError("the yaw misalignment is a condition of a workflow's points (calib run), not of a model "
+                             "built alone", source, field="model.yaw")
+        from calib.rotor.sources import rotor_from_table
+
+        rotor, settings, _ = bem_setup(table, rotor_from_table(dict(rotor_table), source, base_dir), source)
+        return bem_model(table, rotor, settings, grid, channels, dict(rotor_table))
+    return fmu_model(table, rotor_table, channels, source, base_dir, grid=grid, executor=executor)
+
+
+def fmu_model(t: FmuModelTable, rotor_table: dict | None, channels, source: str, base_dir=None, *, grid=None,
+              executor=None):
+    """The :class:`calib.fmu.model.FmuModel` of a checked FMU ``[model]`` table (arguments as
+    :func:`model_from_workflow`); a bundled variant is built for ``rotor_table`` and ``grid`` first."""
     from calib.fmu.model import FmuModel
 
-    if (t.fmu is None) == (t.variant is None):
-        raise InputError("[model] kind = \"fmu\" needs either fmu = \"PATH\" or variant = \"A\" | \"B\"", source,
-                         field="model.fmu")
     build = None
     if t.variant is not None:
         from calib.fmu.build import mapping_path
@@ -162,9 +270,6 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
         fmu = build_variant(build, source, base_dir)
         mapping = _path(t.mapping, base_dir) if t.mapping is not None else mapping_path(build["variant"])
     else:
-        if t.mapping is None:
-            raise InputError("[model] kind = \"fmu\" with fmu = ... needs mapping = \"PATH\" (the mapping file "
-                             "that tells calib how to reach the FMU's variables)", source, field="model.mapping")
         fmu = _path(t.fmu, base_dir)
         mapping = _path(t.mapping, base_dir)
         if not fmu.is_file():
@@ -176,51 +281,90 @@ def model_from_workflow(cfg_model: dict, rotor_table: dict, channels, source: st
                     jacobian=t.jacobian, executor=executor, timeout=t.timeout, isolate=t.isolate, build=build)
 
 
-def _bem_model(cfg: dict, rotor_table: dict, grid, channels, source: str, base_dir):
-    """The native BEM of a ``[model]`` table (:data:`BEM_KEYS`) on the rotor of ``rotor_table``."""
-    from calib.models.bem_model import BemModel
-    from calib.rotor.sources import rotor_from_table
+def bem_setup(table: BemModelTable, rsrc, source: str, viscosity: float | None = None,
+              notes: list | None = None) -> tuple[object, BemSettings, dict]:
+    """The rotor and :class:`calib.bem.BemSettings` of the native BEM of a checked ``[model]`` table.
 
-    settings = settings_from_table(BemSettings, cfg, "model", source, BEM_KEYS)
-    if "yaw" in cfg:
-        raise InputError("the yaw misalignment is a condition of a workflow's points (calib run), not of a model "
-                         "built alone", source, field="model.yaw")
-    rotor = angle_overrides(cfg, rotor_from_table(dict(rotor_table), source, base_dir).rotor, source)
-    return BemModel(rotor, grid, list(channels), settings, tuple(cfg.get("nuisance", ["pitch_offset"])),
-                    rotor_source=dict(rotor_table))
+    Each BEM option comes from the table if given, else from the rotor files if they state it
+    (:data:`FILE_SETUP`), else from the settings' default; ``tilt`` and ``precone`` [deg] override the
+    rotor's.
+
+    Parameters
+    ----------
+    table : BemModelTable
+    rsrc : calib.rotor.sources.RotorSource
+        The rotor of ``[rotor]`` and what its files state.
+    source : str
+        The file named in errors.
+    viscosity : float, optional
+        The fluid's kinematic viscosity [m²/s] (default: the settings' default, air at 15 °C).
+    notes : list of str, optional
+        A line per value taken from the files or overridden is appended.
+
+    Returns
+    -------
+    rotor : calib.rotor.geometry.Rotor
+    settings : BemSettings
+        Checked on the rotor (its azimuth sectors).
+    origins : dict
+        ``{key: "rotor files"}`` for each option taken from the files.
+
+    Raises
+    ------
+    InputError
+        A setting the BEM refuses, named ``model.KEY``.
+    """
+    notes = [] if notes is None else notes
+    rotor = angle_overrides(table, rsrc.rotor, notes)
+    kwargs, origins = dict(table.options), {}
+    for key, attr in FILE_SETUP.items():
+        file_value = getattr(rsrc, attr)
+        if key not in kwargs and file_value is not None:
+            kwargs[key] = file_value
+            origins[key] = "rotor files"
+            notes.append(f"{key} = {file_value} from the rotor files")
+    if viscosity is not None:
+        kwargs["kinematic_viscosity"] = viscosity
+    try:
+        settings = BemSettings(**kwargs)
+        settings.sectors_for(rotor, OperatingConditions([1.0], [1.0], [0.0]))
+    except InputError as exc:
+        raise InputError(exc.message, source, field=f"model.{exc.field}") from None
+    return rotor, settings, origins
 
 
-def angle_overrides(cfg: dict, rotor, source: str, notes: list | None = None):
-    """``rotor`` with the ``tilt`` and ``precone`` of a ``[model]`` table [deg], each within ±30°;
-    a line per override is added to ``notes`` when given."""
+def bem_model(table: BemModelTable, rotor, settings: BemSettings, grid, channels, rotor_source: dict | None,
+              effects=(), rotor_files: dict | None = None) -> BemModel:
+    """The native BEM of a checked ``[model]`` table on ``rotor`` with ``settings`` (:func:`bem_setup`): the
+    one builder of a workflow's, a ``calib diagnose --config``'s and :func:`model_from_workflow`'s."""
+    return BemModel(rotor, grid, list(channels), settings, table.nuisance, rotor_source=rotor_source,
+                    effects=effects, rotor_files=rotor_files)
+
+
+def angle_overrides(table: BemModelTable, rotor, notes: list | None = None):
+    """``rotor`` with the ``tilt`` and ``precone`` of a ``[model]`` table [deg]; a line per override is added
+    to ``notes`` when given."""
     overrides = {}
     for key, attr in (("tilt", "tilt_deg"), ("precone", "precone_deg")):
-        if key in cfg:
-            value = float(cfg[key])
-            if not -30.0 <= value <= 30.0:
-                raise InputError(f"must be an angle in degrees within ±30, got {value!r}", source,
-                                 field=f"model.{key}")
+        value = getattr(table, key)
+        if value is not None:
             overrides[attr] = value
             if notes is not None:
                 notes.append(f"{key} {value:g} deg from [model] (rotor files: {getattr(rotor, attr):g} deg)")
     return dataclasses.replace(rotor, **overrides) if overrides else rotor
 
 
-def executor_from_table(table: dict | None, source: str, progress=None):
-    """The executor of a workflow's ``[executor]`` table (serial without one).
-
-    Raises
-    ------
-    InputError
-        Unknown key or kind, wrong type, ``address`` without ``kind = "dask"``.
-    """
+def executor_of(settings: ExecutorSettings, source: str, progress=None):
+    """The executor of checked ``[executor]`` settings (:class:`ExecutorSettings`)."""
     from calib.executors import get_executor
 
-    st = settings_from_table(ExecutorSettings, dict(table or {}), "executor", source, EXECUTOR_KEYS,
-                             table_label="[executor]")
-    if st.address is not None and st.kind != "dask":
-        raise InputError("'executor.address' applies to kind = \"dask\" only", source, field="executor.address")
     try:
-        return get_executor(st.kind, st.workers, st.address, progress, source)
+        return get_executor(settings.kind, settings.workers, settings.address, progress, source)
     except InputError as exc:
         raise InputError(exc.message, source, field=f"executor.{exc.field}" if exc.field else "executor") from None
+
+
+def executor_from_table(table: dict | None, source: str, progress=None):
+    """The executor of an ``[executor]`` table (serial without one): :meth:`ExecutorSettings.from_table`,
+    then :func:`executor_of`."""
+    return executor_of(ExecutorSettings.from_table(table, source), source, progress)

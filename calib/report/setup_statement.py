@@ -41,7 +41,7 @@ class SetupItem:
         return {"quantity": self.quantity, "value": self.value, "origin": self.origin}
 
 
-def _origin(key: str, table: dict, section: str, file_keys=(), rotor_origin: str = "") -> str:
+def _origin(key: str, table, section: str, file_keys=(), rotor_origin: str = "") -> str:
     if key in table:
         return f"[{section}] {key}"
     if key in file_keys:
@@ -68,14 +68,14 @@ def rotor_origin(rotor_spec: dict | None) -> str:
     return f"rotor files ({Path(files[0]).name})" if files else "rotor files"
 
 
-def bem_statement(setup, cfg: dict, meas=None) -> list[SetupItem]:
-    """The native BEM's set-up in force (:class:`calib.workflow.WorkflowSetup` of ``cfg``).
+def bem_statement(setup, workflow, meas=None) -> list[SetupItem]:
+    """The native BEM's set-up in force (:class:`calib.workflow.WorkflowSetup` of ``workflow``).
 
     Parameters
     ----------
     setup : calib.workflow.WorkflowSetup
         The resolved settings.
-    cfg : dict
+    workflow : calib.workflow.schema.Workflow
         The loaded workflow or config tables (which keys the user gave).
     meas : calib.measurements.Measurements, optional
         The measurement table, whose condition columns override the set-up per point.
@@ -84,7 +84,7 @@ def bem_statement(setup, cfg: dict, meas=None) -> list[SetupItem]:
     -------
     list of SetupItem
     """
-    model = dict(cfg.get("model") or {})
+    model = workflow.model.given
     rot = rotor_origin(setup.rotor_spec)
     from_files = [k for k in _FILE_KEYS if setup.origins.get(k) == "rotor files"]
     s, rotor = setup.settings, setup.rotor
@@ -106,7 +106,7 @@ def bem_statement(setup, cfg: dict, meas=None) -> list[SetupItem]:
         items.append(SetupItem(key.replace("_", " "), "on" if getattr(s, key) else "off",
                                _origin(key, model, "model", from_files, rot)))
     items += _fluid_items(setup, rot, meas)
-    items += _calibration_items(setup, cfg, model)
+    items += _calibration_items(setup, workflow, model)
     return items
 
 
@@ -120,28 +120,28 @@ def _fluid_items(setup, rot: str, meas) -> list[SetupItem]:
     return [SetupItem("air density", *density), SetupItem("kinematic viscosity", *viscosity)]
 
 
-def _calibration_items(setup, cfg: dict, model: dict) -> list[SetupItem]:
-    cal = dict(cfg.get("calibration") or {})
-    noise = setup.calibration_settings.noise
-    items = [SetupItem("noise model", str(noise), _origin("noise", cal, "calibration"))]
-    if setup.fmu_table is None:
+def _calibration_items(setup, workflow, model) -> list[SetupItem]:
+    noise = setup.calibration.noise
+    items = [SetupItem("noise model", str(noise), _origin("noise", workflow.calibration.given, "calibration"))]
+    if not setup.is_fmu:
         nuisance = ", ".join(setup.nuisance) or "none"
         items.append(SetupItem("nuisance parameters", nuisance, _origin("nuisance", model, "model")))
     return items
 
 
-def fmu_statement(setup, cfg: dict, meas=None) -> list[SetupItem]:
+def fmu_statement(setup, workflow, meas=None) -> list[SetupItem]:
     """An FMU model's set-up in force: the file and mapping, and what ``[model]`` overrides."""
-    t = setup.fmu_table
-    items = [SetupItem("model", f"FMU {t.get('fmu', 'variant ' + str(t.get('variant')))}", "[model]")]
-    items.append(SetupItem("mapping", str(t.get("mapping", "the bundled variant's")), "[model] mapping"
-                           if "mapping" in t else "default"))
+    t = setup.model_table
+    items = [SetupItem("model", f"FMU {t.fmu if t.fmu is not None else 'variant ' + str(t.variant)}", "[model]")]
+    items.append(SetupItem("mapping", str(t.mapping if t.mapping is not None else "the bundled variant's"),
+                           "[model] mapping" if t.mapping is not None else "default"))
     for key in ("switches", "settings", "parameters"):
-        if key in t:
-            value = ", ".join(f"{k} = {v}" for k, v in t[key].items()) if isinstance(t[key], dict) else \
-                ", ".join(map(str, t[key]))
+        given = getattr(t, key)
+        if given is not None:
+            value = ", ".join(f"{k} = {v}" for k, v in given.items()) if isinstance(given, dict) else \
+                ", ".join(map(str, given))
             items.append(SetupItem(f"FMU {key}", value or "none", f"[model] {key}"))
-    if setup.rotor is not None and "variant" in t:
+    if setup.rotor is not None and t.variant is not None:
         items.append(SetupItem("rotor", setup.rotor.name, rotor_origin(setup.rotor_spec)))
     if meas is not None:
         for name in ("yaw", "air_density"):
@@ -150,12 +150,13 @@ def fmu_statement(setup, cfg: dict, meas=None) -> list[SetupItem]:
                 items.append(SetupItem(name.replace("_", " "), *column))
     items.append(SetupItem("rotor geometry, tilt, precone, shear, sectors", "as built into the FMU "
                            "(or its [model] settings)", "the FMU"))
-    return items + _calibration_items(setup, cfg, {})
+    return items + _calibration_items(setup, workflow, frozenset())
 
 
-def statement(setup, cfg: dict, meas=None) -> list[SetupItem]:
-    """The set-up in force of a workflow or a diagnosis (BEM or FMU)."""
-    return (bem_statement if setup.fmu_table is None else fmu_statement)(setup, cfg, meas)
+def statement(setup, workflow, meas=None) -> list[SetupItem]:
+    """The set-up in force of a workflow or a diagnosis (BEM or FMU): ``setup`` is the
+    :class:`calib.workflow.WorkflowSetup` of the :class:`calib.workflow.schema.Workflow` ``workflow``."""
+    return (fmu_statement if setup.is_fmu else bem_statement)(setup, workflow, meas)
 
 
 def statement_lines(items: list[SetupItem]) -> list[str]:

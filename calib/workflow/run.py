@@ -22,6 +22,7 @@ from calib.report.setup_statement import statement, statement_html, statement_li
 from calib.types import nominal_vector
 from calib.workflow.schema import load_workflow
 from calib.workflow.setup import StageOutcome, measurements_of, prepare, run_inputs, synthetic_conditions
+from calib.workflow.sections import Stage
 from calib.workflow.truth import smooth_field, truth_checks, truth_model
 
 log = logging.getLogger("calib.workflow")
@@ -57,12 +58,12 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     noise : str, optional
         The noise model (``calib run --noise``), replacing the workflow's ``[calibration] noise``.
     """
-    cfg = load_workflow(path)
-    src = cfg["_source"]
+    workflow = load_workflow(path)
+    src = workflow.source
     if noise is not None:
-        cfg["calibration"] = {**cfg.get("calibration", {}), "noise": noise}
+        workflow = workflow.with_noise(noise)
     # everything the settings can get wrong is found here, before any data is read
-    setup = prepare(cfg)
+    setup = prepare(workflow)
     force = setup.force or force
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -71,7 +72,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     hist = None
     if history or resume:
         from calib.history import content_digest, open_history
-        inputs = {**run_inputs(cfg), "rotor (geometry and polars)": content_digest(setup.rotor)
+        inputs = {**run_inputs(workflow), "rotor (geometry and polars)": content_digest(setup.rotor)
                   if setup.rotor is not None else None}
         hist = open_history(out, {"command": "run", "workflow": str(Path(src).resolve()), "noise": noise,
                                   "inputs": inputs}, resume)
@@ -79,10 +80,10 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
         if resume:
             say(log, f"[calib run] resuming from {hist.folder}: {hist.n_records} model calls on record", progress)
 
-    from calib.models.from_config import executor_from_table
-    executor = executor_from_table(setup.executor_table, src)
+    from calib.models.from_config import executor_of
+    executor = executor_of(setup.executor, src)
     try:
-        outcomes = _run(cfg, setup, out, executor, progress, force, hist, strict_units)
+        outcomes = _run(workflow, setup, out, executor, progress, force, hist, strict_units)
     finally:
         executor.close()
     if hist is not None:
@@ -91,7 +92,7 @@ def run_workflow(path: str | Path, out_dir: str | Path, progress: bool = True,
     return outcomes
 
 
-def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
+def _run(workflow, setup, out, executor, progress, force, hist=None, strict=False):
     """The workflow's steps: its measurements, the diagnosis, each stage (calibration, validation, results,
     figures) and the report; returns the stages' :class:`StageOutcome`."""
     from calib.diagnosis import in_workflow
@@ -101,20 +102,20 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
         say(log, line, progress)
 
     # an FMU's calls are recorded in chunks of points (a kill loses at most one chunk of simulations)
-    chunk = max(int(executor.workers if executor is not None else 1), 1) if setup.fmu_table is not None else None
-    run = _Run(cfg, setup, out, executor, hist, echo, chunk)
+    chunk = max(int(executor.workers if executor is not None else 1), 1) if setup.is_fmu else None
+    run = _Run(workflow, setup, out, executor, hist, echo, chunk)
     run.measurements(progress, force, strict)
     if setup.diagnosis is not None:   # the diagnosis first; its named effects join every stage
         run.effects, run.diag = in_workflow.run_diagnosis(setup, run.meas, run.grid, out, executor, echo, hist)
-    outcomes = [run.stage(k, stage) for k, stage in enumerate(cfg["stages"])]
-    intro = cfg.get("description", "")
+    outcomes = [run.stage(k, stage) for k, stage in enumerate(workflow.stages)]
+    intro = workflow.description
     if run.truth_p is not None:
         intro += " Measurements are synthetic: a truth model with a smooth correction field sampled on a fine " \
                  "grid (not in the span of the calibration's shape functions) plus seeded Gaussian noise."
     from calib.workflow import validation
     sections = [statement_html(run.set_up)] + ([validation.section_html(run.diag, run.validations)]
                                               if (run.diag or run.validations) else [])
-    report = write_report(out / "report.html", title=f"calib: {cfg['name']}", sections=sections,
+    report = write_report(out / "report.html", title=f"calib: {workflow.name}", sections=sections,
                           results={o.name: o.result for o in outcomes},
                           figures={o.name: o.figures for o in outcomes}, intro=intro,
                           extra_figures=run.study_figures(outcomes),
@@ -126,10 +127,10 @@ def _run(cfg, setup, out, executor, progress, force, hist=None, strict=False):
 class _Run:
     """One run of a workflow: what its steps share (measurements, grid, named effects, validations)."""
 
-    def __init__(self, cfg, setup, out, executor, hist, echo, chunk):
-        self.cfg, self.setup, self.out, self.executor, self.hist, self.echo, self.chunk = \
-            cfg, setup, out, executor, hist, echo, chunk
-        self.src = cfg["_source"]
+    def __init__(self, workflow, setup, out, executor, hist, echo, chunk):
+        self.workflow, self.setup, self.out, self.executor, self.hist, self.echo, self.chunk = \
+            workflow, setup, out, executor, hist, echo, chunk
+        self.src = workflow.source
         self.effects, self.diag, self.validations = [], None, {}
         self.unit_notes, self.truth_p = {}, None
 
@@ -139,12 +140,12 @@ class _Run:
         from calib.logs import progress_line
         from calib.models.recorded_model import recorded
 
-        cfg, setup, echo, src = self.cfg, self.setup, self.echo, self.src
+        workflow, setup, echo, src = self.workflow, self.setup, self.echo, self.src
         all_channels = setup.channels
         t0 = time.perf_counter()
-        if "measurements" in cfg:
-            file = Path(cfg["_dir"]) / cfg["measurements"]["file"]
-            meas = measurements_of(cfg, all_channels)
+        if workflow.measurements is not None:
+            file = Path(workflow.base_dir) / workflow.measurements.file
+            meas = measurements_of(workflow, all_channels)
             if "air_density" not in meas.metadata.get("units", {}):
                 meas = dataclasses.replace(meas, conditions=dataclasses.replace(
                     meas.conditions, air_density=np.full(meas.n_points, setup.density)))
@@ -153,35 +154,34 @@ class _Run:
                     meas.conditions, yaw=np.full(meas.n_points, setup.yaw)))
             for note in meas.notes:
                 echo(f"[calib run] {file.name}: {note}")
-            self.set_up = statement(setup, cfg, meas)
+            self.set_up = statement(setup, workflow, meas)
             for line in statement_lines(self.set_up):
                 echo(f"[calib run] set-up in force: {line}")
             self.grid = setup.grid(meas.conditions, progress)
             check_model = recorded(setup.model(self.grid, all_channels, self.executor), self.hist, "unit check",
                                    self.chunk, progress_line)
             _, self.unit_notes = apply_unit_check(check_model, nominal_vector(check_model.parameters), meas,
-                                                  sigma=setup.calibration.get("sigma"), force=force,
+                                                  sigma=setup.calibration.sigma, force=force,
                                                   strict=strict or setup.strict_units, source=str(file),
                                                   printer=echo, model_units=setup.model_units())
         else:
-            cond = synthetic_conditions(cfg["conditions"], setup.rotor, src, setup.density, setup.yaw)
+            cond = synthetic_conditions(workflow.conditions, setup.rotor, setup.density, setup.yaw)
             self.grid = setup.grid(cond, progress)
-            noise = cfg["noise"]
-            rel = noise["relative"]
+            rel = workflow.noise.relative
             missing = [c for c in all_channels if c not in rel]
             if missing:
                 raise InputError(f"no noise level for channel(s) {', '.join(missing)}", src,
                                  field=f"noise.relative.{missing[0]}")
-            self.set_up = statement(setup, cfg)
+            self.set_up = statement(setup, workflow)
             for line in statement_lines(self.set_up):
                 echo(f"[calib run] set-up in force: {line}")
-            tmodel, self.truth_p = truth_model(setup.rotor, all_channels, setup.settings, cfg["truth"],
+            tmodel, self.truth_p = truth_model(setup.rotor, all_channels, setup.settings, workflow.truth,
                                                setup.nuisance)
             meas = synthesize(tmodel, self.truth_p, cond, relative_sigma={c: float(rel[c]) for c in all_channels},
-                              channels=all_channels, seed=int(noise.get("seed", 0)), source=f"synthetic ({src})")
+                              channels=all_channels, seed=workflow.noise.seed, source=f"synthetic ({src})")
             meas.write_csv(self.out / "measurements.csv")
         self.meas = meas
-        echo(f"[calib run] {cfg['name']}: {setup.model_name()}, {meas.n_points} operating points, "
+        echo(f"[calib run] {workflow.name}: {setup.model_name()}, {meas.n_points} operating points, "
              f"channels {', '.join(meas.channels)} ({time.perf_counter() - t0:.1f} s)")
 
     def callback(self, name: str):
@@ -210,7 +210,7 @@ class _Run:
                                                       for k, v in rec.items() if k != "qp"))
         return callback
 
-    def stage(self, k: int, stage: dict) -> StageOutcome:
+    def stage(self, k: int, stage: Stage) -> StageOutcome:
         """One stage: calibrate, validate, write its result and figures, say what it found."""
         from calib.diagnosis import in_workflow
         from calib.logs import progress_line
@@ -218,30 +218,29 @@ class _Run:
         from calib.report.figures import write_figures
         from calib.workflow import validation
 
-        cfg, setup, echo, src, grid, meas = self.cfg, self.setup, self.echo, self.src, self.grid, self.meas
-        name = stage["name"]
-        raw_model = setup.model(grid, stage["channels"], self.executor, self.effects)
+        workflow, setup, echo, src, grid, meas = self.workflow, self.setup, self.echo, self.src, self.grid, self.meas
+        name, channels = stage.name, list(stage.channels)
+        raw_model = setup.model(grid, channels, self.executor, self.effects)
         model = recorded(raw_model, self.hist, f"stage {k + 1}: {name}", self.chunk, progress_line)
-        st = dataclasses.replace(setup.calibration_settings, retain=stage.get("retain",
-                                                                            setup.calibration_settings.retain))
-        st.validate(src, f"stages[{k}].")
-        cal = Calibrator(model, meas.select_channels(stage["channels"]), st, self.callback(name), name=name)
+        # a stage's retain mode was checked with its table (stages[k].retain)
+        st = dataclasses.replace(setup.calibration, retain=stage.retain or setup.calibration.retain)
+        cal = Calibrator(model, meas.select_channels(channels), st, self.callback(name), name=name)
         t_cal = time.perf_counter()
         res = cal.run()
         t_cal = time.perf_counter() - t_cal
         res.provenance.inputs[src] = sha256_of(src)
-        res.provenance.inputs["workflow"] = cfg["name"]
+        res.provenance.inputs["workflow"] = workflow.name
         res.provenance.checks.update(self.unit_notes)
         res.provenance.checks.update(_fault_checks(raw_model))
         if self.truth_p is not None:
-            res.provenance.checks.update(truth_checks(model, res, cfg["truth"]))
+            res.provenance.checks.update(truth_checks(model, res, workflow.truth))
         if self.diag is not None:
             res.provenance.checks["diagnosis"] = in_workflow.diagnosis_sentence(self.diag)
         if setup.validation is not None:
             kind = "leave-one-out" if setup.validation.split == "one" else "band split"
             val = validation.leave_one_out(
-                lambda _c=tuple(stage["channels"]): setup.model(grid, list(_c), self.executor, self.effects),
-                meas.select_channels(stage["channels"]), st, setup.validation,
+                lambda _c=tuple(channels): setup.model(grid, list(_c), self.executor, self.effects),
+                meas.select_channels(channels), st, setup.validation,
                 progress=lambda line, _n=name, _k=kind: echo(f"[calib run] {_n}: {_k}: {line}"))
             self.validations[name] = val
             res.provenance.checks.update({f"{kind} ({c})": val.sentence(c) for c in val.channels()})
@@ -251,7 +250,7 @@ class _Run:
         res.save(stage_dir)
         if name in self.validations:
             validation.write_validation(self.validations[name], stage_dir)
-        truth = (lambda a, e, _b=cfg["truth"]["bumps"]: smooth_field(_b, a, e)) if self.truth_p is not None else None
+        truth = (lambda a, e, _b=workflow.truth.bumps: smooth_field(_b, a, e)) if self.truth_p is not None else None
         figs = write_figures(res, stage_dir, truth=truth, progress=lambda line: echo(f"[calib run] {line}"))
         t_rep = time.perf_counter() - t_rep
         if self.hist is not None:
@@ -274,11 +273,11 @@ class _Run:
         from calib.report.spectrum_figures import plot_spectra
         from calib.workflow import validation
 
-        cfg, out, extra = self.cfg, self.out, {}
+        workflow, out, extra = self.workflow, self.out, {}
         if len(outcomes) > 1:
             fig = plot_spectra({o.name: o.result for o in outcomes})
             extra["singular_value_spectra"] = save_figure(fig, out, "singular_value_spectra")
-        if "measurements" in cfg and (self.diag is not None or self.validations):
+        if workflow.measurements is not None and (self.diag is not None or self.validations):
             rotor_ch = [c for c in self.setup.channels if "@" not in c]
             span_ch = [c for c in self.setup.channels if c.startswith("cn@")]
             for key, chans, what in (("loads_vs_wind_speed", rotor_ch, "rotor loads"),
@@ -286,7 +285,7 @@ class _Run:
                 if chans:
                     fig = validation.campaign_figure(self.setup, self.meas, self.grid, outcomes, self.diag,
                                                      self.validations, self.effects, chans,
-                                                     f"{cfg['name']}: {what}, measured and modelled", self.executor)
+                                                     f"{workflow.name}: {what}, measured and modelled", self.executor)
                     extra[key] = save_figure(fig, out, key)
             for k, o in enumerate(outcomes):
                 fig = validation.informed_eigenshapes(o.result)

@@ -1,114 +1,183 @@
-"""The workflow file: its schema (one table per section, checked by :mod:`calib.config`) and loading it."""
+"""The workflow file: its schema (one table per section, checked by :mod:`calib.config`) and loading it into
+a typed, frozen :class:`Workflow` (its sections in :mod:`calib.workflow.sections`)."""
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from calib.calibration.calibrator import CalibrationSettings
-from calib.config import AUTO_OR_NUM, NUM, check_table, schema_of
+from calib.config import Key, check_table
+from calib.diagnosis.in_workflow import diagnosis_settings
 from calib.errors import InputError
-from calib.models.from_config import BEM_KEYS
+from calib.models.from_config import BEM_KEYS, BemModelTable, ExecutorSettings, FmuModelTable, model_table
 from calib.tomlfile import read_toml
+from calib.workflow.sections import (BUMP_KEYS, CALIBRATION_KEYS, CONDITIONS_KEYS, FLUID_KEYS, GRID_KEYS,
+                                     MEASUREMENTS_KEYS, NOISE_KEYS, STAGE_KEYS, TRUTH_KEYS, CalibrationSection,
+                                     Conditions, Fluid, GridTable, MeasurementsTable, Noise, Truth, stages_from_list)
+from calib.workflow.validation import ValidationSettings
 
 #: [model] keys of the native BEM (:data:`calib.models.from_config.BEM_KEYS`).
 MODEL_KEYS = BEM_KEYS
-#: [calibration] keys: every CalibrationSettings field (same name, same default), plus ``force`` and
-#: ``strict_units``.
-CALIBRATION_KEYS = {**schema_of(CalibrationSettings, exclude=("verbose",),
-                                   overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict,
-                                              "prior_std": dict, "cd_min": NUM, "max_retained": int,
-                                              "band_eta": list}),
-                    "force": (bool, False), "strict_units": (bool, False)}
 
-# schema: section -> key -> (accepted types, required)
+#: schema: section -> key -> :class:`calib.config.Key` (``rotor``: checked by
+#: :func:`calib.rotor.sources.rotor_from_table`; an FMU's ``model``: by
+#: :meth:`calib.models.from_config.FmuModelTable.from_table`)
 SCHEMA = {
-    "": {"name": (str, True), "description": (str, False), "rotor": (dict, False), "model": (dict, False),
-         "fluid": (dict, False), "grid": (dict, False), "conditions": (dict, False), "measurements": (dict, False),
-         "truth": (dict, False), "noise": (dict, False), "calibration": (dict, False),
-         "executor": (dict, False), "diagnosis": (dict, False), "validation": (dict, False),
-         "stages": (list, True)},
-    "rotor": None,  # validated by calib.rotor.sources.rotor_from_table (name | openfast | aerodyn | ... )
+    "": {"name": Key(str, True), "description": Key(str), "rotor": Key(dict), "model": Key(dict),
+         "fluid": Key(dict), "grid": Key(dict), "conditions": Key(dict), "measurements": Key(dict),
+         "truth": Key(dict), "noise": Key(dict), "calibration": Key(dict), "executor": Key(dict),
+         "diagnosis": Key(dict), "validation": Key(dict), "stages": Key(list, True)},
     "model": MODEL_KEYS,
-    "fluid": {"density": (NUM, False), "kinematic_viscosity": (NUM, False)},
-    "grid": {"alpha_nodes_deg": ((list, str), True), "eta_nodes": (list, True), "cl_scale": (NUM, False),
-             "cd_scale": (NUM, False), "cl_bound": (NUM, False), "cd_bound": (NUM, False),
-             "cd_floor": (NUM, False), "n_alpha_nodes": (int, False), "alpha_percentiles": (list, False)},
-    "conditions": {"tsr": (list, True), "pitch": (list, True), "rotor_speed": (NUM, True),
-                   "air_density": (NUM, False), "yaw": (NUM, False)},
-    "measurements": {"file": (str, True), "drop_incomplete_rows": (bool, False), "time_series": (str, False),
-                     "average_from": (NUM, False)},
-    "truth": {"pitch_offset": (NUM, False), "wind_scale": (NUM, False), "alpha_step_deg": (NUM, False),
-              "eta_step": (NUM, False), "bumps": (list, True)},
-    "truth.bumps": {"block": (str, True), "amplitude": (NUM, True), "alpha_deg": (NUM, True),
-                    "alpha_width": (NUM, True), "eta": (NUM, False), "eta_width": (NUM, False),
-                    "eta_range": (list, False), "edge_width": (NUM, False)},
-    "noise": {"relative": (dict, True), "seed": (int, False)},
+    "fluid": FLUID_KEYS,
+    "grid": GRID_KEYS,
+    "conditions": CONDITIONS_KEYS,
+    "measurements": MEASUREMENTS_KEYS,
+    "truth": TRUTH_KEYS,
+    "truth.bumps": BUMP_KEYS,
+    "noise": NOISE_KEYS,
     "calibration": CALIBRATION_KEYS,
-    "stages": {"name": (str, True), "channels": (list, True), "retain": (str, False)},
+    "stages": STAGE_KEYS,
 }
+
+
 def check_section(table: dict, section: str, source: str) -> None:
     """Check a workflow table against :data:`SCHEMA` (:func:`calib.config.check_table`)."""
     check_table(table, SCHEMA[section], section, source)
 
 
-def number_array(value, key: str, source: str) -> np.ndarray:
-    """An array of numbers, or ``{start, stop, num}`` written as [start, stop, "num"]-free lists only."""
-    if (not isinstance(value, (list, tuple)) or not value
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
-        raise InputError(f"'{key}' must be a non-empty array of numbers, got {value!r}", source, field=key)
-    out = np.asarray(value, float)
-    if not np.all(np.isfinite(out)):
-        raise InputError(f"'{key}' must be finite numbers, got {value!r}", source, field=key)
-    return out
+@dataclass(frozen=True)
+class Workflow:
+    """A loaded workflow file: every section typed and checked (:func:`load_workflow`).
+
+    Parameters
+    ----------
+    name, description : str
+    source : str
+        The workflow file (named in errors).
+    base_dir : str
+        Its folder: relative paths start there.
+    stages : tuple of calib.workflow.sections.Stage
+    model : BemModelTable or FmuModelTable
+        ``[model]`` (the native BEM's defaults when absent).
+    calibration : calib.workflow.sections.CalibrationSection
+        ``[calibration]``: the validated settings, ``force`` and ``strict_units``.
+    executor : ExecutorSettings
+        ``[executor]`` (serial when absent).
+    fluid : calib.workflow.sections.Fluid
+    rotor : dict, optional
+        The ``[rotor]`` table (read by :func:`calib.rotor.sources.rotor_from_table`).
+    grid : calib.workflow.sections.GridTable, optional
+    measurements : calib.workflow.sections.MeasurementsTable, optional
+        The measured data; else synthetic data of ``conditions``, ``truth`` and ``noise``.
+    conditions, truth, noise : optional
+        :class:`~calib.workflow.sections.Conditions`, :class:`~calib.workflow.sections.Truth`,
+        :class:`~calib.workflow.sections.Noise`.
+    diagnosis : tuple, optional
+        ``(DiagnosisSettings, channels or None)`` of ``[diagnosis]`` (:func:`calib.diagnosis.in_workflow.diagnosis_settings`).
+    validation : calib.workflow.validation.ValidationSettings, optional
+    """
+
+    name: str
+    source: str
+    base_dir: str
+    stages: tuple
+    model: BemModelTable | FmuModelTable
+    calibration: CalibrationSection
+    executor: ExecutorSettings
+    fluid: Fluid = Fluid()
+    description: str = ""
+    rotor: dict | None = None
+    grid: GridTable | None = None
+    measurements: MeasurementsTable | None = None
+    conditions: Conditions | None = None
+    truth: Truth | None = None
+    noise: Noise | None = None
+    diagnosis: tuple | None = None
+    validation: ValidationSettings | None = None
+
+    @property
+    def is_fmu(self) -> bool:
+        """Whether the model is an FMU (``[model] kind = "fmu"``)."""
+        return isinstance(self.model, FmuModelTable)
+
+    def with_noise(self, noise: str) -> "Workflow":
+        """The workflow with ``noise`` in place of ``[calibration] noise`` (``calib run --noise``)."""
+        return dataclasses.replace(self, calibration=self.calibration.with_noise(noise, self.source))
 
 
-def load_workflow(path: str | Path) -> dict:
+def load_workflow(path: str | Path) -> Workflow:
     """Read and validate a workflow TOML file.
+
+    Returns
+    -------
+    Workflow
+        Typed and frozen; every rule on its values has run.
 
     Raises
     ------
     InputError
-        Syntax errors (with line and column), unknown keys, wrong types, missing keys.
+        Syntax errors (with line and column), unknown keys, wrong types, values a rule refuses, missing keys;
+        naming the file and the key path.
     """
     path = Path(path)
-    src = str(path)
     data = read_toml(path, "workflow file", finite=True)  # no workflow setting is NaN or inf
+    return workflow_from_table(data, str(path), path.parent)
+
+
+def workflow_from_table(data: dict, source: str, base_dir, *, measured_elsewhere: bool = False) -> Workflow:
+    """The :class:`Workflow` of a workflow's tables (as read from ``source``).
+
+    Parameters
+    ----------
+    data : dict
+        The top-level table.
+    source : str
+        The file the tables came from (named in errors).
+    base_dir : str or Path
+        Where relative paths start.
+    measured_elsewhere : bool
+        The measurements come from elsewhere (``calib diagnose --data``): no ``[measurements]`` or
+        synthetic tables are asked for.
+
+    Raises
+    ------
+    InputError
+        As :func:`load_workflow`.
+    """
+    src = source
     check_section(data, "", src)
-    for section in ("model", "grid", "conditions", "measurements", "truth", "noise", "calibration"):
-        if section == "model" and data.get("model", {}).get("kind") == "fmu":
-            continue  # an FMU's [model] table is validated by calib.models.from_config.model_from_workflow
-        if section in data:
-            check_section(data[section], section, src)
-    for k, bump in enumerate(data.get("truth", {}).get("bumps", [])):
-        if not isinstance(bump, dict):
-            raise InputError("each truth.bumps entry must be a table", src, field=f"truth.bumps[{k}]")
-        check_section(bump, "truth.bumps", src)
-        if bump["block"] not in ("lift", "drag"):
-            raise InputError(f"block must be 'lift' or 'drag', got {bump['block']!r}", src,
-                             field=f"truth.bumps[{k}].block")
-        for key in ("alpha_width", "eta_width", "edge_width"):
-            if key in bump and not bump[key] > 0:
-                raise InputError(f"must be > 0, got {bump[key]!r}", src, field=f"truth.bumps[{k}].{key}")
-        if "eta_range" in bump:
-            lo_hi = number_array(bump["eta_range"], f"truth.bumps[{k}].eta_range", src)
-            if lo_hi.size != 2 or not lo_hi[0] < lo_hi[1]:
-                raise InputError(f"must be [lo, hi] with lo < hi (r/R), got {bump['eta_range']!r}", src,
-                                 field=f"truth.bumps[{k}].eta_range")
-    if "conditions" in data:  # the synthetic operating points: checked here, before any set-up
-        for key in ("tsr", "pitch"):
-            number_array(data["conditions"][key], f"conditions.{key}", src)
-    for channel, fraction in data.get("noise", {}).get("relative", {}).items():
-        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not fraction >= 0:
-            raise InputError(f"must be a noise fraction >= 0 of the channel's RMS, got {fraction!r}", src,
-                             field=f"noise.relative.{channel}")
-    if not data["stages"]:
-        raise InputError("at least one stage is needed", src, field="stages")
-    for k, stage in enumerate(data["stages"]):
-        if not isinstance(stage, dict):
-            raise InputError("each stages entry must be a table", src, field=f"stages[{k}]")
-        check_section(stage, "stages", src)
+    sections = {
+        "model": model_table(data.get("model"), src),
+        "calibration": CalibrationSection.from_table(data.get("calibration"), src),
+        "executor": ExecutorSettings.from_table(data.get("executor"), src),
+        "fluid": Fluid.from_table(data.get("fluid"), src),
+        **{key: cls.from_table(data[key], src) for key, cls in (
+            ("grid", GridTable), ("conditions", Conditions), ("measurements", MeasurementsTable), ("truth", Truth),
+            ("noise", Noise)) if key in data}}
+    stages = stages_from_list(data["stages"], src)
+    if not measured_elsewhere:
+        _check_data_source(data, src)
+    for section, why in tables_required(data).items():
+        if section not in data:
+            raise InputError(f"missing required key '{section}' ({why})", src, field=section)
+    if "diagnosis" in data:
+        if isinstance(sections["model"], FmuModelTable):
+            raise InputError("a workflow's [diagnosis] runs on the native BEM only; remove [diagnosis], use "
+                             "[model] kind = \"bem\", or diagnose the FMU with calib diagnose --config (its "
+                             "[model] kind = \"fmu\")", src, field="diagnosis")
+        if "measurements" not in data:
+            raise InputError("[diagnosis] needs measured data ([measurements] file = ...)", src, field="diagnosis")
+        dset, channels = diagnosis_settings(data["diagnosis"], src)
+        sections["diagnosis"] = (dset, None if channels is None else tuple(channels))
+    if "validation" in data:
+        sections["validation"] = ValidationSettings.from_table(data["validation"], src)
+    return Workflow(name=data["name"], source=src, base_dir=str(base_dir), stages=stages,
+                    description=data.get("description", ""), rotor=data.get("rotor"), **sections)
+
+
+def _check_data_source(data: dict, src: str) -> None:
+    """Either ``[measurements]`` or all of the synthetic tables, not both."""
     has_file = "measurements" in data
     has_synth = "truth" in data or "noise" in data or "conditions" in data
     if has_file == has_synth:
@@ -118,13 +187,6 @@ def load_workflow(path: str | Path) -> dict:
         for section in ("conditions", "truth", "noise"):
             if section not in data:
                 raise InputError(f"synthetic measurements need a [{section}] table", src, field=section)
-    for section in tables_required(data):
-        if section not in data:
-            raise InputError(f"missing required key '{section}' ({tables_required(data)[section]})", src,
-                             field=section)
-    data["_source"] = src
-    data["_dir"] = str(path.parent)
-    return data
 
 
 def tables_required(data: dict) -> dict[str, str]:
@@ -145,5 +207,3 @@ def tables_required(data: dict) -> dict[str, str]:
     if "measurements" not in data:
         need.setdefault("rotor", "synthetic measurements come from the native BEM of [rotor]")
     return need
-
-
