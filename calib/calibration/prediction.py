@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.calibration.discrepancy import fit_discrepancy
 from calib.checks.envelope import envelope_of
 from calib.errors import InputError
 
@@ -33,6 +34,11 @@ class Prediction:
     representation : str
         Whether the intervals include the correction field between and beyond the nodes
         (:func:`field_between_nodes`).
+    discrepancy_std : ndarray, shape (n_points, n_channels)
+        The model-discrepancy part of ``std`` (:mod:`calib.calibration.discrepancy`): zero for a
+        channel the calibration fits within its noise [channel units].
+    discrepancy : str
+        Which channels carry a discrepancy term, in words.
     """
 
     channels: tuple
@@ -46,6 +52,8 @@ class Prediction:
     confidence: float
     envelope: tuple = ()
     representation: str = ""
+    discrepancy_std: np.ndarray | None = None
+    discrepancy: str = ""
 
     def to_dataframe(self, conditions):
         """One row per point with its ``conditions`` (:func:`calib.calibration.frames.prediction_frame`)."""
@@ -63,8 +71,10 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     """Model outputs at new conditions with intervals from the estimate's covariance.
 
     The variance of each output is g Cov(p̂) gᵀ with g its row of the model Jacobian at p̂
-    and Cov(p̂) the covariance including the frozen directions (docs/theory.md, Predictions): an
-    interval of the *model output*, not of a new measurement (add the noise σ for that).
+    and Cov(p̂) the covariance including the frozen directions (docs/theory.md, Predictions), plus
+    the model discrepancy of a channel the calibration did not fit within its noise
+    (:mod:`calib.calibration.discrepancy`): an interval of the *model output* as a description of
+    the rotor, not of a new measurement (add the noise σ for that).
 
     Parameters
     ----------
@@ -94,9 +104,12 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), cov, np.nan_to_num(G))
     if rep is not None:
         var = var + rep
-    std = np.sqrt(np.maximum(var, 0.0))
-    z = float(stats.norm.ppf(0.5 * (1 + confidence)))
     values = ev.values[:, idx]
+    disc = fit_discrepancy(result) if result.fit.measured.size else None
+    d_var = np.zeros(values.shape) if disc is None else \
+        disc.variance(conditions.as_dict(), result.provenance.rotor_radius, np.nan_to_num(values))
+    std = np.sqrt(np.maximum(var, 0.0) + d_var)
+    z = float(stats.norm.ppf(0.5 * (1 + confidence)))
     std = np.where(ev.ok[:, None], std, np.nan)
     extras = ev.extras or {}
     fit = result.fit
@@ -105,7 +118,8 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
                            fit.eta_seen) if result.conditions else []
     return Prediction(tuple(result.channels), tuple(result.channel_units), values, std, values - z * std,
                       values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope),
-                      representation)
+                      representation, np.where(ev.ok[:, None], np.sqrt(d_var), np.nan),
+                      "" if disc is None else disc.words())
 
 
 def field_between_nodes(result, model, conditions, ev, G, idx) -> tuple[np.ndarray | None, str]:
