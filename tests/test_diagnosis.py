@@ -191,7 +191,10 @@ def test_tip_loss_named_when_the_truth_uses_another_form():
     d = run(meas, recalibrate=False)
     assert d.named_first == "tip_loss" and d.model_form == ["tip_loss"], d.rounds[0]["reason"]
     assert "model form (the BEM's own induction model, not a missing physical effect)" in d.rounds[0]["reason"]
-    assert d.with_effects["chi2_per_dof"] < 0.2 * d.before["chi2_per_dof"], (d.before, d.with_effects)
+    assert d.with_effects["chi2_per_dof"] < 0.5 * d.before["chi2_per_dof"], (d.before, d.with_effects)
+    # what Shen's form leaves of another tip-loss form is not a second, physical effect (issue 37, item 4):
+    # before, a Reynolds-number effect stood in for it and took the gap below 0.2 of the nominal's
+    assert d.effects == ["tip_loss"] and "would explain only" in d.rounds[-1]["reason"], d.rounds[-1]["reason"]
 
 
 @pytest.mark.statistics

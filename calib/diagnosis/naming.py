@@ -164,6 +164,10 @@ class Namer:
         rnd, best = self._judge(fits)
         if best is not None and best.kind != "model_form" and self._named_fits:
             best = self._earns_place(rnd, best)
+        elif best is not None and best.kind != "model_form":
+            form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
+            if form is not None:
+                best = self._over_model_form(round_no, rnd, best, form)
             form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
             if best is None and form is not None:
                 # what is left is the model's form: the best significant model-form candidate names it
@@ -194,6 +198,35 @@ class Namer:
                      f"{fit_now['chi2_per_dof']:.3g}, {p_is(fit_now['p_value'])}); no further effect is looked for")
             return True
         return False
+
+    def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, form: CandidateFit) -> CandidateFit:
+        """``best`` (physical) when it also earns its place on top of the significant model-form
+        candidate ``form`` (:data:`LATER_EFFECT_SHARE` of what ``form`` leaves), else ``form``: a
+        misfit the model's own form explains is not named as a physical effect."""
+        base = self.family.add(self.base_effects, form)
+        n_base = self.family.n_parameters(base)
+        effect = self._effects[best.name]
+        task = {"name": f"{best.name} over {form.name}", "measurements": self.meas, "settings": self.known,
+                "own": list(range(n_base, n_base + len(effect.parameters()))),
+                "model": self.wrap(self.family.candidate_model(base, effect),
+                                   f"round {round_no + 1}: {best.name} over {form.name}")}
+        out = fit_task(task)
+        if "error" in out:
+            return best
+        ok = np.isfinite(out["values"]).all(axis=1)
+        chi2 = float(np.sum(((self.meas.values - out["values"]) / self.meas.sigma)[ok] ** 2))
+        excess = form.chi2 - (self.n_res - n_base)
+        share = (form.chi2 - chi2) / excess if excess > 0 else float("inf")
+        said = (f"on top of {form.name} (model form) it explains {100 * share:.0f} % of the misfit {form.name} "
+                f"leaves beyond the noise and the model-form tolerance")
+        if share >= LATER_EFFECT_SHARE:
+            rnd["reason"] += f"; {said}"
+            return best
+        rnd.update(verdict=form.effect, reason=(
+            f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), {p_is(form.p_value)}; effect "
+            f"{form.effect_text}; {best.name} fits better (ΔBIC = {form.bic - best.bic:.3g}), but {said}, under "
+            f"{100 * LATER_EFFECT_SHARE:.0f} %: the misfit is the model's form, not {best.effect}"))
+        return form
 
     def _earns_place(self, rnd: dict, best: CandidateFit) -> CandidateFit | None:
         """``best`` when a later effect earns its place, else None with ``rnd`` turned ``none``.
