@@ -41,8 +41,28 @@ Polars
     the linear blend in r of the two stations' airfoils at the same α (calib's BEM evaluates
     each station's own airfoil at the station).
 
-Validation (``benchmarks/bench_lifting_line.py``; figures of the run of 2026-11-27, defaults)
-    See the end of this docstring, filled from ``bench_output/lifting_line.json``.
+Validation (``benchmarks/bench_lifting_line.py``, run of 2026-11-27 with the defaults: 30 panels,
+6 D of wake, 36 steps per turn with the first turn 4× finer, core 0.05 c, U_w = U∞(1 − ā))
+    Discretisation, NREL 5-MW design point (11.4 m/s, λ = 7.5, 12.96 rpm, pitch 0; P = 5.563 MW,
+    T = 782.8 kN, ā = 0.321, 1.9 s on a shared core): panels ×2 ΔP +0.05 %, wake length ×2
+    −0.21 %, helix steps ×2 +0.04 %, all three −0.09 % (limit 0.5 %). Physical parameters, not
+    discretisation: core 0.01 c −0.76 %, 0.10 c +0.98 %; wake convected at U∞(1 − ā/2) +13 %,
+    at U∞ +21 % (the prescribed wake speed is this model's largest uncertainty).
+    NREL UAE Phase VI, sequence H (measured LSS torque): 7 m/s 748 vs 790 N m (−5.3 %), 10 m/s
+    1258 vs 1292 N m (−2.6 %); calib's BEM −3.7 % and +0.6 %. 13 m/s (stalled, no rule): −21 %,
+    and the stalled solution depends on the iteration path (−33 % with a 4 D wake).
+    Lifting line / calib BEM (Prandtl tip and hub loss), NREL 5-MW rigid: at the design point
+    power 1.012, thrust 1.014, hub flap moment 1.023; λ = 4 … 10 at pitch 0 (9 rpm) power
+    1.007 … 1.018, thrust 1.011 … 1.024, hub flap 1.018 … 1.031; λ = 11 power 0.967; pitch 2 … 8
+    deg at λ = 7 and 9.5 power 0.983 … 1.016. calib's BEM without tip and hub loss over with:
+    power 1.063, thrust 1.023 at the design point (the reviewer's +6.6 % / +2.8 % look like
+    that, or like a wake convected faster than U∞(1 − ā)). Mean time per point 1.2-1.7 s.
+Limits
+    Steady, rigid, axisymmetric inflow only. In inboard stall (negative lift slope) the
+    discrete system has several roots; the one found depends on the start and the wake length
+    (a sawtooth in α is possible). Points with ā ≥ :data:`HIGH_INDUCTION` converge but carry a
+    ``warning``: the λ = 9.5, pitch −2 deg point of the battery (ā = 0.58) gives 0.74 of the
+    BEM's power, where both models are outside their validity.
 
 References
 ----------
@@ -82,6 +102,9 @@ ROOT = HERE.parent
 #: Status of an operating point.
 CONVERGED = "converged"
 NOT_CONVERGED = "not_converged"
+#: Mean axial induction from which a converged point carries a warning (the far wake of
+#: momentum theory, U∞ (1 − 2ā), would reverse) [-].
+HIGH_INDUCTION = 0.5
 
 
 # ----------------------------------------------------------------------------- settings and rotor
@@ -365,6 +388,7 @@ class PointResult:
     status: str
     message: str
     seconds: float
+    warning: str = ""             # e.g. ā ≥ 0.5: a converged point outside the helix model's validity
 
 
 def _sections(blade, panels, gamma, ux, ut, wind, omega, pitch_deg):
@@ -529,12 +553,17 @@ def solve_point(blade: BladeDefinition, wind_speed: float, rotor_speed_rpm: floa
     B = blade.n_blades
     torque = B * float(np.sum(ft * panels.r * panels.dr))
     status = NOT_CONVERGED if problems else CONVERGED
+    warning = ""
+    if a_mean >= HIGH_INDUCTION:
+        warning = (f"mean axial induction {a_mean:.3f} >= {HIGH_INDUCTION:g}: the far wake U(1 - 2a) would reverse "
+                   "(turbulent-wake state); a helix convected at U(1 - a) is outside its validity here, as is "
+                   "momentum theory without an empirical high-thrust correction")
     return PointResult(power=omega * torque, thrust=B * float(np.sum(fn * panels.dr)), torque=torque,
                        hub_flap_moment=float(np.sum(fn * panels.r * panels.dr)),
                        root_flap_moment=float(np.sum(fn * (panels.r - blade.hub_radius) * panels.dr)),
                        r=panels.r, fn=fn, ft=ft, gamma=gamma, alpha_deg=alpha,
                        axial_induction=-(ux @ gamma) / U, mean_axial_induction=a_mean, iterations=total_it,
-                       wake_iterations=wit, status=status, message=msg or "ok",
+                       wake_iterations=wit, status=status, message=msg or "ok", warning=warning,
                        seconds=time.perf_counter() - t0)
 
 
@@ -556,11 +585,12 @@ def solve_points(blade: BladeDefinition, wind_speed, rotor_speed_rpm, pitch_deg,
         Lists over the points: ``power`` [W], ``thrust`` [N], ``torque`` [N m],
         ``hub_flap_moment``, ``root_flap_moment`` [N m], ``fn_stations``, ``ft_stations``
         (per point, at the blade stations ``r_stations``) [N/m], ``iterations``,
-        ``wake_iterations``, ``status``, ``message``, ``seconds``, ``mean_axial_induction``.
+        ``wake_iterations``, ``status``, ``message``, ``warning`` (non-empty for ā ≥
+        :data:`HIGH_INDUCTION`), ``seconds``, ``mean_axial_induction``.
     """
     panels = make_panels(blade, settings.n_panels)
     keys = ("power", "thrust", "torque", "hub_flap_moment", "root_flap_moment", "iterations",
-            "wake_iterations", "status", "message", "seconds", "mean_axial_induction")
+            "wake_iterations", "status", "message", "warning", "seconds", "mean_axial_induction")
     out = {k: [] for k in keys}
     out["fn_stations"], out["ft_stations"], out["r_stations"] = [], [], blade.r.tolist()
     for k, (v, n, p) in enumerate(zip(np.atleast_1d(wind_speed), np.atleast_1d(rotor_speed_rpm),
@@ -600,7 +630,7 @@ def main(argv=None) -> int:
                           dataclasses.replace(LiftingLineSettings(), n_panels=args.panels), R)
         print(json.dumps({k: getattr(res, k) for k in ("power", "thrust", "torque", "hub_flap_moment",
                                                          "root_flap_moment", "mean_axial_induction", "iterations",
-                                                         "wake_iterations", "status", "message", "seconds")},
+                                                         "wake_iterations", "status", "message", "warning", "seconds")},
                          indent=1))
         return 0
     from lifting_line_battery import write_battery  # noqa: PLC0415

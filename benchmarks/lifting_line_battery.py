@@ -138,8 +138,10 @@ def truth(names, settings: ll.LiftingLineSettings = ll.LiftingLineSettings(), sa
                               float(base["rotor_radius"]))
         bad = [(k, res["message"][k]) for k, s in enumerate(res["status"]) if s != ll.CONVERGED]
         seconds = time.perf_counter() - t0
+        warn = [k for k, w in enumerate(res["warning"]) if w]
         say(f"[lifting line battery] {name}: {len(pts['wind_speed'])} points in {seconds:.0f} s "
-            f"({seconds / len(pts['wind_speed']):.2f} s per point), {len(bad)} not converged")
+            f"({seconds / len(pts['wind_speed']):.2f} s per point), {len(bad)} not converged, "
+            f"{len(warn)} with ā >= {ll.HIGH_INDUCTION:g} (points {warn}: kept, see truth JSON 'warnings')")
         if bad:
             raise RuntimeError(f"lifting line did not converge in data set {name} at points "
                                + "; ".join(f"{k} (λ {pts['tsr'][k]:.2f}, pitch {pts['pitch_deg'][k]:g}, "
@@ -148,6 +150,7 @@ def truth(names, settings: ll.LiftingLineSettings = ll.LiftingLineSettings(), sa
                                   "root_flap_moment": res["root_flap_moment"], "status": res["status"],
                                   "iterations": res["iterations"], "wake_iterations": res["wake_iterations"],
                                   "mean_axial_induction": res["mean_axial_induction"], "seconds": seconds,
+                                  "warnings": {str(k): w for k, w in enumerate(res["warning"]) if w},
                                   "describe": DATA_SETS[name]}
     return out
 
