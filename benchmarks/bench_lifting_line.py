@@ -171,6 +171,8 @@ def convergence(settings: ll.LiftingLineSettings, say=print) -> dict:
     sens = {
         "core radius 0.01 chord": {"core_radius_chords": 0.01},
         "core radius 0.10 chord": {"core_radius_chords": 0.10},
+        "core radius 0.30 chord": {"core_radius_chords": 0.30},
+        "wake convected at U(1 - 0.85 a)": {"wake_induction_factor": 0.85},
         "wake convected at U(1 - a/2)": {"wake_induction_factor": 0.5},
         "wake convected at free stream U": {"wake_induction_factor": 0.0},
     }

@@ -27,9 +27,11 @@ Model
     segments: the panel's chord); the steady, symmetric rotor has the same Γ on every blade.
     Circulation from the 2-D polars (Kutta–Joukowski): Γ = ½ c W C_L(α), with
     W² = (U∞ + u_x)² + (Ωr − u_θ)², φ = atan2(U∞ + u_x, Ωr − u_θ), α = φ − twist − pitch.
-    The nonlinear system Γ − ½ c W C_L = 0 is solved by damped fixed-point iteration followed
-    by Newton iteration with a finite-difference Jacobian and back-tracking, to
-    max |residual| ≤ ``tolerance`` × max |Γ|; every point returns a status.
+    The nonlinear system Γ − ½ c W C_L = 0 is solved by a few damped fixed-point steps, then
+    Newton iteration with a finite-difference Jacobian and back-tracking, falling back to a
+    relaxed fixed-point iteration where Newton stalls (kinks of the polar in stall), to
+    max |residual| ≤ ``tolerance`` (1e-8) × max |Γ|; the wake speed ā is updated by secant
+    steps to |Δā| < ``wake_tolerance`` (2e-5). Every point returns a status and a message.
     Loads: lift L' = ρ W Γ and drag D' = ½ ρ W² c C_D per length; normal (thrust direction)
     F_n = L' cos φ + D' sin φ, tangential F_t = L' sin φ − D' cos φ; thrust B Σ F_n Δr,
     torque B Σ F_t r Δr, power Ω × torque, ``hub_flap_moment`` Σ F_n r Δr (one blade about
@@ -498,7 +500,7 @@ def solve_point(blade: BladeDefinition, wind_speed: float, rotor_speed_rpm: floa
     U = float(wind_speed)
     rho = settings.air_density
     area_w = panels.r * panels.dr
-    # start: no induction on the wake pitch (a = 1/3 guess), Γ from the undisturbed inflow scaled
+    # start: wake pitch of ā = 0.25 and Γ from the inflow with that induction, no swirl
     a_mean = 0.25
     gamma = None
     total_it, ok_inner, wake_ok = 0, False, False
