@@ -39,6 +39,9 @@ sys.path.insert(0, str(ROOT))
 
 import lifting_line as ll  # noqa: E402
 
+#: A validation study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
+
 DATA = HERE / "data" / "lifting_line"
 OUT = ROOT / "bench_output" / "lifting_line.json"
 #: Pass rules.
@@ -233,7 +236,16 @@ def method_difference(settings: ll.LiftingLineSettings, say=print) -> dict:
             "bem_settings": "calib defaults (BemSettings()): Prandtl tip and hub loss, wake rotation, drag in induction"}
 
 
-def main() -> int:
+def run() -> dict:
+    """All three checks; writes ``bench_output/lifting_line.json``; returns the headline figures.
+
+    Returns
+    -------
+    dict
+        Flat figures for ``run_all.py`` (convergence changes [%], Phase VI errors [%], lifting
+        line / BEM ratios at the design point, seconds per point) and ``pass``; ``error`` when
+        a pass rule failed.
+    """
     t0 = time.perf_counter()
     settings = ll.LiftingLineSettings()
     print("lifting line: discretisation convergence (NREL 5-MW design point)")
@@ -246,10 +258,22 @@ def main() -> int:
            "seconds": time.perf_counter() - t0, "numpy": np.__version__}
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(out, indent=1))
-    ok = conv["pass"] and pvi["pass"]
+    design = diff["rows"][-1]
+    figures = {f"convergence {k} dP %": v["power_change_pct"] for k, v in conv["refined"].items()}
+    figures.update({f"Phase VI {p['wind_speed']:g} m/s torque error %": p["error_pct"]["torque"]
+                    for p in pvi["points"]})
+    figures.update({"LL/BEM power at design": design["power_ratio"], "LL/BEM thrust at design": design["thrust_ratio"],
+                    "LL/BEM hub flap at design": design["hub_flap_moment_ratio"],
+                    "seconds per point": diff["seconds_per_point"], "pass": conv["pass"] and pvi["pass"]})
     print(f"convergence {'PASS' if conv['pass'] else 'FAIL'}; Phase VI {'PASS' if pvi['pass'] else 'FAIL'}; "
           f"{diff['seconds_per_point']:.2f} s per point; written {OUT}")
-    return 0 if ok else 1
+    if not figures["pass"]:
+        figures["error"] = "a pass rule failed (discretisation convergence or Phase VI torque/power)"
+    return figures
+
+
+def main() -> int:
+    return 0 if run()["pass"] else 1
 
 
 if __name__ == "__main__":

@@ -48,8 +48,11 @@ Validation (``benchmarks/bench_lifting_line.py``, run of 2026-11-27 with the def
     Discretisation, NREL 5-MW design point (11.4 m/s, λ = 7.5, 12.96 rpm, pitch 0; P = 5.563 MW,
     T = 782.8 kN, ā = 0.321, 1.9 s on a shared core): panels ×2 ΔP +0.05 %, wake length ×2
     −0.21 %, helix steps ×2 +0.04 %, all three −0.09 % (limit 0.5 %). Physical parameters, not
-    discretisation: core 0.01 c −0.76 %, 0.10 c +0.98 %; wake convected at U∞(1 − ā/2) +13 %,
-    at U∞ +21 % (the prescribed wake speed is this model's largest uncertainty).
+    discretisation: core 0.01 c −0.76 %, 0.10 c +0.98 %, 0.30 c +2.7 %; wake convected at
+    U∞(1 − 0.85 ā) +5.0 %, U∞(1 − ā/2) +13 %, U∞ +21 % (the prescribed wake speed is this
+    model's largest uncertainty; U∞(1 − ā) is the one consistent with momentum theory for a
+    uniformly loaded rotor: a vortex cylinder of strength BΓ/h with h = 2πU∞(1 − a)/Ω gives
+    C_T = 4a(1 − a)).
     NREL UAE Phase VI, sequence H (measured LSS torque): 7 m/s 748 vs 790 N m (−5.3 %), 10 m/s
     1258 vs 1292 N m (−2.6 %); calib's BEM −3.7 % and +0.6 %. 13 m/s (stalled, no rule): −21 %,
     and the stalled solution depends on the iteration path (−33 % with a 4 D wake).
@@ -58,7 +61,9 @@ Validation (``benchmarks/bench_lifting_line.py``, run of 2026-11-27 with the def
     1.007 … 1.018, thrust 1.011 … 1.024, hub flap 1.018 … 1.031; λ = 11 power 0.967; pitch 2 … 8
     deg at λ = 7 and 9.5 power 0.983 … 1.016. calib's BEM without tip and hub loss over with:
     power 1.063, thrust 1.023 at the design point (the reviewer's +6.6 % / +2.8 % look like
-    that, or like a wake convected faster than U∞(1 − ā)). Mean time per point 1.2-1.7 s.
+    that, or like a wake convected faster than U∞(1 − ā): with U∞(1 − 0.85 ā) this code gives
+    LL/BEM power 1.063, thrust 1.037). Time per point 1.1-1.7 s (2-3 s while the 2 cores
+    were shared with other jobs).
 Limits
     Steady, rigid, axisymmetric inflow only. In inboard stall (negative lift slope) the
     discrete system has several roots; the one found depends on the start and the wake length
