@@ -624,9 +624,11 @@ def main(argv=None) -> int:
     q.add_argument("--pitch", type=float, default=0.0)
     q.add_argument("--panels", type=int, default=LiftingLineSettings.n_panels)
     bq = sub.add_parser("battery", help="noisy CSVs of the rigid set-up's operating points")
-    bq.add_argument("--seeds", type=int, default=5)
-    bq.add_argument("--out", type=Path, default=ROOT / "bench_output" / "lifting_line_battery")
-    bq.add_argument("--data-sets", nargs="*", default=None)
+    bq.add_argument("--seeds", type=int, default=20, help="noise copies per data set (seeds 26000 + k)")
+    bq.add_argument("--out", type=Path, default=ROOT / "bench_output" / "lifting_line_battery",
+                    help="folder of data/rigid/*.csv, config_rigid.toml and truth_rigid.json")
+    bq.add_argument("--data-sets", nargs="*", default=None,
+                    help="control, leading_edge_erosion, uniform_table, rotational_augmentation (default all)")
     args = p.parse_args(argv)
     if args.command == "point":
         rotor = load_nrel5mw_rigid()
