@@ -39,6 +39,12 @@ about 6 min; every point converged. Points 27 and 58 (λ 9.5, pitch −2 deg, 9 
 ā = 0.58 and carry a warning in the truth JSON (outside the helix model's validity; kept so the
 operating points are the battery's).
 
+calib's diagnosis on these data (20 seeds each, the written config, ``oof_battery.runner``;
+``benchmarks/data/lifting_line/battery_rigid/diagnosis_2026-11-27.md``): ``control`` named
+``tip_loss`` in 19 of 20 seeds (``rotational_augmentation`` in 1), never
+``wind_tunnel_blockage``; the three effects were named right first in 20 of 20 each (alone in
+10, 3 and 4 of 20 for rotational augmentation, uniform table and erosion).
+
 Run::
 
     PYTHONPATH=. .venv/bin/python benchmarks/lifting_line.py battery --seeds 20 --out bench_output/lifting_line_battery
