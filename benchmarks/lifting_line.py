@@ -629,6 +629,8 @@ def main(argv=None) -> int:
                     help="folder of data/rigid/*.csv, config_rigid.toml and truth_rigid.json")
     bq.add_argument("--data-sets", nargs="*", default=None,
                     help="control, leading_edge_erosion, uniform_table, rotational_augmentation (default all)")
+    bq.add_argument("--wake-induction-factor", type=float, default=LiftingLineSettings.wake_induction_factor,
+                    help="k of the wake speed U(1 - k a); other than 1 only for a sensitivity study")
     args = p.parse_args(argv)
     if args.command == "point":
         rotor = load_nrel5mw_rigid()
@@ -643,7 +645,8 @@ def main(argv=None) -> int:
                          indent=1))
         return 0
     from lifting_line_battery import write_battery  # noqa: PLC0415
-    write_battery(args.seeds, args.out, args.data_sets)
+    write_battery(args.seeds, args.out, args.data_sets,
+                  settings=LiftingLineSettings(wake_induction_factor=args.wake_induction_factor))
     return 0
 
 

@@ -187,8 +187,12 @@ def write_csv(tr: dict, name: str, seed: int, path: Path) -> Path:
     return meas.write_csv(path)
 
 
-def write_battery(n_seeds: int, out: Path, names=None, say=print) -> dict:
+def write_battery(n_seeds: int, out: Path, names=None, say=print,
+                  settings: ll.LiftingLineSettings = ll.LiftingLineSettings()) -> dict:
     """Truth, ``n_seeds`` noisy CSVs per data set and ``config_rigid.toml`` under ``out``.
+
+    ``settings`` other than the defaults make a sensitivity study (e.g. a faster wake), not
+    the battery's truth.
 
     Returns
     -------
@@ -201,7 +205,7 @@ def write_battery(n_seeds: int, out: Path, names=None, say=print) -> dict:
     t0 = time.perf_counter()
     out = Path(out)
     names = list(names or DATA_SETS)
-    tr = truth(names, say=say)
+    tr = truth(names, settings, say=say)
     out.mkdir(parents=True, exist_ok=True)
     (out / f"truth_{SETUP}.json").write_text(json.dumps(tr))
     files = []
