@@ -127,8 +127,8 @@ def phase_vi_check(settings: ll.LiftingLineSettings, say=print) -> dict:
                "bem_error_pct": None if bem is None else {"torque": 100 * (bem["torque"] / m_q - 1),
                                                           "power": 100 * (bem["power"] / m_p - 1)},
                "rule": v in (7.0, 10.0)}
-        rec["pass"] = (not rec["rule"]) or (res.status == ll.CONVERGED and abs(rec["error_pct"]["torque"])
-                                            <= PHASE_VI_LIMIT_PCT and abs(rec["error_pct"]["power"]) <= PHASE_VI_LIMIT_PCT)
+        within = all(abs(rec["error_pct"][c]) <= PHASE_VI_LIMIT_PCT for c in ("torque", "power"))
+        rec["pass"] = (not rec["rule"]) or (res.status == ll.CONVERGED and within)
         out.append(rec)
         say(f"  Phase VI {v:4.1f} m/s: torque measured {m_q:7.1f}  LL {res.torque:7.1f} N m "
             f"({rec['error_pct']['torque']:+5.1f} %)"
@@ -233,7 +233,8 @@ def method_difference(settings: ll.LiftingLineSettings, say=print) -> dict:
             f"(BEM no tip loss / BEM: P {row['bem_without_tip_loss_over_bem_power']:.4f}, "
             f"T {row['bem_without_tip_loss_over_bem_thrust']:.4f}) {row['status']} {row['seconds']:.2f} s")
     return {"rows": rows, "seconds_total": seconds, "seconds_per_point": seconds / len(pts),
-            "bem_settings": "calib defaults (BemSettings()): Prandtl tip and hub loss, wake rotation, drag in induction"}
+            "bem_settings": ("calib defaults (BemSettings()): Prandtl tip and hub loss, wake rotation, "
+                             "drag in induction")}
 
 
 def run() -> dict:

@@ -77,7 +77,8 @@ FADE_DEG = (25.0, 45.0)
 DESIGN_TSR = hx.DESIGN_TSR
 DATA_SETS = {
     "control": "the lifting line with the rotor's own polars",
-    "leading_edge_erosion": "hidden_effects.erosion_rotor: ramp from r/R 0.6, drag +0.010 and lift slope -10 % at the tip",
+    "leading_edge_erosion": ("hidden_effects.erosion_rotor: ramp from r/R 0.6, drag +0.010 and lift slope -10 % "
+                             "at the tip"),
     "uniform_table": "hidden_effects.uniform_rotor: every lifting table as at Re/Re_ref = 0.5",
     "rotational_augmentation": "Lindenburg (2004) stall delay, 3.1 (Ωr/W)² (c/r)² (C_L,lin − C_L), at λ = 7.55",
 }
@@ -212,7 +213,8 @@ def write_battery(n_seeds: int, out: Path, names=None, say=print,
     for name in names:
         for k in range(n_seeds):
             seed = SEED0 + k
-            files.append((SETUP, name, seed, write_csv(tr, name, seed, out / "data" / SETUP / f"{name}_seed{seed}.csv")))
+            path = out / "data" / SETUP / f"{name}_seed{seed}.csv"
+            files.append((SETUP, name, seed, write_csv(tr, name, seed, path)))
     cfg = out / f"config_{SETUP}.toml"
     cfg.write_text(config_text(SETUP).replace("# Written by benchmarks/oof_battery/generate.py; the same set-up as "
                                               "the CCBlade run of the data.",

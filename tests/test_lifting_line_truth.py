@@ -15,7 +15,10 @@ import lifting_line as ll  # noqa: E402
 
 
 def test_straight_segment_matches_closed_form():
-    """Finite segment on the z axis: |u| = Γ/(4π h) (cos θ₁ − cos θ₂), azimuthal (Katz & Plotkin eq. 2.68)."""
+    """Finite segment on the z axis: |u| = Γ/(4π h) (cos θ₁ − cos θ₂), azimuthal.
+
+    Katz & Plotkin 2001, ch. 2.
+    """
     a = np.array([[0.0, 0.0, -1.0]])
     b = np.array([[0.0, 0.0, 2.0]])
     pts = np.array([[0.5, 0.0, 0.0], [0.0, 3.0, 1.0], [2.0, 2.0, 4.0]])
