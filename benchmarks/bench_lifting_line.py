@@ -22,7 +22,6 @@ Three checks, each with its pass rule:
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
