@@ -144,9 +144,9 @@ SOURCES = {"coverage": ("coverage_map", "coverage_truncated")}
 #: Published tables too wide for the content column, split by columns into narrower ones: NAME of the
 #: benchmark -> the column groups by header, each with the columns that name a row. Every column of
 #: the table is in a group, so that every number still reaches the page.
-SPLITS = {"diagnosis_out_of_family": (
-    ("set-up", "data set", "right / total", "alone", "χ²/dof before (median)", "s / diagnosis"),
-    ("set-up", "data set", "counts as right", "first verdicts", "all named"))}
+BATTERY_COLUMNS = (("set-up", "data set", "right / total", "alone", "χ²/dof before (median)", "s / diagnosis"),
+                   ("set-up", "data set", "counts as right", "first verdicts", "all named"))
+SPLITS = {"diagnosis_out_of_family": BATTERY_COLUMNS, "diagnosis_out_of_method": BATTERY_COLUMNS}
 
 #: A cell boundary of a Markdown table row (a ``|`` not escaped as ``\|``).
 CELL = re.compile(r"(?<!\\)\|")

@@ -11,7 +11,8 @@ sys.path.insert(0, str(BENCH))
 
 import run_all  # noqa: E402
 
-SLOW = {"bench_coverage", "bench_soak", "bench_discrepancy", "bench_phase_vi", "bench_oof_battery", "bench_fmu_diagnosis"}
+SLOW = {"bench_coverage", "bench_soak", "bench_discrepancy", "bench_phase_vi", "bench_oof_battery", "bench_fmu_diagnosis",
+        "bench_lifting_line_battery"}
 
 
 def test_speed_suite_leaves_out_the_hour_long_studies():
