@@ -175,19 +175,13 @@ def truth(names, settings: ll.LiftingLineSettings = ll.LiftingLineSettings(), sa
 
 
 def write_csv(tr: dict, name: str, seed: int, path: Path) -> Path:
-    """One data set's CSV: 1 % noise of seed ``seed`` on the lifting-line truth, σ columns, SI units."""
-    from calib.measurements import Measurements  # noqa: PLC0415
-    from calib.types import OperatingConditions  # noqa: PLC0415
+    """One data set's CSV: 1 % noise of seed ``seed`` on the lifting-line truth (``generate.noisy_csv``)."""
+    from oof_battery.generate import noisy_csv  # noqa: PLC0415
 
     d = tr["data_sets"][name]
     y = np.column_stack([np.asarray(d[c], float) for c in campaign.CHANNELS])
-    sigma = campaign.noise_sigma(y)
-    pts = tr["points"]
-    cond = OperatingConditions(pts["wind_speed"], pts["rotor_speed_rpm"], pts["pitch_deg"])
-    meas = Measurements(cond, campaign.CHANNELS, campaign.noisy(y, sigma, seed), np.broadcast_to(sigma, y.shape),
-                        source=f"benchmarks/lifting_line.py: steady lifting line, prescribed helical wake, "
-                               f"set-up {SETUP}, data set {name}, noise seed {seed}")
-    return meas.write_csv(path)
+    return noisy_csv(y, tr["points"], seed, f"benchmarks/lifting_line.py: steady lifting line, prescribed helical "
+                     f"wake, set-up {SETUP}, data set {name}, noise seed {seed}", path)
 
 
 def write_battery(n_seeds: int, out: Path, names=None, say=print,

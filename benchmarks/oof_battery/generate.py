@@ -103,19 +103,25 @@ def truth_matrix(truth: dict, data_set: str) -> np.ndarray:
     return np.column_stack([np.asarray(d[campaign.CCBLADE_KEYS[c]], float) for c in campaign.CHANNELS])
 
 
-def write_csv(truth: dict, setup: str, data_set: str, seed: int, path: Path) -> Path:
-    """One data set's CSV: noise of seed ``seed`` on the CCBlade truth, σ columns, SI units."""
+def noisy_csv(y: np.ndarray, points: dict, seed: int, source: str, path: Path) -> Path:
+    """The battery's CSV of noise-free loads ``y`` (n_points, channels of ``campaign.CHANNELS``) at
+    ``points`` (``wind_speed``, ``rotor_speed_rpm``, ``pitch_deg``): the battery's noise of seed
+    ``seed``, σ columns, SI units, ``source`` in its header."""
     from calib.measurements import Measurements
     from calib.types import OperatingConditions
 
-    y = truth_matrix(truth, data_set)
     sigma = campaign.noise_sigma(y)
-    pts = truth["points"]
-    cond = OperatingConditions(pts["wind_speed"], pts["rotor_speed_rpm"], pts["pitch_deg"])
+    cond = OperatingConditions(points["wind_speed"], points["rotor_speed_rpm"], points["pitch_deg"])
     meas = Measurements(cond, campaign.CHANNELS, campaign.noisy(y, sigma, seed), np.broadcast_to(sigma, y.shape),
-                        source=f"benchmarks/oof_battery/generate.py: WISDEM CCBlade {truth['wisdem_version']}, "
-                               f"set-up {setup}, data set {data_set}, noise seed {seed}")
+                        source=source)
     return meas.write_csv(path)
+
+
+def write_csv(truth: dict, setup: str, data_set: str, seed: int, path: Path) -> Path:
+    """One data set's CSV: noise of seed ``seed`` on the CCBlade truth (:func:`noisy_csv`)."""
+    return noisy_csv(truth_matrix(truth, data_set), truth["points"], seed,
+                     f"benchmarks/oof_battery/generate.py: WISDEM CCBlade {truth['wisdem_version']}, set-up {setup}, "
+                     f"data set {data_set}, noise seed {seed}", path)
 
 
 def config_text(setup: str, recalibrate: bool = False, tolerance: dict | None = None) -> str:
