@@ -280,8 +280,9 @@ def _case(model: str, workdir: str):
             drag = np.array([names[j].startswith("dCD") for j in idx])
             for _ in range(100):
                 draw = p_true.copy()
-                draw[idx] = cal.scale[idx] * (L @ rng.standard_normal(idx.size)) * np.where(drag, DRAG_SHARE, 1.0)
-                if np.all(draw >= cal.lower) and np.all(draw <= cal.upper) and \
+                draw[idx] = cal.statement.scale[idx] * (L @ rng.standard_normal(idx.size)) * np.where(drag, DRAG_SHARE,
+                                                                                                     1.0)
+                if np.all(draw >= cal.statement.lower) and np.all(draw <= cal.statement.upper) and \
                         np.all(draw[idx[drag]] >= -MAX_DRAG_LOSS):
                     p_true = draw
                     break

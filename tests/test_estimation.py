@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from calib.calibration.gauss_newton import EstimationStatus, StopRule, estimate_map, estimate_ml
-from calib.calibration.problem import LeastSquaresProblem
+from calib.calibration.problem import LeastSquaresProblem, ProblemStatement
 from calib.calibration.qp import OPTIMIZERS, get_optimizer
 from calib.errors import InputError
 from calib.models.base import Capabilities, Channel, Evaluation, OperatingConditions, Parameter
@@ -49,16 +49,23 @@ def _conditions(n=12):
     return OperatingConditions(V, 10.0 * np.ones(n), np.tile([0.0, 2.0, 4.0], n // 3 + 1)[:n])
 
 
+def _statement(model, p0, channel_index, lower=None, upper=None):
+    """The statement of a problem on ``model``'s parameters: nominal ``p0``, the parameters' scales
+    and bounds (unless given), a prior nobody stated (the ML estimators do not read it)."""
+    qs = model.parameters
+    scale = np.array([q.scale for q in qs])
+    lo = np.array([q.lower for q in qs]) if lower is None else lower
+    hi = np.array([q.upper for q in qs]) if upper is None else upper
+    return ProblemStatement(qs, p0, scale, lo, hi, scale, np.zeros(len(qs), bool), channel_index)
+
+
 def _problem(model, p_true, noise=0.0, seed=1, lower=None, upper=None):
     cond = _conditions()
     z = LinearModel(model.n, model.c, model.seed).evaluate(p_true, cond).values  # complete data, same A
     z = z + noise * np.random.default_rng(seed).standard_normal(z.shape)
     sigma = np.full(z.shape, noise if noise > 0 else 1e-3)
-    qs = model.parameters
-    lo = np.array([q.lower for q in qs]) if lower is None else lower
-    hi = np.array([q.upper for q in qs]) if upper is None else upper
-    return LeastSquaresProblem(model, cond, z, sigma, list(range(model.c)), np.zeros(model.n),
-                               np.array([q.scale for q in qs]), lo, hi)
+    statement = _statement(model, np.zeros(model.n), range(model.c), lower, upper)
+    return LeastSquaresProblem(model, cond, z, sigma, statement)
 
 
 @pytest.mark.parametrize("optimizer", sorted(OPTIMIZERS))
@@ -78,7 +85,7 @@ def test_bounds_are_respected_and_active():
     upper = np.array([1.0, 1.0, 0.2, 1.0])  # truth violates the bound on p2
     prob = _problem(model, p_true, upper=upper)
     out = estimate_ml(prob, np.eye(model.n), optimizer="sqpmethod")
-    assert np.all(out.p <= upper + 1e-9) and np.all(out.p >= prob.lower - 1e-9)
+    assert np.all(out.p <= upper + 1e-9) and np.all(out.p >= prob.statement.lower - 1e-9)
     assert out.p[2] == pytest.approx(0.2, abs=1e-7)
 
 
@@ -89,7 +96,7 @@ def test_subspace_estimate_is_the_projected_least_squares_solution():
     B = np.linalg.qr(np.random.default_rng(0).standard_normal((4, 2)))[0]
     out = estimate_ml(prob, B, optimizer="slsqp")
     # closed form: min ||(z - A p0 - A D B θ)/σ||
-    lin = prob.linearize(prob.p0)
+    lin = prob.linearize(prob.statement.p0)
     J = lin.M @ B
     theta_ls = np.linalg.lstsq(J, lin.residual.reshape(-1), rcond=None)[0]
     np.testing.assert_allclose(out.theta, theta_ls, atol=1e-6)
@@ -121,7 +128,7 @@ def test_empty_subspace_returns_nominal():
     model = LinearModel()
     prob = _problem(model, np.array([0.3, -0.2, 0.5, 0.1]))
     out = estimate_ml(prob, np.zeros((model.n, 0)))
-    assert out.converged and np.array_equal(out.p, prob.p0)
+    assert out.converged and np.array_equal(out.p, prob.statement.p0)
 
 
 def test_unknown_optimizer_error_lists_valid_names():
@@ -186,8 +193,8 @@ def test_an_infeasible_start_is_pulled_back_inside_the_bounds():
 
     cond = OperatingConditions([8.0], [10.0], [0.0])
     model = Box()
-    problem = LeastSquaresProblem(model, cond, np.array([[0.5]]), np.array([[0.1]]), [0], np.zeros(2), np.ones(2),
-                                  -np.ones(2), np.ones(2))
+    problem = LeastSquaresProblem(model, cond, np.array([[0.5]]), np.array([[0.1]]),
+                                  _statement(model, np.zeros(2), [0]))
     basis = np.array([[2.0], [1.0]]) / np.sqrt(5)
     # θ₀ = 3 gives (2.68, 1.34); clipped (1, 1) and projected back on the basis: (1.2, 0.6), still outside
     out = estimate_ml(problem, basis, np.array([3.0]))
@@ -203,7 +210,8 @@ def test_an_iteration_damps_until_a_step_is_accepted_and_says_stalled_when_it_ca
     model = LinearModel(fail_if_p0_above=0.05)
     prob = _problem(model, np.array([0.8, -0.2, 0.5, 0.1]))
     out = estimate_ml(prob, np.eye(model.n))
-    assert out.status == "converged" and out.linearization.n_failed == 0 and out.cost < prob.linearize(prob.p0).cost
+    assert out.status == "converged" and out.linearization.n_failed == 0
+    assert out.cost < prob.linearize(prob.statement.p0).cost
     monkeypatch.setattr(est, "DAMPING_TRIES", 1)
     stuck = estimate_ml(_problem(model, np.array([0.8, -0.2, 0.5, 0.1])), np.eye(model.n))
     assert stuck.status == "stalled" and not stuck.history and np.array_equal(stuck.p, np.zeros(model.n))
@@ -269,10 +277,8 @@ def test_damped_trials_are_evaluated_when_the_jacobian_costs_simulations(derivat
     p_true = np.array([0.6, -0.5, 0.7, 0.4])
     cond = _conditions()
     z = model.evaluate(p_true, cond).values
-    qs = model.parameters
-    prob = LeastSquaresProblem(model, cond, z, np.full(z.shape, 1e-3), [0, 1], np.full(model.n, -0.9),
-                               np.array([q.scale for q in qs]), np.array([q.lower for q in qs]),
-                               np.array([q.upper for q in qs]))
+    prob = LeastSquaresProblem(model, cond, z, np.full(z.shape, 1e-3),
+                               _statement(model, np.full(model.n, -0.9), [0, 1]))
     out = estimate_ml(prob, np.eye(model.n), np.zeros(model.n), stop=StopRule(max_iterations=60))
     assert out.converged, out.message
     np.testing.assert_allclose(out.p, p_true, atol=1e-6)
@@ -292,7 +298,7 @@ def test_the_map_estimate_of_a_linear_model_is_the_closed_form_posterior_mean():
     wide = np.full(model.n, 50.0)
     prob = _problem(model, np.array([0.3, -0.2, 0.25, 0.1]), noise=0.05, lower=-wide, upper=wide)
     L = np.diag([0.2, 0.5, 1.0, 2.0]) + 0.05
-    at_nominal = prob.linearize(prob.p0)
+    at_nominal = prob.linearize(prob.statement.p0)
     J = at_nominal.M @ L
     u_closed = np.linalg.solve(J.T @ J + np.eye(model.n), J.T @ at_nominal.residual.reshape(-1))
     out = estimate_map(prob, L, stop=StopRule(max_iterations=60))

@@ -14,11 +14,12 @@ import pytest
 from twin_model import TwinModel, twin_conditions
 
 from calib.calibration import CalibrationSettings, Calibrator
+from calib.calibration.problem import ProblemStatement
 from calib.calibration.uncertainty_terms import ModelTerms
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.measurements import synthesize
-from calib.types import nominal_vector
+from calib.types import Parameter, nominal_vector
 
 LINEAR = dict(estimator="map", cd_min=None, scale_by_fit=False, representation_error=False, prior_check=False)
 
@@ -104,7 +105,7 @@ def test_map_covers_prior_draws_on_the_nonlinear_twin():
         cal = Calibrator(model, synthesize(model, p0, cond, channels=("power",), relative_sigma={"power": 0.01}),
                          settings)
         rng = np.random.default_rng(seed)
-        p_true = p0 + cal.prior_std * rng.standard_normal(p0.size)
+        p_true = p0 + cal.statement.prior_std * rng.standard_normal(p0.size)
         meas = synthesize(model, p_true, cond, relative_sigma={"power": 0.01, "thrust": 0.01,
                                                                "root_flap_moment": 0.01}, seed=seed)
         res = Calibrator(model, meas, settings).run()
@@ -158,7 +159,9 @@ def test_the_prior_is_block_diagonal_nodes_correlated_others_independent():
     assert np.linalg.eigvalsh(P).min() > 0
     # without a field (an FMU's scalar parameters): diagonal
     sd, scale = np.array([0.1, 0.1, 2.0]), np.array([0.05, 0.05, 0.5])
-    terms = ModelTerms(None, None, CalibrationSettings(), meas, (), [], sd, scale, -np.inf * sd, np.inf * sd)
+    scalars = tuple(Parameter(f"q{j}", 0.0, -np.inf, np.inf, s) for j, s in enumerate(scale))
+    statement = ProblemStatement(scalars, np.zeros(3), scale, -np.inf * sd, np.inf * sd, sd, np.ones(3, bool), [])
+    terms = ModelTerms(None, None, CalibrationSettings(), meas, statement)
     assert np.array_equal(terms.prior_cov_scaled(), np.diag((sd / scale) ** 2))
 
 

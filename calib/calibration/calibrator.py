@@ -53,7 +53,7 @@ import numpy as np
 
 from calib.calibration.map_fit import MapFit
 from calib.calibration.noise import initial_sigma
-from calib.calibration.problem import LeastSquaresProblem
+from calib.calibration.problem import LeastSquaresProblem, ProblemStatement
 from calib.calibration.result import CalibrationResult
 from calib.calibration.result_assembly import assemble_result
 from calib.calibration.settings import CalibrationSettings
@@ -96,6 +96,15 @@ class Calibrator:
         nominal values stay the reference of the scaled coordinates and of the prior; a start
         away from them serves fits whose derivative vanishes at nominal (a candidate effect at
         zero magnitude). Clipped into the bounds.
+
+    Attributes
+    ----------
+    statement : ProblemStatement
+        The problem's statement, built once here (nominal values, scales, effective bounds
+        [parameter units], prior, measured channels' columns); the problem the estimators solve,
+        the uncertainty terms and the result's estimate read it, none holds a copy.
+    terms : ModelTerms
+        The model-derived uncertainty terms of this problem.
     """
 
     def __init__(self, model, measurements: Measurements, settings: CalibrationSettings | None = None,
@@ -106,55 +115,58 @@ class Calibrator:
         self.settings = (settings or CalibrationSettings()).validate()
         self.name = name
         self._callbacks = [c for c in (callback, _progress_printer if self.settings.verbose else None) if c]
-        self.parameters = tuple(model.parameters)
-        model_channels = [c.name for c in model.channels]
-        check_channels(measurements, model_channels)
-        self.channel_index = [model_channels.index(c) for c in measurements.channels]
-        self.channel_units = [model.channels[i].unit for i in self.channel_index]
-        self.p0 = nominal_vector(self.parameters)
-        self.scale = np.array([q.scale for q in self.parameters], float)
-        if np.any(~(self.scale > 0)):
-            j = int(np.flatnonzero(~(self.scale > 0))[0])
-            raise InputError(f"parameter scale must be > 0, got {self.scale[j]!r}", "model.parameters",
-                             field=self.parameters[j].name)
         self.field = model.correction_field() if model.capabilities.correction_field else None
-        self.lower, self.upper = self._effective_bounds()
+        self.statement = self._state_problem(model, measurements)
         self.start = None
         if start is not None:
+            p0 = self.statement.p0
             start = np.asarray(start, float)
-            if start.shape != self.p0.shape or not np.all(np.isfinite(start)):
-                raise InputError(f"must be {self.p0.size} finite values, got shape {start.shape}", "Calibrator",
+            if start.shape != p0.shape or not np.all(np.isfinite(start)):
+                raise InputError(f"must be {p0.size} finite values, got shape {start.shape}", "Calibrator",
                                  field="start")
-            self.start = np.clip(start, self.lower, self.upper)
+            self.start = np.clip(start, self.statement.lower, self.statement.upper)
+        self.history: list[dict] = []
+        st = self.settings
+        self.terms = ModelTerms(model, self.field, st, measurements, self.statement)
+        self.fitter = MapFit(self) if st.estimator == "map" else TruncatedFit(self)
+
+    # ------------------------------------------------------------------ setup
+    def _state_problem(self, model, measurements: Measurements) -> ProblemStatement:
+        """The problem's statement (:class:`calib.calibration.problem.ProblemStatement`), checked:
+        the measured channels' columns, the nominal values, scales (> 0), effective bounds (the
+        correction field's lower bounds applied, ``cd_min``) and the prior (``prior_std`` of the
+        settings by parameter name, else the parameter's own, else ``prior_sigma`` × scale)."""
+        parameters = tuple(model.parameters)
+        model_channels = [c.name for c in model.channels]
+        check_channels(measurements, model_channels)
+        channel_index = [model_channels.index(c) for c in measurements.channels]
+        p0 = nominal_vector(parameters)
+        scale = np.array([q.scale for q in parameters], float)
+        if np.any(~(scale > 0)):
+            j = int(np.flatnonzero(~(scale > 0))[0])
+            raise InputError(f"parameter scale must be > 0, got {scale[j]!r}", "model.parameters",
+                             field=parameters[j].name)
+        lower = np.array([q.lower for q in parameters], float)
+        upper = np.array([q.upper for q in parameters], float)
+        if self.field is not None:
+            lower = self.field.lower_bounds(lower, p0, self.settings.cd_min)
         stated = dict(self.settings.prior_std or {})
-        names = [q.name for q in self.parameters]
+        names = [q.name for q in parameters]
         for name in stated:
             if name not in names:
                 close = difflib.get_close_matches(name, names, 1)
                 raise InputError(f"no parameter {name!r} in this model" + (f"; did you mean {close[0]!r}?" if close
                                                                             else f"; parameters: {', '.join(names)}"),
                                  "settings", field=f"calibration.prior_std.{name}")
-        self.prior_std = np.array([stated[q.name] if q.name in stated else q.prior_std if np.isfinite(q.prior_std)
-                                   else self.settings.prior_sigma * q.scale for q in self.parameters], float)
+        prior_std = np.array([stated[q.name] if q.name in stated else q.prior_std if np.isfinite(q.prior_std)
+                              else self.settings.prior_sigma * q.scale for q in parameters], float)
         # a prior someone stated: the correction nodes' smooth-field prior, a parameter's own, the settings'
-        self.prior_stated = np.array([q.name in stated or bool(np.isfinite(q.prior_std)) for q in self.parameters])
+        prior_stated = np.array([q.name in stated or bool(np.isfinite(q.prior_std)) for q in parameters], bool)
         if self.field is not None:
             lay = self.field.layout
             for idx in (lay.lift_index, lay.drag_index):
-                self.prior_stated[idx[idx >= 0]] = True
-        self.history: list[dict] = []
-        st = self.settings
-        self.terms = ModelTerms(model, self.field, st, measurements, self.parameters, self.channel_index,
-                                self.prior_std, self.scale, self.lower, self.upper)
-        self.fitter = MapFit(self) if st.estimator == "map" else TruncatedFit(self)
-
-    # ------------------------------------------------------------------ setup
-    def _effective_bounds(self):
-        lower = np.array([q.lower for q in self.parameters], float)
-        upper = np.array([q.upper for q in self.parameters], float)
-        if self.field is not None:
-            lower = self.field.lower_bounds(lower, self.p0, self.settings.cd_min)
-        return lower, upper
+                prior_stated[idx[idx >= 0]] = True
+        return ProblemStatement(parameters, p0, scale, lower, upper, prior_std, prior_stated, tuple(channel_index))
 
     def emit(self, rec: dict) -> None:
         """Record a progress record and pass it to the callbacks."""
@@ -169,20 +181,20 @@ class Calibrator:
         st = self.settings
         m = self.measurements
         sigma = initial_sigma(self.measurements, self.settings)
+        statement = self.statement
         problem = LeastSquaresProblem(self.model, m.conditions, m.values,
-                                      sigma if sigma is not None else np.ones_like(m.values),
-                                      self.channel_index, self.p0, self.scale, self.lower, self.upper)
-        nominal = problem.evaluate(self.p0)
+                                      sigma if sigma is not None else np.ones_like(m.values), statement)
+        nominal = problem.evaluate(statement.p0)
         if nominal.n_failed == len(m.conditions):
             from calib.errors import ModelError
 
             raise ModelError(f"the nominal model fails at every point: {nominal.evaluation.failure_summary()}")
         if sigma is None:  # ML noise: start from the nominal residual
-            resid = m.values - nominal.evaluation.values[:, self.channel_index]
+            resid = m.values - nominal.evaluation.values[:, statement.channel_index]
             sigma = np.broadcast_to(ml_noise(resid, nominal.ok), m.values.shape).copy()
             problem = problem.with_sigma(sigma)
         noise_iters = st.max_noise_iterations if st.noise in ("ml", "relative_ml") else 1
-        p = self.p0.copy() if self.start is None else self.start.copy()
+        p = statement.p0.copy() if self.start is None else self.start.copy()
         for k_noise in range(noise_iters):
             fit = self.fitter.fit(problem, p)
             p, svd, lin, status, message = fit.p, fit.svd, fit.lin, fit.status, fit.message
@@ -191,13 +203,13 @@ class Calibrator:
             if st.noise == "relative_ml":
                 # one ML factor on the stated σ of every channel, with N − k degrees of freedom
                 from calib.calibration.noise import ml_scale
-                n_res = int(lin.ok.sum()) * len(self.channel_index)
+                n_res = int(lin.ok.sum()) * len(statement.channel_index)
                 fitted = float(np.sum(svd.singular_values ** 2 / (1.0 + svd.singular_values ** 2))) \
                     if st.estimator == "map" else svd.n_retained     # the MAP's effective number of parameters
                 k_hat = ml_scale(float(np.sum(lin.residual[lin.ok] ** 2)), n_res, fitted)
                 new_sigma = problem.sigma * k_hat
             else:
-                resid = m.values - lin.evaluation.values[:, self.channel_index]
+                resid = m.values - lin.evaluation.values[:, statement.channel_index]
                 new_sigma = np.broadcast_to(ml_noise(resid, lin.ok), m.values.shape).copy()
             change = float(np.max(np.abs(new_sigma[0] / problem.sigma[0] - 1.0)))
             self.emit({"stage": "noise", "iteration": k_noise + 1, "sigma": new_sigma[0].tolist(),

@@ -224,8 +224,9 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
     """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map`."""
     qp = get_optimizer(optimizer)
     basis = np.asarray(basis, float)
-    lb = (problem.lower - problem.p0) / problem.scale
-    ub = (problem.upper - problem.p0) / problem.scale
+    statement = problem.statement
+    lb = (statement.lower - statement.p0) / statement.scale
+    ub = (statement.upper - statement.p0) / statement.scale
     theta = _feasible_start(basis, theta0, lb, ub)
     run = _Iteration(problem, basis, lb, ub, prior_weight, theta, problem.linearize(problem.p_of(basis, theta)),
                      message=f"stopped after {stop.max_iterations} iterations")

@@ -43,7 +43,7 @@ class MapFit:
     Parameters
     ----------
     cal : Calibrator
-        Its settings, prior, problem terms, scales, bounds and progress records.
+        Its settings, problem statement (prior, scales, bounds), problem terms and progress records.
     """
 
     def __init__(self, cal):
@@ -57,7 +57,7 @@ class MapFit:
         """The prior of the MAP estimator [scale units²]: the stated prior, and ``FLAT_PRIOR`` for
         the parameters without one."""
         P = self.cal.prior_cov_scaled()
-        flat = np.flatnonzero(~self.cal.prior_stated)
+        flat = np.flatnonzero(~self.cal.statement.prior_stated)
         P[flat, :], P[:, flat] = 0.0, 0.0
         P[flat, flat] = FLAT_PRIOR ** 2
         return P
@@ -99,7 +99,7 @@ class MapFit:
         s, W, L = self.decomposition(lin)
         LW = L @ W
         fit_scale, n_eff = map_fit_scale(float(np.sum(lin.residual[lin.ok] ** 2)),
-                                         int(lin.ok.sum()) * len(self.cal.channel_index), s,
+                                         int(lin.ok.sum()) * len(self.cal.statement.channel_index), s,
                                          st.scale_by_fit and st.noise not in ("ml", "relative_ml"))
         laplace = laplace_covariance(s, LW, fit_scale)
         svd, cov, cov_weak = laplace.directions, laplace.total, laplace.weak
@@ -120,11 +120,12 @@ class MapFit:
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a check, not the result
             prior_check = {"failed": f"{type(exc).__name__}: {exc}"}
         multiple_roots = np.asarray(ev.extras.get("multiple_roots", np.zeros(len(ev.status), bool)), bool)
-        D = np.outer(self.cal.scale, self.cal.scale)
+        statement = self.cal.statement
+        D = np.outer(statement.scale, statement.scale)
         self.cal.emit({"stage": "map_covariance", "n_eff": n_eff, "fit_scale": fit_scale})
         agreement = map_ml_agreement(lin.M, lin.residual.reshape(-1), problem.scaled(lin.p),
-                                     self.prior_cov_scaled(), problem.scaled(self.cal.lower),
-                                     problem.scaled(self.cal.upper), [q.name for q in self.cal.parameters], fit_scale)
+                                     self.prior_cov_scaled(), problem.scaled(statement.lower),
+                                     problem.scaled(statement.upper), [q.name for q in statement.parameters], fit_scale)
         self.cal.emit({"stage": "map_agreement", "ok": agreement.ok, "max_z": agreement.max_z,
                     "n_fixed": agreement.n_fixed})
         if not agreement.ok:

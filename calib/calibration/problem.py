@@ -1,6 +1,9 @@
-r"""The calibration problem as the estimators see it: measured outputs, their noise, the model,
-and the parameters' nominal values, scales and bounds (:class:`LeastSquaresProblem`), and the
-model linearized at one parameter vector (:class:`Linearization`).
+r"""The calibration problem: its statement, built once by the Calibrator and read by the estimators,
+the uncertainty terms and the result (the parameters, their nominal values, scales, effective
+bounds and prior, and the measured channels' columns: :class:`ProblemStatement`); the problem as
+the estimators see it, the statement with the model, the measured outputs and their noise
+(:class:`LeastSquaresProblem`); and the model linearized at one parameter vector
+(:class:`Linearization`).
 
 Notes
 -----
@@ -26,13 +29,72 @@ from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Sequence
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from calib.calibration.identifiability import whitened_sensitivities
 from calib.types import Evaluation, OperatingConditions
+
+
+def _read_only(values, dtype) -> np.ndarray:
+    """A read-only copy of ``values`` as a 1-D array of ``dtype``."""
+    out = np.array(values, dtype=dtype).reshape(-1)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ProblemStatement:
+    """One calibration problem's statement: what is estimated, from where, within which bounds,
+    under which prior, from which model channels. Built once
+    (:class:`calib.calibration.calibrator.Calibrator`) and read by the estimators
+    (:class:`LeastSquaresProblem`), the uncertainty terms
+    (:class:`calib.calibration.uncertainty_terms.ModelTerms`) and the result's estimate; nothing
+    else holds a copy. Frozen, its arrays read-only.
+
+    Parameters
+    ----------
+    parameters : tuple of Parameter
+        The model's parameters, n_params of them.
+    p0 : ndarray, shape (n_params,)
+        Nominal values, the reference of the scaled coordinates p̃ = (p − p₀)/scale and of the
+        prior [parameter units].
+    scale : ndarray, shape (n_params,)
+        Scales, > 0 [parameter units].
+    lower, upper : ndarray, shape (n_params,)
+        Effective bounds: the parameters' own, with the correction field's lower bounds (e.g.
+        C_D >= C_D,min at the nodes) applied [parameter units].
+    prior_std : ndarray, shape (n_params,)
+        Prior 1-σ [parameter units]: stated in the settings, the parameter's own, or the settings'
+        ``prior_sigma`` × scale.
+    prior_stated : ndarray of bool, shape (n_params,)
+        Whether someone stated the prior (the settings, the parameter, or the correction field's
+        smooth-field prior at its nodes); the MAP estimator is flat where not.
+    channel_index : tuple of int
+        The column of each measured channel in the model's output, n_channels of them.
+    """
+
+    parameters: tuple
+    p0: np.ndarray
+    scale: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    prior_std: np.ndarray
+    prior_stated: np.ndarray
+    channel_index: tuple
+
+    def __post_init__(self):
+        object.__setattr__(self, "parameters", tuple(self.parameters))
+        object.__setattr__(self, "channel_index", tuple(int(i) for i in self.channel_index))
+        for f in fields(self):
+            if f.name not in ("parameters", "channel_index"):
+                value = _read_only(getattr(self, f.name), bool if f.name == "prior_stated" else float)
+                object.__setattr__(self, f.name, value)
+                if value.shape != self.p0.shape:
+                    raise ValueError(f"ProblemStatement.{f.name} has {value.size} values, p0 {self.p0.size}")
+        if len(self.parameters) != self.p0.size:
+            raise ValueError(f"ProblemStatement has {len(self.parameters)} parameters, p0 {self.p0.size} values")
 
 
 @dataclass(eq=False)
@@ -79,55 +141,46 @@ class LeastSquaresProblem:
         Measured outputs z [channel units].
     sigma : ndarray, shape (n_points, n_channels)
         1-σ noise [channel units].
-    channel_index : sequence of int
-        Column of each measured channel in the model's output.
-    p0, scale, lower, upper : ndarray, shape (n_params,)
-        Nominal values, scales and (effective) bounds.
+    statement : ProblemStatement
+        The nominal values, scales, effective bounds and channel columns (read from it, not copied).
     """
 
     def __init__(self, model, conditions: OperatingConditions, measured: np.ndarray, sigma: np.ndarray,
-                 channel_index: Sequence[int], p0, scale, lower, upper):
+                 statement: ProblemStatement):
         self.model = model
         self.conditions = conditions
         self.measured = np.asarray(measured, float)
         self.sigma = np.asarray(sigma, float)
-        self.channel_index = np.asarray(channel_index, int)
-        self.p0 = np.asarray(p0, float)
-        self.scale = np.asarray(scale, float)
-        self.lower = np.asarray(lower, float)
-        self.upper = np.asarray(upper, float)
+        self.statement = statement
         self.n_evaluations = 0
         self.n_jacobians = 0
         self.n_failed_points_total = 0
         self._cache: Linearization | None = None
 
-    @property
-    def n_params(self) -> int:
-        return self.p0.size
-
     def with_sigma(self, sigma: np.ndarray) -> "LeastSquaresProblem":
         """The same problem with another noise level (the cache is dropped)."""
-        new = LeastSquaresProblem(self.model, self.conditions, self.measured, sigma, self.channel_index,
-                                  self.p0, self.scale, self.lower, self.upper)
+        new = LeastSquaresProblem(self.model, self.conditions, self.measured, sigma, self.statement)
         new.n_evaluations, new.n_jacobians = self.n_evaluations, self.n_jacobians
         new.n_failed_points_total = self.n_failed_points_total
         return new
 
     def p_of(self, basis: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """p = p₀ + D B θ."""
-        return self.p0 + self.scale * (basis @ theta)
+        st = self.statement
+        return st.p0 + st.scale * (basis @ theta)
 
     def scaled(self, p: np.ndarray) -> np.ndarray:
         """p̃ = (p − p₀)/scale."""
-        return (np.asarray(p, float) - self.p0) / self.scale
+        return (np.asarray(p, float) - self.statement.p0) / self.statement.scale
 
     def unscaled(self, x: np.ndarray, clip: bool = False) -> np.ndarray:
         """p = p₀ + scale · x (the inverse of :meth:`scaled`), held inside the bounds when ``clip``."""
-        p = self.p0 + self.scale * np.asarray(x, float)
-        return np.clip(p, self.lower, self.upper) if clip else p
+        st = self.statement
+        p = st.p0 + st.scale * np.asarray(x, float)
+        return np.clip(p, st.lower, st.upper) if clip else p
 
     def _residual(self, ev: Evaluation):
-        y = ev.values[:, self.channel_index]
+        y = ev.values[:, self.statement.channel_index]
         ok = ev.ok & np.all(np.isfinite(y), axis=1)
         r = np.where(ok[:, None], (self.measured - np.where(ok[:, None], y, 0.0)) / self.sigma, 0.0)
         self.n_failed_points_total += int(np.count_nonzero(~ok))
@@ -158,6 +211,6 @@ class LeastSquaresProblem:
         ev, G = self.model.jacobian(p, self.conditions)
         self.n_jacobians += 1
         r, ok = self._residual(ev)
-        M = whitened_sensitivities(G[:, self.channel_index, :], self.sigma, self.scale, ok)
+        M = whitened_sensitivities(G[:, self.statement.channel_index, :], self.sigma, self.statement.scale, ok)
         self._cache = Linearization(p.copy(), r, ok, M, ev)
         return self._cache

@@ -16,7 +16,6 @@ from calib.calibration.result import CalibrationResult
 from calib.calibration.result_parts import PARTS, Estimate, Fit, Identifiability, Provenance, Uncertainty
 from calib.calibration.uncertainty_terms import ModelTerms
 from calib.errors import InputError
-from calib.types import nominal_vector
 
 
 def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_frozen, cov_theta, theta_hat, obs,
@@ -45,18 +44,18 @@ def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_fr
         (:func:`_into_parts`): the estimator's own, and the calibrator's (``history``,
         ``truncation``, ``name``).
     """
-    m = terms.measurements
+    m, statement = terms.measurements, terms.statement
     radius, spec = _model_record(terms.model)
     fit = _fit_part(terms, problem, nominal, lin)     # the failures counted before the tightening's probes
     extra.setdefault("tightening", terms.tightening(problem, lin, cov_p, radius))
-    units = [terms.model.channels[i].unit for i in terms.channel_index]
+    units = [terms.model.channels[i].unit for i in statement.channel_index]
     res = CalibrationResult(
-        parameters=[asdict(q) for q in terms.parameters], channels=list(m.channels), channel_units=units,
+        parameters=[asdict(q) for q in statement.parameters], channels=list(m.channels), channel_units=units,
         conditions=m.conditions.as_dict(),
-        estimate=Estimate(nominal_vector(terms.parameters), lin.p, terms.lower, terms.upper, terms.scale, theta_hat,
+        estimate=Estimate(statement.p0, lin.p, statement.lower, statement.upper, statement.scale, theta_hat,
                           status, message),
         identifiability=_identifiability(terms, lin, svd, cov_p, obs),
-        uncertainty=Uncertainty(cov_p, np.sqrt(np.maximum(np.diag(cov_p), 0.0)), cov_theta, terms.prior_std,
+        uncertainty=Uncertainty(cov_p, np.sqrt(np.maximum(np.diag(cov_p), 0.0)), cov_theta, statement.prior_std,
                                 cov_frozen),
         fit=fit,
         provenance=Provenance(_settings_record(terms), spec, radius, wall_time=wall,
@@ -66,7 +65,7 @@ def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_fr
     if field is not None and field.grid is not None:
         res.uncertainty.polar_bands = field.bands(
             lin.p, cov_p, cov_frozen, eta=st.band_eta, confidence=st.band_confidence,
-            prior_std=terms.prior_std if st.representation_error else None,
+            prior_std=statement.prior_std if st.representation_error else None,
             correlation_length=st.prior_correlation, cd_min=st.cd_min)
     return res
 
@@ -74,27 +73,27 @@ def assemble_result(terms: ModelTerms, problem, nominal, lin, svd, cov_p, cov_fr
 def _identifiability(terms: ModelTerms, lin, svd, cov_p, obs) -> Identifiability:
     """The result's identifiability part: the directions, the Cramér–Rao figures and the verdicts
     (the truncation record is the calibrator's to add)."""
-    st = terms.settings
+    st, statement = terms.settings, terms.statement
     F = fisher_matrix(lin.M)
     _, crb_std_scaled, corr = cramer_rao(F)
-    conf = confounding(F, terms.prior_std / terms.scale, terms.parameters)
+    conf = confounding(F, statement.prior_std / statement.scale, statement.parameters)
     std_p = np.sqrt(np.maximum(np.diag(cov_p), 0.0))
-    verdicts = parameter_verdicts(terms.parameters, lin.p, terms.lower, terms.upper, std_p, terms.prior_std, obs,
-                                  conf, st.identified_ratio, st.confounded_share)
+    verdicts = parameter_verdicts(statement.parameters, lin.p, statement.lower, statement.upper, std_p,
+                                  statement.prior_std, obs, conf, st.identified_ratio, st.confounded_share)
     return Identifiability(svd.singular_values, svd.V, svd.sigma_theta, svd.retained, float(svd.sigma_bar),
-                           corr, crb_std_scaled * terms.scale, obs, verdicts, conf)
+                           corr, crb_std_scaled * statement.scale, obs, verdicts, conf)
 
 
 def _fit_part(terms: ModelTerms, problem, nominal, lin) -> Fit:
     """The result's fit part: the model before and after against the measurements, χ², failures."""
     m = terms.measurements
-    before = nominal.evaluation.values[:, terms.channel_index]
+    before = nominal.evaluation.values[:, terms.statement.channel_index]
     ev = lin.evaluation
     alpha_seen, eta_seen = terms.field.seen(ev) if terms.field is not None else (np.zeros(0), np.zeros(0))
     failures = {"nominal": nominal.n_failed, "final": lin.n_failed,
                 "total_failed_point_evaluations": problem.n_failed_points_total,
                 "model_evaluations": problem.n_evaluations, "model_jacobians": problem.n_jacobians}
-    return Fit(m.values, problem.sigma, before, ev.values[:, terms.channel_index], nominal.evaluation.status,
+    return Fit(m.values, problem.sigma, before, ev.values[:, terms.statement.channel_index], nominal.evaluation.status,
                ev.status, problem.sigma[0],
                float(np.sum(((m.values - before)[nominal.ok] / problem.sigma[nominal.ok]) ** 2)),
                float(np.sum(lin.residual[lin.ok] ** 2)), alpha_seen, eta_seen, failures=failures)
@@ -114,7 +113,7 @@ def _settings_record(terms: ModelTerms) -> dict:
     """The settings as the result records them: the model's name and the effective lower bounds added."""
     settings = asdict(terms.settings)
     settings["model"] = terms.model.capabilities.name
-    settings["lower_effective"] = terms.lower.tolist()
+    settings["lower_effective"] = terms.statement.lower.tolist()
     return settings
 
 

@@ -34,7 +34,7 @@ class TruncatedFit:
     Parameters
     ----------
     cal : Calibrator
-        Its settings, problem terms, scales, bounds and progress records.
+        Its settings, problem statement (scales, bounds, channels), problem terms and progress records.
 
     Attributes
     ----------
@@ -69,7 +69,8 @@ class TruncatedFit:
         if st.sigma_bar != "auto":
             return svd_analysis(lin.M, float(st.sigma_bar), st.max_retained)
         pseudo = lin.residual.reshape(-1) + lin.M @ problem.scaled(lin.p)
-        chosen = self.truncation.choose(lin.M, pseudo, len(self.cal.channel_index), lin.ok, self.cal.prior_cov_scaled())
+        chosen = self.truncation.choose(lin.M, pseudo, len(self.cal.statement.channel_index), lin.ok,
+                                        self.cal.prior_cov_scaled())
         svd = svd_analysis(lin.M, np.inf)
         retained = np.zeros_like(svd.retained)
         retained[:chosen] = svd.retained[:chosen]
@@ -199,7 +200,7 @@ class TruncatedFit:
 
     def chi2_dof(self, lin, svd) -> tuple[float, int]:
         """χ² of the whitened residuals at the points that converged, and N − n_retained."""
-        dof = int(lin.ok.sum()) * len(self.cal.channel_index) - svd.n_retained
+        dof = int(lin.ok.sum()) * len(self.cal.statement.channel_index) - svd.n_retained
         return float(np.sum(lin.residual[lin.ok] ** 2)), dof
 
     def finish(self, problem, nominal, lin, status: str, message: str) -> CalibrationResult:
@@ -228,7 +229,7 @@ class TruncatedFit:
         parts, sigmas = truncated_covariance(svd.V, svd.sigma_theta, svd.retained, prior_cov, alias, fit_scale,
                                              curvature_cov, [d["theta"] for d in fold])
         fold = [{**d, **sigmas[d["theta"]]} for d in fold]
-        D = np.outer(self.cal.scale, self.cal.scale)
+        D = np.outer(self.cal.statement.scale, self.cal.statement.scale)
         return self.cal.result(problem, nominal, lin, svd, parts.total * D, parts.frozen * D, cov_theta,
                             B.T @ problem.scaled(lin.p), observability(svd.V, svd.retained), status, message,
                             fit_scale=fit_scale, aliasing_chi2=alias_misfit, aliasing_note=alias_note,

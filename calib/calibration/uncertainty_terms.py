@@ -16,6 +16,7 @@ import numpy as np
 
 from calib.calibration.fold_directions import fold_dominated_directions
 from calib.calibration.frozen_curvature import frozen_curvature_covariance
+from calib.calibration.problem import ProblemStatement
 from calib.calibration.settings import CalibrationSettings
 from calib.errors import InputError
 from calib.measurements import Measurements
@@ -24,8 +25,8 @@ from calib.parametrizations.aliasing import FineSensitivities
 
 @dataclass(frozen=True, eq=False)
 class ModelTerms:
-    """One calibration problem's statement (model, settings, measurements, parameters, prior,
-    bounds) and its model-derived uncertainty terms; the result is assembled from it
+    """One calibration problem (model, settings, measurements and its statement) and its
+    model-derived uncertainty terms; the result is assembled from it
     (:func:`calib.calibration.result_assembly.assemble_result`).
 
     Parameters
@@ -35,23 +36,16 @@ class ModelTerms:
         The model's correction field (None without one).
     settings : CalibrationSettings
     measurements : Measurements
-    parameters : tuple of Parameter
-    channel_index : list of int
-        The model channel of each measured channel.
-    prior_std, scale, lower, upper : ndarray, shape (n_params,)
-        Prior 1-σ, scales and effective bounds [parameter units].
+    statement : ProblemStatement
+        The parameters, their nominal values, scales, effective bounds and prior [parameter
+        units], and the model channel of each measured channel (read from it, not copied).
     """
 
     model: object
     field: object
     settings: CalibrationSettings
     measurements: Measurements
-    parameters: tuple
-    channel_index: list
-    prior_std: np.ndarray
-    scale: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
+    statement: ProblemStatement
 
     def prior_cov_scaled(self) -> np.ndarray:
         """The stated prior covariance of the scaled parameters [scale units²], P = D C D.
@@ -61,7 +55,7 @@ class ModelTerms:
         (:meth:`calib.parametrizations.CorrectionField.node_correlation`), every other parameter
         independent of all (identity rows). Never the outer product σσᵀ alone, which states
         that all parameters move together (rank one; the MAP then moves them along σ)."""
-        prior_scaled = self.prior_std / self.scale
+        prior_scaled = self.statement.prior_std / self.statement.scale
         n = len(prior_scaled)
         corr = np.eye(n) if self.field is None else self.field.node_correlation(self.settings.prior_correlation)
         return prior_scaled[:, None] * corr * prior_scaled[None, :]
@@ -94,15 +88,16 @@ class ModelTerms:
         from calib.parametrizations.aliasing import aliasing_covariance, fine_sensitivities
 
         r = svd.retained
-        fine = fine_sensitivities(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
+        statement = self.statement
+        fine = fine_sensitivities(self.model, lin.p, problem.conditions, problem.sigma, statement.channel_index,
                                   lin.ok, alpha_seen, eta_seen)
         if gain is not None:
             from calib.parametrizations.aliasing import discrepancy_propagated
 
-            return (discrepancy_propagated(gain @ fine.W, self.field, fine, self.prior_std, st.prior_correlation),
+            return (discrepancy_propagated(gain @ fine.W, self.field, fine, statement.prior_std, st.prior_correlation),
                     0.0, "", fine)
-        cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, problem.channel_index,
-                                        lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], self.prior_std,
+        cov, chi2 = aliasing_covariance(self.model, lin.p, problem.conditions, problem.sigma, statement.channel_index,
+                                        lin.ok, lin.M, svd.V[:, r], 1.0 / svd.sigma_theta[r], statement.prior_std,
                                         st.prior_correlation, alpha_seen, eta_seen, sensitivities=fine)
         return cov, chi2, "", fine
 
@@ -116,7 +111,7 @@ class ModelTerms:
         from calib.checks.prior_check import map_point, prior_amplitude
         from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
 
-        n_ch = len(self.channel_index)
+        n_ch = len(self.statement.channel_index)
         P = self.prior_cov_scaled()
 
         last = {}
@@ -139,17 +134,18 @@ class ModelTerms:
         lay = self.field.layout
         blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
         field_cols = np.concatenate(blocks)
-        other = np.setdiff1d(np.arange(len(self.parameters)), field_cols)
+        other = np.setdiff1d(np.arange(len(self.statement.parameters)), field_cols)
         rows = mp.ok_rows
         M = mp.M[rows]
         z = mp.residual[rows] + M @ mp.x
         if fine is not None:
             at_map = last["at"]                 # map_point ends on the point it linearized last
-            if np.max(np.abs(at_map.p - lin.p) / self.scale) > 1e-9:   # (the MAP estimator's is that point)
+            if np.max(np.abs(at_map.p - lin.p) / self.statement.scale) > 1e-9:   # (the MAP estimator's is that point)
                 fine = fine_sensitivities(self.model, at_map.p, problem.conditions, problem.sigma,
-                                          problem.channel_index, at_map.ok, *self.field.seen(at_map.evaluation))
+                                          self.statement.channel_index, at_map.ok,
+                                          *self.field.seen(at_map.evaluation))
             L = grid_correlation_sqrt(fine.fine, self.field.correlation_lengths(self.settings.prior_correlation))
-            sd = [float(np.sqrt(np.mean(self.prior_std[b] ** 2))) for b in blocks]
+            sd = [float(np.sqrt(np.mean(self.statement.prior_std[b] ** 2))) for b in blocks]
             Z_f, K_f = fine.W[rows], None
             L_f = np.block([[sd[0] * L, np.zeros_like(L)], [np.zeros_like(L), sd[1] * L]])
         else:
@@ -172,12 +168,13 @@ class ModelTerms:
             return None, {}
         if st.curvature_samples == 0:
             return None, {"samples": 0}
-        n_ch = len(self.channel_index)
+        statement = self.statement
+        n_ch = len(statement.channel_index)
 
         def residual_at(step):
-            p = np.clip(lin.p + self.scale * step, self.lower, self.upper)
+            p = np.clip(lin.p + statement.scale * step, statement.lower, statement.upper)
             out = problem.evaluate(p)
-            return out.residual.reshape(-1), np.repeat(out.ok, n_ch), (p - lin.p) / self.scale
+            return out.residual.reshape(-1), np.repeat(out.ok, n_ch), (p - lin.p) / statement.scale
 
         failed_before = problem.n_failed_points_total   # prior draws are not the fit's failures
         cov, info = frozen_curvature_covariance(residual_at, lin.residual.reshape(-1), np.repeat(lin.ok, n_ch),
@@ -193,8 +190,8 @@ class ModelTerms:
         their stated covariance gets the prior variance along them added (:func:`calib.calibration.uncertainty.fold_inflation`),
         so their σ is at least the prior's."""
         Vr = svd.V[:, svd.retained]
-        return fold_dominated_directions(lin.M, len(self.channel_index), Vr, svd.singular_values[svd.retained],
-                                         multiple_roots, lin.ok)
+        return fold_dominated_directions(lin.M, len(self.statement.channel_index), Vr,
+                                         svd.singular_values[svd.retained], multiple_roots, lin.ok)
 
     def tightening(self, problem, lin, cov_p, radius) -> dict:
         """Which measurements would tighten the σ of each parameter that is not a correction node
@@ -204,14 +201,14 @@ class ModelTerms:
         if self.field is not None:
             lay = self.field.layout
             field_cols = {int(j) for idx in (lay.lift_index, lay.drag_index) for j in idx[idx >= 0].ravel()}
-        names = [q.name for j, q in enumerate(self.parameters) if j not in field_cols]
+        names = [q.name for j, q in enumerate(self.statement.parameters) if j not in field_cols]
         if not self.settings.tightening or not names or radius is None \
                 or not self.model.capabilities.refinable:
             return {}
         from calib.calibration.tightening import tightening
 
         m = self.measurements
-        y = np.abs(lin.evaluation.values[:, self.channel_index])
+        y = np.abs(lin.evaluation.values[:, self.statement.channel_index])
         rel = {c: float(np.median((problem.sigma[:, i] / np.maximum(y[:, i], 1e-300))[lin.ok]))
                for i, c in enumerate(m.channels) if lin.ok.any()}
         field_variance = None
@@ -226,10 +223,12 @@ class ModelTerms:
                 a, e = self.field.seen(ev)
                 fs = fine_sensitivities(self.model, lin.p, cond, np.ones((len(cond), len(cols))), cols, ev.ok,
                                         np.concatenate([a, a_cal]), np.concatenate([e, e_cal]))
-                var = discrepancy_propagated(fs.W, self.field, fs, self.prior_std, st.prior_correlation, diagonal=True)
+                var = discrepancy_propagated(fs.W, self.field, fs, self.statement.prior_std, st.prior_correlation,
+                                             diagonal=True)
                 return var.reshape(len(cond), len(cols))
+        scale = self.statement.scale
         try:
-            return tightening(self.model, lin.p, cov_p / np.outer(self.scale, self.scale), self.scale, m.conditions,
+            return tightening(self.model, lin.p, cov_p / np.outer(scale, scale), scale, m.conditions,
                               radius, list(m.channels), rel, names, field_variance=field_variance)
         except (InputError, np.linalg.LinAlgError, ValueError) as exc:     # advice, not the result
             return {"failed": f"{type(exc).__name__}: {exc}"}
