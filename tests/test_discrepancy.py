@@ -85,3 +85,18 @@ def test_the_kernel_is_one_on_the_diagonal_and_falls_with_distance():
     x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     k = _kernel(x, x, 0.5)
     assert np.allclose(np.diag(k), 1.0) and k[0, 1] == pytest.approx(np.exp(-2.0))
+
+
+def test_a_large_calibration_fits_its_process_on_an_evenly_spaced_subset():
+    """2 000 points: the process is fitted on MAX_POINTS of them (a few seconds, not minutes), and
+    still finds the misfit's size."""
+    from calib.calibration.discrepancy import MAX_POINTS
+
+    rng = np.random.default_rng(3703)
+    tsr = np.linspace(4, 8, 2000)
+    model = np.full((2000, 1), 1e6)
+    sigma = 0.01 * model
+    measured = model * (1 + 0.03 * np.sin(tsr)[:, None]) + sigma * rng.standard_normal((2000, 1))
+    q = fit_discrepancy(_result(measured, model, sigma, tsr)).processes["power"]
+    assert q.x.shape[0] == MAX_POINTS
+    assert 0.01 < q.amplitude < 0.1

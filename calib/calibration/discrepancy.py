@@ -45,6 +45,9 @@ import numpy as np
 SIGNIFICANCE = 0.01
 #: Length scales tried, in units of the calibration data's span of each condition [-].
 LENGTHS = (0.15, 0.3, 0.6, 1.2)
+#: Most calibration points a channel's process is fitted on (an evenly spaced subset of them beyond
+#: it): the fit costs O(n³) per likelihood evaluation, and a few hundred points already fix τ and ℓ.
+MAX_POINTS = 300
 #: Smallest span of a condition used to scale it: tip-speed ratio [-], pitch [deg], wind speed [m/s].
 MIN_SPAN = {"tsr": 1.0, "pitch": 2.0, "wind_speed": 2.0}
 
@@ -155,8 +158,9 @@ def _fit_channel(channel: str, x: np.ndarray, e: np.ndarray, s2: np.ndarray, p_v
 def fit_discrepancy(result) -> Discrepancy:
     """The discrepancy of a :class:`~calib.calibration.result.CalibrationResult` (see the module notes).
 
-    Its channels' residuals at the converged points, relative to the calibrated model; a channel
-    gets a process when its χ² against the noise fails at :data:`SIGNIFICANCE` (χ² with one
+    Its channels' residuals at the converged points (at most :data:`MAX_POINTS` of them, evenly
+    spaced), relative to the calibrated model; a channel gets a process when its χ² against the noise
+    (over every converged point) fails at :data:`SIGNIFICANCE` (χ² with one
     degree of freedom per point: the test is conservative, the estimate's own parameters take
     some of the misfit).
     """
@@ -180,6 +184,9 @@ def fit_discrepancy(result) -> Discrepancy:
         p = float(stats.chi2.sf(chi2, int(use.sum())))
         if p >= SIGNIFICANCE:
             continue
-        e = (z - y)[use] / np.abs(y[use])
-        processes[c] = _fit_channel(c, x_all[use], e, (s[use] / np.abs(y[use])) ** 2, p)
+        rows = np.flatnonzero(use)
+        if rows.size > MAX_POINTS:
+            rows = rows[np.round(np.linspace(0, rows.size - 1, MAX_POINTS)).astype(int)]
+        e = (z - y)[rows] / np.abs(y[rows])
+        processes[c] = _fit_channel(c, x_all[rows], e, (s[rows] / np.abs(y[rows])) ** 2, p)
     return Discrepancy(tuple(result.channels), processes, offset, span)
