@@ -2,8 +2,6 @@
 stronger balance (m > 1) gives less induction, so more power and thrust where the rotor is
 loaded, power more than thrust, and almost nothing where the induction is small."""
 
-import numpy as np
-
 from test_effects_chain import check_effect_derivatives, check_nominal_is_no_effect, relative_change, tsr_sweep
 
 from calib.effects import EFFECTS
