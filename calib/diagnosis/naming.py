@@ -175,13 +175,6 @@ class Namer:
             form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
             if form is not None:
                 best = self._over_model_form(round_no, rnd, best, form)
-            form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
-            if best is None and form is not None:
-                # what is left is the model's form: the best significant model-form candidate names it
-                rnd.update(verdict=form.effect, reason=(
-                    f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), "
-                    f"{p_is(form.p_value)}; effect {form.effect_text}; " + rnd["reason"]))
-                best = form
         if best is not None and best.kind == "model_form":
             rnd["reason"] = ("model form (the BEM's own induction model, not a missing physical effect): "
                              + rnd["reason"])
