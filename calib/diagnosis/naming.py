@@ -6,6 +6,11 @@ without it (likelihood ratio, BIC, pattern agreement, effect size) and asks
 :func:`calib.diagnosis.verdict.judge_round` for the verdict; an ``ambiguous`` verdict comes
 with the measurement that would tell the two rivals apart (:func:`separation_of`).
 :class:`Namer` holds the rounds' state.
+
+A model-form candidate (the BEM's own induction model: ``Effect.kind = "model_form"``) is named as
+model form, not as a physical effect. A physical effect must earn its place
+(:data:`LATER_EFFECT_SHARE`): after an earlier effect, and over a significant model-form candidate
+(fitted on top of it), it must explain most of the misfit the model without it leaves.
 """
 
 from __future__ import annotations
