@@ -16,8 +16,11 @@ Three families of data, each split both ways at the median wind speed (``[valida
 
 Per split: held-back χ²/N against the measurements with the noise alone, calibrated and nominal
 (is the calibrated model better than the nominal one where it was not fitted?), the fraction of
-held-back measurements inside the 95 % interval (noise² + prediction variance), and points that
-failed to evaluate.
+held-back measurements inside the 95 % interval (noise² + prediction variance), χ²/N with the
+prediction variance, and points that failed to evaluate. And the decision of
+:func:`calib.calibration.prediction.field_amplitude` measured: the same figures with the correction field
+between and beyond the nodes carried at the stated prior's amplitude, at the prior check's τ̂, and at its
+95 % upper bound (calib's rule), from each held-back row's field part of the variance.
 
 Run: ``python benchmarks/bench_prediction.py [n_seeds]`` (default 12; part of ``make validate``).
 Writes ``bench_output/prediction.json``, and the figures the documentation's validation page
@@ -44,17 +47,41 @@ OUT = ROOT / "bench_output" / "prediction"
 ESTIMATORS = ("map", "truncated")
 
 
+#: How the correction field between and beyond the nodes enters a band, the alternatives measured side by side
+#: (calib.calibration.prediction.field_amplitude): its amplitude in units of the stated prior.
+FIELD_RULES = {"stated": "the stated prior, 1", "estimate": "the prior check's τ̂",
+               "bound": "the prior check's 95 % upper bound (calib's rule)"}
+Z95 = 1.959964
+
+
+def _rule_variance(r: dict, rule: str) -> float:
+    """A held-back row's model variance with the field between and beyond the nodes at ``rule``'s amplitude."""
+    f, used = r.get("field_std", np.nan), r.get("field_amplitude", np.nan)
+    if not (np.isfinite(f) and np.isfinite(used) and used > 0) or rule == "bound":
+        return r["model_std"] ** 2
+    a = 1.0 if rule == "stated" else r.get("prior_amplitude", np.nan)
+    a = used if not np.isfinite(a) else a
+    return r["model_std"] ** 2 + (a ** 2 / used ** 2 - 1.0) * f ** 2
+
+
 def _split_figures(rows: list) -> dict:
-    """Per fold direction: χ²/N (noise only) calibrated and nominal, inside the interval, failed."""
+    """Per fold direction: χ²/N (noise only) calibrated and nominal, inside the interval, failed; and per
+    field rule (:data:`FIELD_RULES`) the points inside and χ²/N with the prediction variance (noise² + model
+    variance)."""
     out = {}
     for fold in sorted({r["fold"] for r in rows}):
         rr = [r for r in rows if r["fold"] == fold]
         ok = [r for r in rr if r["status"] == "converged" and np.isfinite(r["predicted"])]
         cal = float(np.mean([((r["measured"] - r["predicted"]) / r["noise_std"]) ** 2 for r in ok])) if ok else np.nan
         nom = float(np.mean([((r["measured"] - r["nominal"]) / r["noise_std"]) ** 2 for r in ok])) if ok else np.nan
+        rules = {}
+        for rule in FIELD_RULES:
+            z2 = [(r["measured"] - r["predicted"]) ** 2 / (r["noise_std"] ** 2 + _rule_variance(r, rule)) for r in ok]
+            rules[rule] = {"inside": int(sum(z <= Z95 ** 2 for z in z2)), "chi2_sum": float(np.sum(z2))}
         out["low to high" if "at or below" not in fold else "high to low"] = {
             "chi2_per_n_calibrated": cal, "chi2_per_n_nominal": nom, "better_than_nominal": bool(cal <= nom),
-            "inside": int(sum(bool(r["inside"]) for r in ok)), "rows": len(rr), "failed": len(rr) - len(ok)}
+            "inside": int(sum(bool(r["inside"]) for r in ok)), "rows": len(rr), "failed": len(rr) - len(ok),
+            "chi2_per_n_predictive": rules["bound"]["chi2_sum"] / max(len(ok), 1), "rules": rules}
     return out
 
 
@@ -156,13 +183,17 @@ def prior_draws(estimator: str, n_seeds: int, say=print) -> dict:
             pred = res.predict(test, model)
             nominal = model.evaluate(res.estimate.p_nominal, test).values[:, idx]
             noise = res.fit.sigma[0]
-            ok = pred.status == 0
-            z = (meas.values[~train] - pred.values) / np.sqrt(noise ** 2 + pred.std ** 2)
-            out[label].append({
-                "seed": seed, "status": res.estimate.status,
-                "chi2_per_n_calibrated": float(np.mean(((meas.values[~train] - pred.values)[ok] / noise) ** 2)),
-                "chi2_per_n_nominal": float(np.mean(((meas.values[~train] - nominal)[ok] / noise) ** 2)),
-                "inside": int(np.sum(np.abs(z[ok]) <= 1.959964)), "rows": int(z.size), "failed": int((~ok).sum())})
+            tau = float(res.uncertainty.prior_check.get("amplitude", np.nan))
+            fold = "predicting above" if label == "low to high" else "predicting at or below"
+            rows = [{"fold": fold, "status": "converged" if pred.status[k] == 0 else "failed",
+                     "measured": float(meas.values[~train][k, j]), "predicted": float(pred.values[k, j]),
+                     "nominal": float(nominal[k, j]), "noise_std": float(noise[j]), "model_std": float(pred.std[k, j]),
+                     "field_std": float(pred.field_std[k, j]), "field_amplitude": pred.field_amplitude,
+                     "prior_amplitude": tau,
+                     "inside": bool(abs(meas.values[~train][k, j] - pred.values[k, j])
+                                    <= Z95 * np.hypot(noise[j], pred.std[k, j]))}
+                    for k in range(pred.values.shape[0]) for j in range(len(channels))]
+            out[label].append({"seed": seed, "status": res.estimate.status, **_split_figures(rows)[label]})
         say(f"[prediction] {estimator} twin (d) seed {seed}: "
             + ", ".join(f"{k} {v[-1]['chi2_per_n_calibrated']:.3g} vs nominal {v[-1]['chi2_per_n_nominal']:.3g}"
                         for k, v in out.items()))
@@ -187,11 +218,15 @@ def summary(family) -> dict:
     inside = sum(s["inside"] for s in splits)
     rows = sum(s["rows"] - s["failed"] for s in splits)
     scatter = [2.0 * np.sqrt(2.0 / max(s["rows"] - s["failed"], 1)) for s in splits]
+    rules = {rule: {"coverage_95": sum(s["rules"][rule]["inside"] for s in splits) / max(rows, 1),
+                    "chi2_per_n_predictive": sum(s["rules"][rule]["chi2_sum"] for s in splits) / max(rows, 1)}
+             for rule in FIELD_RULES}
     return {"splits": len(splits),
             "better_than_nominal": int(sum(s["chi2_per_n_calibrated"] <= s["chi2_per_n_nominal"] for s in splits)),
             "not_worse_beyond_scatter": int(sum(s["chi2_per_n_calibrated"] <= s["chi2_per_n_nominal"] + d
                                                 for s, d in zip(splits, scatter))),
-            "coverage_95": inside / max(rows, 1), "failed_points": int(sum(s["failed"] for s in splits))}
+            "coverage_95": inside / max(rows, 1), "failed_points": int(sum(s["failed"] for s in splits)),
+            "chi2_per_n_predictive": rules["bound"]["chi2_per_n_predictive"], "field_rules": rules}
 
 
 def publish(out: dict, n_seeds: int) -> str:

@@ -45,7 +45,10 @@ def calibrated():
 def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
     model, res, far = calibrated
     assert res.estimate.status == "converged" and res.uncertainty.gain.size
+    # the formula at the stated prior's amplitude (the prior check's bound scales it: next test)
+    res = res.replace(uncertainty=dataclasses.replace(res.uncertainty, prior_check={}))
     pred = res.predict(far, model)
+    assert pred.field_amplitude == 1.0 and "stated prior's amplitude (the prior check not run)" in pred.representation
     ev = model.evaluate(res.estimate.p_hat, far)
     alpha, eta = model.correction_field().seen(ev)
     assert np.min(alpha[eta > 0.35]) > 8.0 + 4.0            # every outboard section beyond the last hat
@@ -88,7 +91,53 @@ def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
     assert np.all((ratio > 0.6) & (ratio < 1.6)), (ratio, pred.std[0], np.sqrt(mc_var))
 
 
+def test_the_field_beyond_the_nodes_is_carried_at_the_prior_check_s_upper_bound(calibrated):
+    """The field's part of the variance is the stated prior's times the square of the largest amplitude the
+    data allow (calib.calibration.prediction.field_amplitude); the rest of the variance is unchanged."""
+    model, res, far = calibrated
+    pc = res.uncertainty.prior_check
+    assert pc and np.isfinite(pc["upper"]) and pc["upper"] < 1.0        # data made with no field: "smaller"
+    stated = res.replace(uncertainty=dataclasses.replace(res.uncertainty, prior_check={})).predict(far, model)
+    for upper, expect in ((pc["upper"], pc["upper"]), (3.0, 3.0), (np.inf, 10.0), (40.0, 10.0)):
+        r = res.replace(uncertainty=dataclasses.replace(res.uncertainty, prior_check={**pc, "upper": upper}))
+        pred = r.predict(far, model)
+        assert pred.field_amplitude == expect
+        np.testing.assert_allclose(pred.field_std, expect * stated.field_std, rtol=1e-10)
+        np.testing.assert_allclose(pred.std ** 2 - pred.field_std ** 2, stated.std ** 2 - stated.field_std ** 2,
+                                   rtol=1e-8, atol=1e-12 * np.max(stated.std ** 2))
+    assert "do not bound it" in pred.representation
+    failed = res.replace(uncertainty=dataclasses.replace(res.uncertainty, prior_check={"failed": "singular"}))
+    assert failed.predict(far, model).field_amplitude == 1.0
+
+
 def test_a_result_without_gain_says_its_bands_leave_the_field_out(calibrated):
     model, res, far = calibrated
     pred = res.replace(uncertainty=dataclasses.replace(res.uncertainty, gain=np.zeros((0, 0)))).predict(far, model)
     assert "leave out the field between and beyond" in pred.representation
+
+
+def test_a_band_split_under_the_map_carries_each_fold_s_field_amplitude():
+    """Each fold of a band split runs the prior check under the MAP (cheap: it linearizes at the estimate),
+    and its rows record the field's part of the interval, the amplitude it was carried at and τ̂."""
+    from calib.workflow.validation import ValidationSettings, leave_one_out
+
+    rotor = load_rotor("phase_vi")
+    grid = CorrectionGrid([-4.0, 4.0, 12.0], [0.3, 0.6, 1.0])
+
+    def make():
+        return BemModel(rotor, grid, CHANNELS, BemSettings(use_tilt=False), nuisance=())
+
+    tsr, pitch = np.meshgrid([4.0, 5.0, 6.0, 7.0, 8.0, 9.0], [0.0, 3.0], indexing="ij")
+    v = 72 * np.pi / 30 * rotor.rotor_radius / tsr.ravel()
+    cond = OperatingConditions(v, np.full(v.size, 72.0), pitch.ravel())
+    meas = synthesize(make(), nominal_vector(make().parameters), cond,
+                      relative_sigma={c: 0.01 for c in CHANNELS}, seed=12)
+    band = ValidationSettings.from_table({"leave_out": "wind_speed", "split": "band"}, "cfg.toml")
+    val = leave_one_out(make, meas, CalibrationSettings(cd_min=0.003), band)
+    assert len(val.rows) == 2 * meas.n_points
+    for r in val.rows:
+        assert np.isfinite(r.prior_amplitude) and 0 < r.field_amplitude <= 10.0 and np.isfinite(r.field_std)
+        assert r.field_std <= r.model_std * (1 + 1e-9)
+    assert {round(r.field_amplitude, 12) for r in val.rows} != {1.0}      # the folds' own bounds, not the stated 1
+    truncated = leave_one_out(make, meas, CalibrationSettings(cd_min=0.003, estimator="truncated"), band)
+    assert all(np.isnan(r.prior_amplitude) for r in truncated.rows)      # no gain, no field term: no check run

@@ -47,7 +47,8 @@ def prediction_frame(conditions, prediction):
     pandas.DataFrame
         Columns ``wind_speed [m/s]`` … ``yaw [deg]``, then per channel ``power [W]``,
         ``power_std [W]``, ``power_lower [W]``, ``power_upper [W]``, ``power_discrepancy_std [W]``
-        (the model discrepancy's part of the 1-σ); ``status`` (name),
+        (the model discrepancy's part of the 1-σ), ``power_field_std [W]`` (the part from the correction
+        field between and beyond the nodes); ``status`` (name),
         ``envelope`` (``inside``/``outside``) and ``outside_because``.
     """
     pd = require_pandas()
@@ -60,6 +61,8 @@ def prediction_frame(conditions, prediction):
         cols[f"{c}_upper [{u}]"] = prediction.upper[:, j]
         if prediction.discrepancy_std is not None:
             cols[f"{c}_discrepancy_std [{u}]"] = prediction.discrepancy_std[:, j]
+        if prediction.field_std is not None:
+            cols[f"{c}_field_std [{u}]"] = prediction.field_std[:, j]
     cols["status"] = [Status(int(s)).name for s in prediction.status]
     why = list(prediction.envelope) if prediction.envelope else [""] * prediction.values.shape[0]
     cols["envelope"] = ["outside" if w else "inside" for w in why]

@@ -198,6 +198,11 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
             share = np.nanmedian(pred.discrepancy_std ** 2 / pred.std ** 2, axis=0)
         printer("  model discrepancy's share of the interval variance (median over the points): " + ", ".join(
             f"{c} {100 * v:.0f} %" for c, v in zip(pred.channels, share) if np.isfinite(v)))
+    if pred.field_std is not None and np.nanmax(np.nan_to_num(pred.field_std), initial=0.0) > 0:
+        with np.errstate(all="ignore"):
+            share = np.nanmedian(pred.field_std ** 2 / pred.std ** 2, axis=0)
+        printer("  the field between and beyond the nodes' share of the interval variance (median over the points): "
+                + ", ".join(f"{c} {100 * v:.0f} %" for c, v in zip(pred.channels, share) if np.isfinite(v)))
     common = [c for c in meas.channels if c in pred.channels]
     if common:
         chi = {}

@@ -39,6 +39,11 @@ class Prediction:
         channel the calibration fits within its noise [channel units].
     discrepancy : str
         Which channels carry a discrepancy term, in words.
+    field_std : ndarray, shape (n_points, n_channels)
+        The part of ``std`` from the correction field between and beyond the nodes, at the field
+        amplitude :func:`field_amplitude` chose (zero where the bands leave it out) [channel units].
+    field_amplitude : float
+        That amplitude, in units of the stated prior [-].
     """
 
     channels: tuple
@@ -54,6 +59,8 @@ class Prediction:
     representation: str = ""
     discrepancy_std: np.ndarray | None = None
     discrepancy: str = ""
+    field_std: np.ndarray | None = None
+    field_amplitude: float = 1.0
 
     def to_dataframe(self, conditions):
         """One row per point with its ``conditions`` (:func:`calib.calibration.frames.prediction_frame`)."""
@@ -102,8 +109,12 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     unc = result.uncertainty
     cov = unc.cov_p if rep is None else unc.cov_p - unc.cov_alias
     var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), cov, np.nan_to_num(G))
+    amplitude = 1.0
     if rep is not None:
+        amplitude, words = field_amplitude(result)
+        rep = amplitude ** 2 * rep
         var = var + rep
+        representation = f"{representation}; {words}"
     values = ev.values[:, idx]
     disc = fit_discrepancy(result) if result.fit.measured.size else None
     d_var = np.zeros(values.shape) if disc is None else \
@@ -119,7 +130,41 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     return Prediction(tuple(result.channels), tuple(result.channel_units), values, std, values - z * std,
                       values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope),
                       representation, np.where(ev.ok[:, None], np.sqrt(d_var), np.nan),
-                      "" if disc is None else disc.words())
+                      "" if disc is None else disc.words(),
+                      np.where(ev.ok[:, None], np.sqrt(np.maximum(rep, 0.0)) if rep is not None else np.zeros(values.shape), np.nan),
+                      amplitude)
+
+
+#: Largest amplitude of the field between and beyond the nodes a band carries, in units of the stated
+#: prior [-]: where the data do not bound the amplitude (the prior check's interval is open above).
+FIELD_AMPLITUDE_CAP = 10.0
+
+
+def field_amplitude(result) -> tuple[float, str]:
+    """The amplitude of the correction field between and beyond the nodes that the bands carry, in
+    units of the stated prior, and a sentence on it.
+
+    There the field is known only through its prior, and the prior's amplitude only through the
+    data: the prior check (:mod:`calib.checks.prior_check`) gives its type-II maximum-likelihood
+    value τ̂ and a 95 % profile-likelihood interval. The bands carry the interval's upper end, the
+    largest amplitude the data do not reject, rather than τ̂ (which ignores how little the data may
+    say about it) or the stated 1: an extrapolation into a regime the calibration did not see (deep
+    stall from attached flow) widens where the data allow a larger field, and narrows where they
+    call for a smaller one. Chosen by measurement on band splits against τ̂, the stated prior,
+    inflation by χ²/dof and a discrepancy amplitude from the nominal model's misfit
+    (``benchmarks/bench_prediction.py``, docs/validation/extrapolation.md). Without a prior check
+    (off, or failed) the stated prior, 1; at most :data:`FIELD_AMPLITUDE_CAP`.
+    """
+    pc = result.uncertainty.prior_check or {}
+    if not pc or pc.get("failed") or "upper" not in pc:
+        why = "failed" if pc.get("failed") else "not run"
+        return 1.0, f"at the stated prior's amplitude (the prior check {why})"
+    upper = float(pc["upper"])
+    if not np.isfinite(upper) or upper > FIELD_AMPLITUDE_CAP:
+        return FIELD_AMPLITUDE_CAP, (f"at {FIELD_AMPLITUDE_CAP:g} × the stated prior's amplitude: the data do not "
+                                     f"bound it (prior check τ̂ = {float(pc['amplitude']):.2g}, interval open above)")
+    return upper, (f"at {upper:.2g} × the stated prior's amplitude, the largest the data allow (prior check "
+                   f"τ̂ = {float(pc['amplitude']):.2g}, 95 % interval {float(pc['lower']):.2g}–{upper:.2g})")
 
 
 def field_between_nodes(result, model, conditions, ev, G, idx) -> tuple[np.ndarray | None, str]:

@@ -107,6 +107,9 @@ class FoldRow:
     status: str
     fold: str = ""
     outside: str = ""      # why the point lies outside the fold's calibration envelope ("" inside)
+    field_std: float = float("nan")         # the part of model_std from the field between/beyond the nodes
+    field_amplitude: float = float("nan")   # its amplitude in units of the stated prior (prediction.field_amplitude)
+    prior_amplitude: float = float("nan")   # the fold's prior check τ̂ (NaN: not run)
 
     @property
     def inside(self) -> bool:
@@ -237,9 +240,11 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
             measurements, conditions=measurements.conditions.subset(~test), values=measurements.values[~test],
             sigma=None if measurements.sigma is None else measurements.sigma[~test])
         try:
-            # a fold's result serves its prediction only: no prior check
-            res = Calibrator(make_model(), train, dataclasses.replace(settings, prior_check=False, tightening=False),
-                             name=f"fold {i + 1}").run()
+            # a fold's result serves its prediction only: no advice; the prior check only where the bands
+            # carry the field beyond the nodes at the amplitude it bounds (the MAP's, prediction.field_amplitude)
+            res = Calibrator(make_model(), train, dataclasses.replace(
+                settings, prior_check=settings.prior_check and settings.estimator == "map", tightening=False),
+                name=f"fold {i + 1}").run()
             pred = res.predict(measurements.conditions.subset(test), model=make_model(),
                                confidence=validation.confidence)
             status = res.estimate.status
@@ -261,8 +266,11 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
                 half = z * float(np.hypot(sd, noise))
                 yk = float(pred.values[kk, j])
                 why = pred.envelope[kk] if pred.envelope else ""
+                fsd = float(pred.field_std[kk, j]) if pred.field_std is not None else float("nan")
                 out.rows.append(FoldRow(g, c, float(measurements.values[k, j]), float(y_nom[k, j]), yk,
-                                        yk - half, yk + half, sd, noise, res.n_retained, status, label, why))
+                                        yk - half, yk + half, sd, noise, res.n_retained, status, label, why,
+                                        fsd, pred.field_amplitude,
+                                        float(res.uncertainty.prior_check.get("amplitude", np.nan))))
         if res is not None:
             say(f"fold {i + 1}/{len(folds)} ({label}): {res.n_retained} θ retained, {res.estimate.status}")
     return out
