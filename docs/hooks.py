@@ -51,6 +51,15 @@ def _prediction_tables(data: dict) -> str:
                    f"{100 * m['coverage_95']:.1f} % | {t['better_than_nominal']} | {t['not_worse_beyond_scatter']} | "
                    f"{100 * t['coverage_95']:.1f} % |")
     failed = sum(data["summary"][e]["all"]["failed_points"] for e in ("map", "truncated"))
+    rules = {"stated": "stated prior (1)", "estimate": "τ̂", "bound": "upper bound (calib)"}
+    if "field_rules" in data["summary"]["map"]["all"]:
+        out += ["", "The MAP's field between and beyond the nodes carried at three amplitudes: inside the 95 % "
+                "intervals and χ²/N with the prediction variance:", "",
+                "| family | " + " | ".join(rules.values()) + " |", "|---" * (len(rules) + 1) + "|"]
+        for key, label in labels.items():
+            fr = data["summary"]["map"][key]["field_rules"]
+            out.append(f"| {label} | " + " | ".join(
+                f"{100 * fr[r]['coverage_95']:.1f} %, {fr[r]['chi2_per_n_predictive']:.2f}" for r in rules) + " |")
     out += ["", f"Held-back points that failed to evaluate: {failed}.", "",
             "Held-back χ²/N (noise only), calibrated / nominal, per CCBlade data set:", "",
             "| data set | MAP, low → high | MAP, high → low | truncated, low → high | truncated, high → low |",
