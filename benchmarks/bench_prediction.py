@@ -81,7 +81,10 @@ def _split_figures(rows: list) -> dict:
         out["low to high" if "at or below" not in fold else "high to low"] = {
             "chi2_per_n_calibrated": cal, "chi2_per_n_nominal": nom, "better_than_nominal": bool(cal <= nom),
             "inside": int(sum(bool(r["inside"]) for r in ok)), "rows": len(rr), "failed": len(rr) - len(ok),
-            "chi2_per_n_predictive": rules["bound"]["chi2_sum"] / max(len(ok), 1), "rules": rules}
+            "chi2_per_n_predictive": rules["bound"]["chi2_sum"] / max(len(ok), 1), "rules": rules,
+            # the 95 % half-width (noise² + model variance) at least the nominal model's error at the point
+            "wider_than_nominal_misfit": int(sum(Z95 * np.hypot(r["noise_std"], r["model_std"])
+                                                 >= abs(r["measured"] - r["nominal"]) for r in ok))}
     return out
 
 
@@ -218,6 +221,7 @@ def summary(family) -> dict:
     inside = sum(s["inside"] for s in splits)
     rows = sum(s["rows"] - s["failed"] for s in splits)
     scatter = [2.0 * np.sqrt(2.0 / max(s["rows"] - s["failed"], 1)) for s in splits]
+    worse = [s for s in splits if not s["chi2_per_n_calibrated"] <= s["chi2_per_n_nominal"]]
     rules = {rule: {"coverage_95": sum(s["rules"][rule]["inside"] for s in splits) / max(rows, 1),
                     "chi2_per_n_predictive": sum(s["rules"][rule]["chi2_sum"] for s in splits) / max(rows, 1)}
              for rule in FIELD_RULES}
@@ -226,7 +230,11 @@ def summary(family) -> dict:
             "not_worse_beyond_scatter": int(sum(s["chi2_per_n_calibrated"] <= s["chi2_per_n_nominal"] + d
                                                 for s, d in zip(splits, scatter))),
             "coverage_95": inside / max(rows, 1), "failed_points": int(sum(s["failed"] for s in splits)),
-            "chi2_per_n_predictive": rules["bound"]["chi2_per_n_predictive"], "field_rules": rules}
+            "chi2_per_n_predictive": rules["bound"]["chi2_per_n_predictive"], "field_rules": rules,
+            # where the calibrated model is worse than the nominal one (χ²/N, noise only): how many of those
+            # splits' points have intervals at least as wide as the nominal model's error there
+            "worse_than_nominal_rows": int(sum(s["rows"] - s["failed"] for s in worse)),
+            "worse_than_nominal_wider": int(sum(s["wider_than_nominal_misfit"] for s in worse))}
 
 
 def publish(out: dict, n_seeds: int) -> str:

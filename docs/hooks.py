@@ -60,6 +60,11 @@ def _prediction_tables(data: dict) -> str:
             fr = data["summary"]["map"][key]["field_rules"]
             out.append(f"| {label} | " + " | ".join(
                 f"{100 * fr[r]['coverage_95']:.1f} %, {fr[r]['chi2_per_n_predictive']:.2f}" for r in rules) + " |")
+    if "worse_than_nominal_rows" in data["summary"]["map"]["all"]:
+        out += ["", "Where the calibrated model predicts worse than the nominal one (χ²/N, noise only), the "
+                "held-back points whose 95 % half-width is at least the nominal model's error there: " + "; ".join(
+                    f"{est} {data['summary'][est]['all']['worse_than_nominal_wider']} of "
+                    f"{data['summary'][est]['all']['worse_than_nominal_rows']}" for est in ("map", "truncated")) + "."]
     out += ["", f"Held-back points that failed to evaluate: {failed}.", "",
             "Held-back χ²/N (noise only), calibrated / nominal, per CCBlade data set:", "",
             "| data set | MAP, low → high | MAP, high → low | truncated, low → high | truncated, high → low |",
