@@ -55,9 +55,10 @@ Z95 = 1.959964
 
 
 def _rule_variance(r: dict, rule: str) -> float:
-    """A held-back row's model variance with the field between and beyond the nodes at ``rule``'s amplitude."""
+    """A held-back row's model variance with the field between and beyond the nodes at ``rule``'s amplitude
+    (outside the calibration envelope; inside it every rule keeps the stated prior's)."""
     f, used = r.get("field_std", np.nan), r.get("field_amplitude", np.nan)
-    if not (np.isfinite(f) and np.isfinite(used) and used > 0) or rule == "bound":
+    if not (np.isfinite(f) and np.isfinite(used) and used > 0) or rule == "bound" or not r.get("outside"):
         return r["model_std"] ** 2
     a = 1.0 if rule == "stated" else r.get("prior_amplitude", np.nan)
     a = used if not np.isfinite(a) else a
@@ -191,7 +192,9 @@ def prior_draws(estimator: str, n_seeds: int, say=print) -> dict:
             rows = [{"fold": fold, "status": "converged" if pred.status[k] == 0 else "failed",
                      "measured": float(meas.values[~train][k, j]), "predicted": float(pred.values[k, j]),
                      "nominal": float(nominal[k, j]), "noise_std": float(noise[j]), "model_std": float(pred.std[k, j]),
-                     "field_std": float(pred.field_std[k, j]), "field_amplitude": pred.field_amplitude,
+                     "field_std": float(pred.field_std[k, j]),
+                     "field_amplitude": pred.field_amplitude if pred.outside[k] else 1.0,
+                     "outside": pred.envelope[k] if pred.envelope else "",
                      "prior_amplitude": tau,
                      "inside": bool(abs(meas.values[~train][k, j] - pred.values[k, j])
                                     <= Z95 * np.hypot(noise[j], pred.std[k, j]))}

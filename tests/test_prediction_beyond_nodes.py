@@ -106,6 +106,13 @@ def test_the_field_beyond_the_nodes_is_carried_at_the_prior_check_s_upper_bound(
         np.testing.assert_allclose(pred.std ** 2 - pred.field_std ** 2, stated.std ** 2 - stated.field_std ** 2,
                                    rtol=1e-8, atol=1e-12 * np.max(stated.std ** 2))
     assert "do not bound it" in pred.representation
+    # inside the calibration envelope (the calibration's own points) the stated prior's amplitude stays
+    cal = OperatingConditions(**res.conditions)
+    at_cal = r.predict(cal, model)
+    assert not at_cal.outside.any()
+    np.testing.assert_allclose(at_cal.field_std, stated_cal := res.replace(uncertainty=dataclasses.replace(
+        res.uncertainty, prior_check={})).predict(cal, model).field_std, rtol=1e-10)
+    assert np.max(stated_cal) > 0
     failed = res.replace(uncertainty=dataclasses.replace(res.uncertainty, prior_check={"failed": "singular"}))
     assert failed.predict(far, model).field_amplitude == 1.0
 

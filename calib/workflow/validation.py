@@ -108,7 +108,7 @@ class FoldRow:
     fold: str = ""
     outside: str = ""      # why the point lies outside the fold's calibration envelope ("" inside)
     field_std: float = float("nan")         # the part of model_std from the field between/beyond the nodes
-    field_amplitude: float = float("nan")   # its amplitude in units of the stated prior (prediction.field_amplitude)
+    field_amplitude: float = float("nan")   # its amplitude in the stated prior's units (1 inside the envelope)
     prior_amplitude: float = float("nan")   # the fold's prior check τ̂ (NaN: not run)
 
     @property
@@ -269,7 +269,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
                 fsd = float(pred.field_std[kk, j]) if pred.field_std is not None else float("nan")
                 out.rows.append(FoldRow(g, c, float(measurements.values[k, j]), float(y_nom[k, j]), yk,
                                         yk - half, yk + half, sd, noise, res.n_retained, status, label, why,
-                                        fsd, pred.field_amplitude,
+                                        fsd, pred.field_amplitude if pred.outside[kk] else 1.0,
                                         float(res.uncertainty.prior_check.get("amplitude", np.nan))))
         if res is not None:
             say(f"fold {i + 1}/{len(folds)} ({label}): {res.n_retained} θ retained, {res.estimate.status}")
