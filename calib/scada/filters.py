@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calib.errors import InputError
+from calib.scada.bins import bin_index, method_of_bins
 from calib.scada.reader import ScadaRecords
 
 #: the filters, in the order they run and are reported
@@ -185,6 +186,66 @@ def estimate_fine_pitch(records: ScadaRecords, rated_power: float) -> float:
     return float(np.median(pitch[mid]))
 
 
+def out_of_range_flag(records: ScadaRecords, settings: FilterSettings) -> np.ndarray:
+    """A mean outside its range (:meth:`FilterSettings.range_of`)."""
+    f = np.zeros(len(records), bool)
+    for (signal, stat), v in records.values.items():
+        rng = settings.range_of(signal) if stat == "mean" else None
+        if rng is not None:
+            f |= np.isfinite(v) & ((v < rng[0]) | (v > rng[1]))
+    return f
+
+
+def frozen_flag(records: ScadaRecords, settings: FilterSettings) -> np.ndarray:
+    """:func:`frozen_runs` of each of ``frozen_signals`` per turbine, duplicate stamps left out of the series."""
+    f = np.zeros(len(records), bool)
+    dup = records.flags.get("duplicate_stamp", np.zeros(len(records), bool))
+    for signal in settings.frozen_signals:
+        if records.has(signal):
+            v = records.get(signal)
+            f |= _per_turbine(records, dup, lambda idx: frozen_runs(v[idx], int(settings.frozen_count)))
+    return f
+
+
+def _in_window(records: ScadaRecords, settings: FilterSettings) -> np.ndarray:
+    ws = records.get("wind_speed")
+    return (ws >= settings.operating_window[0]) & (ws <= settings.operating_window[1])
+
+
+def start_stop_flag(records: ScadaRecords, settings: FilterSettings) -> np.ndarray:
+    """In the operating window, the power's minimum (else its mean) below ``stop_power`` or the rotor
+    speed's minimum at or below ``stop_rotor_speed``."""
+    window = _in_window(records, settings)
+    p_low = records.get("power", "min") if records.has("power", "min") else records.get("power")
+    stop = 0.01 * settings.rated_power if settings.stop_power is None else settings.stop_power
+    f = window & (p_low < stop)
+    if records.has("rotor_speed", "min"):
+        f |= window & (records.get("rotor_speed", "min") <= settings.stop_rotor_speed)
+    return f
+
+
+def curtailment_flag(records: ScadaRecords, settings: FilterSettings, fine_pitch: float) -> np.ndarray:
+    """In the operating window, pitch above ``fine_pitch + pitch_margin`` at power at most
+    ``curtailment_fraction`` of rated."""
+    return _in_window(records, settings) & (records.get("power") <= settings.curtailment_fraction *
+                                            settings.rated_power) & \
+        (records.get("pitch") > fine_pitch + settings.pitch_margin)
+
+
+def icing_flag(records: ScadaRecords, settings: FilterSettings, clean: np.ndarray) -> np.ndarray:
+    """Cold (below ``icing_temperature``) and more than ``icing_deficit`` below the power curve of the
+    ``clean`` warm records at the same wind speed (where that curve is above 5 % of rated)."""
+    ws, p, t = records.get("wind_speed"), records.get("power"), records.get("temperature")
+    warm = clean & (t >= settings.icing_temperature)
+    if warm.sum() < 3:
+        return np.zeros(len(records), bool)
+    curve = method_of_bins(ws[warm], p[warm])
+    k = bin_index(ws, curve)
+    ref = np.where(k >= 0, curve.power[np.clip(k, 0, None)], np.nan)
+    return (t < settings.icing_temperature) & (ref > 0.05 * settings.rated_power) & \
+        (p < (1.0 - settings.icing_deficit) * ref)
+
+
 def apply_filters(records: ScadaRecords, settings: FilterSettings) -> FilterReport:
     """Run the filters of ``settings`` on ``records`` (see the module docstring).
 
@@ -198,58 +259,21 @@ def apply_filters(records: ScadaRecords, settings: FilterSettings) -> FilterRepo
     FilterReport
     """
     flags = {k: v.copy() for k, v in records.flags.items()}
-    reader_flagged = np.zeros(len(records), bool)
-    for v in flags.values():
-        reader_flagged |= v
-    ws, p = records.get("wind_speed"), records.get("power")
     fine = np.nan
     with np.errstate(invalid="ignore"):
         if "out_of_range" in settings.enabled:
-            f = np.zeros(len(records), bool)
-            for (signal, stat), v in records.values.items():
-                rng = settings.range_of(signal) if stat == "mean" else None
-                if rng is not None:
-                    f |= np.isfinite(v) & ((v < rng[0]) | (v > rng[1]))
-            flags["out_of_range"] = f
+            flags["out_of_range"] = out_of_range_flag(records, settings)
         if "frozen" in settings.enabled:
-            f = np.zeros(len(records), bool)
-            dup = records.flags.get("duplicate_stamp", np.zeros(len(records), bool))
-            for signal in settings.frozen_signals:
-                if records.has(signal):
-                    v = records.get(signal)
-                    f |= _per_turbine(records, dup, lambda idx: frozen_runs(v[idx], int(settings.frozen_count)))
-            flags["frozen"] = f
-        window = (ws >= settings.operating_window[0]) & (ws <= settings.operating_window[1])
+            flags["frozen"] = frozen_flag(records, settings)
         if "start_stop" in settings.enabled:
-            p_low = records.get("power", "min") if records.has("power", "min") else p
-            stop = 0.01 * settings.rated_power if settings.stop_power is None else settings.stop_power
-            f = window & (p_low < stop)
-            if records.has("rotor_speed", "min"):
-                f |= window & (records.get("rotor_speed", "min") <= settings.stop_rotor_speed)
-            flags["start_stop"] = f
+            flags["start_stop"] = start_stop_flag(records, settings)
         if "curtailment" in settings.enabled and records.has("pitch"):
             fine = settings.fine_pitch if settings.fine_pitch is not None else \
                 estimate_fine_pitch(records, settings.rated_power)
-            flags["curtailment"] = window & (p <= settings.curtailment_fraction * settings.rated_power) & \
-                (records.get("pitch") > fine + settings.pitch_margin)
+            flags["curtailment"] = curtailment_flag(records, settings, fine)
         if "icing" in settings.enabled and records.has("temperature"):
-            from calib.scada.bins import bin_index, method_of_bins
-            t = records.get("temperature")
-            clean = ~reader_flagged
-            for name, f in flags.items():
-                clean &= ~f
-            warm = clean & (t >= settings.icing_temperature)
-            f = np.zeros(len(records), bool)
-            if warm.sum() >= 3:
-                curve = method_of_bins(ws[warm], p[warm])
-                k = bin_index(ws, curve)
-                ref = np.where(k >= 0, curve.power[np.clip(k, 0, None)], np.nan)
-                f = (t < settings.icing_temperature) & (ref > 0.05 * settings.rated_power) & \
-                    (p < (1.0 - settings.icing_deficit) * ref)
-            flags["icing"] = f
-    kept = np.ones(len(records), bool)
-    for f in flags.values():
-        kept &= ~f
+            flags["icing"] = icing_flag(records, settings, ~np.any(list(flags.values()), axis=0))
+    kept = ~np.any(list(flags.values()), axis=0)
 
     def counts_of(mask):
         c = {name: int(np.sum(f & mask)) for name, f in flags.items()}

@@ -26,7 +26,7 @@ import numpy as np
 from calib.errors import InputError
 from calib.measurements.cells import MISSING_CELLS, detect_delimiter, did_you_mean, parse_header, short_list, split_line
 from calib.measurements.table import read_text
-from calib.scada.mapping import (SIGNALS, TIME_COLUMNS, TURBINE_COLUMNS, canonical_unit, column_map)
+from calib.scada.mapping import SIGNALS, TIME_COLUMNS, TURBINE_COLUMNS, canonical_unit, column_map
 
 #: the signals a power-curve analysis needs (their means)
 REQUIRED_SIGNALS = ("wind_speed", "power")
@@ -171,51 +171,91 @@ def read_scada(path: str | Path, *, mapping: Mapping[str, tuple] | None = None,
     """
     path = Path(path)
     src = str(path)
-    if duplicates not in ("flag", "error"):
-        raise InputError(f"duplicates must be 'flag' or 'error', got {duplicates!r}", src, field="duplicates")
-    if gaps not in ("count", "error"):
-        raise InputError(f"gaps must be 'count' or 'error', got {gaps!r}", src, field="gaps")
-    if unknown not in ("error", "note"):
-        raise InputError(f"unknown must be 'error' or 'note', got {unknown!r}", src, field="unknown")
-    cmap = column_map(mapping, src)
+    for name, value, allowed in (("duplicates", duplicates, ("flag", "error")), ("gaps", gaps, ("count", "error")),
+                                 ("unknown", unknown, ("error", "note"))):
+        if value not in allowed:
+            raise InputError(f"{name} must be {' or '.join(map(repr, allowed))}, got {value!r}", src, field=name)
     text, notes = read_text(path)
     lines = [(i + 1, s) for i, s in enumerate(text.splitlines()) if s.strip() and not s.lstrip().startswith("#")]
     if not lines:
         raise InputError("empty file: expected a header and one row per 10 minutes", src)
+    header = _read_header(lines, src, column_map(mapping, src), units, required, ignore, unknown, notes)
+    line, time, turbines, arr = _read_rows(lines[1:], header, src, turbine, notes)
+    values = {}
+    for j, key in enumerate(header.signals):
+        _, raw, unit = header.signals[key]
+        _check_unit(raw, key[0], key[1], unit, arr[:, j], src, header.line)
+        factor, offset = SIGNALS[key[0]].units[unit]
+        values[key] = arr[:, j] * factor + (offset if key[1] != "std" else 0.0)
+        if unit != SIGNALS[key[0]].si_unit:
+            notes.append(f"{raw}: {unit} converted to {SIGNALS[key[0]].si_unit}")
+    order = np.lexsort((time, turbines.astype(str)))   # stable: the first line of a stamp stays first
+    if np.any(order != np.arange(order.size)):
+        notes.append("records sorted by turbine and time stamp")
+    turbines, time, line = turbines[order], time[order], line[order]
+    values = {k: v[order] for k, v in values.items()}
+    missing = np.zeros(time.size, bool)
+    for (sig, stat), v in values.items():
+        if stat == "mean":
+            missing |= ~np.isfinite(v)
+    duplicate, gap_count = _time_flags(turbines, time, line, period, duplicates, gaps, src, header.time[1])
+    flags = {"missing": missing, "duplicate_stamp": duplicate}
+    return ScadaRecords(src, turbines, time, line, values, {k: v[1] for k, v in header.signals.items()}, flags,
+                        gap_count, tuple(notes))
+
+
+@dataclass(frozen=True)
+class _Header:
+    line: int
+    delimiter: str
+    n_cols: int
+    time: tuple
+    turbine: tuple | None
+    signals: dict          # (signal, statistic) -> (column index, header text, unit)
+
+
+def _signal_unit(raw, name, head_unit, entry, units, src, line) -> str:
+    """The unit of a signal column: the header's, else ``units``', else the mapping's."""
+    signal, _, unit = entry
+    given = head_unit or (units or {}).get(raw) or (units or {}).get(name)
+    if given is None:
+        return unit
+    unit = canonical_unit(signal, given)
+    if unit is None:
+        raise InputError(f"unit {given!r} is not a unit of {signal}; accepted: {', '.join(SIGNALS[signal].units)}",
+                         src, line, field=raw)
+    return unit
+
+
+def _read_header(lines, src, cmap, units, required, ignore, unknown, notes) -> _Header:
+    """The time, turbine and signal columns of the header line; refuses unknown and duplicate columns and
+    a missing time stamp or required signal."""
     header_line, header = lines[0]
     delimiter = detect_delimiter(header, [s for _, s in lines[1:6]]) or ","
     raw_names = split_line(header, delimiter, src, header_line)
     ignored = {n.strip().lower() for n in ignore}
     time_col = turbine_col = None
-    signal_cols: dict[tuple[str, str], tuple[int, str, str]] = {}
-    skipped = []
+    signal_cols, skipped = {}, []
     for i, raw in enumerate(raw_names):
         name, head_unit = parse_header(raw, i + 1)
         if raw.strip().lower() in ignored or name in ignored:
             continue
         if name in TIME_COLUMNS and time_col is None:
             time_col = (i, raw)
-            continue
-        if name in TURBINE_COLUMNS and turbine_col is None:
+        elif name in TURBINE_COLUMNS and turbine_col is None:
             turbine_col = (i, raw)
-            continue
-        if name not in cmap:
-            if unknown == "note":
-                skipped.append(raw)
-                continue
-            raise InputError(f"unknown column {raw!r}{did_you_mean(name, list(cmap))}; name it in mapping= "
-                             f"({{'{raw}': (signal, statistic, unit)}}) or in ignore=", src, header_line, field=raw)
-        signal, stat, unit = cmap[name]
-        given = head_unit or (units or {}).get(raw) or (units or {}).get(name)
-        if given is not None:
-            unit = canonical_unit(signal, given)
-            if unit is None:
-                raise InputError(f"unit {given!r} is not a unit of {signal}; accepted: "
-                                 f"{', '.join(SIGNALS[signal].units)}", src, header_line, field=raw)
-        if (signal, stat) in signal_cols:
-            raise InputError(f"{signal} {stat} given twice: columns {signal_cols[(signal, stat)][1]!r} and {raw!r}",
-                             src, header_line, field=raw)
-        signal_cols[(signal, stat)] = (i, raw, unit)
+        elif name not in cmap:
+            if unknown == "error":
+                raise InputError(f"unknown column {raw!r}{did_you_mean(name, list(cmap))}; name it in mapping= "
+                                 f"({{'{raw}': (signal, statistic, unit)}}) or in ignore=", src, header_line,
+                                 field=raw)
+            skipped.append(raw)
+        else:
+            key = cmap[name][:2]
+            if key in signal_cols:
+                raise InputError(f"{key[0]} {key[1]} given twice: columns {signal_cols[key][1]!r} and {raw!r}",
+                                 src, header_line, field=raw)
+            signal_cols[key] = (i, raw, _signal_unit(raw, name, head_unit, cmap[name], units, src, header_line))
     if time_col is None:
         raise InputError(f"no time-stamp column (one of {', '.join(TIME_COLUMNS)}); columns: "
                          f"{short_list(raw_names, 30)}", src, header_line)
@@ -226,85 +266,68 @@ def read_scada(path: str | Path, *, mapping: Mapping[str, tuple] | None = None,
                              f"columns present: {short_list(raw_names, 30)}", src, header_line, field=sig)
     if skipped:
         notes.append(f"columns not read (unknown=note): {short_list(skipped, 20)}")
+    return _Header(header_line, delimiter, len(raw_names), time_col, turbine_col, signal_cols)
 
-    keys = list(signal_cols)
-    n_cols = len(raw_names)
+
+def _cell_value(cell: str, is_std: bool, src: str, line: int, column: str) -> float:
+    cell = cell.strip()
+    if cell.lower() in MISSING_CELLS:
+        return np.nan
+    try:
+        v = float(cell)
+    except ValueError:
+        raise InputError(f"{cell!r} is not a number", src, line, field=column) from None
+    if not np.isfinite(v):
+        return np.nan
+    if is_std and v < 0:
+        raise InputError(f"negative standard deviation {v:g}: a σ is >= 0", src, line, field=column)
+    return v
+
+
+def _read_rows(lines, header: _Header, src: str, turbine: str | None, notes: list):
+    """(line, time, turbine, values as written (n_records, n_signals)) of the data lines."""
     rows_line, rows_time, rows_turbine, data, offsets = [], [], [], [], 0
-    for ln, s in lines[1:]:
-        cells = split_line(s, delimiter, src, ln)
-        if len(cells) < n_cols:
-            cells = cells + [""] * (n_cols - len(cells))
-        name = cells[turbine_col[0]].strip() if turbine_col else ""
+    columns = [(i, raw, key[1] == "std") for key, (i, raw, _) in header.signals.items()]
+    for ln, s in lines:
+        cells = split_line(s, header.delimiter, src, ln)
+        cells += [""] * (header.n_cols - len(cells))
+        name = cells[header.turbine[0]].strip() if header.turbine else ""
         if turbine is not None and name != turbine:
             continue
-        t, has_offset = _parse_time(cells[time_col[0]], src, ln, time_col[1])
+        t, has_offset = _parse_time(cells[header.time[0]], src, ln, header.time[1])
         offsets += has_offset
-        row = []
-        for key in keys:
-            i, raw, _ = signal_cols[key]
-            cell = cells[i].strip()
-            if cell.lower() in MISSING_CELLS:
-                row.append(np.nan)
-                continue
-            try:
-                v = float(cell)
-            except ValueError:
-                raise InputError(f"{cell!r} is not a number", src, ln, field=raw) from None
-            if not np.isfinite(v):
-                row.append(np.nan)
-                continue
-            if key[1] == "std" and v < 0:
-                raise InputError(f"negative standard deviation {v:g}: a σ is >= 0", src, ln, field=raw)
-            row.append(v)
+        data.append([_cell_value(cells[i], is_std, src, ln, raw) for i, raw, is_std in columns])
         rows_line.append(ln)
         rows_time.append(t)
         rows_turbine.append(name)
-        data.append(row)
     if not data:
         what = f" of turbine {turbine!r}" if turbine is not None else ""
-        raise InputError(f"no data rows{what} after the header", src, header_line)
+        raise InputError(f"no data rows{what} after the header", src, header.line)
     if offsets < len(data):
         notes.append(f"{len(data) - offsets} time stamps without a UTC offset read as UTC")
-    arr = np.array(data, float).reshape(len(data), len(keys))
-    line = np.array(rows_line)
-    values = {}
-    for j, key in enumerate(keys):
-        i, raw, unit = signal_cols[key]
-        _check_unit(raw, key[0], key[1], unit, arr[:, j], src, header_line)
-        factor, offset = SIGNALS[key[0]].units[unit]
-        values[key] = arr[:, j] * factor + (offset if key[1] != "std" else 0.0)
-        if unit != SIGNALS[key[0]].si_unit:
-            notes.append(f"{raw}: {unit} converted to {SIGNALS[key[0]].si_unit}")
-    turbines = np.array(rows_turbine, dtype=object)
-    time = np.array(rows_time)
-    order = np.lexsort((time, turbines.astype(str)))
-    if np.any(order != np.arange(order.size)):
-        notes.append("records sorted by turbine and time stamp")
-    turbines, time, line = turbines[order], time[order], line[order]
-    values = {k: v[order] for k, v in values.items()}
-    missing = np.zeros(time.size, bool)
-    for (sig, stat), v in values.items():
-        if stat == "mean":
-            missing |= ~np.isfinite(v)
+    return (np.array(rows_line), np.array(rows_time), np.array(rows_turbine, dtype=object),
+            np.array(data, float).reshape(len(data), len(columns)))
+
+
+def _time_flags(turbines, time, line, period, duplicates, gaps, src, time_column):
+    """Per record: a later record of a stamp already seen (``duplicate_stamp``); per turbine: the
+    periods missing. Records sorted by turbine and time."""
     duplicate = np.zeros(time.size, bool)
     gap_count = {}
     for name in dict.fromkeys(turbines.tolist()):
         idx = np.flatnonzero(turbines == name)
-        # the first record (in file order) of a stamp is kept: lexsort is stable in line order
         step = np.diff(time[idx])
         dup = np.concatenate([[False], step == 0])
+        of = f" of turbine {name}" if name else ""
         if dup.any() and duplicates == "error":
             k = idx[np.flatnonzero(dup)[0]]
-            raise InputError(f"duplicate time stamp {datetime.fromtimestamp(time[k], timezone.utc).isoformat()}"
-                             f"{f' of turbine {name}' if name else ''} (also on an earlier line)", src, int(line[k]),
-                             field=time_col[1])
+            raise InputError(f"duplicate time stamp {datetime.fromtimestamp(time[k], timezone.utc).isoformat()}{of} "
+                             "(also on an earlier line)", src, int(line[k]), field=time_column)
         duplicate[idx] = dup
         long = step > period * 1.0001
         gap_count[name] = int(np.sum(np.round(step[long] / period) - 1))
         if long.any() and gaps == "error":
             k = idx[np.flatnonzero(long)[0] + 1]
-            raise InputError(f"gap of {step[long][0] / period:g} periods before this record"
-                             f"{f' of turbine {name}' if name else ''}", src, int(line[k]), field=time_col[1])
-    flags = {"missing": missing, "duplicate_stamp": duplicate}
-    return ScadaRecords(src, turbines, time, line, values, {k: v[1] for k, v in signal_cols.items()}, flags,
-                        gap_count, tuple(notes))
+            raise InputError(f"gap of {step[long][0] / period:g} periods before this record{of}", src, int(line[k]),
+                             field=time_column)
+    return duplicate, gap_count
