@@ -67,6 +67,7 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
   calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
   calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
   calib diagnose ...       find, name and add the effect the model misses
+  calib scada FILE ...     SCADA 10-minute statistics: filters, IEC power curve, tables
   calib fmu build          build the bundled turbine FMUs from their C sources
   calib rotors             list the embedded rotors
 
@@ -129,6 +130,11 @@ def build_parser() -> argparse.ArgumentParser:
                            description=BUILD_DESCRIPTION)
     add_build_arguments(b)
     b.set_defaults(func=_fmu_build)
+    from calib.scada.command import DESCRIPTION as SCADA_DESCRIPTION, add_scada_arguments, scada_command
+    p = sub.add_parser("scada", help="SCADA 10-minute export: filters, counts, IEC power curve, measurement table",
+                       description=SCADA_DESCRIPTION)
+    add_scada_arguments(p)
+    p.set_defaults(func=scada_command)
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)

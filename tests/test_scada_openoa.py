@@ -85,3 +85,20 @@ def test_duplicate_stamps_of_the_dst_change_are_flagged_not_dropped(result):
     assert counts["duplicate_stamp"] == 6          # 2014-03-30 03:00..03:50 +02:00 written twice
     assert counts["frozen"] == 115                 # OpenOA's unresponsive_flag on the same series
     assert counts["removed"] + counts["kept"] == 4464
+
+
+def test_calib_scada_command_prints_counts_and_writes_bins(tmp_path, capsys):
+    from calib.cli import main
+    from calib.measurements import read_measurements
+    out = tmp_path / "bins.csv"
+    assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--bins-out", str(out),
+                 "--fill", "rotor_speed=15"]) == 0
+    text = capsys.readouterr().out
+    assert "duplicate_stamp         6" in text and "frozen                115" in text
+    assert len(read_measurements(out).values) >= 20
+
+
+def test_calib_scada_command_without_rotor_speed_says_so(tmp_path, capsys):
+    from calib.cli import main
+    assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--bins-out", str(tmp_path / "b.csv")]) == 2
+    assert "rotor_speed" in capsys.readouterr().err
