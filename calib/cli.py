@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from calib import __version__
 from calib.errors import CalibError
+from calib.scada.command import add_scada_parser
 
 
 def _demo(args) -> int:
@@ -77,7 +79,6 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="calib", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    from calib import __version__
     parser.add_argument("--version", action="version", version=f"calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="C_P surface, power curve and a diagnosis of an embedded campaign",
@@ -130,11 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
                            description=BUILD_DESCRIPTION)
     add_build_arguments(b)
     b.set_defaults(func=_fmu_build)
-    from calib.scada.command import DESCRIPTION as SCADA_DESCRIPTION, add_scada_arguments, scada_command
-    p = sub.add_parser("scada", help="SCADA 10-minute export: filters, counts, IEC power curve, measurement table",
-                       description=SCADA_DESCRIPTION)
-    add_scada_arguments(p)
-    p.set_defaults(func=scada_command)
+    add_scada_parser(sub)
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)

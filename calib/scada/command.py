@@ -19,7 +19,11 @@ DESCRIPTION = ("Read a SCADA export of 10-minute statistics (Ws_avg, P_avg, Ba_a
                "counts and the power curve per turbine; --bins-out / --records-out write a calib measurement table.")
 
 
-def add_scada_arguments(p: argparse.ArgumentParser) -> None:
+def add_scada_parser(sub) -> argparse.ArgumentParser:
+    """The ``scada`` subcommand on the ``calib`` subparsers ``sub``."""
+    p = sub.add_parser("scada", help="SCADA 10-minute export: filters, counts, IEC power curve, measurement table",
+                       description=DESCRIPTION)
+    p.set_defaults(func=scada_command)
     p.add_argument("export", help="CSV export: a time stamp, optionally a turbine column, signal statistics")
     p.add_argument("--rated-power", type=float, required=True, help="rated power [kW]")
     p.add_argument("--turbine", default=None, help="read this turbine only")
@@ -37,6 +41,7 @@ def add_scada_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--records-out", default=None, help="write the kept records as a measurement table CSV")
     p.add_argument("--fill", action="append", default=[], metavar="CONDITION=VALUE",
                    help="a condition the export lacks, held constant in the table, e.g. rotor_speed=17 [rpm]")
+    return p
 
 
 def _pairs(items, what):
