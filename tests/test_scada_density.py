@@ -26,3 +26,13 @@ def test_normalization_to_the_reference_density():
     assert normalized_wind_speed(8.0, 1.1) == pytest.approx(7.71807, rel=1e-5)
     v = np.array([5.0, 10.0])
     assert np.allclose(normalized_wind_speed(v, 1.225), v)
+
+
+def test_against_openoa_compute_air_density():
+    # openoa 3.2 utils.met_data_processing.compute_air_density(T, B, φ) at (293.15 K, 1000 hPa, 0.5) and
+    # (268.15 K, 950 hPa, 0.9), computed with openoa 3.2: the same formula with R₀ = 287.058 J/(kg K), where
+    # IEC 61400-12-1 writes 287.05, so the two differ by 287.058/287.05 − 1 = 2.8e-5
+    openoa = np.array([1.1832413597076232, 1.2321062231803444])
+    mine = air_density([293.15, 268.15], [1.0e5, 0.95e5], [0.5, 0.9])
+    assert np.allclose(mine, openoa, rtol=3.0e-5)
+    assert not np.allclose(mine, openoa, rtol=1.0e-6)
