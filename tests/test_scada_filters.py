@@ -86,3 +86,12 @@ def test_unknown_filter_is_refused():
     with pytest.raises(InputError) as err:
         FilterSettings(rated_power=RATED, enabled=("icing", "stuck"))
     assert err.value.field == "enabled" and "frozen" in str(err.value)
+
+
+def test_a_filter_without_its_signal_is_reported_not_run(tmp_path):
+    path = tmp_path / "short.csv"
+    path.write_text("Date_time,Ws_avg,P_avg\n" + "".join(
+        f"{(T0 + timedelta(minutes=10 * i)).isoformat()},{5 + 0.01 * i},{100 + i}\n" for i in range(5)))
+    report = apply_filters(read_scada(path), FilterSettings(rated_power=RATED))
+    assert set(report.not_run) == {"curtailment", "icing"}
+    assert "icing            not run: no temperature mean" in report.summary()

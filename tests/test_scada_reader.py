@@ -134,3 +134,9 @@ def test_turbines_sorted_and_selected(tmp_path):
     assert r.turbine.tolist() == ["A", "B", "B"] and r.gaps == {"A": 0, "B": 0}
     assert r.time[0] == T0.timestamp()
     assert np.all(read_scada(path, turbine="B").turbine == "B")
+
+
+def test_a_unit_the_signal_does_not_take_is_refused(tmp_path):
+    with pytest.raises(InputError) as err:
+        read_scada(export(tmp_path, ["Ws_avg", "P_avg [kWh]"], [[7.0, 900.0]]))
+    assert err.value.field == "P_avg [kWh]" and "kW" in str(err.value)

@@ -119,7 +119,9 @@ class FilterReport:
     gaps : dict
         Turbine -> missing periods (from the reader).
     fine_pitch : float
-        The fine pitch [deg] the curtailment filter used.
+        The fine pitch [deg] the curtailment filter used (NaN: not run).
+    not_run : dict
+        Filter asked for but not run -> why (a signal the export lacks).
     """
 
     flags: dict
@@ -128,6 +130,7 @@ class FilterReport:
     counts_by_turbine: dict
     gaps: dict
     fine_pitch: float
+    not_run: dict = field(default_factory=dict)
 
     def summary(self) -> str:
         """One line per flag: records flagged (overlaps allowed), then removed and kept."""
@@ -137,6 +140,7 @@ class FilterReport:
         rows += [f"  {'removed (any)':<16} {self.counts['removed']:>8d}  {100 * self.counts['removed'] / max(n, 1):5.1f} %",
                  f"  {'kept':<16} {self.counts['kept']:>8d}  of {n} records; "
                  f"{sum(self.gaps.values())} periods missing (gaps)"]
+        rows += [f"  {name:<16} not run: {why}" for name, why in self.not_run.items()]
         return "\n".join(rows)
 
 
@@ -260,6 +264,8 @@ def apply_filters(records: ScadaRecords, settings: FilterSettings) -> FilterRepo
     """
     flags = {k: v.copy() for k, v in records.flags.items()}
     fine = np.nan
+    not_run = {name: f"no {signal} mean in the export" for name, signal in (("curtailment", "pitch"),
+               ("icing", "temperature")) if name in settings.enabled and not records.has(signal)}
     with np.errstate(invalid="ignore"):
         if "out_of_range" in settings.enabled:
             flags["out_of_range"] = out_of_range_flag(records, settings)
@@ -283,4 +289,4 @@ def apply_filters(records: ScadaRecords, settings: FilterSettings) -> FilterRepo
 
     return FilterReport(flags, kept, counts_of(np.ones(len(records), bool)),
                         {name: counts_of(records.turbine == name) for name in records.turbines},
-                        dict(records.gaps), float(fine))
+                        dict(records.gaps), float(fine), not_run)
