@@ -4,7 +4,7 @@
 Columns: the conditions ``wind_speed`` [m/s], ``rotor_speed`` [rpm], ``pitch`` [deg] and, where
 known, ``air_density`` [kg/m^3]; the channel ``power`` [W] with ``power_sigma``; and the
 conditions' own σ (``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``) for estimators
-that take errors in variables (read tables without them ignore these columns with a note).
+that take errors in variables (today's ``read_measurements`` passes over them).
 
 - bins: one row per bin with at least ``min_count`` records; ``power_sigma`` is σ/√N and a
   condition's σ is its scatter across the bin's records over √N (the uncertainty of the bin mean);
