@@ -1,8 +1,8 @@
 """OpenOA's IEC power curve of La Haute Borne records: the independent reference of ``calib.scada``.
 
 Runs in a Python environment with ``openoa`` installed, NOT calib's: openoa 3.2 pins
-``pandas<3`` and calib's environment has pandas 3 (``make validate`` builds ``/work/openoa-venv``
-style environments with ``python -m venv .openoa-venv && .openoa-venv/bin/pip install openoa==3.2``).
+``pandas<3`` and calib's environment has pandas 3 (``benchmarks/bench_scada.py`` builds
+``.bench-venv-openoa`` with ``python -m venv`` and ``pip install openoa==3.2``).
 It imports nothing from calib.
 
     python benchmarks/openoa_reference.py <la-haute-borne csv> <out.json>
