@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from calib import __version__
 from calib.errors import CalibError
+from calib.scada.command import add_scada_parser
 
 
 def _demo(args) -> int:
@@ -67,6 +69,7 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
   calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
   calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
   calib diagnose ...       find, name and add the effect the model misses
+  calib scada FILE ...     SCADA 10-minute statistics: filters, IEC power curve, tables
   calib fmu build          build the bundled turbine FMUs from their C sources
   calib rotors             list the embedded rotors
 
@@ -76,7 +79,6 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="calib", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    from calib import __version__
     parser.add_argument("--version", action="version", version=f"calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="C_P surface, power curve and a diagnosis of an embedded campaign",
@@ -129,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
                            description=BUILD_DESCRIPTION)
     add_build_arguments(b)
     b.set_defaults(func=_fmu_build)
+    add_scada_parser(sub)
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)
