@@ -42,6 +42,11 @@ def _predict(args) -> int:
     return 0
 
 
+def _powercurve(args) -> int:
+    from calib.powercurve.command import run_powercurve
+    return run_powercurve(args)
+
+
 def _diagnose(args) -> int:
     from calib.diagnosis.command import diagnose_from_args
     return diagnose_from_args(args)
@@ -66,6 +71,7 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
   calib demo               the embedded default job
   calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
   calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
+  calib powercurve DIR     the calibrated power curve and AEP, with their uncertainty
   calib diagnose ...       find, name and add the effect the model misses
   calib fmu build          build the bundled turbine FMUs from their C sources
   calib rotors             list the embedded rotors
@@ -110,6 +116,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument("--confidence", type=float, default=0.95, help="two-sided interval level (default 0.95)")
     p.set_defaults(func=_predict)
+    from calib.powercurve.command import DESCRIPTION as PC_DESCRIPTION, add_powercurve_arguments
+    p = sub.add_parser("powercurve", help="the calibrated power curve and AEP, with their uncertainty",
+                       description=PC_DESCRIPTION)
+    add_powercurve_arguments(p)
+    p.set_defaults(func=_powercurve)
     p = sub.add_parser("diagnose", help="find, name and add the effect the model misses",
                        description="The diagnosis: find where the nominal model and the measurements "
                                    "disagree, name the missing physical effect (rotational augmentation, erosion, "
