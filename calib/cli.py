@@ -116,11 +116,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument("--confidence", type=float, default=0.95, help="two-sided interval level (default 0.95)")
     p.set_defaults(func=_predict)
-    from calib.powercurve.command import DESCRIPTION as PC_DESCRIPTION, add_powercurve_arguments
-    p = sub.add_parser("powercurve", help="the calibrated power curve and AEP, with their uncertainty",
-                       description=PC_DESCRIPTION)
-    add_powercurve_arguments(p)
-    p.set_defaults(func=_powercurve)
     p = sub.add_parser("diagnose", help="find, name and add the effect the model misses",
                        description="The diagnosis: find where the nominal model and the measurements "
                                    "disagree, name the missing physical effect (rotational augmentation, erosion, "
@@ -143,6 +138,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)
+    return _add_powercurve(parser, sub)
+
+
+def _add_powercurve(parser, sub):
+    """``parser`` with the ``powercurve`` subcommand added to its subparsers ``sub``."""
+    from calib.powercurve.command import add_powercurve_parser
+    add_powercurve_parser(sub).set_defaults(func=_powercurve)
     return parser
 
 

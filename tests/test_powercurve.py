@@ -17,7 +17,6 @@ from calib.cli import main
 from calib.models.bem_model import BemModel
 from calib.powercurve import (FixedSpeed, VariableSpeed, aep, calibrated_power_curve, iec_bins, parse_measurement,
                               posterior_draws, rayleigh_cdf, weibull_cdf)
-from calib.powercurve.curve import _power_model
 from calib.powercurve.schedule import schedule_from_table
 from calib.rotor.geometry import OperatingSchedule
 from calib.rotor.library import load_rotor, reference_path
@@ -57,16 +56,16 @@ def test_delta_method_agrees_with_draws_where_near_linear(wind_tunnel_result, ki
     small = _scaled(result, 1e-4)          # σ of every parameter 1 % of the calibration's: near-linear
     schedule = FixedSpeed(72.0, 3.0) if kind == "fixed" else _variable_speed(model, "optimal")[1]
     v = iec_bins(5.0, 15.0, 1.0)
-    pc = calibrated_power_curve(small, v, schedule, n_draws=400, seed=3, model=model)
+    pc = calibrated_power_curve(small, v, schedule, n_draws=300, seed=3, model=model)
     assert pc.failed_draws == 0
     sd, dd = pc.draw_std("power"), pc.delta_std["power"]
     # region 3's spread is the pitch search's tolerance (1e-4 P_rated), checked below
     spread = (pc.central.region == 2) & (sd > 1e-6 * np.nanmax(pc.central.power))
     assert spread.sum() >= 3
-    # 400 draws: the sample σ scatters by 1/sqrt(2·399) = 3.5 %; 12 % is 3.4 of those
-    np.testing.assert_allclose(dd[spread], sd[spread], rtol=0.12)
+    # 300 draws: the sample σ scatters by 1/sqrt(2·299) = 4.1 %; 13 % is 3.2 of those
+    np.testing.assert_allclose(dd[spread], sd[spread], rtol=0.13)
     # the same draws through the linearization: no sampling scatter, so tighter
-    D, _ = posterior_draws(result.estimate.p_hat, small.uncertainty.cov_p, -np.inf, np.inf, 400, 3)
+    D, _ = posterior_draws(result.estimate.p_hat, small.uncertainty.cov_p, -np.inf, np.inf, 300, 3)
     lin = (D - result.estimate.p_hat) @ pc.grad_power.T
     np.testing.assert_allclose(np.std(lin, axis=0, ddof=1)[spread], sd[spread], rtol=0.03)
     if kind == "variable":

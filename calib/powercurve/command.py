@@ -24,7 +24,7 @@ from calib.powercurve.measurement import parse_measurement
 from calib.powercurve.schedule import FixedSpeed, VariableSpeed, schedule_from_table
 from calib.report.atomic import atomic_path, atomic_write_text
 
-__all__ = ["add_powercurve_arguments", "parse_wind", "run_powercurve", "summary_paragraph", "write_outputs"]
+__all__ = ["add_powercurve_arguments", "add_powercurve_parser", "parse_wind", "run_powercurve", "summary_paragraph", "write_outputs"]
 
 DESCRIPTION = ("The power curve of the model a calibration produced, with intervals: the operating schedule "
                "(the rotor's variable-speed pitch-regulated schedule, a fixed speed and pitch, or a table) is "
@@ -33,6 +33,14 @@ DESCRIPTION = ("The power curve of the model a calibration produced, with interv
                "AEP for Rayleigh mean wind speeds 4-11 m/s and an optional Weibull, with P50, P90 and the "
                "1-sigma of each source (calibration, model discrepancy, stated measurement items). Writes "
                "tables (CSV, JSON), figures and report.md; prints its first paragraph.")
+
+
+def add_powercurve_parser(sub):
+    """The ``powercurve`` subcommand's parser, added to ``sub`` (argparse subparsers)."""
+    p = sub.add_parser("powercurve", help="the calibrated power curve and AEP, with their uncertainty",
+                       description=DESCRIPTION)
+    add_powercurve_arguments(p)
+    return p
 
 
 def add_powercurve_arguments(p) -> None:

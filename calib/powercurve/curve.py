@@ -18,7 +18,6 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.powercurve.aep import aep_weights
-from calib.powercurve.measurement import MeasurementItem
 from calib.powercurve.schedule import ScheduledCurve
 from calib.types import OperatingConditions
 
@@ -346,9 +345,19 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     else:
         notes.append("no delta-method value: the model has no exact Jacobian here")
 
-    disc = np.zeros(v.size)
-    fld = np.zeros(v.size)
-    envelope = ("",) * v.size
+    disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
+    return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
+                                disc, fld, tuple(measurements), envelope,
+                                float(getattr(schedule, "generator_efficiency", 1.0)),
+                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov)
+
+
+def _prediction_terms(result, model, central, air_density, notes):
+    """The model-discrepancy and between-node field 1-σ of power per bin [W] (zero in region 3) and
+    the envelope flags, from :func:`calib.calibration.prediction.predict_outputs` at the central
+    schedule; a sentence on each appended to ``notes``."""
+    v = central.wind_speed
+    disc, fld, envelope = np.zeros(v.size), np.zeros(v.size), ("",) * v.size
     try:
         pred = result.predict(OperatingConditions(v, central.rotor_speed, central.pitch, air_density),
                               _result_channels_model(model, result))
@@ -365,10 +374,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                          "for power (only the parameter uncertainty)")
     except InputError as exc:
         notes.append(f"no discrepancy term and no envelope check: {exc}")
-    return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
-                                disc, fld, tuple(measurements), envelope,
-                                float(getattr(schedule, "generator_efficiency", 1.0)),
-                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov)
+    return disc, fld, envelope
 
 
 def _result_channels_model(model, result):
