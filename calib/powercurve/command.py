@@ -177,11 +177,24 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
     words.append(f"{pc.failed_draws} of {pc.n_draws} draws had a failed BEM solve in some bin "
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")
-    outside = [v for v, e in zip(pc.wind_speed, pc.envelope) if e]
-    if outside:
-        words.append(f"{len(outside)} bins lie outside the calibration envelope (extrapolation): "
-                     f"{outside[0]:g}–{outside[-1]:g} m/s, e.g. {next(e for e in pc.envelope if e)}.")
+    outside = np.array([bool(e) for e in pc.envelope])
+    if outside.any():
+        words.append(f"{int(outside.sum())} bins lie outside the calibration envelope (extrapolation): "
+                     f"{_ranges(pc.wind_speed, outside)} m/s, e.g. {next(e for e in pc.envelope if e)}.")
     return " ".join(words)
+
+
+def _ranges(v, mask) -> str:
+    """The runs of ``v`` where ``mask`` holds, as "3–5.5, 14.5–25"."""
+    runs, start = [], None
+    for k in range(len(v) + 1):
+        on = k < len(v) and mask[k]
+        if on and start is None:
+            start = k
+        elif not on and start is not None:
+            runs.append(f"{v[start]:g}" if start == k - 1 else f"{v[start]:g}–{v[k - 1]:g}")
+            start = None
+    return ", ".join(runs)
 
 
 # ---------------------------------------------------------------------------------------- tables
