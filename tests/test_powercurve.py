@@ -234,3 +234,69 @@ def test_measurement_items():
     np.testing.assert_allclose(m.power_std(v, P), 0.02 * v * 1e6)
     np.testing.assert_allclose(parse_measurement("rho=density:3").power_std(v, P), 0.01 * v * 1e6)
     np.testing.assert_allclose(parse_measurement("t=power:0.5").power_std(v, P), 0.005 * P)
+
+
+class _FailingAt:
+    """A model whose solve fails at one wind speed for the draws with p[0] above the estimate's."""
+
+    def __init__(self, model, wind_speed, p0):
+        self._model, self._v, self._p0 = model, wind_speed, p0
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    def solve(self, p, conditions, sensitivities=False):
+        from calib.types import Status
+        res = self._model.solve(p, conditions, sensitivities)
+        if p[0] > self._p0:
+            hit = np.isclose(conditions.wind_speed, self._v)
+            res = dataclasses.replace(res, status=np.where(hit, int(Status.NOT_CONVERGED), res.status),
+                                      power=np.where(hit, np.nan, res.power))
+        return res
+
+
+def test_failed_solves_are_counted_never_dropped(wind_tunnel_result):
+    from calib.powercurve.command import summary_paragraph
+    _, result = wind_tunnel_result
+    p_hat = result.estimate.p_hat
+    model = _FailingAt(result.rebuild_model(), 10.0, p_hat[0])
+    v = iec_bins(5.0, 15.0, 1.0)
+    pc = calibrated_power_curve(result, v, FixedSpeed(72.0, 3.0), n_draws=30, seed=1, model=model)
+    D, _ = posterior_draws(p_hat, result.uncertainty.cov_p,
+                           [q.lower for q in model.parameters], [q.upper for q in model.parameters], 30, 1)
+    n_bad = int(np.count_nonzero(D[:, 0] > p_hat[0]))
+    assert 0 < n_bad < 30
+    assert pc.failed_per_bin.tolist() == [n_bad if x == 10.0 else 0 for x in v]
+    assert pc.failed_draws == n_bad
+    assert np.isnan(pc.draws["power"][D[:, 0] > p_hat[0], v.tolist().index(10.0)]).all()
+    row = pc.aep_table({"R7": lambda x: rayleigh_cdf(x, 7.0)})[0]
+    assert (row["draws_used"], row["draws_left_out"]) == (30 - n_bad, n_bad)
+    assert f"{n_bad} of 30 draws had a failed BEM solve" in summary_paragraph(pc, [row])
+    # the wrapper has no exact Jacobian of the scheduled power: said, not faked
+    assert pc.delta_std == {} and any("no delta-method value" in n for n in pc.notes)
+
+
+def test_a_schedule_the_rotor_cannot_follow_is_said(wind_tunnel_result):
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    v = iec_bins(5.0, 10.0, 1.0)
+    too_high = dataclasses.replace(PHASE_VI_SCHEDULE, rated_power=1e6)            # 1 MW from a 10 m rotor
+    rotor = dataclasses.replace(model.rotor, schedule=too_high)
+    pc = calibrated_power_curve(result, v, VariableSpeed.from_rotor(rotor, "design"), n_draws=2, model=model)
+    assert any("does not reach rated power" in w for w in pc.warnings)
+    slow = dataclasses.replace(PHASE_VI_SCHEDULE, min_rotor_speed=10.0, max_rotor_speed=20.0)
+    rotor = dataclasses.replace(model.rotor, schedule=slow)
+    pc = calibrated_power_curve(result, v, VariableSpeed.from_rotor(rotor, "design"), n_draws=2, model=model)
+    assert any("maximum speed 20 rpm from the first bin" in w for w in pc.warnings)
+    upside_down = dataclasses.replace(PHASE_VI_SCHEDULE, min_rotor_speed=80.0)
+    with pytest.raises(Exception, match="cannot be followed"):
+        VariableSpeed.from_rotor(dataclasses.replace(model.rotor, schedule=upside_down))
+
+
+def test_powercurve_help_describes_every_option(capsys):
+    with pytest.raises(SystemExit):
+        main(["powercurve", "--help"])
+    text = capsys.readouterr().out
+    for option in ("--wind", "--density", "--draws", "--schedule", "--tsr", "--weibull", "--availability",
+                   "--measurement", "--out"):
+        assert option in text

@@ -177,6 +177,7 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
     words.append(f"{pc.failed_draws} of {pc.n_draws} draws had a failed BEM solve in some bin "
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")
+    words += [f"Warning: {w}." for w in pc.warnings]
     outside = np.array([bool(e) for e in pc.envelope])
     if outside.any():
         words.append(f"{int(outside.sum())} bins lie outside the calibration envelope (extrapolation): "

@@ -21,7 +21,8 @@ from calib.powercurve.aep import aep_weights
 from calib.powercurve.schedule import ScheduledCurve
 from calib.types import OperatingConditions
 
-__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "delta_method", "posterior_draws", "iec_bins"]
+__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "delta_method", "iec_bins", "posterior_draws",
+           "schedule_warnings"]
 
 #: Quantities summarized per bin.
 QUANTITIES = ("power", "thrust", "cp", "ct", "rotor_speed", "pitch")
@@ -148,6 +149,10 @@ class CalibratedPowerCurve:
         Wall time of the draws.
     n_bem_points : int
         BEM points solved for the draws.
+    cov : ndarray, shape (n_params, n_params)
+        The covariance the draws came from.
+    warnings : list of str
+        What the schedule could not do (:func:`schedule_warnings`), for the report's first paragraph.
     """
 
     wind_speed: np.ndarray
@@ -171,6 +176,7 @@ class CalibratedPowerCurve:
     seconds: float = 0.0
     n_bem_points: int = 0
     cov: np.ndarray | None = None
+    warnings: list = field(default_factory=list)
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -321,6 +327,9 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     notes = []
     central = schedule.solve(model.solve, p_hat, v, air_density)
     nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
+    warnings = schedule_warnings(schedule, central)
+    notes.append(f"estimator {result.estimator!r}: the draws and the delta method use its recorded covariance "
+                 "(result.uncertainty.cov_p)")
 
     draws_p, n_clipped = posterior_draws(p_hat, cov, lower, upper, n_draws, seed)
     out = {q: np.full((n_draws, v.size), np.nan) for q in QUANTITIES}
@@ -349,7 +358,25 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
-                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov)
+                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
+
+
+def schedule_warnings(schedule, central: ScheduledCurve) -> list[str]:
+    """Sentences on what a variable-speed schedule could not do at the central curve: rated power
+    never reached in the bins, or the rotor at its maximum speed from the first bin (a speed limit
+    below what region 2 asks at the lowest wind speed)."""
+    out = []
+    if getattr(schedule, "kind", "") != "variable_speed":
+        return out
+    ok = central.ok
+    if ok.any() and not np.any(central.region == 3):
+        out.append(f"the calibrated rotor does not reach rated power ({schedule.rated_power / 1e6:.4g} MW) in any bin "
+                   f"up to {central.wind_speed[ok][-1]:g} m/s (at most {np.nanmax(central.power) / 1e6:.4g} MW): "
+                   "every bin stays in region 2")
+    if ok.any() and central.rotor_speed[ok][0] >= schedule.max_rotor_speed - 1e-9:
+        out.append(f"the rotor is at its maximum speed {schedule.max_rotor_speed:g} rpm from the first bin "
+                   f"({central.wind_speed[ok][0]:g} m/s): the speed limit is below what the tip-speed ratio asks there")
+    return out
 
 
 def _prediction_terms(result, model, central, air_density, notes):

@@ -192,6 +192,10 @@ class VariableSpeed:
         if s is None:
             raise InputError("the rotor has no operating schedule: give --schedule fixed (with --rotor-speed "
                              "and --pitch) or a table CSV", rotor.source, field="schedule")
+        if not 0 < s.min_rotor_speed <= s.max_rotor_speed or not s.rated_power > 0:
+            raise InputError(f"the rotor's schedule cannot be followed: rotor speed limits {s.min_rotor_speed:g}–"
+                             f"{s.max_rotor_speed:g} rpm, rated power {s.rated_power:g} W (need 0 < min <= max, "
+                             "rated > 0)", rotor.source, field="schedule")
         if tsr_rule not in ("optimal", "design"):
             raise InputError(f"unknown tsr rule {tsr_rule!r}; valid: optimal, design", "VariableSpeed",
                              field="tsr_rule")
