@@ -8,7 +8,8 @@ tables, figures and a report.
 """
 
 from calib.powercurve.aep import aep, aep_weights, rayleigh_cdf, weibull_cdf
-from calib.powercurve.curve import CalibratedPowerCurve, calibrated_power_curve, delta_method, iec_bins, posterior_draws
+from calib.powercurve.curve import CalibratedPowerCurve, calibrated_power_curve, iec_bins, posterior_draws
+from calib.powercurve.linearized import delta_method
 from calib.powercurve.measurement import MeasurementItem, parse_measurement
 from calib.powercurve.schedule import FixedSpeed, ScheduledCurve, TableSchedule, VariableSpeed, schedule_from_table
 

@@ -24,7 +24,8 @@ from calib.powercurve.measurement import parse_measurement
 from calib.powercurve.schedule import FixedSpeed, VariableSpeed, schedule_from_table
 from calib.report.atomic import atomic_path, atomic_write_text
 
-__all__ = ["add_powercurve_arguments", "add_powercurve_parser", "parse_wind", "run_powercurve", "summary_paragraph", "write_outputs"]
+__all__ = ["add_powercurve_arguments", "add_powercurve_parser", "parse_wind", "run_powercurve", "summary_paragraph",
+           "write_outputs"]
 
 DESCRIPTION = ("The power curve of the model a calibration produced, with intervals: the operating schedule "
                "(the rotor's variable-speed pitch-regulated schedule, a fixed speed and pitch, or a table) is "
