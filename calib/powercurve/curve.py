@@ -276,6 +276,13 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     notes.append(f"estimator {result.estimator!r}: the draws and the delta method use its recorded covariance "
                  "(result.uncertainty.cov_p)")
 
+    pm = _power_model(model)
+    delta, grad, pitch_grad, dP_dpitch = {}, None, None, None
+    if pm is not None:
+        delta, grad, pitch_grad, dP_dpitch = delta_method(pm, p_hat, cov, central, air_density, schedule)
+    else:
+        notes.append("no delta-method value: the model has no exact Jacobian here")
+
     draws_p, n_clipped = posterior_draws(p_hat, cov, lower, upper, n_draws, seed)
     out = {q: np.full((n_draws, v.size), np.nan) for q in QUANTITIES}
     status = np.zeros((n_draws, v.size), int)
@@ -283,7 +290,9 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     n_pts = 0
     t0 = time.perf_counter()
     for d in range(n_draws):
-        c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central)
+        # the linearized pitch of this draw starts its region-3 search (the search iterates to tolerance)
+        hint = None if pitch_grad is None else (central.pitch + pitch_grad @ (draws_p[d] - p_hat), dP_dpitch)
+        c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central, pitch_hint=hint)
         for q in QUANTITIES:
             x = getattr(c, q)
             out[q][d] = np.where(c.ok, x, np.nan)
@@ -291,13 +300,6 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         if progress is not None and (d + 1) % 100 == 0:
             progress(d + 1, n_draws)
     seconds = time.perf_counter() - t0
-
-    pm = _power_model(model)
-    delta, grad = ({}, None)
-    if pm is not None:
-        delta, grad = delta_method(pm, p_hat, cov, central, air_density, schedule)
-    else:
-        notes.append("no delta-method value: the model has no exact Jacobian here")
 
     disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
     return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,

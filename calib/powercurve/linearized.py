@@ -27,6 +27,10 @@ def delta_method(model, p_hat, cov, central: ScheduledCurve, air_density: float,
         ``power`` [W], ``thrust`` [N], ``pitch`` [deg]; NaN where the central bin failed.
     grad_power : ndarray, shape (n_bins, n_params)
         dP_i/dp of the scheduled power [W per parameter unit] (zero rows in region 3).
+    pitch_grad : ndarray, shape (n_bins, n_params)
+        dβ_i/dp [deg per parameter unit] (zero rows outside region 3).
+    dpower_dpitch : ndarray, shape (n_bins,)
+        ∂P/∂β at the central point [W/deg] in region 3, NaN elsewhere.
     """
     v, rpm, beta = central.wind_speed, central.rotor_speed, central.pitch
     cond = OperatingConditions(v, rpm, beta, air_density)
@@ -53,15 +57,17 @@ def delta_method(model, p_hat, cov, central: ScheduledCurve, air_density: float,
             gT[k] += ((r1.thrust - r0.thrust) / 0.01 * drpm_dlam)[:, None] * dlam_dp
     r3 = central.region == 3
     g_pitch = np.zeros_like(gP)
+    dP_dpitch = np.full(v.size, np.nan)
     if np.any(r3):
         k = np.flatnonzero(r3)
         r0, r1 = solve(k, rpm[k], beta[k]), solve(k, rpm[k], beta[k] + 0.01)
         dP_db, dT_db = (r1.power - r0.power) / 0.01, (r1.thrust - r0.thrust) / 0.01
         g_pitch[k] = -gP[k] / dP_db[:, None]
+        dP_dpitch[k] = dP_db
         gT[k] = gT[k] + dT_db[:, None] * g_pitch[k]
         gP[k] = 0.0
     var = lambda g: np.einsum("ij,jk,ik->i", np.nan_to_num(g), cov, np.nan_to_num(g))  # noqa: E731
     bad = ~central.ok | ~ev.ok
     std = {name: np.where(bad, np.nan, np.sqrt(np.maximum(var(g), 0.0)))
            for name, g in (("power", gP), ("thrust", gT), ("pitch", g_pitch))}
-    return std, np.where(bad[:, None], np.nan, gP)
+    return std, np.where(bad[:, None], np.nan, gP), np.nan_to_num(g_pitch), dP_dpitch

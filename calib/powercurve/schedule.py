@@ -90,7 +90,7 @@ class FixedSpeed:
     generator_efficiency: float = 1.0
     kind: str = "fixed_speed"
 
-    def solve(self, solve, p, wind_speed, air_density, guess=None) -> ScheduledCurve:
+    def solve(self, solve, p, wind_speed, air_density, guess=None, pitch_hint=None) -> ScheduledCurve:
         v = np.asarray(wind_speed, float)
         rpm, pitch = np.full(v.shape, float(self.rotor_speed)), np.full(v.shape, float(self.pitch))
         res = solve(p, OperatingConditions(v, rpm, pitch, air_density))
@@ -111,7 +111,7 @@ class TableSchedule:
     generator_efficiency: float = 1.0
     kind: str = "table"
 
-    def solve(self, solve, p, wind_speed, air_density, guess=None) -> ScheduledCurve:
+    def solve(self, solve, p, wind_speed, air_density, guess=None, pitch_hint=None) -> ScheduledCurve:
         v = np.asarray(wind_speed, float)
         rpm = np.interp(v, self.wind_speed, self.rotor_speed)
         pitch = np.interp(v, self.wind_speed, self.pitch)
@@ -227,9 +227,15 @@ class VariableSpeed:
                 return float(np.clip(-b / (2 * a), x[0], x[2])), lam.size
         return float(lam[k]), lam.size
 
-    def solve(self, solve, p, wind_speed, air_density, guess=None) -> ScheduledCurve:
-        """The schedule at parameters ``p``: ``guess`` (a :class:`ScheduledCurve`, e.g. the central
-        one) starts the region-3 pitch search; without it the pitch is bracketed by bisection."""
+    def solve(self, solve, p, wind_speed, air_density, guess=None, pitch_hint=None) -> ScheduledCurve:
+        """The schedule at parameters ``p``.
+
+        ``guess`` (a :class:`ScheduledCurve`, e.g. the central one) starts the region-3 pitch search;
+        without it the pitch is bracketed by bisection. ``pitch_hint`` = (pitch [deg], dP/dβ [W/deg]),
+        arrays over the bins (NaN where unknown; e.g. the central pitch moved by the linearized
+        dβ/dp, :func:`calib.powercurve.linearized.delta_method`), replaces the guess's pitch and takes
+        the first step by Newton instead of a 0.5° probe; the search still iterates to the tolerance.
+        """
         v = np.asarray(wind_speed, float)
         n_points = 0
         if self.tsr_rule == "optimal":
@@ -248,7 +254,11 @@ class VariableSpeed:
         above = np.flatnonzero(res.ok & (res.power > self.rated_power))
         if above.size:
             g = None if guess is None else np.interp(v[above], guess.wind_speed, guess.pitch)
-            b, r, ok, n = self._pitch_to_rated(solve, p, v[above], rpm[above], air_density, g)
+            slope = None
+            if pitch_hint is not None and g is not None:
+                hint_pitch, slope = (np.asarray(x, float)[above] for x in pitch_hint)
+                g = np.where(np.isfinite(hint_pitch), hint_pitch, g)
+            b, r, ok, n = self._pitch_to_rated(solve, p, v[above], rpm[above], air_density, g, slope)
             n_points += n
             pitch[above] = b
             power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
@@ -259,52 +269,57 @@ class VariableSpeed:
             x[bad] = np.nan
         return ScheduledCurve(v, rpm, pitch, power, thrust, cp, ct, status, region, tsr, n_points)
 
-    def _pitch_to_rated(self, solve, p, v, rpm, rho, guess, max_iter=12):
+    def _pitch_to_rated(self, solve, p, v, rpm, rho, guess, slope=None, max_iter=12):
         """Pitch [deg] at which the aerodynamic power equals rated, per point (vectorized).
 
-        Without a guess: bisection on [fine pitch, max pitch] to 0.05°, then secant steps. With a
-        guess: secant steps from (guess, guess + 0.5°). Only the points not yet within
+        Without a guess: bisection on [fine pitch, max pitch] to 0.05°, then secant steps from its
+        bracket. With a guess: from the guess, a first step by Newton with ``slope`` (dP/dβ [W/deg],
+        where finite and negative) or a 0.5° probe, then secant steps. Only the points not yet within
         ``pitch_tol_power`` are solved again. Returns the pitch, the BEM result at it (a
         :class:`_Rows`), whether |P / P_rated − 1| ≤ ``pitch_tol_power`` and the number of points solved.
         """
         n_pts = 0
-        P_r = self.rated_power
+        P_r, tol = self.rated_power, self.pitch_tol_power * self.rated_power
+        n = v.size
 
         def f(beta, k):
             nonlocal n_pts
             n_pts += beta.size
             return solve(p, OperatingConditions(v[k], rpm[k], beta, rho))
 
-        every = np.arange(v.size)
+        every = np.arange(n)
+        b_old, y_old = np.full(n, np.nan), np.full(n, np.nan)
         if guess is None:
-            lo, hi = np.full(v.size, float(self.fine_pitch)), np.full(v.size, self.max_pitch)
+            lo, hi = np.full(n, float(self.fine_pitch)), np.full(n, self.max_pitch)
             while np.max(hi - lo) > 0.05:
                 mid = 0.5 * (lo + hi)
                 r = f(mid, every)
                 too_much = ~r.ok | (r.power > P_r)
                 lo, hi = np.where(too_much, mid, lo), np.where(too_much, hi, mid)
-            b0, b1 = lo, hi
+            r = f(np.concatenate([lo, hi]), np.concatenate([every, every]))
+            b_old, y_old, b = lo, r.power[:n] - P_r, hi
+            rows = _Rows.of(r, slice(n, None))
         else:
-            b0 = np.clip(np.asarray(guess, float), self.fine_pitch, self.max_pitch)
-            b1 = b0 + 0.5
-        r = f(np.concatenate([b0, b1]), np.concatenate([every, every]))
-        y0, y1 = r.power[:v.size] - P_r, r.power[v.size:] - P_r
-        rows = _Rows.of(r, slice(v.size, None))
+            b = np.clip(np.asarray(guess, float), self.fine_pitch, self.max_pitch)
+            rows = _Rows.of(f(b, every), slice(None))
+        y = rows.power - P_r
+        slope = np.full(n, np.nan) if slope is None else np.asarray(slope, float)
         for _ in range(max_iter):
-            active = np.flatnonzero(rows.status == 0)
-            active = active[np.abs(y1[active]) > self.pitch_tol_power * P_r]
-            if not active.size:
+            a = np.flatnonzero((rows.status == 0) & (np.abs(y) > tol))
+            if not a.size:
                 break
-            d = y1[active] - y0[active]
-            safe = np.isfinite(d) & (np.abs(d) > 1e-9 * P_r)
-            step = np.where(safe, -y1[active] * (b1[active] - b0[active]) / np.where(safe, d, 1.0), 0.5)
-            b2 = np.clip(b1[active] + np.clip(step, -5.0, 5.0), self.fine_pitch, self.max_pitch)
-            r = f(b2, active)
-            b0[active], y0[active] = b1[active], y1[active]
-            b1[active], y1[active] = b2, r.power - P_r
-            rows.put(active, r)
-        ok = (rows.status == 0) & (np.abs(y1) <= self.pitch_tol_power * P_r)
-        return b1, rows, ok, n_pts
+            d = y[a] - y_old[a]
+            secant = np.isfinite(d) & (np.abs(d) > 1e-9 * P_r)
+            newton = ~secant & np.isfinite(slope[a]) & (slope[a] < 0)
+            step = np.where(secant, -y[a] * (b[a] - b_old[a]) / np.where(secant, d, 1.0),
+                            np.where(newton, -y[a] / np.where(newton, slope[a], -1.0), 0.5))
+            b2 = np.clip(b[a] + np.clip(step, -5.0, 5.0), self.fine_pitch, self.max_pitch)
+            r = f(b2, a)
+            b_old[a], y_old[a] = b[a], y[a]
+            b[a], y[a] = b2, r.power - P_r
+            rows.put(a, r)
+        ok = (rows.status == 0) & (np.abs(y) <= tol)
+        return b, rows, ok, n_pts
 
 
 @dataclass(eq=False)
