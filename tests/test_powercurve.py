@@ -194,6 +194,17 @@ def test_powercurve_command_writes_tables_figures_and_report(wind_tunnel_result,
     assert (out / "report.md").read_text().splitlines()[2].startswith("Calibrated AEP")
 
 
+def test_without_draws_the_delta_method_carries_the_calibration(wind_tunnel_result, tmp_path, capsys):
+    stage, _ = wind_tunnel_result
+    assert main(["powercurve", str(stage), "--schedule", "fixed", "--rotor-speed", "72", "--pitch", "3",
+                 "--wind", "5:15:0.5", "--draws", "0", "--out", str(tmp_path)]) == 0
+    assert "by the delta method only: no posterior draws" in capsys.readouterr().out
+    import json
+    row = json.loads((tmp_path / "aep.json").read_text())["aep"][4]
+    assert row["sigma_mwh"]["calibration (draws)"] is None
+    assert row["sigma_total_mwh"] >= row["sigma_calibration_delta_mwh"] > 0
+
+
 def test_schedule_table(tmp_path, wind_tunnel_result):
     _, result = wind_tunnel_result
     path = tmp_path / "sched.csv"

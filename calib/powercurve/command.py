@@ -158,18 +158,21 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
     calibration's share of the variance, the delta method against the draws, failures, extrapolation."""
     r = _headline(rows)
     sig = r["sigma_mwh"]
-    cal = np.nan_to_num(sig["calibration (draws)"])
+    by_draws = bool(np.isfinite(sig["calibration (draws)"]))
+    cal = sig["calibration (draws)"] if by_draws else np.nan_to_num(r["sigma_calibration_delta_mwh"])
     total = r["sigma_total_mwh"]
     share = 100 * cal ** 2 / total ** 2 if total > 0 else float("nan")
     words = [f"Calibrated AEP at {r['distribution']}: {r['p50_mwh']:.4g} MWh (P90 {r['p90_mwh']:.4g}, "
              f"1-σ {total:.2g}); the nominal model said {r['nominal_aep_mwh']:.4g} MWh."]
     words.append(f"The calibration's share of the AEP variance is {share:.0f} % (1-σ {cal:.2g} MWh from "
-                 f"{r['draws_used']} posterior draws, delta method {r['sigma_calibration_delta_mwh']:.2g} MWh)")
+                 f"{r['draws_used']} posterior draws, delta method {r['sigma_calibration_delta_mwh']:.2g} MWh)"
+                 if by_draws else f"The calibration's share of the AEP variance is {share:.0f} % (1-σ {cal:.2g} MWh "
+                 "by the delta method only: no posterior draws)")
     others = [f"{k} {v:.2g}" for k, v in sig.items() if k != "calibration (draws)" and v > 0]
     words[-1] += ("; the rest from " + ", ".join(others) + " MWh." if others else "; no other source was stated.")
     sd, dd = pc.draw_std("power"), pc.delta_std.get("power")
-    if dd is not None and pc.n_draws > 1:
-        sig_ok = (sd > 1e-3 * np.nanmax(np.abs(pc.central.power))) & np.isfinite(dd)
+    if dd is not None and np.any(np.isfinite(sd)):
+        sig_ok = np.isfinite(sd) & (sd > 1e-3 * np.nanmax(np.abs(pc.central.power))) & np.isfinite(dd)
         ratio = dd[sig_ok] / sd[sig_ok]
         off = pc.wind_speed[sig_ok][np.abs(ratio - 1) > 0.1]
         words.append(f"Per bin the delta method's σ of power is {np.nanmin(ratio):.2f}–{np.nanmax(ratio):.2f} × the "

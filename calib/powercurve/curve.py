@@ -12,6 +12,7 @@ solves are counted per bin and per draw, never dropped silently.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,13 +140,28 @@ class CalibratedPowerCurve:
         return int(np.count_nonzero(np.any(self.draw_status != 0, axis=1)))
 
     def draw_std(self, quantity: str) -> np.ndarray:
-        """1-σ over the draws that converged, per bin."""
+        """1-σ over the draws that converged, per bin (NaN where fewer than two did)."""
         x = self.draws[quantity]
-        with np.errstate(invalid="ignore"):
-            return np.nanstd(x, axis=0, ddof=1) if self.n_draws > 1 else np.zeros(x.shape[1])
+        n = np.count_nonzero(np.isfinite(x), axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.where(n > 1, np.nanstd(x, axis=0, ddof=1) if x.shape[0] > 1 else np.nan, np.nan)
 
     def draw_quantile(self, quantity: str, q: float) -> np.ndarray:
-        return np.nanquantile(self.draws[quantity], q, axis=0)
+        """The draws' ``q`` quantile per bin (NaN where none converged)."""
+        x = self.draws[quantity]
+        if x.shape[0] == 0:
+            return np.full(x.shape[1], np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanquantile(x, q, axis=0)
+
+    def calibration_power_std(self) -> np.ndarray:
+        """The calibration's 1-σ of aerodynamic power per bin [W]: the draws', or the delta method's
+        where fewer than two draws converged (``--draws 0``)."""
+        sd = self.draw_std("power")
+        delta = self.delta_std.get("power", np.full(sd.shape, np.nan))
+        return np.where(np.isfinite(sd), sd, delta)
 
     def measurement_std(self) -> dict:
         """u_P per bin [W] of each stated measurement item, at the central curve (electrical power)."""
@@ -153,10 +169,10 @@ class CalibratedPowerCurve:
         return {m.name: m.power_std(self.wind_speed, P) for m in self.measurements}
 
     def power_std_total(self) -> np.ndarray:
-        """Combined 1-σ of electrical power per bin [W]: draws, discrepancy, field and measurement
-        items in quadrature."""
+        """Combined 1-σ of electrical power per bin [W]: the calibration (:meth:`calibration_power_std`),
+        discrepancy, field and measurement items in quadrature."""
         eta = self.generator_efficiency
-        parts = [eta * self.draw_std("power"), eta * self.discrepancy_std, eta * self.field_std]
+        parts = [eta * self.calibration_power_std(), eta * self.discrepancy_std, eta * self.field_std]
         parts += list(self.measurement_std().values())
         return np.sqrt(sum(np.nan_to_num(p) ** 2 for p in parts))
 
@@ -169,7 +185,7 @@ class CalibratedPowerCurve:
         field (fully correlated across bins: added linearly over the bins), each measurement item
         (category B: fully correlated across bins). The total adds the sources in quadrature;
         P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where the distribution has weight
-        are left out of the draws' σ and counted.
+        are left out of the draws' σ and counted. Without draws the delta method's σ enters the total.
         """
         if not 0 < availability <= 1:
             raise InputError(f"availability must be in (0, 1], got {availability!r}", "--availability",
@@ -194,7 +210,10 @@ class CalibratedPowerCurve:
             sig["field between nodes"] = float(c @ np.nan_to_num(self.field_std))
             for m, u in self.measurement_std().items():
                 sig[m] = float(c @ np.nan_to_num(u)) / eta          # u is electrical already
-            total = float(np.sqrt(sum(np.nan_to_num(s) ** 2 for s in sig.values())))
+            # without draws (--draws 0) the calibration enters the total by its delta-method value
+            cal = sig["calibration (draws)"] if np.isfinite(sig["calibration (draws)"]) else sig_delta
+            total = float(np.sqrt(np.nan_to_num(cal) ** 2 + sum(np.nan_to_num(s) ** 2 for k, s in sig.items()
+                                                             if k != "calibration (draws)")))
             rows.append({"distribution": name, "aep_mwh": central, "nominal_aep_mwh": nominal,
                          "draws_mean_aep_mwh": float(np.mean(aep_d)) if aep_d.size else float("nan"),
                          "sigma_mwh": sig, "sigma_calibration_delta_mwh": sig_delta, "sigma_total_mwh": total,

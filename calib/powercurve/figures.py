@@ -77,7 +77,9 @@ def aep_figure(rows) -> Figure:
     sources = list(rows[0]["sigma_mwh"])
     bottom = np.zeros(len(rows))
     for i, s in enumerate(sources):
-        var = np.array([np.nan_to_num(r["sigma_mwh"][s]) ** 2 for r in rows])
+        # without draws the calibration's share is its delta-method value (as in the total)
+        var = np.array([np.nan_to_num(r["sigma_mwh"][s] if np.isfinite(r["sigma_mwh"][s]) or s != "calibration (draws)"
+                                      else r["sigma_calibration_delta_mwh"]) ** 2 for r in rows])
         tot = np.array([r["sigma_total_mwh"] ** 2 for r in rows])
         share = np.where(tot > 0, 100 * var / np.where(tot > 0, tot, 1), 0.0)
         bx.bar(x, share, bottom=bottom, color=f"C{i}", label=s)
