@@ -162,22 +162,27 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
     cal = sig["calibration (draws)"] if by_draws else np.nan_to_num(r["sigma_calibration_delta_mwh"])
     total = r["sigma_total_mwh"]
     share = 100 * cal ** 2 / total ** 2 if total > 0 else float("nan")
-    words = [f"Calibrated AEP at {r['distribution']}: {r['p50_mwh']:.4g} MWh (P90 {r['p90_mwh']:.4g}, "
-             f"1-σ {total:.2g}); the nominal model said {r['nominal_aep_mwh']:.4g} MWh."]
-    words.append(f"The calibration's share of the AEP variance is {share:.0f} % (1-σ {cal:.2g} MWh from "
-                 f"{r['draws_used']} posterior draws, delta method {r['sigma_calibration_delta_mwh']:.2g} MWh)"
-                 if by_draws else f"The calibration's share of the AEP variance is {share:.0f} % (1-σ {cal:.2g} MWh "
+    words = [f"Calibrated AEP at {r['distribution']}: {_energy(r['p50_mwh'])} (P90 {_energy(r['p90_mwh'])}, "
+             f"1-σ {_energy(total)}); the nominal model said {_energy(r['nominal_aep_mwh'])}."]
+    words.append(f"The calibration's share of the AEP variance is {share:.0f} % (1-σ {_energy(cal)} from "
+                 f"{r['draws_used']} posterior draws, delta method {_energy(r['sigma_calibration_delta_mwh'])})"
+                 if by_draws else f"The calibration's share of the AEP variance is {share:.0f} % (1-σ {_energy(cal)} "
                  "by the delta method only: no posterior draws)")
-    others = [f"{k} {v:.2g}" for k, v in sig.items() if k != "calibration (draws)" and v > 0]
-    words[-1] += ("; the rest from " + ", ".join(others) + " MWh." if others else "; no other source was stated.")
+    others = [f"{k} {_energy(v)}" for k, v in sig.items() if k != "calibration (draws)" and v > 0]
+    words[-1] += ("; the rest (1-σ) from " + ", ".join(others) + "." if others else "; no other source was stated.")
     sd, dd = pc.draw_std("power"), pc.delta_std.get("power")
     if dd is not None and np.any(np.isfinite(sd)):
         sig_ok = np.isfinite(sd) & (sd > 1e-3 * np.nanmax(np.abs(pc.central.power))) & np.isfinite(dd)
         ratio = dd[sig_ok] / sd[sig_ok]
-        off = pc.wind_speed[sig_ok][np.abs(ratio - 1) > 0.1]
-        words.append(f"Per bin the delta method's σ of power is {np.nanmin(ratio):.2f}–{np.nanmax(ratio):.2f} × the "
-                     "draws' σ" + (f", more than 10 % off at {', '.join(f'{x:g}' for x in off)} m/s."
-                                   if off.size else ", within 10 % in every bin with a spread."))
+        # the draws' σ scatters by 1/sqrt(2(N−1)): a bin is flagged beyond 10 % or twice that scatter
+        scatter = 1 / np.sqrt(2 * max(pc.n_draws - 1, 1))
+        limit = max(0.1, 2 * scatter)
+        off = pc.wind_speed[sig_ok][np.abs(ratio - 1) > limit]
+        if ratio.size:
+            words.append(f"Per bin the delta method's σ of power is {np.min(ratio):.2f}–{np.max(ratio):.2f} × the "
+                         f"draws' σ (which scatters by ±{100 * scatter:.0f} % with {pc.n_draws} draws)"
+                         + (f", more than {100 * limit:.0f} % off at {_ranges(pc.wind_speed, np.isin(pc.wind_speed, off))} m/s."
+                            if off.size else f", within {100 * limit:.0f} % in every bin with a spread."))
     words.append(f"{pc.failed_draws} of {pc.n_draws} draws had a failed BEM solve in some bin "
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")
@@ -187,6 +192,13 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
         words.append(f"{int(outside.sum())} bins lie outside the calibration envelope (extrapolation): "
                      f"{_ranges(pc.wind_speed, outside)} m/s, e.g. {next(e for e in pc.envelope if e)}.")
     return " ".join(words)
+
+
+def _energy(mwh: float) -> str:
+    """An energy in MWh as "18.62 GWh", "341 MWh" or "0.53 MWh" (three or four significant figures)."""
+    if not np.isfinite(mwh):
+        return "n/a"
+    return f"{mwh / 1e3:.4g} GWh" if abs(mwh) >= 1e3 else f"{mwh:.3g} MWh"
 
 
 def _ranges(v, mask) -> str:
