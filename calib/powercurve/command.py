@@ -134,6 +134,9 @@ def run_powercurve(args, printer=print) -> int:
         raise InputError(f"no such result folder: {rdir}", "RESULT_DIR", field="result_dir")
     result = load_result(rdir)
     model = result.rebuild_model()
+    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
+        raise InputError("calib powercurve needs a native-BEM result (an FMU result is not supported yet)",
+                         str(rdir), field="model")
     schedule = _schedule(args, model)
     out = Path(args.out) if args.out else (rdir if rdir.is_dir() else rdir.parent) / "powercurve"
     pc = calibrated_power_curve(result, wind, schedule, args.density, args.draws, args.seed, items, model,
