@@ -44,6 +44,11 @@ def _predict(args) -> int:
     return 0
 
 
+def _powercurve(args) -> int:
+    from calib.powercurve.command import run_powercurve
+    return run_powercurve(args)
+
+
 def _diagnose(args) -> int:
     from calib.diagnosis.command import diagnose_from_args
     return diagnose_from_args(args)
@@ -68,6 +73,7 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
   calib demo               the embedded default job
   calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
   calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
+  calib powercurve DIR     the calibrated power curve and AEP, with their uncertainty
   calib diagnose ...       find, name and add the effect the model misses
   calib scada FILE ...     SCADA 10-minute statistics: filters, IEC power curve, tables
   calib fmu build          build the bundled turbine FMUs from their C sources
@@ -135,6 +141,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)
+    return _add_powercurve(parser, sub)
+
+
+def _add_powercurve(parser, sub):
+    """``parser`` with the ``powercurve`` subcommand added to its subparsers ``sub``."""
+    from calib.powercurve.command import add_powercurve_parser
+    add_powercurve_parser(sub).set_defaults(func=_powercurve)
     return parser
 
 

@@ -1,0 +1,380 @@
+"""A calibrated model's power curve with its uncertainty: :func:`calibrated_power_curve`.
+
+The schedule (:mod:`calib.powercurve.schedule`) is solved at the estimate p̂ (the central curve),
+at the nominal parameters (the nominal model's curve) and at every posterior draw
+p_d ~ N(p̂, Cov(p̂)) (the Laplace covariance of the estimate, ``result.uncertainty.cov_p``), clipped
+to the parameter bounds: the schedule is re-solved per draw, so a draw moves the optimal λ and
+the rated wind speed. Beside the draws' spread, the linearized (delta-method) 1-σ from the exact
+Jacobian at the central schedule (:func:`calib.powercurve.linearized.delta_method`). Failed BEM
+solves are counted per bin and per draw, never dropped silently.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calib.errors import InputError
+from calib.powercurve.aep import aep_weights
+from calib.powercurve.linearized import delta_method
+from calib.powercurve.schedule import ScheduledCurve
+from calib.types import OperatingConditions
+
+__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws",
+           "schedule_warnings"]
+
+#: Quantities summarized per bin.
+QUANTITIES = ("power", "thrust", "cp", "ct", "rotor_speed", "pitch")
+
+
+def iec_bins(start: float, stop: float, step: float = 0.5) -> np.ndarray:
+    """Bin centres [m/s] from ``start`` to ``stop`` (inclusive) every ``step`` (IEC 61400-12-1: 0.5 m/s)."""
+    if not (np.isfinite(start) and np.isfinite(stop) and np.isfinite(step)) or step <= 0 or stop <= start \
+            or start < 0:
+        raise InputError(f"--wind {start:g}:{stop:g}:{step:g}: needs 0 <= start < stop and step > 0", "--wind",
+                         field="wind")
+    n = int(np.floor((stop - start) / step + 1e-9)) + 1
+    return start + step * np.arange(n)
+
+
+def posterior_draws(p_hat, cov, lower, upper, n_draws: int, seed: int = 0):
+    """Gaussian draws from N(p̂, cov), clipped to [lower, upper].
+
+    Returns
+    -------
+    draws : ndarray, shape (n_draws, n_params)
+    n_clipped : int
+        Draws with at least one parameter clipped to a bound.
+    """
+    p_hat = np.asarray(p_hat, float)
+    cov = 0.5 * (np.asarray(cov, float) + np.asarray(cov, float).T)
+    w, V = np.linalg.eigh(cov) if cov.size else (np.zeros(0), np.zeros((0, 0)))
+    L = V * np.sqrt(np.clip(w, 0.0, None))
+    z = np.random.default_rng(seed).standard_normal((n_draws, p_hat.size))
+    raw = p_hat + z @ L.T
+    draws = np.clip(raw, lower, upper)
+    return draws, int(np.count_nonzero(np.any(draws != raw, axis=1)))
+
+
+@dataclass(eq=False)
+class CalibratedPowerCurve:
+    """A calibrated model's power curve with its uncertainty.
+
+    Attributes
+    ----------
+    wind_speed : ndarray, shape (n_bins,)
+        Bin centres [m/s] (hub height, at ``air_density``).
+    air_density : float
+        [kg/m^3]
+    central, nominal : ScheduledCurve
+        At the estimate p̂ and at the nominal parameters.
+    draws : dict of str to ndarray, shape (n_draws, n_bins)
+        Per quantity of :data:`QUANTITIES`, every draw's curve (NaN where its solve failed).
+    draw_status : ndarray of int, shape (n_draws, n_bins)
+    tsr_opt : ndarray, shape (n_draws,)
+    delta_std : dict of str to ndarray, shape (n_bins,)
+        Delta-method 1-σ (:func:`calib.powercurve.linearized.delta_method`); empty when the model
+        has no Jacobian.
+    grad_power : ndarray, shape (n_bins, n_params) or None
+    discrepancy_std, field_std : ndarray, shape (n_bins,)
+        Model-discrepancy and between-node field 1-σ of power from the prediction machinery
+        (:func:`calib.calibration.prediction.predict_outputs`), zero in region 3 (the pitch holds
+        rated power) and where the result has no power channel [W].
+    measurements : tuple of MeasurementItem
+    envelope : tuple of str
+        Per bin, "" inside the calibration envelope, else why not (an extrapolation).
+    generator_efficiency : float
+    notes : list of str
+        Plain sentences on what was included and left out.
+    n_clipped : int
+        Draws clipped to a parameter bound.
+    seconds : float
+        Wall time of the draws.
+    n_bem_points : int
+        BEM points solved for the draws.
+    cov : ndarray, shape (n_params, n_params)
+        The covariance the draws came from.
+    warnings : list of str
+        What the schedule could not do (:func:`schedule_warnings`), for the report's first paragraph.
+    """
+
+    wind_speed: np.ndarray
+    air_density: float
+    schedule: object
+    central: ScheduledCurve
+    nominal: ScheduledCurve
+    draws: dict
+    draw_status: np.ndarray
+    tsr_opt: np.ndarray
+    delta_std: dict
+    grad_power: np.ndarray | None
+    discrepancy_std: np.ndarray
+    field_std: np.ndarray
+    measurements: tuple
+    envelope: tuple
+    generator_efficiency: float
+    rotor_radius: float
+    notes: list = field(default_factory=list)
+    n_clipped: int = 0
+    seconds: float = 0.0
+    n_bem_points: int = 0
+    cov: np.ndarray | None = None
+    warnings: list = field(default_factory=list)
+
+    # ------------------------------------------------------------------ per bin
+    @property
+    def n_draws(self) -> int:
+        return int(self.draw_status.shape[0])
+
+    @property
+    def failed_per_bin(self) -> np.ndarray:
+        """Draws whose solve failed, per bin."""
+        return np.count_nonzero(self.draw_status != 0, axis=0)
+
+    @property
+    def failed_draws(self) -> int:
+        """Draws with at least one failed bin."""
+        return int(np.count_nonzero(np.any(self.draw_status != 0, axis=1)))
+
+    def draw_std(self, quantity: str) -> np.ndarray:
+        """1-σ over the draws that converged, per bin (NaN where fewer than two did)."""
+        x = self.draws[quantity]
+        n = np.count_nonzero(np.isfinite(x), axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.where(n > 1, np.nanstd(x, axis=0, ddof=1) if x.shape[0] > 1 else np.nan, np.nan)
+
+    def draw_quantile(self, quantity: str, q: float) -> np.ndarray:
+        """The draws' ``q`` quantile per bin (NaN where none converged)."""
+        x = self.draws[quantity]
+        if x.shape[0] == 0:
+            return np.full(x.shape[1], np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanquantile(x, q, axis=0)
+
+    def calibration_power_std(self) -> np.ndarray:
+        """The calibration's 1-σ of aerodynamic power per bin [W]: the draws', or the delta method's
+        where fewer than two draws converged (``--draws 0``)."""
+        sd = self.draw_std("power")
+        delta = self.delta_std.get("power", np.full(sd.shape, np.nan))
+        return np.where(np.isfinite(sd), sd, delta)
+
+    def measurement_std(self) -> dict:
+        """u_P per bin [W] of each stated measurement item, at the central curve (electrical power)."""
+        P = self.central.power * self.generator_efficiency
+        return {m.name: m.power_std(self.wind_speed, P) for m in self.measurements}
+
+    def power_std_total(self) -> np.ndarray:
+        """Combined 1-σ of electrical power per bin [W]: the calibration (:meth:`calibration_power_std`),
+        discrepancy, field and measurement items in quadrature."""
+        eta = self.generator_efficiency
+        parts = [eta * self.calibration_power_std(), eta * self.discrepancy_std, eta * self.field_std]
+        parts += list(self.measurement_std().values())
+        return np.sqrt(sum(np.nan_to_num(p) ** 2 for p in parts))
+
+    # ------------------------------------------------------------------ AEP
+    def aep_table(self, cdfs: dict, availability: float = 1.0) -> list[dict]:
+        """AEP [MWh] per wind distribution with its 1-σ per source, P50 and P90.
+
+        P50 is the central curve's AEP; sources: the calibration through the draws (and, beside
+        it, its delta-method value, not added again), the model discrepancy and the between-node
+        field (fully correlated across bins: added linearly over the bins), each measurement item
+        (category B: fully correlated across bins). The total adds the sources in quadrature;
+        P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where the distribution has weight
+        are left out of the draws' σ and counted. Without draws the delta method's σ enters the total.
+        """
+        if not 0 < availability <= 1:
+            raise InputError(f"availability must be in (0, 1], got {availability!r}", "--availability",
+                             field="availability")
+        eta = self.generator_efficiency
+        rows = []
+        for name, cdf in cdfs.items():
+            c = aep_weights(self.wind_speed, cdf) * availability * eta / 1e6     # MWh per W
+            P = self.central.power
+            central = float(c @ P) if np.all(np.isfinite(P[c > 0])) else float("nan")
+            nominal = float(c @ np.nan_to_num(self.nominal.power))
+            Pd = self.draws["power"]
+            used = np.all(np.isfinite(Pd[:, c > 0]), axis=1)
+            aep_d = np.nan_to_num(Pd[used]) @ c
+            sig = {"calibration (draws)": float(np.std(aep_d, ddof=1)) if aep_d.size > 1 else float("nan")}
+            if self.grad_power is not None and self.cov is not None:
+                g = c @ np.nan_to_num(self.grad_power)
+                sig_delta = float(np.sqrt(max(g @ self.cov @ g, 0.0)))
+            else:
+                sig_delta = float("nan")
+            sig["model discrepancy"] = float(c @ np.nan_to_num(self.discrepancy_std))
+            sig["field between nodes"] = float(c @ np.nan_to_num(self.field_std))
+            for m, u in self.measurement_std().items():
+                sig[m] = float(c @ np.nan_to_num(u)) / eta          # u is electrical already
+            # without draws (--draws 0) the calibration enters the total by its delta-method value
+            cal = sig["calibration (draws)"] if np.isfinite(sig["calibration (draws)"]) else sig_delta
+            total = float(np.sqrt(np.nan_to_num(cal) ** 2 + sum(np.nan_to_num(s) ** 2 for k, s in sig.items()
+                                                             if k != "calibration (draws)")))
+            rows.append({"distribution": name, "aep_mwh": central, "nominal_aep_mwh": nominal,
+                         "draws_mean_aep_mwh": float(np.mean(aep_d)) if aep_d.size else float("nan"),
+                         "sigma_mwh": sig, "sigma_calibration_delta_mwh": sig_delta, "sigma_total_mwh": total,
+                         "p50_mwh": central, "p90_mwh": central - 1.2815515655446004 * total,
+                         "draws_used": int(used.sum()), "draws_left_out": int((~used).sum()),
+                         "availability": availability})
+        return rows
+
+
+def _power_model(model):
+    """The same BEM model with channels power and thrust (for the delta method)."""
+    if not hasattr(model, "spec") or not getattr(model.capabilities, "rebuildable", False):
+        return None
+    from calib.models.bem_model import BemModel
+    if not isinstance(model, BemModel):
+        return None
+    return BemModel(model.rotor, model.grid, ("power", "thrust"), model.settings, model.nuisance, model.rotor_source,
+                    model.effects)
+
+
+def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float = 1.225, n_draws: int = 1000,
+                           seed: int = 0, measurements=(), model=None, tsr_rule: str = "optimal",
+                           progress=None) -> CalibratedPowerCurve:
+    """The calibrated model's power curve with its uncertainty.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    wind_speed : array_like, shape (n_bins,)
+        Hub-height wind speeds, the bin centres [m/s].
+    schedule : VariableSpeed, FixedSpeed or TableSchedule, optional
+        Default: the rotor's own variable-speed schedule (:meth:`VariableSpeed.from_rotor`).
+    air_density : float
+        [kg/m^3]
+    n_draws : int
+        Posterior draws (0: the delta method only).
+    seed : int
+    measurements : sequence of MeasurementItem
+    model : BemModel, optional
+        Default: rebuilt from the result.
+    tsr_rule : str
+        For the default schedule: ``"optimal"`` or ``"design"``.
+    progress : callable, optional
+        Called as ``progress(done, total)`` during the draws.
+
+    Returns
+    -------
+    CalibratedPowerCurve
+
+    Raises
+    ------
+    InputError
+        A negative density, a model without ``solve`` (an FMU: not yet supported here), a
+        parameter count that differs from the result's, a rotor without a schedule and none given.
+    """
+    from calib.powercurve.schedule import VariableSpeed
+
+    if not (np.isfinite(air_density) and air_density > 0):
+        raise InputError(f"--density must be > 0 kg/m^3, got {air_density!r}", "--density", field="density")
+    if n_draws < 0:
+        raise InputError(f"--draws must be >= 0, got {n_draws}", "--draws", field="draws")
+    model = result.rebuild_model() if model is None else model
+    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
+        raise InputError("the power curve needs the native BEM model (an FMU result is not supported by "
+                         "calib powercurve yet)", result.name, field="model")
+    schedule = VariableSpeed.from_rotor(model.rotor, tsr_rule) if schedule is None else schedule
+    v = np.asarray(wind_speed, float)
+    p_hat = np.asarray(result.estimate.p_hat, float)
+    if p_hat.size != len(model.parameters):
+        raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
+                         field="parameters")
+    cov = np.asarray(result.uncertainty.cov_p, float)
+    lower = np.array([q.lower for q in model.parameters], float)
+    upper = np.array([q.upper for q in model.parameters], float)
+    notes = []
+    central = schedule.solve(model.solve, p_hat, v, air_density)
+    nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
+    warnings = schedule_warnings(schedule, central)
+    notes.append(f"estimator {result.estimator!r}: the draws and the delta method use its recorded covariance "
+                 "(result.uncertainty.cov_p)")
+
+    pm = _power_model(model)
+    delta, grad, pitch_grad, dP_dpitch = {}, None, None, None
+    if pm is not None:
+        delta, grad, pitch_grad, dP_dpitch = delta_method(pm, p_hat, cov, central, air_density, schedule)
+    else:
+        notes.append("no delta-method value: the model has no exact Jacobian here")
+
+    draws_p, n_clipped = posterior_draws(p_hat, cov, lower, upper, n_draws, seed)
+    out = {q: np.full((n_draws, v.size), np.nan) for q in QUANTITIES}
+    status = np.zeros((n_draws, v.size), int)
+    tsr = np.full(n_draws, np.nan)
+    n_pts = 0
+    t0 = time.perf_counter()
+    for d in range(n_draws):
+        # the linearized pitch of this draw starts its region-3 search (the search iterates to tolerance)
+        hint = None if pitch_grad is None else (central.pitch + pitch_grad @ (draws_p[d] - p_hat), dP_dpitch)
+        c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central, pitch_hint=hint)
+        for q in QUANTITIES:
+            x = getattr(c, q)
+            out[q][d] = np.where(c.ok, x, np.nan)
+        status[d], tsr[d], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
+        if progress is not None and (d + 1) % 100 == 0:
+            progress(d + 1, n_draws)
+    seconds = time.perf_counter() - t0
+
+    disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
+    return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
+                                disc, fld, tuple(measurements), envelope,
+                                float(getattr(schedule, "generator_efficiency", 1.0)),
+                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
+
+
+def schedule_warnings(schedule, central: ScheduledCurve) -> list[str]:
+    """Sentences on what a variable-speed schedule could not do at the central curve: rated power
+    never reached in the bins, or the rotor at its maximum speed from the first bin (a speed limit
+    below what region 2 asks at the lowest wind speed)."""
+    out = []
+    if getattr(schedule, "kind", "") != "variable_speed":
+        return out
+    ok = central.ok
+    if ok.any() and not np.any(central.region == 3):
+        out.append(f"the calibrated rotor does not reach rated power ({schedule.rated_power / 1e6:.4g} MW) in any bin "
+                   f"up to {central.wind_speed[ok][-1]:g} m/s (at most {np.nanmax(central.power) / 1e6:.4g} MW): "
+                   "every bin stays in region 2")
+    if ok.any() and central.rotor_speed[ok][0] >= schedule.max_rotor_speed - 1e-9:
+        out.append(f"the rotor is at its maximum speed {schedule.max_rotor_speed:g} rpm from the first bin "
+                   f"({central.wind_speed[ok][0]:g} m/s): the speed limit is below what the tip-speed ratio asks there")
+    return out
+
+
+def _prediction_terms(result, model, central, air_density, notes):
+    """The model-discrepancy and between-node field 1-σ of power per bin [W] (zero in region 3) and
+    the envelope flags, from :func:`calib.calibration.prediction.predict_outputs` at the central
+    schedule; a sentence on each appended to ``notes``."""
+    v = central.wind_speed
+    disc, fld, envelope = np.zeros(v.size), np.zeros(v.size), ("",) * v.size
+    try:
+        pred = result.predict(OperatingConditions(v, central.rotor_speed, central.pitch, air_density),
+                              _result_channels_model(model, result))
+        envelope = tuple(pred.envelope) if pred.envelope else envelope
+        if "power" in pred.channels:
+            i = list(pred.channels).index("power")
+            r2 = central.region != 3
+            disc = np.where(r2, np.nan_to_num(pred.discrepancy_std[:, i]), 0.0)
+            fld = np.where(r2, np.nan_to_num(pred.field_std[:, i]), 0.0) if pred.field_std is not None else fld
+            notes.append(f"model discrepancy of power: {pred.discrepancy or 'none recorded'}; field between the "
+                         f"nodes: {pred.representation}; both added in quadrature per bin, zero in region 3")
+        else:
+            notes.append("the calibration has no power channel: no model-discrepancy or between-node field term "
+                         "for power (only the parameter uncertainty)")
+    except InputError as exc:
+        notes.append(f"no discrepancy term and no envelope check: {exc}")
+    return disc, fld, envelope
+
+
+def _result_channels_model(model, result):
+    """``model`` with the result's channels (what :func:`predict_outputs` needs)."""
+    names = [c.name for c in model.channels]
+    if all(c in names for c in result.channels):
+        return model
+    from calib.models.bem_model import BemModel
+    return BemModel(model.rotor, model.grid, tuple(result.channels), model.settings, model.nuisance,
+                    model.rotor_source, model.effects)

@@ -1,0 +1,313 @@
+"""calib.powercurve: the calibrated power curve, its uncertainty and the AEP (issue 41).
+
+The result used is a real calibration: ``calib run workflows/wind_tunnel_hub_loads.toml`` (NREL
+Phase VI, MAP estimator, hub power and thrust), about 10 s.
+"""
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.special import erf
+
+from calib.bem.steady_control import steady_power_curve
+from calib.cli import main
+from calib.models.bem_model import BemModel
+from calib.powercurve import (FixedSpeed, VariableSpeed, aep, calibrated_power_curve, iec_bins, parse_measurement,
+                              posterior_draws, rayleigh_cdf, weibull_cdf)
+from calib.powercurve.schedule import schedule_from_table
+from calib.rotor.geometry import OperatingSchedule
+from calib.rotor.library import load_rotor, reference_path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: An operating schedule for the Phase VI rotor (R = 5.03 m) so the variable-speed path runs on a calibrated
+#: result: rated 5 kW aerodynamic, 40-72 rpm, design λ 5.
+PHASE_VI_SCHEDULE = OperatingSchedule(rated_power=5000.0, min_rotor_speed=40.0, max_rotor_speed=72.0,
+                                      design_tsr=5.0, fine_pitch=3.0, cut_in=4.0, cut_out=20.0)
+
+
+@pytest.fixture(scope="module")
+def wind_tunnel_result(tmp_path_factory):
+    from calib.calibration.result_files import load_result
+
+    out = tmp_path_factory.mktemp("wt")
+    assert main(["run", str(ROOT / "workflows" / "wind_tunnel_hub_loads.toml"), "--out", str(out), "-q"]) == 0
+    stage = next(out.glob("stage*/result.json")).parent
+    return stage, load_result(stage)
+
+
+def _variable_speed(model, rule):
+    rotor = dataclasses.replace(model.rotor, schedule=PHASE_VI_SCHEDULE)
+    return rotor, VariableSpeed.from_rotor(rotor, rule)
+
+
+def _scaled(result, factor):
+    return result.replace(uncertainty=dataclasses.replace(result.uncertainty, cov_p=result.uncertainty.cov_p * factor))
+
+
+# ------------------------------------------------------------------------------ (a) delta method vs draws
+@pytest.mark.parametrize("kind", ["fixed", "variable"])
+def test_delta_method_agrees_with_draws_where_near_linear(wind_tunnel_result, kind):
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    small = _scaled(result, 1e-4)          # σ of every parameter 1 % of the calibration's: near-linear
+    schedule = FixedSpeed(72.0, 3.0) if kind == "fixed" else _variable_speed(model, "optimal")[1]
+    v = iec_bins(5.0, 15.0, 1.0)
+    pc = calibrated_power_curve(small, v, schedule, n_draws=300, seed=3, model=model)
+    assert pc.failed_draws == 0
+    sd, dd = pc.draw_std("power"), pc.delta_std["power"]
+    # region 3's spread is the pitch search's tolerance (1e-4 P_rated), checked below
+    spread = (pc.central.region == 2) & (sd > 1e-6 * np.nanmax(pc.central.power))
+    assert spread.sum() >= 3
+    # 300 draws: the sample σ scatters by 1/sqrt(2·299) = 4.1 %; 13 % is 3.2 of those
+    np.testing.assert_allclose(dd[spread], sd[spread], rtol=0.13)
+    # the same draws through the linearization: no sampling scatter, so tighter
+    D, _ = posterior_draws(result.estimate.p_hat, small.uncertainty.cov_p, -np.inf, np.inf, 300, 3)
+    lin = (D - result.estimate.p_hat) @ pc.grad_power.T
+    np.testing.assert_allclose(np.std(lin, axis=0, ddof=1)[spread], sd[spread], rtol=0.03)
+    if kind == "variable":
+        assert np.any(pc.central.region == 3) and np.any(pc.central.region == 2)
+        # the pitch holds rated power in region 3: no power spread there, by either method
+        r3 = pc.central.region == 3
+        assert np.all(dd[r3] == 0)
+        assert np.all(sd[r3] < 2e-4 * PHASE_VI_SCHEDULE.rated_power)
+
+
+# ------------------------------------------------------------------------------ (b) zero covariance
+def test_zero_covariance_collapses_the_band_onto_steady_power_curve(wind_tunnel_result):
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    nominal_p = model.chain.nominal()
+    zero = result.replace(estimate=dataclasses.replace(result.estimate, p_hat=nominal_p),
+                          uncertainty=dataclasses.replace(result.uncertainty,
+                                                          cov_p=np.zeros_like(result.uncertainty.cov_p)))
+    rotor, schedule = _variable_speed(model, "design")
+    v = iec_bins(4.0, 20.0, 0.5)
+    pc = calibrated_power_curve(zero, v, schedule, n_draws=5, model=model)
+    r2 = pc.central.region == 2
+    for q in ("power", "thrust", "pitch", "rotor_speed"):
+        x = pc.draws[q]
+        assert np.all(x == x[0]), q                                 # every draw is the same curve
+        np.testing.assert_array_equal(x[0][r2], getattr(pc.central, q)[r2])
+    # above rated the draws start their pitch search from the central curve: the same rated power to 1e-4
+    np.testing.assert_allclose(pc.draws["power"][0][~r2], pc.central.power[~r2], rtol=1e-4)
+    ref = steady_power_curve(rotor, v, settings=model.settings, polars=model.polars)
+    assert ref.result.n_failed == 0 and np.all(pc.central.ok)
+    np.testing.assert_allclose(pc.central.rotor_speed, ref.rotor_speed, rtol=1e-12)
+    assert r2.any() and (~r2).any()
+    np.testing.assert_allclose(pc.central.power[r2], ref.result.power[r2], rtol=1e-9)
+    # above rated both pitch to rated power: steady_power_curve by bisection to 1e-3 deg, this to 1e-4 P_rated
+    np.testing.assert_allclose(pc.central.power[~r2], ref.result.power[~r2], rtol=2e-3)
+    np.testing.assert_allclose(pc.central.pitch, ref.pitch, atol=0.02)
+    # the delta method collapses too, and the nominal curve is the central one
+    assert np.all(pc.delta_std["power"][np.isfinite(pc.delta_std["power"])] == 0)
+    np.testing.assert_allclose(pc.nominal.power, pc.central.power, rtol=1e-4)
+
+
+# ------------------------------------------------------------------------------ (c) AEP against analytic integrals
+def _ramp_aep_analytic(a, b, c, P_r, mean):
+    """∫ P(V) f(V) dV × 8760 h for P = P_r (V − a)/(b − a) on [a, b], P_r on [b, c], 0 beyond, Rayleigh(mean)."""
+    k = np.pi / (4 * mean ** 2)
+    E = lambda x: np.exp(-k * x ** 2)  # noqa: E731  (1 − F)
+    gauss = 0.5 * np.sqrt(np.pi / k) * (erf(np.sqrt(k) * b) - erf(np.sqrt(k) * a))   # ∫_a^b E dV
+    ramp = (-(b - a) * E(b) + gauss) / (b - a)         # ∫_a^b (V − a)/(b − a) f dV by parts
+    flat = E(b) - E(c)
+    return 8760.0 * P_r * (ramp + flat)
+
+
+@pytest.mark.parametrize("mean", [4.0, 7.0, 11.0])
+def test_aep_of_a_ramp_matches_the_analytic_integral(mean):
+    a, b, c, P_r = 3.0, 12.0, 25.0, 5e6
+    exact = _ramp_aep_analytic(a, b, c, P_r, mean)
+    cdf = lambda x: rayleigh_cdf(x, mean)  # noqa: E731
+    for step, rtol in ((0.5, 0.01), (0.05, 2e-4)):
+        v = iec_bins(a + step, c, step)                # P_0 = 0 at V_0 = a: the ramp starts at zero
+        P = np.clip(P_r * (v - a) / (b - a), 0, P_r)
+        assert aep(v, P, cdf) == pytest.approx(exact, rel=rtol)
+    # a Weibull of k = 2 and A = 2 V̄/√π is the Rayleigh distribution of mean V̄
+    v = iec_bins(3.5, 25, 0.5)
+    P = np.clip(P_r * (v - a) / (b - a), 0, P_r)
+    assert aep(v, P, lambda x: weibull_cdf(x, 2.0, 2 * mean / np.sqrt(np.pi))) == pytest.approx(aep(v, P, cdf),
+                                                                                                 rel=1e-12)
+
+
+def test_aep_of_a_constant_power_is_hours_times_probability():
+    # P = P_r on every bin: the IEC sum telescopes to P_r [F(V_N) − F(V_0)] minus half the first bin's probability
+    v = iec_bins(3.0, 25.0, 0.5)
+    F = lambda x: rayleigh_cdf(x, 8.0)  # noqa: E731
+    expected = 8760 * 2e6 * (F(25.0) - F(2.5) - 0.5 * (F(3.0) - F(2.5)))
+    assert aep(v, np.full(v.size, 2e6), F) == pytest.approx(expected, rel=1e-12)
+
+
+# ------------------------------------------------------------------------------ (d) NREL 5-MW against OpenFAST
+def test_nrel5mw_nominal_power_curve_against_openfast_steady_table():
+    """The native BEM through the rotor's schedule (not OpenFAST's operating points) against OpenFAST's
+    steady table (calib/data/reference/NREL5MW_Oper_openfast_sim.csv, provenance in PROVENANCE.txt there).
+
+    Tolerances per bin, electrical power (aerodynamic × 0.944): 5 m/s 7 % and 6 m/s 4 % (the schedule's
+    minimum rotor speed is 6.9 rpm, OpenFAST's controller runs 7.5 and 7.9 rpm there), 7-11 m/s 3.5 %
+    (the rigid BEM is 1-3 % above OpenFAST in region 2, tests/test_bem_validation.py), 12-25 m/s 0.1 %
+    (rated); blade pitch above rated within 0.4°; aerodynamic thrust (RtAeroFxh) 8 % at 5-7 m/s (there
+    OpenFAST's rotor runs 3-15 % faster than the schedule's λ 7.55 or its 6.9 rpm minimum) and 3 % from 8 m/s.
+    """
+    rotor = load_rotor("nrel5mw")
+    model = BemModel(rotor, None, ("power", "thrust"), nuisance=())
+    with open(reference_path("NREL5MW_Oper_openfast_sim.csv"), newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if 5.0 <= float(r["WS_[m/s]"]) <= 25.0]
+    col = lambda k: np.array([float(r[k]) for r in rows])  # noqa: E731
+    v = col("WS_[m/s]")
+    schedule = VariableSpeed.from_rotor(rotor, "design")
+    curve = schedule.solve(model.solve, np.zeros(0), v, 1.225)
+    assert np.all(curve.ok)
+    power = curve.power * schedule.generator_efficiency / col("GenPower_[kW]") / 1e3 - 1
+    tol = np.where(v <= 5, 0.07, np.where(v <= 6, 0.04, np.where(v <= 11, 0.035, 0.001)))
+    assert np.all(np.abs(power) < tol), dict(zip(v, np.round(power, 4)))
+    above = v >= 12
+    assert np.all(curve.region[above] == 3) and np.all(curve.region[~above] == 2)
+    assert np.all(np.abs(curve.pitch[above] - col("BldPitch_[deg]")[above]) < 0.4)
+    thrust = curve.thrust / (col("RtAeroFxh_[kN]") * 1e3) - 1
+    assert np.all(np.abs(thrust) < np.where(v <= 7, 0.08, 0.03)), dict(zip(v, np.round(thrust, 4)))
+
+
+# ------------------------------------------------------------------------------ the command, and bad input
+def test_powercurve_command_writes_tables_figures_and_report(wind_tunnel_result, tmp_path, capsys):
+    stage, _ = wind_tunnel_result
+    out = tmp_path / "pc"
+    assert main(["powercurve", str(stage), "--schedule", "fixed", "--rotor-speed", "72", "--pitch", "3",
+                 "--wind", "5:15:0.5", "--draws", "20", "--out", str(out), "--weibull", "2,7",
+                 "--measurement", "anemometer=wind:2", "--measurement", "transducer=power:0.5"]) == 0
+    printed = capsys.readouterr().out
+    assert "Calibrated AEP at Weibull k=2 A=7 m/s" in printed and "P90" in printed
+    for name in ("powercurve.csv", "powercurve.json", "aep.csv", "aep.json", "powercurve.png", "cp_tsr.png",
+                 "aep.png", "report.md"):
+        assert (out / name).stat().st_size > 0, name
+    import json
+    data = json.loads((out / "aep.json").read_text())
+    names = [r["distribution"] for r in data["aep"]]
+    assert names[:8] == [f"Rayleigh {m} m/s" for m in range(4, 12)] and names[8].startswith("Weibull")
+    r = data["aep"][3]
+    assert set(r["sigma_mwh"]) >= {"calibration (draws)", "model discrepancy", "anemometer", "transducer"}
+    assert r["p90_mwh"] < r["p50_mwh"]
+    assert (out / "report.md").read_text().splitlines()[2].startswith("Calibrated AEP")
+
+
+def test_without_draws_the_delta_method_carries_the_calibration(wind_tunnel_result, tmp_path, capsys):
+    stage, _ = wind_tunnel_result
+    assert main(["powercurve", str(stage), "--schedule", "fixed", "--rotor-speed", "72", "--pitch", "3",
+                 "--wind", "5:15:0.5", "--draws", "0", "--out", str(tmp_path)]) == 0
+    assert "by the delta method only: no posterior draws" in capsys.readouterr().out
+    import json
+    row = json.loads((tmp_path / "aep.json").read_text())["aep"][4]
+    assert row["sigma_mwh"]["calibration (draws)"] is None
+    assert row["sigma_total_mwh"] >= row["sigma_calibration_delta_mwh"] > 0
+
+
+def test_schedule_table(tmp_path, wind_tunnel_result):
+    _, result = wind_tunnel_result
+    path = tmp_path / "sched.csv"
+    path.write_text("wind_speed,rotor_speed,pitch\n5,72,3\n15,72,3\n")
+    table = schedule_from_table(path)
+    model = result.rebuild_model()
+    v = iec_bins(5, 15, 1)
+    a = table.solve(model.solve, result.estimate.p_hat, v, 1.225)
+    b = FixedSpeed(72.0, 3.0).solve(model.solve, result.estimate.p_hat, v, 1.225)
+    np.testing.assert_array_equal(a.power, b.power)
+
+
+@pytest.mark.parametrize("args, names", [
+    (["/nonexistent/result"], "RESULT_DIR"),
+    (["{stage}", "--wind", "3-25"], "--wind"),
+    (["{stage}", "--wind", "10:5:0.5"], "--wind"),
+    (["{stage}", "--density", "-1"], "--density"),
+    (["{stage}", "--weibull", "0,8"], "--weibull"),
+    (["{stage}", "--measurement", "anemometer=speed:2"], "--measurement"),
+    (["{stage}", "--availability", "1.5"], "--availability"),
+    (["{stage}"], "--schedule"),                 # the Phase VI rotor has no schedule of its own
+    (["{stage}", "--schedule", "fixed"], "--rotor-speed"),
+    (["{stage}", "--schedule", "missing.csv"], "missing.csv"),
+])
+def test_bad_input_is_a_clean_error_naming_the_option(wind_tunnel_result, tmp_path, capsys, args, names):
+    stage, _ = wind_tunnel_result
+    args = [a.format(stage=stage) for a in args]
+    assert main(["powercurve", *args, "--draws", "2", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("calib: error:") and names in err and "Traceback" not in err
+
+
+def test_measurement_items():
+    m = parse_measurement("anemometer calibration=wind:2%")
+    assert (m.name, m.kind, m.relative) == ("anemometer calibration", "wind", 0.02)
+    v = np.array([5.0, 6.0, 7.0])
+    P = np.array([1.0, 2.0, 3.0]) * 1e6          # dP/dV = 1 MW per m/s
+    np.testing.assert_allclose(m.power_std(v, P), 0.02 * v * 1e6)
+    np.testing.assert_allclose(parse_measurement("rho=density:3").power_std(v, P), 0.01 * v * 1e6)
+    np.testing.assert_allclose(parse_measurement("t=power:0.5").power_std(v, P), 0.005 * P)
+
+
+class _FailingAt:
+    """A model whose solve fails at one wind speed for the draws with p[0] above the estimate's."""
+
+    def __init__(self, model, wind_speed, p0):
+        self._model, self._v, self._p0 = model, wind_speed, p0
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    def solve(self, p, conditions, sensitivities=False):
+        from calib.types import Status
+        res = self._model.solve(p, conditions, sensitivities)
+        if p[0] > self._p0:
+            hit = np.isclose(conditions.wind_speed, self._v)
+            res = dataclasses.replace(res, status=np.where(hit, int(Status.NOT_CONVERGED), res.status),
+                                      power=np.where(hit, np.nan, res.power))
+        return res
+
+
+def test_failed_solves_are_counted_never_dropped(wind_tunnel_result):
+    from calib.powercurve.command import summary_paragraph
+    _, result = wind_tunnel_result
+    p_hat = result.estimate.p_hat
+    model = _FailingAt(result.rebuild_model(), 10.0, p_hat[0])
+    v = iec_bins(5.0, 15.0, 1.0)
+    pc = calibrated_power_curve(result, v, FixedSpeed(72.0, 3.0), n_draws=30, seed=1, model=model)
+    D, _ = posterior_draws(p_hat, result.uncertainty.cov_p,
+                           [q.lower for q in model.parameters], [q.upper for q in model.parameters], 30, 1)
+    n_bad = int(np.count_nonzero(D[:, 0] > p_hat[0]))
+    assert 0 < n_bad < 30
+    assert pc.failed_per_bin.tolist() == [n_bad if x == 10.0 else 0 for x in v]
+    assert pc.failed_draws == n_bad
+    assert np.isnan(pc.draws["power"][D[:, 0] > p_hat[0], v.tolist().index(10.0)]).all()
+    row = pc.aep_table({"R7": lambda x: rayleigh_cdf(x, 7.0)})[0]
+    assert (row["draws_used"], row["draws_left_out"]) == (30 - n_bad, n_bad)
+    assert f"{n_bad} of 30 draws had a failed BEM solve" in summary_paragraph(pc, [row])
+    # the wrapper has no exact Jacobian of the scheduled power: said, not faked
+    assert pc.delta_std == {} and any("no delta-method value" in n for n in pc.notes)
+
+
+def test_a_schedule_the_rotor_cannot_follow_is_said(wind_tunnel_result):
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    v = iec_bins(5.0, 10.0, 1.0)
+    too_high = dataclasses.replace(PHASE_VI_SCHEDULE, rated_power=1e6)            # 1 MW from a 10 m rotor
+    rotor = dataclasses.replace(model.rotor, schedule=too_high)
+    pc = calibrated_power_curve(result, v, VariableSpeed.from_rotor(rotor, "design"), n_draws=2, model=model)
+    assert any("does not reach rated power" in w for w in pc.warnings)
+    slow = dataclasses.replace(PHASE_VI_SCHEDULE, min_rotor_speed=10.0, max_rotor_speed=20.0)
+    rotor = dataclasses.replace(model.rotor, schedule=slow)
+    pc = calibrated_power_curve(result, v, VariableSpeed.from_rotor(rotor, "design"), n_draws=2, model=model)
+    assert any("maximum speed 20 rpm from the first bin" in w for w in pc.warnings)
+    upside_down = dataclasses.replace(PHASE_VI_SCHEDULE, min_rotor_speed=80.0)
+    with pytest.raises(Exception, match="cannot be followed"):
+        VariableSpeed.from_rotor(dataclasses.replace(model.rotor, schedule=upside_down))
+
+
+def test_powercurve_help_describes_every_option(capsys):
+    with pytest.raises(SystemExit):
+        main(["powercurve", "--help"])
+    text = capsys.readouterr().out
+    for option in ("--wind", "--density", "--draws", "--schedule", "--tsr", "--weibull", "--availability",
+                   "--measurement", "--out"):
+        assert option in text
