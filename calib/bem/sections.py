@@ -9,11 +9,13 @@ implicit-function theorem at the root (Ning 2014).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from calib.bem import dual as dl
+from calib.bem import kernel
 from calib.bem.chain import COL_PHI, COL_PITCH, COL_WIND, BoundChain
 from calib.bem.kinematics import curvature, wind_components
 from calib.bem.multiple_roots import (SCAN_STEP_DEG, WINDOW_DEG, SlopeEnvelope, lowest_roots,
@@ -24,6 +26,9 @@ from calib.bem.stages import LoadsState, PolarState, RotorData, SectionContext
 
 RESIDUAL_TOL = 1e-8
 """A section counts as converged when |R(φ*)| is below this [-]."""
+
+_TABLE_ENVELOPES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+"""Slope envelope of each SectionPolars' own tables (no polar effect), built at first use."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,16 +147,28 @@ class Roots:
 
 
 def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, rotor) -> Roots:
-    """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots."""
+    """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots.
 
-    def residual(idx, phi):
-        _, cl, cd = _polar(chain, polars, sec, idx, phi)
-        eq = section_equations(phi, cl, cd, sec.vx[idx], sec.vy[idx], sec.geo.take(idx),
-                               losses=_induction(chain, sec.ctx.take(idx)), **opts)
-        return eq["residual"]
+    Without polar or induction effects in the chain, the compiled kernel (:mod:`calib.bem.kernel`)
+    runs the residual and the iteration when it is available: the same arithmetic, one pass.
+    """
 
-    lo, hi, flo, fhi, found = bracket(residual, sec.n)
-    phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
+    lib = None if (chain.has("polar") or chain.has("induction")) else kernel.library()
+    if lib is not None:
+        compiled = kernel.SectionKernel(lib, polars, sec.station, sec.theta, sec.vx, sec.vy, sec.geo.r,
+                                        sec.geo.sigma, sec.geo.hub_radius, sec.geo.tip_radius, sec.geo.n_blades,
+                                        opts)
+        residual = compiled.residual
+        lo, hi, flo, fhi, found, phi, fphi, iters = compiled.solve(max_iter=settings.max_iter)
+    else:
+        def residual(idx, phi):
+            _, cl, cd = _polar(chain, polars, sec, idx, phi)
+            eq = section_equations(phi, cl, cd, sec.vx[idx], sec.vy[idx], sec.geo.take(idx),
+                                   losses=_induction(chain, sec.ctx.take(idx)), **opts)
+            return eq["residual"]
+
+        lo, hi, flo, fhi, found = bracket(residual, sec.n)
+        phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
     conv = found & np.isfinite(fphi) & (np.abs(fphi) <= RESIDUAL_TOL)
     n_roots = conv.astype(int)
     if settings.search_multiple_roots and conv.any():
@@ -163,8 +180,11 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
         stalled = slopes[0] < 0.0
         ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
         _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci])
-        d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, sec.vx[ci], sec.vy[ci], sec.geo.take(ci), opts,
-                                            _induction(chain, sec.ctx.take(np.concatenate([ci] * 4))))
+        if lib is not None:
+            d0, d_cl, d_cd = compiled.residual_partials(ci, phi[ci], cl_c, cd_c)
+        else:
+            d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, sec.vx[ci], sec.vy[ci], sec.geo.take(ci), opts,
+                                                _induction(chain, sec.ctx.take(np.concatenate([ci] * 4))))
         search = np.zeros(sec.n, bool)
         search[ci] = needs_search(d0, d_cl, d_cd, slopes)
         phi, fphi, n_found = lowest_roots(residual, phi, fphi, lo, hi, search, np.radians(SCAN_STEP_DEG),
@@ -184,7 +204,10 @@ def slope_envelope(chain: BoundChain, polars, sec: Sections, rotor, alpha_range=
     covers all four (exact bounds for effects whose slope is monotone in each of the two).
     """
     if not chain.has("polar"):
-        return SlopeEnvelope.build(polars.cl_slopes, polars.cd_slopes, polars.step_deg, WINDOW_DEG)
+        if polars not in _TABLE_ENVELOPES:      # a function of the tables alone: once per SectionPolars
+            _TABLE_ENVELOPES[polars] = SlopeEnvelope.build(polars.cl_slopes, polars.cd_slopes, polars.step_deg,
+                                                           WINDOW_DEG)
+        return _TABLE_ENVELOPES[polars]
     n_st, n_all = polars.cl_nodes.shape
     h = polars.step_deg
     first, last = 0, n_all - 1

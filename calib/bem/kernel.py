@@ -1,0 +1,205 @@
+"""The compiled root search of the native BEM, built from ``kernel.c`` at first use.
+
+The root search is most of a BEM solve: about ten evaluations of Ning's residual per section
+(two to four for the bracket, the rest Anderson-Björck steps), each a polar look-up, the
+loss factors and the induction. In numpy every step of that is a pass over all sections
+with a temporary array and a Python round trip per iteration; ``kernel.c`` does the same
+arithmetic, in the same order, one section at a time (the bracket, the iteration and the
+residual of :mod:`calib.bem.rootfind`, :mod:`calib.bem.residual` and
+:meth:`calib.bem.polar_grid.SectionPolars.lookup`). It is used when the effect chain has no
+polar or induction stage (those run Python effects inside the residual); derivatives are
+unaffected (the section pass at the root stays in numpy, on dual numbers).
+
+Build: the C compiler ``$CC`` (else ``cc``, ``gcc``, ``clang``) makes a shared library with
+``-O2 -ffp-contract=off`` (no fused multiply-add, no fast-math: the numpy path's rounding),
+cached by a hash of the source, the compiler and the platform in ``$CALIB_CACHE/bem_kernel``
+(default ``<repo>/.calib_cache/bem_kernel``; a temporary directory when that is not
+writable). Never a committed binary. When no compiler is found or the build fails, the
+numpy path is used (:func:`status` says why); ``CALIB_BEM_KERNEL=numpy`` forces the numpy
+path, ``CALIB_BEM_KERNEL=c`` makes a failed build an error.
+
+References
+----------
+S.A. Ning, Wind Energy 17 (2014) 1327-1345 (residual, brackets).
+N. Anderson, Å. Björck, BIT 13 (1973) 253-264 (the iteration).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+from calib.errors import CalibError
+
+SOURCE = Path(__file__).with_name("kernel.c")
+REPO_ROOT = Path(__file__).resolve().parents[2]
+FLAGS = ("-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math", "-fPIC", "-shared")
+ENV = "CALIB_BEM_KERNEL"
+
+_state: dict = {}
+
+
+class KernelBuildError(CalibError, RuntimeError):
+    """The compiled BEM kernel was required (``CALIB_BEM_KERNEL=c``) but could not be built."""
+
+
+class _Problem(ctypes.Structure):
+    _fields_ = [("cl_nodes", ctypes.c_void_p), ("cd_nodes", ctypes.c_void_p), ("cl_slopes", ctypes.c_void_p),
+                ("cd_slopes", ctypes.c_void_p), ("n_grid", ctypes.c_int64), ("step_deg", ctypes.c_double),
+                ("station", ctypes.c_void_p), ("theta", ctypes.c_void_p), ("vx", ctypes.c_void_p),
+                ("vy", ctypes.c_void_p), ("r", ctypes.c_void_p), ("sigma", ctypes.c_void_p),
+                ("hub_radius", ctypes.c_double), ("tip_radius", ctypes.c_double), ("n_blades", ctypes.c_double),
+                ("tip_loss", ctypes.c_int), ("hub_loss", ctypes.c_int), ("drag_axial", ctypes.c_int),
+                ("drag_tangential", ctypes.c_int), ("wake_rotation", ctypes.c_int)]
+
+
+def _compiler() -> str | None:
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def _cache_dir() -> Path:
+    root = os.environ.get("CALIB_CACHE")
+    return (Path(root) if root else REPO_ROOT / ".calib_cache") / "bem_kernel"
+
+
+def _build() -> ctypes.CDLL:
+    cc = _compiler()
+    if cc is None:
+        raise KernelBuildError("no C compiler found (set CC, or install gcc or clang)")
+    key = hashlib.sha256(SOURCE.read_bytes() + " ".join((cc,) + FLAGS).encode()
+                         + f"{sys.platform} {platform.machine()}".encode()).hexdigest()[:16]
+    name = f"bem_kernel_{key}.so"
+    last = ""
+    for base in (_cache_dir(), Path(tempfile.gettempdir()) / "calib_bem_kernel"):
+        lib = base / name
+        if not lib.exists():
+            try:
+                base.mkdir(parents=True, exist_ok=True)
+                tmp = base / f".{name}.{uuid.uuid4().hex}"
+                proc = subprocess.run([cc, *FLAGS, str(SOURCE), "-o", str(tmp), "-lm"], capture_output=True,
+                                      text=True, timeout=120)
+            except (OSError, subprocess.TimeoutExpired) as exc:
+                last = f"{cc} could not build {SOURCE.name} in {base}: {exc}"
+                continue
+            if proc.returncode != 0:
+                raise KernelBuildError(f"{cc} failed on {SOURCE} (exit {proc.returncode}):\n{proc.stderr[-2000:]}")
+            os.replace(tmp, lib)              # atomic: concurrent first uses agree
+        return ctypes.CDLL(str(lib))
+    raise KernelBuildError(last)
+
+
+def library() -> ctypes.CDLL | None:
+    """The loaded kernel, built at first use; None when it is switched off or cannot be built."""
+    if "lib" not in _state:
+        mode = os.environ.get(ENV, "auto").lower()
+        if mode == "numpy":
+            _state.update(lib=None, status=f"numpy path ({ENV}=numpy)")
+        else:
+            try:
+                lib = _build()
+                ptr = ctypes.c_void_p
+                lib.bem_solve.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ctypes.c_double, ctypes.c_double,
+                                          ctypes.c_int64] + [ptr] * 8
+                lib.bem_solve.restype = None
+                lib.bem_residual.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr]
+                lib.bem_residual.restype = None
+                lib.bem_residual_partials.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ptr,
+                                                      ctypes.c_double, ptr, ptr, ptr]
+                lib.bem_residual_partials.restype = None
+                _state.update(lib=lib, status="compiled kernel")
+            except (KernelBuildError, OSError) as exc:
+                if mode == "c":
+                    raise KernelBuildError(f"{ENV}=c but the BEM kernel is not available: {exc}") from exc
+                _state.update(lib=None, status=f"numpy path (kernel not built: {exc})")
+    return _state["lib"]
+
+
+def status() -> str:
+    """Which root search the BEM uses, and why not the kernel when it does not."""
+    library()
+    return _state["status"]
+
+
+def _ptr(a: np.ndarray) -> int:
+    return a.ctypes.data
+
+
+class SectionKernel:
+    """The kernel bound to one batch's sections (arrays kept alive while it is).
+
+    Parameters
+    ----------
+    lib : ctypes.CDLL
+        :func:`library`.
+    polars : SectionPolars
+    station, theta, vx, vy, r, sigma : ndarray, shape (n,)
+        Per active section: station index, pitch + twist [rad], velocities [m/s], radius [m],
+        local solidity [-].
+    hub_radius, tip_radius : float
+        [m]
+    n_blades : int
+    opts : dict
+        ``tip_loss``, ``hub_loss``, ``drag_in_axial_induction``, ``drag_in_tangential_induction``,
+        ``wake_rotation`` (as :func:`calib.bem.residual.section_equations`).
+    """
+
+    def __init__(self, lib, polars, station, theta, vx, vy, r, sigma, hub_radius, tip_radius, n_blades, opts):
+        f8 = lambda x: np.ascontiguousarray(x, dtype=np.float64)   # noqa: E731
+        self._keep = [f8(polars.cl_nodes), f8(polars.cd_nodes), f8(polars.cl_slopes), f8(polars.cd_slopes),
+                      np.ascontiguousarray(station, dtype=np.int64), f8(theta), f8(vx), f8(vy), f8(r), f8(sigma)]
+        k = self._keep
+        self.n = int(k[4].size)
+        self.lib = lib
+        self.problem = _Problem(_ptr(k[0]), _ptr(k[1]), _ptr(k[2]), _ptr(k[3]), int(k[0].shape[1]),
+                                float(polars.step_deg), _ptr(k[4]), _ptr(k[5]), _ptr(k[6]), _ptr(k[7]),
+                                _ptr(k[8]), _ptr(k[9]), float(hub_radius), float(tip_radius), float(n_blades),
+                                int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
+                                int(bool(opts["drag_in_axial_induction"])),
+                                int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])))
+
+    def residual(self, index, phi) -> np.ndarray:
+        """Ning's residual [-] at sections ``index`` and inflow angles ``phi`` [rad] (same shape)."""
+        index = np.ascontiguousarray(index, dtype=np.int64)
+        phi = np.ascontiguousarray(np.broadcast_to(phi, index.shape), dtype=np.float64)
+        out = np.empty(index.shape)
+        self.lib.bem_residual(ctypes.byref(self.problem), index.size, _ptr(index), _ptr(phi), _ptr(out))
+        return out
+
+    def residual_partials(self, index, phi, cl, cd, rel_step=1e-6):
+        """∂R/∂φ [1/rad], ∂R/∂C_L, ∂R/∂C_D [-] at sections ``index`` by one-sided differences
+        (as :func:`calib.bem.sections._residual_partials`, which screens for several roots)."""
+        index = np.ascontiguousarray(index, dtype=np.int64)
+        phi, cl, cd = (np.ascontiguousarray(x, dtype=np.float64) for x in (phi, cl, cd))
+        d0, d_cl, d_cd = (np.empty(index.size) for _ in range(3))
+        self.lib.bem_residual_partials(ctypes.byref(self.problem), index.size, _ptr(index), _ptr(phi), _ptr(cl),
+                                       _ptr(cd), float(rel_step), _ptr(d0), _ptr(d_cl), _ptr(d_cd))
+        return d0, d_cl, d_cd
+
+    def solve(self, xtol=1e-12, ftol=1e-12, max_iter=100):
+        """Bracket and iteration of every section.
+
+        Returns
+        -------
+        lo, hi, flo, fhi, found, phi, fphi, iterations
+            As :func:`calib.bem.rootfind.bracket` followed by :func:`calib.bem.rootfind.solve_brackets`.
+        """
+        n = self.n
+        lo, hi, flo, fhi, phi, fphi = (np.empty(n) for _ in range(6))
+        found = np.empty(n, dtype=np.uint8)
+        iters = np.empty(n, dtype=np.int64)
+        self.lib.bem_solve(ctypes.byref(self.problem), n, float(xtol), float(ftol), int(max_iter), _ptr(lo),
+                           _ptr(hi), _ptr(flo), _ptr(fhi), _ptr(found), _ptr(phi), _ptr(fphi), _ptr(iters))
+        return lo, hi, flo, fhi, found.astype(bool), phi, fphi, iters
