@@ -20,7 +20,7 @@ typedef struct {
     double step_deg;
     /* per section */
     const int64_t *station;
-    const double *theta, *vx, *vy, *r, *sigma;
+    const double *theta, *vx, *vy, *r, *sigma, *chord, *rho;
     double hub_radius, tip_radius, n_blades;
     int tip_loss, hub_loss, drag_axial, drag_tangential, wake_rotation;
 } Problem;
@@ -63,8 +63,11 @@ static double prandtl(double f) {
     return (2.0 / PI) * acos(exp(-f));
 }
 
-/* Ning's residual at inflow angle phi with the polar's cl, cd given (section_equations) */
-static double residual_at(const Problem *p, int64_t j, double phi, double cl, double cd) {
+typedef struct { double residual, a, ap, cn, ct, F; } Equations;
+
+/* section_equations at inflow angle phi with the polar's cl, cd given */
+static Equations equations(const Problem *p, int64_t j, double phi, double cl, double cd) {
+    Equations e;
     double s = sin(phi), c = cos(phi);
     double r = p->r[j], B = p->n_blades;
     double F = 1.0, tip = 1.0, hub = 1.0;
@@ -94,8 +97,17 @@ static double residual_at(const Problem *p, int64_t j, double phi, double cl, do
     }
     if (!p->wake_rotation) kp = 0.0 * kp;
     double lam = p->vy[j] / p->vx[j];
-    if (phi > 0) return s / (1.0 - a) - c / lam * (1.0 - kp);
-    return s * (1.0 - k) - c / lam * (1.0 - kp);
+    e.residual = phi > 0 ? s / (1.0 - a) - c / lam * (1.0 - kp) : s * (1.0 - k) - c / lam * (1.0 - kp);
+    e.a = a;
+    e.ap = kp / (1.0 - kp);
+    e.cn = cn;
+    e.ct = ct;
+    e.F = F;
+    return e;
+}
+
+static double residual_at(const Problem *p, int64_t j, double phi, double cl, double cd) {
+    return equations(p, j, phi, cl, cd).residual;
 }
 
 static double residual(const Problem *p, int64_t j, double phi) {
@@ -181,5 +193,31 @@ void bem_residual_partials(const Problem *p, int64_t n, const int64_t *index, co
         d0[m] = (residual_at(p, j, phi[m] + h, cl[m] + 0.0, cd[m] + 0.0) - r0) / h;
         d_cl[m] = (residual_at(p, j, phi[m] + 0.0, cl[m] + hc, cd[m] + 0.0) - r0) / hc;
         d_cd[m] = (residual_at(p, j, phi[m] + 0.0, cl[m] + 0.0, cd[m] + hd) - r0) / hd;
+    }
+}
+
+/* C_L, C_D at (index[m], phi[m]) (SectionPolars.lookup at alpha = phi - theta) */
+void bem_polar(const Problem *p, int64_t n, const int64_t *index, const double *phi, double *cl, double *cd) {
+    for (int64_t m = 0; m < n; m++)
+        lookup(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
+}
+
+/* Every section at its root phi[j] (sections.section_pass without effects, k = 0): angle of
+ * attack [deg], C_L, C_D, residual, a, a', c_n, c_t (rotor axes), F, W [m/s], N', T' [N/m],
+ * c_n, c_t (chord axes); out is (14, n), row-major. */
+void bem_values(const Problem *p, int64_t n, const double *phi, double *out) {
+    for (int64_t j = 0; j < n; j++) {
+        double alpha_rad = phi[j] - p->theta[j];
+        double alpha_deg = alpha_rad * (180.0 / PI);
+        double cl, cd;
+        lookup(p, j, alpha_deg, &cl, &cd);
+        Equations e = equations(p, j, phi[j], cl, cd);
+        double ux = p->vx[j] * (1.0 - e.a), uy = p->vy[j] * (1.0 + e.ap);
+        double w2 = ux * ux + uy * uy;
+        double q = 0.5 * p->rho[j] * w2 * p->chord[j];
+        double sa = sin(alpha_rad), ca = cos(alpha_rad);
+        double row[14] = {alpha_deg, cl, cd, e.residual, e.a, e.ap, e.cn, e.ct, e.F, sqrt(w2), e.cn * q, e.ct * q,
+                          cl * ca + cd * sa, cl * sa - cd * ca};
+        for (int m = 0; m < 14; m++) out[m * n + j] = row[m];
     }
 }

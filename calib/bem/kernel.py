@@ -58,6 +58,7 @@ class _Problem(ctypes.Structure):
                 ("cd_slopes", ctypes.c_void_p), ("n_grid", ctypes.c_int64), ("step_deg", ctypes.c_double),
                 ("station", ctypes.c_void_p), ("theta", ctypes.c_void_p), ("vx", ctypes.c_void_p),
                 ("vy", ctypes.c_void_p), ("r", ctypes.c_void_p), ("sigma", ctypes.c_void_p),
+                ("chord", ctypes.c_void_p), ("rho", ctypes.c_void_p),
                 ("hub_radius", ctypes.c_double), ("tip_radius", ctypes.c_double), ("n_blades", ctypes.c_double),
                 ("tip_loss", ctypes.c_int), ("hub_loss", ctypes.c_int), ("drag_axial", ctypes.c_int),
                 ("drag_tangential", ctypes.c_int), ("wake_rotation", ctypes.c_int)]
@@ -119,6 +120,10 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_residual_partials.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ptr,
                                                       ctypes.c_double, ptr, ptr, ptr]
                 lib.bem_residual_partials.restype = None
+                lib.bem_polar.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ptr]
+                lib.bem_polar.restype = None
+                lib.bem_values.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr]
+                lib.bem_values.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
                 if mode == "c":
@@ -145,30 +150,49 @@ class SectionKernel:
     lib : ctypes.CDLL
         :func:`library`.
     polars : SectionPolars
-    station, theta, vx, vy, r, sigma : ndarray, shape (n,)
-        Per active section: station index, pitch + twist [rad], velocities [m/s], radius [m],
-        local solidity [-].
-    hub_radius, tip_radius : float
-        [m]
-    n_blades : int
+    sec : calib.bem.sections.Sections
+        The active sections: station index, pitch + twist [rad], velocities [m/s], radius,
+        chord [m], local solidity [-], air density [kg/m^3], hub and tip radius, blade count.
     opts : dict
         ``tip_loss``, ``hub_loss``, ``drag_in_axial_induction``, ``drag_in_tangential_induction``,
         ``wake_rotation`` (as :func:`calib.bem.residual.section_equations`).
     """
 
-    def __init__(self, lib, polars, station, theta, vx, vy, r, sigma, hub_radius, tip_radius, n_blades, opts):
+    VALUES = ("alpha_deg", "cl", "cd", "residual", "a", "ap", "cn", "ct", "F", "W", "Np", "Tp", "cn_chord",
+              "ct_chord")
+    """Rows of :meth:`values`."""
+
+    def __init__(self, lib, polars, sec, opts):
         f8 = lambda x: np.ascontiguousarray(x, dtype=np.float64)   # noqa: E731
+        geo = sec.geo
         self._keep = [f8(polars.cl_nodes), f8(polars.cd_nodes), f8(polars.cl_slopes), f8(polars.cd_slopes),
-                      np.ascontiguousarray(station, dtype=np.int64), f8(theta), f8(vx), f8(vy), f8(r), f8(sigma)]
+                      np.ascontiguousarray(sec.station, dtype=np.int64), f8(sec.theta), f8(sec.vx), f8(sec.vy),
+                      f8(geo.r), f8(geo.sigma), f8(geo.chord), f8(sec.rho)]
         k = self._keep
         self.n = int(k[4].size)
         self.lib = lib
         self.problem = _Problem(_ptr(k[0]), _ptr(k[1]), _ptr(k[2]), _ptr(k[3]), int(k[0].shape[1]),
-                                float(polars.step_deg), _ptr(k[4]), _ptr(k[5]), _ptr(k[6]), _ptr(k[7]),
-                                _ptr(k[8]), _ptr(k[9]), float(hub_radius), float(tip_radius), float(n_blades),
+                                float(polars.step_deg), *(_ptr(x) for x in k[4:]), float(geo.hub_radius),
+                                float(geo.tip_radius), float(geo.n_blades),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
                                 int(bool(opts["drag_in_axial_induction"])),
                                 int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])))
+
+    def polar(self, index, phi):
+        """C_L, C_D [-] at sections ``index`` and inflow angles ``phi`` [rad] (no polar effects)."""
+        index = np.ascontiguousarray(index, dtype=np.int64)
+        phi = np.ascontiguousarray(np.broadcast_to(phi, index.shape), dtype=np.float64)
+        cl, cd = np.empty(index.shape), np.empty(index.shape)
+        self.lib.bem_polar(ctypes.byref(self.problem), index.size, _ptr(index), _ptr(phi), _ptr(cl), _ptr(cd))
+        return cl, cd
+
+    def values(self, phi) -> dict:
+        """Every section at inflow angle ``phi`` [rad] (its root): :attr:`VALUES` -> ndarray (n,)
+        (as :func:`calib.bem.sections.section_pass` without effects and derivatives)."""
+        phi = np.ascontiguousarray(phi, dtype=np.float64)
+        out = np.empty((len(self.VALUES), self.n))
+        self.lib.bem_values(ctypes.byref(self.problem), self.n, _ptr(phi), _ptr(out))
+        return dict(zip(self.VALUES, out))
 
     def residual(self, index, phi) -> np.ndarray:
         """Ning's residual [-] at sections ``index`` and inflow angles ``phi`` [rad] (same shape)."""

@@ -155,9 +155,7 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
 
     lib = None if (chain.has("polar") or chain.has("induction")) else kernel.library()
     if lib is not None:
-        compiled = kernel.SectionKernel(lib, polars, sec.station, sec.theta, sec.vx, sec.vy, sec.geo.r,
-                                        sec.geo.sigma, sec.geo.hub_radius, sec.geo.tip_radius, sec.geo.n_blades,
-                                        opts)
+        compiled = kernel.SectionKernel(lib, polars, sec, opts)
         residual = compiled.residual
         lo, hi, flo, fhi, found, phi, fphi, iters = compiled.solve(max_iter=settings.max_iter)
     else:
@@ -179,7 +177,7 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
         slopes = envelope.at(alpha_c, sec.station[ci])
         stalled = slopes[0] < 0.0
         ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
-        _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci])
+        _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci]) if lib is None else (None, *compiled.polar(ci, phi[ci]))
         if lib is not None:
             d0, d_cl, d_cd = compiled.residual_partials(ci, phi[ci], cl_c, cd_c)
         else:
@@ -296,9 +294,20 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     """Evaluate every section at its root; with ``k`` > 0, on duals over the chain's section columns.
 
     Columns: φ, pitch [rad], inflow speed [m/s], then the section-stage effects' columns
-    (:mod:`calib.bem.chain`).
+    (:mod:`calib.bem.chain`). Plain values without polar or induction effects come from the
+    compiled kernel when it is available (:mod:`calib.bem.kernel`; the same arithmetic).
     """
     phi = roots.phi
+    if not k and not (chain.has("polar") or chain.has("induction")) and kernel.library() is not None:
+        v = kernel.SectionKernel(kernel.library(), polars, sec, opts).values(phi)
+        Np, Tp = v["Np"], v["Tp"]
+        if chain.has("loads"):
+            state = chain.run("loads", LoadsState(Np, Tp), sec.ctx, k)
+            Np, Tp = state.Np, state.Tp
+        eq = {"residual": v["residual"], "a": v["a"], "ap": v["ap"], "cn": v["cn"], "ct": v["ct"], "F": v["F"],
+              "load": 1.0}
+        return SectionValues(v["alpha_deg"], v["cl"], v["cd"], eq, v["W"],
+                             {"Np": Np, "Tp": Tp, "cn": v["cn_chord"], "ct": v["ct_chord"]})
     alpha_deg = np.degrees(phi - sec.theta)
     cl, cd, dcl, dcd = polars.lookup(alpha_deg, sec.station)
     ctx = sec.ctx
