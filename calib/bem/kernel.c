@@ -9,19 +9,23 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 #define EPS_PHI 1e-6
 #define PI 3.141592653589793
 #define HALF_PI (0.5 * PI)
 
 typedef struct {
-    const double *cl_nodes, *cd_nodes, *cl_slopes, *cd_slopes;  /* (n_stations, n_grid), C order */
-    int64_t n_grid;
-    double step_deg;
+    /* per node of each distinct table: C_L, C_L' h, C_D, C_D' h (SectionPolars.lookup's y and m) */
+    const double *table;
+    const int64_t *table_row;   /* (n_stations,) the table of each station */
+    int64_t n_grid, n_stations;
+    double step_deg, inv_step;  /* inv_step: 1 / step when that is exact (a power of two), else 0 */
     /* per section */
     const int64_t *station;
     const double *theta, *vx, *vy, *r, *sigma, *chord, *rho;
-    double hub_radius, tip_radius, n_blades;
+    const double *tip_f, *hub_f, *lam;  /* B (R - r) / (2 r), B (r - R_h) / (2 R_h), V_y / V_x */
+    double n_blades;
     int tip_loss, hub_loss, drag_axial, drag_tangential, wake_rotation;
 } Problem;
 
@@ -39,7 +43,7 @@ static double py_mod(double a, double b) {
 static void lookup(const Problem *p, int64_t j, double alpha_deg, double *cl, double *cd) {
     double h = p->step_deg;
     double a = py_mod(alpha_deg + 180.0, 360.0);
-    double x = a / h;
+    double x = p->inv_step != 0.0 ? a * p->inv_step : a / h;   /* equal when inv_step is exact */
     if (!isfinite(x)) {             /* numpy would fail to index; a NaN residual stops the section */
         *cl = *cd = NAN;
         return;
@@ -49,11 +53,9 @@ static void lookup(const Problem *p, int64_t j, double alpha_deg, double *cl, do
     double t = x - (double)i;
     double t2 = t * t, t3 = t * t * t;
     double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = -2 * t3 + 3 * t2, h11 = t3 - t2;
-    int64_t k = p->station[j] * p->n_grid + i;
-    *cl = h00 * p->cl_nodes[k] + h10 * (p->cl_slopes[k] * h) + h01 * p->cl_nodes[k + 1]
-          + h11 * (p->cl_slopes[k + 1] * h);
-    *cd = h00 * p->cd_nodes[k] + h10 * (p->cd_slopes[k] * h) + h01 * p->cd_nodes[k + 1]
-          + h11 * (p->cd_slopes[k + 1] * h);
+    const double *n0 = p->table + 4 * (p->table_row[p->station[j]] * p->n_grid + i), *n1 = n0 + 4;
+    *cl = h00 * n0[0] + h10 * n0[1] + h01 * n1[0] + h11 * n1[1];
+    *cd = h00 * n0[2] + h10 * n0[3] + h01 * n1[2] + h11 * n1[3];
 }
 
 /* (2/pi) acos(exp(-f)): exactly (2/pi) acos(0) once exp(-f) < 3.2e-17 (f > 38), where the
@@ -69,11 +71,10 @@ typedef struct { double residual, a, ap, cn, ct, F; } Equations;
 static Equations equations(const Problem *p, int64_t j, double phi, double cl, double cd) {
     Equations e;
     double s = sin(phi), c = cos(phi);
-    double r = p->r[j], B = p->n_blades;
     double F = 1.0, tip = 1.0, hub = 1.0;
     double as = fabs(s);
-    if (p->tip_loss) tip = prandtl(B * (p->tip_radius - r) / (2.0 * r) / as);
-    if (p->hub_loss) hub = prandtl(B * (r - p->hub_radius) / (2.0 * p->hub_radius) / as);
+    if (p->tip_loss) tip = prandtl(p->tip_f[j] / as);
+    if (p->hub_loss) hub = prandtl(p->hub_f[j] / as);
     if (!p->tip_loss) F = hub;
     else F = p->hub_loss ? tip * hub : tip;
     double cn = cl * c + cd * s;
@@ -96,7 +97,7 @@ static Equations equations(const Problem *p, int64_t j, double phi, double cl, d
         a = k > 1.0 ? k / (k - 1.0) : 0.0 * k;
     }
     if (!p->wake_rotation) kp = 0.0 * kp;
-    double lam = p->vy[j] / p->vx[j];
+    double lam = p->lam[j];
     e.residual = phi > 0 ? s / (1.0 - a) - c / lam * (1.0 - kp) : s * (1.0 - k) - c / lam * (1.0 - kp);
     e.a = a;
     e.ap = kp / (1.0 - kp);
@@ -123,7 +124,7 @@ void bem_residual(const Problem *p, int64_t n, const int64_t *index, const doubl
 
 /* Ning's bracket and the Anderson-Bjorck iteration per section (rootfind.bracket and
  * rootfind.solve_brackets); outputs lo, hi (the bracket), flo, fhi, found, phi, fphi, iters. */
-void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t max_iter,
+void bem_solve_serial(const Problem *p, int64_t n, double xtol, double ftol, int64_t max_iter,
                double *lo_out, double *hi_out, double *flo_out, double *fhi_out, uint8_t *found_out,
                double *phi_out, double *fphi_out, int64_t *iters_out) {
     for (int64_t j = 0; j < n; j++) {
@@ -220,4 +221,135 @@ void bem_values(const Problem *p, int64_t n, const double *phi, double *out) {
                           cl * ca + cd * sa, cl * sa - cd * ca};
         for (int m = 0; m < 14; m++) out[m * n + j] = row[m];
     }
+}
+
+/* The same bracket and iteration with LANES sections in flight at once: each section runs the
+ * exact sequence of bem_solve_serial; their residual evaluations are independent, so the
+ * processor overlaps them (each alone is a long dependent chain of sin, cos, exp, acos). */
+#define LANES 4
+
+typedef struct {
+    int64_t j, it;
+    int stage;             /* 0: at lo, 1: at hi, 2: at -pi/4, 3: at -eps, 4: at pi - eps, 5: iterating */
+    double lo, hi, flo, fhi, fa_neg, a, b, fa, fb, x;
+} Lane;
+
+typedef struct {
+    const Problem *p;
+    double xtol, ftol;
+    int64_t max_iter;
+    double *lo, *hi, *flo, *fhi, *phi, *fphi;
+    uint8_t *found;
+    int64_t *iters;
+} Out;
+
+static void finish(const Out *o, Lane *l, int found, double phi, double fphi) {
+    int64_t j = l->j;
+    o->lo[j] = l->lo; o->hi[j] = l->hi; o->flo[j] = l->flo; o->fhi[j] = l->fhi; o->found[j] = (uint8_t)found;
+    o->phi[j] = phi; o->fphi[j] = fphi; o->iters[j] = l->it;
+    l->j = -1;
+}
+
+/* next Anderson-Bjorck point of an iterating lane (it already incremented) */
+static void ab_point(Lane *l) {
+    double a = l->a, b = l->b, fa = l->fa, fb = l->fb;
+    double c = b - fb * (b - a) / (fb - fa);
+    double lo_w = a < b ? a : b, hi_w = a > b ? a : b;
+    if (!isfinite(c) || c <= lo_w || c >= hi_w || l->it % 8 == 0) c = 0.5 * (a + b);
+    l->x = c;
+}
+
+/* the bracket is found: start the iteration (or finish at an endpoint that is a root) */
+static void start_iteration(const Out *o, Lane *l) {
+    l->a = l->lo; l->b = l->hi; l->fa = l->flo; l->fb = l->fhi;
+    if (fabs(l->fa) <= o->ftol || fabs(l->fb) <= o->ftol) {
+        int pick_a = fabs(l->fa) <= fabs(l->fb);
+        finish(o, l, 1, pick_a ? l->a : l->b, pick_a ? l->fa : l->fb);
+        return;
+    }
+    if (o->max_iter < 1) { finish(o, l, 1, l->b, l->fb); return; }
+    l->stage = 5;
+    l->it = 1;
+    ab_point(l);
+}
+
+/* take the residual f at l->x and set the next point (or finish) */
+static void consume(const Out *o, Lane *l, double f) {
+    switch (l->stage) {
+    case 0:
+        l->flo = f; l->stage = 1; l->x = HALF_PI;
+        return;
+    case 1:
+        l->fhi = f;
+        if (isfinite(l->flo) && isfinite(l->fhi) && (l->flo * l->fhi <= 0)) { start_iteration(o, l); return; }
+        l->stage = 2; l->x = -0.25 * PI;
+        return;
+    case 2:
+        l->fa_neg = f; l->stage = 3; l->x = -EPS_PHI;
+        return;
+    case 3:
+        if (l->fa_neg < 0 && f > 0) {
+            l->lo = -0.25 * PI; l->hi = -EPS_PHI; l->flo = l->fa_neg; l->fhi = f;
+            start_iteration(o, l);
+            return;
+        }
+        l->stage = 4; l->x = PI - EPS_PHI;
+        return;
+    case 4:
+        l->lo = HALF_PI; l->hi = PI - EPS_PHI; l->flo = l->fhi; l->fhi = f;
+        if (isfinite(l->flo) && isfinite(f) && (l->flo * f <= 0)) start_iteration(o, l);
+        else finish(o, l, 0, NAN, NAN);
+        return;
+    default: {
+        double c = l->x, fc = f, fb = l->fb;
+        int flip = fc * fb < 0;
+        double m = 1.0 - fc / fb;
+        if (!(m > 0 && isfinite(m))) m = 0.5;
+        double new_a = flip ? l->b : l->a;
+        double new_fa = flip ? fb : l->fa * m;
+        l->a = new_a; l->fa = new_fa; l->b = c; l->fb = fc;
+        double ac = fabs(c);
+        int conv = (fabs(fc) <= o->ftol || fabs(c - new_a) <= o->xtol * (ac > 1.0 ? ac : 1.0)) && isfinite(fc);
+        if (conv) { finish(o, l, 1, c, fc); return; }
+        if (l->it == o->max_iter) { finish(o, l, 1, l->b, l->fb); return; }
+        l->it++;
+        ab_point(l);
+    }
+    }
+}
+
+void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t max_iter,
+               double *lo_out, double *hi_out, double *flo_out, double *fhi_out, uint8_t *found_out,
+               double *phi_out, double *fphi_out, int64_t *iters_out) {
+    Out o = {p, xtol, ftol, max_iter, lo_out, hi_out, flo_out, fhi_out, phi_out, fphi_out, found_out, iters_out};
+    Lane lanes[LANES];
+    int64_t next = 0;
+    /* sections station by station (a counting sort): each station's table stays in cache */
+    int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    int64_t *start = calloc((size_t)p->n_stations + 1, sizeof(int64_t));
+    if (!order || !start) { free(order); free(start); bem_solve_serial(p, n, xtol, ftol, max_iter, lo_out, hi_out,
+                                                                      flo_out, fhi_out, found_out, phi_out, fphi_out,
+                                                                      iters_out); return; }
+    for (int64_t j = 0; j < n; j++) start[p->station[j] + 1]++;
+    for (int64_t q = 0; q < p->n_stations; q++) start[q + 1] += start[q];
+    for (int64_t j = 0; j < n; j++) order[start[p->station[j]]++] = j;
+    free(start);
+    int busy = 0;
+    for (int q = 0; q < LANES; q++) lanes[q].j = -1;
+    for (;;) {
+        for (int q = 0; q < LANES; q++) {
+            if (lanes[q].j < 0 && next < n) {
+                Lane *l = &lanes[q];
+                l->j = order[next++]; l->it = 0; l->stage = 0; l->x = EPS_PHI; l->lo = EPS_PHI; l->hi = HALF_PI;
+            }
+        }
+        busy = 0;
+        double f[LANES];
+        for (int q = 0; q < LANES; q++)
+            if (lanes[q].j >= 0) { f[q] = residual(p, lanes[q].j, lanes[q].x); busy = 1; }
+        if (!busy) break;
+        for (int q = 0; q < LANES; q++)
+            if (lanes[q].j >= 0) consume(&o, &lanes[q], f[q]);
+    }
+    free(order);
 }

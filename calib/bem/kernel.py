@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import math
 import os
 import platform
 import shutil
@@ -35,6 +36,7 @@ import subprocess
 import sys
 import tempfile
 import uuid
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -54,14 +56,37 @@ class KernelBuildError(CalibError, RuntimeError):
 
 
 class _Problem(ctypes.Structure):
-    _fields_ = [("cl_nodes", ctypes.c_void_p), ("cd_nodes", ctypes.c_void_p), ("cl_slopes", ctypes.c_void_p),
-                ("cd_slopes", ctypes.c_void_p), ("n_grid", ctypes.c_int64), ("step_deg", ctypes.c_double),
-                ("station", ctypes.c_void_p), ("theta", ctypes.c_void_p), ("vx", ctypes.c_void_p),
-                ("vy", ctypes.c_void_p), ("r", ctypes.c_void_p), ("sigma", ctypes.c_void_p),
-                ("chord", ctypes.c_void_p), ("rho", ctypes.c_void_p),
-                ("hub_radius", ctypes.c_double), ("tip_radius", ctypes.c_double), ("n_blades", ctypes.c_double),
-                ("tip_loss", ctypes.c_int), ("hub_loss", ctypes.c_int), ("drag_axial", ctypes.c_int),
-                ("drag_tangential", ctypes.c_int), ("wake_rotation", ctypes.c_int)]
+    _fields_ = [("table", ctypes.c_void_p), ("table_row", ctypes.c_void_p), ("n_grid", ctypes.c_int64),
+                ("n_stations", ctypes.c_int64), ("step_deg", ctypes.c_double), ("inv_step", ctypes.c_double)]
+    _fields_ += [(name, ctypes.c_void_p) for name in ("station", "theta", "vx", "vy", "r", "sigma", "chord", "rho",
+                                                      "tip_f", "hub_f", "lam")]
+    _fields_ += [("n_blades", ctypes.c_double)]
+    _fields_ += [(name, ctypes.c_int) for name in ("tip_loss", "hub_loss", "drag_axial", "drag_tangential",
+                                                   "wake_rotation")]
+
+
+_TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def node_table(polars) -> tuple[np.ndarray, np.ndarray]:
+    """The polars as the kernel reads them, once per :class:`SectionPolars`.
+
+    Returns
+    -------
+    table : ndarray, shape (n_tables, n_grid, 4)
+        Per distinct station table and α node: C_L, h dC_L/dα, C_D, h dC_D/dα (h the grid step
+        [deg]; the products :meth:`SectionPolars.lookup` forms), so that a look-up reads two
+        adjacent nodes from one place.
+    row : ndarray of int, shape (n_stations,)
+        The table of each station.
+    """
+    if polars not in _TABLES:
+        h = polars.step_deg
+        per_station = np.stack([polars.cl_nodes, polars.cl_slopes * h, polars.cd_nodes, polars.cd_slopes * h], axis=-1)
+        flat = per_station.reshape(per_station.shape[0], -1)
+        _, first, row = np.unique(flat, axis=0, return_index=True, return_inverse=True)
+        _TABLES[polars] = (np.ascontiguousarray(per_station[first]), np.ascontiguousarray(row.reshape(-1), np.int64))
+    return _TABLES[polars]
 
 
 def _compiler() -> str | None:
@@ -165,15 +190,21 @@ class SectionKernel:
     def __init__(self, lib, polars, sec, opts):
         f8 = lambda x: np.ascontiguousarray(x, dtype=np.float64)   # noqa: E731
         geo = sec.geo
-        self._keep = [f8(polars.cl_nodes), f8(polars.cd_nodes), f8(polars.cl_slopes), f8(polars.cd_slopes),
-                      np.ascontiguousarray(sec.station, dtype=np.int64), f8(sec.theta), f8(sec.vx), f8(sec.vy),
-                      f8(geo.r), f8(geo.sigma), f8(geo.chord), f8(sec.rho)]
-        k = self._keep
-        self.n = int(k[4].size)
+        table, row = node_table(polars)
+        h = float(polars.step_deg)
+        mantissa, _ = math.frexp(h)
+        inv_step = 1.0 / h if mantissa == 0.5 else 0.0       # x / h == x * (1 / h) exactly for a power of two
+        B, r = geo.n_blades, geo.r
+        with np.errstate(all="ignore"):
+            tip_f = B * (geo.tip_radius - r) / (2.0 * r)
+            hub_f = B * (r - geo.hub_radius) / (2.0 * geo.hub_radius)
+            lam = sec.vy / sec.vx
+        per_section = [sec.theta, sec.vx, sec.vy, r, geo.sigma, geo.chord, sec.rho, tip_f, hub_f, lam]
+        self._keep = [table, row, np.ascontiguousarray(sec.station, dtype=np.int64)] + [f8(x) for x in per_section]
+        self.n = int(sec.station.size)
         self.lib = lib
-        self.problem = _Problem(_ptr(k[0]), _ptr(k[1]), _ptr(k[2]), _ptr(k[3]), int(k[0].shape[1]),
-                                float(polars.step_deg), *(_ptr(x) for x in k[4:]), float(geo.hub_radius),
-                                float(geo.tip_radius), float(geo.n_blades),
+        self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
+                                *(_ptr(x) for x in self._keep[2:]), float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
                                 int(bool(opts["drag_in_axial_induction"])),
                                 int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])))
