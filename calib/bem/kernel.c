@@ -31,6 +31,7 @@ typedef struct {
 
 /* numpy's float mod (np.mod): the sign of the divisor */
 static double py_mod(double a, double b) {
+    if (a > 0.0 && a < b) return a;      /* fmod's own result there, without the call */
     double m = fmod(a, b);
     if (m != 0.0) {
         if ((b < 0) != (m < 0)) m += b;
