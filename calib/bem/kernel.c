@@ -9,7 +9,6 @@
  */
 #include <math.h>
 #include <stdint.h>
-#include <stdlib.h>
 
 #define EPS_PHI 1e-6
 #define PI 3.141592653589793
@@ -123,63 +122,6 @@ void bem_residual(const Problem *p, int64_t n, const int64_t *index, const doubl
     for (int64_t m = 0; m < n; m++) out[m] = residual(p, index[m], phi[m]);
 }
 
-/* Ning's bracket and the Anderson-Bjorck iteration per section (rootfind.bracket and
- * rootfind.solve_brackets); outputs lo, hi (the bracket), flo, fhi, found, phi, fphi, iters. */
-void bem_solve_serial(const Problem *p, int64_t n, double xtol, double ftol, int64_t max_iter,
-               double *lo_out, double *hi_out, double *flo_out, double *fhi_out, uint8_t *found_out,
-               double *phi_out, double *fphi_out, int64_t *iters_out) {
-    for (int64_t j = 0; j < n; j++) {
-        double lo = EPS_PHI, hi = HALF_PI;
-        double flo = residual(p, j, lo), fhi = residual(p, j, hi);
-        int found = isfinite(flo) && isfinite(fhi) && (flo * fhi <= 0);
-        if (!found) {
-            double fa = residual(p, j, -0.25 * PI), fb = residual(p, j, -EPS_PHI);
-            if (fa < 0 && fb > 0) {
-                lo = -0.25 * PI; hi = -EPS_PHI; flo = fa; fhi = fb;
-                found = 1;
-            } else {
-                double fc = residual(p, j, PI - EPS_PHI);
-                lo = HALF_PI; hi = PI - EPS_PHI; flo = fhi; fhi = fc;
-                found = isfinite(flo) && isfinite(fc) && (flo * fc <= 0);
-            }
-        }
-        lo_out[j] = lo; hi_out[j] = hi; flo_out[j] = flo; fhi_out[j] = fhi; found_out[j] = (uint8_t)found;
-        double phi = NAN, fphi = NAN;
-        int64_t iters = 0;
-        if (found) {
-            double a = lo, b = hi, fa = flo, fb = fhi;
-            if (fabs(fa) <= ftol || fabs(fb) <= ftol) {
-                int pick_a = fabs(fa) <= fabs(fb);
-                phi = pick_a ? a : b;
-                fphi = pick_a ? fa : fb;
-            } else {
-                int done = 0;
-                for (int64_t it = 1; it <= max_iter; it++) {
-                    double c = b - fb * (b - a) / (fb - fa);
-                    double lo_w = a < b ? a : b, hi_w = a > b ? a : b;
-                    if (!isfinite(c) || c <= lo_w || c >= hi_w || it % 8 == 0) c = 0.5 * (a + b);
-                    double fc = residual(p, j, c);
-                    int flip = fc * fb < 0;
-                    double m = 1.0 - fc / fb;
-                    if (!(m > 0 && isfinite(m))) m = 0.5;
-                    double new_a = flip ? b : a;
-                    double new_fa = flip ? fb : fa * m;
-                    a = new_a; fa = new_fa; b = c; fb = fc;
-                    iters = it;
-                    double ac = fabs(c);
-                    int conv = (fabs(fc) <= ftol || fabs(c - new_a) <= xtol * (ac > 1.0 ? ac : 1.0)) && isfinite(fc);
-                    if (conv) {
-                        phi = c; fphi = fc; done = 1;
-                        break;
-                    }
-                }
-                if (!done) { phi = b; fphi = fb; }
-            }
-        }
-        phi_out[j] = phi; fphi_out[j] = fphi; iters_out[j] = iters;
-    }
-}
-
 /* One-sided differences of the residual in phi, C_L, C_D at given sections (the screen for
  * several roots; sections._residual_partials): d0, d_cl, d_cd. */
 void bem_residual_partials(const Problem *p, int64_t n, const int64_t *index, const double *phi,
@@ -204,16 +146,33 @@ void bem_polar(const Problem *p, int64_t n, const int64_t *index, const double *
         lookup(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
 }
 
+/* The quantities of section_pass at the last residual evaluation of a section (rows of ROOT_ROWS) */
+#define ROOT_ROWS 9
+static void store_root(double *root, int64_t n, int64_t j, double alpha_deg, double cl, double cd, Equations e) {
+    double row[ROOT_ROWS] = {alpha_deg, cl, cd, e.residual, e.a, e.ap, e.cn, e.ct, e.F};
+    for (int m = 0; m < ROOT_ROWS; m++) root[m * n + j] = row[m];
+}
+
 /* Every section at its root phi[j] (sections.section_pass without effects, k = 0): angle of
  * attack [deg], C_L, C_D, residual, a, a', c_n, c_t (rotor axes), F, W [m/s], N', T' [N/m],
- * c_n, c_t (chord axes); out is (14, n), row-major. */
-void bem_values(const Problem *p, int64_t n, const double *phi, double *out) {
+ * c_n, c_t (chord axes); out is (14, n), row-major. Where phi[j] is the phi bem_solve ended on
+ * (solved_phi[j]), its stored quantities (root, ROOT_ROWS x n) are the same numbers and are reused;
+ * solved_phi may be NULL. */
+void bem_values(const Problem *p, int64_t n, const double *phi, const double *solved_phi, const double *root,
+                double *out) {
     for (int64_t j = 0; j < n; j++) {
         double alpha_rad = phi[j] - p->theta[j];
-        double alpha_deg = alpha_rad * (180.0 / PI);
-        double cl, cd;
-        lookup(p, j, alpha_deg, &cl, &cd);
-        Equations e = equations(p, j, phi[j], cl, cd);
+        double alpha_deg, cl, cd;
+        Equations e;
+        if (solved_phi && phi[j] == solved_phi[j]) {
+            alpha_deg = root[j]; cl = root[n + j]; cd = root[2 * n + j];
+            e.residual = root[3 * n + j]; e.a = root[4 * n + j]; e.ap = root[5 * n + j];
+            e.cn = root[6 * n + j]; e.ct = root[7 * n + j]; e.F = root[8 * n + j];
+        } else {
+            alpha_deg = alpha_rad * (180.0 / PI);
+            lookup(p, j, alpha_deg, &cl, &cd);
+            e = equations(p, j, phi[j], cl, cd);
+        }
         double ux = p->vx[j] * (1.0 - e.a), uy = p->vy[j] * (1.0 + e.ap);
         double w2 = ux * ux + uy * uy;
         double q = 0.5 * p->rho[j] * w2 * p->chord[j];
@@ -224,30 +183,41 @@ void bem_values(const Problem *p, int64_t n, const double *phi, double *out) {
     }
 }
 
-/* The same bracket and iteration with LANES sections in flight at once: each section runs the
- * exact sequence of bem_solve_serial; their residual evaluations are independent, so the
- * processor overlaps them (each alone is a long dependent chain of sin, cos, exp, acos). */
+/* Ning's bracket and the Anderson-Bjorck iteration per section, the sequence of rootfind.bracket
+ * and rootfind.solve_brackets for each section, with LANES sections in flight at once: their
+ * residual evaluations are independent, so the processor overlaps them. */
 #define LANES 4
 
 typedef struct {
     int64_t j, it;
     int stage;             /* 0: at lo, 1: at hi, 2: at -pi/4, 3: at -eps, 4: at pi - eps, 5: iterating */
     double lo, hi, flo, fhi, fa_neg, a, b, fa, fb, x;
+    double alpha_deg, cl, cd;   /* of the last evaluation */
+    Equations e;
 } Lane;
 
 typedef struct {
     const Problem *p;
     double xtol, ftol;
     int64_t max_iter;
-    double *lo, *hi, *flo, *fhi, *phi, *fphi;
+    double *lo, *hi, *flo, *fhi, *phi, *fphi, *root;
     uint8_t *found;
     int64_t *iters;
+    int64_t n;
 } Out;
 
 static void finish(const Out *o, Lane *l, int found, double phi, double fphi) {
     int64_t j = l->j;
     o->lo[j] = l->lo; o->hi[j] = l->hi; o->flo[j] = l->flo; o->fhi[j] = l->fhi; o->found[j] = (uint8_t)found;
     o->phi[j] = phi; o->fphi[j] = fphi; o->iters[j] = l->it;
+    /* what section_pass needs at the root: the last evaluation's, where the section ended on it */
+    if (l->stage == 5 && phi == l->x) {
+        store_root(o->root, o->n, j, l->alpha_deg, l->cl, l->cd, l->e);
+    } else if (isfinite(phi)) {             /* an endpoint of the bracket that is a root */
+        double alpha_deg = (phi - o->p->theta[j]) * (180.0 / PI), cl, cd;
+        lookup(o->p, j, alpha_deg, &cl, &cd);
+        store_root(o->root, o->n, j, alpha_deg, cl, cd, equations(o->p, j, phi, cl, cd));
+    }
     l->j = -1;
 }
 
@@ -321,36 +291,39 @@ static void consume(const Out *o, Lane *l, double f) {
 
 void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t max_iter,
                double *lo_out, double *hi_out, double *flo_out, double *fhi_out, uint8_t *found_out,
-               double *phi_out, double *fphi_out, int64_t *iters_out) {
-    Out o = {p, xtol, ftol, max_iter, lo_out, hi_out, flo_out, fhi_out, phi_out, fphi_out, found_out, iters_out};
+               double *phi_out, double *fphi_out, int64_t *iters_out, double *root_out, int64_t *order,
+               int64_t *start) {
+    /* root_out: ROOT_ROWS x n (see bem_values); order: n and start: n_stations + 1 zeros, scratch */
+    Out o = {p, xtol, ftol, max_iter, lo_out, hi_out, flo_out, fhi_out, phi_out, fphi_out, root_out, found_out,
+             iters_out, n};
     Lane lanes[LANES];
     int64_t next = 0;
     /* sections station by station (a counting sort): each station's table stays in cache */
-    int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
-    int64_t *start = calloc((size_t)p->n_stations + 1, sizeof(int64_t));
-    if (!order || !start) { free(order); free(start); bem_solve_serial(p, n, xtol, ftol, max_iter, lo_out, hi_out,
-                                                                      flo_out, fhi_out, found_out, phi_out, fphi_out,
-                                                                      iters_out); return; }
     for (int64_t j = 0; j < n; j++) start[p->station[j] + 1]++;
     for (int64_t q = 0; q < p->n_stations; q++) start[q + 1] += start[q];
     for (int64_t j = 0; j < n; j++) order[start[p->station[j]]++] = j;
-    free(start);
-    int busy = 0;
     for (int q = 0; q < LANES; q++) lanes[q].j = -1;
     for (;;) {
+        int busy = 0;
         for (int q = 0; q < LANES; q++) {
-            if (lanes[q].j < 0 && next < n) {
-                Lane *l = &lanes[q];
+            Lane *l = &lanes[q];
+            if (l->j < 0 && next < n) {
                 l->j = order[next++]; l->it = 0; l->stage = 0; l->x = EPS_PHI; l->lo = EPS_PHI; l->hi = HALF_PI;
             }
         }
-        busy = 0;
         double f[LANES];
-        for (int q = 0; q < LANES; q++)
-            if (lanes[q].j >= 0) { f[q] = residual(p, lanes[q].j, lanes[q].x); busy = 1; }
+        for (int q = 0; q < LANES; q++) {
+            Lane *l = &lanes[q];
+            if (l->j >= 0) {
+                l->alpha_deg = (l->x - p->theta[l->j]) * (180.0 / PI);
+                lookup(p, l->j, l->alpha_deg, &l->cl, &l->cd);
+                l->e = equations(p, l->j, l->x, l->cl, l->cd);
+                f[q] = l->e.residual;
+                busy = 1;
+            }
+        }
         if (!busy) break;
         for (int q = 0; q < LANES; q++)
             if (lanes[q].j >= 0) consume(&o, &lanes[q], f[q]);
     }
-    free(order);
 }

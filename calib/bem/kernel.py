@@ -138,7 +138,7 @@ def library() -> ctypes.CDLL | None:
                 lib = _build()
                 ptr = ctypes.c_void_p
                 lib.bem_solve.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ctypes.c_double, ctypes.c_double,
-                                          ctypes.c_int64] + [ptr] * 8
+                                          ctypes.c_int64] + [ptr] * 11
                 lib.bem_solve.restype = None
                 lib.bem_residual.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr]
                 lib.bem_residual.restype = None
@@ -147,7 +147,7 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_residual_partials.restype = None
                 lib.bem_polar.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ptr]
                 lib.bem_polar.restype = None
-                lib.bem_values.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr]
+                lib.bem_values.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ptr]
                 lib.bem_values.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
@@ -203,6 +203,7 @@ class SectionKernel:
         self._keep = [table, row, np.ascontiguousarray(sec.station, dtype=np.int64)] + [f8(x) for x in per_section]
         self.n = int(sec.station.size)
         self.lib = lib
+        self._solved = None
         self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
                                 *(_ptr(x) for x in self._keep[2:]), float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
@@ -219,10 +220,13 @@ class SectionKernel:
 
     def values(self, phi) -> dict:
         """Every section at inflow angle ``phi`` [rad] (its root): :attr:`VALUES` -> ndarray (n,)
-        (as :func:`calib.bem.sections.section_pass` without effects and derivatives)."""
+        (as :func:`calib.bem.sections.section_pass` without effects and derivatives). Sections
+        still at the angle :meth:`solve` ended on reuse that evaluation (the same numbers)."""
         phi = np.ascontiguousarray(phi, dtype=np.float64)
         out = np.empty((len(self.VALUES), self.n))
-        self.lib.bem_values(ctypes.byref(self.problem), self.n, _ptr(phi), _ptr(out))
+        solved = self._solved
+        self.lib.bem_values(ctypes.byref(self.problem), self.n, _ptr(phi), _ptr(solved[0]) if solved else None,
+                            _ptr(solved[1]) if solved else None, _ptr(out))
         return dict(zip(self.VALUES, out))
 
     def residual(self, index, phi) -> np.ndarray:
@@ -255,6 +259,10 @@ class SectionKernel:
         lo, hi, flo, fhi, phi, fphi = (np.empty(n) for _ in range(6))
         found = np.empty(n, dtype=np.uint8)
         iters = np.empty(n, dtype=np.int64)
+        root = np.empty((9, n))
+        order, start = np.empty(n, dtype=np.int64), np.zeros(self.problem.n_stations + 1, dtype=np.int64)
         self.lib.bem_solve(ctypes.byref(self.problem), n, float(xtol), float(ftol), int(max_iter), _ptr(lo),
-                           _ptr(hi), _ptr(flo), _ptr(fhi), _ptr(found), _ptr(phi), _ptr(fphi), _ptr(iters))
+                           _ptr(hi), _ptr(flo), _ptr(fhi), _ptr(found), _ptr(phi), _ptr(fphi), _ptr(iters),
+                           _ptr(root), _ptr(order), _ptr(start))
+        self._solved = (phi.copy(), root)
         return lo, hi, flo, fhi, found.astype(bool), phi, fphi, iters

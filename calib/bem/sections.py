@@ -137,6 +137,8 @@ class Roots:
         Inflow angle [rad] (π/2 where not converged) and residual there [-].
     converged : ndarray of bool
     iterations, n_roots : ndarray of int
+    compiled : calib.bem.kernel.SectionKernel or None
+        The compiled kernel that found them (it keeps its last evaluation of each section).
     """
 
     phi: np.ndarray
@@ -144,6 +146,7 @@ class Roots:
     converged: np.ndarray
     iterations: np.ndarray
     n_roots: np.ndarray
+    compiled: object = None
 
 
 def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, rotor) -> Roots:
@@ -188,7 +191,7 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
         phi, fphi, n_found = lowest_roots(residual, phi, fphi, lo, hi, search, np.radians(SCAN_STEP_DEG),
                                           np.radians(WINDOW_DEG), RESIDUAL_TOL, max_iter=settings.max_iter)
         n_roots = np.where(conv, n_found, 0)
-    return Roots(np.where(conv, phi, 0.5 * np.pi), fphi, conv, iters, n_roots)
+    return Roots(np.where(conv, phi, 0.5 * np.pi), fphi, conv, iters, n_roots, compiled if lib is not None else None)
 
 
 def slope_envelope(chain: BoundChain, polars, sec: Sections, rotor, alpha_range=None) -> SlopeEnvelope:
@@ -298,8 +301,8 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     compiled kernel when it is available (:mod:`calib.bem.kernel`; the same arithmetic).
     """
     phi = roots.phi
-    if not k and not (chain.has("polar") or chain.has("induction")) and kernel.library() is not None:
-        v = kernel.SectionKernel(kernel.library(), polars, sec, opts).values(phi)
+    if not k and roots.compiled is not None:        # no polar or induction effects (find_roots)
+        v = roots.compiled.values(phi)
         Np, Tp = v["Np"], v["Tp"]
         if chain.has("loads"):
             state = chain.run("loads", LoadsState(Np, Tp), sec.ctx, k)
