@@ -109,3 +109,27 @@ def test_no_compiler_falls_back_or_fails_clearly(monkeypatch, tmp_path):
     monkeypatch.setenv(kernel.ENV, "c")
     with pytest.raises(kernel.KernelBuildError, match="no C compiler"):
         kernel.library()
+
+
+@pytest.mark.parametrize("rotor_name", ["phase_vi", "iea3.4"])
+def test_screen_for_several_roots_selects_the_same_sections(rotor_name, numpy_path, monkeypatch):
+    """The compiled screen (negative lift slope in the window, then the slope budget) picks exactly the
+    sections the numpy screen picks."""
+    from calib.bem import sections
+    seen = []
+    search = sections.lowest_roots
+
+    def spy(residual, phi, fphi, lo, hi, candidates, *args, **kwargs):
+        seen.append(candidates.copy())
+        return search(residual, phi, fphi, lo, hi, candidates, *args, **kwargs)
+
+    monkeypatch.setattr(sections, "lowest_roots", spy)
+    rotor = load_rotor(rotor_name)
+    cond = _grid(rotor, tsr=np.linspace(2.0, 12.0, 9), pitch=np.linspace(-5.0, 30.0, 8),
+                 rpm=72.0 if rotor_name == "phase_vi" else 7.0)
+    fast = solve_bem(rotor, cond, BemSettings(polar_smoothing=(0.1, 0.001)))
+    numpy_path()
+    slow = solve_bem(rotor, cond, BemSettings(polar_smoothing=(0.1, 0.001)))
+    assert len(seen) == 2 and seen[1].sum() > 0
+    np.testing.assert_array_equal(seen[0], seen[1])
+    _assert_same(fast, slow)

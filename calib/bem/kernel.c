@@ -327,3 +327,38 @@ void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t ma
             if (lanes[q].j >= 0) consume(&o, &lanes[q], f[q]);
     }
 }
+
+/* NaN when either is (np.minimum) */
+static double nan_min(double a, double b) {
+    if (isnan(a) || isnan(b)) return NAN;
+    return a < b ? a : b;
+}
+
+/* The screen for several roots at sections index[m] (the converged ones) at their roots phi[j]:
+ * a negative lift slope within the window (SlopeEnvelope.at on env, 4 x (n_stations x env_grid):
+ * cl_min, cl_max, cd_min, cd_max [1/deg]), then the slope budget of multiple_roots.needs_search
+ * with the one-sided partials of bem_residual_partials. search[j] set to 1 where to search. */
+void bem_screen(const Problem *p, int64_t n_c, const int64_t *index, const double *phi, const double *env,
+                int64_t env_grid, int64_t first_node, double env_step, double margin, double rel_step,
+                uint8_t *search) {
+    int64_t plane = p->n_stations * env_grid;
+    const double per_rad = 180.0 / PI;
+    for (int64_t m = 0; m < n_c; m++) {
+        int64_t j = index[m];
+        double alpha_deg = (phi[j] - p->theta[j]) * (180.0 / PI);
+        double node_f = rint(py_mod(alpha_deg + 180.0, 360.0) / env_step);
+        if (!isfinite(node_f)) { search[j] = 1; continue; }
+        int64_t node = (int64_t)node_f - first_node;
+        if (node < 0) node = 0;
+        if (node > env_grid - 1) node = env_grid - 1;
+        int64_t at = p->station[j] * env_grid + node;
+        double cl_min = env[at], cl_max = env[plane + at], cd_min = env[2 * plane + at], cd_max = env[3 * plane + at];
+        if (!(cl_min < 0.0)) continue;
+        double cl, cd, d0, d_cl, d_cd;
+        lookup(p, j, alpha_deg, &cl, &cd);
+        bem_residual_partials(p, 1, &j, phi + j, &cl, &cd, rel_step, &d0, &d_cl, &d_cd);
+        double worst = d0 + nan_min(d_cl * (cl_min * per_rad), d_cl * (cl_max * per_rad))
+                       + nan_min(d_cd * (cd_min * per_rad), d_cd * (cd_max * per_rad));
+        search[j] = !(worst >= margin * fabs(d0)) || !(d0 > 0);
+    }
+}

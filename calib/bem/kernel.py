@@ -149,6 +149,9 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_polar.restype = None
                 lib.bem_values.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ptr]
                 lib.bem_values.restype = None
+                lib.bem_screen.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ctypes.c_int64,
+                                           ctypes.c_int64, ctypes.c_double, ctypes.c_double, ctypes.c_double, ptr]
+                lib.bem_screen.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
                 if mode == "c":
@@ -204,6 +207,7 @@ class SectionKernel:
         self.n = int(sec.station.size)
         self.lib = lib
         self._solved = None
+        self._envelope = None
         self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
                                 *(_ptr(x) for x in self._keep[2:]), float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
@@ -246,6 +250,26 @@ class SectionKernel:
         self.lib.bem_residual_partials(ctypes.byref(self.problem), index.size, _ptr(index), _ptr(phi), _ptr(cl),
                                        _ptr(cd), float(rel_step), _ptr(d0), _ptr(d_cl), _ptr(d_cd))
         return d0, d_cl, d_cd
+
+    def screen(self, index, phi, envelope, margin) -> np.ndarray:
+        """Sections to search for several roots (bool, shape (n,)): of ``index`` (converged, at
+        roots ``phi`` [rad], shape (n,)), those with a negative lift slope in ``envelope`` (a
+        :class:`calib.bem.multiple_roots.SlopeEnvelope`) that fail the slope budget of
+        :func:`calib.bem.multiple_roots.needs_search` with ``margin``; as the numpy screen of
+        :func:`calib.bem.sections.find_roots`."""
+        index = np.ascontiguousarray(index, dtype=np.int64)
+        phi = np.ascontiguousarray(phi, dtype=np.float64)
+        key = id(envelope)
+        if self._envelope is None or self._envelope[0] != key:
+            stack = np.ascontiguousarray(np.stack([envelope.cl_min, envelope.cl_max, envelope.cd_min,
+                                                   envelope.cd_max]), dtype=np.float64)
+            self._envelope = (key, stack, envelope)
+        stack = self._envelope[1]
+        search = np.zeros(self.n, dtype=np.uint8)
+        self.lib.bem_screen(ctypes.byref(self.problem), index.size, _ptr(index), _ptr(phi), _ptr(stack),
+                            int(stack.shape[2]), int(envelope.first_node), float(envelope.step_deg), float(margin),
+                            1e-6, _ptr(search))
+        return search.astype(bool)
 
     def solve(self, xtol=1e-12, ftol=1e-12, max_iter=100):
         """Bracket and iteration of every section.

@@ -18,7 +18,7 @@ from calib.bem import dual as dl
 from calib.bem import kernel
 from calib.bem.chain import COL_PHI, COL_PITCH, COL_WIND, BoundChain
 from calib.bem.kinematics import curvature, wind_components
-from calib.bem.multiple_roots import (SCAN_STEP_DEG, WINDOW_DEG, SlopeEnvelope, lowest_roots,
+from calib.bem.multiple_roots import (SCAN_STEP_DEG, SCREEN_MARGIN, WINDOW_DEG, SlopeEnvelope, lowest_roots,
                                       needs_search)
 from calib.bem.residual import SectionGeometry, section_equations, section_loads
 from calib.bem.rootfind import bracket, solve_brackets
@@ -175,19 +175,19 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
     if settings.search_multiple_roots and conv.any():
         # screen: a negative lift slope within the window (stall), then the exact slope budget
         ci = np.flatnonzero(conv)
-        alpha_c = np.degrees(phi[ci] - sec.theta[ci])
-        envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
-        slopes = envelope.at(alpha_c, sec.station[ci])
-        stalled = slopes[0] < 0.0
-        ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
-        _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci]) if lib is None else (None, *compiled.polar(ci, phi[ci]))
         if lib is not None:
-            d0, d_cl, d_cd = compiled.residual_partials(ci, phi[ci], cl_c, cd_c)
+            search = compiled.screen(ci, phi, slope_envelope(chain, polars, sec, rotor), SCREEN_MARGIN)
         else:
+            alpha_c = np.degrees(phi[ci] - sec.theta[ci])
+            envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
+            slopes = envelope.at(alpha_c, sec.station[ci])
+            stalled = slopes[0] < 0.0
+            ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
+            _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci])
             d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, sec.vx[ci], sec.vy[ci], sec.geo.take(ci), opts,
                                                 _induction(chain, sec.ctx.take(np.concatenate([ci] * 4))))
-        search = np.zeros(sec.n, bool)
-        search[ci] = needs_search(d0, d_cl, d_cd, slopes)
+            search = np.zeros(sec.n, bool)
+            search[ci] = needs_search(d0, d_cl, d_cd, slopes)
         phi, fphi, n_found = lowest_roots(residual, phi, fphi, lo, hi, search, np.radians(SCAN_STEP_DEG),
                                           np.radians(WINDOW_DEG), RESIDUAL_TOL, max_iter=settings.max_iter)
         n_roots = np.where(conv, n_found, 0)
