@@ -7,8 +7,15 @@ with a temporary array and a Python round trip per iteration; ``kernel.c`` does 
 arithmetic, in the same order, one section at a time (the bracket, the iteration and the
 residual of :mod:`calib.bem.rootfind`, :mod:`calib.bem.residual` and
 :meth:`calib.bem.polar_grid.SectionPolars.lookup`). It is used when the effect chain has no
-polar or induction stage (those run Python effects inside the residual); derivatives are
-unaffected (the section pass at the root stays in numpy, on dual numbers).
+polar or induction stage (those run Python effects inside the residual), for the search
+itself, the screen for several roots (:mod:`calib.bem.multiple_roots`) and the plain section
+values at the roots (the last evaluation of each section, reused). Derivatives are
+unaffected: with sensitivities the section pass at the root runs in numpy, on dual numbers.
+
+Where the time goes (NREL 5-MW C_P surface, 2200 points, 37 400 loaded sections, one core):
+about 10 residual evaluations per section at some 50-65 ns each (sin, cos, two exp and acos
+for the loss factors, the polar's cubic), i.e. about 0.65 µs per section in the kernel,
+plus about 0.3 µs per section of numpy around it (kinematics, status, scatter to full shape).
 
 Build: the C compiler ``$CC`` (else ``cc``, ``gcc``, ``clang``) makes a shared library with
 ``-O2 -ffp-contract=off`` (no fused multiply-add, no fast-math: the numpy path's rounding),
