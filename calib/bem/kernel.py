@@ -73,6 +73,7 @@ class _Problem(ctypes.Structure):
 
 
 _TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_ENVELOPES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def node_table(polars) -> tuple[np.ndarray, np.ndarray]:
@@ -214,7 +215,6 @@ class SectionKernel:
         self.n = int(sec.station.size)
         self.lib = lib
         self._solved = None
-        self._envelope = None
         self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
                                 *(_ptr(x) for x in self._keep[2:]), float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
@@ -266,12 +266,10 @@ class SectionKernel:
         :func:`calib.bem.sections.find_roots`."""
         index = np.ascontiguousarray(index, dtype=np.int64)
         phi = np.ascontiguousarray(phi, dtype=np.float64)
-        key = id(envelope)
-        if self._envelope is None or self._envelope[0] != key:
-            stack = np.ascontiguousarray(np.stack([envelope.cl_min, envelope.cl_max, envelope.cd_min,
-                                                   envelope.cd_max]), dtype=np.float64)
-            self._envelope = (key, stack, envelope)
-        stack = self._envelope[1]
+        if envelope not in _ENVELOPES:      # the tables' envelope lives as long as its SectionPolars
+            _ENVELOPES[envelope] = np.ascontiguousarray(np.stack([envelope.cl_min, envelope.cl_max, envelope.cd_min,
+                                                                  envelope.cd_max]), dtype=np.float64)
+        stack = _ENVELOPES[envelope]
         search = np.zeros(self.n, dtype=np.uint8)
         self.lib.bem_screen(ctypes.byref(self.problem), index.size, _ptr(index), _ptr(phi), _ptr(stack),
                             int(stack.shape[2]), int(envelope.first_node), float(envelope.step_deg), float(margin),
