@@ -9,14 +9,16 @@ implicit-function theorem at the root (Ning 2014).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from calib.bem import dual as dl
+from calib.bem import kernel
 from calib.bem.chain import COL_PHI, COL_PITCH, COL_WIND, BoundChain
 from calib.bem.kinematics import curvature, wind_components
-from calib.bem.multiple_roots import (SCAN_STEP_DEG, WINDOW_DEG, SlopeEnvelope, lowest_roots,
+from calib.bem.multiple_roots import (SCAN_STEP_DEG, SCREEN_MARGIN, WINDOW_DEG, SlopeEnvelope, lowest_roots,
                                       needs_search)
 from calib.bem.residual import SectionGeometry, section_equations, section_loads
 from calib.bem.rootfind import bracket, solve_brackets
@@ -24,6 +26,9 @@ from calib.bem.stages import LoadsState, PolarState, RotorData, SectionContext
 
 RESIDUAL_TOL = 1e-8
 """A section counts as converged when |R(φ*)| is below this [-]."""
+
+_TABLE_ENVELOPES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+"""Slope envelope of each SectionPolars' own tables (no polar effect), built at first use."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,6 +137,8 @@ class Roots:
         Inflow angle [rad] (π/2 where not converged) and residual there [-].
     converged : ndarray of bool
     iterations, n_roots : ndarray of int
+    compiled : calib.bem.kernel.SectionKernel or None
+        The compiled kernel that found them (it keeps its last evaluation of each section).
     """
 
     phi: np.ndarray
@@ -139,38 +146,52 @@ class Roots:
     converged: np.ndarray
     iterations: np.ndarray
     n_roots: np.ndarray
+    compiled: object = None
 
 
 def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, rotor) -> Roots:
-    """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots."""
+    """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots.
 
-    def residual(idx, phi):
-        _, cl, cd = _polar(chain, polars, sec, idx, phi)
-        eq = section_equations(phi, cl, cd, sec.vx[idx], sec.vy[idx], sec.geo.take(idx),
-                               losses=_induction(chain, sec.ctx.take(idx)), **opts)
-        return eq["residual"]
+    Without polar or induction effects in the chain, the compiled kernel (:mod:`calib.bem.kernel`)
+    runs the residual and the iteration when it is available: the same arithmetic, one pass.
+    """
 
-    lo, hi, flo, fhi, found = bracket(residual, sec.n)
-    phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
+    lib = None if (chain.has("polar") or chain.has("induction")) else kernel.library()
+    if lib is not None:
+        compiled = kernel.SectionKernel(lib, polars, sec, opts)
+        residual = compiled.residual
+        lo, hi, flo, fhi, found, phi, fphi, iters = compiled.solve(max_iter=settings.max_iter)
+    else:
+        def residual(idx, phi):
+            _, cl, cd = _polar(chain, polars, sec, idx, phi)
+            eq = section_equations(phi, cl, cd, sec.vx[idx], sec.vy[idx], sec.geo.take(idx),
+                                   losses=_induction(chain, sec.ctx.take(idx)), **opts)
+            return eq["residual"]
+
+        lo, hi, flo, fhi, found = bracket(residual, sec.n)
+        phi, fphi, iters = solve_brackets(residual, lo, hi, flo, fhi, found, max_iter=settings.max_iter)
     conv = found & np.isfinite(fphi) & (np.abs(fphi) <= RESIDUAL_TOL)
     n_roots = conv.astype(int)
     if settings.search_multiple_roots and conv.any():
         # screen: a negative lift slope within the window (stall), then the exact slope budget
         ci = np.flatnonzero(conv)
-        alpha_c = np.degrees(phi[ci] - sec.theta[ci])
-        envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
-        slopes = envelope.at(alpha_c, sec.station[ci])
-        stalled = slopes[0] < 0.0
-        ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
-        _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci])
-        d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, sec.vx[ci], sec.vy[ci], sec.geo.take(ci), opts,
-                                            _induction(chain, sec.ctx.take(np.concatenate([ci] * 4))))
-        search = np.zeros(sec.n, bool)
-        search[ci] = needs_search(d0, d_cl, d_cd, slopes)
+        if lib is not None:
+            search = compiled.screen(ci, phi, slope_envelope(chain, polars, sec, rotor), SCREEN_MARGIN)
+        else:
+            alpha_c = np.degrees(phi[ci] - sec.theta[ci])
+            envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
+            slopes = envelope.at(alpha_c, sec.station[ci])
+            stalled = slopes[0] < 0.0
+            ci, slopes = ci[stalled], tuple(v[stalled] for v in slopes)
+            _, cl_c, cd_c = _polar(chain, polars, sec, ci, phi[ci])
+            d0, d_cl, d_cd = _residual_partials(phi[ci], cl_c, cd_c, sec.vx[ci], sec.vy[ci], sec.geo.take(ci), opts,
+                                                _induction(chain, sec.ctx.take(np.concatenate([ci] * 4))))
+            search = np.zeros(sec.n, bool)
+            search[ci] = needs_search(d0, d_cl, d_cd, slopes)
         phi, fphi, n_found = lowest_roots(residual, phi, fphi, lo, hi, search, np.radians(SCAN_STEP_DEG),
                                           np.radians(WINDOW_DEG), RESIDUAL_TOL, max_iter=settings.max_iter)
         n_roots = np.where(conv, n_found, 0)
-    return Roots(np.where(conv, phi, 0.5 * np.pi), fphi, conv, iters, n_roots)
+    return Roots(np.where(conv, phi, 0.5 * np.pi), fphi, conv, iters, n_roots, compiled if lib is not None else None)
 
 
 def slope_envelope(chain: BoundChain, polars, sec: Sections, rotor, alpha_range=None) -> SlopeEnvelope:
@@ -184,7 +205,10 @@ def slope_envelope(chain: BoundChain, polars, sec: Sections, rotor, alpha_range=
     covers all four (exact bounds for effects whose slope is monotone in each of the two).
     """
     if not chain.has("polar"):
-        return SlopeEnvelope.build(polars.cl_slopes, polars.cd_slopes, polars.step_deg, WINDOW_DEG)
+        if polars not in _TABLE_ENVELOPES:      # a function of the tables alone: once per SectionPolars
+            _TABLE_ENVELOPES[polars] = SlopeEnvelope.build(polars.cl_slopes, polars.cd_slopes, polars.step_deg,
+                                                           WINDOW_DEG)
+        return _TABLE_ENVELOPES[polars]
     n_st, n_all = polars.cl_nodes.shape
     h = polars.step_deg
     first, last = 0, n_all - 1
@@ -273,9 +297,20 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     """Evaluate every section at its root; with ``k`` > 0, on duals over the chain's section columns.
 
     Columns: φ, pitch [rad], inflow speed [m/s], then the section-stage effects' columns
-    (:mod:`calib.bem.chain`).
+    (:mod:`calib.bem.chain`). Plain values without polar or induction effects come from the
+    compiled kernel when it is available (:mod:`calib.bem.kernel`; the same arithmetic).
     """
     phi = roots.phi
+    if not k and roots.compiled is not None:        # no polar or induction effects (find_roots)
+        v = roots.compiled.values(phi)
+        Np, Tp = v["Np"], v["Tp"]
+        if chain.has("loads"):
+            state = chain.run("loads", LoadsState(Np, Tp), sec.ctx, k)
+            Np, Tp = state.Np, state.Tp
+        eq = {"residual": v["residual"], "a": v["a"], "ap": v["ap"], "cn": v["cn"], "ct": v["ct"], "F": v["F"],
+              "load": 1.0}
+        return SectionValues(v["alpha_deg"], v["cl"], v["cd"], eq, v["W"],
+                             {"Np": Np, "Tp": Tp, "cn": v["cn_chord"], "ct": v["ct_chord"]})
     alpha_deg = np.degrees(phi - sec.theta)
     cl, cd, dcl, dcd = polars.lookup(alpha_deg, sec.station)
     ctx = sec.ctx

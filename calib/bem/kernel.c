@@ -1,0 +1,364 @@
+/* Compiled root search of the native BEM: Ning's residual, his brackets and the
+ * Anderson-Bjorck iteration, one section at a time (calib/bem/kernel.py builds and loads it).
+ *
+ * The same arithmetic, in the same order, as calib/bem/residual.py (section_equations on
+ * plain arrays, no induction-stage effect), calib/bem/polar_grid.py (SectionPolars.lookup)
+ * and calib/bem/rootfind.py (bracket, solve_brackets): compiled with -ffp-contract=off and
+ * without -ffast-math, a root differs from the numpy path's only through the last bit of
+ * sin, cos, exp, acos (libm against numpy's own loops).
+ */
+#include <math.h>
+#include <stdint.h>
+
+#define EPS_PHI 1e-6
+#define PI 3.141592653589793
+#define HALF_PI (0.5 * PI)
+
+typedef struct {
+    /* per node of each distinct table: C_L, C_L' h, C_D, C_D' h (SectionPolars.lookup's y and m) */
+    const double *table;
+    const int64_t *table_row;   /* (n_stations,) the table of each station */
+    int64_t n_grid, n_stations;
+    double step_deg, inv_step;  /* inv_step: 1 / step when that is exact (a power of two), else 0 */
+    /* per section */
+    const int64_t *station;
+    const double *theta, *vx, *vy, *r, *sigma, *chord, *rho;
+    const double *tip_f, *hub_f, *lam;  /* B (R - r) / (2 r), B (r - R_h) / (2 R_h), V_y / V_x */
+    double n_blades;
+    int tip_loss, hub_loss, drag_axial, drag_tangential, wake_rotation;
+} Problem;
+
+/* numpy's float mod (np.mod): the sign of the divisor */
+static double py_mod(double a, double b) {
+    if (a > 0.0 && a < b) return a;      /* fmod's own result there, without the call */
+    double m = fmod(a, b);
+    if (m != 0.0) {
+        if ((b < 0) != (m < 0)) m += b;
+    } else {
+        m = copysign(0.0, b);
+    }
+    return m;
+}
+
+static void lookup(const Problem *p, int64_t j, double alpha_deg, double *cl, double *cd) {
+    double h = p->step_deg;
+    double a = py_mod(alpha_deg + 180.0, 360.0);
+    double x = p->inv_step != 0.0 ? a * p->inv_step : a / h;   /* equal when inv_step is exact */
+    if (!isfinite(x)) {             /* numpy would fail to index; a NaN residual stops the section */
+        *cl = *cd = NAN;
+        return;
+    }
+    int64_t i = (int64_t)x;
+    if (i > p->n_grid - 2) i = p->n_grid - 2;
+    double t = x - (double)i;
+    double t2 = t * t, t3 = t * t * t;
+    double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = -2 * t3 + 3 * t2, h11 = t3 - t2;
+    const double *n0 = p->table + 4 * (p->table_row[p->station[j]] * p->n_grid + i), *n1 = n0 + 4;
+    *cl = h00 * n0[0] + h10 * n0[1] + h01 * n1[0] + h11 * n1[1];
+    *cd = h00 * n0[2] + h10 * n0[3] + h01 * n1[2] + h11 * n1[3];
+}
+
+/* (2/pi) acos(exp(-f)): exactly (2/pi) acos(0) once exp(-f) < 3.2e-17 (f > 38), where the
+ * correctly rounded acos of the tiny argument is already the double nearest pi/2 */
+static double prandtl(double f) {
+    if (f > 38.0) return (2.0 / PI) * 1.5707963267948966;
+    return (2.0 / PI) * acos(exp(-f));
+}
+
+typedef struct { double residual, a, ap, cn, ct, F; } Equations;
+
+/* section_equations at inflow angle phi with the polar's cl, cd given */
+static Equations equations(const Problem *p, int64_t j, double phi, double cl, double cd) {
+    Equations e;
+    double s = sin(phi), c = cos(phi);
+    double F = 1.0, tip = 1.0, hub = 1.0;
+    double as = fabs(s);
+    if (p->tip_loss) tip = prandtl(p->tip_f[j] / as);
+    if (p->hub_loss) hub = prandtl(p->hub_f[j] / as);
+    if (!p->tip_loss) F = hub;
+    else F = p->hub_loss ? tip * hub : tip;
+    double cn = cl * c + cd * s;
+    double ct = cl * s - cd * c;
+    double cn_i = p->drag_axial ? cn : cl * c;
+    double ct_i = p->drag_tangential ? ct : cl * s;
+    double k = p->sigma[j] * cn_i / (4.0 * F * s * s);
+    double kp = p->sigma[j] * ct_i / (4.0 * F * s * c);
+    double a;
+    if (phi > 0) {
+        if (k <= 2.0 / 3.0) {
+            a = k / (1.0 + k);
+        } else {
+            double g1 = 2.0 * F * k - (10.0 / 9.0 - F);
+            double g2 = 2.0 * F * k - F * (4.0 / 3.0 - F);
+            double g3 = 2.0 * F * k - (25.0 / 9.0 - 2.0 * F);
+            a = fabs(g3) < 1e-6 ? 1.0 - 0.5 / sqrt(g2) : (g1 - sqrt(g2)) / g3;
+        }
+    } else {
+        a = k > 1.0 ? k / (k - 1.0) : 0.0 * k;
+    }
+    if (!p->wake_rotation) kp = 0.0 * kp;
+    double lam = p->lam[j];
+    e.residual = phi > 0 ? s / (1.0 - a) - c / lam * (1.0 - kp) : s * (1.0 - k) - c / lam * (1.0 - kp);
+    e.a = a;
+    e.ap = kp / (1.0 - kp);
+    e.cn = cn;
+    e.ct = ct;
+    e.F = F;
+    return e;
+}
+
+static double residual_at(const Problem *p, int64_t j, double phi, double cl, double cd) {
+    return equations(p, j, phi, cl, cd).residual;
+}
+
+static double residual(const Problem *p, int64_t j, double phi) {
+    double cl, cd;
+    lookup(p, j, (phi - p->theta[j]) * (180.0 / PI), &cl, &cd);
+    return residual_at(p, j, phi, cl, cd);
+}
+
+/* R at (index[m], phi[m]) for m < n */
+void bem_residual(const Problem *p, int64_t n, const int64_t *index, const double *phi, double *out) {
+    for (int64_t m = 0; m < n; m++) out[m] = residual(p, index[m], phi[m]);
+}
+
+/* One-sided differences of the residual in phi, C_L, C_D at given sections (the screen for
+ * several roots; sections._residual_partials): d0, d_cl, d_cd. */
+void bem_residual_partials(const Problem *p, int64_t n, const int64_t *index, const double *phi,
+                           const double *cl, const double *cd, double rel_step, double *d0, double *d_cl,
+                           double *d_cd) {
+    for (int64_t m = 0; m < n; m++) {
+        int64_t j = index[m];
+        double aphi = fabs(phi[m]), acl = fabs(cl[m]), acd = fabs(cd[m]);
+        double h = rel_step * (aphi > 1.0 ? aphi : 1.0);
+        double hc = rel_step * (acl > 1.0 ? acl : 1.0);
+        double hd = rel_step * (acd > 1e-2 ? acd : 1e-2);
+        double r0 = residual_at(p, j, phi[m] + 0.0, cl[m] + 0.0, cd[m] + 0.0);
+        d0[m] = (residual_at(p, j, phi[m] + h, cl[m] + 0.0, cd[m] + 0.0) - r0) / h;
+        d_cl[m] = (residual_at(p, j, phi[m] + 0.0, cl[m] + hc, cd[m] + 0.0) - r0) / hc;
+        d_cd[m] = (residual_at(p, j, phi[m] + 0.0, cl[m] + 0.0, cd[m] + hd) - r0) / hd;
+    }
+}
+
+/* C_L, C_D at (index[m], phi[m]) (SectionPolars.lookup at alpha = phi - theta) */
+void bem_polar(const Problem *p, int64_t n, const int64_t *index, const double *phi, double *cl, double *cd) {
+    for (int64_t m = 0; m < n; m++)
+        lookup(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
+}
+
+/* The quantities of section_pass at the last residual evaluation of a section (rows of ROOT_ROWS) */
+#define ROOT_ROWS 9
+static void store_root(double *root, int64_t n, int64_t j, double alpha_deg, double cl, double cd, Equations e) {
+    double row[ROOT_ROWS] = {alpha_deg, cl, cd, e.residual, e.a, e.ap, e.cn, e.ct, e.F};
+    for (int m = 0; m < ROOT_ROWS; m++) root[m * n + j] = row[m];
+}
+
+/* Every section at its root phi[j] (sections.section_pass without effects, k = 0): angle of
+ * attack [deg], C_L, C_D, residual, a, a', c_n, c_t (rotor axes), F, W [m/s], N', T' [N/m],
+ * c_n, c_t (chord axes); out is (14, n), row-major. Where phi[j] is the phi bem_solve ended on
+ * (solved_phi[j]), its stored quantities (root, ROOT_ROWS x n) are the same numbers and are reused;
+ * solved_phi may be NULL. */
+void bem_values(const Problem *p, int64_t n, const double *phi, const double *solved_phi, const double *root,
+                double *out) {
+    for (int64_t j = 0; j < n; j++) {
+        double alpha_rad = phi[j] - p->theta[j];
+        double alpha_deg, cl, cd;
+        Equations e;
+        if (solved_phi && phi[j] == solved_phi[j]) {
+            alpha_deg = root[j]; cl = root[n + j]; cd = root[2 * n + j];
+            e.residual = root[3 * n + j]; e.a = root[4 * n + j]; e.ap = root[5 * n + j];
+            e.cn = root[6 * n + j]; e.ct = root[7 * n + j]; e.F = root[8 * n + j];
+        } else {
+            alpha_deg = alpha_rad * (180.0 / PI);
+            lookup(p, j, alpha_deg, &cl, &cd);
+            e = equations(p, j, phi[j], cl, cd);
+        }
+        double ux = p->vx[j] * (1.0 - e.a), uy = p->vy[j] * (1.0 + e.ap);
+        double w2 = ux * ux + uy * uy;
+        double q = 0.5 * p->rho[j] * w2 * p->chord[j];
+        double sa = sin(alpha_rad), ca = cos(alpha_rad);
+        double row[14] = {alpha_deg, cl, cd, e.residual, e.a, e.ap, e.cn, e.ct, e.F, sqrt(w2), e.cn * q, e.ct * q,
+                          cl * ca + cd * sa, cl * sa - cd * ca};
+        for (int m = 0; m < 14; m++) out[m * n + j] = row[m];
+    }
+}
+
+/* Ning's bracket and the Anderson-Bjorck iteration per section, the sequence of rootfind.bracket
+ * and rootfind.solve_brackets for each section, with LANES sections in flight at once: their
+ * residual evaluations are independent, so the processor overlaps them. */
+#define LANES 4
+
+typedef struct {
+    int64_t j, it;
+    int stage;             /* 0: at lo, 1: at hi, 2: at -pi/4, 3: at -eps, 4: at pi - eps, 5: iterating */
+    double lo, hi, flo, fhi, fa_neg, a, b, fa, fb, x;
+    double alpha_deg, cl, cd;   /* of the last evaluation */
+    Equations e;
+} Lane;
+
+typedef struct {
+    const Problem *p;
+    double xtol, ftol;
+    int64_t max_iter;
+    double *lo, *hi, *flo, *fhi, *phi, *fphi, *root;
+    uint8_t *found;
+    int64_t *iters;
+    int64_t n;
+} Out;
+
+static void finish(const Out *o, Lane *l, int found, double phi, double fphi) {
+    int64_t j = l->j;
+    o->lo[j] = l->lo; o->hi[j] = l->hi; o->flo[j] = l->flo; o->fhi[j] = l->fhi; o->found[j] = (uint8_t)found;
+    o->phi[j] = phi; o->fphi[j] = fphi; o->iters[j] = l->it;
+    /* what section_pass needs at the root: the last evaluation's, where the section ended on it */
+    if (l->stage == 5 && phi == l->x) {
+        store_root(o->root, o->n, j, l->alpha_deg, l->cl, l->cd, l->e);
+    } else if (isfinite(phi)) {             /* an endpoint of the bracket that is a root */
+        double alpha_deg = (phi - o->p->theta[j]) * (180.0 / PI), cl, cd;
+        lookup(o->p, j, alpha_deg, &cl, &cd);
+        store_root(o->root, o->n, j, alpha_deg, cl, cd, equations(o->p, j, phi, cl, cd));
+    }
+    l->j = -1;
+}
+
+/* next Anderson-Bjorck point of an iterating lane (it already incremented) */
+static void ab_point(Lane *l) {
+    double a = l->a, b = l->b, fa = l->fa, fb = l->fb;
+    double c = b - fb * (b - a) / (fb - fa);
+    double lo_w = a < b ? a : b, hi_w = a > b ? a : b;
+    if (!isfinite(c) || c <= lo_w || c >= hi_w || l->it % 8 == 0) c = 0.5 * (a + b);
+    l->x = c;
+}
+
+/* the bracket is found: start the iteration (or finish at an endpoint that is a root) */
+static void start_iteration(const Out *o, Lane *l) {
+    l->a = l->lo; l->b = l->hi; l->fa = l->flo; l->fb = l->fhi;
+    if (fabs(l->fa) <= o->ftol || fabs(l->fb) <= o->ftol) {
+        int pick_a = fabs(l->fa) <= fabs(l->fb);
+        finish(o, l, 1, pick_a ? l->a : l->b, pick_a ? l->fa : l->fb);
+        return;
+    }
+    if (o->max_iter < 1) { finish(o, l, 1, l->b, l->fb); return; }
+    l->stage = 5;
+    l->it = 1;
+    ab_point(l);
+}
+
+/* take the residual f at l->x and set the next point (or finish) */
+static void consume(const Out *o, Lane *l, double f) {
+    switch (l->stage) {
+    case 0:
+        l->flo = f; l->stage = 1; l->x = HALF_PI;
+        return;
+    case 1:
+        l->fhi = f;
+        if (isfinite(l->flo) && isfinite(l->fhi) && (l->flo * l->fhi <= 0)) { start_iteration(o, l); return; }
+        l->stage = 2; l->x = -0.25 * PI;
+        return;
+    case 2:
+        l->fa_neg = f; l->stage = 3; l->x = -EPS_PHI;
+        return;
+    case 3:
+        if (l->fa_neg < 0 && f > 0) {
+            l->lo = -0.25 * PI; l->hi = -EPS_PHI; l->flo = l->fa_neg; l->fhi = f;
+            start_iteration(o, l);
+            return;
+        }
+        l->stage = 4; l->x = PI - EPS_PHI;
+        return;
+    case 4:
+        l->lo = HALF_PI; l->hi = PI - EPS_PHI; l->flo = l->fhi; l->fhi = f;
+        if (isfinite(l->flo) && isfinite(f) && (l->flo * f <= 0)) start_iteration(o, l);
+        else finish(o, l, 0, NAN, NAN);
+        return;
+    default: {
+        double c = l->x, fc = f, fb = l->fb;
+        int flip = fc * fb < 0;
+        double m = 1.0 - fc / fb;
+        if (!(m > 0 && isfinite(m))) m = 0.5;
+        double new_a = flip ? l->b : l->a;
+        double new_fa = flip ? fb : l->fa * m;
+        l->a = new_a; l->fa = new_fa; l->b = c; l->fb = fc;
+        double ac = fabs(c);
+        int conv = (fabs(fc) <= o->ftol || fabs(c - new_a) <= o->xtol * (ac > 1.0 ? ac : 1.0)) && isfinite(fc);
+        if (conv) { finish(o, l, 1, c, fc); return; }
+        if (l->it == o->max_iter) { finish(o, l, 1, l->b, l->fb); return; }
+        l->it++;
+        ab_point(l);
+    }
+    }
+}
+
+void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t max_iter,
+               double *lo_out, double *hi_out, double *flo_out, double *fhi_out, uint8_t *found_out,
+               double *phi_out, double *fphi_out, int64_t *iters_out, double *root_out, int64_t *order,
+               int64_t *start) {
+    /* root_out: ROOT_ROWS x n (see bem_values); order: n and start: n_stations + 1 zeros, scratch */
+    Out o = {p, xtol, ftol, max_iter, lo_out, hi_out, flo_out, fhi_out, phi_out, fphi_out, root_out, found_out,
+             iters_out, n};
+    Lane lanes[LANES];
+    int64_t next = 0;
+    /* sections station by station (a counting sort): each station's table stays in cache */
+    for (int64_t j = 0; j < n; j++) start[p->station[j] + 1]++;
+    for (int64_t q = 0; q < p->n_stations; q++) start[q + 1] += start[q];
+    for (int64_t j = 0; j < n; j++) order[start[p->station[j]]++] = j;
+    for (int q = 0; q < LANES; q++) lanes[q].j = -1;
+    for (;;) {
+        int busy = 0;
+        for (int q = 0; q < LANES; q++) {
+            Lane *l = &lanes[q];
+            if (l->j < 0 && next < n) {
+                l->j = order[next++]; l->it = 0; l->stage = 0; l->x = EPS_PHI; l->lo = EPS_PHI; l->hi = HALF_PI;
+            }
+        }
+        double f[LANES];
+        for (int q = 0; q < LANES; q++) {
+            Lane *l = &lanes[q];
+            if (l->j >= 0) {
+                l->alpha_deg = (l->x - p->theta[l->j]) * (180.0 / PI);
+                lookup(p, l->j, l->alpha_deg, &l->cl, &l->cd);
+                l->e = equations(p, l->j, l->x, l->cl, l->cd);
+                f[q] = l->e.residual;
+                busy = 1;
+            }
+        }
+        if (!busy) break;
+        for (int q = 0; q < LANES; q++)
+            if (lanes[q].j >= 0) consume(&o, &lanes[q], f[q]);
+    }
+}
+
+/* NaN when either is (np.minimum) */
+static double nan_min(double a, double b) {
+    if (isnan(a) || isnan(b)) return NAN;
+    return a < b ? a : b;
+}
+
+/* The screen for several roots at sections index[m] (the converged ones) at their roots phi[j]:
+ * a negative lift slope within the window (SlopeEnvelope.at on env, 4 x (n_stations x env_grid):
+ * cl_min, cl_max, cd_min, cd_max [1/deg]), then the slope budget of multiple_roots.needs_search
+ * with the one-sided partials of bem_residual_partials. search[j] set to 1 where to search. */
+void bem_screen(const Problem *p, int64_t n_c, const int64_t *index, const double *phi, const double *env,
+                int64_t env_grid, int64_t first_node, double env_step, double margin, double rel_step,
+                uint8_t *search) {
+    int64_t plane = p->n_stations * env_grid;
+    const double per_rad = 180.0 / PI;
+    for (int64_t m = 0; m < n_c; m++) {
+        int64_t j = index[m];
+        double alpha_deg = (phi[j] - p->theta[j]) * (180.0 / PI);
+        double node_f = rint(py_mod(alpha_deg + 180.0, 360.0) / env_step);
+        if (!isfinite(node_f)) { search[j] = 1; continue; }
+        int64_t node = (int64_t)node_f - first_node;
+        if (node < 0) node = 0;
+        if (node > env_grid - 1) node = env_grid - 1;
+        int64_t at = p->station[j] * env_grid + node;
+        double cl_min = env[at], cl_max = env[plane + at], cd_min = env[2 * plane + at], cd_max = env[3 * plane + at];
+        if (!(cl_min < 0.0)) continue;
+        double cl, cd, d0, d_cl, d_cd;
+        lookup(p, j, alpha_deg, &cl, &cd);
+        bem_residual_partials(p, 1, &j, phi + j, &cl, &cd, rel_step, &d0, &d_cl, &d_cd);
+        double worst = d0 + nan_min(d_cl * (cl_min * per_rad), d_cl * (cl_max * per_rad))
+                       + nan_min(d_cd * (cd_min * per_rad), d_cd * (cd_max * per_rad));
+        search[j] = !(worst >= margin * fabs(d0)) || !(d0 > 0);
+    }
+}
