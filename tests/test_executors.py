@@ -111,3 +111,52 @@ def test_pool_workers_end_when_the_run_is_killed(tmp_path):
     while time.monotonic() < deadline and alive():
         time.sleep(0.2)
     assert not alive(), f"pool workers {alive()} outlived the killed run"
+
+
+class CountingExecutor(SerialExecutor):
+    """A serial executor that counts its calls and the tasks it ran."""
+
+    def __init__(self):
+        super().__init__()
+        self.calls, self.tasks = 0, 0
+
+    def map(self, fn, tasks, progress=None):
+        tasks = list(tasks)
+        self.calls += 1
+        self.tasks += len(tasks)
+        return super().map(fn, tasks, progress)
+
+
+def test_simulation_counts_are_the_executor_calls_made(small_model):
+    """The model's tally (issue 38) counts what the executor ran: one call per model call, one task per
+    point, 1 run per point of an evaluation and 1 + 2 n_params per point of a Jacobian, the model time
+    of their windows, and a parallel efficiency in (0, 1]; the report line says the same."""
+    from calib.fmu.faults import fault_sentences
+
+    make, cond = small_model
+    counting = CountingExecutor()
+    model = make(counting)
+    p = np.array([q.nominal for q in model.parameters])
+    assert model.simulation_summary()["simulations"] == 0 and model.simulation_summary()["parallel_efficiency"] is None
+    model.evaluate(p, cond)
+    model.jacobian(p, cond)
+    model.evaluate(p + 0.1, cond)
+    s = model.simulation_summary()
+    n, n_params = len(cond), len(model.parameters)
+    assert (s["calls"], s["tasks"]) == (counting.calls, counting.tasks) == (3, 3 * n)
+    assert s["simulations"] == 2 * n + n * (1 + 2 * n_params)
+    steady = model.steady
+    base = sum(sum(steady.window(rpm)[1:]) * steady.window(rpm)[0] for rpm in cond.rotor_speed)
+    warm = sum(sum(steady.perturbation_window(rpm)[1:]) * steady.window(rpm)[0] for rpm in cond.rotor_speed)
+    np.testing.assert_allclose(s["simulated_s"], 3 * base + 2 * n_params * warm, rtol=1e-9)
+    assert 0 < s["busy_worker_s"] <= s["wall_s"] and 0 < s["parallel_efficiency"] <= 1
+    line = fault_sentences(model.fault_summary())["FMU simulations and their wall time"]
+    assert line.startswith(f"{s['simulations']} simulations ({3 * n} points in 3 calls)")
+    model.close()
+    with ProcessExecutor(2) as pool:
+        model = make(pool)
+        model.jacobian(p, cond)
+        s = model.simulation_summary()
+        assert s["workers"] == 2 and s["simulations"] == n * (1 + 2 * n_params)
+        assert 0 < s["parallel_efficiency"] <= 1
+        model.close()

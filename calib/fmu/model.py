@@ -41,6 +41,7 @@ parameters; whether the FMU offers them is reported by :attr:`FmuModel.jacobian_
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -63,6 +64,7 @@ from calib.fmu.stations import probe_radii
 from calib.fmu.variables import Variables
 from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
+from calib.fmu.tally import SimulationTally
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 
@@ -147,6 +149,7 @@ class FmuModel:
         self.start_timeout = float(start_timeout)
         self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
                                    self.timeout, self.start_timeout, self.fmu_path.name)
+        self._tally = SimulationTally()
 
     # ------------------------------------------------------------------ load-time steps
     def _keep_file(self, f: FmuFile) -> None:
@@ -245,7 +248,10 @@ class FmuModel:
         run, results = self._faults.plan(tasks, p, len(self._plan.signals))
         policy = self._faults.policy()
         jobs = [(self._plan, tasks[k], self.isolate, policy) for k in run]
+        t0 = time.perf_counter()
         done = self.executor.map(fw.run_point, jobs, self.progress) if jobs else []
+        if jobs:
+            self._tally.record(done, time.perf_counter() - t0, getattr(self.executor, "workers", 1))
         for k, r in zip(run, done):
             results[k] = r
         self._faults.record(tasks, results, run, p, conditions)
@@ -261,9 +267,17 @@ class FmuModel:
             (configured, in force, the healthy runs' median and its changes), ``quarantine`` (one dict
             per quarantined point: conditions, fault, message, retries), ``errors`` (points with an
             error status), ``counts`` (calls, points simulated and skipped, runs per kind of fault) and
-            ``rules`` (the quarantined fault kinds and the retry distance).
+            ``rules`` (the quarantined fault kinds and the retry distance); ``simulations``:
+            :meth:`simulation_summary`.
         """
-        return {"fmu": self.fmu_path.name, **self._faults.summary()}
+        return {"fmu": self.fmu_path.name, **self._faults.summary(), "simulations": self.simulation_summary()}
+
+    def simulation_summary(self) -> dict:
+        """What this model's simulations cost so far (:meth:`calib.fmu.tally.SimulationTally.summary`):
+        ``calls`` (executor calls), ``tasks`` (points sent), ``simulations`` (runs made), ``simulated_s``
+        (model time [s]), ``busy_worker_s``, ``wall_s`` (of the executor calls [s]), ``workers`` and
+        ``parallel_efficiency`` = busy worker time / (wall time x workers) [-]."""
+        return self._tally.summary()
 
     def clear_quarantine(self) -> None:
         """Simulate quarantined points again from now on (e.g. a new stage with another

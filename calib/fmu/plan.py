@@ -179,6 +179,8 @@ class RunOutcome:
         :class:`FaultLedger`).
     instantiation : float
         Part of ``wall`` spent creating the FMU instance [s] (0 when the instance was reused).
+    simulated : float
+        Model time simulated, settling included [s] (0 when the run failed).
     """
 
     status: int
@@ -191,6 +193,7 @@ class RunOutcome:
     wall: float = 0.0
     fault: str = ""
     instantiation: float = 0.0
+    simulated: float = 0.0
 
     @classmethod
     def failed(cls, n_signals: int, status: int, message: str, wall: float = 0.0, fault: str = "") -> "RunOutcome":
@@ -208,7 +211,8 @@ class PointResult:
     """The runs of one :class:`PointTask` (``perturbations[j]`` None if never run).
 
     ``timeout`` is the simulation timeout in force when the task ended [s] (None in
-    process: no timeout).
+    process: no timeout); ``busy`` the wall time the executor's worker spent on the task [s]
+    (:func:`calib.fmu.worker.run_point`).
     """
 
     index: int
@@ -217,6 +221,7 @@ class PointResult:
     restarts: int = 0
     base_state: bytes | None = None
     timeout: float | None = None
+    busy: float = 0.0
 
     def outcomes(self) -> list:
         """The runs made, base first (perturbed runs never run left out)."""
