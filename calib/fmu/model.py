@@ -26,7 +26,9 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 and ψ the azimuth of blade 1 (0 = up).
 
 Jacobians are central differences (:mod:`calib.fmu.differences`) with steps ``relative_step`` ×
-each parameter's ``scale`` (one-sided inside a bound). With ``warm_start`` (``[jacobian]`` of the mapping,
+each parameter's ``scale`` (one-sided inside a bound), or forward differences against the point's
+base run (``differences = "forward"`` in ``[jacobian]``: one run per parameter instead of two, an
+O(h) error instead of O(h²); for an FMU whose second-order term is far below the noise). With ``warm_start`` (``[jacobian]`` of the mapping,
 or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
 every perturbed run restores it, sets the perturbed parameters and settles only
 ``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
@@ -58,6 +60,7 @@ from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
 from calib.fmu.differences import perturbed_vectors, sensitivities
 from calib.fmu.fmu_file import FmuFile, open_fmu
 from calib.fmu.mapping import Mapping, load_mapping
+from calib.fmu.rules import check_differences
 from calib.fmu.signals import PlanSite, make_plan
 from calib.fmu.states import read_states, write_states
 from calib.fmu.stations import probe_radii
@@ -178,6 +181,7 @@ class FmuModel:
             jac[key] = value
         self.relative_step = float(jac["relative_step"])
         self.warm_start = bool(jac["warm_start"])
+        self.differences = check_differences(jac["differences"], "FmuModel")
         self.steady = steady_rule
 
     def _bind(self, channels, parameters, corrections: bool, switches: dict, settings: dict) -> None:
@@ -234,7 +238,7 @@ class FmuModel:
               if self.offers_directional_derivatives else "the FMU offers no directional derivatives")
         warm = ("warm-started from the settled base state" if self.warm_start and self.can_get_state
                 else "each perturbed run settled from scratch")
-        return f"central differences, steps {self.relative_step:g} x parameter scale, {warm}; {dd}"
+        return f"{self.differences} differences, steps {self.relative_step:g} x parameter scale, {warm}; {dd}"
 
     def _fmu_parameter_values(self, p: np.ndarray) -> tuple:
         return self._params.assignments(p)
@@ -290,7 +294,7 @@ class FmuModel:
         inputs = self._fmu_inputs(conditions)
         perturbations, steps = (), None
         if perturb:
-            vectors, steps = perturbed_vectors(p, self._parameters, self.relative_step)
+            vectors, steps = perturbed_vectors(p, self._parameters, self.relative_step, self.differences)
             perturbations = tuple(self._fmu_parameter_values(q) for q in vectors)
         if start_states is not None and len(start_states) != len(conditions):
             raise InputError(f"{len(start_states)} start states for {len(conditions)} operating points", "FmuModel",
@@ -318,7 +322,8 @@ class FmuModel:
         return self._evaluation(self._run(tasks, p, conditions), conditions)
 
     def jacobian(self, p, conditions: OperatingConditions, start_states=None):
-        """Central-difference sensitivities ``G[k, c, j] = d y[k, c] / d p[j]``.
+        """Finite-difference sensitivities ``G[k, c, j] = d y[k, c] / d p[j]`` (central, or forward against
+        the base run with ``jacobian={"differences": "forward"}``).
 
         Returns
         -------
@@ -331,7 +336,7 @@ class FmuModel:
         p, tasks, steps = self._tasks(p, conditions, perturb=True, start_states=start_states)
         results = self._run(tasks, p, conditions)
         return sensitivities(results, self._evaluation(results, conditions), steps, self._channel_specs,
-                             self._keys_for_values, [q.name for q in self._parameters])
+                             self._keys_for_values, [q.name for q in self._parameters], self.differences)
 
     # ------------------------------------------------------------------ declared capabilities
     @property
