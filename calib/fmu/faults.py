@@ -196,7 +196,7 @@ class FaultLedger:
             key = _FAULT_COUNTS.get(o.fault)
             if key:
                 self.counts[key] += 1
-        if r.base is not None and r.base.ok and task.start_state is None:
+        if r.base is not None and r.base.ok and task.start_state is None and not r.base.reused:
             self.walls.append(r.base.wall - r.base.instantiation)
             self.n_healthy += 1
         where = {f: float(getattr(conditions, f)[k]) for f in CONDITION_FIELDS}

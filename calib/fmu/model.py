@@ -54,6 +54,7 @@ from calib.errors import InputError, ModelError
 from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
+from calib.fmu.base_runs import BASE_RUNS
 from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
 from calib.fmu.bundled import spec_files
 from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
@@ -251,15 +252,37 @@ class FmuModel:
         fills their results), the others run on the executor with the adaptive timeout."""
         run, results = self._faults.plan(tasks, p, len(self._plan.signals))
         policy = self._faults.policy()
-        jobs = [(self._plan, tasks[k], self.isolate, policy) for k in run]
+        send = self._known_base_runs(tasks, run, results)
+        jobs = [(self._plan, tasks[k], self.isolate, policy) for k in send]
         t0 = time.perf_counter()
         done = self.executor.map(fw.run_point, jobs, self.progress) if jobs else []
         if jobs:
             self._tally.record(done, time.perf_counter() - t0, getattr(self.executor, "workers", 1))
-        for k, r in zip(run, done):
+        for k, r in zip(send, done):
             results[k] = r
+            BASE_RUNS.put(self._plan.key, tasks[k], r.base)
         self._faults.record(tasks, results, run, p, conditions)
         return results
+
+    def _known_base_runs(self, tasks: list, run: list, results: list) -> list:
+        """The indices of ``run`` to send to the executor. A point whose base run was simulated before
+        (:data:`calib.fmu.base_runs.BASE_RUNS`) is not simulated again: an evaluation's result is filled
+        here; a Jacobian's task takes the known outcome along when its perturbed runs start cold anyway
+        (warm start off or no FMU state), so that the result is the same bit for bit."""
+        cold = not (self.warm_start and self.can_get_state)
+        send = []
+        for k in run:
+            t = tasks[k]
+            known = BASE_RUNS.get(self._plan.key, t) if (cold or not t.perturbations) and not t.keep_state else None
+            if known is None:
+                send.append(k)
+            elif not t.perturbations:
+                results[k] = fp.PointResult(t.index, known, [])
+                self._tally.reused += 1
+            else:
+                tasks[k] = replace(t, known_base=known, warm=False)
+                send.append(k)
+        return send
 
     def fault_summary(self) -> dict:
         """Faults met by this model's simulations so far, as a plain (JSON-able) dict.

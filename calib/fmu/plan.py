@@ -136,6 +136,9 @@ class PointTask:
     start_state : bytes or None
         A serialized settled state (this build) the base run starts from instead of from
         scratch; it then settles only ``perturbation_settle_revolutions``.
+    known_base : RunOutcome or None
+        The outcome of this base run, simulated before (:mod:`calib.fmu.base_runs`): not simulated
+        again (perturbed runs then start cold).
     """
 
     index: int
@@ -148,6 +151,7 @@ class PointTask:
     skip: int = 0
     keep_state: bool = False
     start_state: bytes | None = None
+    known_base: "RunOutcome | None" = None
 
 
 @dataclass
@@ -181,6 +185,8 @@ class RunOutcome:
         Part of ``wall`` spent creating the FMU instance [s] (0 when the instance was reused).
     simulated : float
         Model time simulated, settling included [s] (0 when the run failed).
+    reused : bool
+        The outcome of an earlier identical run, not simulated again (:mod:`calib.fmu.base_runs`).
     """
 
     status: int
@@ -194,6 +200,7 @@ class RunOutcome:
     fault: str = ""
     instantiation: float = 0.0
     simulated: float = 0.0
+    reused: bool = False
 
     @classmethod
     def failed(cls, n_signals: int, status: int, message: str, wall: float = 0.0, fault: str = "") -> "RunOutcome":

@@ -318,7 +318,12 @@ class Simulator:
         p = self.plan
         warm = p.can_get_state and ((task.warm and bool(task.perturbations)) or task.keep_state)
         state, t_state, blob, owner = None, 0.0, task.base_state, None
-        if task.base_state is None:
+        if task.known_base is not None and task.base_state is None:   # simulated before: perturbed runs cold
+            warm = False
+            yield ("base", task.known_base, None)
+            if not task.known_base.ok:
+                return
+        elif task.base_state is None:
             outcome, state, t_state = self.cold_run(task, task.base, keep_state=warm)
             owner = self.instantiations
             if state is not None and p.can_serialize:

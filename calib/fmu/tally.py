@@ -26,6 +26,8 @@ class SimulationTally:
         Operating points sent to the executor (one task each).
     simulations : int
         Runs made (base and perturbed runs; quarantined points are not simulated).
+    reused : int
+        Base runs not simulated again: their outcome was known (:mod:`calib.fmu.base_runs`).
     simulated_s : float
         Model time simulated, settling included [s].
     busy_s : float
@@ -39,6 +41,7 @@ class SimulationTally:
     calls: int = 0
     tasks: int = 0
     simulations: int = 0
+    reused: int = 0
     simulated_s: float = 0.0
     busy_s: float = 0.0
     wall_s: float = 0.0
@@ -53,7 +56,8 @@ class SimulationTally:
         self.workers = max(self.workers, int(workers or 1))
         for r in results:
             runs = r.outcomes()
-            self.simulations += sum(1 for o in runs if o.fault != "quarantined")
+            self.simulations += sum(1 for o in runs if o.fault != "quarantined" and not o.reused)
+            self.reused += sum(1 for o in runs if o.reused)
             self.simulated_s += sum(o.simulated for o in runs)
             self.busy_s += r.busy
 
@@ -65,6 +69,7 @@ class SimulationTally:
     def summary(self) -> dict:
         """Plain (JSON-able) dict: the attributes and ``parallel_efficiency``."""
         return {"calls": self.calls, "tasks": self.tasks, "simulations": self.simulations,
+                "reused_base_runs": self.reused,
                 "simulated_s": self.simulated_s, "busy_worker_s": self.busy_s, "wall_s": self.wall_s,
                 "workers": self.workers, "parallel_efficiency": self.efficiency}
 
@@ -72,7 +77,9 @@ class SimulationTally:
 def tally_sentence(summary: dict) -> str:
     """One line of :meth:`SimulationTally.summary` for the report and the console."""
     eff = summary["parallel_efficiency"]
-    return (f"{summary['simulations']} simulations ({summary['tasks']} points in {summary['calls']} calls), "
+    reused = summary.get("reused_base_runs", 0)
+    return (f"{summary['simulations']} simulations ({summary['tasks']} points in {summary['calls']} calls"
+            + (f", {reused} base runs reused" if reused else "") + "), "
             f"{summary['simulated_s']:.4g} s simulated, {summary['busy_worker_s']:.3g} s busy on "
             f"{summary['workers']} worker(s) in {summary['wall_s']:.3g} s wall: parallel efficiency "
             + ("n/a" if eff is None else f"{eff:.2f}"))

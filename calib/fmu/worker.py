@@ -102,7 +102,7 @@ class WorkerProcess:
 
     def _measured(self, outcome: RunOutcome, task: PointTask) -> None:
         """Count a healthy base run (full window, from scratch) in the timeout rule."""
-        if outcome.ok and task.start_state is None:
+        if outcome.ok and task.start_state is None and not outcome.reused:
             self._walls.append(outcome.wall - outcome.instantiation)
             del self._walls[:-HEALTHY_WALLS_KEPT]
 
