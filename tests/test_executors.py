@@ -133,9 +133,6 @@ def test_simulation_counts_are_the_executor_calls_made(small_model):
     of their windows, and a parallel efficiency in (0, 1]; the report line says the same."""
     from calib.fmu.faults import fault_sentences
 
-    from calib.fmu.base_runs import BASE_RUNS
-
-    BASE_RUNS.clear()
     make, cond = small_model
     counting = CountingExecutor()
     model = make(counting)
@@ -156,7 +153,6 @@ def test_simulation_counts_are_the_executor_calls_made(small_model):
     line = fault_sentences(model.fault_summary())["FMU simulations and their wall time"]
     assert line.startswith(f"{s['simulations']} simulations ({3 * n} points in 3 calls)")
     model.close()
-    BASE_RUNS.clear()
     with ProcessExecutor(2) as pool:
         model = make(pool)
         model.jacobian(p, cond)
@@ -170,16 +166,15 @@ def test_a_base_run_simulated_before_is_reused_bit_for_bit(small_model):
     """Issue 38: an evaluation at parameters already simulated (by any model of the same plan: the unit
     check's at the nominal vector, a Gauss-Newton trial) simulates nothing, and a cold Jacobian there reuses
     the base runs; values and sensitivities are those of fresh simulations, bit for bit."""
-    from calib.fmu.base_runs import BASE_RUNS
+    from calib.fmu.base_runs import BaseRunCache
 
     make_warm, cond = small_model
     n = len(cond)
-    BASE_RUNS.clear()
     fresh = _cold(make_warm)
     p = np.array([q.nominal for q in fresh.parameters]) + 0.02
     ev0, G0 = fresh.jacobian(p, cond)
-    BASE_RUNS.clear()
-    check, model = _cold(make_warm), _cold(make_warm)        # e.g. the unit check's model and a stage's
+    shared = BaseRunCache()
+    check, model = _cold(make_warm, shared), _cold(make_warm, shared)   # e.g. the unit check's model and a stage's
     ev1 = check.evaluate(p, cond)
     ev2 = model.evaluate(p, cond)
     ev3, G3 = model.jacobian(p, cond)
@@ -193,11 +188,12 @@ def test_a_base_run_simulated_before_is_reused_bit_for_bit(small_model):
         m.close()
 
 
-def _cold(make):
+def _cold(make, base_runs=None):
     """The small model with warm start off (perturbed runs from scratch)."""
     from calib.fmu.model import FmuModel
 
     m = make(SerialExecutor())
     return FmuModel(m.fmu_path, m.mapping, [c.name for c in m.channels], parameters=[q.name for q in m.parameters],
                     corrections=False, switches=m._options["switches"], settings=m._options["settings"],
-                    steady=m._options["steady"], jacobian=dict(warm_start=False), executor=SerialExecutor())
+                    steady=m._options["steady"], jacobian=dict(warm_start=False), executor=SerialExecutor(),
+                    base_runs=base_runs)

@@ -3,15 +3,17 @@
 A cold base run (reset, parameters and inputs set, settled, averaged) is deterministic: the same plan
 (FMU content hash, settings, switches, signals, window: :attr:`~calib.fmu.plan.SimulationPlan.key`), the
 same inputs and parameter values give the same outcome bit for bit, whatever the executor or worker.
-So the planner keeps the outcomes of such runs (:data:`BASE_RUNS`, one per process, shared by every
-model of the same plan) and a later call at the same point and parameters reuses them: the unit check's
-evaluation at the nominal parameters serves the calibration's first evaluation; a Gauss-Newton step
-evaluated at a trial vector serves the base runs of the Jacobian taken there when it is accepted.
-A reused outcome is marked ``reused`` (not counted as a simulation, nor as a healthy wall time).
+So the planner keeps the outcomes of such runs (a :class:`BaseRunCache`: one per model by default, or
+one shared by the models of a run, :func:`shared_by`) and a later call at the same point and parameters
+reuses them: the unit check's evaluation at the nominal parameters serves the calibration's first
+evaluation; a Gauss-Newton step evaluated at a trial vector serves the base runs of the Jacobian taken
+there when it is accepted. A reused outcome is marked ``reused`` (not counted as a simulation, nor as a
+healthy wall time).
 """
 
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 from dataclasses import replace
 
@@ -58,5 +60,13 @@ class BaseRunCache:
         self._runs.clear()
 
 
-#: The planning process's cache, shared by its models (keyed by their plans)
-BASE_RUNS = BaseRunCache()
+_SHARED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def shared_by(executor) -> BaseRunCache:
+    """The cache shared by the models that run on ``executor`` (the models of one workflow run share it;
+    it goes with the executor)."""
+    cache = _SHARED.get(executor)
+    if cache is None:
+        cache = _SHARED[executor] = BaseRunCache()
+    return cache

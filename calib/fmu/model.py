@@ -54,7 +54,7 @@ from calib.errors import InputError, ModelError
 from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
-from calib.fmu.base_runs import BASE_RUNS
+from calib.fmu.base_runs import BaseRunCache
 from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
 from calib.fmu.bundled import spec_files
 from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
@@ -118,6 +118,10 @@ class FmuModel:
         :meth:`spec` so that a saved result can rebuild the FMU.
     progress : callable(done, total), optional
         Called as operating points finish.
+    base_runs : BaseRunCache, optional
+        Base runs already simulated (:mod:`calib.fmu.base_runs`), shared with other models of the same
+        FMU (a workflow's models share their executor's: :func:`calib.fmu.base_runs.shared_by`);
+        default: this model's own.
 
     Notes
     -----
@@ -132,7 +136,8 @@ class FmuModel:
                  parameters: Sequence[str] | None = None, corrections: bool = True,
                  switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
                  jacobian: dict | None = None, executor=None, timeout: float = fp.DEFAULT_TIMEOUT, isolate: bool = True,
-                 build: dict | None = None, progress=None, start_timeout: float = fp.DEFAULT_TIMEOUT):
+                 build: dict | None = None, progress=None, start_timeout: float = fp.DEFAULT_TIMEOUT,
+                 base_runs: BaseRunCache | None = None):
         self.fmu_path = Path(fmu).resolve()
         self.mapping: Mapping = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
         self._keep_file(open_fmu(self.fmu_path, self.mapping, warn_stacklevel=2))
@@ -154,6 +159,7 @@ class FmuModel:
         self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
                                    self.timeout, self.start_timeout, self.fmu_path.name)
         self._tally = SimulationTally()
+        self.base_runs = base_runs if base_runs is not None else BaseRunCache()
 
     # ------------------------------------------------------------------ load-time steps
     def _keep_file(self, f: FmuFile) -> None:
@@ -260,20 +266,20 @@ class FmuModel:
             self._tally.record(done, time.perf_counter() - t0, getattr(self.executor, "workers", 1))
         for k, r in zip(send, done):
             results[k] = r
-            BASE_RUNS.put(self._plan.key, tasks[k], r.base)
+            self.base_runs.put(self._plan.key, tasks[k], r.base)
         self._faults.record(tasks, results, run, p, conditions)
         return results
 
     def _known_base_runs(self, tasks: list, run: list, results: list) -> list:
         """The indices of ``run`` to send to the executor. A point whose base run was simulated before
-        (:data:`calib.fmu.base_runs.BASE_RUNS`) is not simulated again: an evaluation's result is filled
+        (:attr:`base_runs`) is not simulated again: an evaluation's result is filled
         here; a Jacobian's task takes the known outcome along when its perturbed runs start cold anyway
         (warm start off or no FMU state), so that the result is the same bit for bit."""
         cold = not (self.warm_start and self.can_get_state)
         send = []
         for k in run:
             t = tasks[k]
-            known = BASE_RUNS.get(self._plan.key, t) if (cold or not t.perturbations) and not t.keep_state else None
+            known = self.base_runs.get(self._plan.key, t) if (cold or not t.perturbations) and not t.keep_state else None
             if known is None:
                 send.append(k)
             elif not t.perturbations:
