@@ -17,7 +17,7 @@ import weakref
 from collections import OrderedDict
 from dataclasses import replace
 
-from calib.fmu.plan import PointTask, RunOutcome
+from calib.fmu.plan import PointResult, PointTask, RunOutcome
 
 #: Outcomes kept (the oldest dropped first): a few hundred model calls of a few dozen points
 MAX_KEPT = 20_000
@@ -55,6 +55,30 @@ class BaseRunCache:
         self._runs.move_to_end(key)
         while len(self._runs) > self.max_kept:
             self._runs.popitem(last=False)
+
+    def split(self, plan_key: str, tasks: list, run: list, results: list, reused: int,
+              cold: bool) -> tuple[list, int]:
+        """The indices of ``run`` still to send to the executor, and ``reused`` plus the base runs reused here.
+
+        A point of ``tasks`` whose base run is kept is not simulated again: an evaluation's result is
+        filled into ``results`` here; a Jacobian's task (replaced in ``tasks``) takes the known outcome
+        along when its perturbed runs start ``cold`` anyway (warm start off or no FMU state), so that its
+        result is the same bit for bit.
+        """
+        send = []
+        for k in run:
+            t = tasks[k]
+            known = self.get(plan_key, t) if (cold or not t.perturbations) and not t.keep_state else None
+            if known is None:
+                send.append(k)
+                continue
+            reused += 1
+            if t.perturbations:
+                tasks[k] = replace(t, known_base=known, warm=False)
+                send.append(k)
+            else:
+                results[k] = PointResult(t.index, known, [])
+        return send, reused
 
     def clear(self) -> None:
         self._runs.clear()

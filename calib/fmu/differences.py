@@ -5,6 +5,21 @@
 :func:`sensitivities` the Jacobian from those runs, point by point: a point whose perturbed run
 failed gets that run's status, phases are differenced on the circle. How the runs are simulated
 (cold or warm-started from the settled base state) is :class:`calib.fmu.model.FmuModel`'s affair.
+
+Jacobians are central differences with steps ``relative_step`` ×
+each parameter's ``scale`` (one-sided inside a bound), or forward differences against the point's
+base run (``differences = "forward"`` in ``[jacobian]``: one run per parameter instead of two, an
+O(h) error instead of O(h²); for an FMU whose second-order term is far below the noise). With ``warm_start`` (``[jacobian]`` of the mapping,
+or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
+every perturbed run restores it, sets the perturbed parameters and settles only
+``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
+(docs/theory.md, FMUs). That is exact when a parameter step acts at once (quasi-steady physics) and
+wrong by the lag where the FMU filters it (dynamic inflow): the bundled mappings keep it off
+and say why. A point's runs are one executor task, so the state never leaves its worker
+except serialized, to resume after a fault. FMI directional derivatives are not used: co-simulation FMUs give them for
+inputs and states at one instant, not for the steady window averages with respect to
+parameters; whether the FMU offers them is reported by :attr:`calib.fmu.model.FmuModel.jacobian_method`
+(the bundled FMUs and PythonFMU's do not).
 """
 
 from __future__ import annotations
@@ -159,3 +174,12 @@ def sensitivities(results: list, ev: Evaluation, steps: np.ndarray, specs: list,
     values = ev.values.copy()
     values[status != Status.CONVERGED] = np.nan
     return Evaluation(values, status, tuple(messages), ev.channels, ev.extras), G
+
+
+def method_words(differences: str, relative_step: float, warm: bool, offers_directional_derivatives: bool) -> str:
+    """How an FMU model differentiates, and why (:attr:`calib.fmu.model.FmuModel.jacobian_method`)."""
+    dd = ("the FMU offers directional derivatives, but of instantaneous outputs with respect to inputs and "
+          "states, not of steady window averages with respect to parameters: not used"
+          if offers_directional_derivatives else "the FMU offers no directional derivatives")
+    how = "warm-started from the settled base state" if warm else "each perturbed run settled from scratch"
+    return f"{differences} differences, steps {relative_step:g} x parameter scale, {how}; {dd}"

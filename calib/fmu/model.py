@@ -10,13 +10,11 @@ parameters, settings and switches are parameters, array elements are inside thei
 setting values inside the FMU's range), refusing with :class:`~calib.errors.InputError`
 naming the file and the item.
 
-It extracts the FMU once (cached by the file's SHA-256), and hands workers a picklable
-:class:`~calib.fmu.plan.SimulationPlan` (paths and value references, never an
-instance). Simulations run through :func:`calib.fmu.worker.run_point` on the
-model's executor (serial by default), in worker processes with a per-simulation timeout
-that adapts to the measured cost of healthy runs; a point that crashed or hung is
-quarantined by the model (planned here, whatever the executor): see
-:class:`calib.fmu.faults.FaultLedger` and :meth:`FmuModel.fault_summary`.
+It extracts the FMU once (cached by its SHA-256) and hands workers a picklable
+:class:`~calib.fmu.plan.SimulationPlan` (never an instance). Simulations run through
+:func:`calib.fmu.worker.run_point` on the model's executor (serial by default), in worker processes
+with a timeout adapted to the healthy runs; a point that crashed or hung is quarantined by the model
+(:class:`calib.fmu.faults.FaultLedger`, :meth:`FmuModel.fault_summary`).
 
 Steady outputs: settle ``settle_revolutions``, then average ``average_revolutions`` whole
 revolutions (``[steady]`` of the mapping); the status of a point says whether the two
@@ -25,25 +23,14 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 (amplitude, unit of x) and ``x_1p_phase`` ... (deg), with x ≈ mean + Σ A_n cos(nψ + φ_n)
 and ψ the azimuth of blade 1 (0 = up).
 
-Jacobians are central differences (:mod:`calib.fmu.differences`) with steps ``relative_step`` ×
-each parameter's ``scale`` (one-sided inside a bound), or forward differences against the point's
-base run (``differences = "forward"`` in ``[jacobian]``: one run per parameter instead of two, an
-O(h) error instead of O(h²); for an FMU whose second-order term is far below the noise). With ``warm_start`` (``[jacobian]`` of the mapping,
-or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
-every perturbed run restores it, sets the perturbed parameters and settles only
-``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
-(docs/theory.md, FMUs). That is exact when a parameter step acts at once (quasi-steady physics) and
-wrong by the lag where the FMU filters it (dynamic inflow): the bundled mappings keep it off
-and say why. A point's runs are one executor task, so the state never leaves its worker
-except serialized, to resume after a fault. FMI directional derivatives are not used: co-simulation FMUs give them for
-inputs and states at one instant, not for the steady window averages with respect to
-parameters; whether the FMU offers them is reported by :attr:`FmuModel.jacobian_method`
-(the bundled FMUs and PythonFMU's do not).
+Jacobians: finite differences (central by default, or forward), cold or warm-started from the
+settled base state, as :mod:`calib.fmu.differences` says; a base run already simulated at the
+same point and parameters is reused (:mod:`calib.fmu.base_runs`); what the simulations cost is
+counted (:meth:`FmuModel.simulation_summary`).
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -58,7 +45,7 @@ from calib.fmu.base_runs import BaseRunCache
 from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
 from calib.fmu.bundled import spec_files
 from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
-from calib.fmu.differences import perturbed_vectors, sensitivities
+from calib.fmu.differences import method_words, perturbed_vectors, sensitivities
 from calib.fmu.fmu_file import FmuFile, open_fmu
 from calib.fmu.mapping import Mapping, load_mapping
 from calib.fmu.rules import check_differences
@@ -119,9 +106,7 @@ class FmuModel:
     progress : callable(done, total), optional
         Called as operating points finish.
     base_runs : BaseRunCache, optional
-        Base runs already simulated (:mod:`calib.fmu.base_runs`), shared with other models of the same
-        FMU (a workflow's models share their executor's: :func:`calib.fmu.base_runs.shared_by`);
-        default: this model's own.
+        Base runs simulated before, shared with other models (:mod:`calib.fmu.base_runs`); default its own.
 
     Notes
     -----
@@ -239,13 +224,9 @@ class FmuModel:
 
     @property
     def jacobian_method(self) -> str:
-        """How :meth:`jacobian` differentiates, and why."""
-        dd = ("the FMU offers directional derivatives, but of instantaneous outputs with respect to inputs and "
-              "states, not of steady window averages with respect to parameters: not used"
-              if self.offers_directional_derivatives else "the FMU offers no directional derivatives")
-        warm = ("warm-started from the settled base state" if self.warm_start and self.can_get_state
-                else "each perturbed run settled from scratch")
-        return f"{self.differences} differences, steps {self.relative_step:g} x parameter scale, {warm}; {dd}"
+        """How :meth:`jacobian` differentiates, and why (:func:`calib.fmu.differences.method_words`)."""
+        return method_words(self.differences, self.relative_step, self.warm_start and self.can_get_state,
+                            self.offers_directional_derivatives)
 
     def _fmu_parameter_values(self, p: np.ndarray) -> tuple:
         return self._params.assignments(p)
@@ -258,37 +239,15 @@ class FmuModel:
         fills their results), the others run on the executor with the adaptive timeout."""
         run, results = self._faults.plan(tasks, p, len(self._plan.signals))
         policy = self._faults.policy()
-        send = self._known_base_runs(tasks, run, results)
+        send, self._tally.reused = self.base_runs.split(self._plan.key, tasks, run, results, self._tally.reused,
+                                                        cold=not (self.warm_start and self.can_get_state))
         jobs = [(self._plan, tasks[k], self.isolate, policy) for k in send]
-        t0 = time.perf_counter()
-        done = self.executor.map(fw.run_point, jobs, self.progress) if jobs else []
-        if jobs:
-            self._tally.record(done, time.perf_counter() - t0, getattr(self.executor, "workers", 1))
+        done = self._tally.timed_map(self.executor, fw.run_point, jobs, self.progress)
         for k, r in zip(send, done):
             results[k] = r
             self.base_runs.put(self._plan.key, tasks[k], r.base)
         self._faults.record(tasks, results, run, p, conditions)
         return results
-
-    def _known_base_runs(self, tasks: list, run: list, results: list) -> list:
-        """The indices of ``run`` to send to the executor. A point whose base run was simulated before
-        (:attr:`base_runs`) is not simulated again: an evaluation's result is filled
-        here; a Jacobian's task takes the known outcome along when its perturbed runs start cold anyway
-        (warm start off or no FMU state), so that the result is the same bit for bit."""
-        cold = not (self.warm_start and self.can_get_state)
-        send = []
-        for k in run:
-            t = tasks[k]
-            known = self.base_runs.get(self._plan.key, t) if (cold or not t.perturbations) and not t.keep_state else None
-            if known is None:
-                send.append(k)
-            elif not t.perturbations:
-                results[k] = fp.PointResult(t.index, known, [])
-                self._tally.reused += 1
-            else:
-                tasks[k] = replace(t, known_base=known, warm=False)
-                send.append(k)
-        return send
 
     def fault_summary(self) -> dict:
         """Faults met by this model's simulations so far, as a plain (JSON-able) dict.
@@ -299,17 +258,14 @@ class FmuModel:
             ``fmu`` (the file's name), then :meth:`calib.fmu.faults.FaultLedger.summary`: ``timeout``
             (configured, in force, the healthy runs' median and its changes), ``quarantine`` (one dict
             per quarantined point: conditions, fault, message, retries), ``errors`` (points with an
-            error status), ``counts`` (calls, points simulated and skipped, runs per kind of fault) and
-            ``rules`` (the quarantined fault kinds and the retry distance); ``simulations``:
-            :meth:`simulation_summary`.
+            error status), ``counts`` (calls, points simulated and skipped, runs per kind of fault),
+            ``rules`` (quarantined fault kinds, retry distance); ``simulations`` (:meth:`simulation_summary`).
         """
         return {"fmu": self.fmu_path.name, **self._faults.summary(), "simulations": self.simulation_summary()}
 
     def simulation_summary(self) -> dict:
-        """What this model's simulations cost so far (:meth:`calib.fmu.tally.SimulationTally.summary`):
-        ``calls`` (executor calls), ``tasks`` (points sent), ``simulations`` (runs made), ``simulated_s``
-        (model time [s]), ``busy_worker_s``, ``wall_s`` (of the executor calls [s]), ``workers`` and
-        ``parallel_efficiency`` = busy worker time / (wall time x workers) [-]."""
+        """What this model's simulations cost so far: :meth:`calib.fmu.tally.SimulationTally.summary` (counts,
+        model time, busy worker and wall time [s], parallel efficiency)."""
         return self._tally.summary()
 
     def clear_quarantine(self) -> None:

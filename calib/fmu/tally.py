@@ -11,6 +11,7 @@ calls is not counted: it is outside the calls).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 
@@ -47,6 +48,15 @@ class SimulationTally:
     wall_s: float = 0.0
     workers: int = 1
 
+    def timed_map(self, executor, fn, jobs: list, progress=None) -> list:
+        """``executor.map(fn, jobs, progress)``, timed and recorded (nothing for no jobs)."""
+        if not jobs:
+            return []
+        t0 = time.perf_counter()
+        done = executor.map(fn, jobs, progress)
+        self.record(done, time.perf_counter() - t0, getattr(executor, "workers", 1))
+        return done
+
     def record(self, results, wall: float, workers: int) -> None:
         """Add one executor call: its :class:`~calib.fmu.plan.PointResult` list, its wall time [s] and the
         executor's worker count."""
@@ -57,7 +67,6 @@ class SimulationTally:
         for r in results:
             runs = r.outcomes()
             self.simulations += sum(1 for o in runs if o.fault != "quarantined" and not o.reused)
-            self.reused += sum(1 for o in runs if o.reused)
             self.simulated_s += sum(o.simulated for o in runs)
             self.busy_s += r.busy
 
