@@ -111,3 +111,89 @@ def test_pool_workers_end_when_the_run_is_killed(tmp_path):
     while time.monotonic() < deadline and alive():
         time.sleep(0.2)
     assert not alive(), f"pool workers {alive()} outlived the killed run"
+
+
+class CountingExecutor(SerialExecutor):
+    """A serial executor that counts its calls and the tasks it ran."""
+
+    def __init__(self):
+        super().__init__()
+        self.calls, self.tasks = 0, 0
+
+    def map(self, fn, tasks, progress=None):
+        tasks = list(tasks)
+        self.calls += 1
+        self.tasks += len(tasks)
+        return super().map(fn, tasks, progress)
+
+
+def test_simulation_counts_are_the_executor_calls_made(small_model):
+    """The model's tally (issue 38) counts what the executor ran: one call per model call, one task per
+    point, 1 run per point of an evaluation and 1 + 2 n_params per point of a Jacobian, the model time
+    of their windows, and a parallel efficiency in (0, 1]; the report line says the same."""
+    from calib.fmu.faults import fault_sentences
+
+    make, cond = small_model
+    counting = CountingExecutor()
+    model = make(counting)
+    p = np.array([q.nominal for q in model.parameters])
+    assert model.simulation_summary()["simulations"] == 0 and model.simulation_summary()["parallel_efficiency"] is None
+    model.evaluate(p, cond)
+    model.jacobian(p, cond)
+    model.evaluate(p + 0.1, cond)
+    s = model.simulation_summary()
+    n, n_params = len(cond), len(model.parameters)
+    assert (s["calls"], s["tasks"]) == (counting.calls, counting.tasks) == (3, 3 * n)
+    assert s["simulations"] == 2 * n + n * (1 + 2 * n_params)
+    steady = model.steady
+    base = sum(sum(steady.window(rpm)[1:]) * steady.window(rpm)[0] for rpm in cond.rotor_speed)
+    warm = sum(sum(steady.perturbation_window(rpm)[1:]) * steady.window(rpm)[0] for rpm in cond.rotor_speed)
+    np.testing.assert_allclose(s["simulated_s"], 3 * base + 2 * n_params * warm, rtol=1e-9)
+    assert 0 < s["busy_worker_s"] <= s["wall_s"] and 0 < s["parallel_efficiency"] <= 1
+    line = fault_sentences(model.fault_summary())["FMU simulations and their wall time"]
+    assert line.startswith(f"{s['simulations']} simulations ({3 * n} points in 3 calls)")
+    model.close()
+    with ProcessExecutor(2) as pool:
+        model = make(pool)
+        model.jacobian(p, cond)
+        s = model.simulation_summary()
+        assert s["workers"] == 2 and s["simulations"] == n * (1 + 2 * n_params)
+        assert 0 < s["parallel_efficiency"] <= 1
+        model.close()
+
+
+def test_a_base_run_simulated_before_is_reused_bit_for_bit(small_model):
+    """Issue 38: an evaluation at parameters already simulated (by any model of the same plan: the unit
+    check's at the nominal vector, a Gauss-Newton trial) simulates nothing, and a cold Jacobian there reuses
+    the base runs; values and sensitivities are those of fresh simulations, bit for bit."""
+    from calib.fmu.base_runs import BaseRunCache
+
+    make_warm, cond = small_model
+    n = len(cond)
+    fresh = _cold(make_warm)
+    p = np.array([q.nominal for q in fresh.parameters]) + 0.02
+    ev0, G0 = fresh.jacobian(p, cond)
+    shared = BaseRunCache()
+    check, model = _cold(make_warm, shared), _cold(make_warm, shared)   # e.g. the unit check's model and a stage's
+    ev1 = check.evaluate(p, cond)
+    ev2 = model.evaluate(p, cond)
+    ev3, G3 = model.jacobian(p, cond)
+    assert check.simulation_summary()["simulations"] == n
+    s = model.simulation_summary()
+    assert s["simulations"] == n * 2 * len(model.parameters) and s["reused_base_runs"] == 2 * n
+    for ev in (ev1, ev2, ev3):
+        np.testing.assert_array_equal(ev.values, ev0.values)
+    np.testing.assert_array_equal(G3, G0)
+    for m in (fresh, check, model):
+        m.close()
+
+
+def _cold(make, base_runs=None):
+    """The small model with warm start off (perturbed runs from scratch)."""
+    from calib.fmu.model import FmuModel
+
+    m = make(SerialExecutor())
+    return FmuModel(m.fmu_path, m.mapping, [c.name for c in m.channels], parameters=[q.name for q in m.parameters],
+                    corrections=False, switches=m._options["switches"], settings=m._options["settings"],
+                    steady=m._options["steady"], jacobian=dict(warm_start=False), executor=SerialExecutor(),
+                    base_runs=base_runs)

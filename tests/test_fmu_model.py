@@ -357,3 +357,28 @@ def test_fault_in_a_perturbed_run_keeps_the_others(small_fmus, rotor, fault, sta
             np.testing.assert_array_equal(a.mean, b.mean)
     clean.close()
     faulty.close()
+
+
+def test_forward_differences_agree_with_central_at_half_the_runs(small_fmus, rotor):
+    """``jacobian = {differences = "forward"}`` (issue 38): one perturbed run per parameter against the base
+    run; the sensitivities agree with central ones to the O(h) term, and an unknown scheme is refused
+    naming the valid ones."""
+    cond = conditions(rotor, tsr=(6.0, 9.0), pitch=(0.0,))
+    names = ["pitch_offset_blade1", "stall_delay_strength"]
+    central = quick_model(small_fmus["A"], "A", parameters=names, corrections=False)
+    forward = quick_model(small_fmus["A"], "A", parameters=names, corrections=False,
+                          jacobian=dict(warm_start=True, differences="forward"))
+    p = np.array([q.nominal for q in central.parameters])
+    ev_c, G_c = central.jacobian(p, cond)
+    ev_f, G_f = forward.jacobian(p, cond)
+    np.testing.assert_array_equal(ev_f.values, ev_c.values)
+    assert np.all(np.isfinite(G_f)) and np.abs(G_c).max() > 0
+    np.testing.assert_allclose(G_f, G_c, rtol=0, atol=0.02 * np.abs(G_c).max())
+    n = len(cond)
+    assert central.simulation_summary()["simulations"] == n * (1 + 2 * len(names))
+    assert forward.simulation_summary()["simulations"] == n * (1 + len(names))
+    assert forward.jacobian_method.startswith("forward differences")
+    with pytest.raises(InputError, match="central, forward"):
+        quick_model(small_fmus["A"], "A", parameters=names, corrections=False, jacobian=dict(differences="backward"))
+    central.close()
+    forward.close()

@@ -199,8 +199,10 @@ def check_units(model, p, measurements: Measurements, *, sigma: Mapping[str, flo
 
     Notes
     -----
-    See the module docstring for the method. Cost: one model evaluation, plus two per
-    checked condition that is not zero everywhere (seven for the default).
+    See the module docstring for the method. Cost: one model evaluation; when the data do not
+    fit as read (misfit > 1), two more per checked condition that is not zero everywhere (seven
+    for the default). Data that fit as read cannot be explained better by a condition factor
+    (step 4), so those hypotheses are not evaluated then.
     """
     _check_condition_names(conditions)
     model_channels = [c.name for c in model.channels]
@@ -307,6 +309,12 @@ def _hypotheses(evaluate, measurements: Measurements, conditions: Sequence[str],
     as_read = _fit("as read", y0, ok0, z, sig0, search_factors=False, **kw)
     base = _fit("as read", y0, ok0, z, sig0, **kw)
     base.status_summary = status0
+    if base.misfit <= 1.0:
+        # no condition hypothesis can explain data that fit as read (step 4): none is evaluated
+        notes.extend(f"{name} is 0 at every point: a unit mistake in it cannot be seen" for name in conditions
+                     if np.all(getattr(measurements.conditions, name) == 0))
+        notes.append(f"the data fit as read (misfit {base.misfit:.3g} <= 1): no condition hypothesis evaluated")
+        return as_read, base, [base], base
     fits = [base] + _condition_hypotheses(evaluate, measurements, conditions, z, kw, notes)
     best = min(fits, key=lambda f: f.misfit)
     explained = (best is not base and base.misfit > 1.0 and best.misfit <= chi2_threshold
@@ -356,6 +364,9 @@ def apply_unit_check(model, p, measurements: Measurements, *, sigma: Mapping[str
     report = check_units(model, p, measurements, sigma=sigma, model_units=model_units)
     for line in report.summary().splitlines():
         printer(f"{prefix} {line}")
+    simulations = _simulation_line(model)
+    if simulations:
+        printer(f"{prefix} unit check: {simulations}")
     if not force:
         report.raise_if_failed(source, strict=strict)
     notes = {}
@@ -366,3 +377,14 @@ def apply_unit_check(model, p, measurements: Measurements, *, sigma: Mapping[str
             printer(f"{prefix} {line}")
         notes["unit check: misfit no unit factor explains (calibrated anyway)"] = report.ratio_words()
     return report, notes
+
+
+def _simulation_line(model) -> str | None:
+    """What the check's simulations cost, for a model that counts them (an FMU:
+    :meth:`calib.fmu.model.FmuModel.simulation_summary`; through a recorded model, the wrapped one)."""
+    inner = getattr(model, "wrapped", model)
+    summary = getattr(inner, "simulation_summary", None)
+    if summary is None:
+        return None
+    from calib.fmu.tally import tally_sentence
+    return "FMU " + tally_sentence(summary())

@@ -20,7 +20,9 @@ The adapter, from the archive to the model:
 - :mod:`calib.fmu.pipe`         the pipe protocol between them (length-prefixed pickles);
 - :mod:`calib.fmu.faults`       the fault ledger: quarantine and healthy wall times;
 - :mod:`calib.fmu.states`       settled FMU states saved to and read from files;
-- :mod:`calib.fmu.differences`  central differences: perturbed parameter vectors, sensitivities;
+- :mod:`calib.fmu.tally`        what the simulations cost: counts, model time, busy and wall time, efficiency;
+- :mod:`calib.fmu.base_runs`    base runs kept for reuse (same plan, point and parameters: simulated once);
+- :mod:`calib.fmu.differences`  central or forward differences: perturbed parameter vectors, sensitivities;
 - :mod:`calib.fmu.model`        :class:`~calib.fmu.model.FmuModel`, the thin adapter;
 - :mod:`calib.fmu.bundled`      the bundled FMU of a workflow (``[model] variant``), built on demand.
 

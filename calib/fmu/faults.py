@@ -196,7 +196,7 @@ class FaultLedger:
             key = _FAULT_COUNTS.get(o.fault)
             if key:
                 self.counts[key] += 1
-        if r.base is not None and r.base.ok and task.start_state is None:
+        if r.base is not None and r.base.ok and task.start_state is None and not r.base.reused:
             self.walls.append(r.base.wall - r.base.instantiation)
             self.n_healthy += 1
         where = {f: float(getattr(conditions, f)[k]) for f in CONDITION_FIELDS}
@@ -283,16 +283,19 @@ def _conditions_text(conditions: dict) -> str:
 def fault_sentences(summary: dict) -> dict[str, str]:
     """The report's lines of :meth:`FaultLedger.summary`: {label: text}.
 
-    Always the timeout in force (how it follows from the healthy runs); then, when any
+    The simulations made and what they cost (:func:`calib.fmu.tally.tally_sentence`, when the summary
+    has them) and the timeout in force (how it follows from the healthy runs); then, when any
     point faulted, the quarantined points and the points with an error status.
     """
+    from calib.fmu.tally import tally_sentence
     t = summary["timeout"]
     med = t["median_healthy_s"]
     rule = (f"{t['multiple']:g}× the median healthy simulation ({med:.3g} s over {t['healthy_runs']} runs), at least "
             f"{t['floor_s']:g} s, at most the configured {t['configured_s']:g} s" if med is not None else
             f"the configured {t['configured_s']:g} s (no healthy simulation measured yet)")
-    out = {"FMU simulation timeout": f"{t['in_force_s']:.3g} s in force: {rule}; instantiation "
-                                     f"{t['start_timeout_s']:g} s"}
+    out = {"FMU simulations and their wall time": tally_sentence(summary["simulations"])} if "simulations" in summary else {}
+    out["FMU simulation timeout"] = (f"{t['in_force_s']:.3g} s in force: {rule}; instantiation "
+                                     f"{t['start_timeout_s']:g} s")
     quarantined = summary["quarantine"]
     if quarantined:
         out["FMU points quarantined"] = "; ".join(

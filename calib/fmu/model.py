@@ -10,13 +10,11 @@ parameters, settings and switches are parameters, array elements are inside thei
 setting values inside the FMU's range), refusing with :class:`~calib.errors.InputError`
 naming the file and the item.
 
-It extracts the FMU once (cached by the file's SHA-256), and hands workers a picklable
-:class:`~calib.fmu.plan.SimulationPlan` (paths and value references, never an
-instance). Simulations run through :func:`calib.fmu.worker.run_point` on the
-model's executor (serial by default), in worker processes with a per-simulation timeout
-that adapts to the measured cost of healthy runs; a point that crashed or hung is
-quarantined by the model (planned here, whatever the executor): see
-:class:`calib.fmu.faults.FaultLedger` and :meth:`FmuModel.fault_summary`.
+It extracts the FMU once (cached by its SHA-256) and hands workers a picklable
+:class:`~calib.fmu.plan.SimulationPlan` (never an instance). Simulations run through
+:func:`calib.fmu.worker.run_point` on the model's executor (serial by default), in worker processes
+with a timeout adapted to the healthy runs; a point that crashed or hung is quarantined by the model
+(:class:`calib.fmu.faults.FaultLedger`, :meth:`FmuModel.fault_summary`).
 
 Steady outputs: settle ``settle_revolutions``, then average ``average_revolutions`` whole
 revolutions (``[steady]`` of the mapping); the status of a point says whether the two
@@ -25,18 +23,10 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 (amplitude, unit of x) and ``x_1p_phase`` ... (deg), with x ≈ mean + Σ A_n cos(nψ + φ_n)
 and ψ the azimuth of blade 1 (0 = up).
 
-Jacobians are central differences (:mod:`calib.fmu.differences`) with steps ``relative_step`` ×
-each parameter's ``scale`` (one-sided inside a bound). With ``warm_start`` (``[jacobian]`` of the mapping,
-or ``jacobian={"warm_start": True}``) the base run of each point saves its settled state and
-every perturbed run restores it, sets the perturbed parameters and settles only
-``perturbation_settle_revolutions`` before averaging ``perturbation_average_revolutions``
-(docs/theory.md, FMUs). That is exact when a parameter step acts at once (quasi-steady physics) and
-wrong by the lag where the FMU filters it (dynamic inflow): the bundled mappings keep it off
-and say why. A point's runs are one executor task, so the state never leaves its worker
-except serialized, to resume after a fault. FMI directional derivatives are not used: co-simulation FMUs give them for
-inputs and states at one instant, not for the steady window averages with respect to
-parameters; whether the FMU offers them is reported by :attr:`FmuModel.jacobian_method`
-(the bundled FMUs and PythonFMU's do not).
+Jacobians: finite differences (central by default, or forward), cold or warm-started from the
+settled base state, as :mod:`calib.fmu.differences` says; a base run already simulated at the
+same point and parameters is reused (:mod:`calib.fmu.base_runs`); what the simulations cost is
+counted (:meth:`FmuModel.simulation_summary`).
 """
 
 from __future__ import annotations
@@ -51,18 +41,21 @@ from calib.errors import InputError, ModelError
 from calib.measurements import sha256_of
 from calib.fmu import plan as fp
 from calib.fmu import worker as fw
+from calib.fmu.base_runs import BaseRunCache
 from calib.fmu.binding import bind_inputs, bind_parameters, check_mapped_variables, fixed_assignments
 from calib.fmu.bundled import spec_files
 from calib.fmu.channels import channel_specs, evaluation_of, offered_channels
-from calib.fmu.differences import perturbed_vectors, sensitivities
+from calib.fmu.differences import method_words, perturbed_vectors, sensitivities
 from calib.fmu.fmu_file import FmuFile, open_fmu
 from calib.fmu.mapping import Mapping, load_mapping
+from calib.fmu.rules import check_differences
 from calib.fmu.signals import PlanSite, make_plan
 from calib.fmu.states import read_states, write_states
 from calib.fmu.stations import probe_radii
 from calib.fmu.variables import Variables
 from calib.models.base import Capabilities
 from calib.fmu.faults import FaultLedger
+from calib.fmu.tally import SimulationTally
 from calib.parametrizations.correction_field import CorrectionField, seen_from_extras
 from calib.types import Channel, Evaluation, OperatingConditions, Parameter, check_parameter_vector
 
@@ -112,6 +105,8 @@ class FmuModel:
         :meth:`spec` so that a saved result can rebuild the FMU.
     progress : callable(done, total), optional
         Called as operating points finish.
+    base_runs : BaseRunCache, optional
+        Base runs simulated before, shared with other models (:mod:`calib.fmu.base_runs`); default its own.
 
     Notes
     -----
@@ -126,7 +121,8 @@ class FmuModel:
                  parameters: Sequence[str] | None = None, corrections: bool = True,
                  switches: dict | None = None, settings: dict | None = None, steady: dict | None = None,
                  jacobian: dict | None = None, executor=None, timeout: float = fp.DEFAULT_TIMEOUT, isolate: bool = True,
-                 build: dict | None = None, progress=None, start_timeout: float = fp.DEFAULT_TIMEOUT):
+                 build: dict | None = None, progress=None, start_timeout: float = fp.DEFAULT_TIMEOUT,
+                 base_runs: BaseRunCache | None = None):
         self.fmu_path = Path(fmu).resolve()
         self.mapping: Mapping = mapping if isinstance(mapping, Mapping) else load_mapping(mapping)
         self._keep_file(open_fmu(self.fmu_path, self.mapping, warn_stacklevel=2))
@@ -147,6 +143,8 @@ class FmuModel:
         self.start_timeout = float(start_timeout)
         self._faults = FaultLedger([q.name for q in self._parameters], [q.scale for q in self._parameters],
                                    self.timeout, self.start_timeout, self.fmu_path.name)
+        self._tally = SimulationTally()
+        self.base_runs = base_runs if base_runs is not None else BaseRunCache()
 
     # ------------------------------------------------------------------ load-time steps
     def _keep_file(self, f: FmuFile) -> None:
@@ -175,6 +173,7 @@ class FmuModel:
             jac[key] = value
         self.relative_step = float(jac["relative_step"])
         self.warm_start = bool(jac["warm_start"])
+        self.differences = check_differences(jac["differences"], "FmuModel")
         self.steady = steady_rule
 
     def _bind(self, channels, parameters, corrections: bool, switches: dict, settings: dict) -> None:
@@ -225,13 +224,9 @@ class FmuModel:
 
     @property
     def jacobian_method(self) -> str:
-        """How :meth:`jacobian` differentiates, and why."""
-        dd = ("the FMU offers directional derivatives, but of instantaneous outputs with respect to inputs and "
-              "states, not of steady window averages with respect to parameters: not used"
-              if self.offers_directional_derivatives else "the FMU offers no directional derivatives")
-        warm = ("warm-started from the settled base state" if self.warm_start and self.can_get_state
-                else "each perturbed run settled from scratch")
-        return f"central differences, steps {self.relative_step:g} x parameter scale, {warm}; {dd}"
+        """How :meth:`jacobian` differentiates, and why (:func:`calib.fmu.differences.method_words`)."""
+        return method_words(self.differences, self.relative_step, self.warm_start and self.can_get_state,
+                            self.offers_directional_derivatives)
 
     def _fmu_parameter_values(self, p: np.ndarray) -> tuple:
         return self._params.assignments(p)
@@ -244,10 +239,13 @@ class FmuModel:
         fills their results), the others run on the executor with the adaptive timeout."""
         run, results = self._faults.plan(tasks, p, len(self._plan.signals))
         policy = self._faults.policy()
-        jobs = [(self._plan, tasks[k], self.isolate, policy) for k in run]
-        done = self.executor.map(fw.run_point, jobs, self.progress) if jobs else []
-        for k, r in zip(run, done):
+        send, self._tally.reused = self.base_runs.split(self._plan.key, tasks, run, results, self._tally.reused,
+                                                        cold=not (self.warm_start and self.can_get_state))
+        jobs = [(self._plan, tasks[k], self.isolate, policy) for k in send]
+        done = self._tally.timed_map(self.executor, fw.run_point, jobs, self.progress)
+        for k, r in zip(send, done):
             results[k] = r
+            self.base_runs.put(self._plan.key, tasks[k], r.base)
         self._faults.record(tasks, results, run, p, conditions)
         return results
 
@@ -260,10 +258,15 @@ class FmuModel:
             ``fmu`` (the file's name), then :meth:`calib.fmu.faults.FaultLedger.summary`: ``timeout``
             (configured, in force, the healthy runs' median and its changes), ``quarantine`` (one dict
             per quarantined point: conditions, fault, message, retries), ``errors`` (points with an
-            error status), ``counts`` (calls, points simulated and skipped, runs per kind of fault) and
-            ``rules`` (the quarantined fault kinds and the retry distance).
+            error status), ``counts`` (calls, points simulated and skipped, runs per kind of fault),
+            ``rules`` (quarantined fault kinds, retry distance); ``simulations`` (:meth:`simulation_summary`).
         """
-        return {"fmu": self.fmu_path.name, **self._faults.summary()}
+        return {"fmu": self.fmu_path.name, **self._faults.summary(), "simulations": self.simulation_summary()}
+
+    def simulation_summary(self) -> dict:
+        """What this model's simulations cost so far: :meth:`calib.fmu.tally.SimulationTally.summary` (counts,
+        model time, busy worker and wall time [s], parallel efficiency)."""
+        return self._tally.summary()
 
     def clear_quarantine(self) -> None:
         """Simulate quarantined points again from now on (e.g. a new stage with another
@@ -276,7 +279,7 @@ class FmuModel:
         inputs = self._fmu_inputs(conditions)
         perturbations, steps = (), None
         if perturb:
-            vectors, steps = perturbed_vectors(p, self._parameters, self.relative_step)
+            vectors, steps = perturbed_vectors(p, self._parameters, self.relative_step, self.differences)
             perturbations = tuple(self._fmu_parameter_values(q) for q in vectors)
         if start_states is not None and len(start_states) != len(conditions):
             raise InputError(f"{len(start_states)} start states for {len(conditions)} operating points", "FmuModel",
@@ -304,7 +307,8 @@ class FmuModel:
         return self._evaluation(self._run(tasks, p, conditions), conditions)
 
     def jacobian(self, p, conditions: OperatingConditions, start_states=None):
-        """Central-difference sensitivities ``G[k, c, j] = d y[k, c] / d p[j]``.
+        """Finite-difference sensitivities ``G[k, c, j] = d y[k, c] / d p[j]`` (central, or forward against
+        the base run with ``jacobian={"differences": "forward"}``).
 
         Returns
         -------
@@ -317,7 +321,7 @@ class FmuModel:
         p, tasks, steps = self._tasks(p, conditions, perturb=True, start_states=start_states)
         results = self._run(tasks, p, conditions)
         return sensitivities(results, self._evaluation(results, conditions), steps, self._channel_specs,
-                             self._keys_for_values, [q.name for q in self._parameters])
+                             self._keys_for_values, [q.name for q in self._parameters], self.differences)
 
     # ------------------------------------------------------------------ declared capabilities
     @property

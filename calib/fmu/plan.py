@@ -136,6 +136,9 @@ class PointTask:
     start_state : bytes or None
         A serialized settled state (this build) the base run starts from instead of from
         scratch; it then settles only ``perturbation_settle_revolutions``.
+    known_base : RunOutcome or None
+        The outcome of this base run, simulated before (:mod:`calib.fmu.base_runs`): not simulated
+        again (perturbed runs then start cold).
     """
 
     index: int
@@ -148,6 +151,7 @@ class PointTask:
     skip: int = 0
     keep_state: bool = False
     start_state: bytes | None = None
+    known_base: "RunOutcome | None" = None
 
 
 @dataclass
@@ -179,6 +183,10 @@ class RunOutcome:
         :class:`FaultLedger`).
     instantiation : float
         Part of ``wall`` spent creating the FMU instance [s] (0 when the instance was reused).
+    simulated : float
+        Model time simulated, settling included [s] (0 when the run failed).
+    reused : bool
+        The outcome of an earlier identical run, not simulated again (:mod:`calib.fmu.base_runs`).
     """
 
     status: int
@@ -191,6 +199,8 @@ class RunOutcome:
     wall: float = 0.0
     fault: str = ""
     instantiation: float = 0.0
+    simulated: float = 0.0
+    reused: bool = False
 
     @classmethod
     def failed(cls, n_signals: int, status: int, message: str, wall: float = 0.0, fault: str = "") -> "RunOutcome":
@@ -208,7 +218,8 @@ class PointResult:
     """The runs of one :class:`PointTask` (``perturbations[j]`` None if never run).
 
     ``timeout`` is the simulation timeout in force when the task ended [s] (None in
-    process: no timeout).
+    process: no timeout); ``busy`` the wall time the executor's worker spent on the task [s]
+    (:func:`calib.fmu.worker.run_point`).
     """
 
     index: int
@@ -217,6 +228,7 @@ class PointResult:
     restarts: int = 0
     base_state: bytes | None = None
     timeout: float | None = None
+    busy: float = 0.0
 
     def outcomes(self) -> list:
         """The runs made, base first (perturbed runs never run left out)."""

@@ -23,7 +23,9 @@ _STEADY_KEYS = {"steps_per_revolution": Key(int, True), "settle_revolutions": Ke
 #: upper bounds of the step counts: a larger one is a typo, and would run the FMU for days
 _STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
                "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
-_JACOBIAN_KEYS = {"relative_step": Key(NUM), "warm_start": Key(bool)}
+_JACOBIAN_KEYS = {"relative_step": Key(NUM), "warm_start": Key(bool), "differences": Key(str)}
+#: Finite-difference schemes: runs per parameter and point
+DIFFERENCES = {"central": 2, "forward": 1}
 
 
 @dataclass(frozen=True)
@@ -70,10 +72,12 @@ class SteadyRule:
 
 @dataclass(frozen=True)
 class JacobianRule:
-    """How the adapter differentiates: central differences and their warm start."""
+    """How the adapter differentiates: central (two runs per parameter, error O(h²)) or forward
+    differences (one run per parameter against the point's base run, error O(h)), and their warm start."""
 
     relative_step: float = 1e-2
     warm_start: bool = True
+    differences: str = "central"
 
 
 def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
@@ -108,4 +112,13 @@ def jacobian_rule(data: dict, src: str) -> JacobianRule:
     if not 0 < jacobian.relative_step <= 0.5:
         raise InputError(f"'jacobian.relative_step' must be in (0, 0.5], got {jacobian.relative_step!r}", src,
                          field="jacobian.relative_step")
+    check_differences(jacobian.differences, src)
     return jacobian
+
+
+def check_differences(value, src: str) -> str:
+    """``value`` if it names a scheme of :data:`DIFFERENCES`, else :class:`~calib.errors.InputError` naming them."""
+    if value not in DIFFERENCES:
+        raise InputError(f"'jacobian.differences' must be one of {', '.join(DIFFERENCES)}, got {value!r}", src,
+                         field="jacobian.differences")
+    return value

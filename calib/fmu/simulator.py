@@ -281,6 +281,7 @@ class Simulator:
             return self._failure(exc, "simulation failed", t0_wall), None, 0.0
         outcome = self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall)
         outcome.instantiation = self.last_instantiation if self.instantiations != created else 0.0
+        outcome.simulated = (n_settle + n_average) * h
         return outcome, state, t_state
 
     def warm_run(self, task: PointTask, parameters, state, state_time: float) -> RunOutcome:
@@ -296,7 +297,9 @@ class Simulator:
         # the halves of an odd number of revolutions are not whole revolutions: no check then (the
         # base run of the point was checked)
         check = self.plan.steady.perturbation_average_revolutions % 2 == 0
-        return self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall, check)
+        outcome = self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall, check)
+        outcome.simulated = (n_settle + n_average) * h
+        return outcome
 
     def _restore_point(self, blob: bytes):
         """A state handle in a healthy instance from serialized bytes (+ its time)."""
@@ -315,7 +318,12 @@ class Simulator:
         p = self.plan
         warm = p.can_get_state and ((task.warm and bool(task.perturbations)) or task.keep_state)
         state, t_state, blob, owner = None, 0.0, task.base_state, None
-        if task.base_state is None:
+        if task.known_base is not None and task.base_state is None:   # simulated before: perturbed runs cold
+            warm = False
+            yield ("base", task.known_base, None)
+            if not task.known_base.ok:
+                return
+        elif task.base_state is None:
             outcome, state, t_state = self.cold_run(task, task.base, keep_state=warm)
             owner = self.instantiations
             if state is not None and p.can_serialize:

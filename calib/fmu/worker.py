@@ -32,6 +32,7 @@ import select
 import signal
 import subprocess
 import sys
+import time
 from dataclasses import replace
 
 from calib.fmu.pipe import read_message, write_message
@@ -101,7 +102,7 @@ class WorkerProcess:
 
     def _measured(self, outcome: RunOutcome, task: PointTask) -> None:
         """Count a healthy base run (full window, from scratch) in the timeout rule."""
-        if outcome.ok and task.start_state is None:
+        if outcome.ok and task.start_state is None and not outcome.reused:
             self._walls.append(outcome.wall - outcome.instantiation)
             del self._walls[:-HEALTHY_WALLS_KEPT]
 
@@ -296,9 +297,12 @@ def close_workers(plan_key: str | None = None) -> None:
 
 def run_point(job) -> PointResult:
     """Executor task: ``job = (plan, task, isolate, timeout)`` -> :class:`PointResult`
-    (``timeout``: float [s] or :class:`TimeoutPolicy`)."""
+    (``timeout``: float [s] or :class:`TimeoutPolicy`), with the wall time spent on it as ``busy`` [s]."""
+    t0 = time.perf_counter()
     plan, task, isolate, timeout = job
-    return worker_for(plan, isolate, timeout).run_point(task)
+    result = worker_for(plan, isolate, timeout).run_point(task)
+    result.busy = time.perf_counter() - t0
+    return result
 
 
 import atexit  # noqa: E402

@@ -276,9 +276,13 @@ def fmu_model(t: FmuModelTable, rotor_table: dict | None, channels, source: str,
             raise InputError(f"FMU file not found: {fmu}{_RELATIVE}", source, field="model.fmu")
     if not Path(mapping).is_file():
         raise InputError(f"mapping file not found: {mapping}{_RELATIVE}", source, field="model.mapping")
+    from calib.fmu.base_runs import shared_by
+
+    # the models of a run share their executor, and the base runs it simulated (the unit check's serve a stage)
     return FmuModel(fmu, mapping, list(channels), parameters=None if t.parameters is None else list(t.parameters),
                     corrections=t.corrections, switches=t.switches, settings=t.settings, steady=t.steady,
-                    jacobian=t.jacobian, executor=executor, timeout=t.timeout, isolate=t.isolate, build=build)
+                    jacobian=t.jacobian, executor=executor, timeout=t.timeout, isolate=t.isolate, build=build,
+                    base_runs=shared_by(executor) if executor is not None else None)
 
 
 def bem_setup(table: BemModelTable, rsrc, source: str, viscosity: float | None = None,

@@ -1,0 +1,172 @@
+"""``calib run`` through an FMU, phase by phase: the unit check, the calibration, the simulations.
+
+The nearest equivalent this repository can build of a third-party steady-rotor FMU with an output
+lag (issue 38): the bundled variant A (FMI 2.0, NREL 5-MW) with Øye dynamic inflow on (the lag:
+induction filtered with a time constant of about a revolution) and rigid blades, no tower, shear
+or gravity; the four scalar parameters of its mapping (three blade pitch offsets, the stall-delay
+strength, Snel's model on); 48 operating points (12 wind speeds x 4 pitch angles); four channels
+(power, thrust, root flap moment of blades 1 and 2); process executor, 2 workers. The
+measurements are the FMU's own at a known truth plus 1 % Gaussian noise (with ``_sigma``
+columns), written once into ``bench_output/fmu_run/``.
+
+Printed, one line per phase: unit check [s], calibration [s], simulations (count), simulated
+seconds (model time), busy worker seconds, wall [s], and the estimate with its σ.
+``python benchmarks/bench_fmu_run.py [--out DIR] [--runs N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+PARAMETERS = ["pitch_offset_blade1", "pitch_offset_blade2", "pitch_offset_blade3", "stall_delay_strength"]
+TRUTH = [0.4, -0.3, 0.1, 1.5]
+CHANNELS = ["power", "thrust", "root_flap_moment_blade1", "root_flap_moment_blade2"]
+SWITCHES = dict(dynamic_inflow=True, flexible_blades=False, tower_shadow=False, shear=False, gravity=False,
+                yaw=False, skewed_wake=False, stall_delay="snel")
+STEADY = dict(steps_per_revolution=16, settle_revolutions=2, average_revolutions=2)
+WIND = np.linspace(5.0, 16.0, 12)
+PITCH = [0.0, 1.5, 3.0, 4.5]
+RELATIVE_NOISE = 0.01
+SEED = 38
+DIFFERENCES = None          # the [model] jacobian.differences of the workflow (None: the mapping's)
+
+
+def conditions():
+    from calib.types import OperatingConditions
+    v = np.repeat(WIND, len(PITCH))
+    pitch = np.tile(PITCH, len(WIND))
+    rpm = np.clip(7.0 + 0.45 * (v - 5.0) ** 1.2, 7.0, 12.1)
+    return OperatingConditions(v, rpm, pitch, np.full(v.size, 1.225))
+
+
+def _toml(value) -> str:
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    return repr(value)
+
+
+def prepare(out: Path) -> Path:
+    """The measurements (once) and the workflow file; returns the workflow's path."""
+    out.mkdir(parents=True, exist_ok=True)
+    table = out / "measurements.csv"
+    if not table.is_file():
+        from calib.fmu.build import build_fmu, mapping_path
+        from calib.fmu.model import FmuModel
+        from calib.measurements import synthesize
+        model = FmuModel(build_fmu("A"), mapping_path("A"), CHANNELS, parameters=PARAMETERS, corrections=False,
+                         switches=SWITCHES, steady=dict(STEADY, settle_revolutions=6), isolate=False)
+        meas = synthesize(model, np.array(TRUTH), conditions(), relative_sigma={c: RELATIVE_NOISE for c in CHANNELS},
+                          channels=CHANNELS, seed=SEED, source="bench_fmu_run truth")
+        meas.write_csv(table)
+    wf = out / "fmu_run.toml"
+    wf.write_text("\n".join([
+        'name = "bench_fmu_run"',
+        'description = "issue 38 benchmark: a lagged steady rotor FMU, 4 parameters, 48 points, 4 channels"',
+        "[rotor]", 'name = "nrel5mw"',
+        "[model]", 'kind = "fmu"', 'variant = "A"', f"parameters = {_toml(PARAMETERS)}", "corrections = false",
+        f"switches = {_toml(SWITCHES)}", f"steady = {_toml(STEADY)}",
+        *([f'jacobian = {{ differences = "{DIFFERENCES}" }}'] if DIFFERENCES else []),
+        "[grid]", "alpha_nodes_deg = [-10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0]",   # the FMU's default grid
+        "eta_nodes = [0.2, 0.4, 0.6, 0.8, 1.0]",
+        "[measurements]", f'file = "{table.name}"',
+        "[executor]", 'kind = "process"', "workers = 2",
+        "[[stages]]", 'name = "rotor_loads"', f"channels = {_toml(CHANNELS)}", ""]))
+    return wf
+
+
+def run_once(wf: Path, out: Path) -> dict:
+    """One ``calib run`` in a fresh process; the phases from its console lines and its result."""
+    calib = str(Path(sys.executable).with_name("calib"))
+    t0 = time.perf_counter()
+    proc = subprocess.run([calib, "run", str(wf), "--out", str(out), "--no-history"], capture_output=True,
+                          text=True, cwd=ROOT)
+    wall = time.perf_counter() - t0
+    if proc.returncode:
+        raise RuntimeError(proc.stderr[-3000:] + proc.stdout[-3000:])
+    text = proc.stdout + proc.stderr
+    fig = {"wall_s": wall, "console": text}
+    m = re.search(r"operating points, channels .*\(([\d.]+) s\)", text)
+    fig["unit_check_s"] = float(m.group(1)) if m else float("nan")
+    m = re.search(r"calibration ([\d.]+) s, figures ([\d.]+) s", text)
+    fig["calibration_s"], fig["figures_s"] = (float(m.group(1)), float(m.group(2))) if m else (np.nan, np.nan)
+    res = json.loads(next(out.glob("stage1_*/result.json")).read_text())
+    with np.load(next(out.glob("stage1_*/result.npz"))) as z:
+        fig["p_hat"], fig["sigma"] = z["estimate.p_hat"].tolist(), z["uncertainty.std_p"].tolist()
+    fig["checks"] = res["provenance"]["checks"]
+    return fig
+
+
+def difference_error(sigma_p) -> dict:
+    """Error of forward and central differences against a reference (central, step / 5), at the truth, as
+    the error of a linearized prediction over one posterior σ of each parameter, in noise σ (1 %).
+
+    Returns the largest and the median of ``|G - G_ref|[k, c, j] σ_j / σ_noise[k, c]`` over points,
+    channels and parameters, per scheme, and the relative step of the forward scheme."""
+    from calib.fmu.build import build_fmu, mapping_path
+    from calib.fmu.model import FmuModel
+
+    def model(differences, step):
+        return FmuModel(build_fmu("A"), mapping_path("A"), CHANNELS, parameters=PARAMETERS, corrections=False,
+                        switches=SWITCHES, steady=STEADY, jacobian=dict(differences=differences, relative_step=step),
+                        isolate=False)
+    cond, p = conditions(), np.array(TRUTH)
+    ev, G_ref = model("central", 0.002).jacobian(p, cond)
+    noise = RELATIVE_NOISE * np.abs(ev.values)
+    out = {}
+    for scheme in ("central", "forward"):
+        _, G = model(scheme, 0.01).jacobian(p, cond)
+        e = np.abs(G - G_ref) * np.asarray(sigma_p)[None, None, :] / noise[:, :, None]
+        out[scheme] = {"max": float(np.nanmax(e)), "median": float(np.nanmedian(e))}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(ROOT / "bench_output" / "fmu_run"))
+    ap.add_argument("--runs", type=int, default=1)
+    ap.add_argument("--difference-error", nargs=4, type=float, metavar="SIGMA",
+                    help="only measure the finite-difference error against the posterior σ of the 4 parameters")
+    ap.add_argument("--differences", choices=("central", "forward"), default=None,
+                    help="the [model] jacobian.differences of the workflow (default: the mapping's)")
+    args = ap.parse_args(argv)
+    if args.difference_error:
+        for scheme, e in difference_error(args.difference_error).items():
+            print(f"[bench_fmu_run] {scheme} differences: error of a 1-σ linearized prediction / noise: max "
+                  f"{e['max']:.2e}, median {e['median']:.2e}")
+        return 0
+    global DIFFERENCES
+    DIFFERENCES = args.differences
+    out = Path(args.out)
+    wf = prepare(out)
+    for k in range(args.runs):
+        fig = run_once(wf, out / f"run{k + 1}")
+        print(f"[bench_fmu_run] unit check     {fig['unit_check_s']:7.1f} s")
+        print(f"[bench_fmu_run] calibration    {fig['calibration_s']:7.1f} s (figures {fig['figures_s']:.1f} s)")
+        for label, text in fig["checks"].items():
+            if label.startswith("FMU simulations and"):
+                print(f"[bench_fmu_run] {label}: {text}")
+        print(f"[bench_fmu_run] wall           {fig['wall_s']:7.1f} s")
+        print(f"[bench_fmu_run] p_hat {np.round(fig['p_hat'], 5).tolist()} sigma {np.round(fig['sigma'], 5).tolist()}")
+        (out / f"run{k + 1}" / "bench.json").write_text(json.dumps({k: v for k, v in fig.items() if k != "console"},
+                                                                   indent=1))
+        (out / f"run{k + 1}" / "console.txt").write_text(fig["console"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
