@@ -108,7 +108,7 @@ class ModelTerms:
         else on the calibration nodes; {} without a correction field or with ``prior_check`` off."""
         if self.field is None or self.field.grid is None or not self.settings.prior_check:
             return {}
-        from calib.checks.prior_check import map_point, prior_amplitude
+        from calib.checks.prior_check import MapPoint, map_point, prior_amplitude
         from calib.parametrizations.aliasing import fine_sensitivities, grid_correlation_sqrt
 
         n_ch = len(self.statement.channel_index)
@@ -126,11 +126,15 @@ class ModelTerms:
             out = problem.evaluate(p)
             return problem.scaled(p), out.residual.reshape(-1), np.repeat(out.ok, n_ch)
 
-        failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
-        # the MAP estimator's result is the MAP point of the stated prior already (up to its flat priors)
-        mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at,
-                       max_iterations=0 if self.settings.estimator == "map" else 10)
-        problem.n_failed_points_total = failed_before
+        if self.settings.estimator == "map":
+            # the MAP estimator's result is the MAP point of the stated prior already (up to its flat
+            # priors), and ``lin`` the model linearized there: no model call
+            last["at"] = lin
+            mp = MapPoint(problem.scaled(lin.p), lin.residual.reshape(-1), np.repeat(lin.ok, n_ch), lin.M, 0, True)
+        else:
+            failed_before = problem.n_failed_points_total   # the check's own evaluations are not the fit's failures
+            mp = map_point(linearize_at, problem.scaled(lin.p), P, evaluate_at=evaluate_at)
+            problem.n_failed_points_total = failed_before
         lay = self.field.layout
         blocks = [idx[idx >= 0] for idx in (lay.lift_index.ravel(), lay.drag_index.ravel())]
         field_cols = np.concatenate(blocks)
