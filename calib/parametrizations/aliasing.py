@@ -90,14 +90,11 @@ def interpolation_matrix(coarse: CorrectionGrid, fine: CorrectionGrid) -> np.nda
 
 def grid_correlation(a: CorrectionGrid, b: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
     """Smooth-field prior correlation between the nodes of ``a`` and of ``b`` (one block,
-    node order α-major as in the grids' layout) [-]."""
-
-    def nodes(g):
-        A, E = np.meshgrid(g.alpha_nodes_deg, g.eta_nodes, indexing="ij")
-        return A.ravel(), E.ravel()
-
-    x, y = nodes(a), nodes(b)
-    return se_correlation(x[0][:, None] - y[0][None], x[1][:, None] - y[1][None], lengths)
+    node order α-major as in the grids' layout) [-]: the squared exponential separates, so it is
+    the Kronecker product of its α and η factors (one product per pair of nodes, no exponential)."""
+    d_alpha = a.alpha_nodes_deg[:, None] - b.alpha_nodes_deg[None]
+    d_eta = a.eta_nodes[:, None] - b.eta_nodes[None]
+    return np.kron(se_correlation(d_alpha, 0.0, (lengths[0], 1.0)), se_correlation(0.0, d_eta, (1.0, lengths[1])))
 
 
 def grid_correlation_factors(g: CorrectionGrid, lengths: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
