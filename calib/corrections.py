@@ -45,6 +45,53 @@ def _check_nodes(nodes, name: str) -> np.ndarray:
     return a
 
 
+#: Node counts up to which a point's cell is found by comparing it with every inner node (a few
+#: passes over the points, faster than a binary search for the grids the calibrations use).
+_FEW_NODES = 16
+
+
+def _cells(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """The cell k of every point, clip(#{nodes <= x} - 1, 0, n - 2): the two hats that may be
+    non-zero at x are k and k + 1 (NaN in the last cell, as a binary search puts it)."""
+    n = nodes.size
+    if n > _FEW_NODES:
+        return np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, n - 2)
+    k = np.zeros(x.shape, np.intp)
+    for node in nodes[1:-1]:
+        k += x >= node
+    nan = np.isnan(x)
+    if nan.any():
+        k[nan] = n - 2
+    return k
+
+
+def _hat_columns(x, nodes: np.ndarray):
+    """:func:`hat_weights` by column: the cell k and the two hats' values and slopes there
+    (w0, w1, s0, s1), each of the shape of ``x``."""
+    x = np.asarray(x, dtype=float)
+    shape, x = x.shape, x.reshape(-1)
+    k = _cells(x, nodes)
+    h = np.diff(nodes)[k]
+    t = (x - nodes[k]) / h
+    w0, w1 = 1.0 - t, t
+    s0, s1 = -1.0 / h, 1.0 / h
+    below = np.flatnonzero(x < nodes[0])
+    if below.size:      # below the first node: the first hat ramps to zero over one spacing
+        h0 = nodes[1] - nodes[0]
+        tb = (nodes[0] - x[below]) / h0
+        w0[below] = np.where(tb < 1.0, 1.0 - tb, 0.0)
+        s0[below] = np.where(tb < 1.0, 1.0 / h0, 0.0)
+        w1[below], s1[below] = 0.0, 0.0
+    above = np.flatnonzero(x > nodes[-1])
+    if above.size:      # above the last node: the last hat ramps to zero over one spacing
+        hn = nodes[-1] - nodes[-2]
+        ta = (x[above] - nodes[-1]) / hn
+        w1[above] = np.where(ta < 1.0, 1.0 - ta, 0.0)
+        s1[above] = np.where(ta < 1.0, -1.0 / hn, 0.0)
+        w0[above], s0[above] = 0.0, 0.0
+    return tuple(a.reshape(shape) for a in (k, w0, w1, s0, s1))
+
+
 def hat_weights(x, nodes: np.ndarray):
     """Values and slopes of the 1-D hat functions at ``x``.
 
@@ -64,31 +111,8 @@ def hat_weights(x, nodes: np.ndarray):
     slope : ndarray, shape x.shape + (2,)
         dN_index/dx [1/unit of x].
     """
-    x = np.asarray(x, dtype=float)
-    n = nodes.size
-    k = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, n - 2)
-    h = nodes[k + 1] - nodes[k]
-    t = (x - nodes[k]) / h
-    index = np.stack([k, k + 1], axis=-1)
-    weight = np.stack([1.0 - t, t], axis=-1)
-    slope = np.stack([-1.0 / h, 1.0 / h], axis=-1)
-    # below the first node: the first hat ramps to zero over one spacing
-    h0 = nodes[1] - nodes[0]
-    below = x < nodes[0]
-    tb = (nodes[0] - x) / h0
-    wb = np.where(tb < 1.0, 1.0 - tb, 0.0)
-    sb = np.where(tb < 1.0, 1.0 / h0, 0.0)
-    # above the last node: the last hat ramps to zero over one spacing
-    hn = nodes[-1] - nodes[-2]
-    above = x > nodes[-1]
-    ta = (x - nodes[-1]) / hn
-    wa = np.where(ta < 1.0, 1.0 - ta, 0.0)
-    sa = np.where(ta < 1.0, -1.0 / hn, 0.0)
-    weight[..., 0] = np.where(below, wb, np.where(above, 0.0, weight[..., 0]))
-    slope[..., 0] = np.where(below, sb, np.where(above, 0.0, slope[..., 0]))
-    weight[..., 1] = np.where(above, wa, np.where(below, 0.0, weight[..., 1]))
-    slope[..., 1] = np.where(above, sa, np.where(below, 0.0, slope[..., 1]))
-    return index, weight, slope
+    k, w0, w1, s0, s1 = _hat_columns(x, nodes)
+    return np.stack([k, k + 1], axis=-1), np.stack([w0, w1], axis=-1), np.stack([s0, s1], axis=-1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,12 +194,19 @@ class CorrectionGrid:
         dvalue_dalpha : ndarray, shape (..., 4)
             ∂/∂α of ``value`` [1/deg].
         """
+        index, value, dvalue = self._corners(alpha_deg, eta)
+        return np.stack(index, axis=-1), np.stack(value, axis=-1), np.stack(dvalue, axis=-1)
+
+    def _corners(self, alpha_deg, eta):
+        """:meth:`basis` as lists of the four corners of each point's cell, in the order of
+        its last axis ((α_k, η_l), (α_k, η_l+1), (α_k+1, η_l), (α_k+1, η_l+1))."""
         alpha_deg, eta = np.broadcast_arrays(np.asarray(alpha_deg, float), np.asarray(eta, float))
-        ia, wa, sa = hat_weights(alpha_deg, self.alpha_nodes_deg)
-        je, we, _ = hat_weights(eta, self.eta_nodes)
-        index = (ia[..., :, None] * self.n_eta + je[..., None, :]).reshape(*alpha_deg.shape, 4)
-        value = (wa[..., :, None] * we[..., None, :]).reshape(*alpha_deg.shape, 4)
-        dvalue = (sa[..., :, None] * we[..., None, :]).reshape(*alpha_deg.shape, 4)
+        ka, wa0, wa1, sa0, sa1 = _hat_columns(alpha_deg, self.alpha_nodes_deg)
+        ke, we0, we1, _, _ = _hat_columns(eta, self.eta_nodes)
+        row = ka * self.n_eta + ke
+        index = [row, row + 1, row + self.n_eta, row + (self.n_eta + 1)]
+        value = [wa0 * we0, wa0 * we1, wa1 * we0, wa1 * we1]
+        dvalue = [sa0 * we0, sa0 * we1, sa1 * we0, sa1 * we1]
         return index, value, dvalue
 
     def evaluate(self, p, alpha_deg, eta):
@@ -199,10 +230,16 @@ class CorrectionGrid:
         if p.shape != (self.n_params,):
             raise InputError(f"expected {self.n_params} correction values, got shape {p.shape}",
                              "CorrectionGrid.evaluate", field="p")
-        index, value, dvalue = self.basis(alpha_deg, eta)
-        pl, pd = p[: self.n_lift][index], p[self.n_lift:][index]
-        return ((value * pl).sum(-1), (value * pd).sum(-1),
-                (dvalue * pl).sum(-1), (dvalue * pd).sum(-1))
+        index, value, dvalue = self._corners(alpha_deg, eta)
+        lift = [p[: self.n_lift][i] for i in index]
+        drag = [p[self.n_lift:][i] for i in index]
+        out = []
+        for weights, nodal in ((value, lift), (value, drag), (dvalue, lift), (dvalue, drag)):
+            total = weights[0] * nodal[0]
+            for w, v in zip(weights[1:], nodal[1:]):     # summed in the corners' order
+                total = total + w * v
+            out.append(total)
+        return tuple(out)
 
     def parameters(self) -> tuple[Parameter, ...]:
         """The nodal parameters, lift block then drag block, in ``p`` order."""

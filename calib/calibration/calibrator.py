@@ -184,7 +184,10 @@ class Calibrator:
         statement = self.statement
         problem = LeastSquaresProblem(self.model, m.conditions, m.values,
                                       sigma if sigma is not None else np.ones_like(m.values), statement)
-        nominal = problem.evaluate(statement.p0)
+        # with exact derivatives a Jacobian costs little more than the values, and the estimators
+        # linearize at the nominal values first: linearized here, the first iteration finds it cached
+        starts_at_nominal = sigma is not None and self.start is None and self.model.capabilities.derivatives == "exact"
+        nominal = problem.linearize(statement.p0) if starts_at_nominal else problem.evaluate(statement.p0)
         if nominal.n_failed == len(m.conditions):
             from calib.errors import ModelError
 

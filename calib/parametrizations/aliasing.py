@@ -90,26 +90,37 @@ def interpolation_matrix(coarse: CorrectionGrid, fine: CorrectionGrid) -> np.nda
 
 def grid_correlation(a: CorrectionGrid, b: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
     """Smooth-field prior correlation between the nodes of ``a`` and of ``b`` (one block,
-    node order α-major as in the grids' layout) [-]."""
+    node order α-major as in the grids' layout) [-]: the squared exponential separates, so it is
+    the Kronecker product of its α and η factors (one product per pair of nodes, no exponential)."""
+    d_alpha = a.alpha_nodes_deg[:, None] - b.alpha_nodes_deg[None]
+    d_eta = a.eta_nodes[:, None] - b.eta_nodes[None]
+    return np.kron(se_correlation(d_alpha, 0.0, (lengths[0], 1.0)), se_correlation(0.0, d_eta, (1.0, lengths[1])))
 
-    def nodes(g):
-        A, E = np.meshgrid(g.alpha_nodes_deg, g.eta_nodes, indexing="ij")
-        return A.ravel(), E.ravel()
 
-    x, y = nodes(a), nodes(b)
-    return se_correlation(x[0][:, None] - y[0][None], x[1][:, None] - y[1][None], lengths)
+def grid_correlation_factors(g: CorrectionGrid, lengths: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(L_α, L_η), the square roots of the α and η factors of :func:`grid_correlation` (g, g), whose
+    Kronecker product L_α ⊗ L_η is :func:`grid_correlation_sqrt` [-]."""
+
+    def factor(x, length):
+        w, Q = np.linalg.eigh(se_correlation(x[:, None] - x[None], 0.0, (length, 1.0)))
+        return Q * np.sqrt(np.clip(w, 0.0, None))
+
+    return factor(g.alpha_nodes_deg, lengths[0]), factor(g.eta_nodes, lengths[1])
 
 
 def grid_correlation_sqrt(g: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:
     """L with L Lᵀ = :func:`grid_correlation` (g, g): the squared-exponential correlation on a
     tensor grid is the Kronecker product of its α and η factors, so L = L_α ⊗ L_η from two small
     eigen-decompositions [-]."""
+    return np.kron(*grid_correlation_factors(g, lengths))
 
-    def factor(x, length):
-        w, Q = np.linalg.eigh(se_correlation(x[:, None] - x[None], 0.0, (length, 1.0)))
-        return Q * np.sqrt(np.clip(w, 0.0, None))
 
-    return np.kron(factor(g.alpha_nodes_deg, lengths[0]), factor(g.eta_nodes, lengths[1]))
+def times_kron(X: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """X (A ⊗ B) without forming the Kronecker product, X's columns in the order of A ⊗ B's rows
+    (α-major on a grid: (i, j) at i n_B + j): (n_A n_B)² products per row become n_A n_B (n_A + n_B)."""
+    n_a, n_b = A.shape[0], B.shape[0]
+    Y = np.matmul(X.reshape(-1, n_a, n_b), B)               # Σ_j X[i, j] B[j, l]
+    return np.matmul(A.T, Y).reshape(X.shape[0], -1)         # Σ_i A[i, k] (...)[i, l]
 
 
 def discrepancy_correlation(coarse: CorrectionGrid, fine: CorrectionGrid, lengths: tuple[float, float]) -> np.ndarray:

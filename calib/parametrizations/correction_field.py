@@ -68,10 +68,12 @@ def node_layout(parameters: Sequence[Parameter]) -> NodeLayout:
         return NodeLayout(None, empty, empty)
     lift = -np.ones((alphas.size, etas.size), int)
     drag = -np.ones_like(lift)
-    for i, q in nodes:
-        a = int(np.searchsorted(alphas, round(q.alpha_deg, 9)))
-        e = int(np.searchsorted(etas, round(q.eta, 9)))
-        (lift if q.kind == ParameterKind.LIFT_CORRECTION else drag)[a, e] = i
+    at = np.array([i for i, _ in nodes])
+    a = np.searchsorted(alphas, np.round([q.alpha_deg for _, q in nodes], 9))
+    e = np.searchsorted(etas, np.round([q.eta for _, q in nodes], 9))
+    is_lift = np.array([q.kind == ParameterKind.LIFT_CORRECTION for _, q in nodes], bool)
+    lift[a[is_lift], e[is_lift]] = at[is_lift]
+    drag[a[~is_lift], e[~is_lift]] = at[~is_lift]
     grid = CorrectionGrid(alphas, etas)
     return NodeLayout(grid, lift, drag)
 
