@@ -11,7 +11,8 @@ columns), written once into ``bench_output/fmu_run/``.
 
 Printed, one line per phase: unit check [s], calibration [s], simulations (count), simulated
 seconds (model time), busy worker seconds, wall [s], and the estimate with its σ.
-``python benchmarks/bench_fmu_run.py [--out DIR] [--runs N]``.
+``python benchmarks/bench_fmu_run.py [--out DIR] [--runs N]``; under ``make validate`` :func:`run` (one run;
+several minutes of simulation on 2 workers: a study, not a ``make bench`` figure).
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ PITCH = [0.0, 1.5, 3.0, 4.5]
 RELATIVE_NOISE = 0.01
 SEED = 38
 DIFFERENCES = None          # the [model] jacobian.differences of the workflow (None: the mapping's)
+#: A study of minutes: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
+SUITE = "validate"
 
 
 def conditions():
@@ -133,6 +136,14 @@ def difference_error(sigma_p) -> dict:
         e = np.abs(G - G_ref) * np.asarray(sigma_p)[None, None, :] / noise[:, :, None]
         out[scheme] = {"max": float(np.nanmax(e)), "median": float(np.nanmedian(e))}
     return out
+
+
+def run(out: Path | None = None) -> dict:
+    """One ``calib run`` of the benchmark (benchmarks/run_all.py): its phases' seconds, the FMU simulation
+    counts the result states, the estimate and its σ."""
+    out = Path(out or ROOT / "bench_output" / "fmu_run")
+    fig = run_once(prepare(out), out / "run1")
+    return {k: v for k, v in fig.items() if k != "console"}
 
 
 def main(argv=None) -> int:

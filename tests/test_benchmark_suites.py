@@ -32,3 +32,12 @@ def test_makefile_targets_call_the_suites():
     text = (BENCH.parent / "Makefile").read_text()
     assert "run_all.py --suite speed" in text.split("\nbench:")[1].split("\n\n")[0]
     assert "run_all.py --suite validate" in text.split("\nvalidate:")[1].split("\n\n")[0]
+
+
+def test_every_benchmark_module_has_the_run_the_suites_call():
+    """run_all calls each discovered module's run(): one without it fails `make bench` or `make validate`."""
+    import ast
+
+    for name in run_all.discover("all"):
+        tree = ast.parse((BENCH / f"{name}.py").read_text())
+        assert any(isinstance(n, ast.FunctionDef) and n.name == "run" for n in tree.body), f"{name}.py has no run()"
