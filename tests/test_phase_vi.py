@@ -93,10 +93,15 @@ def test_pressure_taps_inform_more_directions_and_localize_the_inboard_correctio
     hub, taps = load_result(out / HUB), load_result(out / TAPS)
     assert np.sum(taps.identifiability.singular_values >= INFORMED) > np.sum(hub.identifiability.singular_values >= INFORMED)
     assert np.sum(taps.identifiability.singular_values >= 1.0) > np.sum(hub.identifiability.singular_values >= 1.0)
-    # the stall-delay strength: confounded from hub loads, identified with the taps
+    # the stall-delay strength: confounded from hub loads, identified with the taps. Under the MAP the
+    # field's prior bounds the confounding, so σ moves little (0.12 -> 0.11 when written); what the taps
+    # change is the information the strength shares with the correction field (0.76 -> 0.37)
     i = [q["name"] for q in hub.parameters].index("stall_delay_strength")
-    assert taps.uncertainty.std_p[i] < 0.5 * hub.uncertainty.std_p[i]
+    assert hub.identifiability.verdicts[i]["verdict"] == "confounded"
     assert taps.identifiability.verdicts[i]["verdict"] == "identified"
+    assert taps.uncertainty.std_p[i] < hub.uncertainty.std_p[i]
+    assert (taps.identifiability.verdicts[i]["shared_information"]
+            < 0.75 * hub.identifiability.verdicts[i]["shared_information"])
     # field directions informed by the hub loads sit outboard (torque arm); with the taps one
     # is concentrated on the inboard nodes, where the measured c_n exceeds the 2-D polar most
     assert max(_field_modes(hub), default=0.0) < 0.5
