@@ -26,6 +26,15 @@ typedef struct {
     const double *tip_f, *hub_f, *lam;  /* B (R - r) / (2 r), B (r - R_h) / (2 R_h), V_y / V_x */
     double n_blades;
     int tip_loss, hub_loss, drag_axial, drag_tangential, wake_rotation;
+    /* an additive correction field on hat functions of (alpha, eta) after the look-up, or
+     * field_alpha NULL (calib.bem.stages.CompiledPolar; calib.corrections.CorrectionGrid.evaluate
+     * and calib.effects.correction_field.floor_drag): alpha nodes [deg], eta nodes [-], nodal
+     * values of the lift and drag blocks (n_alpha x n_eta, row-major), the drag floor, and per
+     * section its eta = r / R_tip */
+    const double *field_alpha, *field_eta, *field_lift, *field_drag;
+    int64_t field_n_alpha, field_n_eta;
+    double field_floor;
+    const double *eta;
 } Problem;
 
 /* numpy's float mod (np.mod): the sign of the divisor */
@@ -56,6 +65,49 @@ static void lookup(const Problem *p, int64_t j, double alpha_deg, double *cl, do
     const double *n0 = p->table + 4 * (p->table_row[p->station[j]] * p->n_grid + i), *n1 = n0 + 4;
     *cl = h00 * n0[0] + h10 * n0[1] + h01 * n1[0] + h11 * n1[1];
     *cd = h00 * n0[2] + h10 * n0[3] + h01 * n1[2] + h11 * n1[3];
+}
+
+/* the two hats at x on n nodes nd (corrections._hat_columns): cell k, values w0, w1 */
+static void hats(const double *nd, int64_t n, double x, int64_t *k, double *w0, double *w1) {
+    int64_t kk = 0;
+    if (isnan(x)) kk = n - 2;
+    else for (int64_t i = 1; i < n - 1; i++) kk += x >= nd[i];
+    double t = (x - nd[kk]) / (nd[kk + 1] - nd[kk]);
+    double a0 = 1.0 - t, a1 = t;
+    if (x < nd[0]) {              /* the first hat ramps to zero over one spacing */
+        double tb = (nd[0] - x) / (nd[1] - nd[0]);
+        a0 = tb < 1.0 ? 1.0 - tb : 0.0;
+        a1 = 0.0;
+    } else if (x > nd[n - 1]) {   /* the last hat likewise */
+        double ta = (x - nd[n - 1]) / (nd[n - 1] - nd[n - 2]);
+        a1 = ta < 1.0 ? 1.0 - ta : 0.0;
+        a0 = 0.0;
+    }
+    *k = kk; *w0 = a0; *w1 = a1;
+}
+
+/* sum over the four corners of a section's cell, in CorrectionGrid._corners' order */
+static double corners(const double *nodal, int64_t row, int64_t ne, const double v[4]) {
+    double total = v[0] * nodal[row];
+    total = total + v[1] * nodal[row + 1];
+    total = total + v[2] * nodal[row + ne];
+    return total + v[3] * nodal[row + ne + 1];
+}
+
+/* C_L, C_D of section j at alpha [deg]: the table, then the correction field when there is one */
+static void polar(const Problem *p, int64_t j, double alpha_deg, double *cl, double *cd) {
+    lookup(p, j, alpha_deg, cl, cd);
+    if (!p->field_alpha) return;
+    int64_t k, ke;
+    double a0, a1, e0, e1;
+    hats(p->field_alpha, p->field_n_alpha, alpha_deg, &k, &a0, &a1);
+    hats(p->field_eta, p->field_n_eta, p->eta[j], &ke, &e0, &e1);
+    int64_t ne = p->field_n_eta, row = k * ne + ke;
+    double v[4] = {a0 * e0, a0 * e1, a1 * e0, a1 * e1};
+    double cd0 = *cd, floor = cd0 < p->field_floor ? cd0 : p->field_floor;
+    double c = cd0 + corners(p->field_drag, row, ne, v);
+    *cl = *cl + corners(p->field_lift, row, ne, v);
+    *cd = c >= floor ? c : floor;
 }
 
 /* (2/pi) acos(exp(-f)): exactly (2/pi) acos(0) once exp(-f) < 3.2e-17 (f > 38), where the
@@ -113,7 +165,7 @@ static double residual_at(const Problem *p, int64_t j, double phi, double cl, do
 
 static double residual(const Problem *p, int64_t j, double phi) {
     double cl, cd;
-    lookup(p, j, (phi - p->theta[j]) * (180.0 / PI), &cl, &cd);
+    polar(p, j, (phi - p->theta[j]) * (180.0 / PI), &cl, &cd);
     return residual_at(p, j, phi, cl, cd);
 }
 
@@ -143,7 +195,7 @@ void bem_residual_partials(const Problem *p, int64_t n, const int64_t *index, co
 /* C_L, C_D at (index[m], phi[m]) (SectionPolars.lookup at alpha = phi - theta) */
 void bem_polar(const Problem *p, int64_t n, const int64_t *index, const double *phi, double *cl, double *cd) {
     for (int64_t m = 0; m < n; m++)
-        lookup(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
+        polar(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
 }
 
 /* The quantities of section_pass at the last residual evaluation of a section (rows of ROOT_ROWS) */
@@ -170,7 +222,7 @@ void bem_values(const Problem *p, int64_t n, const double *phi, const double *so
             e.cn = root[6 * n + j]; e.ct = root[7 * n + j]; e.F = root[8 * n + j];
         } else {
             alpha_deg = alpha_rad * (180.0 / PI);
-            lookup(p, j, alpha_deg, &cl, &cd);
+            polar(p, j, alpha_deg, &cl, &cd);
             e = equations(p, j, phi[j], cl, cd);
         }
         double ux = p->vx[j] * (1.0 - e.a), uy = p->vy[j] * (1.0 + e.ap);
@@ -215,7 +267,7 @@ static void finish(const Out *o, Lane *l, int found, double phi, double fphi) {
         store_root(o->root, o->n, j, l->alpha_deg, l->cl, l->cd, l->e);
     } else if (isfinite(phi)) {             /* an endpoint of the bracket that is a root */
         double alpha_deg = (phi - o->p->theta[j]) * (180.0 / PI), cl, cd;
-        lookup(o->p, j, alpha_deg, &cl, &cd);
+        polar(o->p, j, alpha_deg, &cl, &cd);
         store_root(o->root, o->n, j, alpha_deg, cl, cd, equations(o->p, j, phi, cl, cd));
     }
     l->j = -1;
@@ -316,7 +368,7 @@ void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t ma
             Lane *l = &lanes[q];
             if (l->j >= 0) {
                 l->alpha_deg = (l->x - p->theta[l->j]) * (180.0 / PI);
-                lookup(p, l->j, l->alpha_deg, &l->cl, &l->cd);
+                polar(p, l->j, l->alpha_deg, &l->cl, &l->cd);
                 l->e = equations(p, l->j, l->x, l->cl, l->cd);
                 f[q] = l->e.residual;
                 busy = 1;

@@ -70,6 +70,9 @@ class _Problem(ctypes.Structure):
     _fields_ += [("n_blades", ctypes.c_double)]
     _fields_ += [(name, ctypes.c_int) for name in ("tip_loss", "hub_loss", "drag_axial", "drag_tangential",
                                                    "wake_rotation")]
+    _fields_ += [(name, ctypes.c_void_p) for name in ("field_alpha", "field_eta", "field_lift", "field_drag")]
+    _fields_ += [("field_n_alpha", ctypes.c_int64), ("field_n_eta", ctypes.c_int64), ("field_floor", ctypes.c_double),
+                 ("eta", ctypes.c_void_p)]
 
 
 _TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -192,13 +195,16 @@ class SectionKernel:
     opts : dict
         ``tip_loss``, ``hub_loss``, ``drag_in_axial_induction``, ``drag_in_tangential_induction``,
         ``wake_rotation`` (as :func:`calib.bem.residual.section_equations`).
+    field : calib.bem.stages.CompiledPolar, optional
+        The chain's polar stage when it is one additive hat-function field (the correction
+        field), evaluated after every look-up; None for the tables alone.
     """
 
     VALUES = ("alpha_deg", "cl", "cd", "residual", "a", "ap", "cn", "ct", "F", "W", "Np", "Tp", "cn_chord",
               "ct_chord")
     """Rows of :meth:`values`."""
 
-    def __init__(self, lib, polars, sec, opts):
+    def __init__(self, lib, polars, sec, opts, field=None):
         f8 = lambda x: np.ascontiguousarray(x, dtype=np.float64)   # noqa: E731
         geo = sec.geo
         table, row = node_table(polars)
@@ -215,14 +221,24 @@ class SectionKernel:
         self.n = int(sec.station.size)
         self.lib = lib
         self._solved = None
+        self.field = field
+        section_ptrs = [_ptr(x) for x in self._keep[2:]]
+        if field is not None:
+            arrays = [f8(x) for x in (field.alpha_nodes_deg, field.eta_nodes, field.lift, field.drag, sec.ctx.eta)]
+            self._keep += arrays
+            field_args = [_ptr(x) for x in arrays[:4]] + [arrays[0].size, arrays[1].size, float(field.cd_floor),
+                                                          _ptr(arrays[4])]
+        else:
+            field_args = [None] * 4 + [0, 0, 0.0, None]
         self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
-                                *(_ptr(x) for x in self._keep[2:]), float(B),
+                                *section_ptrs, float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
                                 int(bool(opts["drag_in_axial_induction"])),
-                                int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])))
+                                int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])),
+                                *field_args)
 
     def polar(self, index, phi):
-        """C_L, C_D [-] at sections ``index`` and inflow angles ``phi`` [rad] (no polar effects)."""
+        """C_L, C_D [-] at sections ``index`` and inflow angles ``phi`` [rad] (after the field, if any)."""
         index = np.ascontiguousarray(index, dtype=np.int64)
         phi = np.ascontiguousarray(np.broadcast_to(phi, index.shape), dtype=np.float64)
         cl, cd = np.empty(index.shape), np.empty(index.shape)
@@ -264,6 +280,8 @@ class SectionKernel:
         :class:`calib.bem.multiple_roots.SlopeEnvelope`) that fail the slope budget of
         :func:`calib.bem.multiple_roots.needs_search` with ``margin``; as the numpy screen of
         :func:`calib.bem.sections.find_roots`."""
+        if self.field is not None:
+            raise ValueError("the compiled screen reads the tables alone: screen a field's sections in numpy")
         index = np.ascontiguousarray(index, dtype=np.int64)
         phi = np.ascontiguousarray(phi, dtype=np.float64)
         if envelope not in _ENVELOPES:      # the tables' envelope lives as long as its SectionPolars

@@ -149,16 +149,37 @@ class Roots:
     compiled: object = None
 
 
+def _compiled_polar(chain: BoundChain):
+    """Whether the kernel can run the chain's section stages, and its polar stage for it.
+
+    Returns
+    -------
+    compilable : bool
+        No induction effect, and no polar effect or a single one with ``compiled_polar``.
+    field : calib.bem.stages.CompiledPolar or None
+    """
+    if chain.has("induction"):
+        return False, None
+    entries = chain.stage("polar")
+    if not entries:
+        return True, None
+    form = getattr(entries[0].effect, "compiled_polar", None)
+    if len(entries) > 1 or form is None:
+        return False, None
+    return True, form(chain.theta(entries[0]))
+
+
 def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, rotor) -> Roots:
     """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots.
 
-    Without polar or induction effects in the chain, the compiled kernel (:mod:`calib.bem.kernel`)
+    Without induction effects, and with no polar effect or one the kernel evaluates (a
+    ``compiled_polar``: the correction field), the compiled kernel (:mod:`calib.bem.kernel`)
     runs the residual and the iteration when it is available: the same arithmetic, one pass.
     """
-
-    lib = None if (chain.has("polar") or chain.has("induction")) else kernel.library()
+    compilable, field = _compiled_polar(chain)
+    lib = kernel.library() if compilable else None
     if lib is not None:
-        compiled = kernel.SectionKernel(lib, polars, sec, opts)
+        compiled = kernel.SectionKernel(lib, polars, sec, opts, field)
         residual = compiled.residual
         lo, hi, flo, fhi, found, phi, fphi, iters = compiled.solve(max_iter=settings.max_iter)
     else:
@@ -175,7 +196,7 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
     if settings.search_multiple_roots and conv.any():
         # screen: a negative lift slope within the window (stall), then the exact slope budget
         ci = np.flatnonzero(conv)
-        if lib is not None:
+        if lib is not None and field is None:
             search = compiled.screen(ci, phi, slope_envelope(chain, polars, sec, rotor), SCREEN_MARGIN)
         else:
             alpha_c = np.degrees(phi[ci] - sec.theta[ci])
@@ -297,11 +318,11 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     """Evaluate every section at its root; with ``k`` > 0, on duals over the chain's section columns.
 
     Columns: φ, pitch [rad], inflow speed [m/s], then the section-stage effects' columns
-    (:mod:`calib.bem.chain`). Plain values without polar or induction effects come from the
-    compiled kernel when it is available (:mod:`calib.bem.kernel`; the same arithmetic).
+    (:mod:`calib.bem.chain`). Plain values come from the compiled kernel where it found the
+    roots (:func:`find_roots`; the same arithmetic).
     """
     phi = roots.phi
-    if not k and roots.compiled is not None:        # no polar or induction effects (find_roots)
+    if not k and roots.compiled is not None:        # no induction effects, the polar stage compiled (find_roots)
         v = roots.compiled.values(phi)
         Np, Tp = v["Np"], v["Tp"]
         if chain.has("loads"):
