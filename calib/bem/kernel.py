@@ -100,6 +100,27 @@ def node_table(polars) -> tuple[np.ndarray, np.ndarray]:
     return _TABLES[polars]
 
 
+def chain_form(chain):
+    """Whether the kernel can run the section stages of ``chain`` (a :class:`calib.bem.chain.BoundChain`),
+    and its polar stage for it.
+
+    Returns
+    -------
+    compilable : bool
+        No induction effect, and no polar effect or a single one with ``compiled_polar``.
+    field : calib.bem.stages.CompiledPolar or None
+    """
+    if chain.has("induction"):
+        return False, None
+    entries = chain.stage("polar")
+    if not entries:
+        return True, None
+    form = getattr(entries[0].effect, "compiled_polar", None)
+    if len(entries) > 1 or form is None:
+        return False, None
+    return True, form(chain.theta(entries[0]))
+
+
 def _compiler() -> str | None:
     for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
         if name and shutil.which(name):
@@ -163,6 +184,9 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_screen.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ctypes.c_int64,
                                            ctypes.c_int64, ctypes.c_double, ctypes.c_double, ctypes.c_double, ptr]
                 lib.bem_screen.restype = None
+                lib.bem_derivatives.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ctypes.c_int64,
+                                                ctypes.c_int64] + [ptr] * 4
+                lib.bem_derivatives.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
                 if mode == "c":
@@ -255,6 +279,41 @@ class SectionKernel:
         self.lib.bem_values(ctypes.byref(self.problem), self.n, _ptr(phi), _ptr(solved[0]) if solved else None,
                             _ptr(solved[1]) if solved else None, _ptr(out))
         return dict(zip(self.VALUES, out))
+
+    DERIVATIVES = ("residual", "Np", "Tp", "cn", "ct", "alpha_deg")
+    """Quantities of :meth:`derivatives`."""
+    MAX_COLUMNS = 6
+    """Most derivative columns :meth:`derivatives` carries (``KMAX`` in kernel.c)."""
+
+    def derivatives(self, phi, k, vx_per_wind, vy_per_wind, probe_column=-1) -> dict:
+        """Exact derivatives at the roots ``phi`` [rad] (forward mode, as
+        :func:`calib.bem.sections.section_pass` on dual numbers).
+
+        Parameters
+        ----------
+        phi : ndarray, shape (n,)
+        k : int
+            Columns: 0 φ [rad], 1 pitch [rad], 2 inflow speed [m/s], then the field's probes
+            (additive C_L, C_D) at ``probe_column``, ``probe_column + 1``; at most :attr:`MAX_COLUMNS`.
+        vx_per_wind, vy_per_wind : ndarray, shape (n,)
+            dV_x/dV, dV_y/dV [-].
+        probe_column : int
+            -1 without a field.
+
+        Returns
+        -------
+        dict
+            :attr:`DERIVATIVES` -> ndarray (n, k): ∂ quantity / ∂ column (N', T' [N/m], α [deg]).
+        """
+        if not 3 <= k <= self.MAX_COLUMNS or (self.field is not None) != (probe_column >= 0) \
+                or probe_column + 2 > k:
+            raise ValueError(f"derivative columns: k = {k}, probe column {probe_column} (field: "
+                             f"{self.field is not None}); expected 3 <= k <= {self.MAX_COLUMNS}")
+        phi, vxw, vyw = (np.ascontiguousarray(x, dtype=np.float64) for x in (phi, vx_per_wind, vy_per_wind))
+        out = np.empty((len(self.DERIVATIVES), self.n, k))
+        self.lib.bem_derivatives(ctypes.byref(self.problem), self.n, int(k), int(probe_column), _ptr(phi), _ptr(vxw),
+                                 _ptr(vyw), _ptr(out))
+        return dict(zip(self.DERIVATIVES, out))
 
     def residual(self, index, phi) -> np.ndarray:
         """Ning's residual [-] at sections ``index`` and inflow angles ``phi`` [rad] (same shape)."""

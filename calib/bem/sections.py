@@ -149,26 +149,6 @@ class Roots:
     compiled: object = None
 
 
-def _compiled_polar(chain: BoundChain):
-    """Whether the kernel can run the chain's section stages, and its polar stage for it.
-
-    Returns
-    -------
-    compilable : bool
-        No induction effect, and no polar effect or a single one with ``compiled_polar``.
-    field : calib.bem.stages.CompiledPolar or None
-    """
-    if chain.has("induction"):
-        return False, None
-    entries = chain.stage("polar")
-    if not entries:
-        return True, None
-    form = getattr(entries[0].effect, "compiled_polar", None)
-    if len(entries) > 1 or form is None:
-        return False, None
-    return True, form(chain.theta(entries[0]))
-
-
 def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, rotor) -> Roots:
     """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots.
 
@@ -176,7 +156,7 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
     ``compiled_polar``: the correction field), the compiled kernel (:mod:`calib.bem.kernel`)
     runs the residual and the iteration when it is available: the same arithmetic, one pass.
     """
-    compilable, field = _compiled_polar(chain)
+    compilable, field = kernel.chain_form(chain)
     lib = kernel.library() if compilable else None
     if lib is not None:
         compiled = kernel.SectionKernel(lib, polars, sec, opts, field)
@@ -322,6 +302,8 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     roots (:func:`find_roots`; the same arithmetic).
     """
     phi = roots.phi
+    if k and roots.compiled is not None and not chain.has("loads") and k <= roots.compiled.MAX_COLUMNS:
+        return _compiled_pass(sec, roots, chain, k)
     if not k and roots.compiled is not None:        # no induction effects, the polar stage compiled (find_roots)
         v = roots.compiled.values(phi)
         Np, Tp = v["Np"], v["Tp"]
@@ -371,6 +353,20 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     if k:
         quantities["alpha_deg"] = alpha_rad * (180.0 / np.pi)
     return SectionValues(alpha_deg, dl.value(cl_x), dl.value(cd_x), eq, loads["W"], quantities)
+
+
+def _compiled_pass(sec: Sections, roots: Roots, chain: BoundChain, k: int) -> SectionValues:
+    """:func:`section_pass` on ``k`` derivative columns by the compiled kernel (values as without
+    derivatives, exact derivatives in one forward-mode pass; no loads-stage effect)."""
+    v = roots.compiled.values(roots.phi)
+    probe = chain.stage("polar")[0].column if chain.has("polar") else -1
+    d = roots.compiled.derivatives(roots.phi, k, sec.vx_per_wind, sec.vy_per_wind, probe)
+    eq = {"residual": dl.Dual(v["residual"], d["residual"]), "a": v["a"], "ap": v["ap"], "cn": v["cn"],
+          "ct": v["ct"], "F": v["F"], "load": 1.0}
+    quantities = {"Np": dl.Dual(v["Np"], d["Np"]), "Tp": dl.Dual(v["Tp"], d["Tp"]),
+                  "cn": dl.Dual(v["cn_chord"], d["cn"]), "ct": dl.Dual(v["ct_chord"], d["ct"]),
+                  "alpha_deg": dl.Dual(v["alpha_deg"], d["alpha_deg"])}
+    return SectionValues(v["alpha_deg"], v["cl"], v["cd"], eq, v["W"], quantities)
 
 
 def eliminate_phi(values: SectionValues, roots: Roots, sec: Sections) -> dict:
