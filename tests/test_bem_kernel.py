@@ -179,6 +179,14 @@ def test_correction_field_compiled_same_as_numpy_path(seed, numpy_path, monkeypa
         return out
 
     monkeypatch.setattr(sections.kernel, "SectionKernel", spy)
+    seen = []
+    search = sections.lowest_roots
+
+    def spy_search(residual, phi, fphi, lo, hi, candidates, *args, **kwargs):
+        seen.append(candidates.copy())
+        return search(residual, phi, fphi, lo, hi, candidates, *args, **kwargs)
+
+    monkeypatch.setattr(sections, "lowest_roots", spy_search)
     fast = model.solve(p, cond, sensitivities=True)
     ev_fast, g_fast = model.jacobian(p, cond)
     assert fields and all(f is not None for f in fields)
@@ -186,6 +194,9 @@ def test_correction_field_compiled_same_as_numpy_path(seed, numpy_path, monkeypa
     slow = model.solve(p, cond, sensitivities=True)
     ev_slow, g_slow = model.jacobian(p, cond)
     assert (slow.status == Status.CONVERGED).sum() > 20
+    # the compiled screen (polar after the field) selects the sections the numpy screen selects
+    assert len(seen) == 4 and seen[3].sum() > 0
+    assert (seen[0] != seen[2]).sum() <= max(1, 1e-3 * seen[0].size)
     cd_floor = slow.sections["cd"] == grid.cd_floor
     assert cd_floor.any(), "no section on the drag floor: the test does not reach it"
     _assert_same(fast, slow)

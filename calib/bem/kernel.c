@@ -30,11 +30,12 @@ typedef struct {
      * field_alpha NULL (calib.bem.stages.CompiledPolar; calib.corrections.CorrectionGrid.evaluate
      * and calib.effects.correction_field.floor_drag): alpha nodes [deg], eta nodes [-], nodal
      * values of the lift and drag blocks (n_alpha x n_eta, row-major), the drag floor, and per
-     * section its eta = r / R_tip */
+     * section the eta cell and its two hats' values at eta = r / R_tip (bem_eta_hats) */
     const double *field_alpha, *field_eta, *field_lift, *field_drag;
     int64_t field_n_alpha, field_n_eta;
     double field_floor;
-    const double *eta;
+    const int64_t *eta_cell;
+    const double *eta_w0, *eta_w1;
 } Problem;
 
 /* numpy's float mod (np.mod): the sign of the divisor */
@@ -86,6 +87,12 @@ static void hats(const double *nd, int64_t n, double x, int64_t *k, double *w0, 
     *k = kk; *w0 = a0; *w1 = a1;
 }
 
+/* the eta hats of n sections (once per batch): cell, values */
+void bem_eta_hats(int64_t n, const double *nodes, int64_t n_nodes, const double *eta, int64_t *cell, double *w0,
+                  double *w1) {
+    for (int64_t j = 0; j < n; j++) hats(nodes, n_nodes, eta[j], cell + j, w0 + j, w1 + j);
+}
+
 /* sum over the four corners of a section's cell, in CorrectionGrid._corners' order */
 static double corners(const double *nodal, int64_t row, int64_t ne, const double v[4]) {
     double total = v[0] * nodal[row];
@@ -101,7 +108,7 @@ static void polar(const Problem *p, int64_t j, double alpha_deg, double *cl, dou
     int64_t k, ke;
     double a0, a1, e0, e1;
     hats(p->field_alpha, p->field_n_alpha, alpha_deg, &k, &a0, &a1);
-    hats(p->field_eta, p->field_n_eta, p->eta[j], &ke, &e0, &e1);
+    ke = p->eta_cell[j]; e0 = p->eta_w0[j]; e1 = p->eta_w1[j];
     int64_t ne = p->field_n_eta, row = k * ne + ke;
     double v[4] = {a0 * e0, a0 * e1, a1 * e0, a1 * e1};
     double cd0 = *cd, floor = cd0 < p->field_floor ? cd0 : p->field_floor;
@@ -389,7 +396,8 @@ static double nan_min(double a, double b) {
 /* The screen for several roots at sections index[m] (the converged ones) at their roots phi[j]:
  * a negative lift slope within the window (SlopeEnvelope.at on env, 4 x (n_stations x env_grid):
  * cl_min, cl_max, cd_min, cd_max [1/deg]), then the slope budget of multiple_roots.needs_search
- * with the one-sided partials of bem_residual_partials. search[j] set to 1 where to search. */
+ * with the one-sided partials of bem_residual_partials at C_L, C_D after the field (if any).
+ * search[j] set to 1 where to search. */
 void bem_screen(const Problem *p, int64_t n_c, const int64_t *index, const double *phi, const double *env,
                 int64_t env_grid, int64_t first_node, double env_step, double margin, double rel_step,
                 uint8_t *search) {
@@ -407,7 +415,7 @@ void bem_screen(const Problem *p, int64_t n_c, const int64_t *index, const doubl
         double cl_min = env[at], cl_max = env[plane + at], cd_min = env[2 * plane + at], cd_max = env[3 * plane + at];
         if (!(cl_min < 0.0)) continue;
         double cl, cd, d0, d_cl, d_cd;
-        lookup(p, j, alpha_deg, &cl, &cd);
+        polar(p, j, alpha_deg, &cl, &cd);
         bem_residual_partials(p, 1, &j, phi + j, &cl, &cd, rel_step, &d0, &d_cl, &d_cd);
         double worst = d0 + nan_min(d_cl * (cl_min * per_rad), d_cl * (cl_max * per_rad))
                        + nan_min(d_cd * (cd_min * per_rad), d_cd * (cd_max * per_rad));
@@ -491,7 +499,7 @@ void bem_derivatives(const Problem *p, int64_t n, int64_t k, int64_t probe_col, 
             const double *nd = p->field_alpha;
             int64_t na = p->field_n_alpha, ne = p->field_n_eta;
             hats(nd, na, alpha_deg, &ka, &a0, &a1);
-            hats(p->field_eta, ne, p->eta[j], &ke, &e0, &e1);
+            ke = p->eta_cell[j]; e0 = p->eta_w0[j]; e1 = p->eta_w1[j];
             /* the alpha hats' slopes [1/deg] (corrections._hat_columns) */
             double s0 = -1.0 / (nd[ka + 1] - nd[ka]), s1 = 1.0 / (nd[ka + 1] - nd[ka]);
             if (alpha_deg < nd[0]) {

@@ -71,8 +71,8 @@ class _Problem(ctypes.Structure):
     _fields_ += [(name, ctypes.c_int) for name in ("tip_loss", "hub_loss", "drag_axial", "drag_tangential",
                                                    "wake_rotation")]
     _fields_ += [(name, ctypes.c_void_p) for name in ("field_alpha", "field_eta", "field_lift", "field_drag")]
-    _fields_ += [("field_n_alpha", ctypes.c_int64), ("field_n_eta", ctypes.c_int64), ("field_floor", ctypes.c_double),
-                 ("eta", ctypes.c_void_p)]
+    _fields_ += [("field_n_alpha", ctypes.c_int64), ("field_n_eta", ctypes.c_int64), ("field_floor", ctypes.c_double)]
+    _fields_ += [(name, ctypes.c_void_p) for name in ("eta_cell", "eta_w0", "eta_w1")]
 
 
 _TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -187,6 +187,8 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_derivatives.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ctypes.c_int64,
                                                 ctypes.c_int64] + [ptr] * 4
                 lib.bem_derivatives.restype = None
+                lib.bem_eta_hats.argtypes = [ctypes.c_int64, ptr, ctypes.c_int64] + [ptr] * 4
+                lib.bem_eta_hats.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
                 if mode == "c":
@@ -248,12 +250,15 @@ class SectionKernel:
         self.field = field
         section_ptrs = [_ptr(x) for x in self._keep[2:]]
         if field is not None:
-            arrays = [f8(x) for x in (field.alpha_nodes_deg, field.eta_nodes, field.lift, field.drag, sec.ctx.eta)]
-            self._keep += arrays
-            field_args = [_ptr(x) for x in arrays[:4]] + [arrays[0].size, arrays[1].size, float(field.cd_floor),
-                                                          _ptr(arrays[4])]
+            arrays = [f8(x) for x in (field.alpha_nodes_deg, field.eta_nodes, field.lift, field.drag)]
+            eta = f8(sec.ctx.eta)
+            hats = [np.empty(self.n, dtype=np.int64), np.empty(self.n), np.empty(self.n)]
+            lib.bem_eta_hats(self.n, _ptr(arrays[1]), arrays[1].size, _ptr(eta), *(_ptr(x) for x in hats))
+            self._keep += arrays + hats
+            field_args = [_ptr(x) for x in arrays] + [arrays[0].size, arrays[1].size, float(field.cd_floor)] + \
+                [_ptr(x) for x in hats]
         else:
-            field_args = [None] * 4 + [0, 0, 0.0, None]
+            field_args = [None] * 4 + [0, 0, 0.0] + [None] * 3
         self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
                                 *section_ptrs, float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
@@ -339,8 +344,6 @@ class SectionKernel:
         :class:`calib.bem.multiple_roots.SlopeEnvelope`) that fail the slope budget of
         :func:`calib.bem.multiple_roots.needs_search` with ``margin``; as the numpy screen of
         :func:`calib.bem.sections.find_roots`."""
-        if self.field is not None:
-            raise ValueError("the compiled screen reads the tables alone: screen a field's sections in numpy")
         index = np.ascontiguousarray(index, dtype=np.int64)
         phi = np.ascontiguousarray(phi, dtype=np.float64)
         if envelope not in _ENVELOPES:      # the tables' envelope lives as long as its SectionPolars

@@ -178,6 +178,10 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
         ci = np.flatnonzero(conv)
         if lib is not None and field is None:
             search = compiled.screen(ci, phi, slope_envelope(chain, polars, sec, rotor), SCREEN_MARGIN)
+        elif lib is not None:       # the field's envelope on the converged sections' range, as below
+            alpha_c = np.degrees(phi[ci] - sec.theta[ci])
+            envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
+            search = compiled.screen(ci, phi, envelope, SCREEN_MARGIN)
         else:
             alpha_c = np.degrees(phi[ci] - sec.theta[ci])
             envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
