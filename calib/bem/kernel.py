@@ -7,10 +7,16 @@ with a temporary array and a Python round trip per iteration; ``kernel.c`` does 
 arithmetic, in the same order, one section at a time (the bracket, the iteration and the
 residual of :mod:`calib.bem.rootfind`, :mod:`calib.bem.residual` and
 :meth:`calib.bem.polar_grid.SectionPolars.lookup`). It is used when the effect chain has no
-polar or induction stage (those run Python effects inside the residual), for the search
-itself, the screen for several roots (:mod:`calib.bem.multiple_roots`) and the plain section
-values at the roots (the last evaluation of each section, reused). Derivatives are
-unaffected: with sensitivities the section pass at the root runs in numpy, on dual numbers.
+induction stage and its polar stage is empty or a single effect the kernel evaluates itself
+(``compiled_polar``: the correction field of every calibration, :class:`calib.bem.stages.CompiledPolar`,
+the arithmetic of :meth:`calib.corrections.CorrectionGrid.evaluate`); other polar and induction
+effects run Python inside the residual, on the numpy path. It runs the search itself, the
+screen for several roots (:mod:`calib.bem.multiple_roots`), the plain section values at the
+roots (the last evaluation of each section, reused) and, without a loads-stage effect, the
+exact derivatives at the roots (:meth:`SectionKernel.derivatives`: forward mode on the
+columns φ, pitch, inflow speed and the field's two probes, what
+:func:`calib.bem.sections.section_pass` computes on dual numbers; the implicit-function
+step stays in :func:`calib.bem.sections.eliminate_phi`).
 
 Where the time goes (NREL 5-MW C_P surface, 2200 points, 37 400 loaded sections, one core):
 about 10 residual evaluations per section at some 50-65 ns each (sin, cos, two exp and acos
