@@ -211,8 +211,8 @@ def test_compiled_jacobian_matches_central_differences(monkeypatch):
     compiled solve, on the correction field's nodes and the pitch offset, off the drag floor."""
     from calib.bem import sections
     used = []
-    compiled_pass = sections._compiled_pass
-    monkeypatch.setattr(sections, "_compiled_pass", lambda *a: used.append(1) or compiled_pass(*a))
+    compiled_pass = sections.kernel_chain.compiled_pass
+    monkeypatch.setattr(sections.kernel_chain, "compiled_pass", lambda *a: used.append(1) or compiled_pass(*a))
     model, grid = _field_model()
     rng = np.random.default_rng(5)
     p = np.zeros(len(model.parameters))

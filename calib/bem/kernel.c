@@ -568,3 +568,23 @@ void bem_derivatives(const Problem *p, int64_t n, int64_t k, int64_t probe_col, 
             for (int64_t col = 0; col < k; col++) dout[(m * n + j) * k + col] = qs[m]->d[col];
     }
 }
+
+/* The implicit-function step at the roots (sections.eliminate_phi) on bem_derivatives' output d
+ * (6 x n x k): for each quantity q of rows 1..5, dq/dc + dq/dphi dphi/dc with dphi/dc = -dR/dc / dR/dphi
+ * for the columns c >= 1 (the pitch column per degree), written at sel[j] of full (5 x size x (k - 1),
+ * zeros on entry) for the converged sections; the same operations in the same order as numpy's. */
+void bem_eliminate(int64_t n, int64_t k, const double *d, const uint8_t *converged, const int64_t *sel,
+                   int64_t size, double *full) {
+    double dphi[KMAX];
+    for (int64_t j = 0; j < n; j++) {
+        if (!converged[j]) continue;
+        const double *R = d + j * k;
+        for (int64_t c = 1; c < k; c++) dphi[c] = -R[c] / R[0];
+        for (int64_t m = 1; m < 6; m++) {
+            const double *q = d + (m * n + j) * k;
+            double *out = full + ((m - 1) * size + sel[j]) * (k - 1);
+            for (int64_t c = 1; c < k; c++) out[c - 1] = q[c] + q[0] * dphi[c];
+            out[0] *= PI / 180.0;
+        }
+    }
+}

@@ -15,8 +15,8 @@ screen for several roots (:mod:`calib.bem.multiple_roots`), the plain section va
 roots (the last evaluation of each section, reused) and, without a loads-stage effect, the
 exact derivatives at the roots (:meth:`SectionKernel.derivatives`: forward mode on the
 columns φ, pitch, inflow speed and the field's two probes, what
-:func:`calib.bem.sections.section_pass` computes on dual numbers; the implicit-function
-step stays in :func:`calib.bem.sections.eliminate_phi`).
+:func:`calib.bem.sections.section_pass` computes on dual numbers) with the implicit-function
+step of :func:`calib.bem.sections.eliminate_phi` (:meth:`SectionKernel.totals`).
 
 Where the time goes (NREL 5-MW C_P surface, 2200 points, 37 400 loaded sections, one core):
 about 10 residual evaluations per section at some 50-65 ns each (sin, cos, two exp and acos
@@ -54,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.bem.kernel_chain import node_table
 from calib.errors import CalibError
 
 SOURCE = Path(__file__).with_name("kernel.c")
@@ -81,50 +82,7 @@ class _Problem(ctypes.Structure):
     _fields_ += [(name, ctypes.c_void_p) for name in ("eta_cell", "eta_w0", "eta_w1")]
 
 
-_TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _ENVELOPES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
-def node_table(polars) -> tuple[np.ndarray, np.ndarray]:
-    """The polars as the kernel reads them, once per :class:`SectionPolars`.
-
-    Returns
-    -------
-    table : ndarray, shape (n_tables, n_grid, 4)
-        Per distinct station table and α node: C_L, h dC_L/dα, C_D, h dC_D/dα (h the grid step
-        [deg]; the products :meth:`SectionPolars.lookup` forms), so that a look-up reads two
-        adjacent nodes from one place.
-    row : ndarray of int, shape (n_stations,)
-        The table of each station.
-    """
-    if polars not in _TABLES:
-        h = polars.step_deg
-        per_station = np.stack([polars.cl_nodes, polars.cl_slopes * h, polars.cd_nodes, polars.cd_slopes * h], axis=-1)
-        flat = per_station.reshape(per_station.shape[0], -1)
-        _, first, row = np.unique(flat, axis=0, return_index=True, return_inverse=True)
-        _TABLES[polars] = (np.ascontiguousarray(per_station[first]), np.ascontiguousarray(row.reshape(-1), np.int64))
-    return _TABLES[polars]
-
-
-def chain_form(chain):
-    """Whether the kernel can run the section stages of ``chain`` (a :class:`calib.bem.chain.BoundChain`),
-    and its polar stage for it.
-
-    Returns
-    -------
-    compilable : bool
-        No induction effect, and no polar effect or a single one with ``compiled_polar``.
-    field : calib.bem.stages.CompiledPolar or None
-    """
-    if chain.has("induction"):
-        return False, None
-    entries = chain.stage("polar")
-    if not entries:
-        return True, None
-    form = getattr(entries[0].effect, "compiled_polar", None)
-    if len(entries) > 1 or form is None:
-        return False, None
-    return True, form(chain.theta(entries[0]))
 
 
 def _compiler() -> str | None:
@@ -195,6 +153,8 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_derivatives.restype = None
                 lib.bem_eta_hats.argtypes = [ctypes.c_int64, ptr, ctypes.c_int64] + [ptr] * 4
                 lib.bem_eta_hats.restype = None
+                lib.bem_eliminate.argtypes = [ctypes.c_int64, ctypes.c_int64, ptr, ptr, ptr, ctypes.c_int64, ptr]
+                lib.bem_eliminate.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
                 if mode == "c":
@@ -324,7 +284,34 @@ class SectionKernel:
         out = np.empty((len(self.DERIVATIVES), self.n, k))
         self.lib.bem_derivatives(ctypes.byref(self.problem), self.n, int(k), int(probe_column), _ptr(phi), _ptr(vxw),
                                  _ptr(vyw), _ptr(out))
+        self._derivatives = out
         return dict(zip(self.DERIVATIVES, out))
+
+    def totals(self, converged, sel, shape) -> dict:
+        """The implicit-function step on the last :meth:`derivatives` (as
+        :func:`calib.bem.sections.eliminate_phi`, the same operations in the same order).
+
+        Parameters
+        ----------
+        converged : ndarray of bool, shape (n,)
+        sel : ndarray of int, shape (n,)
+            Flat index of each section in ``shape``.
+        shape : tuple
+            (n_points, n_sectors, n_stations).
+
+        Returns
+        -------
+        dict
+            ``Np``, ``Tp``, ``cn``, ``ct``, ``alpha_deg`` -> ndarray ``shape + (k - 1,)``: column 0 per
+            degree of pitch, 1 per m/s of inflow speed, then the probes; zero off the converged sections.
+        """
+        d = self._derivatives
+        k, size = d.shape[2], int(np.prod(shape))
+        full = np.zeros((len(self.DERIVATIVES) - 1, size, k - 1))
+        conv = np.ascontiguousarray(converged, dtype=np.uint8)
+        sel = np.ascontiguousarray(sel, dtype=np.int64)
+        self.lib.bem_eliminate(self.n, k, _ptr(d), _ptr(conv), _ptr(sel), size, _ptr(full))
+        return {name: x.reshape(tuple(shape) + (k - 1,)) for name, x in zip(self.DERIVATIVES[1:], full)}
 
     def residual(self, index, phi) -> np.ndarray:
         """Ning's residual [-] at sections ``index`` and inflow angles ``phi`` [rad] (same shape)."""

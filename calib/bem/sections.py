@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.bem import dual as dl
-from calib.bem import kernel
+from calib.bem import kernel, kernel_chain
 from calib.bem.chain import COL_PHI, COL_PITCH, COL_WIND, BoundChain
 from calib.bem.kinematics import curvature, wind_components
 from calib.bem.multiple_roots import (SCAN_STEP_DEG, SCREEN_MARGIN, WINDOW_DEG, SlopeEnvelope, lowest_roots,
@@ -156,7 +156,7 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
     ``compiled_polar``: the correction field), the compiled kernel (:mod:`calib.bem.kernel`)
     runs the residual and the iteration when it is available: the same arithmetic, one pass.
     """
-    compilable, field = kernel.chain_form(chain)
+    compilable, field = kernel_chain.chain_form(chain)
     lib = kernel.library() if compilable else None
     if lib is not None:
         compiled = kernel.SectionKernel(lib, polars, sec, opts, field)
@@ -288,6 +288,8 @@ class SectionValues:
     quantities : dict
         ``Np``, ``Tp`` [N/m] (after the loads stage), ``cn``, ``ct`` [-] (chord axes), and with
         duals ``alpha_deg``.
+    totals : dict or None
+        :func:`eliminate_phi` of these, when the compiled kernel took that step already.
     """
 
     alpha_deg: np.ndarray
@@ -296,6 +298,7 @@ class SectionValues:
     eq: dict
     W: object
     quantities: dict
+    totals: dict | None = None
 
 
 def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: dict, k: int = 0) -> SectionValues:
@@ -307,7 +310,7 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     """
     phi = roots.phi
     if k and roots.compiled is not None and not chain.has("loads") and k <= roots.compiled.MAX_COLUMNS:
-        return _compiled_pass(sec, roots, chain, k)
+        return SectionValues(*kernel_chain.compiled_pass(sec, roots, chain, k))
     if not k and roots.compiled is not None:        # no induction effects, the polar stage compiled (find_roots)
         v = roots.compiled.values(phi)
         Np, Tp = v["Np"], v["Tp"]
@@ -359,20 +362,6 @@ def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: d
     return SectionValues(alpha_deg, dl.value(cl_x), dl.value(cd_x), eq, loads["W"], quantities)
 
 
-def _compiled_pass(sec: Sections, roots: Roots, chain: BoundChain, k: int) -> SectionValues:
-    """:func:`section_pass` on ``k`` derivative columns by the compiled kernel (values as without
-    derivatives, exact derivatives in one forward-mode pass; no loads-stage effect)."""
-    v = roots.compiled.values(roots.phi)
-    probe = chain.stage("polar")[0].column if chain.has("polar") else -1
-    d = roots.compiled.derivatives(roots.phi, k, sec.vx_per_wind, sec.vy_per_wind, probe)
-    eq = {"residual": dl.Dual(v["residual"], d["residual"]), "a": v["a"], "ap": v["ap"], "cn": v["cn"],
-          "ct": v["ct"], "F": v["F"], "load": 1.0}
-    quantities = {"Np": dl.Dual(v["Np"], d["Np"]), "Tp": dl.Dual(v["Tp"], d["Tp"]),
-                  "cn": dl.Dual(v["cn_chord"], d["cn"]), "ct": dl.Dual(v["ct_chord"], d["ct"]),
-                  "alpha_deg": dl.Dual(v["alpha_deg"], d["alpha_deg"])}
-    return SectionValues(v["alpha_deg"], v["cl"], v["cd"], eq, v["W"], quantities)
-
-
 def eliminate_phi(values: SectionValues, roots: Roots, sec: Sections) -> dict:
     """Total derivatives at the root (implicit function theorem), scattered to full shape.
 
@@ -383,6 +372,8 @@ def eliminate_phi(values: SectionValues, roots: Roots, sec: Sections) -> dict:
         pitch, 1 per m/s of inflow speed, then the effects' columns; zero off the converged
         sections.
     """
+    if values.totals is not None:
+        return values.totals
     R = values.eq["residual"]
     with np.errstate(all="ignore"):
         dphi = -R.d[:, 1:] / R.d[:, [0]]
