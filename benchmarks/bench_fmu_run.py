@@ -11,8 +11,11 @@ columns), written once into ``bench_output/fmu_run/``.
 
 Printed, one line per phase: unit check [s], calibration [s], simulations (count), simulated
 seconds (model time), busy worker seconds, wall [s], and the estimate with its σ.
-``python benchmarks/bench_fmu_run.py [--out DIR] [--runs N]``; under ``make validate`` :func:`run` (one run;
-several minutes of simulation on 2 workers: a study, not a ``make bench`` figure).
+``python benchmarks/bench_fmu_run.py [--out DIR] [--runs N] [--executor process|dask|both]``; under ``make
+validate`` :func:`run` (one run; several minutes of simulation on 2 workers: a study, not a ``make bench``
+figure). ``--executor dask`` runs the same workflow on a Dask LocalCluster of 2 single-threaded worker
+processes; ``both`` runs the process executor, then Dask, and says whether the estimates and their σ are
+identical to the bit.
 """
 
 from __future__ import annotations
@@ -63,8 +66,9 @@ def _toml(value) -> str:
     return repr(value)
 
 
-def prepare(out: Path) -> Path:
-    """The measurements (once) and the workflow file; returns the workflow's path."""
+def prepare(out: Path, executor: str = "process") -> Path:
+    """The measurements (once) and the workflow file for ``executor`` (``process`` or ``dask``, 2 workers);
+    returns the workflow's path."""
     out.mkdir(parents=True, exist_ok=True)
     table = out / "measurements.csv"
     if not table.is_file():
@@ -76,7 +80,7 @@ def prepare(out: Path) -> Path:
         meas = synthesize(model, np.array(TRUTH), conditions(), relative_sigma={c: RELATIVE_NOISE for c in CHANNELS},
                           channels=CHANNELS, seed=SEED, source="bench_fmu_run truth")
         meas.write_csv(table)
-    wf = out / "fmu_run.toml"
+    wf = out / ("fmu_run.toml" if executor == "process" else f"fmu_run_{executor}.toml")
     wf.write_text("\n".join([
         'name = "bench_fmu_run"',
         'description = "issue 38 benchmark: a lagged steady rotor FMU, 4 parameters, 48 points, 4 channels"',
@@ -87,7 +91,7 @@ def prepare(out: Path) -> Path:
         "[grid]", "alpha_nodes_deg = [-10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0]",   # the FMU's default grid
         "eta_nodes = [0.2, 0.4, 0.6, 0.8, 1.0]",
         "[measurements]", f'file = "{table.name}"',
-        "[executor]", 'kind = "process"', "workers = 2",
+        "[executor]", f'kind = "{executor}"', "workers = 2",
         "[[stages]]", 'name = "rotor_loads"', f"channels = {_toml(CHANNELS)}", ""]))
     return wf
 
@@ -154,6 +158,8 @@ def main(argv=None) -> int:
                     help="only measure the finite-difference error against the posterior σ of the 4 parameters")
     ap.add_argument("--differences", choices=("central", "forward"), default=None,
                     help="the [model] jacobian.differences of the workflow (default: the mapping's)")
+    ap.add_argument("--executor", choices=("process", "dask", "both"), default="process",
+                    help="2 worker processes, a Dask LocalCluster of 2 workers, or both (estimates compared)")
     args = ap.parse_args(argv)
     if args.difference_error:
         for scheme, e in difference_error(args.difference_error).items():
@@ -163,9 +169,13 @@ def main(argv=None) -> int:
     global DIFFERENCES
     DIFFERENCES = args.differences
     out = Path(args.out)
-    wf = prepare(out)
-    for k in range(args.runs):
-        fig = run_once(wf, out / f"run{k + 1}")
+    kinds = ("process", "dask") if args.executor == "both" else (args.executor,)
+    estimates = {}
+    for kind, k in ((kind, k) for kind in kinds for k in range(args.runs)):
+        wf = prepare(out, kind)
+        fig = run_once(wf, out / (f"run{k + 1}" if kind == "process" else f"run{k + 1}_{kind}"))
+        estimates.setdefault(kind, (fig["p_hat"], fig["sigma"]))
+        print(f"[bench_fmu_run] executor       {kind}")
         print(f"[bench_fmu_run] unit check     {fig['unit_check_s']:7.1f} s")
         print(f"[bench_fmu_run] calibration    {fig['calibration_s']:7.1f} s (figures {fig['figures_s']:.1f} s)")
         for label, text in fig["checks"].items():
@@ -173,9 +183,14 @@ def main(argv=None) -> int:
                 print(f"[bench_fmu_run] {label}: {text}")
         print(f"[bench_fmu_run] wall           {fig['wall_s']:7.1f} s")
         print(f"[bench_fmu_run] p_hat {np.round(fig['p_hat'], 5).tolist()} sigma {np.round(fig['sigma'], 5).tolist()}")
-        (out / f"run{k + 1}" / "bench.json").write_text(json.dumps({k: v for k, v in fig.items() if k != "console"},
-                                                                   indent=1))
-        (out / f"run{k + 1}" / "console.txt").write_text(fig["console"])
+        run_dir = out / (f"run{k + 1}" if kind == "process" else f"run{k + 1}_{kind}")
+        (run_dir / "bench.json").write_text(json.dumps({name: v for name, v in fig.items() if name != "console"},
+                                                       indent=1))
+        (run_dir / "console.txt").write_text(fig["console"])
+    if len(estimates) == 2:
+        same = all(np.array_equal(a, b) for a, b in zip(estimates["process"], estimates["dask"]))
+        print(f"[bench_fmu_run] process and dask: estimate and sigma {'identical to the bit' if same else 'DIFFER'}")
+        return 0 if same else 1
     return 0
 
 

@@ -1,8 +1,10 @@
 """The compiled root search (calib.bem.kernel) against the numpy path it replaces.
 
 The kernel runs the same bracket, iteration and residual, in the same order of operations:
-the same number of iterations and roots per section, values equal to the last bits of
-sin, cos, exp and acos (libm against numpy's loops).
+values equal to the last bits of sin, cos, exp and acos (libm against numpy's loops). Those last
+bits differ between processors and libm versions, so iteration counts are compared with a
+tolerance (a last-bit difference in a residual may move a convergence test by one step in a
+rare section); roots, values and the number of roots per section are compared as solutions.
 """
 
 import numpy as np
@@ -30,10 +32,19 @@ def _grid(rotor, tsr=np.linspace(1.0, 60.0, 13), pitch=np.linspace(-10.0, 90.0, 
     return OperatingConditions(wind, np.full(wind.size, rpm), beta.ravel())
 
 
+def _assert_same_counts(fast, slow):
+    """Iterations per section equal but for at most one step in at most 0.1 % of the sections (last
+    bits of libm); roots found per section equal (a property of the residual, not of rounding)."""
+    it_fast, it_slow = fast.sections["iterations"], slow.sections["iterations"]
+    off = it_fast != it_slow
+    assert np.all(np.abs(it_fast - it_slow) <= 1), "iteration counts differ by more than one step"
+    assert off.sum() <= max(1, 1e-3 * off.size), f"{off.sum()} of {off.size} sections differ in iterations"
+    np.testing.assert_array_equal(fast.sections["n_roots"], slow.sections["n_roots"], err_msg="n_roots")
+
+
 def _assert_same(fast, slow):
     np.testing.assert_array_equal(fast.status, slow.status)
-    for name in ("iterations", "n_roots"):
-        np.testing.assert_array_equal(fast.sections[name], slow.sections[name], err_msg=name)
+    _assert_same_counts(fast, slow)
     for name in ("phi", "a", "ap", "cl", "cd", "W"):
         np.testing.assert_allclose(fast.sections[name], slow.sections[name], rtol=1e-11, atol=1e-13, err_msg=name)
     for name in ("Np", "Tp"):
@@ -131,5 +142,91 @@ def test_screen_for_several_roots_selects_the_same_sections(rotor_name, numpy_pa
     numpy_path()
     slow = solve_bem(rotor, cond, BemSettings(polar_smoothing=(0.1, 0.001)))
     assert len(seen) == 2 and seen[1].sum() > 0
-    np.testing.assert_array_equal(seen[0], seen[1])
+    # a section at the screen's margin may flip with the last bit of libm: at most one in a thousand
+    assert (seen[0] != seen[1]).sum() <= max(1, 1e-3 * seen[1].size)
     _assert_same(fast, slow)
+
+
+def _field_model(rotor_name="phase_vi"):
+    from calib.corrections import CorrectionGrid
+    from calib.models.bem_model import BemModel
+    rotor = load_rotor(rotor_name)
+    grid = CorrectionGrid(np.linspace(-4.0, 16.0, 6), np.linspace(0.3, 0.95, 5))
+    return BemModel(rotor, grid, ("power", "thrust", "root_flap_moment"), BemSettings(use_tilt=False),
+                    nuisance=("pitch_offset",)), grid
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_correction_field_compiled_same_as_numpy_path(seed, numpy_path, monkeypatch):
+    """A calibration chain (the correction field and a pitch offset) runs the compiled root search with the
+    field evaluated in C; values, roots and the exact Jacobian agree with the numpy path. Drag corrections
+    down to -0.05 put some sections on the drag floor; angles of attack span the nodes and beyond."""
+    from calib.bem import sections
+    model, grid = _field_model()
+    rng = np.random.default_rng(seed)
+    p = np.zeros(len(model.parameters))
+    p[:grid.n_lift] = 0.2 * rng.standard_normal(grid.n_lift)
+    p[grid.n_lift:grid.n_params] = rng.uniform(-0.05, 0.02, grid.n_lift)
+    p[-1] = 0.7
+    rotor = model.rotor
+    cond = _grid(rotor, tsr=np.linspace(1.5, 12.0, 8), pitch=np.linspace(-6.0, 25.0, 7), rpm=72.0)
+    fields = []
+    make = kernel.SectionKernel
+
+    def spy(*args, **kwargs):
+        out = make(*args, **kwargs)
+        fields.append(out.field)
+        return out
+
+    monkeypatch.setattr(sections.kernel, "SectionKernel", spy)
+    seen = []
+    search = sections.lowest_roots
+
+    def spy_search(residual, phi, fphi, lo, hi, candidates, *args, **kwargs):
+        seen.append(candidates.copy())
+        return search(residual, phi, fphi, lo, hi, candidates, *args, **kwargs)
+
+    monkeypatch.setattr(sections, "lowest_roots", spy_search)
+    fast = model.solve(p, cond, sensitivities=True)
+    ev_fast, g_fast = model.jacobian(p, cond)
+    assert fields and all(f is not None for f in fields)
+    numpy_path()
+    slow = model.solve(p, cond, sensitivities=True)
+    ev_slow, g_slow = model.jacobian(p, cond)
+    assert (slow.status == Status.CONVERGED).sum() > 20
+    # the compiled screen (polar after the field) selects the sections the numpy screen selects
+    assert len(seen) == 4 and seen[3].sum() > 0
+    assert (seen[0] != seen[2]).sum() <= max(1, 1e-3 * seen[0].size)
+    cd_floor = slow.sections["cd"] == grid.cd_floor
+    assert cd_floor.any(), "no section on the drag floor: the test does not reach it"
+    _assert_same(fast, slow)
+    np.testing.assert_array_equal(np.isnan(ev_fast.values), np.isnan(ev_slow.values))
+    np.testing.assert_allclose(ev_fast.values, ev_slow.values, rtol=1e-11, atol=0)
+    scale = np.nanmax(np.abs(g_slow), axis=(0, 1))
+    np.testing.assert_allclose(g_fast, g_slow, rtol=1e-9, atol=1e-10 * scale.max())
+
+
+def test_compiled_jacobian_matches_central_differences(monkeypatch):
+    """The compiled derivatives (forward mode in kernel.c) against central differences of the
+    compiled solve, on the correction field's nodes and the pitch offset, off the drag floor."""
+    from calib.bem import sections
+    used = []
+    compiled_pass = sections.kernel_chain.compiled_pass
+    monkeypatch.setattr(sections.kernel_chain, "compiled_pass", lambda *a: used.append(1) or compiled_pass(*a))
+    model, grid = _field_model()
+    rng = np.random.default_rng(5)
+    p = np.zeros(len(model.parameters))
+    p[:grid.n_lift] = 0.05 * rng.standard_normal(grid.n_lift)
+    p[grid.n_lift:grid.n_params] = 0.002
+    p[-1] = 0.4
+    cond = _grid(model.rotor, tsr=np.linspace(3.0, 9.0, 4), pitch=np.array([0.0, 4.0]), rpm=72.0)
+    ev, G = model.jacobian(p, cond)
+    assert used and np.isfinite(G).all()
+    for j in (grid.node_index(1, 2), grid.node_index(3, 4), grid.n_lift + grid.node_index(2, 3), len(p) - 1):
+        h = 1e-6 * max(1.0, abs(p[j]))
+        up, down = p.copy(), p.copy()
+        up[j] += h
+        down[j] -= h
+        fd = (model.evaluate(up, cond).values - model.evaluate(down, cond).values) / (2 * h)
+        scale = np.max(np.abs(G), axis=(0, 2))     # per channel
+        np.testing.assert_allclose(G[:, :, j], fd, rtol=1e-5, atol=1e-6 * scale.max(), err_msg=str(j))

@@ -19,7 +19,10 @@ and optionally
   Reynolds number (the screen for several roots then tabulates it at their extremes);
 - ``n_probes`` (int) with ``probe_map(theta, alpha_deg, ctx)``: for effects with many
   local parameters (see :class:`calib.bem.stages.ProbeMap`); ``apply`` then receives the
-  probes as keyword ``probes``.
+  probes as keyword ``probes``;
+- ``compiled_polar(theta)`` (polar stage): the effect as a :class:`calib.bem.stages.CompiledPolar`
+  (an additive hat-function field with a drag floor) when it is exactly that; a chain whose
+  polar stage is that one effect then runs on the compiled kernel (:mod:`calib.bem.kernel`).
 
 Derivative columns of the section pass: 0 the inflow angle φ, 1 the pitch (rad), 2 the
 inflow speed V, then each section-stage effect's parameters (or probes) in chain order.

@@ -26,6 +26,16 @@ typedef struct {
     const double *tip_f, *hub_f, *lam;  /* B (R - r) / (2 r), B (r - R_h) / (2 R_h), V_y / V_x */
     double n_blades;
     int tip_loss, hub_loss, drag_axial, drag_tangential, wake_rotation;
+    /* an additive correction field on hat functions of (alpha, eta) after the look-up, or
+     * field_alpha NULL (calib.bem.stages.CompiledPolar; calib.corrections.CorrectionGrid.evaluate
+     * and calib.effects.correction_field.floor_drag): alpha nodes [deg], eta nodes [-], nodal
+     * values of the lift and drag blocks (n_alpha x n_eta, row-major), the drag floor, and per
+     * section the eta cell and its two hats' values at eta = r / R_tip (bem_eta_hats) */
+    const double *field_alpha, *field_eta, *field_lift, *field_drag;
+    int64_t field_n_alpha, field_n_eta;
+    double field_floor;
+    const int64_t *eta_cell;
+    const double *eta_w0, *eta_w1;
 } Problem;
 
 /* numpy's float mod (np.mod): the sign of the divisor */
@@ -56,6 +66,55 @@ static void lookup(const Problem *p, int64_t j, double alpha_deg, double *cl, do
     const double *n0 = p->table + 4 * (p->table_row[p->station[j]] * p->n_grid + i), *n1 = n0 + 4;
     *cl = h00 * n0[0] + h10 * n0[1] + h01 * n1[0] + h11 * n1[1];
     *cd = h00 * n0[2] + h10 * n0[3] + h01 * n1[2] + h11 * n1[3];
+}
+
+/* the two hats at x on n nodes nd (corrections._hat_columns): cell k, values w0, w1 */
+static void hats(const double *nd, int64_t n, double x, int64_t *k, double *w0, double *w1) {
+    int64_t kk = 0;
+    if (isnan(x)) kk = n - 2;
+    else for (int64_t i = 1; i < n - 1; i++) kk += x >= nd[i];
+    double t = (x - nd[kk]) / (nd[kk + 1] - nd[kk]);
+    double a0 = 1.0 - t, a1 = t;
+    if (x < nd[0]) {              /* the first hat ramps to zero over one spacing */
+        double tb = (nd[0] - x) / (nd[1] - nd[0]);
+        a0 = tb < 1.0 ? 1.0 - tb : 0.0;
+        a1 = 0.0;
+    } else if (x > nd[n - 1]) {   /* the last hat likewise */
+        double ta = (x - nd[n - 1]) / (nd[n - 1] - nd[n - 2]);
+        a1 = ta < 1.0 ? 1.0 - ta : 0.0;
+        a0 = 0.0;
+    }
+    *k = kk; *w0 = a0; *w1 = a1;
+}
+
+/* the eta hats of n sections (once per batch): cell, values */
+void bem_eta_hats(int64_t n, const double *nodes, int64_t n_nodes, const double *eta, int64_t *cell, double *w0,
+                  double *w1) {
+    for (int64_t j = 0; j < n; j++) hats(nodes, n_nodes, eta[j], cell + j, w0 + j, w1 + j);
+}
+
+/* sum over the four corners of a section's cell, in CorrectionGrid._corners' order */
+static double corners(const double *nodal, int64_t row, int64_t ne, const double v[4]) {
+    double total = v[0] * nodal[row];
+    total = total + v[1] * nodal[row + 1];
+    total = total + v[2] * nodal[row + ne];
+    return total + v[3] * nodal[row + ne + 1];
+}
+
+/* C_L, C_D of section j at alpha [deg]: the table, then the correction field when there is one */
+static void polar(const Problem *p, int64_t j, double alpha_deg, double *cl, double *cd) {
+    lookup(p, j, alpha_deg, cl, cd);
+    if (!p->field_alpha) return;
+    int64_t k, ke;
+    double a0, a1, e0, e1;
+    hats(p->field_alpha, p->field_n_alpha, alpha_deg, &k, &a0, &a1);
+    ke = p->eta_cell[j]; e0 = p->eta_w0[j]; e1 = p->eta_w1[j];
+    int64_t ne = p->field_n_eta, row = k * ne + ke;
+    double v[4] = {a0 * e0, a0 * e1, a1 * e0, a1 * e1};
+    double cd0 = *cd, floor = cd0 < p->field_floor ? cd0 : p->field_floor;
+    double c = cd0 + corners(p->field_drag, row, ne, v);
+    *cl = *cl + corners(p->field_lift, row, ne, v);
+    *cd = c >= floor ? c : floor;
 }
 
 /* (2/pi) acos(exp(-f)): exactly (2/pi) acos(0) once exp(-f) < 3.2e-17 (f > 38), where the
@@ -113,7 +172,7 @@ static double residual_at(const Problem *p, int64_t j, double phi, double cl, do
 
 static double residual(const Problem *p, int64_t j, double phi) {
     double cl, cd;
-    lookup(p, j, (phi - p->theta[j]) * (180.0 / PI), &cl, &cd);
+    polar(p, j, (phi - p->theta[j]) * (180.0 / PI), &cl, &cd);
     return residual_at(p, j, phi, cl, cd);
 }
 
@@ -143,7 +202,7 @@ void bem_residual_partials(const Problem *p, int64_t n, const int64_t *index, co
 /* C_L, C_D at (index[m], phi[m]) (SectionPolars.lookup at alpha = phi - theta) */
 void bem_polar(const Problem *p, int64_t n, const int64_t *index, const double *phi, double *cl, double *cd) {
     for (int64_t m = 0; m < n; m++)
-        lookup(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
+        polar(p, index[m], (phi[m] - p->theta[index[m]]) * (180.0 / PI), cl + m, cd + m);
 }
 
 /* The quantities of section_pass at the last residual evaluation of a section (rows of ROOT_ROWS) */
@@ -170,7 +229,7 @@ void bem_values(const Problem *p, int64_t n, const double *phi, const double *so
             e.cn = root[6 * n + j]; e.ct = root[7 * n + j]; e.F = root[8 * n + j];
         } else {
             alpha_deg = alpha_rad * (180.0 / PI);
-            lookup(p, j, alpha_deg, &cl, &cd);
+            polar(p, j, alpha_deg, &cl, &cd);
             e = equations(p, j, phi[j], cl, cd);
         }
         double ux = p->vx[j] * (1.0 - e.a), uy = p->vy[j] * (1.0 + e.ap);
@@ -215,7 +274,7 @@ static void finish(const Out *o, Lane *l, int found, double phi, double fphi) {
         store_root(o->root, o->n, j, l->alpha_deg, l->cl, l->cd, l->e);
     } else if (isfinite(phi)) {             /* an endpoint of the bracket that is a root */
         double alpha_deg = (phi - o->p->theta[j]) * (180.0 / PI), cl, cd;
-        lookup(o->p, j, alpha_deg, &cl, &cd);
+        polar(o->p, j, alpha_deg, &cl, &cd);
         store_root(o->root, o->n, j, alpha_deg, cl, cd, equations(o->p, j, phi, cl, cd));
     }
     l->j = -1;
@@ -316,7 +375,7 @@ void bem_solve(const Problem *p, int64_t n, double xtol, double ftol, int64_t ma
             Lane *l = &lanes[q];
             if (l->j >= 0) {
                 l->alpha_deg = (l->x - p->theta[l->j]) * (180.0 / PI);
-                lookup(p, l->j, l->alpha_deg, &l->cl, &l->cd);
+                polar(p, l->j, l->alpha_deg, &l->cl, &l->cd);
                 l->e = equations(p, l->j, l->x, l->cl, l->cd);
                 f[q] = l->e.residual;
                 busy = 1;
@@ -337,7 +396,8 @@ static double nan_min(double a, double b) {
 /* The screen for several roots at sections index[m] (the converged ones) at their roots phi[j]:
  * a negative lift slope within the window (SlopeEnvelope.at on env, 4 x (n_stations x env_grid):
  * cl_min, cl_max, cd_min, cd_max [1/deg]), then the slope budget of multiple_roots.needs_search
- * with the one-sided partials of bem_residual_partials. search[j] set to 1 where to search. */
+ * with the one-sided partials of bem_residual_partials at C_L, C_D after the field (if any).
+ * search[j] set to 1 where to search. */
 void bem_screen(const Problem *p, int64_t n_c, const int64_t *index, const double *phi, const double *env,
                 int64_t env_grid, int64_t first_node, double env_step, double margin, double rel_step,
                 uint8_t *search) {
@@ -355,10 +415,176 @@ void bem_screen(const Problem *p, int64_t n_c, const int64_t *index, const doubl
         double cl_min = env[at], cl_max = env[plane + at], cd_min = env[2 * plane + at], cd_max = env[3 * plane + at];
         if (!(cl_min < 0.0)) continue;
         double cl, cd, d0, d_cl, d_cd;
-        lookup(p, j, alpha_deg, &cl, &cd);
+        polar(p, j, alpha_deg, &cl, &cd);
         bem_residual_partials(p, 1, &j, phi + j, &cl, &cd, rel_step, &d0, &d_cl, &d_cd);
         double worst = d0 + nan_min(d_cl * (cl_min * per_rad), d_cl * (cl_max * per_rad))
                        + nan_min(d_cd * (cd_min * per_rad), d_cd * (cd_max * per_rad));
         search[j] = !(worst >= margin * fabs(d0)) || !(d0 > 0);
+    }
+}
+
+/* ---- exact derivatives at the root: forward mode on KMAX columns (sections.section_pass on
+ * calib.bem.dual numbers, for chains the kernel runs: the field or no polar effect, no induction
+ * or loads effect). Columns: 0 phi, 1 pitch [rad], 2 inflow speed [m/s], then the field's two
+ * probes (additive C_L, C_D) at probe_col, probe_col + 1 (probe_col < 0: no field). */
+#define KMAX 6
+typedef struct { double v, d[KMAX]; } Dn;
+
+static Dn dn_const(double v) { Dn r; r.v = v; for (int c = 0; c < KMAX; c++) r.d[c] = 0.0; return r; }
+static Dn dn_add(Dn a, Dn b) { Dn r; r.v = a.v + b.v; for (int c = 0; c < KMAX; c++) r.d[c] = a.d[c] + b.d[c]; return r; }
+static Dn dn_sub(Dn a, Dn b) { Dn r; r.v = a.v - b.v; for (int c = 0; c < KMAX; c++) r.d[c] = a.d[c] - b.d[c]; return r; }
+static Dn dn_mul(Dn a, Dn b) {
+    Dn r; r.v = a.v * b.v;
+    for (int c = 0; c < KMAX; c++) r.d[c] = a.d[c] * b.v + b.d[c] * a.v;
+    return r;
+}
+static Dn dn_div(Dn a, Dn b) {
+    Dn r; r.v = a.v / b.v;
+    for (int c = 0; c < KMAX; c++) r.d[c] = (a.d[c] - b.d[c] * r.v) / b.v;
+    return r;
+}
+static Dn dn_scale(Dn a, double s) { Dn r; r.v = a.v * s; for (int c = 0; c < KMAX; c++) r.d[c] = a.d[c] * s; return r; }
+static Dn dn_shift(Dn a, double s) { a.v = a.v + s; return a; }
+/* f(a) with f'(a.v) = slope */
+static Dn dn_chain(Dn a, double value, double slope) {
+    Dn r; r.v = value;
+    for (int c = 0; c < KMAX; c++) r.d[c] = a.d[c] * slope;
+    return r;
+}
+static Dn dn_rsub(double s, Dn a) { return dn_shift(dn_scale(a, -1.0), s); }
+static Dn dn_sqrt(Dn a) { double q = sqrt(a.v); return dn_chain(a, q, 0.5 / q); }
+
+/* (2/pi) acos(exp(-f)) on duals (prandtl) */
+static Dn dn_prandtl(Dn f) {
+    double e = exp(-f.v);
+    Dn x = dn_chain(dn_scale(f, -1.0), e, e);
+    return dn_scale(dn_chain(x, acos(e), -1.0 / sqrt(1.0 - e * e)), 2.0 / PI);
+}
+
+/* sections at their roots phi: the derivatives of the residual, N', T', c_n, c_t (chord axes) and
+ * the angle of attack [deg] on the first k columns (dout: 6 x n x k, row-major); the values are
+ * bem_values' */
+void bem_derivatives(const Problem *p, int64_t n, int64_t k, int64_t probe_col, const double *phi,
+                     const double *vx_per_wind, const double *vy_per_wind, double *dout) {
+    for (int64_t j = 0; j < n; j++) {
+        Dn ph = dn_const(phi[j]), th = dn_const(p->theta[j]);
+        ph.d[0] = 1.0; th.d[1] = 1.0;
+        Dn vx = dn_const(p->vx[j]), vy = dn_const(p->vy[j]);
+        vx.d[2] = vx_per_wind[j]; vy.d[2] = vy_per_wind[j];
+        Dn alpha_rad = dn_sub(ph, th);
+        double alpha_deg = alpha_rad.v * (180.0 / PI);
+        Dn alpha_x = dn_scale(alpha_rad, 180.0 / PI);
+        alpha_x.v = alpha_deg;
+        /* the table and its slopes [1/deg] (SectionPolars.lookup) */
+        double h = p->step_deg, cl0, cd0, dcl0, dcd0;
+        {
+            double a = py_mod(alpha_deg + 180.0, 360.0);
+            double x = p->inv_step != 0.0 ? a * p->inv_step : a / h;
+            int64_t i = isfinite(x) ? (int64_t)x : 0;
+            if (i > p->n_grid - 2) i = p->n_grid - 2;
+            double t = x - (double)i, t2 = t * t, t3 = t * t * t;
+            double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = -2 * t3 + 3 * t2, h11 = t3 - t2;
+            double d00 = 6 * t2 - 6 * t, d10 = 3 * t2 - 4 * t + 1, d01 = -6 * t2 + 6 * t, d11 = 3 * t2 - 2 * t;
+            const double *n0 = p->table + 4 * (p->table_row[p->station[j]] * p->n_grid + i), *n1 = n0 + 4;
+            cl0 = h00 * n0[0] + h10 * n0[1] + h01 * n1[0] + h11 * n1[1];
+            cd0 = h00 * n0[2] + h10 * n0[3] + h01 * n1[2] + h11 * n1[3];
+            dcl0 = (d00 * n0[0] + d10 * n0[1] + d01 * n1[0] + d11 * n1[1]) / h;
+            dcd0 = (d00 * n0[2] + d10 * n0[3] + d01 * n1[2] + d11 * n1[3]) / h;
+            if (!isfinite(x)) cl0 = cd0 = dcl0 = dcd0 = NAN;
+        }
+        Dn cl = dn_chain(alpha_x, cl0, dcl0), cd = dn_chain(alpha_x, cd0, dcd0);
+        if (p->field_alpha) {
+            int64_t ka, ke;
+            double a0, a1, e0, e1;
+            const double *nd = p->field_alpha;
+            int64_t na = p->field_n_alpha, ne = p->field_n_eta;
+            hats(nd, na, alpha_deg, &ka, &a0, &a1);
+            ke = p->eta_cell[j]; e0 = p->eta_w0[j]; e1 = p->eta_w1[j];
+            /* the alpha hats' slopes [1/deg] (corrections._hat_columns) */
+            double s0 = -1.0 / (nd[ka + 1] - nd[ka]), s1 = 1.0 / (nd[ka + 1] - nd[ka]);
+            if (alpha_deg < nd[0]) {
+                double h0 = nd[1] - nd[0];
+                s0 = (nd[0] - alpha_deg) / h0 < 1.0 ? 1.0 / h0 : 0.0; s1 = 0.0;
+            } else if (alpha_deg > nd[na - 1]) {
+                double hn = nd[na - 1] - nd[na - 2];
+                s1 = (alpha_deg - nd[na - 1]) / hn < 1.0 ? -1.0 / hn : 0.0; s0 = 0.0;
+            }
+            int64_t row = ka * ne + ke;
+            double v[4] = {a0 * e0, a0 * e1, a1 * e0, a1 * e1}, dv[4] = {s0 * e0, s0 * e1, s1 * e0, s1 * e1};
+            Dn dcl = dn_chain(alpha_x, corners(p->field_lift, row, ne, v), corners(p->field_lift, row, ne, dv));
+            Dn dcd = dn_chain(alpha_x, corners(p->field_drag, row, ne, v), corners(p->field_drag, row, ne, dv));
+            Dn cd_base = cd;
+            cl = dn_add(cl, dcl);
+            cd = dn_add(cd, dcd);
+            cl.d[probe_col] += 1.0;
+            cd.d[probe_col + 1] += 1.0;
+            Dn floor = cd_base.v < p->field_floor ? cd_base : dn_const(p->field_floor);
+            if (!(cd.v >= floor.v)) cd = floor;
+        }
+        /* section_equations */
+        Dn s = dn_chain(ph, sin(ph.v), cos(ph.v)), c = dn_chain(ph, cos(ph.v), -sin(ph.v));
+        Dn as = dn_chain(s, fabs(s.v), s.v > 0 ? 1.0 : (s.v < 0 ? -1.0 : 0.0));
+        Dn F = dn_const(1.0), tip = dn_const(1.0), hub = dn_const(1.0);
+        if (p->tip_loss) tip = dn_prandtl(dn_div(dn_const(p->tip_f[j]), as));
+        if (p->hub_loss) hub = dn_prandtl(dn_div(dn_const(p->hub_f[j]), as));
+        if (!p->tip_loss) F = hub;
+        else F = p->hub_loss ? dn_mul(tip, hub) : tip;
+        Dn cn = dn_add(dn_mul(cl, c), dn_mul(cd, s));
+        Dn ct = dn_sub(dn_mul(cl, s), dn_mul(cd, c));
+        Dn cn_i = p->drag_axial ? cn : dn_mul(cl, c);
+        Dn ct_i = p->drag_tangential ? ct : dn_mul(cl, s);
+        Dn kk = dn_div(dn_scale(cn_i, p->sigma[j]), dn_mul(dn_mul(dn_scale(F, 4.0), s), s));
+        Dn kp = dn_div(dn_scale(ct_i, p->sigma[j]), dn_mul(dn_mul(dn_scale(F, 4.0), s), c));
+        Dn a;
+        if (ph.v > 0) {
+            if (kk.v <= 2.0 / 3.0) {
+                a = dn_div(kk, dn_shift(kk, 1.0));
+            } else {
+                Dn fk2 = dn_mul(dn_scale(F, 2.0), kk);
+                Dn g1 = dn_sub(fk2, dn_rsub(10.0 / 9.0, F));
+                Dn g2 = dn_sub(fk2, dn_mul(F, dn_rsub(4.0 / 3.0, F)));
+                Dn g3 = dn_sub(fk2, dn_rsub(25.0 / 9.0, dn_scale(F, 2.0)));
+                a = fabs(g3.v) < 1e-6 ? dn_rsub(1.0, dn_div(dn_const(0.5), dn_sqrt(g2)))
+                                      : dn_div(dn_sub(g1, dn_sqrt(g2)), g3);
+            }
+        } else {
+            a = kk.v > 1.0 ? dn_div(kk, dn_shift(kk, -1.0)) : dn_scale(kk, 0.0);
+        }
+        if (!p->wake_rotation) kp = dn_scale(kp, 0.0);
+        Dn ap = dn_div(kp, dn_rsub(1.0, kp));
+        Dn lam = dn_div(vy, vx);
+        Dn tail = dn_mul(dn_div(c, lam), dn_rsub(1.0, kp));
+        Dn res = ph.v > 0 ? dn_sub(dn_div(s, dn_rsub(1.0, a)), tail) : dn_sub(dn_mul(s, dn_rsub(1.0, kk)), tail);
+        /* section_loads */
+        Dn ux = dn_mul(vx, dn_rsub(1.0, a)), uy = dn_mul(vy, dn_shift(ap, 1.0));
+        Dn w2 = dn_add(dn_mul(ux, ux), dn_mul(uy, uy));
+        Dn q = dn_scale(w2, 0.5 * p->rho[j] * p->chord[j]);
+        Dn Np = dn_mul(cn, q), Tp = dn_mul(ct, q);
+        Dn sa = dn_chain(alpha_rad, sin(alpha_rad.v), cos(alpha_rad.v));
+        Dn ca = dn_chain(alpha_rad, cos(alpha_rad.v), -sin(alpha_rad.v));
+        Dn cn_c = dn_add(dn_mul(cl, ca), dn_mul(cd, sa)), ct_c = dn_sub(dn_mul(cl, sa), dn_mul(cd, ca));
+        const Dn *qs[6] = {&res, &Np, &Tp, &cn_c, &ct_c, &alpha_x};
+        for (int m = 0; m < 6; m++)
+            for (int64_t col = 0; col < k; col++) dout[(m * n + j) * k + col] = qs[m]->d[col];
+    }
+}
+
+/* The implicit-function step at the roots (sections.eliminate_phi) on bem_derivatives' output d
+ * (6 x n x k): for each quantity q of rows 1..5, dq/dc + dq/dphi dphi/dc with dphi/dc = -dR/dc / dR/dphi
+ * for the columns c >= 1 (the pitch column per degree), written at sel[j] of full (5 x size x (k - 1),
+ * zeros on entry) for the converged sections; the same operations in the same order as numpy's. */
+void bem_eliminate(int64_t n, int64_t k, const double *d, const uint8_t *converged, const int64_t *sel,
+                   int64_t size, double *full) {
+    double dphi[KMAX];
+    for (int64_t j = 0; j < n; j++) {
+        if (!converged[j]) continue;
+        const double *R = d + j * k;
+        for (int64_t c = 1; c < k; c++) dphi[c] = -R[c] / R[0];
+        for (int64_t m = 1; m < 6; m++) {
+            const double *q = d + (m * n + j) * k;
+            double *out = full + ((m - 1) * size + sel[j]) * (k - 1);
+            for (int64_t c = 1; c < k; c++) out[c - 1] = q[c] + q[0] * dphi[c];
+            out[0] *= PI / 180.0;
+        }
     }
 }

@@ -7,10 +7,16 @@ with a temporary array and a Python round trip per iteration; ``kernel.c`` does 
 arithmetic, in the same order, one section at a time (the bracket, the iteration and the
 residual of :mod:`calib.bem.rootfind`, :mod:`calib.bem.residual` and
 :meth:`calib.bem.polar_grid.SectionPolars.lookup`). It is used when the effect chain has no
-polar or induction stage (those run Python effects inside the residual), for the search
-itself, the screen for several roots (:mod:`calib.bem.multiple_roots`) and the plain section
-values at the roots (the last evaluation of each section, reused). Derivatives are
-unaffected: with sensitivities the section pass at the root runs in numpy, on dual numbers.
+induction stage and its polar stage is empty or a single effect the kernel evaluates itself
+(``compiled_polar``: the correction field of every calibration, :class:`calib.bem.stages.CompiledPolar`,
+the arithmetic of :meth:`calib.corrections.CorrectionGrid.evaluate`); other polar and induction
+effects run Python inside the residual, on the numpy path. It runs the search itself, the
+screen for several roots (:mod:`calib.bem.multiple_roots`), the plain section values at the
+roots (the last evaluation of each section, reused) and, without a loads-stage effect, the
+exact derivatives at the roots (:meth:`SectionKernel.derivatives`: forward mode on the
+columns φ, pitch, inflow speed and the field's two probes, what
+:func:`calib.bem.sections.section_pass` computes on dual numbers) with the implicit-function
+step of :func:`calib.bem.sections.eliminate_phi` (:meth:`SectionKernel.totals`).
 
 Where the time goes (NREL 5-MW C_P surface, 2200 points, 37 400 loaded sections, one core):
 about 10 residual evaluations per section at some 50-65 ns each (sin, cos, two exp and acos
@@ -48,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.bem.kernel_chain import node_table
 from calib.errors import CalibError
 
 SOURCE = Path(__file__).with_name("kernel.c")
@@ -70,31 +77,12 @@ class _Problem(ctypes.Structure):
     _fields_ += [("n_blades", ctypes.c_double)]
     _fields_ += [(name, ctypes.c_int) for name in ("tip_loss", "hub_loss", "drag_axial", "drag_tangential",
                                                    "wake_rotation")]
+    _fields_ += [(name, ctypes.c_void_p) for name in ("field_alpha", "field_eta", "field_lift", "field_drag")]
+    _fields_ += [("field_n_alpha", ctypes.c_int64), ("field_n_eta", ctypes.c_int64), ("field_floor", ctypes.c_double)]
+    _fields_ += [(name, ctypes.c_void_p) for name in ("eta_cell", "eta_w0", "eta_w1")]
 
 
-_TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _ENVELOPES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
-def node_table(polars) -> tuple[np.ndarray, np.ndarray]:
-    """The polars as the kernel reads them, once per :class:`SectionPolars`.
-
-    Returns
-    -------
-    table : ndarray, shape (n_tables, n_grid, 4)
-        Per distinct station table and α node: C_L, h dC_L/dα, C_D, h dC_D/dα (h the grid step
-        [deg]; the products :meth:`SectionPolars.lookup` forms), so that a look-up reads two
-        adjacent nodes from one place.
-    row : ndarray of int, shape (n_stations,)
-        The table of each station.
-    """
-    if polars not in _TABLES:
-        h = polars.step_deg
-        per_station = np.stack([polars.cl_nodes, polars.cl_slopes * h, polars.cd_nodes, polars.cd_slopes * h], axis=-1)
-        flat = per_station.reshape(per_station.shape[0], -1)
-        _, first, row = np.unique(flat, axis=0, return_index=True, return_inverse=True)
-        _TABLES[polars] = (np.ascontiguousarray(per_station[first]), np.ascontiguousarray(row.reshape(-1), np.int64))
-    return _TABLES[polars]
 
 
 def _compiler() -> str | None:
@@ -160,6 +148,13 @@ def library() -> ctypes.CDLL | None:
                 lib.bem_screen.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ptr, ptr, ptr, ctypes.c_int64,
                                            ctypes.c_int64, ctypes.c_double, ctypes.c_double, ctypes.c_double, ptr]
                 lib.bem_screen.restype = None
+                lib.bem_derivatives.argtypes = [ctypes.POINTER(_Problem), ctypes.c_int64, ctypes.c_int64,
+                                                ctypes.c_int64] + [ptr] * 4
+                lib.bem_derivatives.restype = None
+                lib.bem_eta_hats.argtypes = [ctypes.c_int64, ptr, ctypes.c_int64] + [ptr] * 4
+                lib.bem_eta_hats.restype = None
+                lib.bem_eliminate.argtypes = [ctypes.c_int64, ctypes.c_int64, ptr, ptr, ptr, ctypes.c_int64, ptr]
+                lib.bem_eliminate.restype = None
                 _state.update(lib=lib, status="compiled kernel")
             except (KernelBuildError, OSError) as exc:
                 if mode == "c":
@@ -192,13 +187,16 @@ class SectionKernel:
     opts : dict
         ``tip_loss``, ``hub_loss``, ``drag_in_axial_induction``, ``drag_in_tangential_induction``,
         ``wake_rotation`` (as :func:`calib.bem.residual.section_equations`).
+    field : calib.bem.stages.CompiledPolar, optional
+        The chain's polar stage when it is one additive hat-function field (the correction
+        field), evaluated after every look-up; None for the tables alone.
     """
 
     VALUES = ("alpha_deg", "cl", "cd", "residual", "a", "ap", "cn", "ct", "F", "W", "Np", "Tp", "cn_chord",
               "ct_chord")
     """Rows of :meth:`values`."""
 
-    def __init__(self, lib, polars, sec, opts):
+    def __init__(self, lib, polars, sec, opts, field=None):
         f8 = lambda x: np.ascontiguousarray(x, dtype=np.float64)   # noqa: E731
         geo = sec.geo
         table, row = node_table(polars)
@@ -215,14 +213,27 @@ class SectionKernel:
         self.n = int(sec.station.size)
         self.lib = lib
         self._solved = None
+        self.field = field
+        section_ptrs = [_ptr(x) for x in self._keep[2:]]
+        if field is not None:
+            arrays = [f8(x) for x in (field.alpha_nodes_deg, field.eta_nodes, field.lift, field.drag)]
+            eta = f8(sec.ctx.eta)
+            hats = [np.empty(self.n, dtype=np.int64), np.empty(self.n), np.empty(self.n)]
+            lib.bem_eta_hats(self.n, _ptr(arrays[1]), arrays[1].size, _ptr(eta), *(_ptr(x) for x in hats))
+            self._keep += arrays + hats
+            field_args = [_ptr(x) for x in arrays] + [arrays[0].size, arrays[1].size, float(field.cd_floor)] + \
+                [_ptr(x) for x in hats]
+        else:
+            field_args = [None] * 4 + [0, 0, 0.0] + [None] * 3
         self.problem = _Problem(_ptr(table), _ptr(row), int(table.shape[1]), int(row.size), h, inv_step,
-                                *(_ptr(x) for x in self._keep[2:]), float(B),
+                                *section_ptrs, float(B),
                                 int(bool(opts["tip_loss"])), int(bool(opts["hub_loss"])),
                                 int(bool(opts["drag_in_axial_induction"])),
-                                int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])))
+                                int(bool(opts["drag_in_tangential_induction"])), int(bool(opts["wake_rotation"])),
+                                *field_args)
 
     def polar(self, index, phi):
-        """C_L, C_D [-] at sections ``index`` and inflow angles ``phi`` [rad] (no polar effects)."""
+        """C_L, C_D [-] at sections ``index`` and inflow angles ``phi`` [rad] (after the field, if any)."""
         index = np.ascontiguousarray(index, dtype=np.int64)
         phi = np.ascontiguousarray(np.broadcast_to(phi, index.shape), dtype=np.float64)
         cl, cd = np.empty(index.shape), np.empty(index.shape)
@@ -239,6 +250,68 @@ class SectionKernel:
         self.lib.bem_values(ctypes.byref(self.problem), self.n, _ptr(phi), _ptr(solved[0]) if solved else None,
                             _ptr(solved[1]) if solved else None, _ptr(out))
         return dict(zip(self.VALUES, out))
+
+    DERIVATIVES = ("residual", "Np", "Tp", "cn", "ct", "alpha_deg")
+    """Quantities of :meth:`derivatives`."""
+    MAX_COLUMNS = 6
+    """Most derivative columns :meth:`derivatives` carries (``KMAX`` in kernel.c)."""
+
+    def derivatives(self, phi, k, vx_per_wind, vy_per_wind, probe_column=-1) -> dict:
+        """Exact derivatives at the roots ``phi`` [rad] (forward mode, as
+        :func:`calib.bem.sections.section_pass` on dual numbers).
+
+        Parameters
+        ----------
+        phi : ndarray, shape (n,)
+        k : int
+            Columns: 0 φ [rad], 1 pitch [rad], 2 inflow speed [m/s], then the field's probes
+            (additive C_L, C_D) at ``probe_column``, ``probe_column + 1``; at most :attr:`MAX_COLUMNS`.
+        vx_per_wind, vy_per_wind : ndarray, shape (n,)
+            dV_x/dV, dV_y/dV [-].
+        probe_column : int
+            -1 without a field.
+
+        Returns
+        -------
+        dict
+            :attr:`DERIVATIVES` -> ndarray (n, k): ∂ quantity / ∂ column (N', T' [N/m], α [deg]).
+        """
+        if not 3 <= k <= self.MAX_COLUMNS or (self.field is not None) != (probe_column >= 0) \
+                or probe_column + 2 > k:
+            raise ValueError(f"derivative columns: k = {k}, probe column {probe_column} (field: "
+                             f"{self.field is not None}); expected 3 <= k <= {self.MAX_COLUMNS}")
+        phi, vxw, vyw = (np.ascontiguousarray(x, dtype=np.float64) for x in (phi, vx_per_wind, vy_per_wind))
+        out = np.empty((len(self.DERIVATIVES), self.n, k))
+        self.lib.bem_derivatives(ctypes.byref(self.problem), self.n, int(k), int(probe_column), _ptr(phi), _ptr(vxw),
+                                 _ptr(vyw), _ptr(out))
+        self._derivatives = out
+        return dict(zip(self.DERIVATIVES, out))
+
+    def totals(self, converged, sel, shape) -> dict:
+        """The implicit-function step on the last :meth:`derivatives` (as
+        :func:`calib.bem.sections.eliminate_phi`, the same operations in the same order).
+
+        Parameters
+        ----------
+        converged : ndarray of bool, shape (n,)
+        sel : ndarray of int, shape (n,)
+            Flat index of each section in ``shape``.
+        shape : tuple
+            (n_points, n_sectors, n_stations).
+
+        Returns
+        -------
+        dict
+            ``Np``, ``Tp``, ``cn``, ``ct``, ``alpha_deg`` -> ndarray ``shape + (k - 1,)``: column 0 per
+            degree of pitch, 1 per m/s of inflow speed, then the probes; zero off the converged sections.
+        """
+        d = self._derivatives
+        k, size = d.shape[2], int(np.prod(shape))
+        full = np.zeros((len(self.DERIVATIVES) - 1, size, k - 1))
+        conv = np.ascontiguousarray(converged, dtype=np.uint8)
+        sel = np.ascontiguousarray(sel, dtype=np.int64)
+        self.lib.bem_eliminate(self.n, k, _ptr(d), _ptr(conv), _ptr(sel), size, _ptr(full))
+        return {name: x.reshape(tuple(shape) + (k - 1,)) for name, x in zip(self.DERIVATIVES[1:], full)}
 
     def residual(self, index, phi) -> np.ndarray:
         """Ning's residual [-] at sections ``index`` and inflow angles ``phi`` [rad] (same shape)."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.bem import dual as dl
-from calib.bem import kernel
+from calib.bem import kernel, kernel_chain
 from calib.bem.chain import COL_PHI, COL_PITCH, COL_WIND, BoundChain
 from calib.bem.kinematics import curvature, wind_components
 from calib.bem.multiple_roots import (SCAN_STEP_DEG, SCREEN_MARGIN, WINDOW_DEG, SlopeEnvelope, lowest_roots,
@@ -152,13 +152,14 @@ class Roots:
 def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, rotor) -> Roots:
     """Ning's brackets, the Anderson-Björck iteration and, near stall, the search for several roots.
 
-    Without polar or induction effects in the chain, the compiled kernel (:mod:`calib.bem.kernel`)
+    Without induction effects, and with no polar effect or one the kernel evaluates (a
+    ``compiled_polar``: the correction field), the compiled kernel (:mod:`calib.bem.kernel`)
     runs the residual and the iteration when it is available: the same arithmetic, one pass.
     """
-
-    lib = None if (chain.has("polar") or chain.has("induction")) else kernel.library()
+    compilable, field = kernel_chain.chain_form(chain)
+    lib = kernel.library() if compilable else None
     if lib is not None:
-        compiled = kernel.SectionKernel(lib, polars, sec, opts)
+        compiled = kernel.SectionKernel(lib, polars, sec, opts, field)
         residual = compiled.residual
         lo, hi, flo, fhi, found, phi, fphi, iters = compiled.solve(max_iter=settings.max_iter)
     else:
@@ -175,8 +176,12 @@ def find_roots(sec: Sections, chain: BoundChain, polars, settings, opts: dict, r
     if settings.search_multiple_roots and conv.any():
         # screen: a negative lift slope within the window (stall), then the exact slope budget
         ci = np.flatnonzero(conv)
-        if lib is not None:
+        if lib is not None and field is None:
             search = compiled.screen(ci, phi, slope_envelope(chain, polars, sec, rotor), SCREEN_MARGIN)
+        elif lib is not None:       # the field's envelope on the converged sections' range, as below
+            alpha_c = np.degrees(phi[ci] - sec.theta[ci])
+            envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
+            search = compiled.screen(ci, phi, envelope, SCREEN_MARGIN)
         else:
             alpha_c = np.degrees(phi[ci] - sec.theta[ci])
             envelope = slope_envelope(chain, polars, sec, rotor, (alpha_c.min(), alpha_c.max()))
@@ -283,6 +288,8 @@ class SectionValues:
     quantities : dict
         ``Np``, ``Tp`` [N/m] (after the loads stage), ``cn``, ``ct`` [-] (chord axes), and with
         duals ``alpha_deg``.
+    totals : dict or None
+        :func:`eliminate_phi` of these, when the compiled kernel took that step already.
     """
 
     alpha_deg: np.ndarray
@@ -291,17 +298,20 @@ class SectionValues:
     eq: dict
     W: object
     quantities: dict
+    totals: dict | None = None
 
 
 def section_pass(sec: Sections, roots: Roots, chain: BoundChain, polars, opts: dict, k: int = 0) -> SectionValues:
     """Evaluate every section at its root; with ``k`` > 0, on duals over the chain's section columns.
 
     Columns: φ, pitch [rad], inflow speed [m/s], then the section-stage effects' columns
-    (:mod:`calib.bem.chain`). Plain values without polar or induction effects come from the
-    compiled kernel when it is available (:mod:`calib.bem.kernel`; the same arithmetic).
+    (:mod:`calib.bem.chain`). Plain values come from the compiled kernel where it found the
+    roots (:func:`find_roots`; the same arithmetic).
     """
     phi = roots.phi
-    if not k and roots.compiled is not None:        # no polar or induction effects (find_roots)
+    if k and roots.compiled is not None and not chain.has("loads") and k <= roots.compiled.MAX_COLUMNS:
+        return SectionValues(*kernel_chain.compiled_pass(sec, roots, chain, k))
+    if not k and roots.compiled is not None:        # no induction effects, the polar stage compiled (find_roots)
         v = roots.compiled.values(phi)
         Np, Tp = v["Np"], v["Tp"]
         if chain.has("loads"):
@@ -362,6 +372,8 @@ def eliminate_phi(values: SectionValues, roots: Roots, sec: Sections) -> dict:
         pitch, 1 per m/s of inflow speed, then the effects' columns; zero off the converged
         sections.
     """
+    if values.totals is not None:
+        return values.totals
     R = values.eq["residual"]
     with np.errstate(all="ignore"):
         dphi = -R.d[:, 1:] / R.d[:, [0]]

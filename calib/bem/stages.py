@@ -311,3 +311,32 @@ class ProbeMap:
     index: np.ndarray
     weight: np.ndarray
     probe: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledPolar:
+    """A polar-stage effect in the form the compiled kernel evaluates (:mod:`calib.bem.kernel`).
+
+    An additive field on tensor-product hat functions of (α, η) followed by a floor on the
+    drag, evaluated with the arithmetic of :meth:`calib.corrections.CorrectionGrid.evaluate`
+    and :func:`calib.effects.correction_field.floor_drag`. A polar effect that is exactly this
+    returns it from an optional ``compiled_polar(theta)``; the root search then runs compiled
+    with the effect in it.
+
+    Attributes
+    ----------
+    alpha_nodes_deg : ndarray, shape (n_alpha,)
+        [deg], strictly increasing.
+    eta_nodes : ndarray, shape (n_eta,)
+        r / R [-], strictly increasing.
+    lift, drag : ndarray, shape (n_alpha * n_eta,)
+        Nodal ΔC_L, ΔC_D [-], node (i, j) at ``i * n_eta + j``.
+    cd_floor : float
+        The corrected C_D is held at or above min(``cd_floor``, C_D before the field) [-].
+    """
+
+    alpha_nodes_deg: np.ndarray
+    eta_nodes: np.ndarray
+    lift: np.ndarray
+    drag: np.ndarray
+    cd_floor: float

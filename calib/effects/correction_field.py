@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from calib.bem import dual as dl
-from calib.bem.stages import ProbeMap
+from calib.bem.stages import CompiledPolar, ProbeMap
 from calib.corrections import CorrectionGrid
 from calib.effects.base import Effect
 from calib.errors import InputError
@@ -106,6 +106,13 @@ class CorrectionFieldEffect(Effect):
         if isinstance(probes[0], dl.Dual):
             cl, cd = cl + probes[0], cd + probes[1]
         return state.replace(cl=cl, cd=floor_drag(cd, state.cd, self.grid.cd_floor))
+
+    def compiled_polar(self, theta) -> CompiledPolar:
+        """The field at nodal values ``theta`` as the compiled BEM kernel evaluates it (the same
+        arithmetic as :meth:`apply` on plain values)."""
+        p = np.asarray(theta, float)
+        g = self.grid
+        return CompiledPolar(g.alpha_nodes_deg, g.eta_nodes, p[:g.n_lift], p[g.n_lift:], g.cd_floor)
 
     def probe_map(self, theta, alpha_deg, ctx) -> ProbeMap:
         """Node weights at the sections' angles of attack: lift nodes on probe 0, drag nodes on probe 1."""

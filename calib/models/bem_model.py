@@ -62,6 +62,10 @@ class BemModel:
         Provenance of the rotor files as read (:func:`calib.rotor.provenance.file_provenance`:
         every file with its SHA-256 and path relative to the workflow); without it
         :meth:`spec` hashes the files ``rotor_source`` names when called.
+    polars : SectionPolars, optional
+        The polar tables of a model of the same rotor with the same ``polar_smoothing`` and
+        ``kinematic_viscosity`` (:meth:`with_grid` passes its own: they do not depend on the
+        grid); built from the rotor when not given.
 
     Notes
     -----
@@ -80,7 +84,7 @@ class BemModel:
     def __init__(self, rotor: Rotor, grid: CorrectionGrid | None = None,
                  channels: Sequence[str] = ("power", "thrust"), settings: BemSettings | None = None,
                  nuisance: Sequence[str] = ("pitch_offset", "wind_scale"), rotor_source: dict | None = None,
-                 effects: Sequence = (), rotor_files: dict | None = None):
+                 effects: Sequence = (), rotor_files: dict | None = None, polars: SectionPolars | None = None):
         self.rotor = rotor
         self.rotor_files = rotor_files
         if rotor_source is None:
@@ -102,8 +106,8 @@ class BemModel:
         if len(channels) == 0:
             raise InputError("at least one channel is needed", "BemModel", field="channels")
         self._specs = channel_specs(list(channels), rotor, self._weights, self._interior)
-        self._polars = SectionPolars.from_rotor(rotor, smoothing=self.settings.polar_smoothing,
-                                                kinematic_viscosity=self.settings.kinematic_viscosity)
+        self._polars = polars if polars is not None else SectionPolars.from_rotor(
+            rotor, smoothing=self.settings.polar_smoothing, kinematic_viscosity=self.settings.kinematic_viscosity)
         self.effects: tuple[Effect, ...] = tuple(effect_from_spec(e, "BemModel") for e in effects)
         chain = [CorrectionFieldEffect(grid)] if grid is not None else []
         chain += [make_effect(NUISANCE_EFFECTS[n]) for n in self.nuisance]
@@ -179,7 +183,7 @@ class BemModel:
         """The same model (rotor, channels, settings, nuisance, effects) on another correction
         grid (``capabilities.refinable``)."""
         return BemModel(self.rotor, grid, [c.name for c in self.channels], self.settings, self.nuisance,
-                        self.rotor_source, self.effects)
+                        self.rotor_source, self.effects, polars=self._polars)
 
     @property
     def rotor_radius(self) -> float:
