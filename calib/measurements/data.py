@@ -61,6 +61,11 @@ class Measurements:
     notes : tuple of str
         What the reader did that a user should know (delimiter detected, columns
         ignored, rows dropped ...), one sentence each.
+    condition_sigma : dict str -> ndarray, optional
+        1-σ of the measured conditions per point, shape (n_points,) each, from the table's
+        ``wind_speed_sigma`` [m/s], ``rotor_speed_sigma`` [rpm] and ``pitch_sigma`` [deg] columns
+        (those given), >= 0; read by the errors-in-variables estimator
+        (:mod:`calib.calibration.errors_in_variables`).
     """
 
     conditions: OperatingConditions
@@ -71,6 +76,7 @@ class Measurements:
     sha256: str = ""
     metadata: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    condition_sigma: dict | None = None
 
     def __repr__(self) -> str:
         """A short summary (``values``, ``sigma`` and ``conditions`` hold the arrays)."""
@@ -98,6 +104,16 @@ class Measurements:
                 raise InputError(f"noise sigma must be > 0, got {s[k, c]!r} (row {k + 1})",
                                  self.source, field=f"{self.channels[c]}_sigma")
             object.__setattr__(self, "sigma", s)
+        if self.condition_sigma is not None:
+            cs = {}
+            for name, value in self.condition_sigma.items():
+                a = np.broadcast_to(np.asarray(value, dtype=float), (len(self.conditions),)).copy()
+                bad = np.flatnonzero(~(a >= 0))
+                if bad.size:
+                    raise InputError(f"condition sigma must be >= 0, got {a[bad[0]]!r} (row {bad[0] + 1})",
+                                     self.source, field=f"{name}_sigma")
+                cs[name] = a
+            object.__setattr__(self, "condition_sigma", cs)
 
     @property
     def n_points(self) -> int:
