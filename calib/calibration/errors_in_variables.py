@@ -16,8 +16,8 @@ and sensitivities of each point with the Cholesky factor C_k = L_k L_kᵀ,
 .. math::  r̃_k = L_k⁻¹ (z_k − y_k(p)),\qquad M_k = L_k⁻¹ G_k D,
 
 and runs the calibrator's estimator (MAP or truncated ML) on that problem; J_u is re-linearized
-at the estimate and the fit repeated until the estimate moves less than ``EIV_SETTLED`` scale
-units, at most ``max_eiv_iterations`` fits (the iteratively re-weighted form of the
+at the estimate and the fit repeated until the estimate's move changes the whitened fit by less than
+``EIV_SETTLED`` standard deviations, at most ``max_eiv_iterations`` fits (the iteratively re-weighted form of the
 effective-variance method: C_k is held fixed within a fit, so the ½ log det C_k term and the
 dependence of C_k on p do not enter the gradient).
 
@@ -49,9 +49,12 @@ from calib.types import OperatingConditions
 #: Units of the conditions' σ (those of the conditions, :class:`calib.types.OperatingConditions`).
 CONDITION_UNITS = {"wind_speed": "m/s", "rotor_speed": "rpm", "pitch": "deg"}
 
-#: Largest change of the estimate between two fits, in parameter scales [-], below which the
-#: re-linearization of J_u has settled.
-EIV_SETTLED = 1e-3
+#: Length of the last fit's move ‖M (p̃_k+1 − p̃_k)‖ (the change of the whitened fitted outputs, in
+#: standard deviations of the data) below which the re-linearization of J_u has settled [-]: a
+#: move of a tenth of a standard deviation along the best-determined direction, far less along
+#: the others. (In parameter scales the poorly determined directions, held by their prior, keep
+#: moving by a few hundredths per fit on the validation's campaigns.)
+EIV_SETTLED = 0.1
 
 #: Central-difference steps of J_u: relative to the condition's value (wind and rotor speed) and
 #: absolute (pitch [deg]). Small against the conditions' σ (3 % and 0.2 deg in the field), large
@@ -282,7 +285,8 @@ def fit_marginal(cal, problem: LeastSquaresProblem, sigma_u: np.ndarray, p: np.n
                                              sigma_u, statement, p, base=problem)
         n_failed_total = max(n_failed_total, n_failed)
         fit = cal.fitter.fit(problem, p)
-        change = float(np.max(np.abs((fit.p - p) / statement.scale)))
+        change = float(np.linalg.norm(fit.lin.M @ ((fit.p - p) / statement.scale))) if fit.lin.M is not None \
+            else float(np.max(np.abs((fit.p - p) / statement.scale)))
         p = fit.p
         cal.emit({"stage": "errors_in_variables", "iteration": k + 1, "change": change,
                   "n_failed_differences": n_failed, "status": fit.status})
@@ -291,8 +295,9 @@ def fit_marginal(cal, problem: LeastSquaresProblem, sigma_u: np.ndarray, p: np.n
     settled = change < EIV_SETTLED
     # the result is assembled at the last J_u: linearized at the estimate it settled at
     text = (f"errors in variables (marginal): {k + 1} fit(s) re-linearizing the conditions' sensitivities, "
-            + (f"settled (last change {change:.2g} < {EIV_SETTLED:g} scales)" if settled else
-               f"NOT settled after max_eiv_iterations = {st.max_eiv_iterations} (last change {change:.2g} scales)"))
+            + (f"settled (last move {change:.2g} < {EIV_SETTLED:g} σ of the data)" if settled else
+               f"NOT settled after max_eiv_iterations = {st.max_eiv_iterations} (last move {change:.2g} σ of "
+               f"the data, settled below {EIV_SETTLED:g})"))
     if n_failed_total:
         text += f"; the conditions' sensitivities failed at {n_failed_total} point(s) (condition scatter left out there)"
     message = f"{fit.message}; {text}" if fit.message else text
