@@ -189,7 +189,7 @@ class CalibrationSettings:
     errors_in_variables: str = "marginal"
     condition_sigma: dict | None = None
     condition_relative_sigma: dict | None = None
-    max_eiv_iterations: int = 5
+    max_eiv_iterations: int = 10
     verbose: bool = False
 
     def validate(self, source: str = "CalibrationSettings", prefix: str = "") -> "CalibrationSettings":
