@@ -203,3 +203,28 @@ def test_field_scada_workflow_runs_with_errors_in_variables(tmp_path):
     (tmp_path / "oe.toml").write_text(text)
     [oe] = run_workflow(tmp_path / "oe.toml", tmp_path / "oe", progress=False, history=False)
     assert oe.result.fit.chi2_after / oe.result.dof > 3.0
+
+
+def test_select_points_carries_the_condition_sigma():
+    from calib.measurements import Measurements
+    cond = OperatingConditions([5.0, 10.0, 12.0], [9.0, 12.0, 12.1], [0.0, 2.0, 4.0])
+    m = Measurements(cond, ("power",), [[1.0], [2.0], [3.0]], [[0.1], [0.2], [0.3]],
+                     condition_sigma={"pitch": [0.1, 0.2, 0.3]})
+    sub = m.select_points(np.array([True, False, True]))
+    np.testing.assert_array_equal(sub.condition_sigma["pitch"], [0.1, 0.3])
+    np.testing.assert_array_equal(sub.values[:, 0], [1.0, 3.0])
+    np.testing.assert_array_equal(sub.conditions.wind_speed, [5.0, 12.0])
+
+
+def test_truncated_estimator_takes_the_marginal_problem(globals_model):
+    """The truncated ML estimator on the marginal problem: its χ² is that of the stated noise (the
+    conditions' scatter carried by the effective covariance), the output-error fit's is not."""
+    model, truth = globals_model
+    meas, _ = synthesize_campaign(truth, np.zeros(0), CampaignSpec(n_records=60), seed=11)
+    chi2 = {}
+    for mode in ("marginal", "ignore"):
+        res = Calibrator(model, meas, CalibrationSettings(estimator="truncated", errors_in_variables=mode,
+                                                          **FAST)).run()
+        assert res.estimate.status == "converged"
+        chi2[mode] = res.fit.chi2_after / res.dof
+    assert chi2["marginal"] < 1.6 < 3.0 < chi2["ignore"]

@@ -51,7 +51,7 @@ from typing import Callable
 
 import numpy as np
 
-from calib.calibration.errors_in_variables import check_noise_mode, condition_sigma, fit_marginal
+from calib.calibration.errors_in_variables import fit_marginal, uncertain_conditions
 from calib.calibration.map_fit import MapFit
 from calib.calibration.noise import initial_sigma
 from calib.calibration.problem import LeastSquaresProblem, ProblemStatement
@@ -181,8 +181,7 @@ class Calibrator:
         t0 = time.perf_counter()
         st = self.settings
         m = self.measurements
-        if st.errors_in_variables == "marginal" and condition_sigma(m, st) is not None:
-            check_noise_mode(st, m.source)
+        sigma_u = uncertain_conditions(m, st)   # None: the output-error fit below, as before
         sigma = initial_sigma(self.measurements, self.settings)
         statement = self.statement
         problem = LeastSquaresProblem(self.model, m.conditions, m.values,
@@ -201,8 +200,7 @@ class Calibrator:
             problem = problem.with_sigma(sigma)
         noise_iters = st.max_noise_iterations if st.noise in ("ml", "relative_ml") else 1
         p = statement.p0.copy() if self.start is None else self.start.copy()
-        sigma_u = condition_sigma(m, st) if st.errors_in_variables == "marginal" else None
-        if sigma_u is not None:   # errors in variables; none stated: the output-error fit below, as before
+        if sigma_u is not None:   # errors in variables
             problem, fit, message = fit_marginal(self, problem, sigma_u, p)
             p, status, noise_iters = fit.p, fit.status, 0
         for k_noise in range(noise_iters):

@@ -118,6 +118,24 @@ def check_noise_mode(settings, source: str = "settings") -> None:
                          field="calibration.noise")
 
 
+def uncertain_conditions(m, settings) -> np.ndarray | None:
+    """The conditions' σ the calibration takes into its fit (:func:`condition_sigma`), or None: none
+    stated, all zero, or ``errors_in_variables = "ignore"``.
+
+    Raises
+    ------
+    InputError
+        Condition σ stated with a noise model the marginal estimator does not support
+        (:func:`check_noise_mode`).
+    """
+    if settings.errors_in_variables != "marginal":
+        return None
+    sigma_u = condition_sigma(m, settings)
+    if sigma_u is not None:
+        check_noise_mode(settings, m.source)
+    return sigma_u
+
+
 def condition_sensitivities(model, p: np.ndarray, conditions: OperatingConditions, channel_index,
                             sigma_u: np.ndarray) -> tuple[np.ndarray, int]:
     """∂y/∂u of every point's measured channels by central differences through ``model.evaluate``.

@@ -240,6 +240,16 @@ class CalibrationSettings:
         for c, v in (self.relative_sigma or {}).items():
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 10:
                 bad(f"must be a fraction > 0 (of the channel's RMS), got {v!r}", f"relative_sigma.{c}")
+        self._validate_errors_in_variables(bad)
+        try:
+            get_optimizer(self.optimizer)
+        except InputError as exc:
+            bad(exc.message, "optimizer")
+        return self
+
+    def _validate_errors_in_variables(self, bad) -> None:
+        """Check ``errors_in_variables``, the condition σ (known conditions, numbers >= 0) and
+        ``max_eiv_iterations``; ``bad(message, key)`` raises."""
         if self.errors_in_variables not in ERRORS_IN_VARIABLES:
             bad(f"unknown mode {self.errors_in_variables!r}; valid: {', '.join(ERRORS_IN_VARIABLES)}",
                 "errors_in_variables")
@@ -252,8 +262,3 @@ class CalibrationSettings:
                     bad(f"must be a number >= 0 ({what}), got {v!r}", f"{key}.{c}")
         if not self.max_eiv_iterations >= 1:
             bad(f"must be >= 1, got {self.max_eiv_iterations!r}", "max_eiv_iterations")
-        try:
-            get_optimizer(self.optimizer)
-        except InputError as exc:
-            bad(exc.message, "optimizer")
-        return self

@@ -142,6 +142,13 @@ class Measurements:
         return replace(self, channels=tuple(names), values=self.values[:, idx],
                        sigma=None if self.sigma is None else self.sigma[:, idx])
 
+    def select_points(self, index) -> "Measurements":
+        """A copy with the points at ``index`` (any numpy index): conditions, values, σ and the
+        conditions' σ; notes and metadata are kept."""
+        sub = {k: v[index] for k, v in self.condition_sigma.items()} if self.condition_sigma else None
+        return replace(self, conditions=self.conditions.subset(index), values=self.values[index],
+                       sigma=None if self.sigma is None else self.sigma[index], condition_sigma=sub)
+
     def with_sigma(self, sigma) -> "Measurements":
         """A copy with noise ``sigma`` (scalar, (n_channels,) or (n_points, n_channels))."""
         s = np.broadcast_to(np.asarray(sigma, dtype=float), self.values.shape).copy()

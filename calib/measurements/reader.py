@@ -153,9 +153,9 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     declared = declared_units(table)
     rows = split_rows(table)
     channels, sig_cols = kept_channels(table, channels, allow_no_channels)
-    cond_sig_cols = [f"{c}_sigma" for c in ("wind_speed", "rotor_speed", "pitch") if f"{c}_sigma" in set(table.names)]
-    needed = (list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in set(table.names)] + channels
-              + sig_cols + cond_sig_cols)
+    cond_sig_cols = [f"{c}_sigma" for c in ("wind_speed", "rotor_speed", "pitch") if f"{c}_sigma" in table.names]
+    needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in set(table.names)] + channels + sig_cols
+    needed += cond_sig_cols
     index_of = {n: i for i, n in enumerate(table.names)}
     col_of = {n: index_of[n] for n in needed}
     times = {}
@@ -183,7 +183,7 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     line_of = [rows[k][0] for k in kept]
     col = {n: data[:, j] for j, n in enumerate(needed)}
     check_values(col, sig_cols, line_of, src)
-    check_condition_sigma(col, cond_sig_cols, line_of, table)
+    cond_sigma = condition_sigma_columns(col, cond_sig_cols, line_of, table, notes)
     metadata = {"units": declared, "delimiter": table.delimiter, "decimal_comma": decimal_comma,
                 "units_row": table.units_row[0] if table.units_row else None,
                 "format": "openfast" if table.openfast is not None else "csv"}
@@ -199,16 +199,13 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     cond = OperatingConditions(**{f: col.get(f, CONDITION_DEFAULTS.get(f)) for f in CONDITION_FIELDS})
     values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(line_of), 0))
     sigma = np.column_stack([col[s] for s in sig_cols]) if sig_cols else None
-    cond_sigma = {s[:-6]: col[s] for s in cond_sig_cols} or None
-    if cond_sigma:
-        notes.append("condition uncertainty read: " + ", ".join(
-            f"{s} [{si_unit(quantity_of(s))}]" for s in cond_sig_cols))
     return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256,
                         metadata=metadata, notes=tuple(notes), condition_sigma=cond_sigma)
 
 
-def check_condition_sigma(col: dict, columns: list[str], line_of: list[int], table) -> None:
-    """Refuse a negative or non-finite condition σ (``wind_speed_sigma`` ...), naming line and column.
+def condition_sigma_columns(col: dict, columns: list[str], line_of: list[int], table, notes: list) -> dict | None:
+    """The condition σ columns (``wind_speed_sigma`` ...) checked, as :attr:`Measurements.condition_sigma`;
+    a note says which were read. A negative or non-finite σ is refused, naming line and column.
 
     Parameters
     ----------
@@ -220,6 +217,13 @@ def check_condition_sigma(col: dict, columns: list[str], line_of: list[int], tab
         File line of each point.
     table : Table
         For the file name and the column's position and header.
+    notes : list of str
+        Appended to.
+
+    Returns
+    -------
+    dict or None
+        Condition -> σ per point [m/s, rpm, deg]; None without such columns.
 
     Raises
     ------
@@ -233,3 +237,7 @@ def check_condition_sigma(col: dict, columns: list[str], line_of: list[int], tab
             raise InputError(f"condition sigma in column {i + 1} '{table.raw_names[i]}' must be >= 0 "
                              f"({si_unit(quantity_of(name))}; 0 for an exact condition), got {col[name][bad[0]]:g}",
                              table.src, line_of[bad[0]], field=name)
+    if not columns:
+        return None
+    notes.append("condition uncertainty read: " + ", ".join(f"{c} [{si_unit(quantity_of(c))}]" for c in columns))
+    return {c[:-6]: col[c] for c in columns}
