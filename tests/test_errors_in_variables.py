@@ -228,3 +228,13 @@ def test_truncated_estimator_takes_the_marginal_problem(globals_model):
         assert res.estimate.status == "converged"
         chi2[mode] = res.fit.chi2_after / res.dof
     assert chi2["marginal"] < 1.6 < 3.0 < chi2["ignore"]
+
+
+def test_condition_sigma_survives_a_written_table(tmp_path):
+    from calib.measurements import Measurements
+    cond = OperatingConditions([5.0, 10.0], [9.0, 12.0], [0.0, 2.0])
+    m = Measurements(cond, ("power",), [[1.0e6], [2.0e6]], [[1e4], [2e4]],
+                     condition_sigma={"wind_speed": [0.15, 0.3], "pitch": [0.2, 0.2]})
+    back = read_measurements(m.write_csv(tmp_path / "t.csv"))
+    for name in ("wind_speed", "pitch"):
+        np.testing.assert_allclose(back.condition_sigma[name], m.condition_sigma[name], rtol=1e-12)

@@ -157,7 +157,8 @@ class Measurements:
     def write_csv(self, path: str | Path) -> Path:
         """Write the table as CSV in SI units, each column header with its unit.
 
-        ``_sigma`` columns are written when the noise is known. The source and the
+        ``_sigma`` columns are written when the noise is known, and the conditions' σ columns
+        (``wind_speed_sigma`` ...) when given. The source and the
         :attr:`notes` are written as ``#`` comment lines above the header (reading the
         file back gives fresh notes about the written file). The file is written to a
         temporary name and renamed, so an interruption never leaves a truncated table.
@@ -173,6 +174,9 @@ class Measurements:
         if self.sigma is not None:
             cols += [f"{c}_sigma" for c in self.channels]
             data += list(self.sigma.T)
+        for name, sig in (self.condition_sigma or {}).items():   # the conditions' σ, for errors in variables
+            cols.append(f"{name}_sigma")
+            data.append(sig)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
         try:
