@@ -311,7 +311,7 @@ def fit_marginal(cal, problem: LeastSquaresProblem, sigma_u: np.ndarray, p: np.n
         if change < EIV_SETTLED:
             break
     settled = change < EIV_SETTLED
-    # the result is assembled at the last J_u: linearized at the estimate it settled at
+    # the result is assembled with the last fit's J_u, linearized at the estimate before it (settled: moved < EIV_SETTLED since)
     text = (f"errors in variables (marginal): {k + 1} fit(s) re-linearizing the conditions' sensitivities, "
             + (f"settled (last move {change:.2g} < {EIV_SETTLED:g} σ of the data)" if settled else
                f"NOT settled after max_eiv_iterations = {st.max_eiv_iterations} (last move {change:.2g} σ of "
