@@ -51,6 +51,7 @@ from typing import Callable
 
 import numpy as np
 
+from calib.calibration.errors_in_variables import fit_marginal, uncertain_conditions
 from calib.calibration.map_fit import MapFit
 from calib.calibration.noise import initial_sigma
 from calib.calibration.problem import LeastSquaresProblem, ProblemStatement
@@ -180,6 +181,7 @@ class Calibrator:
         t0 = time.perf_counter()
         st = self.settings
         m = self.measurements
+        sigma_u = uncertain_conditions(m, st)   # None: the output-error fit below, as before
         sigma = initial_sigma(self.measurements, self.settings)
         statement = self.statement
         problem = LeastSquaresProblem(self.model, m.conditions, m.values,
@@ -198,6 +200,9 @@ class Calibrator:
             problem = problem.with_sigma(sigma)
         noise_iters = st.max_noise_iterations if st.noise in ("ml", "relative_ml") else 1
         p = statement.p0.copy() if self.start is None else self.start.copy()
+        if sigma_u is not None:   # errors in variables
+            problem, fit, message = fit_marginal(self, problem, sigma_u, p)
+            p, status, noise_iters = fit.p, fit.status, 0
         for k_noise in range(noise_iters):
             fit = self.fitter.fit(problem, p)
             p, svd, lin, status, message = fit.p, fit.svd, fit.lin, fit.status, fit.message
@@ -220,7 +225,7 @@ class Calibrator:
             problem = problem.with_sigma(new_sigma)
             if change < NOISE_SETTLED:
                 break
-        if st.noise in ("ml", "relative_ml"):
+        if st.noise in ("ml", "relative_ml") and sigma_u is None:
             # the estimator's message is the last fit's: say how many fits the noise estimate took
             settled = change < NOISE_SETTLED
             message = (f"{message}; noise σ estimated over {k_noise + 1} fit(s), "

@@ -13,6 +13,8 @@ from calib.errors import InputError
 NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
 RETAIN_MODES = ("threshold", "all")
 ESTIMATORS = ("map", "truncated")
+ERRORS_IN_VARIABLES = ("marginal", "ignore")
+UNCERTAIN_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
 
 
 @dataclass(frozen=True)
@@ -139,6 +141,20 @@ class CalibrationSettings:
         Confidence level of the polar bands.
     band_eta : tuple of float, optional
         Spanwise positions of the polar bands (default: the η nodes).
+    errors_in_variables : {"marginal", "ignore"}
+        What the conditions' uncertainty does (:mod:`calib.calibration.errors_in_variables`):
+        ``"marginal"`` (default) fits with each point's effective covariance
+        R_k + J_u,k Σ_u,k J_u,kᵀ wherever a condition σ is stated (none stated: the output-error
+        fit, unchanged); ``"ignore"`` fits as if the conditions were exact (output error).
+    condition_sigma : dict condition -> float, optional
+        Absolute 1-σ of the measured conditions, ``wind_speed`` [m/s], ``rotor_speed`` [rpm],
+        ``pitch`` [deg], >= 0; adds in quadrature to the table's ``<condition>_sigma`` columns.
+    condition_relative_sigma : dict condition -> float, optional
+        1-σ of the conditions as a fraction of each point's value [-] (e.g. ``{wind_speed = 0.03}``
+        for a nacelle anemometer's 3 % scatter per 10-minute mean), >= 0; adds in quadrature.
+    max_eiv_iterations : int
+        Most fits of the marginal estimator, each with the conditions' sensitivities
+        re-linearized at the last estimate.
     """
 
     estimator: str = "map"
@@ -170,6 +186,10 @@ class CalibrationSettings:
     confounded_share: float = 0.75
     band_confidence: float = 0.95
     band_eta: tuple | None = None
+    errors_in_variables: str = "marginal"
+    condition_sigma: dict | None = None
+    condition_relative_sigma: dict | None = None
+    max_eiv_iterations: int = 10
     verbose: bool = False
 
     def validate(self, source: str = "CalibrationSettings", prefix: str = "") -> "CalibrationSettings":
@@ -220,8 +240,25 @@ class CalibrationSettings:
         for c, v in (self.relative_sigma or {}).items():
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 10:
                 bad(f"must be a fraction > 0 (of the channel's RMS), got {v!r}", f"relative_sigma.{c}")
+        self._validate_errors_in_variables(bad)
         try:
             get_optimizer(self.optimizer)
         except InputError as exc:
             bad(exc.message, "optimizer")
         return self
+
+    def _validate_errors_in_variables(self, bad) -> None:
+        """Check ``errors_in_variables``, the condition σ (known conditions, numbers >= 0) and
+        ``max_eiv_iterations``; ``bad(message, key)`` raises."""
+        if self.errors_in_variables not in ERRORS_IN_VARIABLES:
+            bad(f"unknown mode {self.errors_in_variables!r}; valid: {', '.join(ERRORS_IN_VARIABLES)}",
+                "errors_in_variables")
+        for key, what in (("condition_sigma", "absolute 1-σ in the condition's unit: m/s, rpm, deg"),
+                          ("condition_relative_sigma", "a fraction of the condition's value")):
+            for c, v in (getattr(self, key) or {}).items():
+                if c not in UNCERTAIN_CONDITIONS:
+                    bad(f"unknown condition {c!r}; valid: {', '.join(UNCERTAIN_CONDITIONS)}", f"{key}.{c}")
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 or not np.isfinite(v):
+                    bad(f"must be a number >= 0 ({what}), got {v!r}", f"{key}.{c}")
+        if not self.max_eiv_iterations >= 1:
+            bad(f"must be >= 1, got {self.max_eiv_iterations!r}", "max_eiv_iterations")

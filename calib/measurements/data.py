@@ -61,6 +61,11 @@ class Measurements:
     notes : tuple of str
         What the reader did that a user should know (delimiter detected, columns
         ignored, rows dropped ...), one sentence each.
+    condition_sigma : dict str -> ndarray, optional
+        1-σ of the measured conditions per point, shape (n_points,) each, from the table's
+        ``wind_speed_sigma`` [m/s], ``rotor_speed_sigma`` [rpm] and ``pitch_sigma`` [deg] columns
+        (those given), >= 0; read by the errors-in-variables estimator
+        (:mod:`calib.calibration.errors_in_variables`).
     """
 
     conditions: OperatingConditions
@@ -71,6 +76,7 @@ class Measurements:
     sha256: str = ""
     metadata: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    condition_sigma: dict | None = None
 
     def __repr__(self) -> str:
         """A short summary (``values``, ``sigma`` and ``conditions`` hold the arrays)."""
@@ -98,6 +104,16 @@ class Measurements:
                 raise InputError(f"noise sigma must be > 0, got {s[k, c]!r} (row {k + 1})",
                                  self.source, field=f"{self.channels[c]}_sigma")
             object.__setattr__(self, "sigma", s)
+        if self.condition_sigma is not None:
+            cs = {}
+            for name, value in self.condition_sigma.items():
+                a = np.broadcast_to(np.asarray(value, dtype=float), (len(self.conditions),)).copy()
+                bad = np.flatnonzero(~(a >= 0))
+                if bad.size:
+                    raise InputError(f"condition sigma must be >= 0, got {a[bad[0]]!r} (row {bad[0] + 1})",
+                                     self.source, field=f"{name}_sigma")
+                cs[name] = a
+            object.__setattr__(self, "condition_sigma", cs)
 
     @property
     def n_points(self) -> int:
@@ -126,6 +142,13 @@ class Measurements:
         return replace(self, channels=tuple(names), values=self.values[:, idx],
                        sigma=None if self.sigma is None else self.sigma[:, idx])
 
+    def select_points(self, index) -> "Measurements":
+        """A copy with the points at ``index`` (any numpy index): conditions, values, σ and the
+        conditions' σ; notes and metadata are kept."""
+        sub = {k: v[index] for k, v in self.condition_sigma.items()} if self.condition_sigma else None
+        return replace(self, conditions=self.conditions.subset(index), values=self.values[index],
+                       sigma=None if self.sigma is None else self.sigma[index], condition_sigma=sub)
+
     def with_sigma(self, sigma) -> "Measurements":
         """A copy with noise ``sigma`` (scalar, (n_channels,) or (n_points, n_channels))."""
         s = np.broadcast_to(np.asarray(sigma, dtype=float), self.values.shape).copy()
@@ -134,7 +157,8 @@ class Measurements:
     def write_csv(self, path: str | Path) -> Path:
         """Write the table as CSV in SI units, each column header with its unit.
 
-        ``_sigma`` columns are written when the noise is known. The source and the
+        ``_sigma`` columns are written when the noise is known, and the conditions' σ columns
+        (``wind_speed_sigma`` ...) when given. The source and the
         :attr:`notes` are written as ``#`` comment lines above the header (reading the
         file back gives fresh notes about the written file). The file is written to a
         temporary name and renamed, so an interruption never leaves a truncated table.
@@ -150,6 +174,9 @@ class Measurements:
         if self.sigma is not None:
             cols += [f"{c}_sigma" for c in self.channels]
             data += list(self.sigma.T)
+        for name, sig in (self.condition_sigma or {}).items():   # the conditions' σ, for errors in variables
+            cols.append(f"{name}_sigma")
+            data.append(sig)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
         try:

@@ -19,7 +19,10 @@ Columns (order free; names are case-insensitive, spaces and hyphens count as ``_
   ``root_edge_moment`` [N m], and spanwise channels ``<q>@<r/R>`` with ``q`` in
   ``cn``, ``ct`` (force coefficients [-]) or ``fn``, ``ft`` (force per unit length [N/m]),
   e.g. ``cn@0.30`` is the normal-force coefficient at r/R = 0.30;
-- noise: ``<channel>_sigma``, the 1-σ noise of that channel, in the same unit.
+- noise: ``<channel>_sigma``, the 1-σ noise of that channel, in the same unit;
+- condition uncertainty: ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``, the 1-σ
+  of a measured condition (>= 0), in the condition's units (read into
+  :attr:`Measurements.condition_sigma` for the errors-in-variables estimator).
 
 A header may give a unit as ``power [kW]``, ``Power_[kW]`` (OpenFAST style) or
 ``power (kW)``; units are case-insensitive (``kw`` is kW, ``mw`` is MW, never milliwatt)
@@ -150,7 +153,9 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     declared = declared_units(table)
     rows = split_rows(table)
     channels, sig_cols = kept_channels(table, channels, allow_no_channels)
+    cond_sig_cols = [f"{c}_sigma" for c in ("wind_speed", "rotor_speed", "pitch") if f"{c}_sigma" in table.names]
     needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in set(table.names)] + channels + sig_cols
+    needed += cond_sig_cols
     index_of = {n: i for i, n in enumerate(table.names)}
     col_of = {n: index_of[n] for n in needed}
     times = {}
@@ -178,6 +183,7 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     line_of = [rows[k][0] for k in kept]
     col = {n: data[:, j] for j, n in enumerate(needed)}
     check_values(col, sig_cols, line_of, src)
+    cond_sigma = condition_sigma_columns(col, cond_sig_cols, line_of, table, notes)
     metadata = {"units": declared, "delimiter": table.delimiter, "decimal_comma": decimal_comma,
                 "units_row": table.units_row[0] if table.units_row else None,
                 "format": "openfast" if table.openfast is not None else "csv"}
@@ -194,4 +200,44 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     values = np.column_stack([col[c] for c in channels]) if channels else np.zeros((len(line_of), 0))
     sigma = np.column_stack([col[s] for s in sig_cols]) if sig_cols else None
     return Measurements(cond, tuple(channels), values, sigma, source=src, sha256=sha256,
-                        metadata=metadata, notes=tuple(notes))
+                        metadata=metadata, notes=tuple(notes), condition_sigma=cond_sigma)
+
+
+def condition_sigma_columns(col: dict, columns: list[str], line_of: list[int], table, notes: list) -> dict | None:
+    """The condition σ columns (``wind_speed_sigma`` ...) checked, as :attr:`Measurements.condition_sigma`;
+    a note says which were read. A negative or non-finite σ is refused, naming line and column.
+
+    Parameters
+    ----------
+    col : dict
+        Column name -> values in SI units of the contract, shape (n_points,).
+    columns : list of str
+        The condition σ columns present.
+    line_of : list of int
+        File line of each point.
+    table : Table
+        For the file name and the column's position and header.
+    notes : list of str
+        Appended to.
+
+    Returns
+    -------
+    dict or None
+        Condition -> σ per point [m/s, rpm, deg]; None without such columns.
+
+    Raises
+    ------
+    InputError
+        The first σ < 0 (a σ of 0 states an exact condition).
+    """
+    for name in columns:
+        bad = np.flatnonzero(~(col[name] >= 0))
+        if bad.size:
+            i = table.names.index(name)
+            raise InputError(f"condition sigma in column {i + 1} '{table.raw_names[i]}' must be >= 0 "
+                             f"({si_unit(quantity_of(name))}; 0 for an exact condition), got {col[name][bad[0]]:g}",
+                             table.src, line_of[bad[0]], field=name)
+    if not columns:
+        return None
+    notes.append("condition uncertainty read: " + ", ".join(f"{c} [{si_unit(quantity_of(c))}]" for c in columns))
+    return {c[:-6]: col[c] for c in columns}

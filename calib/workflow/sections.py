@@ -292,6 +292,7 @@ def stages_from_list(stages: list, source: str) -> tuple:
 #: ``strict_units``.
 CALIBRATION_KEYS = {**schema_of(CalibrationSettings, exclude=("verbose",),
                                 overrides={"sigma_bar": AUTO_OR_NUM, "sigma": dict, "relative_sigma": dict,
+                                           "condition_sigma": dict, "condition_relative_sigma": dict,
                                            "prior_std": dict, "cd_min": NUM, "max_retained": int,
                                            "band_eta": list}),
                     "force": Key(bool), "strict_units": Key(bool)}

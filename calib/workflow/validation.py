@@ -236,9 +236,7 @@ def leave_one_out(make_model: Callable, measurements: Measurements, settings: Ca
     out = Validation(validation.leave_out, validation.confidence, units={c: units.get(c, "") for c in channels},
                      split=validation.split)
     for i, (label, test) in enumerate(folds):
-        train = dataclasses.replace(
-            measurements, conditions=measurements.conditions.subset(~test), values=measurements.values[~test],
-            sigma=None if measurements.sigma is None else measurements.sigma[~test])
+        train = measurements.select_points(~test)
         try:
             # a fold's result serves its prediction only: no advice; the prior check only where the bands
             # carry the field beyond the nodes at the amplitude it bounds (the MAP's, prediction.field_amplitude)
