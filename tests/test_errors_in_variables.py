@@ -238,3 +238,15 @@ def test_condition_sigma_survives_a_written_table(tmp_path):
     back = read_measurements(m.write_csv(tmp_path / "t.csv"))
     for name in ("wind_speed", "pitch"):
         np.testing.assert_allclose(back.condition_sigma[name], m.condition_sigma[name], rtol=1e-12)
+
+
+def test_the_diagnosis_refuses_condition_sigma_naming_the_key(globals_model):
+    from calib.corrections import CorrectionGrid
+    from calib.diagnosis.core import diagnose
+    _, truth = globals_model
+    meas, _ = synthesize_campaign(truth, np.zeros(0), CampaignSpec(n_records=12), seed=2)
+    grid = CorrectionGrid([0.0, 8.0], [0.5, 1.0])
+    with pytest.raises(InputError, match="diagnose with errors_in_variables") as exc:
+        diagnose(load_rotor("nrel5mw"), meas, grid, BemSettings(use_tilt=False),
+                 CalibrationSettings(noise="known", condition_sigma={"pitch": 0.2}, **FAST))
+    assert exc.value.field == "errors_in_variables"

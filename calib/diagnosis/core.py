@@ -69,6 +69,7 @@ import numpy as np
 
 from calib.bem import BemSettings
 from calib.calibration.calibrator import CalibrationSettings, Calibrator
+from calib.calibration.errors_in_variables import uncertain_conditions
 from calib.corrections import CorrectionGrid
 from calib.diagnosis.bem_family import BemFamily, facility_effects
 from calib.diagnosis.figures_of_merit import find, gap
@@ -134,6 +135,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         fixed = facility_effects((diagnosis or DiagnosisSettings()).validate(), rotor)
         family = BemFamily(rotor, channels, grid, settings, rotor_source, fixed=fixed)
     cal, dset = _fit_settings(calibration, diagnosis, family)
+    _refuse_condition_sigma(measurements, cal)
     say = progress or (lambda s: None)
     wrap = wrap or (lambda model, label: model)
 
@@ -162,6 +164,15 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
                      meas.values, sigma, meas.conditions.as_dict(), y0, namer.base_values, y_after,
                      family.rotor_radius, time.perf_counter() - t0, namer.notes, "; ".join(namer.failures),
                      model_form=namer.model_form)
+
+
+def _refuse_condition_sigma(measurements: Measurements, cal: CalibrationSettings) -> None:
+    """Refuse operating conditions with a stated σ: the diagnosis's fits do not carry them (its
+    localization would hand the effective σ of one fit on as the next fits' output noise)."""
+    if uncertain_conditions(measurements, cal) is not None:
+        raise InputError("the diagnosis does not take the operating conditions' σ (errors in variables) "
+                         "into its fits yet; diagnose with errors_in_variables = \"ignore\" (the conditions "
+                         "as read), then calibrate with them", measurements.source, field="errors_in_variables")
 
 
 def _fit_settings(calibration: CalibrationSettings | None, diagnosis: DiagnosisSettings | None,
