@@ -1,0 +1,359 @@
+"""``calib.design.design``: choose a campaign's operating points from a workflow's model, prior and noise.
+
+The workflow file states the model (native BEM or FMU), the correction grid, the prior
+(``[calibration]``) and the noise (``[noise] relative`` of a synthetic workflow, else
+``[calibration] relative_sigma`` or ``sigma``); its data points (the measured table or the
+``[conditions]`` grid) span the operating envelope. The sensitivities of every candidate come from
+one call of the model's Jacobian at the linearization point (the nominal parameters, or a
+calibrated result's estimate with ``after``), and the criteria and the selection are those of
+:mod:`calib.design.criteria` and :mod:`calib.design.select`.
+
+Noise: channel c's 1-σ is its relative level times the RMS of the nominal model's output over the
+workflow's data points (as :func:`calib.calibration.noise.relative_noise` and the synthetic data
+of :func:`calib.measurements.synthesize` define it), the same at every candidate; a channel without
+a stated level gets the median of the stated ones (as :mod:`calib.calibration.tightening` does).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calib.checks.prior_check import psd_sqrt
+from calib.design import candidates as cand
+from calib.design.criteria import a_criterion, d_criterion, determined_directions
+from calib.design.select import Selection, precision, select
+from calib.design.sensors import check_groups, parse_groups
+from calib.errors import InputError
+from calib.types import OperatingConditions
+
+__all__ = ["DesignProblem", "DesignResult", "design", "problem_from_workflow", "CRITERIA"]
+
+CRITERIA = ("d", "a", "prediction")
+DEFAULT_RELATIVE = 0.01
+
+
+@dataclass
+class DesignProblem:
+    """What a design needs from a workflow.
+
+    Attributes
+    ----------
+    model : ForwardModel
+        Built with the sensor groups' channels.
+    p : ndarray, shape (n,)
+        Linearization point [parameter units].
+    scale : ndarray, shape (n,)
+        Parameter scales [parameter units].
+    L : ndarray, shape (n, n)
+        Square root of the prior covariance of the scaled parameters, P = L Lᵀ [scale units].
+    names : list of str
+    channels : list of str
+    sigma : ndarray, shape (n_channels,)
+        Noise 1-σ per channel [channel units].
+    envelope : Envelope
+    reference : OperatingConditions
+        The workflow's data points.
+    groups : list of SensorGroup
+    source : str
+    notes : list of str
+    """
+
+    model: object
+    p: np.ndarray
+    scale: np.ndarray
+    L: np.ndarray
+    names: list
+    channels: list
+    sigma: np.ndarray
+    envelope: cand.Envelope
+    reference: OperatingConditions
+    groups: list
+    source: str
+    notes: list = field(default_factory=list)
+    prior_from: str = "the workflow's prior"
+
+    def blocks(self, conditions: OperatingConditions):
+        """The prior-whitened blocks H_j = R^{-½} ∂y_j/∂p̃ L of every point (one model Jacobian call).
+
+        Returns
+        -------
+        H : ndarray, shape (n_points, n_channels, n)
+            Zero at failed points.
+        ok : ndarray of bool, shape (n_points,)
+            Converged points with finite sensitivities.
+        """
+        ev, G = self.model.jacobian(self.p, conditions)
+        ok = np.asarray(ev.ok, bool) & np.all(np.isfinite(G), axis=(1, 2)) & np.all(np.isfinite(ev.values), axis=1)
+        M = np.where(ok[:, None, None], G, 0.0) * self.scale / self.sigma[None, :, None]
+        return np.nan_to_num(M) @ self.L, ok
+
+
+def _reference(workflow, setup):
+    from calib.workflow.setup import measurements_of, synthetic_conditions
+
+    if workflow.measurements is not None:
+        return measurements_of(workflow, setup.channels).conditions
+    return synthetic_conditions(workflow.conditions, setup.rotor, setup.density, setup.yaw)
+
+
+def _relative_levels(workflow, setup, channels, notes) -> dict:
+    s = setup.calibration
+    stated = dict(workflow.noise.relative) if workflow.noise is not None and workflow.measurements is None else {}
+    stated = {**dict(s.relative_sigma or {}), **stated}
+    from calib.calibration.noise import group_of
+
+    rel = {c: stated.get(c, stated.get(group_of(c))) for c in channels}
+    known = [float(v) for v in rel.values() if v is not None]
+    fill = float(np.median(known)) if known else DEFAULT_RELATIVE
+    missing = [c for c, v in rel.items() if v is None]
+    if missing:
+        notes.append(f"no stated noise for {', '.join(missing)}: {100 * fill:.3g} % of the channel's RMS assumed"
+                     + (" (the median of the stated ones)" if known else " (default)"))
+    return {c: float(v) if v is not None else fill for c, v in rel.items()}
+
+
+def problem_from_workflow(path, sensors=None, after=None, executor=None) -> DesignProblem:
+    """The design problem of a workflow file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The workflow TOML.
+    sensors : sequence of str, optional
+        Sensor groups ``NAME[:COST]`` (:mod:`calib.design.sensors`); default the workflow's channels.
+    after : str or Path, optional
+        A calibrated result's folder (``calib run`` stage folder): its estimate is the
+        linearization point and its posterior covariance the prior.
+    executor : optional
+        The FMU's executor.
+    """
+    from calib.calibration.calibrator import Calibrator
+    from calib.calibration.map_fit import MapFit
+    from calib.calibration.noise import relative_noise
+    from calib.measurements import Measurements
+    from calib.workflow.schema import load_workflow
+    from calib.workflow.setup import prepare
+
+    workflow = load_workflow(path)
+    setup = prepare(workflow)
+    src = workflow.source
+    notes = list(setup.notes)
+    if setup.rotor is None:
+        raise InputError("calib design needs the rotor's radius: give a [rotor] table", src, field="rotor")
+    reference = _reference(workflow, setup)
+    grid = setup.grid(reference)
+    groups = parse_groups(sensors, setup.channels)
+    model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor))
+    ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
+    if not np.any(ev.ok):
+        raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
+    rel = _relative_levels(workflow, setup, channels, notes)
+    values = ev.values[ev.ok]
+    sigma = relative_noise(values, channels, rel, src, field="noise.relative")[0]
+    meas = Measurements(reference.subset(np.flatnonzero(ev.ok)), tuple(channels), values)
+    settings = setup.calibration
+    cal = Calibrator(model, meas, settings)
+    stmt = cal.statement
+    P = MapFit(cal).prior_cov_scaled() if settings.estimator == "map" else cal.prior_cov_scaled()
+    p, prior_from = stmt.p0.copy(), "the workflow's prior"
+    names = [q.name for q in stmt.parameters]
+    if after is not None:
+        p, P = _posterior_of(after, names, stmt.scale)
+        prior_from = f"the posterior of {after}"
+    env = cand.envelope_of(reference, setup.rotor.rotor_radius)
+    return DesignProblem(model, p, np.array(stmt.scale), psd_sqrt(P), names, channels, sigma, env, reference,
+                         groups, src, notes, prior_from)
+
+
+def _posterior_of(rdir, names, scale):
+    from calib.calibration.result_files import load_result
+
+    rdir = Path(rdir)
+    if not rdir.exists():
+        raise InputError(f"no such result folder: {rdir}", "--after", field="after")
+    res = load_result(rdir)
+    theirs = [q.name for q in res.parameter_objects]
+    if theirs != names:
+        raise InputError(f"the result's {len(theirs)} parameters are not the workflow model's {len(names)} "
+                         f"(first difference: {next((a for a, b in zip(theirs, names) if a != b), 'count')})",
+                         str(rdir), field="parameters")
+    cov = np.asarray(res.uncertainty.cov_p, float) / np.outer(scale, scale)
+    return np.array(res.estimate.p_hat, float), 0.5 * (cov + cov.T)
+
+
+@dataclass
+class DesignResult:
+    """A campaign design and how it compares (see :func:`design`).
+
+    Attributes
+    ----------
+    candidates : OperatingConditions
+        The candidate set (failed candidates included, ``ok`` False).
+    ok : ndarray of bool
+    design : ndarray of int
+        Candidate index of each point of the design, fixed first (a repeat appears twice).
+    fixed : ndarray of int
+    selection : Selection
+    sigma_prior, sigma_design, sigma_full, sigma_uniform : ndarray, shape (n,)
+        Posterior 1-σ of every parameter [parameter units].
+    s_design, s_full, s_uniform : ndarray
+        Singular values of the prior-whitened sensitivities (s > 1: determined by the data).
+    logdet : dict
+        log det of the whitened precision: design, full, uniform, greedy (before exchange) [-].
+    uniform : ndarray of int
+        The space-filling design of the same size.
+    criterion : str
+    seconds : dict
+        CPU seconds (time.process_time) of the sensitivities and of the selection [s].
+    """
+
+    problem: DesignProblem
+    candidates: OperatingConditions
+    ok: np.ndarray
+    design: np.ndarray
+    fixed: np.ndarray
+    selection: Selection
+    sigma_prior: np.ndarray
+    sigma_design: np.ndarray
+    sigma_full: np.ndarray
+    sigma_uniform: np.ndarray
+    s_design: np.ndarray
+    s_full: np.ndarray
+    s_uniform: np.ndarray
+    logdet: dict
+    uniform: np.ndarray
+    criterion: str
+    seconds: dict
+    H: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def n_determined(self) -> dict:
+        """Directions with s > 1: design, full candidate set, uniform design."""
+        return {k: int(np.sum(getattr(self, f"s_{k}") > 1.0)) for k in ("design", "full", "uniform")}
+
+    @property
+    def n_failed(self) -> int:
+        """Candidates the model failed at (left out)."""
+        return int(np.count_nonzero(~self.ok))
+
+    def gain_fraction(self) -> float:
+        """The design's share of the full candidate set's information gain, log det A(ξ)/log det A(full) [-]."""
+        return float(self.logdet["design"] / self.logdet["full"]) if self.logdet["full"] > 0 else float("nan")
+
+
+def _sigma(problem: DesignProblem, A: np.ndarray) -> np.ndarray:
+    """Posterior 1-σ of every parameter from the whitened precision A [parameter units]."""
+    LA = problem.L @ np.linalg.inv(A)
+    return np.sqrt(np.clip(np.einsum("ij,ij->i", LA, problem.L), 0.0, None)) * problem.scale
+
+
+def _criterion(kind, problem, parameters, targets):
+    if kind == "d":
+        return d_criterion()
+    if kind == "a":
+        if not parameters:
+            raise InputError("criterion 'a' needs the parameters to tighten (--parameters NAME,...)", "--criterion",
+                             field="parameters")
+        bad = [q for q in parameters if q not in problem.names]
+        if bad:
+            import difflib
+            close = difflib.get_close_matches(bad[0], problem.names, 1)
+            raise InputError(f"no parameter {bad[0]!r} in this model" + (f"; did you mean {close[0]!r}?" if close
+                             else f"; parameters: {', '.join(problem.names)}"), "--parameters", field=bad[0])
+        idx = [problem.names.index(q) for q in parameters]
+        # posterior variance over prior variance of each named parameter: C = Lᵀ e_j / σ_prior,j
+        Lt = problem.L.T[:, idx]
+        return a_criterion(Lt / np.linalg.norm(Lt, axis=0), f"A-optimality on {', '.join(parameters)}")
+    if kind == "prediction":
+        Ht, ok = problem.blocks(targets)
+        T = Ht[ok].reshape(-1, Ht.shape[-1]).T             # (n, n_targets·m): prediction variance over noise variance
+        return a_criterion(T, f"prediction variance at {int(ok.sum())} target points")
+    raise InputError(f"unknown criterion {kind!r}; expected one of {', '.join(CRITERIA)}", "--criterion",
+                     field="criterion")
+
+
+def design(problem: DesignProblem, budget: int, candidates: OperatingConditions | None = None,
+           fixed: OperatingConditions | None = None, criterion: str = "d", parameters=None,
+           targets: OperatingConditions | None = None, max_repeats: int = 1, n_tsr: int = 25, n_pitch: int = 16,
+           n_rotor_speed: int = 1, curve_to: int | None = None) -> DesignResult:
+    """Choose ``budget`` operating points for a campaign.
+
+    Parameters
+    ----------
+    problem : DesignProblem
+        From :func:`problem_from_workflow`.
+    budget : int
+        Points in the design (fixed ones and repeats included), ≥ 1.
+    candidates : OperatingConditions, optional
+        The candidate set; default a λ × pitch (× rotor speed) grid over the envelope
+        (:func:`calib.design.candidates.generate` with ``n_tsr``, ``n_pitch``, ``n_rotor_speed``).
+        Refused when a point lies outside the envelope.
+    fixed : OperatingConditions, optional
+        Points the design must keep; each must be a candidate.
+    criterion : {"d", "a", "prediction"}
+        Bayesian D-optimality (default), A-optimality on ``parameters`` (their posterior variance
+        relative to the prior's, summed), or the prediction variance of the channels at ``targets``
+        (default: the candidates) relative to the noise.
+    max_repeats : int
+        How often one candidate may be chosen.
+    curve_to : int, optional
+        Greedy points for the marginal-gain curve (default min(2·budget, candidates)).
+
+    Returns
+    -------
+    DesignResult
+    """
+    env = problem.envelope
+    if candidates is None:
+        candidates = cand.generate(env, n_tsr, n_pitch, n_rotor_speed)
+    else:
+        cand.check_inside(candidates, env)
+    if not isinstance(budget, (int, np.integer)) or budget <= 0:
+        raise InputError(f"the budget must be a whole number of points > 0, got {budget!r}", "--budget", field="budget")
+    if not isinstance(max_repeats, (int, np.integer)) or max_repeats < 1:
+        raise InputError(f"repeats must be a whole number >= 1, got {max_repeats!r}", "--repeats", field="repeats")
+    t0 = time.process_time()
+    H, ok = problem.blocks(candidates)
+    t_sens = time.process_time() - t0
+    usable = int(ok.sum())
+    if budget > usable * max_repeats:
+        raise InputError(f"the budget {budget} is larger than the candidate set ({usable} usable candidate(s)"
+                         + (f" × {max_repeats} repeats" if max_repeats > 1 else "")
+                         + (f"; {len(ok) - usable} failed" if usable < len(ok) else "") + ")", "--budget",
+                         field="budget")
+    fixed_idx = np.zeros(0, int) if fixed is None or len(fixed) == 0 else \
+        cand.match_points(fixed, candidates, env.radius)
+    if fixed_idx.size and not np.all(ok[fixed_idx]):
+        k = int(np.flatnonzero(~ok[fixed_idx])[0])
+        raise InputError(f"fixed point {k + 1}: the model fails there, so it informs nothing", "fixed points",
+                         line=k + 1)
+    if fixed_idx.size > budget:
+        raise InputError(f"{fixed_idx.size} fixed points exceed the budget {budget}", "--budget", field="budget")
+    crit = _criterion(criterion, problem, parameters, targets if targets is not None else candidates.subset(
+        np.flatnonzero(ok)))
+    t1 = time.process_time()
+    usable_idx = np.flatnonzero(ok)
+    Hu = H[usable_idx]
+    where = {int(j): k for k, j in enumerate(usable_idx)}
+    curve = curve_to if curve_to is not None else min(2 * budget, usable * max_repeats)
+    sel = select(crit, Hu, budget, [where[int(i)] for i in fixed_idx], max_repeats, curve_to=curve)
+    t_sel = time.process_time() - t1
+    sel.design = usable_idx[sel.design]
+    chosen = sel.design
+    uniform = usable_idx[cand.space_filling(candidates.subset(usable_idx), env.radius, budget)]
+    A_d, A_f, A_u = precision(H, chosen), precision(H, usable_idx), precision(H, uniform)
+    logdet = {k: float(np.linalg.slogdet(A)[1]) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
+    logdet["greedy"] = float(np.linalg.slogdet(precision(Hu, np.concatenate(
+        [[where[int(i)] for i in fixed_idx], np.zeros(0, int)]).astype(int)))[1] + np.sum(
+        sel.greedy_gains[:budget - fixed_idx.size])) if crit.kind == "d" else float("nan")
+    n = H.shape[-1]
+    F = {k: A - np.eye(n) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
+    return DesignResult(problem, candidates, ok, chosen, fixed_idx, sel, _sigma(problem, np.eye(n)),
+                        _sigma(problem, A_d), _sigma(problem, A_f), _sigma(problem, A_u),
+                        determined_directions(F["design"]), determined_directions(F["full"]),
+                        determined_directions(F["uniform"]), logdet, uniform, crit.name,
+                        {"sensitivities": t_sens, "selection": t_sel}, H)
