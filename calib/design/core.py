@@ -240,6 +240,15 @@ class DesignResult:
         """Candidates the model failed at (left out)."""
         return int(np.count_nonzero(~self.ok))
 
+    def run_order(self) -> list:
+        """The design's distinct points in run order: by yaw, rotor speed and pitch line, then λ rising
+        (one pitch setting at a time, the tunnel or wind speed stepped along it); candidate indices."""
+        c = self.candidates
+        idx = np.unique(self.design)
+        lam = c.tip_speed_ratio(self.problem.envelope.radius)[idx]
+        keys = np.lexsort((lam, np.round(c.pitch[idx], 6), np.round(c.rotor_speed[idx], 6), np.round(c.yaw[idx], 6)))
+        return idx[keys].tolist()
+
     def gain_fraction(self) -> float:
         """The design's share of the full candidate set's information gain, log det A(ξ)/log det A(full) [-]."""
         return float(self.logdet["design"] / self.logdet["full"]) if self.logdet["full"] > 0 else float("nan")

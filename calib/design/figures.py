@@ -12,8 +12,6 @@ __all__ = ["design_figure", "gain_figure"]
 def design_figure(res) -> Figure:
     """The candidates (grey), failed candidates (x), the space-filling design of the same size
     (open squares), the fixed points and the chosen points (numbered in run order) on the λ–pitch plane."""
-    from calib.design.report import run_order
-
     pr = res.problem
     lam = res.candidates.tip_speed_ratio(pr.envelope.radius)
     pitch = res.candidates.pitch
@@ -24,7 +22,7 @@ def design_figure(res) -> Figure:
         ax.plot(lam[~res.ok], pitch[~res.ok], "x", color="C3", ms=4, label=f"model failed ({res.n_failed})")
     ax.plot(lam[res.uniform], pitch[res.uniform], "s", mfc="none", mec="C2", ms=7,
             label=f"space-filling design ({len(res.uniform)})")
-    order = run_order(res)
+    order = res.run_order()
     idx, counts = np.unique(res.design, return_counts=True)
     mult = dict(zip(idx.tolist(), counts.tolist()))
     free = [j for j in idx if j not in set(res.fixed.tolist())]

@@ -13,17 +13,7 @@ import numpy as np
 from calib.design.select import precision
 from calib.report.atomic import atomic_write_text
 
-__all__ = ["run_order", "matrix_rows", "parameter_rows", "group_values", "summary", "paragraph", "write_outputs"]
-
-
-def run_order(res) -> list:
-    """The design's distinct points in run order: by yaw, rotor speed and pitch line, then λ rising
-    (one pitch setting at a time, the tunnel or wind speed stepped along it)."""
-    c, r = res.candidates, res.problem.envelope.radius
-    idx = np.unique(res.design)
-    lam = c.tip_speed_ratio(r)[idx]
-    keys = np.lexsort((lam, np.round(c.pitch[idx], 6), np.round(c.rotor_speed[idx], 6), np.round(c.yaw[idx], 6)))
-    return idx[keys].tolist()
+__all__ = ["matrix_rows", "parameter_rows", "group_values", "summary", "paragraph", "write_outputs"]
 
 
 def matrix_rows(res) -> list[dict]:
@@ -35,7 +25,7 @@ def matrix_rows(res) -> list[dict]:
     sensors = " + ".join(g.name for g in pr.groups)
     added = {int(j): k + 1 for k, j in enumerate(res.design)}
     rows = []
-    for k, j in enumerate(run_order(res)):
+    for k, j in enumerate(res.run_order()):
         rows.append({"run": k + 1, "wind_speed [m/s]": float(c.wind_speed[j]), "rotor_speed [rpm]": float(c.rotor_speed[j]),
                      "pitch [deg]": float(c.pitch[j]), "tsr [-]": float(lam[j]), "yaw [deg]": float(c.yaw[j]),
                      "air_density [kg/m^3]": float(c.air_density[j]), "sensors": sensors,

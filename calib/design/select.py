@@ -95,16 +95,25 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
     -------
     Selection
     """
-    n_c, _, n = H.shape
+    n_c = H.shape[0]
     fixed = [int(i) for i in fixed]
     counts = np.bincount(np.asarray(fixed, int), minlength=n_c) if fixed else np.zeros(n_c, int)
+    steps = min(max(budget, curve_to or 0), n_c * max_repeats) - len(fixed)
+    design, counts, Ainv, value, gains = _greedy(criterion, H, budget, fixed, counts, max_repeats, steps)
+    out = Selection(np.array(design, int), value, np.array(gains), value)
+    if exchange:
+        _exchange(criterion, H, out, design, counts, Ainv, len(fixed), max_repeats, max_passes)
+    return out
+
+
+def _greedy(criterion, H, budget, fixed, counts, max_repeats, steps):
+    """Forward selection from ``fixed``: the design, counts and A⁻¹ at ``budget`` points, the
+    criterion there, and the gains of all ``steps`` points added."""
     A = precision(H, fixed)
     Ainv = np.linalg.inv(A)
     value = criterion.value(A, Ainv)
-    design = list(fixed)
-    steps = max(budget, curve_to or 0) - len(fixed)
-    steps = min(steps, n_c * max_repeats - len(fixed))
-    gains, greedy_value, kept = [], value, None
+    design, gains = list(fixed), []
+    kept = (list(design), counts.copy(), Ainv.copy(), value)
     for _ in range(max(steps, 0)):
         g = criterion.gains(Ainv, H)
         g[counts >= max_repeats] = -np.inf
@@ -117,19 +126,16 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
         value += float(g[c])
         gains.append(float(g[c]))
         if len(design) == budget:
-            kept, greedy_value, Ainv_kept = (list(design), counts.copy()), value, Ainv.copy()
-    if kept is None:                 # budget == number of fixed points
-        kept, greedy_value, Ainv_kept = (list(design), counts.copy()), value, Ainv.copy()
-    design, counts = kept
-    design, counts, Ainv = design[:budget], counts, Ainv_kept
-    value = greedy_value
-    out = Selection(np.array(design, int), value, np.array(gains), greedy_value)
-    if not exchange:
-        return out
-    free = range(len(fixed), len(design))
+            kept = (list(design), counts.copy(), Ainv.copy(), value)
+    return (*kept, gains)
+
+
+def _exchange(criterion, H, out, design, counts, Ainv, n_fixed, max_repeats, max_passes):
+    """Fedorov exchange on ``design`` in place; ``out`` gets the design, value, exchanges and passes."""
+    value = out.value
     for k in range(max_passes):
         changed = 0
-        for pos in free:
+        for pos in range(n_fixed, len(design)):
             i = design[pos]
             loss = criterion.removal(Ainv, H[i])
             A_minus = woodbury(Ainv, H[i], -1.0)
@@ -148,11 +154,10 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
                 changed += 1
         out.passes = k + 1
         out.exchanges += changed
-        # refresh from scratch once a pass: no drift of the rank-m updates
+        # refreshed from scratch once a pass: no drift of the rank-m updates
         A = precision(H, design)
         Ainv = np.linalg.inv(A)
         value = criterion.value(A, Ainv)
         if not changed:
             break
     out.design, out.value = np.array(design, int), value
-    return out
