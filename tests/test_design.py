@@ -76,6 +76,23 @@ def test_block_updates_against_direct_linear_algebra():
     assert np.sum(sel.greedy_gains) == pytest.approx(np.linalg.slogdet(precision(H, sel.design))[1], rel=1e-9)
 
 
+def test_pseudo_bayesian_criterion_is_the_mean_over_draws():
+    """Blocks stacked over draws: the gains, the removal and the design's value are the means of each draw's."""
+    H = np.stack([_blocks(21, n_c=7), _blocks(22, n_c=7), _blocks(23, n_c=7)])
+    crit = d_criterion()
+    design_ = [1, 4]
+    A = precision(H, design_)
+    Ainv = np.linalg.inv(A)
+    per_draw = np.array([crit.gains(np.linalg.inv(precision(Hk, design_)), Hk) for Hk in H])
+    assert crit.gains(Ainv, H) == pytest.approx(per_draw.mean(axis=0), rel=1e-9)
+    assert crit.removal(Ainv, H[:, 4]) == pytest.approx(
+        np.mean([crit.value(precision(Hk, [1])) - crit.value(precision(Hk, design_)) for Hk in H]), rel=1e-9)
+    sel = select(crit, H, 3)
+    assert sel.value == pytest.approx(np.mean([crit.value(precision(Hk, sel.design)) for Hk in H]), rel=1e-9)
+    best = max(np.mean([crit.value(precision(Hk, s)) for Hk in H]) for s in itertools.combinations(range(7), 3))
+    assert sel.value >= best - 0.01 * abs(best)
+
+
 # ---------------------------------------------------------------- a linear model through the whole pipeline
 class LinearModel:
     """y = G(u) p with a fixed smooth G per operating point: the linear-Gaussian case exactly."""
@@ -197,3 +214,14 @@ def test_cli_designs_from_a_native_bem_workflow(tmp_path, capsys):
 def test_cli_errors(args, message, tmp_path, capsys):
     assert main(["design", str(WORKFLOW), "--out", str(tmp_path / "d")] + args) == 2
     assert message in capsys.readouterr().err
+
+
+def test_pseudo_bayesian_design_of_a_linear_model_does_not_depend_on_the_draws():
+    """A linear model has the same sensitivities at every draw: the averaged design is each draw's optimum."""
+    problem, _ = _linear_problem()
+    cand = generate(problem.envelope, 6, 4)
+    res = design(problem, 4, cand, draws=3, seed=2)
+    ref = design(problem, 4, cand)
+    assert sorted(res.design) == sorted(ref.design)
+    assert res.robustness["draws"] == 3 and res.robustness["shared_points_min"] == 1.0
+    assert abs(res.robustness["averaged_design_loss_worst"]) < 1e-9

@@ -75,9 +75,25 @@ class DesignProblem:
     source: str
     notes: list = field(default_factory=list)
     prior_from: str = "the workflow's prior"
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+    field_index: np.ndarray | None = None
 
-    def blocks(self, conditions: OperatingConditions):
-        """The prior-whitened blocks H_j = R^{-½} ∂y_j/∂p̃ L of every point (one model Jacobian call).
+    def field_draws(self, n: int, seed: int = 0) -> np.ndarray:
+        """``n`` parameter vectors with the correction field drawn from the prior about ``p`` (the other
+        parameters at ``p``), clipped to the bounds; shape (n, n_params) [parameter units]."""
+        rng = np.random.default_rng(seed)
+        idx = np.arange(len(self.p)) if self.field_index is None else self.field_index
+        out = np.tile(self.p, (n, 1))
+        step = (rng.normal(size=(n, len(self.p))) @ self.L.T) * self.scale
+        out[:, idx] += step[:, idx]
+        if self.lower is not None:
+            out = np.clip(out, self.lower, self.upper)
+        return out
+
+    def blocks(self, conditions: OperatingConditions, p: np.ndarray | None = None):
+        """The prior-whitened blocks H_j = R^{-½} ∂y_j/∂p̃ L of every point (one model Jacobian call),
+        at ``p`` (default the linearization point).
 
         Returns
         -------
@@ -86,7 +102,7 @@ class DesignProblem:
         ok : ndarray of bool, shape (n_points,)
             Converged points with finite sensitivities.
         """
-        ev, G = self.model.jacobian(self.p, conditions)
+        ev, G = self.model.jacobian(self.p if p is None else p, conditions)
         ok = np.asarray(ev.ok, bool) & np.all(np.isfinite(G), axis=(1, 2)) & np.all(np.isfinite(ev.values), axis=1)
         M = np.where(ok[:, None, None], G, 0.0) * self.scale / self.sigma[None, :, None]
         return np.nan_to_num(M) @ self.L, ok
@@ -165,8 +181,10 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None) -> Desi
         p, P = _posterior_of(after, names, stmt.scale)
         prior_from = f"the posterior of {after}"
     env = cand.envelope_of(reference, setup.rotor.rotor_radius)
+    kinds = ("lift_correction", "drag_correction")
+    field_index = np.array([j for j, q in enumerate(stmt.parameters) if str(q.kind) in kinds], int)
     return DesignProblem(model, p, np.array(stmt.scale), psd_sqrt(P), names, channels, sigma, env, reference,
-                         groups, src, notes, prior_from)
+                         groups, src, notes, prior_from, np.array(stmt.lower), np.array(stmt.upper), field_index)
 
 
 def _posterior_of(rdir, names, scale):
@@ -229,6 +247,7 @@ class DesignResult:
     criterion: str
     seconds: dict
     H: np.ndarray = field(repr=False, default=None)
+    robustness: dict = field(default_factory=dict)
 
     @property
     def n_determined(self) -> dict:
@@ -288,7 +307,7 @@ def _criterion(kind, problem, parameters, targets):
 def design(problem: DesignProblem, budget: int, candidates: OperatingConditions | None = None,
            fixed: OperatingConditions | None = None, criterion: str = "d", parameters=None,
            targets: OperatingConditions | None = None, max_repeats: int = 1, n_tsr: int = 25, n_pitch: int = 16,
-           n_rotor_speed: int = 1, curve_to: int | None = None) -> DesignResult:
+           n_rotor_speed: int = 1, curve_to: int | None = None, draws: int = 0, seed: int = 0) -> DesignResult:
     """Choose ``budget`` operating points for a campaign.
 
     Parameters
@@ -311,6 +330,10 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
         How often one candidate may be chosen.
     curve_to : int, optional
         Greedy points for the marginal-gain curve (default min(2·budget, candidates)).
+    draws : int
+        With draws > 0, the pseudo-Bayesian design: the criterion averaged over the linearization point
+        and ``draws`` prior draws of the correction field (seeded by ``seed``), each with its own
+        sensitivities; ``robustness`` then says how the locally optimal design at each draw differs.
 
     Returns
     -------
@@ -327,6 +350,9 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
         raise InputError(f"repeats must be a whole number >= 1, got {max_repeats!r}", "--repeats", field="repeats")
     t0 = time.process_time()
     H, ok = problem.blocks(candidates)
+    H_draws = _draw_blocks(problem, candidates, draws, seed)
+    for Hk, okk in H_draws:
+        ok = ok & okk
     t_sens = time.process_time() - t0
     usable = int(ok.sum())
     if budget > usable * max_repeats:
@@ -349,7 +375,10 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
     Hu = H[usable_idx]
     where = {int(j): k for k, j in enumerate(usable_idx)}
     curve = curve_to if curve_to is not None else min(2 * budget, usable * max_repeats)
-    sel = select(crit, Hu, budget, [where[int(i)] for i in fixed_idx], max_repeats, curve_to=curve)
+    fixed_u = [where[int(i)] for i in fixed_idx]
+    H_sel = np.stack([Hu] + [Hk[usable_idx] for Hk, _ in H_draws]) if H_draws else Hu
+    sel = select(crit, H_sel, budget, fixed_u, max_repeats, curve_to=curve)
+    robust = _robustness(crit, H_sel, sel.design, budget, fixed_u, max_repeats) if H_draws else {}
     t_sel = time.process_time() - t1
     sel.design = usable_idx[sel.design]
     chosen = sel.design
@@ -358,11 +387,36 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
     logdet = {k: float(np.linalg.slogdet(A)[1]) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
     logdet["greedy"] = float(np.linalg.slogdet(precision(Hu, np.concatenate(
         [[where[int(i)] for i in fixed_idx], np.zeros(0, int)]).astype(int)))[1] + np.sum(
-        sel.greedy_gains[:budget - fixed_idx.size])) if crit.kind == "d" else float("nan")
+        sel.greedy_gains[:budget - fixed_idx.size])) if crit.kind == "d" and not H_draws else float("nan")
     n = H.shape[-1]
     F = {k: A - np.eye(n) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
     return DesignResult(problem, candidates, ok, chosen, fixed_idx, sel, _sigma(problem, np.eye(n)),
                         _sigma(problem, A_d), _sigma(problem, A_f), _sigma(problem, A_u),
                         determined_directions(F["design"]), determined_directions(F["full"]),
                         determined_directions(F["uniform"]), logdet, uniform, crit.name,
-                        {"sensitivities": t_sens, "selection": t_sel}, H)
+                        {"sensitivities": t_sens, "selection": t_sel}, H, robust)
+
+
+def _draw_blocks(problem: DesignProblem, candidates, draws: int, seed: int) -> list:
+    """(H, ok) of the candidates at ``draws`` prior draws of the correction field."""
+    if not isinstance(draws, (int, np.integer)) or draws < 0:
+        raise InputError(f"draws must be a whole number >= 0, got {draws!r}", "--draws", field="draws")
+    return [problem.blocks(candidates, p) for p in problem.field_draws(draws, seed)] if draws else []
+
+
+def _robustness(crit, H_sel, chosen, budget, fixed, max_repeats) -> dict:
+    """How the choice changes across the prior draws: the locally optimal design at each draw (its own
+    sensitivities only) against the averaged one: shared points, and each draw's criterion at the
+    averaged design and at the nominal-only design, relative to its own optimum [-]."""
+    from calib.design.select import select as run
+
+    local = [run(crit, Hk, budget, fixed, max_repeats).design for Hk in H_sel]
+    value = [lambda d, Hk=Hk: crit.value(precision(Hk, d)) for Hk in H_sel]
+    shared = [len(set(d.tolist()) & set(chosen.tolist())) / len(set(chosen.tolist())) for d in local[1:]]
+    avg_loss = [value[k](chosen) - value[k](local[k]) for k in range(1, len(H_sel))]
+    nominal_loss = [value[k](local[0]) - value[k](local[k]) for k in range(1, len(H_sel))]
+    return {"draws": len(H_sel) - 1, "shared_points_mean": float(np.mean(shared)),
+            "shared_points_min": float(np.min(shared)),
+            "averaged_design_loss_mean": float(np.mean(avg_loss)), "averaged_design_loss_worst": float(np.min(avg_loss)),
+            "nominal_design_loss_mean": float(np.mean(nominal_loss)),
+            "nominal_design_loss_worst": float(np.min(nominal_loss))}

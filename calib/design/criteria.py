@@ -39,8 +39,14 @@ __all__ = ["Criterion", "d_criterion", "a_criterion", "woodbury", "log_det", "de
 
 
 def log_det(A: np.ndarray) -> float:
-    """log det of a symmetric positive definite matrix (by Cholesky) [-]."""
-    return float(2.0 * np.sum(np.log(np.diag(np.linalg.cholesky(A)))))
+    """log det of a symmetric positive definite matrix (by Cholesky), averaged over any leading
+    (prior-draw) axes [-]."""
+    L = np.linalg.cholesky(A)
+    return float(np.mean(2.0 * np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)))
+
+
+def _t(X: np.ndarray) -> np.ndarray:
+    return np.swapaxes(X, -1, -2)
 
 
 def woodbury(Ainv: np.ndarray, H: np.ndarray, sign: float = 1.0) -> np.ndarray:
@@ -48,24 +54,27 @@ def woodbury(Ainv: np.ndarray, H: np.ndarray, sign: float = 1.0) -> np.ndarray:
 
     Parameters
     ----------
-    Ainv : ndarray, shape (n, n)
-        A⁻¹ (symmetric positive definite).
-    H : ndarray, shape (m, n)
+    Ainv : ndarray, shape (..., n, n)
+        A⁻¹ (symmetric positive definite); leading axes: prior draws.
+    H : ndarray, shape (..., m, n)
         The block added (sign +1) or removed (sign −1).
     sign : float
         +1 or −1.
     """
     K = H @ Ainv
-    S = np.eye(H.shape[0]) + sign * (K @ H.T)
-    out = Ainv - sign * K.T @ np.linalg.solve(S, K)
-    return 0.5 * (out + out.T)
+    S = np.eye(H.shape[-2]) + sign * (K @ _t(H))
+    out = Ainv - sign * _t(K) @ np.linalg.solve(S, K)
+    return 0.5 * (out + _t(out))
 
 
 def _schur(Ainv: np.ndarray, H: np.ndarray, sign: float = 1.0):
-    """K = H A⁻¹ and I + sign·H A⁻¹ Hᵀ for a batch of blocks H, shape (n_c, m, n)."""
-    K = H @ Ainv
-    S = np.einsum("cmn,cln->cml", K, H)
-    return K, np.eye(H.shape[1])[None] + sign * S
+    """K = H A⁻¹ and I + sign·H A⁻¹ Hᵀ for a batch of blocks H, shape (..., n_c, m, n)."""
+    K = H @ Ainv[..., None, :, :]
+    return K, np.eye(H.shape[-2]) + sign * (K @ _t(H))
+
+
+def _mean_over_draws(x: np.ndarray, n_c: int) -> np.ndarray:
+    return x.reshape(-1, n_c).mean(axis=0)
 
 
 @dataclass(frozen=True)
@@ -91,31 +100,33 @@ class Criterion:
         if self.kind == "d":
             return log_det(A)
         Ainv = np.linalg.inv(A) if Ainv is None else Ainv
-        return -float(np.sum(self.C * (Ainv @ self.C)))
+        return -float(np.mean(np.sum(self.C * (Ainv @ self.C), axis=(-2, -1))))
 
     def gains(self, Ainv: np.ndarray, H: np.ndarray) -> np.ndarray:
         """The change of ``value`` from adding each block of ``H`` alone, shape (n_c,).
 
         Parameters
         ----------
-        Ainv : ndarray, shape (n, n)
-        H : ndarray, shape (n_c, m, n)
-            Candidate blocks (whitened).
+        Ainv : ndarray, shape (..., n, n)
+        H : ndarray, shape (..., n_c, m, n)
+            Candidate blocks (whitened); leading axes: prior draws, over which the gain is averaged
+            (the pseudo-Bayesian criterion).
         """
+        n_c = H.shape[-3]
         K, S = _schur(Ainv, H, 1.0)
         if self.kind == "d":
-            return np.linalg.slogdet(S)[1]
-        HZ = K @ self.C                                          # H A⁻¹ C, (n_c, m, k)
-        return np.sum(HZ * np.linalg.solve(S, HZ), axis=(1, 2))
+            return _mean_over_draws(np.linalg.slogdet(S)[1], n_c)
+        HZ = K @ self.C                                          # H A⁻¹ C, (..., n_c, m, k)
+        return _mean_over_draws(np.sum(HZ * np.linalg.solve(S, HZ), axis=(-2, -1)), n_c)
 
     def removal(self, Ainv: np.ndarray, H: np.ndarray) -> float:
-        """The change of ``value`` from removing block ``H`` (m, n) from the design (≤ 0)."""
-        K, S = _schur(Ainv, H[None], -1.0)
+        """The change of ``value`` from removing block ``H`` (..., m, n) from the design (≤ 0)."""
+        K, S = _schur(Ainv, H[..., None, :, :], -1.0)
         if self.kind == "d":
-            sign, ld = np.linalg.slogdet(S[0])
-            return float(ld) if sign > 0 else -np.inf
-        HZ = K[0] @ self.C
-        return -float(np.sum(HZ * np.linalg.solve(S[0], HZ)))
+            sign, ld = np.linalg.slogdet(S)
+            return float(np.mean(ld)) if np.all(sign > 0) else -np.inf
+        HZ = K @ self.C
+        return -float(np.mean(np.sum(HZ * np.linalg.solve(S, HZ), axis=(-2, -1))))
 
 
 def d_criterion() -> Criterion:

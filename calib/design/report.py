@@ -76,7 +76,8 @@ def summary(res) -> dict:
                                                                  if nxt is not None and res.logdet["design"] > 0
                                                                  else None),
             "greedy_gains": gains.tolist(), "exchanges": sel.exchanges, "exchange_passes": sel.passes,
-            "cpu_seconds": res.seconds, "notes": pr.notes, "group_values": group_values(res)}
+            "cpu_seconds": res.seconds, "notes": pr.notes, "group_values": group_values(res),
+            "robustness": res.robustness}
 
 
 def paragraph(res) -> str:
@@ -98,6 +99,14 @@ def paragraph(res) -> str:
     ratio = res.sigma_design / np.where(res.sigma_prior > 0, res.sigma_prior, np.inf)
     tight = int(np.sum(ratio < 0.5))
     words.append(f"{tight} of {len(ratio)} parameters end with a σ below half their prior's.")
+    rb = res.robustness
+    if rb:
+        words.append(f"Averaged over the linearization point and {rb['draws']} prior draws of the correction field "
+                     f"(pseudo-Bayesian), the design shares {100 * rb['shared_points_mean']:.0f} % of its points "
+                     f"(at least {100 * rb['shared_points_min']:.0f} %) with the optimum at each draw and loses "
+                     f"{-rb['averaged_design_loss_mean']:.2g} of log det against it on average (worst "
+                     f"{-rb['averaged_design_loss_worst']:.2g}); the design for the nominal field alone loses "
+                     f"{-rb['nominal_design_loss_mean']:.2g} (worst {-rb['nominal_design_loss_worst']:.2g}).")
     gv = s["group_values"]
     if gv:
         best = max(gv, key=lambda g: g["loss_per_cost"])

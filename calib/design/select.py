@@ -59,14 +59,15 @@ class Selection:
 
 
 def precision(H: np.ndarray, design, A0: np.ndarray | None = None) -> np.ndarray:
-    """The whitened posterior precision A = A0 + Σ_{j∈design} H_jᵀH_j (A0 = I by default)."""
+    """The whitened posterior precision A = A0 + Σ_{j∈design} H_jᵀH_j (A0 = I by default); with
+    H of shape (..., n_c, m, n), one per leading (prior-draw) index."""
     n = H.shape[-1]
     A = np.eye(n) if A0 is None else np.array(A0, float)
     d = np.asarray(design, int)
     if d.size:
-        B = H[d].reshape(-1, n)
-        A = A + B.T @ B
-    return A
+        B = H[..., d, :, :].reshape(*H.shape[:-3], -1, n)
+        A = A + np.swapaxes(B, -1, -2) @ B
+    return A * np.ones(H.shape[:-3] + (1, 1))
 
 
 def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repeats: int = 1,
@@ -76,8 +77,9 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
     Parameters
     ----------
     criterion : Criterion
-    H : ndarray, shape (n_candidates, m, n)
-        The candidates' prior-whitened blocks (:mod:`calib.design.criteria`).
+    H : ndarray, shape (n_candidates, m, n) or (n_draws, n_candidates, m, n)
+        The candidates' prior-whitened blocks (:mod:`calib.design.criteria`); with a leading axis,
+        at several parameter vectors (prior draws), the criterion averaged over them.
     budget : int
         Points in the design, the fixed ones included (repeats count).
     fixed : sequence of int
@@ -95,7 +97,7 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
     -------
     Selection
     """
-    n_c = H.shape[0]
+    n_c = H.shape[-3]
     fixed = [int(i) for i in fixed]
     counts = np.bincount(np.asarray(fixed, int), minlength=n_c) if fixed else np.zeros(n_c, int)
     steps = min(max(budget, curve_to or 0), n_c * max_repeats) - len(fixed)
@@ -122,7 +124,7 @@ def _greedy(criterion, H, budget, fixed, counts, max_repeats, steps):
             break
         design.append(c)
         counts[c] += 1
-        Ainv = woodbury(Ainv, H[c])
+        Ainv = woodbury(Ainv, H[..., c, :, :])
         value += float(g[c])
         gains.append(float(g[c]))
         if len(design) == budget:
@@ -137,8 +139,8 @@ def _exchange(criterion, H, out, design, counts, Ainv, n_fixed, max_repeats, max
         changed = 0
         for pos in range(n_fixed, len(design)):
             i = design[pos]
-            loss = criterion.removal(Ainv, H[i])
-            A_minus = woodbury(Ainv, H[i], -1.0)
+            loss = criterion.removal(Ainv, H[..., i, :, :])
+            A_minus = woodbury(Ainv, H[..., i, :, :], -1.0)
             g = criterion.gains(A_minus, H)
             room = counts.copy()
             room[i] -= 1
@@ -149,7 +151,7 @@ def _exchange(criterion, H, out, design, counts, Ainv, n_fixed, max_repeats, max
                 design[pos] = c
                 counts[i] -= 1
                 counts[c] += 1
-                Ainv = woodbury(A_minus, H[c])
+                Ainv = woodbury(A_minus, H[..., c, :, :])
                 value += delta
                 changed += 1
         out.passes = k + 1
