@@ -45,6 +45,8 @@ def add_design_parser(sub):
     p.add_argument("--sensors", default=None, help="sensor groups NAME[:COST],... : hub, torque, root, "
                    "station@ETA, workflow (default), or a channel name")
     p.add_argument("--repeats", type=int, default=1, help="how often one point may be chosen (default 1)")
+    p.add_argument("--cover", type=int, default=0, help="start from this many space-filling points over the "
+                   "envelope (kept), the rest chosen by the criterion (default 0)")
     p.add_argument("--draws", type=int, default=0, help="pseudo-Bayesian: average the criterion over this many "
                    "prior draws of the correction field too (default 0: at the linearization point only)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --draws (default 0)")
@@ -114,7 +116,8 @@ def run_design(args, printer=print) -> int:
     fixed = _fixed(args.fixed, env) if args.fixed else None
     params = [s.strip() for s in args.parameters.split(",") if s.strip()] if args.parameters else None
     res = design(problem, args.budget, candidates, fixed, args.criterion, params, targets, args.repeats,
-                 n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed)
+                 n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed,
+                 cover=args.cover)
     out = Path(args.out) if args.out else wf.parent / "design"
     paths = write_outputs(res, out)
     printer(paragraph(res))

@@ -248,6 +248,7 @@ class DesignResult:
     seconds: dict
     H: np.ndarray = field(repr=False, default=None)
     robustness: dict = field(default_factory=dict)
+    cover: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
     @property
     def n_determined(self) -> dict:
@@ -307,7 +308,8 @@ def _criterion(kind, problem, parameters, targets):
 def design(problem: DesignProblem, budget: int, candidates: OperatingConditions | None = None,
            fixed: OperatingConditions | None = None, criterion: str = "d", parameters=None,
            targets: OperatingConditions | None = None, max_repeats: int = 1, n_tsr: int = 25, n_pitch: int = 16,
-           n_rotor_speed: int = 1, curve_to: int | None = None, draws: int = 0, seed: int = 0) -> DesignResult:
+           n_rotor_speed: int = 1, curve_to: int | None = None, draws: int = 0, seed: int = 0,
+           cover: int = 0) -> DesignResult:
     """Choose ``budget`` operating points for a campaign.
 
     Parameters
@@ -330,6 +332,10 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
         How often one candidate may be chosen.
     curve_to : int, optional
         Greedy points for the marginal-gain curve (default min(2·budget, candidates)).
+    cover : int
+        Start from this many space-filling points (kept like fixed ones), the rest chosen by the
+        criterion: a skeleton over the envelope against model-form error, which variance-optimal
+        designs do not see (Box & Draper 1959).
     draws : int
         With draws > 0, the pseudo-Bayesian design: the criterion averaged over the linearization point
         and ``draws`` prior draws of the correction field (seeded by ``seed``), each with its own
@@ -360,14 +366,7 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
                          + (f" × {max_repeats} repeats" if max_repeats > 1 else "")
                          + (f"; {len(ok) - usable} failed" if usable < len(ok) else "") + ")", "--budget",
                          field="budget")
-    fixed_idx = np.zeros(0, int) if fixed is None or len(fixed) == 0 else \
-        cand.match_points(fixed, candidates, env.radius)
-    if fixed_idx.size and not np.all(ok[fixed_idx]):
-        k = int(np.flatnonzero(~ok[fixed_idx])[0])
-        raise InputError(f"fixed point {k + 1}: the model fails there, so it informs nothing", "fixed points",
-                         line=k + 1)
-    if fixed_idx.size > budget:
-        raise InputError(f"{fixed_idx.size} fixed points exceed the budget {budget}", "--budget", field="budget")
+    fixed_idx, cover_idx = _fixed_indices(fixed, candidates, ok, env, budget, cover)
     crit = _criterion(criterion, problem, parameters, targets if targets is not None else candidates.subset(
         np.flatnonzero(ok)))
     t1 = time.process_time()
@@ -394,7 +393,29 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
                         _sigma(problem, A_d), _sigma(problem, A_f), _sigma(problem, A_u),
                         determined_directions(F["design"]), determined_directions(F["full"]),
                         determined_directions(F["uniform"]), logdet, uniform, crit.name,
-                        {"sensitivities": t_sens, "selection": t_sel}, H, robust)
+                        {"sensitivities": t_sens, "selection": t_sel}, H, robust, cover_idx)
+
+
+def _fixed_indices(fixed, candidates, ok, env, budget, cover):
+    """The candidate indices of the fixed points and of the ``cover`` space-filling points added to them
+    (checked: candidates the model converges at, within the budget)."""
+    fixed_idx = np.zeros(0, int) if fixed is None or len(fixed) == 0 else \
+        cand.match_points(fixed, candidates, env.radius)
+    if fixed_idx.size and not np.all(ok[fixed_idx]):
+        k = int(np.flatnonzero(~ok[fixed_idx])[0])
+        raise InputError(f"fixed point {k + 1}: the model fails there, so it informs nothing", "fixed points",
+                         line=k + 1)
+    if not isinstance(cover, (int, np.integer)) or cover < 0:
+        raise InputError(f"cover must be a whole number of points >= 0, got {cover!r}", "--cover", field="cover")
+    cover_idx = np.zeros(0, int)
+    if cover:
+        mask = ok.copy()
+        mask[fixed_idx] = False
+        cover_idx = cand.space_filling(candidates, env.radius, int(cover), mask)
+    if fixed_idx.size + cover_idx.size > budget:
+        raise InputError(f"{fixed_idx.size} fixed and {cover_idx.size} cover points exceed the budget {budget}",
+                         "--budget", field="budget")
+    return np.concatenate([fixed_idx, cover_idx]).astype(int), cover_idx
 
 
 def _draw_blocks(problem: DesignProblem, candidates, draws: int, seed: int) -> list:

@@ -22,15 +22,17 @@ def matrix_rows(res) -> list[dict]:
     lam = c.tip_speed_ratio(pr.envelope.radius)
     counts = dict(zip(*np.unique(res.design, return_counts=True)))
     fixed = set(res.fixed.tolist())
+    cover = set(res.cover.tolist())
     sensors = " + ".join(g.name for g in pr.groups)
     added = {int(j): k + 1 for k, j in enumerate(res.design)}
     rows = []
     for k, j in enumerate(res.run_order()):
-        rows.append({"run": k + 1, "wind_speed [m/s]": float(c.wind_speed[j]), "rotor_speed [rpm]": float(c.rotor_speed[j]),
-                     "pitch [deg]": float(c.pitch[j]), "tsr [-]": float(lam[j]), "yaw [deg]": float(c.yaw[j]),
+        rows.append({"run": k + 1, "wind_speed [m/s]": float(c.wind_speed[j]),
+                     "rotor_speed [rpm]": float(c.rotor_speed[j]), "pitch [deg]": float(c.pitch[j]), "tsr [-]": float(lam[j]), "yaw [deg]": float(c.yaw[j]),
                      "air_density [kg/m^3]": float(c.air_density[j]), "sensors": sensors,
                      "channels": " ".join(pr.channels), "repeats": int(counts[j]),
-                     "fixed": "yes" if j in fixed else "no", "candidate": int(j) + 1, "chosen_as": added[int(j)]})
+                     "fixed": "cover" if j in cover else "yes" if j in fixed else "no", "candidate": int(j) + 1,
+                     "chosen_as": added[int(j)]})
     return rows
 
 
