@@ -225,3 +225,23 @@ def test_pseudo_bayesian_design_of_a_linear_model_does_not_depend_on_the_draws()
     assert sorted(res.design) == sorted(ref.design)
     assert res.robustness["draws"] == 3 and res.robustness["shared_points_min"] == 1.0
     assert abs(res.robustness["averaged_design_loss_worst"]) < 1e-9
+
+
+def test_after_a_calibration_its_posterior_is_the_prior(tmp_path, capsys):
+    """``--after RESULT``: the design's prior σ is the calibrated result's σ of every parameter, and the
+    next points only tighten it."""
+    from calib.calibration.result_files import load_result
+    from calib.design import problem_from_workflow
+
+    run = tmp_path / "run"
+    assert main(["run", str(WORKFLOW), "--out", str(run), "-q"]) == 0
+    stage = next(run.glob("stage*/result.json")).parent
+    result = load_result(stage)
+    problem = problem_from_workflow(WORKFLOW, after=stage)
+    res = design(problem, 6, generate(problem.envelope, 8, 5))
+    assert res.sigma_prior == pytest.approx(np.sqrt(np.diag(result.uncertainty.cov_p)), rel=1e-6)
+    assert np.all(res.sigma_design <= res.sigma_prior * (1 + 1e-9))
+    assert problem.p == pytest.approx(result.estimate.p_hat)
+    assert main(["design", str(WORKFLOW), "--budget", "5", "--after", str(tmp_path / "nowhere"),
+                 "--out", str(tmp_path / "d")]) == 2
+    assert "no such result folder" in capsys.readouterr().err
