@@ -16,7 +16,8 @@ workflow's prior. Candidates: a 25 λ × 16 pitch grid over the workflow's envel
    held-out prediction error of the calibrated model (MAP from ``seeds`` noise draws of the out-of-family
    truth at the design's points; RMS over a 11 × 7 test grid between the candidate lines of (prediction −
    truth)/σ, power and thrust) for the D-optimal design, the I-optimal one (``criterion="prediction"``,
-   targets the candidates), the D-optimal design completing a space-filling cover of 8, 12 or 16
+   targets the candidates), both with the field between the nodes in the noise (``between_nodes``),
+   the D-optimal design completing a space-filling cover of 8, 12 or 16
    points (``cover``), the median of ``n_random`` random designs,
    the space-filling design and the seed study's hand-chosen 12 × 6 grid thinned to N points
    (every third point), and the full candidate set.
@@ -150,6 +151,11 @@ def compare(twin, res, n_random, seeds) -> dict:
     pred = design(pr, N, res.candidates, criterion="prediction")
     entry("I-optimal (prediction variance over the candidates)", res.candidates.subset(pred.design), res.H,
           pred.design)
+    between = problem_from_workflow(WORKFLOW, between_nodes=True)
+    for crit, label in (("d", "D-optimal"), ("prediction", "I-optimal")):
+        bn = design(between, N, res.candidates, criterion=crit)
+        entry(f"{label}, the field between the nodes in the noise", res.candidates.subset(bn.design), res.H,
+              bn.design)
     for cover in (8, 12, 16):
         cov = design(pr, N, res.candidates, cover=cover)
         entry(f"D-optimal on a {cover}-point space-filling cover", res.candidates.subset(cov.design), res.H,

@@ -245,3 +245,16 @@ def test_after_a_calibration_its_posterior_is_the_prior(tmp_path, capsys):
     assert main(["design", str(WORKFLOW), "--budget", "5", "--after", str(tmp_path / "nowhere"),
                  "--out", str(tmp_path / "d")]) == 2
     assert "no such result folder" in capsys.readouterr().err
+
+
+def test_the_field_between_the_nodes_adds_noise_and_takes_information():
+    """With the field between the nodes in the noise every candidate's σ grows, so the full set's
+    precision can only shrink (Loewner order): smaller log det, no fewer σ."""
+    from calib.design import problem_from_workflow
+
+    cand = generate(problem_from_workflow(WORKFLOW).envelope, 8, 5)
+    plain = design(problem_from_workflow(WORKFLOW), 6, cand)
+    wide = design(problem_from_workflow(WORKFLOW, between_nodes=True), 6, cand)
+    assert wide.logdet["full"] < plain.logdet["full"]
+    assert np.all(wide.sigma_full >= plain.sigma_full * (1 - 1e-9))
+    assert np.all(np.isfinite(wide.sigma_design))

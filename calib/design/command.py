@@ -47,6 +47,8 @@ def add_design_parser(sub):
     p.add_argument("--repeats", type=int, default=1, help="how often one point may be chosen (default 1)")
     p.add_argument("--cover", type=int, default=0, help="start from this many space-filling points over the "
                    "envelope (kept), the rest chosen by the criterion (default 0)")
+    p.add_argument("--between-nodes", action="store_true", help="add the variance of the correction field "
+                   "between and beyond the nodes (its smooth-field prior) to the candidates' noise")
     p.add_argument("--draws", type=int, default=0, help="pseudo-Bayesian: average the criterion over this many "
                    "prior draws of the correction field too (default 0: at the linearization point only)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --draws (default 0)")
@@ -107,7 +109,8 @@ def run_design(args, printer=print) -> int:
         raise InputError(f"no such workflow file: {wf}", "WORKFLOW", field="workflow")
     t0 = time.process_time()
     sensors = [s for s in args.sensors.split(",") if s.strip()] if args.sensors else None
-    problem = problem_from_workflow(wf, sensors=sensors, after=args.after)
+    problem = problem_from_workflow(wf, sensors=sensors, after=args.after,
+                                    between_nodes=args.between_nodes)
     env = problem.envelope
     candidates = user_grid(_grid_spec(args.grid, "--grid"), env, "--grid") if args.grid else None
     if candidates is not None:

@@ -56,6 +56,11 @@ class DesignProblem:
     groups : list of SensorGroup
     source : str
     notes : list of str
+    between_nodes : dict, optional
+        With ``prior_std`` [parameter units], ``correlation`` [node spacings] and the (α, η) the data
+        reach (``alpha``, ``eta``): the variance the correction field between and beyond the nodes adds
+        to each candidate output is added to its noise (:meth:`field_variance`), as the tightening advice
+        of :mod:`calib.calibration.tightening` does.
     """
 
     model: object
@@ -74,6 +79,22 @@ class DesignProblem:
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
     field_index: np.ndarray | None = None
+    between_nodes: dict | None = None
+
+    def field_variance(self, conditions: OperatingConditions, p: np.ndarray, ok: np.ndarray, evaluation):
+        """Variance of each output from the correction field the nodes do not carry (the smooth-field prior
+        between the nodes on a refined grid, :func:`calib.parametrizations.aliasing.discrepancy_propagated`,
+        diagonal only), shape (n_points, n_channels) [channel unit²]."""
+        from calib.parametrizations.aliasing import discrepancy_propagated, fine_sensitivities
+
+        b = self.between_nodes
+        corr = self.model.correction_field()
+        a, e = corr.seen(evaluation)
+        m = len(self.channels)
+        fs = fine_sensitivities(self.model, p, conditions, np.ones((len(conditions), m)), list(range(m)), ok,
+                                np.concatenate([a, b["alpha"]]), np.concatenate([e, b["eta"]]))
+        var = discrepancy_propagated(fs.W, corr, fs, b["prior_std"], b["correlation"], diagonal=True)
+        return var.reshape(len(conditions), m)
 
     def field_draws(self, n: int, seed: int = 0) -> np.ndarray:
         """``n`` parameter vectors with the correction field drawn from the prior about ``p`` (the other
@@ -98,9 +119,13 @@ class DesignProblem:
         ok : ndarray of bool, shape (n_points,)
             Converged points with finite sensitivities.
         """
-        ev, G = self.model.jacobian(self.p if p is None else p, conditions)
+        p = self.p if p is None else p
+        ev, G = self.model.jacobian(p, conditions)
         ok = np.asarray(ev.ok, bool) & np.all(np.isfinite(G), axis=(1, 2)) & np.all(np.isfinite(ev.values), axis=1)
-        M = np.where(ok[:, None, None], G, 0.0) * self.scale / self.sigma[None, :, None]
+        sigma = np.broadcast_to(self.sigma, (len(conditions), len(self.sigma)))
+        if self.between_nodes is not None:
+            sigma = np.sqrt(sigma ** 2 + np.nan_to_num(self.field_variance(conditions, p, ok, ev)))
+        M = np.where(ok[:, None, None], G, 0.0) * self.scale / sigma[:, :, None]
         return np.nan_to_num(M) @ self.L, ok
 
 
@@ -128,7 +153,8 @@ def _relative_levels(workflow, setup, channels, notes) -> dict:
     return {c: float(v) if v is not None else fill for c, v in rel.items()}
 
 
-def problem_from_workflow(path, sensors=None, after=None, executor=None) -> DesignProblem:
+def problem_from_workflow(path, sensors=None, after=None, executor=None, between_nodes: bool = False
+                          ) -> DesignProblem:
     """The design problem of a workflow file.
 
     Parameters
@@ -142,6 +168,9 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None) -> Desi
         linearization point and its posterior covariance the prior.
     executor : optional
         The FMU's executor.
+    between_nodes : bool
+        Add the variance of the correction field between and beyond the nodes to the candidates' noise
+        (native BEM with a correction grid and ``prior_correlation`` > 0).
     """
     from calib.calibration.calibrator import Calibrator
     from calib.calibration.map_fit import MapFit
@@ -179,8 +208,17 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None) -> Desi
     env = cand.envelope_of(reference, setup.rotor.rotor_radius)
     kinds = ("lift_correction", "drag_correction")
     field_index = np.array([j for j, q in enumerate(stmt.parameters) if str(q.kind) in kinds], int)
+    extra = None
+    if between_nodes:
+        if not hasattr(model, "with_grid") or settings.prior_correlation <= 0 or grid is None:
+            raise InputError("the field between the nodes needs a native-BEM model with a correction grid and "
+                             "[calibration] prior_correlation > 0", src, field="between_nodes")
+        a, e = model.correction_field().seen(ev)
+        extra = {"prior_std": np.array(stmt.prior_std), "correlation": settings.prior_correlation,
+                 "alpha": a, "eta": e}
     return DesignProblem(model, p, np.array(stmt.scale), psd_sqrt(P), names, channels, sigma, env, reference,
-                         groups, src, notes, prior_from, np.array(stmt.lower), np.array(stmt.upper), field_index)
+                         groups, src, notes, prior_from, np.array(stmt.lower), np.array(stmt.upper), field_index,
+                         extra)
 
 
 def _posterior_of(rdir, names, scale):
