@@ -120,12 +120,12 @@ def paragraph(res) -> str:
 
 
 def _csv(rows, comment) -> str:
+    """``rows`` (dicts with the same keys) as CSV under a ``# comment`` line; floats to 8 digits."""
     buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow([f"# {comment}"])
-    w.writerow(list(rows[0]))
-    for r in rows:
-        w.writerow([f"{x:.8g}" if isinstance(x, float) else x for x in r.values()])
+    buf.write(f"# {comment}\n")
+    out = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    out.writeheader()
+    out.writerows({k: format(v, ".8g") if isinstance(v, float) else v for k, v in r.items()} for r in rows)
     return buf.getvalue()
 
 
