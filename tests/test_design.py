@@ -258,3 +258,16 @@ def test_the_field_between_the_nodes_adds_noise_and_takes_information():
     assert wide.logdet["full"] < plain.logdet["full"]
     assert np.all(wide.sigma_full >= plain.sigma_full * (1 - 1e-9))
     assert np.all(np.isfinite(wide.sigma_design))
+
+
+def test_cli_designs_through_the_bundled_fmu(tmp_path, capsys):
+    """The FMU path: the bundled FMU (variant A, 16 parameters) through the workflow's process executor."""
+    out = tmp_path / "fmu"
+    assert main(["design", str(ROOT / "workflows" / "bundled_fmu.toml"), "--budget", "4", "--points", "4x2",
+                 "--out", str(out)]) == 0
+    assert "chosen by Bayesian D-optimality from 8 candidates" in capsys.readouterr().out
+    with open(out / "parameters.csv") as fh:
+        prm = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    assert len(prm) == 16
+    assert all(float(r["sigma_design"]) <= float(r["sigma_prior"]) * (1 + 1e-9) for r in prm)
+    assert any(float(r["sigma_design"]) < 0.5 * float(r["sigma_prior"]) for r in prm)

@@ -95,9 +95,23 @@ def _counts(text):
         raise InputError(f"--points {text!r}: expected NTSRxNPITCH, e.g. 25x16", "--points", field="points") from None
 
 
-def run_design(args, printer=print) -> int:
-    from calib.design import design, problem_from_workflow
+def _design(args, problem, n_tsr, n_pitch):
+    from calib.design import design
     from calib.design.candidates import check_inside, user_grid
+
+    env = problem.envelope
+    candidates = user_grid(_grid_spec(args.grid, "--grid"), env, "--grid") if args.grid else None
+    if candidates is not None:
+        check_inside(candidates, env, "--grid")
+    targets = user_grid(_grid_spec(args.targets, "--targets"), env, "--targets") if args.targets else None
+    fixed = _fixed(args.fixed, env) if args.fixed else None
+    params = [s.strip() for s in args.parameters.split(",") if s.strip()] if args.parameters else None
+    return design(problem, args.budget, candidates, fixed, args.criterion, params, targets, args.repeats,
+                  n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed, cover=args.cover)
+
+
+def run_design(args, printer=print) -> int:
+    from calib.design import problem_from_workflow
     from calib.design.report import paragraph, write_outputs
 
     if args.budget <= 0:
@@ -111,16 +125,10 @@ def run_design(args, printer=print) -> int:
     sensors = [s for s in args.sensors.split(",") if s.strip()] if args.sensors else None
     problem = problem_from_workflow(wf, sensors=sensors, after=args.after,
                                     between_nodes=args.between_nodes)
-    env = problem.envelope
-    candidates = user_grid(_grid_spec(args.grid, "--grid"), env, "--grid") if args.grid else None
-    if candidates is not None:
-        check_inside(candidates, env, "--grid")
-    targets = user_grid(_grid_spec(args.targets, "--targets"), env, "--targets") if args.targets else None
-    fixed = _fixed(args.fixed, env) if args.fixed else None
-    params = [s.strip() for s in args.parameters.split(",") if s.strip()] if args.parameters else None
-    res = design(problem, args.budget, candidates, fixed, args.criterion, params, targets, args.repeats,
-                 n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed,
-                 cover=args.cover)
+    try:
+        res = _design(args, problem, n_tsr, n_pitch)
+    finally:
+        problem.close()
     out = Path(args.out) if args.out else wf.parent / "design"
     paths = write_outputs(res, out)
     printer(paragraph(res))

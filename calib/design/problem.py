@@ -80,6 +80,13 @@ class DesignProblem:
     upper: np.ndarray | None = None
     field_index: np.ndarray | None = None
     between_nodes: dict | None = None
+    executor: object = None
+
+    def close(self) -> None:
+        """Close the executor the problem opened (an FMU's, from the workflow's ``[executor]``)."""
+        if self.executor is not None:
+            self.executor.close()
+            self.executor = None
 
     def field_variance(self, conditions: OperatingConditions, p: np.ndarray, ok: np.ndarray, evaluation):
         """Variance of each output from the correction field the nodes do not carry (the smooth-field prior
@@ -167,7 +174,8 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         A calibrated result's folder (``calib run`` stage folder): its estimate is the
         linearization point and its posterior covariance the prior.
     executor : optional
-        The FMU's executor.
+        The FMU's executor; default the workflow's ``[executor]`` for an FMU (``problem.executor``, to be
+        closed by the caller: :meth:`DesignProblem.close`).
     between_nodes : bool
         Add the variance of the correction field between and beyond the nodes to the candidates' noise
         (native BEM with a correction grid and ``prior_correlation`` > 0).
@@ -188,37 +196,46 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
     reference = _reference(workflow, setup)
     grid = setup.grid(reference)
     groups = parse_groups(sensors, setup.channels)
-    model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor))
-    ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
-    if not np.any(ev.ok):
-        raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
-    rel = _relative_levels(workflow, setup, channels, notes)
-    values = ev.values[ev.ok]
-    sigma = relative_noise(values, channels, rel, src, field="noise.relative")[0]
-    meas = Measurements(reference.subset(np.flatnonzero(ev.ok)), tuple(channels), values)
-    settings = setup.calibration
-    cal = Calibrator(model, meas, settings)
-    stmt = cal.statement
-    P = MapFit(cal).prior_cov_scaled() if settings.estimator == "map" else cal.prior_cov_scaled()
-    p, prior_from = stmt.p0.copy(), "the workflow's prior"
-    names = [q.name for q in stmt.parameters]
-    if after is not None:
-        p, P = _posterior_of(after, names, stmt.scale)
-        prior_from = f"the posterior of {after}"
-    env = cand.envelope_of(reference, setup.rotor.rotor_radius)
-    kinds = ("lift_correction", "drag_correction")
-    field_index = np.array([j for j, q in enumerate(stmt.parameters) if str(q.kind) in kinds], int)
-    extra = None
-    if between_nodes:
-        if not hasattr(model, "with_grid") or settings.prior_correlation <= 0 or grid is None:
-            raise InputError("the field between the nodes needs a native-BEM model with a correction grid and "
-                             "[calibration] prior_correlation > 0", src, field="between_nodes")
-        a, e = model.correction_field().seen(ev)
-        extra = {"prior_std": np.array(stmt.prior_std), "correlation": settings.prior_correlation,
-                 "alpha": a, "eta": e}
-    return DesignProblem(model, p, np.array(stmt.scale), psd_sqrt(P), names, channels, sigma, env, reference,
-                         groups, src, notes, prior_from, np.array(stmt.lower), np.array(stmt.upper), field_index,
-                         extra)
+    own = None
+    if executor is None and setup.is_fmu:
+        from calib.models.from_config import executor_of
+        executor = own = executor_of(setup.executor, src)
+    try:
+        model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor))
+        ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
+        if not np.any(ev.ok):
+            raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
+        rel = _relative_levels(workflow, setup, channels, notes)
+        values = ev.values[ev.ok]
+        sigma = relative_noise(values, channels, rel, src, field="noise.relative")[0]
+        meas = Measurements(reference.subset(np.flatnonzero(ev.ok)), tuple(channels), values)
+        settings = setup.calibration
+        cal = Calibrator(model, meas, settings)
+        stmt = cal.statement
+        P = MapFit(cal).prior_cov_scaled() if settings.estimator == "map" else cal.prior_cov_scaled()
+        p, prior_from = stmt.p0.copy(), "the workflow's prior"
+        names = [q.name for q in stmt.parameters]
+        if after is not None:
+            p, P = _posterior_of(after, names, stmt.scale)
+            prior_from = f"the posterior of {after}"
+        env = cand.envelope_of(reference, setup.rotor.rotor_radius)
+        kinds = ("lift_correction", "drag_correction")
+        field_index = np.array([j for j, q in enumerate(stmt.parameters) if str(q.kind) in kinds], int)
+        extra = None
+        if between_nodes:
+            if not hasattr(model, "with_grid") or settings.prior_correlation <= 0 or grid is None:
+                raise InputError("the field between the nodes needs a native-BEM model with a correction grid and "
+                                 "[calibration] prior_correlation > 0", src, field="between_nodes")
+            a, e = model.correction_field().seen(ev)
+            extra = {"prior_std": np.array(stmt.prior_std), "correlation": settings.prior_correlation,
+                     "alpha": a, "eta": e}
+        return DesignProblem(model, p, np.array(stmt.scale), psd_sqrt(P), names, channels, sigma, env, reference,
+                             groups, src, notes, prior_from, np.array(stmt.lower), np.array(stmt.upper), field_index,
+                             extra, own)
+    except BaseException:
+        if own is not None:
+            own.close()
+        raise
 
 
 def _posterior_of(rdir, names, scale):
