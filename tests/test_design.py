@@ -271,3 +271,15 @@ def test_cli_designs_through_the_bundled_fmu(tmp_path, capsys):
     assert len(prm) == 16
     assert all(float(r["sigma_design"]) <= float(r["sigma_prior"]) * (1 + 1e-9) for r in prm)
     assert any(float(r["sigma_design"]) < 0.5 * float(r["sigma_prior"]) for r in prm)
+
+
+def test_sensor_groups_parse_costs_stations_and_taps():
+    from calib.design.sensors import parse_groups
+
+    groups = parse_groups(["hub", "root:2", "station@0.47:3", "taps@0.8"], ["power"])
+    assert [(g.name, g.channels, g.cost) for g in groups] == [
+        ("hub", ("power", "thrust"), 1.0), ("root", ("root_flap_moment", "root_edge_moment"), 2.0),
+        ("station@0.47", ("fn@0.47", "ft@0.47"), 3.0), ("taps@0.8", ("cn@0.8", "ct@0.8"), 1.0)]
+    for bad, message in (("hub:0", "cost"), ("station@1.5", "radial position"), ("hub,hub", "twice")):
+        with pytest.raises(InputError, match=message):
+            parse_groups(bad.split(","), ["power"])

@@ -1,8 +1,8 @@
 """Sensor groups of a campaign design: named sets of the model's channels, each with a cost.
 
 Built-in groups: ``hub`` (power, thrust), ``torque``, ``root`` (root flap and edge moments),
-``station@ETA`` (spanwise normal and tangential force per length at the radial station η, e.g. a
-pressure-tap station), ``workflow`` (the workflow's stage channels, the default); any single model
+``station@ETA`` (spanwise normal and tangential force per length at the radial station η),
+``taps@ETA`` (the normal and tangential force coefficients a pressure-tap station gives), ``workflow`` (the workflow's stage channels, the default); any single model
 channel is a group of itself. A group is written ``NAME`` or ``NAME:COST`` (cost per operating
 point, default 1).
 """
@@ -29,7 +29,8 @@ class SensorGroup:
 
 def available_words() -> str:
     """The group names a user may give, in words."""
-    return (", ".join(BUILT_IN) + ", station@ETA (fn@ETA and ft@ETA at radial station ETA in (0, 1]), workflow "
+    return (", ".join(BUILT_IN) + ", station@ETA (fn@ETA and ft@ETA at radial station ETA in (0, 1]), taps@ETA "
+            "(the pressure-tap coefficients cn@ETA and ct@ETA), workflow "
             "(the stage channels), or a channel name of the model")
 
 
@@ -61,15 +62,15 @@ def parse_groups(specs, workflow_channels, source: str = "--sensors") -> list[Se
             chans = tuple(workflow_channels)
         elif name in BUILT_IN:
             chans = BUILT_IN[name]
-        elif name.startswith("station@"):
-            eta = name.split("@", 1)[1]
+        elif name.startswith(("station@", "taps@")):
+            kind, eta = name.split("@", 1)
             try:
                 if not 0 < float(eta) <= 1:
                     raise ValueError
             except ValueError:
                 raise InputError(f"sensor group {name!r}: the station must be a radial position η in (0, 1], "
-                                 f"e.g. station@0.47", source, field=name) from None
-            chans = (f"fn@{eta}", f"ft@{eta}")
+                                 f"e.g. {kind}@0.47", source, field=name) from None
+            chans = (f"fn@{eta}", f"ft@{eta}") if kind == "station" else (f"cn@{eta}", f"ct@{eta}")
         elif name:
             chans = (name,)
         else:
