@@ -49,6 +49,11 @@ def _powercurve(args) -> int:
     return run_powercurve(args)
 
 
+def _design(args) -> int:
+    from calib.design.command import run_design
+    return run_design(args)
+
+
 def _diagnose(args) -> int:
     from calib.diagnosis.command import diagnose_from_args
     return diagnose_from_args(args)
@@ -74,6 +79,7 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
   calib run FILE --out D   run a workflow TOML file (keys: workflows/README.md)
   calib predict DIR ...    a calibrated model at new conditions, with 95 % intervals
   calib powercurve DIR     the calibrated power curve and AEP, with their uncertainty
+  calib design FILE ...    choose a campaign's operating points and sensors
   calib diagnose ...       find, name and add the effect the model misses
   calib scada FILE ...     SCADA 10-minute statistics: filters, IEC power curve, tables
   calib fmu build          build the bundled turbine FMUs from their C sources
@@ -148,6 +154,8 @@ def _add_powercurve(parser, sub):
     """``parser`` with the ``powercurve`` subcommand added to its subparsers ``sub``."""
     from calib.powercurve.command import add_powercurve_parser
     add_powercurve_parser(sub).set_defaults(func=_powercurve)
+    from calib.design.command import add_design_parser
+    add_design_parser(sub).set_defaults(func=_design)
     return parser
 
 

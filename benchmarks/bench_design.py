@@ -1,0 +1,285 @@
+"""Campaign design (``calib design``) on the native-BEM twin of the wind-tunnel workflow: predicted = realized,
+the design against random, space-filling and full-set designs, the information curve, the speed.
+
+The problem: ``workflows/wind_tunnel_hub_loads.toml`` (NREL Phase VI at 72 rpm, 60 correction nodes and
+the pitch offset: 61 parameters; power and thrust at 1 % of their RMS), the MAP estimator under the
+workflow's prior. Candidates: a 25 λ × 16 pitch grid over the workflow's envelope (λ 2–7.5, pitch −2…8°).
+
+1. *Predicted = realized.* The D-optimal design of N points; at a fixed truth, ``reps`` noise replicates
+   at the chosen points, each calibrated by the MAP estimator (calib's :class:`Calibrator`); the spread of
+   the estimates along each direction the design determines (s > 1 of the prior-whitened sensitivities),
+   against the design's prediction: the posterior σ_k = 1/√(1 + s_k²) and, for the spread of a MAP estimate
+   at a fixed truth, the linear-Gaussian σ_k = s_k/(1 + s_k²) (the two agree as s grows). Truths: the
+   nominal model (where the design linearized) and the workflow's out-of-family truth (smooth bumps not in
+   the span of the hat functions), where the spread is taken about the estimates' mean.
+2. *Better than what engineers do.* For the same N: log det of the whitened posterior precision, and the
+   held-out prediction error of the calibrated model (MAP from ``seeds`` noise draws of the out-of-family
+   truth at the design's points; RMS over a 11 × 7 test grid between the candidate lines of (prediction −
+   truth)/σ, power and thrust) for the D-optimal design, the I-optimal one (``criterion="prediction"``,
+   targets the candidates), both with the field between the nodes in the noise (``between_nodes``),
+   the D-optimal design completing a space-filling cover of 8, 12 or 16
+   points (``cover``), the median of ``n_random`` random designs,
+   the space-filling design and the seed study's hand-chosen 12 × 6 grid thinned to N points
+   (every third point), and the full candidate set.
+3. *Information against size.* The greedy curve's log det as a share of the full set's, on the 400
+   candidates and on the paper's 12 × 6 grid (72 candidates; 25 % = 18 points).
+4. *Speed.* 2 000 candidates (50 × 40): CPU seconds (time.process_time) of the sensitivities and of the selection.
+
+``python benchmarks/bench_design.py [REPS [N_RANDOM [SEEDS]]]`` (defaults 100, 50, 3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, ROOT)
+
+from calib.calibration.calibrator import Calibrator  # noqa: E402
+from calib.design import design, problem_from_workflow  # noqa: E402
+from calib.design.candidates import generate, user_grid  # noqa: E402
+from calib.design.select import precision  # noqa: E402
+from calib.measurements import Measurements  # noqa: E402
+from calib.workflow.schema import load_workflow  # noqa: E402
+from calib.workflow.setup import prepare  # noqa: E402
+from calib.workflow.truth import truth_model  # noqa: E402
+
+SUITE = "validate"
+WORKFLOW = os.path.join(ROOT, "workflows", "wind_tunnel_hub_loads.toml")
+N = 25
+
+
+class Twin:
+    """The workflow's model, truth and MAP settings for replicate calibrations."""
+
+    def __init__(self, problem):
+        wf = load_workflow(WORKFLOW)
+        setup = prepare(wf)
+        self.problem = problem
+        self.truth, self.p_truth = truth_model(setup.rotor, problem.channels, setup.settings, wf.truth, setup.nuisance)
+        sig = dict(zip(problem.channels, map(float, problem.sigma)))
+        self.settings = dataclasses.replace(setup.calibration, estimator="map", noise="known", sigma=sig,
+                                            representation_error=False, curvature_samples=0, tightening=False,
+                                            prior_check=False, scale_by_fit=False)
+
+    def calibrate(self, cond, clean, rng):
+        """MAP estimate from ``clean`` outputs plus noise; (p̂, status)."""
+        pr = self.problem
+        y = clean + rng.normal(size=clean.shape) * pr.sigma
+        m = Measurements(cond, tuple(pr.channels), y, sigma=np.broadcast_to(pr.sigma, y.shape).copy())
+        res = Calibrator(pr.model, m, self.settings).run()
+        return np.asarray(res.estimate.p_hat, float), str(res.estimate.status)
+
+
+def predicted_realized(twin, res, reps, truth: str, seed: int) -> dict:
+    pr = twin.problem
+    cond = res.candidates.subset(res.design)
+    if truth == "nominal":
+        ev = pr.model.evaluate(pr.p, cond)
+    else:
+        ev = twin.truth.evaluate(twin.p_truth, cond)
+    rng = np.random.default_rng(seed)
+    est, status = [], {}
+    for k in range(reps):
+        p, st = twin.calibrate(cond, ev.values, rng)
+        est.append(p)
+        status[st] = status.get(st, 0) + 1
+        if (k + 1) % 10 == 0:
+            print(f"[design] {truth}: {k + 1}/{reps} replicates", flush=True)
+    E = (np.array(est) - pr.p) / pr.scale                        # scaled
+    W = np.linalg.solve(pr.L, E.T).T                              # prior-whitened
+    W = W - W.mean(axis=0) if truth != "nominal" else W           # about the mean where the truth is biased
+    F = precision(res.H, res.design) - np.eye(len(pr.names))
+    lam, V = np.linalg.eigh(0.5 * (F + F.T))
+    order = np.argsort(lam)[::-1]
+    lam, V = lam[order], V[:, order]
+    s = np.sqrt(np.clip(lam, 0, None))
+    det = s > 1
+    realized = np.sqrt(np.mean((W @ V[:, det]) ** 2, axis=0))
+    post = 1 / np.sqrt(1 + s[det] ** 2)
+    freq = s[det] / (1 + s[det] ** 2)
+    return {"truth": truth, "replicates": reps, "status": status, "s": s[det].tolist(),
+            "ratio_to_posterior": (realized / post).tolist(), "ratio_to_linear_spread": (realized / freq).tolist(),
+            "directions": int(det.sum())}
+
+
+def test_grid(env):
+    lam = np.linspace(env.tsr[0], env.tsr[1], 12)
+    pitch = np.linspace(env.pitch[0], env.pitch[1], 8)
+    return user_grid({"tsr": 0.5 * (lam[1:] + lam[:-1]), "pitch": 0.5 * (pitch[1:] + pitch[:-1])}, env)
+
+
+def prediction_error(twin, cond, seeds, test, clean_test) -> tuple[float, int]:
+    pr = twin.problem
+    clean = twin.truth.evaluate(twin.p_truth, cond).values
+    errs, failed = [], 0
+    for k in range(seeds):
+        p, st = twin.calibrate(cond, clean, np.random.default_rng(7000 + k))
+        ev = pr.model.evaluate(p, test)
+        ok = ev.ok
+        failed += int(np.count_nonzero(~ok))
+        errs.append(np.sqrt(np.mean(((ev.values[ok] - clean_test[ok]) / pr.sigma) ** 2)))
+    return float(np.mean(errs)), failed
+
+
+def compare(twin, res, n_random, seeds) -> dict:
+    pr = twin.problem
+    env = pr.envelope
+    test = test_grid(env)
+    clean_test = twin.truth.evaluate(twin.p_truth, test).values
+    usable = np.flatnonzero(res.ok)
+    rng = np.random.default_rng(39)
+    paper = generate(env, 12, 6)                                  # the seed study's 12 × 6 grid
+    Hp, okp = pr.blocks(paper)
+    hand = np.flatnonzero(okp)[::3][:N]
+    out = {}
+
+    def entry(name, cond, H, idx):
+        t = time.process_time()
+        err, failed = prediction_error(twin, cond, seeds, test, clean_test)
+        out[name] = {"logdet": float(np.linalg.slogdet(precision(H, idx))[1]), "prediction_error": err,
+                     "points": int(len(idx)), "failed_test_points": failed, "cpu_s": time.process_time() - t}
+        print(f"[design] {name}: log det {out[name]['logdet']:.1f}, held-out error {err:.2f} σ", flush=True)
+
+    entry("D-optimal", res.candidates.subset(res.design), res.H, res.design)
+    pred = design(pr, N, res.candidates, criterion="prediction")
+    entry("I-optimal (prediction variance over the candidates)", res.candidates.subset(pred.design), res.H,
+          pred.design)
+    between = problem_from_workflow(WORKFLOW, between_nodes=True)
+    for crit, label in (("d", "D-optimal"), ("prediction", "I-optimal")):
+        bn = design(between, N, res.candidates, criterion=crit)
+        entry(f"{label}, the field between the nodes in the noise", res.candidates.subset(bn.design), res.H,
+              bn.design)
+    for cover in (8, 12, 16):
+        cov = design(pr, N, res.candidates, cover=cover)
+        entry(f"D-optimal on a {cover}-point space-filling cover", res.candidates.subset(cov.design), res.H,
+              cov.design)
+    entry("space-filling", res.candidates.subset(res.uniform), res.H, res.uniform)
+    entry("hand-chosen (12 × 6 grid, every third)", paper.subset(hand), Hp, hand)
+    entry("full candidate set", res.candidates.subset(usable), res.H, usable)
+    rand = []
+    for k in range(n_random):
+        idx = rng.choice(usable, N, replace=False)
+        err, _ = prediction_error(twin, res.candidates.subset(idx), seeds, test, clean_test)
+        rand.append((float(np.linalg.slogdet(precision(res.H, idx))[1]), err))
+        print(f"[design] random design {k + 1}/{n_random}: log det {rand[-1][0]:.1f}, error {err:.2f} σ", flush=True)
+    rand = np.array(rand)
+    out["random (median)"] = {"logdet": float(np.median(rand[:, 0])), "prediction_error": float(np.median(rand[:, 1])),
+                              "points": N, "designs": n_random,
+                              "beaten_logdet": float(np.mean(rand[:, 0] < out["D-optimal"]["logdet"])),
+                              "beaten_error": float(np.mean(rand[:, 1] > out["D-optimal"]["prediction_error"]))}
+    return out
+
+
+def curves(problem) -> dict:
+    out = {}
+    for name, (a, b) in (("400 candidates (25 × 16)", (25, 16)), ("paper grid (12 × 6)", (12, 6))):
+        cand = generate(problem.envelope, a, b)
+        r = design(problem, 5, cand, curve_to=min(a * b, 120))
+        cum = r.logdet["greedy"] - np.sum(r.selection.greedy_gains[:5]) + np.cumsum(r.selection.greedy_gains)
+        frac = cum / r.logdet["full"]
+        n90 = int(np.argmax(frac >= 0.9)) + 1 if np.any(frac >= 0.9) else None
+        q = max(int(0.25 * a * b), 1)
+        F = precision(r.H, _greedy_order(r)[:q]) - np.eye(len(problem.names))
+        s = np.sqrt(np.clip(np.linalg.eigvalsh(F), 0, None))
+        out[name] = {"candidates": a * b, "fraction": frac.tolist(), "points_for_90_percent": n90,
+                     "directions_at_25_percent": int(np.sum(s > 1)), "directions_full": r.n_determined["full"],
+                     "fraction_at_25_percent": float(frac[max(int(0.25 * a * b), 1) - 1])
+                     if frac.size >= int(0.25 * a * b) else None}
+    return out
+
+
+def _greedy_order(r):
+    """The greedy sequence of a design run with a curve: replayed from its gains' order (the design keeps
+    only the budget); recomputed here by a greedy run without exchange."""
+    from calib.design.criteria import d_criterion
+    from calib.design.select import select
+
+    usable = np.flatnonzero(r.ok)
+    sel = select(d_criterion(), r.H[usable], r.selection.greedy_gains.size, exchange=False)
+    return usable[sel.design]
+
+
+def speed(problem) -> dict:
+    cand = generate(problem.envelope, 50, 40)
+    t = time.process_time()
+    r = design(problem, 50, cand)
+    total = time.process_time() - t
+    return {"candidates": len(cand), "parameters": len(problem.names), "budget": 50,
+            "cpu_sensitivities_s": r.seconds["sensitivities"], "cpu_selection_s": r.seconds["selection"],
+            "cpu_total_s": total, "exchanges": r.selection.exchanges}
+
+
+def run_bench(reps=100, n_random=50, seeds=3) -> dict:
+    problem = problem_from_workflow(WORKFLOW)
+    res = design(problem, N, generate(problem.envelope, 25, 16))
+    twin = Twin(problem)
+    out = {"budget": N, "candidates": int(len(res.ok)), "failed_candidates": res.n_failed,
+           "determined": res.n_determined, "logdet": res.logdet, "speed": speed(problem), "curves": curves(problem)}
+    out["predicted_realized"] = [predicted_realized(twin, res, reps, t, 100 + k)
+                                 for k, t in enumerate(("nominal", "out-of-family"))]
+    out["comparison"] = compare(twin, res, n_random, seeds)
+    out["settings"] = {"reps": reps, "n_random": n_random, "seeds": seeds}
+    return out
+
+
+def _range(x):
+    x = np.asarray(x, float)
+    return f"{x.min():.2f}–{x.max():.2f}" if x.size else "–"
+
+
+def markdown(out: dict) -> str:
+    sp, st = out["speed"], out["settings"]
+    rows = [f"Wind-tunnel twin (Phase VI, 72 rpm, 61 parameters, power and thrust at 1 %), D-optimal design of "
+            f"{out['budget']} points from {out['candidates']} candidates ({out['failed_candidates']} failed); "
+            f"it determines {out['determined']['design']} directions (s > 1), the full set "
+            f"{out['determined']['full']}, a space-filling design of the same size {out['determined']['uniform']}.",
+            "", "**Predicted = realized** (MAP estimates over noise replicates at the design's points; ratio of "
+            "the realized spread to the predicted σ per determined direction):", "",
+            "| truth | replicates | directions | realized / posterior σ | realized / linear-Gaussian spread | "
+            "statuses |", "|---|---|---|---|---|---|"]
+    for r in out["predicted_realized"]:
+        rows.append(f"| {r['truth']} | {r['replicates']} | {r['directions']} | {_range(r['ratio_to_posterior'])} | "
+                    f"{_range(r['ratio_to_linear_spread'])} | "
+                    + ", ".join(f"{k} {v}" for k, v in r["status"].items()) + " |")
+    rows += ["", f"**Against other designs of {out['budget']} points** (held-out error: RMS of (prediction − "
+             f"truth)/σ on a 11 × 7 test grid, out-of-family truth, MAP from {st['seeds']} noise draws each):", "",
+             "| design | points | log det | held-out error [σ] |", "|---|---|---|---|"]
+    for name, r in out["comparison"].items():
+        rows.append(f"| {name} | {r['points']} | {r['logdet']:.1f} | {r['prediction_error']:.2f} |")
+    rnd = out["comparison"]["random (median)"]
+    rows += ["", f"The D-optimal design has a larger log det than {100 * rnd['beaten_logdet']:.0f} % and a smaller "
+             f"held-out error than {100 * rnd['beaten_error']:.0f} % of the {rnd['designs']} random designs.", "",
+             "**Information against size** (greedy log det as a share of the full candidate set's):", "",
+             "| candidate set | points for 90 % | share at 25 % of the candidates | directions at 25 % (full set) |",
+             "|---|---|---|---|"]
+    for name, r in out["curves"].items():
+        f25 = r["fraction_at_25_percent"]
+        rows.append(f"| {name} | {r['points_for_90_percent'] or 'not reached'} | "
+                    f"{'–' if f25 is None else f'{100 * f25:.0f} %'} | {r['directions_at_25_percent']} "
+                    f"({r['directions_full']}) |")
+    rows += ["", f"**Speed**: {sp['candidates']} candidates, {sp['parameters']} parameters, budget {sp['budget']}: "
+             f"sensitivities {sp['cpu_sensitivities_s']:.2f} s CPU, selection (greedy and exchange) "
+             f"{sp['cpu_selection_s']:.2f} s CPU, whole design {sp['cpu_total_s']:.2f} s CPU."]
+    return "\n".join(rows) + "\n"
+
+
+def run(reps: int = 100, n_random: int = 50, seeds: int = 3) -> dict:
+    """Entry point of ``benchmarks/run_all.py``: the study, published for the validation page."""
+    from publish import command_line, publish
+
+    out = run_bench(reps, n_random, seeds)
+    publish("design", out, command_line(), markdown(out))
+    return out
+
+
+if __name__ == "__main__":
+    args = [int(a) for a in sys.argv[1:]]
+    out = run(*args)
+    print(markdown(out))

@@ -1,0 +1,138 @@
+"""``calib design WORKFLOW --budget N``: which operating points (and sensor groups) a campaign should measure.
+
+Writes into ``--out`` (default ``design`` beside the workflow): ``test_matrix.csv`` (run order:
+conditions, sensors, repeats), ``parameters.csv`` (predicted posterior 1-σ of every parameter for the
+design, the full candidate set and a space-filling design of the same size), ``design.json``,
+``design.png`` (the points on the λ–pitch plane), ``gain.png`` (the marginal-gain curve) and
+``report.md``, whose first paragraph it also prints.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from calib.errors import InputError
+
+__all__ = ["add_design_parser", "run_design"]
+
+DESCRIPTION = ("Choose the operating points of a test campaign before it is run: from the workflow's model, "
+               "prior and noise, the points of a candidate set (a stated grid, or a lambda x pitch grid over the "
+               "workflow's operating envelope) that maximize the information the data will give (Bayesian "
+               "D-optimality by default), by greedy selection and a Fedorov exchange on sensitivities computed "
+               "once per candidate. Writes the test matrix in run order, the predicted posterior sigma of every "
+               "parameter, the marginal gain of each point, figures and report.md; prints its first paragraph.")
+
+
+def add_design_parser(sub):
+    """The ``design`` subcommand's parser, added to ``sub`` (argparse subparsers)."""
+    p = sub.add_parser("design", help="choose a campaign's operating points and sensors", description=DESCRIPTION)
+    p.add_argument("workflow", help="workflow TOML file (model, grid, prior, noise; its data span the envelope)")
+    p.add_argument("--budget", type=int, required=True, help="operating points in the design (fixed ones included)")
+    p.add_argument("--out", default=None, help="output folder (default: design/ beside the workflow)")
+    p.add_argument("--criterion", choices=("d", "a", "prediction"), default="d",
+                   help="d: Bayesian D-optimality (default); a: A-optimality on --parameters; prediction: the "
+                        "prediction variance at --targets (default: the candidates)")
+    p.add_argument("--parameters", default=None, help="NAME,NAME,... of --criterion a")
+    p.add_argument("--after", default=None, help="a calibrated result's folder: its posterior is the prior")
+    p.add_argument("--grid", default=None, help="candidate grid, e.g. 'tsr=2:8:0.25;pitch=-2:8:1' (keys tsr or "
+                   "wind_speed, pitch, rotor_speed, yaw; START:STOP:STEP or a,b,c); default: over the envelope")
+    p.add_argument("--points", default="25x16", help="the generated grid's λ x pitch counts (default 25x16)")
+    p.add_argument("--targets", default=None, help="target grid of --criterion prediction (the --grid syntax)")
+    p.add_argument("--fixed", default=None, help="points to keep, 'tsr,pitch[,rotor_speed];...' (each a candidate)")
+    p.add_argument("--sensors", default=None, help="sensor groups NAME[:COST],... : hub, torque, root, "
+                   "station@ETA, workflow (default), or a channel name")
+    p.add_argument("--repeats", type=int, default=1, help="how often one point may be chosen (default 1)")
+    p.add_argument("--cover", type=int, default=0, help="start from this many space-filling points over the "
+                   "envelope (kept), the rest chosen by the criterion (default 0)")
+    p.add_argument("--between-nodes", action="store_true", help="add the variance of the correction field "
+                   "between and beyond the nodes (its smooth-field prior) to the candidates' noise")
+    p.add_argument("--draws", type=int, default=0, help="pseudo-Bayesian: average the criterion over this many "
+                   "prior draws of the correction field too (default 0: at the linearization point only)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of --draws (default 0)")
+    return p
+
+
+def _grid_spec(text: str, option: str) -> dict:
+    spec = {}
+    for part in str(text).split(";"):
+        if not part.strip():
+            continue
+        key, eq, value = part.partition("=")
+        if not eq:
+            raise InputError(f"{option} {text!r}: expected KEY=RANGE;KEY=RANGE, e.g. 'tsr=2:8:0.25;pitch=-2:8:1'",
+                             option, field=option.lstrip("-"))
+        spec[key.strip()] = value.strip()
+    return spec
+
+
+def _fixed(text, env):
+    from calib.types import OperatingConditions
+
+    rows = []
+    for k, part in enumerate(s for s in str(text).split(";") if s.strip()):
+        try:
+            vals = [float(x) for x in part.split(",")]
+            if len(vals) not in (2, 3):
+                raise ValueError
+        except ValueError:
+            raise InputError(f"--fixed point {k + 1} {part!r}: expected tsr,pitch or tsr,pitch,rotor_speed",
+                             "--fixed", field="fixed") from None
+        rows.append(vals + [env.rotor_speed[0]] * (3 - len(vals)))
+    lam, pitch, rpm = np.array(rows, float).T
+    return OperatingConditions(rpm * np.pi / 30 * env.radius / lam, rpm, pitch, env.air_density, env.yaw[0])
+
+
+def _counts(text):
+    try:
+        a, b = (int(x) for x in str(text).lower().split("x"))
+        if a < 1 or b < 1:
+            raise ValueError
+        return a, b
+    except ValueError:
+        raise InputError(f"--points {text!r}: expected NTSRxNPITCH, e.g. 25x16", "--points", field="points") from None
+
+
+def _design(args, problem, n_tsr, n_pitch):
+    from calib.design import design
+    from calib.design.candidates import check_inside, user_grid
+
+    env = problem.envelope
+    candidates = user_grid(_grid_spec(args.grid, "--grid"), env, "--grid") if args.grid else None
+    if candidates is not None:
+        check_inside(candidates, env, "--grid")
+    targets = user_grid(_grid_spec(args.targets, "--targets"), env, "--targets") if args.targets else None
+    fixed = _fixed(args.fixed, env) if args.fixed else None
+    params = [s.strip() for s in args.parameters.split(",") if s.strip()] if args.parameters else None
+    return design(problem, args.budget, candidates, fixed, args.criterion, params, targets, args.repeats,
+                  n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed, cover=args.cover)
+
+
+def run_design(args, printer=print) -> int:
+    from calib.design import problem_from_workflow
+    from calib.design.report import paragraph, write_outputs
+
+    if args.budget <= 0:
+        raise InputError(f"--budget must be a whole number of points > 0, got {args.budget}", "--budget",
+                         field="budget")
+    n_tsr, n_pitch = _counts(args.points)
+    wf = Path(args.workflow)
+    if not wf.is_file():
+        raise InputError(f"no such workflow file: {wf}", "WORKFLOW", field="workflow")
+    t0 = time.process_time()
+    sensors = [s for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    problem = problem_from_workflow(wf, sensors=sensors, after=args.after,
+                                    between_nodes=args.between_nodes)
+    try:
+        res = _design(args, problem, n_tsr, n_pitch)
+    finally:
+        problem.close()
+    out = Path(args.out) if args.out else wf.parent / "design"
+    paths = write_outputs(res, out)
+    printer(paragraph(res))
+    printer(f"[calib design] {len(res.ok)} candidates, sensitivities {res.seconds['sensitivities']:.1f} s CPU, "
+            f"selection {res.seconds['selection']:.1f} s CPU ({res.selection.exchanges} exchanges), total "
+            f"{time.process_time() - t0:.1f} s CPU; wrote {', '.join(p.name for p in paths)} to {out}")
+    return 0
