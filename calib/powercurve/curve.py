@@ -19,12 +19,16 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.powercurve.aep import aep_weights
+from calib.powercurve.batch import batchable, batched_solver
 from calib.powercurve.linearized import delta_method
 from calib.powercurve.schedule import ScheduledCurve
 from calib.types import OperatingConditions
 
 __all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws",
            "schedule_warnings"]
+
+#: Posterior draws per batched block (a block of 250 draws × 45 bins is ~11 000 BEM points per solve).
+BATCH_DRAWS = 250
 
 #: Quantities summarized per bin.
 QUANTITIES = ("power", "thrust", "cp", "ct", "rotor_speed", "pitch")
@@ -236,7 +240,7 @@ def _power_model(model):
 
 def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float = 1.225, n_draws: int = 1000,
                            seed: int = 0, measurements=(), model=None, tsr_rule: str = "optimal",
-                           progress=None) -> CalibratedPowerCurve:
+                           progress=None, batched: bool | None = None) -> CalibratedPowerCurve:
     """The calibrated model's power curve with its uncertainty.
 
     Parameters
@@ -258,6 +262,10 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         For the default schedule: ``"optimal"`` or ``"design"``.
     progress : callable, optional
         Called as ``progress(done, total)`` during the draws.
+    batched : bool, optional
+        None (default): the draws are solved batched (:mod:`calib.powercurve.batch`) where the model
+        allows it, else one by one (a note says why); False: one by one (the reference path);
+        True: batched or an :class:`InputError`.
 
     Returns
     -------
@@ -308,16 +316,39 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     tsr = np.full(n_draws, np.nan)
     n_pts = 0
     t0 = time.perf_counter()
-    for d in range(n_draws):
-        # the linearized pitch of this draw starts its region-3 search (the search iterates to tolerance)
-        hint = None if pitch_grad is None else (central.pitch + pitch_grad @ (draws_p[d] - p_hat), dP_dpitch)
-        c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central, pitch_hint=hint)
-        for q in QUANTITIES:
-            x = getattr(c, q)
-            out[q][d] = np.where(c.ok, x, np.nan)
-        status[d], tsr[d], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
-        if progress is not None and (d + 1) % 100 == 0:
-            progress(d + 1, n_draws)
+    why = batchable(model) if batched is not False else "the per-draw loop was asked for (batched=False)"
+    if why and batched:
+        raise InputError(f"the draws cannot be batched: {why}", result.name, field="batched")
+    if n_draws and not why and hasattr(schedule, "solve_batch"):
+        # every draw's schedule in a few large solves, in blocks of draws (bounded memory)
+        for start in range(0, n_draws, BATCH_DRAWS):
+            block = draws_p[start:start + BATCH_DRAWS]
+            hint = None
+            if pitch_grad is not None:
+                hint = (central.pitch[None, :] + (block - p_hat) @ pitch_grad.T, dP_dpitch)
+            c = schedule.solve_batch(batched_solver(model, block), block.shape[0], v, air_density, guess=central,
+                                     pitch_hint=hint)
+            rows = slice(start, start + block.shape[0])
+            for q in QUANTITIES:
+                out[q][rows] = np.where(c.ok, getattr(c, q), np.nan)
+            status[rows], tsr[rows], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
+            if progress is not None:
+                progress(min(start + BATCH_DRAWS, n_draws), n_draws)
+        notes.append(f"the {n_draws} draws were solved batched ({BATCH_DRAWS} draws per block, per-point "
+                     "parameters in one BEM solve per schedule step)")
+    else:
+        if n_draws:
+            notes.append(f"the draws were solved one by one: {why or 'the schedule has no batched solve'}")
+        for d in range(n_draws):
+            # the linearized pitch of this draw starts its region-3 search (the search iterates to tolerance)
+            hint = None if pitch_grad is None else (central.pitch + pitch_grad @ (draws_p[d] - p_hat), dP_dpitch)
+            c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central, pitch_hint=hint)
+            for q in QUANTITIES:
+                x = getattr(c, q)
+                out[q][d] = np.where(c.ok, x, np.nan)
+            status[d], tsr[d], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
+            if progress is not None and (d + 1) % 100 == 0:
+                progress(d + 1, n_draws)
     seconds = time.perf_counter() - t0
 
     disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
