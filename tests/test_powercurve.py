@@ -14,6 +14,7 @@ from scipy.special import erf
 
 from calib.bem.steady_control import steady_power_curve
 from calib.cli import main
+from calib.errors import InputError
 from calib.models.bem_model import BemModel
 from calib.powercurve import (FixedSpeed, VariableSpeed, aep, calibrated_power_curve, iec_bins, parse_measurement,
                               posterior_draws, rayleigh_cdf, weibull_cdf)
@@ -311,3 +312,42 @@ def test_powercurve_help_describes_every_option(capsys):
     for option in ("--wind", "--density", "--draws", "--schedule", "--tsr", "--weibull", "--availability",
                    "--measurement", "--out"):
         assert option in text
+
+
+# ------------------------------------------------------------------------------ batched draws (issue 41 item 5)
+@pytest.mark.parametrize("kind", ["variable", "fixed", "table"])
+def test_batched_draws_equal_the_per_draw_loop(wind_tunnel_result, kind, tmp_path):
+    """The batched path (every draw's schedule in a few solves with per-point parameters) against the
+    straightforward loop solving each draw's schedule with ``model.solve`` at that draw's parameters.
+    Bins up to 25 m/s: Phase VI deep in stall, where the multiple-root screen uses the slope table."""
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    if kind == "variable":
+        schedule = _variable_speed(model, "optimal")[1]
+    elif kind == "fixed":
+        schedule = FixedSpeed(72.0, 3.0)
+    else:
+        path = tmp_path / "table.csv"
+        path.write_text("wind_speed,rotor_speed,pitch\n5,60,2\n15,72,4\n25,72,10\n")
+        schedule = schedule_from_table(path)
+    v = iec_bins(4.0, 25.0, 1.0)
+    loop = calibrated_power_curve(result, v, schedule, n_draws=6, seed=5, model=model, batched=False)
+    batch = calibrated_power_curve(result, v, schedule, n_draws=6, seed=5, model=model, batched=True)
+    assert any("one by one" in n for n in loop.notes) and any("batched" in n for n in batch.notes)
+    np.testing.assert_array_equal(batch.draw_status, loop.draw_status)
+    assert batch.n_bem_points == loop.n_bem_points
+    for q in ("power", "thrust", "cp", "ct", "rotor_speed", "pitch"):
+        np.testing.assert_allclose(batch.draws[q], loop.draws[q], rtol=1e-9, atol=1e-9, equal_nan=True)
+    np.testing.assert_allclose(batch.tsr_opt, loop.tsr_opt, rtol=1e-12, equal_nan=True)
+    if kind == "variable":
+        assert np.any(loop.central.region == 3)      # the pitch search ran in both paths
+
+
+def test_a_wrapped_model_is_solved_per_draw_and_says_so(wind_tunnel_result):
+    _, result = wind_tunnel_result
+    model = _FailingAt(result.rebuild_model(), 10.0, np.inf)
+    pc = calibrated_power_curve(result, iec_bins(5.0, 7.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=2, model=model)
+    assert any("solved one by one" in n and "_FailingAt" in n for n in pc.notes)
+    with pytest.raises(InputError, match="cannot be batched"):
+        calibrated_power_curve(result, iec_bins(5.0, 7.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=2, model=model,
+                               batched=True)

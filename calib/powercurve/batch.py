@@ -42,10 +42,11 @@ class BatchLayoutError(RuntimeError):
 
 def batchable(model) -> str:
     """Why ``model`` cannot be solved with per-point parameters ('' when it can)."""
-    chain = getattr(model, "chain", None)
-    if chain is None or not hasattr(model, "rotor") or not hasattr(model, "settings"):
-        return "the model is not the native BEM"
-    for e in chain.effects:
+    from calib.models.bem_model import BemModel
+
+    if not isinstance(model, BemModel):
+        return f"the model is a {type(model).__name__}, not the native BEM (its own solve is called per draw)"
+    for e in model.chain.effects:
         if isinstance(e, CorrectionFieldEffect):
             continue
         if e.stage == "conditions" and not e.reads_thrust:
@@ -111,7 +112,10 @@ class _BatchedCorrectionField:
 
     @property
     def _block(self):
-        return self.batch.P[:, self.offset:self.offset + self.grid.n_params]
+        if getattr(self, "_contiguous", None) is None or self._contiguous[0] is not self.batch.P:
+            self._contiguous = (self.batch.P, np.ascontiguousarray(
+                self.batch.P[:, self.offset:self.offset + self.grid.n_params]))
+        return self._contiguous[1]
 
     def apply(self, theta, state, ctx, probes=None):
         g = self.grid
@@ -130,11 +134,12 @@ class _BatchedCorrectionField:
                 smin = s[k, np.arange(s.shape[1])]
                 better = smin < best
                 best, draws = np.where(better, smin, best), np.where(better, k + start, draws)
-        Pb, rows = self._block, draws[:, None]
-        lift, drag = Pb[rows, index], Pb[rows, index + g.n_lift]                    # (n, 4) nodal values
-        dcl, dcd = np.sum(value * lift, axis=1), np.sum(value * drag, axis=1)
+        flat = self._block.ravel()
+        at = draws[:, None] * self.grid.n_params + index                              # (n, 4) into flat
+        lift, drag = flat.take(at), flat.take(at + g.n_lift)                         # nodal values
+        dcl, dcd = np.einsum("ij,ij->i", value, lift), np.einsum("ij,ij->i", value, drag)
         if isinstance(a, dl.Dual):
-            scl, scd = np.sum(dvalue * lift, axis=1), np.sum(dvalue * drag, axis=1)
+            scl, scd = np.einsum("ij,ij->i", dvalue, lift), np.einsum("ij,ij->i", dvalue, drag)
             dcl, dcd = dl.Dual(dcl, scl[:, None] * a.d), dl.Dual(dcd, scd[:, None] * a.d)
         cl, cd = state.cl + dcl, state.cd + dcd
         return state.replace(cl=cl, cd=floor_drag(cd, state.cd, g.cd_floor))

@@ -379,7 +379,8 @@ class VariableSpeed:
         Without a guess: bisection on [fine pitch, max pitch] to 0.05°, then secant steps from its
         bracket. With a guess: from the guess, a first step by Newton with ``slope`` (dP/dβ [W/deg],
         where finite and negative) or a 0.5° probe, then secant steps. Only the points not yet within
-        ``pitch_tol_power`` are solved again. Returns the pitch, the BEM result at it (a
+        ``pitch_tol_power`` are solved again; a point at a pitch limit whose next step points out of
+        the range again stops there (not converged). Returns the pitch, the BEM result at it (a
         :class:`_Rows`), whether |P / P_rated − 1| ≤ ``pitch_tol_power`` and the number of points solved.
         With ``per_point``, ``p`` is an array over the points (a batched solve's draw index per point,
         :func:`calib.powercurve.batch.batched_solver`) and is indexed like the points.
@@ -410,8 +411,9 @@ class VariableSpeed:
             rows = _Rows.of(f(b, every), slice(None))
         y = rows.power - P_r
         slope = np.full(n, np.nan) if slope is None else np.asarray(slope, float)
+        stuck = np.zeros(n, bool)
         for _ in range(max_iter):
-            a = np.flatnonzero((rows.status == 0) & (np.abs(y) > tol))
+            a = np.flatnonzero((rows.status == 0) & (np.abs(y) > tol) & ~stuck)
             if not a.size:
                 break
             d = y[a] - y_old[a]
@@ -420,6 +422,13 @@ class VariableSpeed:
             step = np.where(secant, -y[a] * (b[a] - b_old[a]) / np.where(secant, d, 1.0),
                             np.where(newton, -y[a] / np.where(newton, slope[a], -1.0), 0.5))
             b2 = np.clip(b[a] + np.clip(step, -5.0, 5.0), self.fine_pitch, self.max_pitch)
+            # at a pitch limit and the step points out of the range again: rated power is not
+            # reachable from here (e.g. power rising with pitch in deep stall); the point stops
+            out = (b2 == b[a]) & ((b2 == self.fine_pitch) | (b2 == self.max_pitch))
+            stuck[a[out]] = True
+            a, b2 = a[~out], b2[~out]
+            if not a.size:
+                break
             r = f(b2, a)
             b_old[a], y_old[a] = b[a], y[a]
             b[a], y[a] = b2, r.power - P_r
