@@ -190,6 +190,7 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")
     words += [f"Warning: {w}." for w in pc.warnings]
+    words += [f"{n[0].upper()}{n[1:]}." for n in pc.notes if "has no posterior" in n or n.startswith("left out")]
     outside = np.array([bool(e) for e in pc.envelope])
     if outside.any():
         words.append(f"{int(outside.sum())} bins lie outside the calibration envelope (extrapolation): "

@@ -24,7 +24,7 @@ from calib.powercurve.linearized import delta_method
 from calib.powercurve.schedule import ScheduledCurve
 from calib.types import OperatingConditions
 
-__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws",
+__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws", "posterior_statement",
            "schedule_warnings"]
 
 #: Posterior draws per batched block (a block of 100 draws × 45 bins is 4 500 BEM points per solve; larger blocks ran slower here).
@@ -288,20 +288,26 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         raise InputError("the power curve needs the native BEM model (an FMU result is not supported by "
                          "calib powercurve yet)", result.name, field="model")
     schedule = VariableSpeed.from_rotor(model.rotor, tsr_rule) if schedule is None else schedule
+    if hasattr(schedule, "check_reachable"):
+        schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
     v = np.asarray(wind_speed, float)
     p_hat = np.asarray(result.estimate.p_hat, float)
     if p_hat.size != len(model.parameters):
         raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
                          field="parameters")
     cov = np.asarray(result.uncertainty.cov_p, float)
+    if cov.shape != (p_hat.size, p_hat.size) or not np.all(np.isfinite(cov)):
+        raise InputError(f"the result records no usable covariance of the estimate (result.uncertainty.cov_p has "
+                         f"shape {cov.shape}, {int(np.count_nonzero(~np.isfinite(cov)))} non-finite entries; expected "
+                         f"a finite {p_hat.size}x{p_hat.size} matrix): there is no posterior to draw from or to "
+                         "linearize; re-run the calibration", result.name, field="uncertainty.cov_p")
     lower = np.array([q.lower for q in model.parameters], float)
     upper = np.array([q.upper for q in model.parameters], float)
     notes = []
     central = schedule.solve(model.solve, p_hat, v, air_density)
     nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
     warnings = schedule_warnings(schedule, central)
-    notes.append(f"estimator {result.estimator!r}: the draws and the delta method use its recorded covariance "
-                 "(result.uncertainty.cov_p)")
+    notes += posterior_statement(result)
 
     pm = _power_model(model)
     delta, grad, pitch_grad, dP_dpitch = {}, None, None, None
@@ -356,6 +362,40 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
+
+
+def posterior_statement(result) -> list[str]:
+    """What the draws stand for, by estimator, and what the calibration's uncertainty leaves out.
+
+    The MAP estimator's covariance is a Laplace posterior. The truncated estimator has no posterior:
+    its covariance is the data's in the retained directions plus the prior's in the frozen ones
+    (:func:`calib.calibration.identifiability.frozen_aware_covariance`); the statement says so, how
+    much of the variance the prior carries, and which terms the result does not record (the field
+    between the nodes without a gain, the frozen directions' curvature term when not sampled).
+    """
+    unc = result.uncertainty
+    est = result.estimator
+    if est == "map":
+        out = [f"estimator {est!r}: the draws and the delta method use its Laplace posterior covariance "
+               "(result.uncertainty.cov_p)"]
+    else:
+        cov = np.asarray(unc.cov_p, float)
+        frozen = np.asarray(unc.cov_frozen, float)
+        total = float(np.trace(cov))
+        share = float(np.trace(frozen)) / total if frozen.shape == cov.shape and total > 0 else float("nan")
+        out = [f"estimator {est!r} has no posterior: the draws and the delta method use its recorded covariance, the "
+               "data's in the retained directions plus the prior's in the frozen ones (result.uncertainty.cov_p)"
+               + (f"; the prior carries {100 * share:.0f} % of its variance (trace)" if np.isfinite(share) else "")]
+    left = []
+    if not np.asarray(unc.gain).size:
+        left.append("the correction field between and beyond the nodes (the result records no gain)")
+    if unc.curvature and not unc.curvature.get("samples", 0):
+        left.append("the frozen directions' curvature term (not sampled)")
+    if getattr(unc, "aliasing_note", ""):
+        left.append(f"({unc.aliasing_note})")
+    if left:
+        out.append("left out of the calibration's uncertainty: " + "; ".join(left))
+    return out
 
 
 def schedule_warnings(schedule, central: ScheduledCurve) -> list[str]:

@@ -229,11 +229,35 @@ class VariableSpeed:
             raise InputError(f"the rotor's schedule cannot be followed: rotor speed limits {s.min_rotor_speed:g}–"
                              f"{s.max_rotor_speed:g} rpm, rated power {s.rated_power:g} W (need 0 < min <= max, "
                              "rated > 0)", rotor.source, field="schedule")
+        if np.isfinite(s.cut_in) and s.cut_in > 0:
+            need = s.design_tsr * s.cut_in / float(rotor.rotor_radius) * 30 / np.pi
+            if s.max_rotor_speed < need * (1 - 1e-9):
+                raise InputError(f"the rotor's schedule cannot be followed: the speed limit {s.max_rotor_speed:g} rpm is "
+                                 f"below the {need:.4g} rpm the design tip-speed ratio {s.design_tsr:g} asks at cut-in "
+                                 f"({s.cut_in:g} m/s, R = {float(rotor.rotor_radius):g} m); a limit in rad/s instead of "
+                                 "rpm?", rotor.source, field="schedule.max_rotor_speed")
         if tsr_rule not in ("optimal", "design"):
             raise InputError(f"unknown tsr rule {tsr_rule!r}; valid: optimal, design", "VariableSpeed",
                              field="tsr_rule")
         return cls(s.rated_power, s.min_rotor_speed, s.max_rotor_speed, s.design_tsr, s.fine_pitch,
                    float(rotor.rotor_radius), tsr_rule, s.generator_efficiency)
+
+    def check_reachable(self, wind_speed, air_density, source: str = "schedule") -> None:
+        """Refuse a rated power the rotor cannot produce in the bins: above the Betz limit
+        16/27 · ½ρπR²V³ at the highest bin (Betz 1920; no rotor exceeds it).
+
+        Raises
+        ------
+        InputError
+            Naming the rated power, the Betz power and the highest bin.
+        """
+        v_max = float(np.max(wind_speed))
+        betz = 16 / 27 * 0.5 * air_density * np.pi * self.rotor_radius ** 2 * v_max ** 3
+        if self.rated_power > betz:
+            raise InputError(f"the rated power {self.rated_power / 1e6:.4g} MW is above what the rotor can produce in the "
+                             f"bins: the Betz limit at the highest bin {v_max:g} m/s is {betz / 1e6:.4g} MW "
+                             f"(R = {self.rotor_radius:g} m, ρ = {air_density:g} kg/m³); check the rated power's unit",
+                             source, field="schedule.rated_power")
 
     def describe(self) -> str:
         lam = ("the C_P-maximizing tip-speed ratio of each parameter vector (re-found per draw)"
