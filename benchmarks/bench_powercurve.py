@@ -208,6 +208,75 @@ def speed(n_draws: int = 1000, n_loop: int = 50) -> dict:
     return out
 
 
+PHASE_VI_WORKFLOW = """# calib run workflow of bench_powercurve's Phase VI hold-out (written by benchmarks/bench_powercurve.py):
+# workflows/phase_vi.toml's rotor, grid and calibration settings, hub loads, the low-wind half of sequence H
+name = "powercurve_phase_vi_low_wind"
+[rotor]
+name = "phase_vi"
+[grid]
+alpha_nodes_deg = [-2.0, 4.0, 10.0, 16.0, 22.0, 28.0]
+eta_nodes = [0.25, 0.45, 0.65, 0.85, 1.0]
+[measurements]
+file = "{csv}"
+[calibration]
+noise = "{noise}"
+relative_sigma = {{ torque = 0.03, thrust = 0.03 }}
+estimator = "truncated"
+cd_min = 0.003
+[[stages]]
+name = "hub loads"
+channels = ["torque", "thrust"]
+"""
+
+
+def phase_vi_holdout(work: Path, n_draws: int = 200, noise: str = "relative_ml") -> dict:
+    """Calibrate on sequence H's three lowest wind speeds (7, 10, 13 m/s; torque and thrust), predict
+    the power at the three highest (15, 20, 25 m/s) at their measured rotor speed and 3° pitch with
+    a 90 % interval (±1.645 σ, σ the calibration's draws, discrepancy and field in quadrature), and
+    count the held-out measured powers (LSS torque × Ω, normalized to the model's density as
+    IEC 61400-12-1 does for a stall-regulated rotor: P ρ_ref / ρ) inside."""
+    from calib.calibration.result_files import load_result
+    from calib.cli import main
+    from calib.powercurve import calibrated_power_curve
+    from calib.powercurve.schedule import TableSchedule
+
+    src = ROOT / "workflows" / "data" / "phase_vi_sequence_H.csv"
+    lines = src.read_text().splitlines()
+    head = [k for k, line in enumerate(lines) if line.startswith("file_name")][0]
+    cols = lines[head].split(",")
+    rows = [dict(zip(cols, line.split(","))) for line in lines[head + 1:] if line.strip()]
+    v_all = np.array([float(r["wind_speed [m/s]"]) for r in rows])
+    order = np.argsort(v_all)
+    low, high = order[:len(order) // 2], order[len(order) // 2:]
+    folder = work / "phase_vi"
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "low.csv").write_text("\n".join(lines[:head] + [f"# bench_powercurve: the rows of the lowest "
+                                                              f"{len(low)} wind speeds only"] + [lines[head]]
+                                              + [lines[head + 1 + k] for k in sorted(low)]) + "\n")
+    (folder / "workflow.toml").write_text(PHASE_VI_WORKFLOW.format(csv="low.csv", noise=noise))
+    code = main(["run", str(folder / "workflow.toml"), "--out", str(folder / "run"), "-q"])
+    if code != 0:
+        return {"error": f"calib run exited {code}"}
+    result = load_result(next((folder / "run").glob("stage*/result.json")).parent)
+    hv = v_all[high]
+    rpm = np.array([float(rows[k]["rotor_speed [rpm]"]) for k in high])
+    rho = np.array([float(rows[k]["air_density [kg/m^3]"]) for k in high])
+    torque = np.array([float(rows[k]["torque [N m]"]) for k in high])
+    rho_ref = float(np.mean(rho))
+    schedule = TableSchedule(tuple(hv), tuple(rpm), tuple(np.full(hv.size, 3.0)), "sequence H, held-out rows")
+    pc = calibrated_power_curve(result, hv, schedule, air_density=rho_ref, n_draws=n_draws, seed=7)
+    measured = torque * rpm * np.pi / 30 * rho_ref / rho
+    sig = pc.power_std_total()
+    inside = np.abs(pc.central.power - measured) <= Z90 * sig
+    return {"calibrated_on_m_s": sorted(v_all[low].tolist()), "held_out_m_s": hv.tolist(),
+            "noise": noise, "estimator": result.estimator,
+            "measured_power_w": measured.tolist(), "predicted_power_w": pc.central.power.tolist(),
+            "nominal_power_w": pc.nominal.power.tolist(), "sigma_total_w": sig.tolist(),
+            "sigma_calibration_draws_w": pc.draw_std("power").tolist(),
+            "inside_90": [bool(x) for x in inside], "n_inside": int(inside.sum()), "n_bins": int(hv.size),
+            "envelope": list(pc.envelope), "failed_draws": pc.failed_draws, "notes": pc.notes}
+
+
 def markdown(res: dict) -> str:
     lines = [f"Out-of-family truth (CCBlade {res.get('wisdem_version', '?')}), NREL 5-MW rigid, "
              f"{res['replicates']} noise replicates per effect, {res['draws']} posterior draws each.", "",
@@ -222,6 +291,19 @@ def markdown(res: dict) -> str:
                          f"| {a['abs_error_nominal_mwh']:.3g} | {a['error_ratio_nominal_over_calibrated']:.2g} "
                          f"| {a['median_sigma_total_mwh']:.3g} | {a['delta_over_draws_sigma_median']:.2f} "
                          f"({a['delta_over_draws_sigma_min']:.2f}-{a['delta_over_draws_sigma_max']:.2f}) |")
+    ph = res.get("phase_vi")
+    if ph and "error" not in ph:
+        lines += ["", f"Phase VI sequence H, calibrated on {', '.join(f'{x:g}' for x in ph['calibrated_on_m_s'])} m/s "
+                  f"(torque, thrust; estimator {ph['estimator']!r}, noise {ph['noise']!r}); held-out bins inside their "
+                  f"90 % interval: {ph['n_inside']} of {ph['n_bins']}.", "",
+                  "| wind speed [m/s] | measured P [kW] | calibrated P [kW] | 90 % half-width [kW] | nominal P [kW] "
+                  "| inside | envelope |", "|---|---|---|---|---|---|---|"]
+        for k, v in enumerate(ph["held_out_m_s"]):
+            lines.append(f"| {v:g} | {ph['measured_power_w'][k] / 1e3:.2f} | {ph['predicted_power_w'][k] / 1e3:.2f} "
+                         f"| {Z90 * ph['sigma_total_w'][k] / 1e3:.2f} | {ph['nominal_power_w'][k] / 1e3:.2f} "
+                         f"| {'yes' if ph['inside_90'][k] else 'no'} | {ph['envelope'][k] or 'inside'} |")
+    elif ph:
+        lines += ["", f"Phase VI hold-out: {ph['error']}"]
     sp = res.get("speed")
     if sp:
         lines += ["", f"Speed ({sp['case']}): {sp['batched_draws']} draws batched in {sp['batched_cpu_s']:.1f} s CPU "
@@ -230,8 +312,33 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run(n_replicates: int = 50, n_draws: int = 200, effects=None) -> dict:
-    """Truths, replicates, figures; publishes ``powercurve.json`` (``run_all`` calls this)."""
+def records_path(n_draws: int) -> Path:
+    """The replicates done so far (a killed run resumes from it): one JSON line per replicate."""
+    path = ROOT / "bench_output" / "powercurve" / f"records_{n_draws}_draws.jsonl"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _done(n_draws: int) -> dict:
+    path = records_path(n_draws)
+    if not path.exists():
+        return {}
+    out = {}
+    for line in path.read_text().splitlines():
+        try:
+            d = json.loads(line)
+        except json.JSONDecodeError:
+            continue            # a line cut by a kill
+        out[(d["name"], d["seed"])] = d["record"]
+    return out
+
+
+def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float | None = None) -> dict:
+    """Truths, replicates, figures; publishes ``powercurve.json`` (``run_all`` calls this).
+
+    ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
+    figures then say how many replicates ran per effect (``replicates_run``).
+    """
     from publish import command_line, publish
 
     t0 = time.perf_counter()
@@ -243,13 +350,31 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None) -> dict:
         except Exception as exc:  # noqa: BLE001  (never crash the benchmark runner)
             return {"error": f"the CCBlade truth failed: {type(exc).__name__}: {exc}"}
         records = {n: [] for n in names}
-        for k in range(n_replicates):
-            for n in names:
-                records[n].append(replicate(truth, n, SEED0 + k, work, n_draws))
-            print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
-    res = {"replicates": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
+        done = _done(n_draws)
+        with open(records_path(n_draws), "a") as log:
+            for k in range(n_replicates):
+                if stop_at is not None and time.time() > stop_at:
+                    print(f"[bench_powercurve] time budget reached after {k} replicates", flush=True)
+                    break
+                for n in names:
+                    rec = done.get((n, SEED0 + k))
+                    if rec is None:
+                        try:
+                            rec = replicate(truth, n, SEED0 + k, work, n_draws)
+                        except Exception as exc:  # noqa: BLE001  (counted, never dropped)
+                            rec = {"seed": SEED0 + k, "error": f"{type(exc).__name__}: {exc}"}
+                        log.write(json.dumps({"name": n, "seed": SEED0 + k, "record": rec}) + "\n")
+                        log.flush()
+                    records[n].append(rec)
+                print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
+    res = {"replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
            "truth_tsr_opt": {n: truth["data_sets"][n]["curve"]["tsr_opt"] for n in names},
            "effects": summarize(records)}
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            res["phase_vi"] = phase_vi_holdout(Path(tmp), n_draws)
+        except Exception as exc:  # noqa: BLE001  (said in the figures)
+            res["phase_vi"] = {"error": f"{type(exc).__name__}: {exc}"}
     res["speed"] = speed()
     res["wall_seconds"] = time.perf_counter() - t0
     publish("powercurve", res, command_line() if __name__ == "__main__" else
