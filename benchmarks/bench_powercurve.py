@@ -377,8 +377,13 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
             res["phase_vi"] = {"error": f"{type(exc).__name__}: {exc}"}
     res["speed"] = speed()
     res["wall_seconds"] = time.perf_counter() - t0
-    publish("powercurve", res, command_line() if __name__ == "__main__" else
-            f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}", markdown(res))
+    res["effects_run"] = names
+    res["time_budget_utc"] = (None if stop_at is None else
+                              time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(stop_at)))
+    how = (f"python -c \"import bench_powercurve as B; B.run({n_replicates}, {n_draws}, effects={names!r}, "
+           f"stop_at=<{res['time_budget_utc']} UTC>)\" (in benchmarks/)"
+           if effects or stop_at is not None else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
+    publish("powercurve", res, command_line() if __name__ == "__main__" else how, markdown(res))
     return res
 
 
