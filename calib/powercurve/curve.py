@@ -19,19 +19,14 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.powercurve.aep import aep_weights
-from calib.powercurve.batch import batchable, batched_solver
+from calib.powercurve.draws import solve_draws
 from calib.powercurve.linearized import delta_method
 from calib.powercurve.schedule import ScheduledCurve
+from calib.powercurve.statements import posterior_statement, schedule_warnings
 from calib.types import OperatingConditions
 
-__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws", "posterior_statement",
-           "schedule_warnings"]
+__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws"]
 
-#: Posterior draws per batched block (a block of 100 draws × 45 bins is 4 500 BEM points per solve; larger blocks ran slower here).
-BATCH_DRAWS = 100
-
-#: Quantities summarized per bin.
-QUANTITIES = ("power", "thrust", "cp", "ct", "rotor_speed", "pitch")
 
 
 def iec_bins(start: float, stop: float, step: float = 0.5) -> np.ndarray:
@@ -76,7 +71,7 @@ class CalibratedPowerCurve:
     central, nominal : ScheduledCurve
         At the estimate p̂ and at the nominal parameters.
     draws : dict of str to ndarray, shape (n_draws, n_bins)
-        Per quantity of :data:`QUANTITIES`, every draw's curve (NaN where its solve failed).
+        Per quantity of :data:`calib.powercurve.draws.QUANTITIES`, every draw's curve (NaN where its solve failed).
     draw_status : ndarray of int, shape (n_draws, n_bins)
     tsr_opt : ndarray, shape (n_draws,)
     delta_std : dict of str to ndarray, shape (n_bins,)
@@ -102,7 +97,7 @@ class CalibratedPowerCurve:
     cov : ndarray, shape (n_params, n_params)
         The covariance the draws came from.
     warnings : list of str
-        What the schedule could not do (:func:`schedule_warnings`), for the report's first paragraph.
+        What the schedule could not do (:func:`calib.powercurve.statements.schedule_warnings`), for the report's first paragraph.
     """
 
     wind_speed: np.ndarray
@@ -317,44 +312,10 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         notes.append("no delta-method value: the model has no exact Jacobian here")
 
     draws_p, n_clipped = posterior_draws(p_hat, cov, lower, upper, n_draws, seed)
-    out = {q: np.full((n_draws, v.size), np.nan) for q in QUANTITIES}
-    status = np.zeros((n_draws, v.size), int)
-    tsr = np.full(n_draws, np.nan)
-    n_pts = 0
     t0 = time.perf_counter()
-    why = batchable(model) if batched is not False else "the per-draw loop was asked for (batched=False)"
-    if why and batched:
-        raise InputError(f"the draws cannot be batched: {why}", result.name, field="batched")
-    if n_draws and not why and hasattr(schedule, "solve_batch"):
-        # every draw's schedule in a few large solves, in blocks of draws (bounded memory)
-        for start in range(0, n_draws, BATCH_DRAWS):
-            block = draws_p[start:start + BATCH_DRAWS]
-            hint = None
-            if pitch_grad is not None:
-                hint = (central.pitch[None, :] + (block - p_hat) @ pitch_grad.T, dP_dpitch)
-            c = schedule.solve_batch(batched_solver(model, block), block.shape[0], v, air_density, guess=central,
-                                     pitch_hint=hint)
-            rows = slice(start, start + block.shape[0])
-            for q in QUANTITIES:
-                out[q][rows] = np.where(c.ok, getattr(c, q), np.nan)
-            status[rows], tsr[rows], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
-            if progress is not None:
-                progress(min(start + BATCH_DRAWS, n_draws), n_draws)
-        notes.append(f"the {n_draws} draws were solved batched ({BATCH_DRAWS} draws per block, per-point "
-                     "parameters in one BEM solve per schedule step)")
-    else:
-        if n_draws:
-            notes.append(f"the draws were solved one by one: {why or 'the schedule has no batched solve'}")
-        for d in range(n_draws):
-            # the linearized pitch of this draw starts its region-3 search (the search iterates to tolerance)
-            hint = None if pitch_grad is None else (central.pitch + pitch_grad @ (draws_p[d] - p_hat), dP_dpitch)
-            c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central, pitch_hint=hint)
-            for q in QUANTITIES:
-                x = getattr(c, q)
-                out[q][d] = np.where(c.ok, x, np.nan)
-            status[d], tsr[d], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
-            if progress is not None and (d + 1) % 100 == 0:
-                progress(d + 1, n_draws)
+    out, status, tsr, n_pts, how = solve_draws(model, schedule, draws_p, p_hat, v, air_density, central, pitch_grad,
+                                               dP_dpitch, batched, progress, result.name)
+    notes += how
     seconds = time.perf_counter() - t0
 
     disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
@@ -362,58 +323,6 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
-
-
-def posterior_statement(result) -> list[str]:
-    """What the draws stand for, by estimator, and what the calibration's uncertainty leaves out.
-
-    The MAP estimator's covariance is a Laplace posterior. The truncated estimator has no posterior:
-    its covariance is the data's in the retained directions plus the prior's in the frozen ones
-    (:func:`calib.calibration.identifiability.frozen_aware_covariance`); the statement says so, how
-    much of the variance the prior carries, and which terms the result does not record (the field
-    between the nodes without a gain, the frozen directions' curvature term when not sampled).
-    """
-    unc = result.uncertainty
-    est = result.estimator
-    if est == "map":
-        out = [f"estimator {est!r}: the draws and the delta method use its Laplace posterior covariance "
-               "(result.uncertainty.cov_p)"]
-    else:
-        cov = np.asarray(unc.cov_p, float)
-        frozen = np.asarray(unc.cov_frozen, float)
-        total = float(np.trace(cov))
-        share = float(np.trace(frozen)) / total if frozen.shape == cov.shape and total > 0 else float("nan")
-        out = [f"estimator {est!r} has no posterior: the draws and the delta method use its recorded covariance, the "
-               "data's in the retained directions plus the prior's in the frozen ones (result.uncertainty.cov_p)"
-               + (f"; the prior carries {100 * share:.0f} % of its variance (trace)" if np.isfinite(share) else "")]
-    left = []
-    if not np.asarray(unc.gain).size:
-        left.append("the correction field between and beyond the nodes (the result records no gain)")
-    if unc.curvature and not unc.curvature.get("samples", 0):
-        left.append("the frozen directions' curvature term (not sampled)")
-    if getattr(unc, "aliasing_note", ""):
-        left.append(f"({unc.aliasing_note})")
-    if left:
-        out.append("left out of the calibration's uncertainty: " + "; ".join(left))
-    return out
-
-
-def schedule_warnings(schedule, central: ScheduledCurve) -> list[str]:
-    """Sentences on what a variable-speed schedule could not do at the central curve: rated power
-    never reached in the bins, or the rotor at its maximum speed from the first bin (a speed limit
-    below what region 2 asks at the lowest wind speed)."""
-    out = []
-    if getattr(schedule, "kind", "") != "variable_speed":
-        return out
-    ok = central.ok
-    if ok.any() and not np.any(central.region == 3):
-        out.append(f"the calibrated rotor does not reach rated power ({schedule.rated_power / 1e6:.4g} MW) in any bin "
-                   f"up to {central.wind_speed[ok][-1]:g} m/s (at most {np.nanmax(central.power) / 1e6:.4g} MW): "
-                   "every bin stays in region 2")
-    if ok.any() and central.rotor_speed[ok][0] >= schedule.max_rotor_speed - 1e-9:
-        out.append(f"the rotor is at its maximum speed {schedule.max_rotor_speed:g} rpm from the first bin "
-                   f"({central.wind_speed[ok][0]:g} m/s): the speed limit is below what the tip-speed ratio asks there")
-    return out
 
 
 def _prediction_terms(result, model, central, air_density, notes):

@@ -87,6 +87,63 @@ def _discon_number(values: dict, key: str, src: str, unit: str) -> float:
     return x
 
 
+def _simple_vs(sd, gb, design_tsr, fine_pitch, src, notes):
+    """Rated power [W], speed limits [rpm], design λ and fine pitch of ``VSContrl = 1``."""
+    rt_sp = sd.number("VS_RtGnSp", "rated generator speed [rpm]")
+    rt_tq = sd.number("VS_RtTq", "rated generator torque [N m]")
+    for key, x in (("VS_RtGnSp", rt_sp), ("VS_RtTq", rt_tq)):
+        if not x > 0:
+            raise InputError(f"expected > 0, got {x:g} (VSContrl = 1 uses it)", sd.source, sd.get(key).line, key)
+        src[key] = f"{sd.source} line {sd.get(key).line}: {key} = {x:g}"
+    if design_tsr is None:
+        raise InputError("ServoDyn's simple variable-speed control (VSContrl = 1) states no design tip-speed "
+                         "ratio: give one", sd.source, sd.get("VSContrl").line, "VSContrl")
+    rated = rt_sp / RPM_PER_RAD_S * rt_tq
+    max_rpm = rt_sp / gb
+    min_rpm = 1e-3 * max_rpm
+    notes.append("VSContrl = 1 states no minimum rotor speed: region 2 tracks the tip-speed ratio down to "
+                 f"{min_rpm:.3g} rpm")
+    if fine_pitch is None:
+        fine_pitch = 0.0
+        notes.append("VSContrl = 1 states no fine pitch: 0 deg")
+    return rated, min_rpm, max_rpm, design_tsr, fine_pitch
+
+
+def _rosco(sd, gb, gen_eff, design_tsr, fine_pitch, src, notes):
+    """Rated power [W], speed limits [rpm], design λ, fine pitch and generator efficiency of a ROSCO DISCON.IN."""
+    dll_in = sd.require("DLL_InFile", "quoted file name")
+    path = resolve_input_file(dll_in.text, sd, dll_in.line, dll_in.key, True)
+    dv = read_discon(path)
+    where = str(path)
+    ref = _discon_number(dv, "VS_RefSpd", where, "rad/s")
+    min_om = _discon_number(dv, "VS_MinOMSpd", where, "rad/s")
+    rt_pwr = _discon_number(dv, "VS_RtPwr", where, "W")
+    eff = _discon_number(dv, "VS_GenEff", where, "%") / 100.0
+    for key, x in (("VS_RefSpd", ref), ("VS_RtPwr", rt_pwr), ("VS_GenEff", eff)):
+        if not x > 0:
+            raise InputError(f"expected > 0, got {x:g}", where, dv[key.lower()][1], key)
+    for key in ("VS_RefSpd", "VS_MinOMSpd", "VS_RtPwr", "VS_GenEff"):
+        src[key] = f"{where} line {dv[key.lower()][1]}: {key} = {dv[key.lower()][0]}"
+    if abs(eff - gen_eff) > 1e-9:
+        notes.append(f"ROSCO's VS_GenEff {100 * eff:g} % differs from ServoDyn's GenEff {100 * gen_eff:g} %: "
+                     "the ROSCO value is used")
+    gen_eff = eff
+    rated = rt_pwr / eff
+    max_rpm, min_rpm = ref / gb * RPM_PER_RAD_S, min_om / gb * RPM_PER_RAD_S
+    if design_tsr is None:
+        design_tsr = _discon_number(dv, "VS_TSRopt", where, "-")
+        src["VS_TSRopt"] = f"{where} line {dv['vs_tsropt'][1]}: VS_TSRopt = {design_tsr:g}"
+    if fine_pitch is None:
+        fine_pitch = float(np.degrees(_discon_number(dv, "PC_FinePit", where, "rad")))
+        src["PC_FinePit"] = f"{where} line {dv['pc_finepit'][1]}: PC_FinePit = {dv['pc_finepit'][0]}"
+    if "we_gearboxratio" in dv:
+        gb_r = _discon_number(dv, "WE_GearboxRatio", where, "-")
+        if abs(gb_r - gb) > 1e-6 * gb:
+            notes.append(f"ROSCO's WE_GearboxRatio {gb_r:g} differs from ElastoDyn's GBRatio {gb:g}: "
+                         "ElastoDyn's is used")
+    return rated, min_rpm, max_rpm, design_tsr, fine_pitch, gen_eff
+
+
 def schedule_from_openfast(fst, rotor_radius: float, design_tsr: float | None = None,
                            fine_pitch: float | None = None, tsr_rule: str = "optimal") -> OpenFastLimits:
     """A :class:`VariableSpeed` schedule from the controller inputs of an OpenFAST deck.
@@ -124,54 +181,10 @@ def schedule_from_openfast(fst, rotor_radius: float, design_tsr: float | None = 
            "GenEff": f"{sd.source} line {sd.get('GenEff').line}: GenEff = {100 * gen_eff:g} %"}
     notes = []
     if mode == 1:
-        rt_sp = sd.number("VS_RtGnSp", "rated generator speed [rpm]")
-        rt_tq = sd.number("VS_RtTq", "rated generator torque [N m]")
-        for key, x in (("VS_RtGnSp", rt_sp), ("VS_RtTq", rt_tq)):
-            if not x > 0:
-                raise InputError(f"expected > 0, got {x:g} (VSContrl = 1 uses it)", sd.source, sd.get(key).line, key)
-            src[key] = f"{sd.source} line {sd.get(key).line}: {key} = {x:g}"
-        if design_tsr is None:
-            raise InputError("ServoDyn's simple variable-speed control (VSContrl = 1) states no design tip-speed "
-                             "ratio: give one", sd.source, sd.get("VSContrl").line, "VSContrl")
-        rated = rt_sp / RPM_PER_RAD_S * rt_tq
-        max_rpm = rt_sp / gb
-        min_rpm = 1e-3 * max_rpm
-        notes.append("VSContrl = 1 states no minimum rotor speed: region 2 tracks the tip-speed ratio down to "
-                     f"{min_rpm:.3g} rpm")
-        if fine_pitch is None:
-            fine_pitch = 0.0
-            notes.append("VSContrl = 1 states no fine pitch: 0 deg")
+        rated, min_rpm, max_rpm, design_tsr, fine_pitch = _simple_vs(sd, gb, design_tsr, fine_pitch, src, notes)
     elif mode == 5:
-        dll_in = sd.require("DLL_InFile", "quoted file name")
-        path = resolve_input_file(dll_in.text, sd, dll_in.line, dll_in.key, True)
-        dv = read_discon(path)
-        where = str(path)
-        ref = _discon_number(dv, "VS_RefSpd", where, "rad/s")
-        min_om = _discon_number(dv, "VS_MinOMSpd", where, "rad/s")
-        rt_pwr = _discon_number(dv, "VS_RtPwr", where, "W")
-        eff = _discon_number(dv, "VS_GenEff", where, "%") / 100.0
-        for key, x in (("VS_RefSpd", ref), ("VS_RtPwr", rt_pwr), ("VS_GenEff", eff)):
-            if not x > 0:
-                raise InputError(f"expected > 0, got {x:g}", where, dv[key.lower()][1], key)
-        for key in ("VS_RefSpd", "VS_MinOMSpd", "VS_RtPwr", "VS_GenEff"):
-            src[key] = f"{where} line {dv[key.lower()][1]}: {key} = {dv[key.lower()][0]}"
-        if abs(eff - gen_eff) > 1e-9:
-            notes.append(f"ROSCO's VS_GenEff {100 * eff:g} % differs from ServoDyn's GenEff {100 * gen_eff:g} %: "
-                         "the ROSCO value is used")
-        gen_eff = eff
-        rated = rt_pwr / eff
-        max_rpm, min_rpm = ref / gb * RPM_PER_RAD_S, min_om / gb * RPM_PER_RAD_S
-        if design_tsr is None:
-            design_tsr = _discon_number(dv, "VS_TSRopt", where, "-")
-            src["VS_TSRopt"] = f"{where} line {dv['vs_tsropt'][1]}: VS_TSRopt = {design_tsr:g}"
-        if fine_pitch is None:
-            fine_pitch = float(np.degrees(_discon_number(dv, "PC_FinePit", where, "rad")))
-            src["PC_FinePit"] = f"{where} line {dv['pc_finepit'][1]}: PC_FinePit = {dv['pc_finepit'][0]}"
-        if "we_gearboxratio" in dv:
-            gb_r = _discon_number(dv, "WE_GearboxRatio", where, "-")
-            if abs(gb_r - gb) > 1e-6 * gb:
-                notes.append(f"ROSCO's WE_GearboxRatio {gb_r:g} differs from ElastoDyn's GBRatio {gb:g}: "
-                             "ElastoDyn's is used")
+        rated, min_rpm, max_rpm, design_tsr, fine_pitch, gen_eff = _rosco(sd, gb, gen_eff, design_tsr, fine_pitch,
+                                                                          src, notes)
     else:
         raise InputError(f"VSContrl = {mode}: calib reads the limits of VSContrl = 1 (simple variable-speed "
                          "control) or 5 (a DLL with a ROSCO DISCON.IN); give the schedule another way",

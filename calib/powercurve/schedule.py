@@ -96,15 +96,9 @@ class FixedSpeed:
         res = solve(p, OperatingConditions(v, rpm, pitch, air_density))
         return _curve(v, rpm, pitch, res, np.full(v.shape, 2), float("nan"), v.size)
 
-    def _setting(self, v):
+    def setting(self, v):
+        """Rotor speed [rpm] and pitch [deg] at the wind speeds ``v`` [m/s]."""
         return np.full(v.shape, float(self.rotor_speed)), np.full(v.shape, float(self.pitch))
-
-    def solve_batch(self, bsolve, n_draws, wind_speed, air_density, guess=None, pitch_hint=None) -> ScheduledCurve:
-        """The schedule for ``n_draws`` parameter vectors at once (arrays of shape (n_draws, n_bins));
-        ``bsolve(draw, conditions)`` from :func:`calib.powercurve.batch.batched_solver`."""
-        v = np.asarray(wind_speed, float)
-        rpm, pitch = self._setting(v)
-        return _fixed_batch(bsolve, n_draws, v, rpm, pitch, air_density)
 
     def describe(self) -> str:
         return f"fixed speed {self.rotor_speed:g} rpm, pitch {self.pitch:g}°"
@@ -128,31 +122,12 @@ class TableSchedule:
         res = solve(p, OperatingConditions(v, rpm, pitch, air_density))
         return _curve(v, rpm, pitch, res, np.full(v.shape, 2), float("nan"), v.size)
 
-    def _setting(self, v):
+    def setting(self, v):
+        """Rotor speed [rpm] and pitch [deg] at the wind speeds ``v`` [m/s]."""
         return np.interp(v, self.wind_speed, self.rotor_speed), np.interp(v, self.wind_speed, self.pitch)
-
-    def solve_batch(self, bsolve, n_draws, wind_speed, air_density, guess=None, pitch_hint=None) -> ScheduledCurve:
-        """The schedule for ``n_draws`` parameter vectors at once (arrays of shape (n_draws, n_bins));
-        ``bsolve(draw, conditions)`` from :func:`calib.powercurve.batch.batched_solver`."""
-        v = np.asarray(wind_speed, float)
-        rpm, pitch = self._setting(v)
-        return _fixed_batch(bsolve, n_draws, v, rpm, pitch, air_density)
 
     def describe(self) -> str:
         return f"user table {self.source} ({len(self.wind_speed)} rows)"
-
-
-def _fixed_batch(bsolve, n_draws, v, rpm, pitch, air_density) -> ScheduledCurve:
-    """A fixed or table schedule for ``n_draws`` draws in one batched solve."""
-    D, n = int(n_draws), v.size
-    draw = np.repeat(np.arange(D), n)
-    res = bsolve(draw, OperatingConditions(np.tile(v, D), np.tile(rpm, D), np.tile(pitch, D), air_density))
-    shape = (D, n)
-    st = res.status.reshape(shape).copy()
-    nan = lambda x: np.where(st != 0, np.nan, x.reshape(shape))  # noqa: E731
-    return ScheduledCurve(np.broadcast_to(v, shape), np.broadcast_to(rpm, shape), np.broadcast_to(pitch, shape),
-                          nan(res.power), nan(res.thrust), nan(res.cp), nan(res.ct), st, np.full(shape, 2),
-                          np.full(D, np.nan), D * n)
 
 
 def schedule_from_table(path) -> TableSchedule:
@@ -315,7 +290,7 @@ class VariableSpeed:
             if pitch_hint is not None and g is not None:
                 hint_pitch, slope = (np.asarray(x, float)[above] for x in pitch_hint)
                 g = np.where(np.isfinite(hint_pitch), hint_pitch, g)
-            b, r, ok, n = self._pitch_to_rated(solve, p, v[above], rpm[above], air_density, g, slope)
+            b, r, ok, n = self.pitch_to_rated(solve, p, v[above], rpm[above], air_density, g, slope)
             n_points += n
             pitch[above] = b
             power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
@@ -326,78 +301,7 @@ class VariableSpeed:
             x[bad] = np.nan
         return ScheduledCurve(v, rpm, pitch, power, thrust, cp, ct, status, region, tsr, n_points)
 
-    def optimal_tsr_batch(self, bsolve, n_draws, air_density) -> tuple[np.ndarray, int]:
-        """:meth:`optimal_tsr` of ``n_draws`` parameter vectors in one batched solve: λ* per draw [-]
-        (NaN where every point of a draw's search failed) and the number of BEM points."""
-        lam = self.design_tsr * np.linspace(0.65, 1.35, 13)
-        D, m = int(n_draws), lam.size
-        omega = self.max_rotor_speed * np.pi / 30
-        res = bsolve(np.repeat(np.arange(D), m),
-                     OperatingConditions(np.tile(omega * self.rotor_radius / lam, D), np.full(D * m, self.max_rotor_speed),
-                                         np.full(D * m, self.fine_pitch), air_density))
-        cp = np.where(res.ok, res.cp, -np.inf).reshape(D, m)
-        k = np.argmax(cp, axis=1)
-        rows = np.arange(D)
-        best = cp[rows, k]
-        out = np.where(np.isfinite(best), lam[k], np.nan)
-        inner = (k > 0) & (k < m - 1)
-        kk = np.clip(k, 1, m - 2)
-        y0, y1, y2 = cp[rows, kk - 1], cp[rows, kk], cp[rows, kk + 1]
-        h = lam[1] - lam[0]
-        curv = y0 - 2 * y1 + y2                      # 2 a h² of the parabola through the three
-        fit = inner & np.isfinite(y0) & np.isfinite(y1) & np.isfinite(y2) & (curv < 0)
-        with np.errstate(all="ignore"):
-            vertex = lam[kk] - h * (y2 - y0) / (2 * curv)
-        out = np.where(fit, np.clip(vertex, lam[kk - 1], lam[kk + 1]), out)
-        return out, D * m
-
-    def solve_batch(self, bsolve, n_draws, wind_speed, air_density, guess=None, pitch_hint=None) -> ScheduledCurve:
-        """:meth:`solve` for ``n_draws`` parameter vectors at once: arrays of shape (n_draws, n_bins),
-        ``tsr_opt`` of shape (n_draws,). ``bsolve(draw, conditions)`` solves every point at its draw's
-        parameters (:func:`calib.powercurve.batch.batched_solver`); ``pitch_hint`` = (pitch, dP/dβ)
-        with shapes (n_draws, n_bins) and (n_bins,). Each point follows the same steps as in :meth:`solve`."""
-        v = np.asarray(wind_speed, float)
-        D, n = int(n_draws), v.size
-        n_points = 0
-        if self.tsr_rule == "optimal":
-            tsr, n_points = self.optimal_tsr_batch(bsolve, D, air_density)
-            tsr = np.where(np.isfinite(tsr), tsr, self.design_tsr)
-        else:
-            tsr = np.full(D, float(self.design_tsr))
-        rpm = np.clip(tsr[:, None] * v[None, :] / self.rotor_radius * 30 / np.pi, self.min_rotor_speed,
-                      self.max_rotor_speed).reshape(-1)
-        vf = np.tile(v, D)
-        draw = np.repeat(np.arange(D), n)
-        pitch = np.full(D * n, float(self.fine_pitch))
-        res = bsolve(draw, OperatingConditions(vf, rpm, pitch, air_density))
-        n_points += D * n
-        power, thrust, cp, ct = res.power.copy(), res.thrust.copy(), res.cp.copy(), res.ct.copy()
-        status = res.status.copy()
-        region = np.full(D * n, 2)
-        above = np.flatnonzero(res.ok & (res.power > self.rated_power))
-        if above.size:
-            g = None if guess is None else np.interp(vf[above], guess.wind_speed, guess.pitch)
-            slope = None
-            if pitch_hint is not None and g is not None:
-                hint_pitch = np.asarray(pitch_hint[0], float).reshape(-1)[above]
-                slope = np.tile(np.asarray(pitch_hint[1], float), D)[above]
-                g = np.where(np.isfinite(hint_pitch), hint_pitch, g)
-            b, r, ok, m = self._pitch_to_rated(bsolve, draw[above], vf[above], rpm[above], air_density, g, slope,
-                                               per_point=True)
-            n_points += m
-            pitch[above] = b
-            power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
-            status[above] = np.where(r.status != 0, r.status, np.where(ok, 0, PITCH_NOT_CONVERGED))
-            region[above] = 3
-        bad = status != 0
-        for x in (power, thrust, cp, ct):
-            x[bad] = np.nan
-        shape = (D, n)
-        return ScheduledCurve(np.broadcast_to(v, shape), rpm.reshape(shape), pitch.reshape(shape), power.reshape(shape),
-                              thrust.reshape(shape), cp.reshape(shape), ct.reshape(shape), status.reshape(shape),
-                              region.reshape(shape), tsr, n_points)
-
-    def _pitch_to_rated(self, solve, p, v, rpm, rho, guess, slope=None, max_iter=12, per_point=False):
+    def pitch_to_rated(self, solve, p, v, rpm, rho, guess, slope=None, max_iter=12, per_point=False):
         """Pitch [deg] at which the aerodynamic power equals rated, per point (vectorized).
 
         Without a guess: bisection on [fine pitch, max pitch] to 0.05°, then secant steps from its
