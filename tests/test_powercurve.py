@@ -14,6 +14,7 @@ from scipy.special import erf
 
 from calib.bem.steady_control import steady_power_curve
 from calib.cli import main
+from calib.errors import InputError
 from calib.models.bem_model import BemModel
 from calib.powercurve import (FixedSpeed, VariableSpeed, aep, calibrated_power_curve, iec_bins, parse_measurement,
                               posterior_draws, rayleigh_cdf, weibull_cdf)
@@ -223,6 +224,10 @@ def test_schedule_table(tmp_path, wind_tunnel_result):
     (["{stage}", "--wind", "10:5:0.5"], "--wind"),
     (["{stage}", "--density", "-1"], "--density"),
     (["{stage}", "--weibull", "0,8"], "--weibull"),
+    (["{stage}", "--weibull=-1.5,8"], "--weibull"),
+    (["{stage}", "--weibull", "2,0"], "--weibull"),
+    (["{stage}", "--weibull=2,-7"], "--weibull"),
+    (["{stage}", "--weibull", "2"], "--weibull"),
     (["{stage}", "--measurement", "anemometer=speed:2"], "--measurement"),
     (["{stage}", "--availability", "1.5"], "--availability"),
     (["{stage}"], "--schedule"),                 # the Phase VI rotor has no schedule of its own
@@ -291,17 +296,29 @@ def test_a_schedule_the_rotor_cannot_follow_is_said(wind_tunnel_result):
     _, result = wind_tunnel_result
     model = result.rebuild_model()
     v = iec_bins(5.0, 10.0, 1.0)
-    too_high = dataclasses.replace(PHASE_VI_SCHEDULE, rated_power=1e6)            # 1 MW from a 10 m rotor
-    rotor = dataclasses.replace(model.rotor, schedule=too_high)
-    pc = calibrated_power_curve(result, v, VariableSpeed.from_rotor(rotor, "design"), n_draws=2, model=model)
+
+    def schedule(**change):
+        return VariableSpeed.from_rotor(dataclasses.replace(model.rotor, schedule=dataclasses.replace(
+            PHASE_VI_SCHEDULE, **change)), "design")
+
+    # 1 MW from a 10 m rotor: above the Betz limit 16/27·½ρπR²V³ at 10 m/s (28.8 kW, computed here)
+    betz = 16 / 27 * 0.5 * 1.225 * np.pi * model.rotor.rotor_radius ** 2 * 10.0 ** 3
+    assert 25e3 < betz < 35e3
+    with pytest.raises(InputError, match=r"above what the rotor can produce.*Betz limit at the highest bin 10 m/s"):
+        calibrated_power_curve(result, v, schedule(rated_power=1e6), n_draws=2, model=model)
+    # below Betz but above what this rotor makes (about 10 kW at 10 m/s): every bin in region 2, said
+    pc = calibrated_power_curve(result, v, schedule(rated_power=0.9 * betz), n_draws=2, model=model)
     assert any("does not reach rated power" in w for w in pc.warnings)
-    slow = dataclasses.replace(PHASE_VI_SCHEDULE, min_rotor_speed=10.0, max_rotor_speed=20.0)
-    rotor = dataclasses.replace(model.rotor, schedule=slow)
-    pc = calibrated_power_curve(result, v, VariableSpeed.from_rotor(rotor, "design"), n_draws=2, model=model)
-    assert any("maximum speed 20 rpm from the first bin" in w for w in pc.warnings)
-    upside_down = dataclasses.replace(PHASE_VI_SCHEDULE, min_rotor_speed=80.0)
+    assert np.all(pc.central.region == 2)
+    # a speed limit below what the design λ asks at cut-in (5·4/5.03 rad/s = 38 rpm): refused
+    with pytest.raises(InputError, match=r"speed limit 20 rpm is below the 3\d\.\d+ rpm .* at cut-in"):
+        schedule(min_rotor_speed=10.0, max_rotor_speed=20.0)
+    # above cut-in's speed but below the first bin's (47 rpm at 5 m/s): runs, and says so
+    pc = calibrated_power_curve(result, v, schedule(min_rotor_speed=10.0, max_rotor_speed=45.0), n_draws=2,
+                                model=model)
+    assert any("maximum speed 45 rpm from the first bin" in w for w in pc.warnings)
     with pytest.raises(Exception, match="cannot be followed"):
-        VariableSpeed.from_rotor(dataclasses.replace(model.rotor, schedule=upside_down))
+        schedule(min_rotor_speed=80.0)
 
 
 def test_powercurve_help_describes_every_option(capsys):
@@ -311,3 +328,89 @@ def test_powercurve_help_describes_every_option(capsys):
     for option in ("--wind", "--density", "--draws", "--schedule", "--tsr", "--weibull", "--availability",
                    "--measurement", "--out"):
         assert option in text
+
+
+# ------------------------------------------------------------------------------ batched draws (issue 41 item 5)
+@pytest.mark.parametrize("kind", ["variable", "fixed", "table"])
+def test_batched_draws_equal_the_per_draw_loop(wind_tunnel_result, kind, tmp_path):
+    """The batched path (every draw's schedule in a few solves with per-point parameters) against the
+    straightforward loop solving each draw's schedule with ``model.solve`` at that draw's parameters.
+    Bins up to 25 m/s: Phase VI deep in stall, where the multiple-root screen uses the slope table."""
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    if kind == "variable":
+        schedule = _variable_speed(model, "optimal")[1]
+    elif kind == "fixed":
+        schedule = FixedSpeed(72.0, 3.0)
+    else:
+        path = tmp_path / "table.csv"
+        path.write_text("wind_speed,rotor_speed,pitch\n5,60,2\n15,72,4\n25,72,10\n")
+        schedule = schedule_from_table(path)
+    v = iec_bins(4.0, 25.0, 1.0)
+    loop = calibrated_power_curve(result, v, schedule, n_draws=6, seed=5, model=model, batched=False)
+    batch = calibrated_power_curve(result, v, schedule, n_draws=6, seed=5, model=model, batched=True)
+    assert any("one by one" in n for n in loop.notes) and any("batched" in n for n in batch.notes)
+    np.testing.assert_array_equal(batch.draw_status, loop.draw_status)
+    assert batch.n_bem_points == loop.n_bem_points
+    for q in ("power", "thrust", "cp", "ct", "rotor_speed", "pitch"):
+        np.testing.assert_allclose(batch.draws[q], loop.draws[q], rtol=1e-9, atol=1e-9, equal_nan=True)
+    np.testing.assert_allclose(batch.tsr_opt, loop.tsr_opt, rtol=1e-12, equal_nan=True)
+    if kind == "variable":
+        assert np.any(loop.central.region == 3)      # the pitch search ran in both paths
+
+
+def test_a_wrapped_model_is_solved_per_draw_and_says_so(wind_tunnel_result):
+    _, result = wind_tunnel_result
+    model = _FailingAt(result.rebuild_model(), 10.0, np.inf)
+    pc = calibrated_power_curve(result, iec_bins(5.0, 7.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=2, model=model)
+    assert any("solved one by one" in n and "_FailingAt" in n for n in pc.notes)
+    with pytest.raises(InputError, match="cannot be batched"):
+        calibrated_power_curve(result, iec_bins(5.0, 7.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=2, model=model,
+                               batched=True)
+
+
+def test_weibull_refuses_a_shape_or_scale_not_positive():
+    for k, A, what in ((0.0, 8.0, "shape k must be > 0"), (-2.0, 8.0, "shape k"), (2.0, 0.0, "scale A must be > 0"),
+                       (2.0, -8.0, "scale A"), (float("nan"), 8.0, "shape k")):
+        with pytest.raises(InputError, match=what):
+            weibull_cdf(5.0, k, A)
+
+
+def test_bins_outside_the_calibration_envelope_are_flagged_with_the_reasons(wind_tunnel_result, tmp_path):
+    """The calibration saw 72 rpm and λ 2-7.5 (wind 5.1-19 m/s with R = 5.03 m): 3-4.5 m/s (λ > 8.4) and
+    20-25 m/s (λ < 1.9) lie outside; the bins say why, and the paragraph and the CSV carry it."""
+    from calib.powercurve.command import summary_paragraph, write_outputs, distributions
+    _, result = wind_tunnel_result
+    v = iec_bins(3.0, 25.0, 0.5)
+    pc = calibrated_power_curve(result, v, FixedSpeed(72.0, 3.0), n_draws=4)
+    lam = 72 * np.pi / 30 * result.rebuild_model().rotor.rotor_radius / v
+    outside = np.array([bool(e) for e in pc.envelope])
+    beyond = (lam > 7.5 * 1.05) | (lam < 2.0 * 0.95)
+    inside = (lam < 7.5 * 0.95) & (lam > 2.0 * 1.05)
+    assert outside[beyond].all() and not outside[inside].any()
+    assert all("tip" in e.lower() or "λ" in e or "tsr" in e.lower() for e in np.array(pc.envelope)[beyond])
+    text = summary_paragraph(pc, pc.aep_table(distributions()))
+    assert f"{int(outside.sum())} bins lie outside the calibration envelope (extrapolation)" in text
+    write_outputs(pc, tmp_path, distributions())
+    rows = list(csv.DictReader(l for l in (tmp_path / "powercurve.csv").read_text().splitlines()[1:]))
+    assert [r["envelope"] != "inside" for r in rows] == outside.tolist()
+
+
+def test_a_result_without_a_posterior_says_what_is_left_out(wind_tunnel_result):
+    _, result = wind_tunnel_result
+    settings = {**result.provenance.settings, "estimator": "truncated"}
+    unc = result.uncertainty
+    cov_frozen = 0.25 * unc.cov_p
+    trunc = result.replace(provenance=dataclasses.replace(result.provenance, settings=settings),
+                           uncertainty=dataclasses.replace(unc, gain=np.zeros((0, 0)), cov_frozen=cov_frozen,
+                                                           curvature={"samples": 0}))
+    assert trunc.estimator == "truncated"
+    from calib.powercurve.command import distributions, summary_paragraph
+    pc = calibrated_power_curve(trunc, iec_bins(6.0, 10.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=4)
+    text = summary_paragraph(pc, pc.aep_table(distributions()))
+    assert "Estimator 'truncated' has no posterior" in text and "the prior carries 25 % of its variance" in text
+    assert "Left out of the calibration's uncertainty: the correction field between and beyond the nodes" in text
+    assert "curvature term (not sampled)" in text
+    bad = result.replace(uncertainty=dataclasses.replace(unc, cov_p=np.full_like(unc.cov_p, np.nan)))
+    with pytest.raises(InputError, match=r"no usable covariance.*non-finite"):
+        calibrated_power_curve(bad, iec_bins(6.0, 10.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=4)

@@ -51,7 +51,8 @@ def add_powercurve_arguments(p) -> None:
     p.add_argument("--draws", type=int, default=1000, help="posterior draws (default 1000; 0: delta method only)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the draws (default 0)")
     p.add_argument("--schedule", default="rotor", help="'rotor' (the rotor's variable-speed schedule, default), "
-                   "'fixed' (with --rotor-speed and --pitch), or a CSV with wind_speed, rotor_speed, pitch")
+                   "'fixed' (with --rotor-speed and --pitch), a CSV with wind_speed, rotor_speed, pitch, or an "
+                   "OpenFAST .fst whose ServoDyn (VSContrl 1, or 5 with a ROSCO DISCON.IN) gives the limits")
     p.add_argument("--tsr", choices=("optimal", "design"), default="optimal", help="region 2 of the rotor "
                    "schedule: at each draw's own C_P-maximizing tip-speed ratio (default) or the design one")
     p.add_argument("--rotor-speed", type=float, default=None, help="rotor speed [rpm] of --schedule fixed")
@@ -104,6 +105,9 @@ def _schedule(args, model):
             raise InputError(f"--rotor-speed must be > 0 rpm, got {args.rotor_speed!r}", "--rotor-speed",
                              field="rotor_speed")
         return FixedSpeed(args.rotor_speed, args.pitch)
+    if s.lower().endswith(".fst"):
+        from calib.powercurve.openfast_limits import schedule_from_openfast
+        return schedule_from_openfast(s, float(model.rotor.rotor_radius), tsr_rule=args.tsr).schedule
     return schedule_from_table(s)
 
 
@@ -190,6 +194,7 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")
     words += [f"Warning: {w}." for w in pc.warnings]
+    words += [f"{n[0].upper()}{n[1:]}." for n in pc.notes if "has no posterior" in n or n.startswith("left out")]
     outside = np.array([bool(e) for e in pc.envelope])
     if outside.any():
         words.append(f"{int(outside.sum())} bins lie outside the calibration envelope (extrapolation): "

@@ -19,15 +19,14 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.powercurve.aep import aep_weights
+from calib.powercurve.draws import solve_draws
 from calib.powercurve.linearized import delta_method
 from calib.powercurve.schedule import ScheduledCurve
+from calib.powercurve.statements import posterior_statement, schedule_warnings
 from calib.types import OperatingConditions
 
-__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws",
-           "schedule_warnings"]
+__all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws"]
 
-#: Quantities summarized per bin.
-QUANTITIES = ("power", "thrust", "cp", "ct", "rotor_speed", "pitch")
 
 
 def iec_bins(start: float, stop: float, step: float = 0.5) -> np.ndarray:
@@ -72,7 +71,7 @@ class CalibratedPowerCurve:
     central, nominal : ScheduledCurve
         At the estimate p̂ and at the nominal parameters.
     draws : dict of str to ndarray, shape (n_draws, n_bins)
-        Per quantity of :data:`QUANTITIES`, every draw's curve (NaN where its solve failed).
+        Per quantity of :data:`calib.powercurve.draws.QUANTITIES`, every draw's curve (NaN where its solve failed).
     draw_status : ndarray of int, shape (n_draws, n_bins)
     tsr_opt : ndarray, shape (n_draws,)
     delta_std : dict of str to ndarray, shape (n_bins,)
@@ -98,7 +97,7 @@ class CalibratedPowerCurve:
     cov : ndarray, shape (n_params, n_params)
         The covariance the draws came from.
     warnings : list of str
-        What the schedule could not do (:func:`schedule_warnings`), for the report's first paragraph.
+        What the schedule could not do (:func:`calib.powercurve.statements.schedule_warnings`), for the report's first paragraph.
     """
 
     wind_speed: np.ndarray
@@ -236,7 +235,7 @@ def _power_model(model):
 
 def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float = 1.225, n_draws: int = 1000,
                            seed: int = 0, measurements=(), model=None, tsr_rule: str = "optimal",
-                           progress=None) -> CalibratedPowerCurve:
+                           progress=None, batched: bool | None = None) -> CalibratedPowerCurve:
     """The calibrated model's power curve with its uncertainty.
 
     Parameters
@@ -258,6 +257,10 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         For the default schedule: ``"optimal"`` or ``"design"``.
     progress : callable, optional
         Called as ``progress(done, total)`` during the draws.
+    batched : bool, optional
+        None (default): the draws are solved batched (:mod:`calib.powercurve.batch`) where the model
+        allows it, else one by one (a note says why); False: one by one (the reference path);
+        True: batched or an :class:`InputError`.
 
     Returns
     -------
@@ -280,20 +283,26 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         raise InputError("the power curve needs the native BEM model (an FMU result is not supported by "
                          "calib powercurve yet)", result.name, field="model")
     schedule = VariableSpeed.from_rotor(model.rotor, tsr_rule) if schedule is None else schedule
+    if hasattr(schedule, "check_reachable"):
+        schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
     v = np.asarray(wind_speed, float)
     p_hat = np.asarray(result.estimate.p_hat, float)
     if p_hat.size != len(model.parameters):
         raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
                          field="parameters")
     cov = np.asarray(result.uncertainty.cov_p, float)
+    if cov.shape != (p_hat.size, p_hat.size) or not np.all(np.isfinite(cov)):
+        raise InputError(f"the result records no usable covariance of the estimate (result.uncertainty.cov_p has "
+                         f"shape {cov.shape}, {int(np.count_nonzero(~np.isfinite(cov)))} non-finite entries; expected "
+                         f"a finite {p_hat.size}x{p_hat.size} matrix): there is no posterior to draw from or to "
+                         "linearize; re-run the calibration", result.name, field="uncertainty.cov_p")
     lower = np.array([q.lower for q in model.parameters], float)
     upper = np.array([q.upper for q in model.parameters], float)
     notes = []
     central = schedule.solve(model.solve, p_hat, v, air_density)
     nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
     warnings = schedule_warnings(schedule, central)
-    notes.append(f"estimator {result.estimator!r}: the draws and the delta method use its recorded covariance "
-                 "(result.uncertainty.cov_p)")
+    notes += posterior_statement(result)
 
     pm = _power_model(model)
     delta, grad, pitch_grad, dP_dpitch = {}, None, None, None
@@ -303,21 +312,10 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         notes.append("no delta-method value: the model has no exact Jacobian here")
 
     draws_p, n_clipped = posterior_draws(p_hat, cov, lower, upper, n_draws, seed)
-    out = {q: np.full((n_draws, v.size), np.nan) for q in QUANTITIES}
-    status = np.zeros((n_draws, v.size), int)
-    tsr = np.full(n_draws, np.nan)
-    n_pts = 0
     t0 = time.perf_counter()
-    for d in range(n_draws):
-        # the linearized pitch of this draw starts its region-3 search (the search iterates to tolerance)
-        hint = None if pitch_grad is None else (central.pitch + pitch_grad @ (draws_p[d] - p_hat), dP_dpitch)
-        c = schedule.solve(model.solve, draws_p[d], v, air_density, guess=central, pitch_hint=hint)
-        for q in QUANTITIES:
-            x = getattr(c, q)
-            out[q][d] = np.where(c.ok, x, np.nan)
-        status[d], tsr[d], n_pts = c.status, c.tsr_opt, n_pts + c.n_points
-        if progress is not None and (d + 1) % 100 == 0:
-            progress(d + 1, n_draws)
+    out, status, tsr, n_pts, how = solve_draws(model, schedule, draws_p, p_hat, v, air_density, central, pitch_grad,
+                                               dP_dpitch, batched, progress, result.name)
+    notes += how
     seconds = time.perf_counter() - t0
 
     disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
@@ -325,24 +323,6 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
-
-
-def schedule_warnings(schedule, central: ScheduledCurve) -> list[str]:
-    """Sentences on what a variable-speed schedule could not do at the central curve: rated power
-    never reached in the bins, or the rotor at its maximum speed from the first bin (a speed limit
-    below what region 2 asks at the lowest wind speed)."""
-    out = []
-    if getattr(schedule, "kind", "") != "variable_speed":
-        return out
-    ok = central.ok
-    if ok.any() and not np.any(central.region == 3):
-        out.append(f"the calibrated rotor does not reach rated power ({schedule.rated_power / 1e6:.4g} MW) in any bin "
-                   f"up to {central.wind_speed[ok][-1]:g} m/s (at most {np.nanmax(central.power) / 1e6:.4g} MW): "
-                   "every bin stays in region 2")
-    if ok.any() and central.rotor_speed[ok][0] >= schedule.max_rotor_speed - 1e-9:
-        out.append(f"the rotor is at its maximum speed {schedule.max_rotor_speed:g} rpm from the first bin "
-                   f"({central.wind_speed[ok][0]:g} m/s): the speed limit is below what the tip-speed ratio asks there")
-    return out
 
 
 def _prediction_terms(result, model, central, air_density, notes):

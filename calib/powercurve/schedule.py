@@ -96,6 +96,10 @@ class FixedSpeed:
         res = solve(p, OperatingConditions(v, rpm, pitch, air_density))
         return _curve(v, rpm, pitch, res, np.full(v.shape, 2), float("nan"), v.size)
 
+    def setting(self, v):
+        """Rotor speed [rpm] and pitch [deg] at the wind speeds ``v`` [m/s]."""
+        return np.full(v.shape, float(self.rotor_speed)), np.full(v.shape, float(self.pitch))
+
     def describe(self) -> str:
         return f"fixed speed {self.rotor_speed:g} rpm, pitch {self.pitch:g}°"
 
@@ -117,6 +121,10 @@ class TableSchedule:
         pitch = np.interp(v, self.wind_speed, self.pitch)
         res = solve(p, OperatingConditions(v, rpm, pitch, air_density))
         return _curve(v, rpm, pitch, res, np.full(v.shape, 2), float("nan"), v.size)
+
+    def setting(self, v):
+        """Rotor speed [rpm] and pitch [deg] at the wind speeds ``v`` [m/s]."""
+        return np.interp(v, self.wind_speed, self.rotor_speed), np.interp(v, self.wind_speed, self.pitch)
 
     def describe(self) -> str:
         return f"user table {self.source} ({len(self.wind_speed)} rows)"
@@ -196,11 +204,35 @@ class VariableSpeed:
             raise InputError(f"the rotor's schedule cannot be followed: rotor speed limits {s.min_rotor_speed:g}–"
                              f"{s.max_rotor_speed:g} rpm, rated power {s.rated_power:g} W (need 0 < min <= max, "
                              "rated > 0)", rotor.source, field="schedule")
+        if np.isfinite(s.cut_in) and s.cut_in > 0:
+            need = s.design_tsr * s.cut_in / float(rotor.rotor_radius) * 30 / np.pi
+            if s.max_rotor_speed < need * (1 - 1e-9):
+                raise InputError(f"the rotor's schedule cannot be followed: the speed limit {s.max_rotor_speed:g} rpm is "
+                                 f"below the {need:.4g} rpm the design tip-speed ratio {s.design_tsr:g} asks at cut-in "
+                                 f"({s.cut_in:g} m/s, R = {float(rotor.rotor_radius):g} m); a limit in rad/s instead of "
+                                 "rpm?", rotor.source, field="schedule.max_rotor_speed")
         if tsr_rule not in ("optimal", "design"):
             raise InputError(f"unknown tsr rule {tsr_rule!r}; valid: optimal, design", "VariableSpeed",
                              field="tsr_rule")
         return cls(s.rated_power, s.min_rotor_speed, s.max_rotor_speed, s.design_tsr, s.fine_pitch,
                    float(rotor.rotor_radius), tsr_rule, s.generator_efficiency)
+
+    def check_reachable(self, wind_speed, air_density, source: str = "schedule") -> None:
+        """Refuse a rated power the rotor cannot produce in the bins: above the Betz limit
+        16/27 · ½ρπR²V³ at the highest bin (Betz 1920; no rotor exceeds it).
+
+        Raises
+        ------
+        InputError
+            Naming the rated power, the Betz power and the highest bin.
+        """
+        v_max = float(np.max(wind_speed))
+        betz = 16 / 27 * 0.5 * air_density * np.pi * self.rotor_radius ** 2 * v_max ** 3
+        if self.rated_power > betz:
+            raise InputError(f"the rated power {self.rated_power / 1e6:.4g} MW is above what the rotor can produce in the "
+                             f"bins: the Betz limit at the highest bin {v_max:g} m/s is {betz / 1e6:.4g} MW "
+                             f"(R = {self.rotor_radius:g} m, ρ = {air_density:g} kg/m³); check the rated power's unit",
+                             source, field="schedule.rated_power")
 
     def describe(self) -> str:
         lam = ("the C_P-maximizing tip-speed ratio of each parameter vector (re-found per draw)"
@@ -258,7 +290,7 @@ class VariableSpeed:
             if pitch_hint is not None and g is not None:
                 hint_pitch, slope = (np.asarray(x, float)[above] for x in pitch_hint)
                 g = np.where(np.isfinite(hint_pitch), hint_pitch, g)
-            b, r, ok, n = self._pitch_to_rated(solve, p, v[above], rpm[above], air_density, g, slope)
+            b, r, ok, n = self.pitch_to_rated(solve, p, v[above], rpm[above], air_density, g, slope)
             n_points += n
             pitch[above] = b
             power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
@@ -269,14 +301,17 @@ class VariableSpeed:
             x[bad] = np.nan
         return ScheduledCurve(v, rpm, pitch, power, thrust, cp, ct, status, region, tsr, n_points)
 
-    def _pitch_to_rated(self, solve, p, v, rpm, rho, guess, slope=None, max_iter=12):
+    def pitch_to_rated(self, solve, p, v, rpm, rho, guess, slope=None, max_iter=12, per_point=False):
         """Pitch [deg] at which the aerodynamic power equals rated, per point (vectorized).
 
         Without a guess: bisection on [fine pitch, max pitch] to 0.05°, then secant steps from its
         bracket. With a guess: from the guess, a first step by Newton with ``slope`` (dP/dβ [W/deg],
         where finite and negative) or a 0.5° probe, then secant steps. Only the points not yet within
-        ``pitch_tol_power`` are solved again. Returns the pitch, the BEM result at it (a
+        ``pitch_tol_power`` are solved again; a point at a pitch limit whose next step points out of
+        the range again stops there (not converged). Returns the pitch, the BEM result at it (a
         :class:`_Rows`), whether |P / P_rated − 1| ≤ ``pitch_tol_power`` and the number of points solved.
+        With ``per_point``, ``p`` is an array over the points (a batched solve's draw index per point,
+        :func:`calib.powercurve.batch.batched_solver`) and is indexed like the points.
         """
         n_pts = 0
         P_r, tol = self.rated_power, self.pitch_tol_power * self.rated_power
@@ -285,7 +320,7 @@ class VariableSpeed:
         def f(beta, k):
             nonlocal n_pts
             n_pts += beta.size
-            return solve(p, OperatingConditions(v[k], rpm[k], beta, rho))
+            return solve(p[k] if per_point else p, OperatingConditions(v[k], rpm[k], beta, rho))
 
         every = np.arange(n)
         b_old, y_old = np.full(n, np.nan), np.full(n, np.nan)
@@ -304,8 +339,9 @@ class VariableSpeed:
             rows = _Rows.of(f(b, every), slice(None))
         y = rows.power - P_r
         slope = np.full(n, np.nan) if slope is None else np.asarray(slope, float)
+        stuck = np.zeros(n, bool)
         for _ in range(max_iter):
-            a = np.flatnonzero((rows.status == 0) & (np.abs(y) > tol))
+            a = np.flatnonzero((rows.status == 0) & (np.abs(y) > tol) & ~stuck)
             if not a.size:
                 break
             d = y[a] - y_old[a]
@@ -314,6 +350,13 @@ class VariableSpeed:
             step = np.where(secant, -y[a] * (b[a] - b_old[a]) / np.where(secant, d, 1.0),
                             np.where(newton, -y[a] / np.where(newton, slope[a], -1.0), 0.5))
             b2 = np.clip(b[a] + np.clip(step, -5.0, 5.0), self.fine_pitch, self.max_pitch)
+            # at a pitch limit and the step points out of the range again: rated power is not
+            # reachable from here (e.g. power rising with pitch in deep stall); the point stops
+            out = (b2 == b[a]) & ((b2 == self.fine_pitch) | (b2 == self.max_pitch))
+            stuck[a[out]] = True
+            a, b2 = a[~out], b2[~out]
+            if not a.size:
+                break
             r = f(b2, a)
             b_old[a], y_old[a] = b[a], y[a]
             b[a], y[a] = b2, r.power - P_r

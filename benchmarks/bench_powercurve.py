@@ -1,0 +1,391 @@
+"""Power curve and AEP of a calibrated model against an out-of-family truth (issue 41 item 4), and speed.
+
+Truth: WISDEM's CCBlade (``.bench-venv``) on calib's embedded NREL 5-MW (rigid: tilt 0, precone 0,
+no shear, one sector) with a hidden effect written in CCBlade's world (``oof_battery/hidden_effects.py``:
+leading-edge erosion, WISDEM's rotational augmentation correction3D, Reynolds-number following)
+or a 0.5° blade-pitch error of the truth turbine, and a control without effect. CCBlade gives the
+loads at the out-of-family battery's 63 operating points (``oof_battery/campaign.py``) and its
+power curve through the same variable-speed schedule as calib's (``powercurve_truth.py``: λ* of
+the truth re-found, region 3 pitched to rated). Per replicate, 1 % noise on power, thrust,
+torque and the hub flap moment (``campaign.noisy``, seed per replicate); calib calibrates the
+correction field (6 α × 5 η nodes, lift and drag) and a pitch offset by MAP (``calib run``) and
+computes the calibrated power curve with ``n_draws`` posterior draws
+(:func:`calib.powercurve.calibrated_power_curve`, the schedule re-solved per draw).
+
+Figures per hidden effect, AEP at the Rayleigh annual means 6, 8 and 10 m/s (IEC 61400-12-1;
+electrical, η = 0.944 on both sides): how often the calibrated AEP's 90 % interval
+(P50 ± 1.645 σ, σ the total of the calibration's draws, the model discrepancy and the field
+between the nodes) covers the truth's AEP; the median |error| of the calibrated and of the
+nominal AEP; the delta-method σ against the draws' σ. And the speed: CPU seconds
+(``time.process_time``) of a 1 000-draw power curve of the Phase VI calibration of
+``workflows/wind_tunnel_hub_loads.toml`` with the variable-speed test schedule of
+``tests/test_powercurve.py``, batched and (on 50 draws) one by one.
+
+``python benchmarks/bench_powercurve.py [n_replicates] [n_draws]`` (default 50 and 200); publishes
+``docs/validation/data/powercurve.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(HERE))
+
+SUITE = "validate"
+
+#: Hidden effects of the truth: data-set name -> (CCBlade form, pitch offset of the truth turbine [deg]).
+EFFECTS = {"control": ("none", 0.0), "leading_edge_erosion": ("erosion", 0.0),
+           "rotational_augmentation": ("correction3D", 0.0), "reynolds_following": ("reynolds", 0.0),
+           "pitch_offset_0.5deg": ("none", 0.5)}
+RAYLEIGH = (6.0, 8.0, 10.0)
+BINS = (3.0, 25.0, 0.5)
+Z90 = 1.6448536269514722
+SEED0 = 41000
+
+WORKFLOW = """# calib run workflow of bench_powercurve (written by benchmarks/bench_powercurve.py)
+name = "powercurve_{name}_{seed}"
+[rotor]
+name = "nrel5mw"
+[model]
+nuisance = ["pitch_offset"]
+tilt = 0.0
+precone = 0.0
+use_tilt = false
+[grid]
+alpha_nodes_deg = [-4.0, 0.0, 4.0, 8.0, 12.0, 16.0]
+eta_nodes = [0.2, 0.4, 0.6, 0.8, 1.0]
+[measurements]
+file = "{csv}"
+[calibration]
+noise = "known"
+[[stages]]
+name = "hub loads"
+channels = ["power", "thrust", "torque", "hub_flap_moment"]
+"""
+
+
+def truths(work: Path) -> dict:
+    """CCBlade's loads at the campaign's points and its scheduled power curve, per data set."""
+    from export_rotor import rotor_to_dict
+    from oof_battery import campaign, generate
+
+    from calib.powercurve import VariableSpeed, iec_bins
+
+    rotor = generate.setup_rotor("rigid")
+    s = VariableSpeed.from_rotor(rotor)
+    spec = {**campaign.operating_points(rotor.rotor_radius), "tilt_deg": 0.0, "shear_exp": 0.0, "n_sector": 1,
+            "bins": iec_bins(*BINS).tolist(),
+            "schedule": {"rated_power": s.rated_power, "min_rotor_speed": s.min_rotor_speed,
+                         "max_rotor_speed": s.max_rotor_speed, "design_tsr": s.design_tsr, "fine_pitch": s.fine_pitch,
+                         "rotor_radius": s.rotor_radius},
+            "data_sets": [{"name": n, "hidden": h, "pitch_offset": o} for n, (h, o) in EFFECTS.items()]}
+    (work / "rotor.json").write_text(json.dumps(rotor_to_dict(rotor)))
+    (work / "spec.json").write_text(json.dumps(spec))
+    py = generate.ensure_ccblade_env()
+    proc = subprocess.run([str(py), str(HERE / "powercurve_truth.py"), str(work / "rotor.json"),
+                           str(work / "spec.json"), str(work / "truth.json")], capture_output=True, text=True,
+                          timeout=3600)
+    if proc.returncode != 0:
+        raise RuntimeError(f"powercurve_truth.py failed:\n{proc.stderr[-3000:]}")
+    out = json.loads((work / "truth.json").read_text())
+    out["points"] = {k: spec[k] for k in ("wind_speed", "rotor_speed_rpm", "pitch_deg", "tsr")}
+    return out
+
+
+def replicate(truth: dict, name: str, seed: int, work: Path, n_draws: int) -> dict:
+    """One noisy data set calibrated and its power curve's AEP against the truth's."""
+    from oof_battery import campaign, generate
+
+    from calib.calibration.result_files import load_result
+    from calib.cli import main
+    from calib.powercurve import aep_weights, calibrated_power_curve, iec_bins, rayleigh_cdf
+
+    d = truth["data_sets"][name]
+    y = np.column_stack([np.asarray(d[campaign.CCBLADE_KEYS[c]], float) for c in campaign.CHANNELS])
+    folder = work / f"{name}_{seed}"
+    folder.mkdir(parents=True, exist_ok=True)
+    generate.noisy_csv(y, truth["points"], seed, f"bench_powercurve: CCBlade {truth['wisdem_version']}, {name}, "
+                       f"seed {seed}", folder / "data.csv")
+    (folder / "workflow.toml").write_text(WORKFLOW.format(name=name, seed=seed, csv="data.csv"))
+    c0 = time.process_time()
+    code = main(["run", str(folder / "workflow.toml"), "--out", str(folder / "run"), "-q"])
+    if code != 0:
+        return {"error": f"calib run exited {code}"}
+    result = load_result(next((folder / "run").glob("stage*/result.json")).parent)
+    c1 = time.process_time()
+    v = iec_bins(*BINS)
+    pc = calibrated_power_curve(result, v, n_draws=n_draws, seed=seed)
+    c2 = time.process_time()
+    cdfs = {f"Rayleigh {m:g} m/s": (lambda x, m=m: rayleigh_cdf(x, m)) for m in RAYLEIGH}
+    rows = pc.aep_table(cdfs)
+    true_power = np.where(d["curve"]["converged"], d["curve"]["power"], np.nan)
+    out = {"seed": seed, "calibration_cpu_s": c1 - c0, "powercurve_cpu_s": c2 - c1, "failed_draws": pc.failed_draws,
+           "central_failed_bins": int(np.count_nonzero(~pc.central.ok)), "aep": {}}
+    for r in rows:
+        c = aep_weights(v, cdfs[r["distribution"]]) * pc.generator_efficiency / 1e6
+        true = float(c @ true_power)
+        sig_cal = r["sigma_mwh"]["calibration (draws)"]
+        out["aep"][r["distribution"]] = {
+            "true_mwh": true, "calibrated_mwh": r["p50_mwh"], "nominal_mwh": r["nominal_aep_mwh"],
+            "sigma_total_mwh": r["sigma_total_mwh"], "sigma_calibration_draws_mwh": sig_cal,
+            "sigma_calibration_delta_mwh": r["sigma_calibration_delta_mwh"],
+            "covered_total": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_total_mwh"]),
+            "covered_calibration": bool(abs(r["p50_mwh"] - true) <= Z90 * sig_cal)}
+    return out
+
+
+def summarize(records: dict) -> dict:
+    """Per effect and distribution: coverage, median errors, delta/draws ratio."""
+    out = {}
+    for name, recs in records.items():
+        ok = [r for r in recs if "error" not in r]
+        per = {}
+        for dist in (f"Rayleigh {m:g} m/s" for m in RAYLEIGH):
+            a = [r["aep"][dist] for r in ok if np.isfinite(r["aep"][dist]["true_mwh"])
+                 and np.isfinite(r["aep"][dist]["calibrated_mwh"])]
+            if not a:
+                continue
+            err_cal = np.array([x["calibrated_mwh"] - x["true_mwh"] for x in a])
+            err_nom = np.array([x["nominal_mwh"] - x["true_mwh"] for x in a])
+            ratio = np.array([x["sigma_calibration_delta_mwh"] / x["sigma_calibration_draws_mwh"] for x in a])
+            per[dist] = {"replicates": len(a), "true_mwh": a[0]["true_mwh"],
+                         "coverage_90_total": float(np.mean([x["covered_total"] for x in a])),
+                         "coverage_90_calibration_only": float(np.mean([x["covered_calibration"] for x in a])),
+                         "median_abs_error_calibrated_mwh": float(np.median(np.abs(err_cal))),
+                         "mean_error_calibrated_mwh": float(np.mean(err_cal)),
+                         "abs_error_nominal_mwh": float(np.median(np.abs(err_nom))),
+                         "error_ratio_nominal_over_calibrated": float(np.median(np.abs(err_nom))
+                                                                      / max(np.median(np.abs(err_cal)), 1e-12)),
+                         "median_sigma_total_mwh": float(np.median([x["sigma_total_mwh"] for x in a])),
+                         "delta_over_draws_sigma_median": float(np.nanmedian(ratio)),
+                         "delta_over_draws_sigma_min": float(np.nanmin(ratio)),
+                         "delta_over_draws_sigma_max": float(np.nanmax(ratio))}
+        out[name] = {"replicates_run": len(recs), "replicates_failed": len(recs) - len(ok),
+                     "failed_draws_total": int(sum(r["failed_draws"] for r in ok)),
+                     "calibration_cpu_s_median": float(np.median([r["calibration_cpu_s"] for r in ok])) if ok else None,
+                     "powercurve_cpu_s_median": float(np.median([r["powercurve_cpu_s"] for r in ok])) if ok else None,
+                     "aep": per}
+    return out
+
+
+def speed(n_draws: int = 1000, n_loop: int = 50) -> dict:
+    """CPU seconds of a power curve with ``n_draws`` draws (batched) and of ``n_loop`` draws one by one."""
+    from calib.calibration.result_files import load_result
+    from calib.cli import main
+    from calib.powercurve import VariableSpeed, calibrated_power_curve, iec_bins
+    from calib.rotor.geometry import OperatingSchedule
+
+    with tempfile.TemporaryDirectory() as tmp:
+        assert main(["run", str(ROOT / "workflows" / "wind_tunnel_hub_loads.toml"), "--out", tmp, "-q"]) == 0
+        result = load_result(next(Path(tmp).glob("stage*/result.json")).parent)
+    model = result.rebuild_model()
+    sched = OperatingSchedule(rated_power=5000.0, min_rotor_speed=40.0, max_rotor_speed=72.0, design_tsr=5.0,
+                              fine_pitch=3.0, cut_in=4.0, cut_out=20.0)
+    schedule = VariableSpeed.from_rotor(dataclasses.replace(model.rotor, schedule=sched))
+    v = iec_bins(3.0, 25.0, 0.5)
+    out = {"case": "Phase VI, workflows/wind_tunnel_hub_loads.toml (61 parameters), variable-speed test schedule, "
+                   f"{v.size} bins 3-25 m/s"}
+    for label, n, batched in (("batched", n_draws, True), ("per_draw", n_loop, False)):
+        t = time.process_time()
+        pc = calibrated_power_curve(result, v, schedule, n_draws=n, model=model, batched=batched)
+        out[f"{label}_draws"] = n
+        out[f"{label}_cpu_s"] = time.process_time() - t
+        out[f"{label}_bem_points"] = pc.n_bem_points
+        out[f"{label}_failed_draws"] = pc.failed_draws
+    out["per_draw_cpu_s_per_1000"] = out["per_draw_cpu_s"] * 1000 / n_loop
+    return out
+
+
+PHASE_VI_WORKFLOW = """# calib run workflow of bench_powercurve's Phase VI hold-out (written by benchmarks/bench_powercurve.py):
+# workflows/phase_vi.toml's rotor, grid and calibration settings, hub loads, the low-wind half of sequence H
+name = "powercurve_phase_vi_low_wind"
+[rotor]
+name = "phase_vi"
+[grid]
+alpha_nodes_deg = [-2.0, 4.0, 10.0, 16.0, 22.0, 28.0]
+eta_nodes = [0.25, 0.45, 0.65, 0.85, 1.0]
+[measurements]
+file = "{csv}"
+[calibration]
+noise = "{noise}"
+relative_sigma = {{ torque = 0.03, thrust = 0.03 }}
+estimator = "truncated"
+cd_min = 0.003
+[[stages]]
+name = "hub loads"
+channels = ["torque", "thrust"]
+"""
+
+
+def phase_vi_holdout(work: Path, n_draws: int = 200, noise: str = "relative_ml") -> dict:
+    """Calibrate on sequence H's three lowest wind speeds (7, 10, 13 m/s; torque and thrust), predict
+    the power at the three highest (15, 20, 25 m/s) at their measured rotor speed and 3° pitch with
+    a 90 % interval (±1.645 σ, σ the calibration's draws, discrepancy and field in quadrature), and
+    count the held-out measured powers (LSS torque × Ω, normalized to the model's density as
+    IEC 61400-12-1 does for a stall-regulated rotor: P ρ_ref / ρ) inside."""
+    from calib.calibration.result_files import load_result
+    from calib.cli import main
+    from calib.powercurve import calibrated_power_curve
+    from calib.powercurve.schedule import TableSchedule
+
+    src = ROOT / "workflows" / "data" / "phase_vi_sequence_H.csv"
+    lines = src.read_text().splitlines()
+    head = [k for k, line in enumerate(lines) if line.startswith("file_name")][0]
+    cols = lines[head].split(",")
+    rows = [dict(zip(cols, line.split(","))) for line in lines[head + 1:] if line.strip()]
+    v_all = np.array([float(r["wind_speed [m/s]"]) for r in rows])
+    order = np.argsort(v_all)
+    low, high = order[:len(order) // 2], order[len(order) // 2:]
+    folder = work / "phase_vi"
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "low.csv").write_text("\n".join(lines[:head] + [f"# bench_powercurve: the rows of the lowest "
+                                                              f"{len(low)} wind speeds only"] + [lines[head]]
+                                              + [lines[head + 1 + k] for k in sorted(low)]) + "\n")
+    (folder / "workflow.toml").write_text(PHASE_VI_WORKFLOW.format(csv="low.csv", noise=noise))
+    code = main(["run", str(folder / "workflow.toml"), "--out", str(folder / "run"), "-q"])
+    if code != 0:
+        return {"error": f"calib run exited {code}"}
+    result = load_result(next((folder / "run").glob("stage*/result.json")).parent)
+    hv = v_all[high]
+    rpm = np.array([float(rows[k]["rotor_speed [rpm]"]) for k in high])
+    rho = np.array([float(rows[k]["air_density [kg/m^3]"]) for k in high])
+    torque = np.array([float(rows[k]["torque [N m]"]) for k in high])
+    rho_ref = float(np.mean(rho))
+    schedule = TableSchedule(tuple(hv), tuple(rpm), tuple(np.full(hv.size, 3.0)), "sequence H, held-out rows")
+    pc = calibrated_power_curve(result, hv, schedule, air_density=rho_ref, n_draws=n_draws, seed=7)
+    measured = torque * rpm * np.pi / 30 * rho_ref / rho
+    sig = pc.power_std_total()
+    inside = np.abs(pc.central.power - measured) <= Z90 * sig
+    return {"calibrated_on_m_s": sorted(v_all[low].tolist()), "held_out_m_s": hv.tolist(),
+            "noise": noise, "estimator": result.estimator,
+            "measured_power_w": measured.tolist(), "predicted_power_w": pc.central.power.tolist(),
+            "nominal_power_w": pc.nominal.power.tolist(), "sigma_total_w": sig.tolist(),
+            "sigma_calibration_draws_w": pc.draw_std("power").tolist(),
+            "inside_90": [bool(x) for x in inside], "n_inside": int(inside.sum()), "n_bins": int(hv.size),
+            "envelope": list(pc.envelope), "failed_draws": pc.failed_draws, "notes": pc.notes}
+
+
+def markdown(res: dict) -> str:
+    lines = [f"Out-of-family truth (CCBlade {res.get('wisdem_version', '?')}), NREL 5-MW rigid, "
+             f"{res['replicates']} noise replicates per effect, {res['draws']} posterior draws each.", "",
+             "| hidden effect | Rayleigh mean | true AEP [MWh] | 90 % coverage (total σ) | coverage (calibration σ only) "
+             "| median \\|error\\| calibrated [MWh] | \\|error\\| nominal [MWh] | nominal / calibrated | "
+             "median σ total [MWh] | delta σ / draws σ (median, min-max) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, s in res["effects"].items():
+        for dist, a in s["aep"].items():
+            lines.append(f"| {name} | {dist.split()[1]} m/s | {a['true_mwh']:.5g} | {100 * a['coverage_90_total']:.0f} % "
+                         f"| {100 * a['coverage_90_calibration_only']:.0f} % | {a['median_abs_error_calibrated_mwh']:.3g} "
+                         f"| {a['abs_error_nominal_mwh']:.3g} | {a['error_ratio_nominal_over_calibrated']:.2g} "
+                         f"| {a['median_sigma_total_mwh']:.3g} | {a['delta_over_draws_sigma_median']:.2f} "
+                         f"({a['delta_over_draws_sigma_min']:.2f}-{a['delta_over_draws_sigma_max']:.2f}) |")
+    ph = res.get("phase_vi")
+    if ph and "error" not in ph:
+        lines += ["", f"Phase VI sequence H, calibrated on {', '.join(f'{x:g}' for x in ph['calibrated_on_m_s'])} m/s "
+                  f"(torque, thrust; estimator {ph['estimator']!r}, noise {ph['noise']!r}); held-out bins inside their "
+                  f"90 % interval: {ph['n_inside']} of {ph['n_bins']}.", "",
+                  "| wind speed [m/s] | measured P [kW] | calibrated P [kW] | 90 % half-width [kW] | nominal P [kW] "
+                  "| inside | envelope |", "|---|---|---|---|---|---|---|"]
+        for k, v in enumerate(ph["held_out_m_s"]):
+            lines.append(f"| {v:g} | {ph['measured_power_w'][k] / 1e3:.2f} | {ph['predicted_power_w'][k] / 1e3:.2f} "
+                         f"| {Z90 * ph['sigma_total_w'][k] / 1e3:.2f} | {ph['nominal_power_w'][k] / 1e3:.2f} "
+                         f"| {'yes' if ph['inside_90'][k] else 'no'} | {ph['envelope'][k] or 'inside'} |")
+    elif ph:
+        lines += ["", f"Phase VI hold-out: {ph['error']}"]
+    sp = res.get("speed")
+    if sp:
+        lines += ["", f"Speed ({sp['case']}): {sp['batched_draws']} draws batched in {sp['batched_cpu_s']:.1f} s CPU "
+                  f"({sp['batched_bem_points']} BEM points); one by one {sp['per_draw_draws']} draws in "
+                  f"{sp['per_draw_cpu_s']:.1f} s CPU ({sp['per_draw_cpu_s_per_1000']:.0f} s per 1 000 draws)."]
+    return "\n".join(lines) + "\n"
+
+
+def records_path(n_draws: int) -> Path:
+    """The replicates done so far (a killed run resumes from it): one JSON line per replicate."""
+    path = ROOT / "bench_output" / "powercurve" / f"records_{n_draws}_draws.jsonl"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _done(n_draws: int) -> dict:
+    path = records_path(n_draws)
+    if not path.exists():
+        return {}
+    out = {}
+    for line in path.read_text().splitlines():
+        try:
+            d = json.loads(line)
+        except json.JSONDecodeError:
+            continue            # a line cut by a kill
+        out[(d["name"], d["seed"])] = d["record"]
+    return out
+
+
+def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float | None = None) -> dict:
+    """Truths, replicates, figures; publishes ``powercurve.json`` (``run_all`` calls this).
+
+    ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
+    figures then say how many replicates ran per effect (``replicates_run``).
+    """
+    from publish import command_line, publish
+
+    t0 = time.perf_counter()
+    names = list(effects or EFFECTS)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        try:
+            truth = truths(work)
+        except Exception as exc:  # noqa: BLE001  (never crash the benchmark runner)
+            return {"error": f"the CCBlade truth failed: {type(exc).__name__}: {exc}"}
+        records = {n: [] for n in names}
+        done = _done(n_draws)
+        with open(records_path(n_draws), "a") as log:
+            for k in range(n_replicates):
+                if stop_at is not None and time.time() > stop_at:
+                    print(f"[bench_powercurve] time budget reached after {k} replicates", flush=True)
+                    break
+                for n in names:
+                    rec = done.get((n, SEED0 + k))
+                    if rec is None:
+                        try:
+                            rec = replicate(truth, n, SEED0 + k, work, n_draws)
+                        except Exception as exc:  # noqa: BLE001  (counted, never dropped)
+                            rec = {"seed": SEED0 + k, "error": f"{type(exc).__name__}: {exc}"}
+                        log.write(json.dumps({"name": n, "seed": SEED0 + k, "record": rec}) + "\n")
+                        log.flush()
+                    records[n].append(rec)
+                print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
+    res = {"replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
+           "truth_tsr_opt": {n: truth["data_sets"][n]["curve"]["tsr_opt"] for n in names},
+           "effects": summarize(records)}
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            res["phase_vi"] = phase_vi_holdout(Path(tmp), n_draws)
+        except Exception as exc:  # noqa: BLE001  (said in the figures)
+            res["phase_vi"] = {"error": f"{type(exc).__name__}: {exc}"}
+    res["speed"] = speed()
+    res["wall_seconds"] = time.perf_counter() - t0
+    res["effects_run"] = names
+    res["time_budget_utc"] = (None if stop_at is None else
+                              time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(stop_at)))
+    how = (f"python -c \"import bench_powercurve as B; B.run({n_replicates}, {n_draws}, effects={names!r}, "
+           f"stop_at=<{res['time_budget_utc']} UTC>)\" (in benchmarks/)"
+           if effects or stop_at is not None else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
+    publish("powercurve", res, command_line() if __name__ == "__main__" else how, markdown(res))
+    return res
+
+
+if __name__ == "__main__":
+    args = [int(a) for a in sys.argv[1:3]]
+    print(json.dumps(run(*args), indent=1, default=str))
