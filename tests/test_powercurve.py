@@ -414,3 +414,36 @@ def test_a_result_without_a_posterior_says_what_is_left_out(wind_tunnel_result):
     bad = result.replace(uncertainty=dataclasses.replace(unc, cov_p=np.full_like(unc.cov_p, np.nan)))
     with pytest.raises(InputError, match=r"no usable covariance.*non-finite"):
         calibrated_power_curve(bad, iec_bins(6.0, 10.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=4)
+
+
+def test_a_torque_calibration_carries_its_field_and_discrepancy_to_power_times_the_rotor_speed(wind_tunnel_result):
+    """Power is torque × Ω with Ω a condition: a result calibrated on torque (Phase VI) gives the power curve the
+    torque's between-node field and discrepancy σ times Ω [rad/s], the same as a power calibration would."""
+    from calib.powercurve.curve import _prediction_terms
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    pc = calibrated_power_curve(result, iec_bins(5.0, 15.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=0, model=model)
+    ref_disc, ref_field, _ = _prediction_terms(result, model, pc.central, 1.225, [])
+    assert np.all(ref_field > 0)
+    omega = pc.central.rotor_speed * np.pi / 30.0
+
+    class TorqueResult:
+        """The same result, its power channel predicted as torque (power / Ω)."""
+
+        def __getattr__(self, name):
+            return getattr(result, name)
+
+        def predict(self, conditions, m):
+            pred = result.predict(conditions, m)
+            i = list(pred.channels).index("power")
+            per = np.ones(len(pred.channels))[None, :].repeat(len(omega), 0)
+            per[:, i] = 1.0 / omega
+            channels = tuple("torque" if c == "power" else c for c in pred.channels)
+            return dataclasses.replace(pred, channels=channels, field_std=pred.field_std * per,
+                                       discrepancy_std=pred.discrepancy_std * per)
+
+    notes = []
+    disc, fld, _ = _prediction_terms(TorqueResult(), model, pc.central, 1.225, notes)
+    np.testing.assert_allclose(fld, ref_field, rtol=1e-12)
+    np.testing.assert_allclose(disc, ref_disc, rtol=1e-12, atol=1e-9)
+    assert "as torque x rotor speed" in notes[-1]

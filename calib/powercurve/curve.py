@@ -335,16 +335,22 @@ def _prediction_terms(result, model, central, air_density, notes):
         pred = result.predict(OperatingConditions(v, central.rotor_speed, central.pitch, air_density),
                               _result_channels_model(model, result))
         envelope = tuple(pred.envelope) if pred.envelope else envelope
-        if "power" in pred.channels:
-            i = list(pred.channels).index("power")
+        # power is the torque times the rotor speed (a condition): a calibration on torque carries its
+        # terms to power exactly, scaled by Ω
+        source = "power" if "power" in pred.channels else "torque" if "torque" in pred.channels else None
+        if source is not None:
+            i = list(pred.channels).index(source)
+            scale = 1.0 if source == "power" else central.rotor_speed * np.pi / 30.0
             r2 = central.region != 3
-            disc = np.where(r2, np.nan_to_num(pred.discrepancy_std[:, i]), 0.0)
-            fld = np.where(r2, np.nan_to_num(pred.field_std[:, i]), 0.0) if pred.field_std is not None else fld
-            notes.append(f"model discrepancy of power: {pred.discrepancy or 'none recorded'}; field between the "
-                         f"nodes: {pred.representation}; both added in quadrature per bin, zero in region 3")
+            disc = np.where(r2, scale * np.nan_to_num(pred.discrepancy_std[:, i]), 0.0)
+            if pred.field_std is not None:
+                fld = np.where(r2, scale * np.nan_to_num(pred.field_std[:, i]), 0.0)
+            notes.append(f"model discrepancy of {source}: {pred.discrepancy or 'none recorded'}; field between the "
+                         f"nodes: {pred.representation}; both added in quadrature per bin"
+                         f"{' (as torque x rotor speed)' if source == 'torque' else ''}, zero in region 3")
         else:
-            notes.append("the calibration has no power channel: no model-discrepancy or between-node field term "
-                         "for power (only the parameter uncertainty)")
+            notes.append("the calibration has no power or torque channel: no model-discrepancy or between-node "
+                         "field term for power (only the parameter uncertainty)")
     except InputError as exc:
         notes.append(f"no discrepancy term and no envelope check: {exc}")
     return disc, fld, envelope
