@@ -176,7 +176,7 @@ def fine_sensitivities(model, p: np.ndarray, conditions, sigma: np.ndarray, chan
         cols.append(f_idx.ravel())
     ev, G = fmodel.jacobian(p_fine, conditions)
     use = np.asarray(ok, bool) & ev.ok
-    W = np.concatenate([G[:, channel_index, :][..., c] for c in cols], axis=-1) / sigma[:, :, None]
+    W = G[:, channel_index, :][..., np.concatenate(cols)] / sigma[:, :, None]     # the measured channels indexed once
     W = np.where(use[:, None, None], W, 0.0).reshape(-1, sum(c.size for c in cols))
     return FineSensitivities(fine, W, int(cols[0].size))
 
