@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.errors import InputError
-from calib.types import Parameter
+from calib.types import Parameter, ParameterKind
 
 
 def _check_nodes(nodes, name: str) -> np.ndarray:
@@ -244,14 +244,18 @@ class CorrectionGrid:
     def parameters(self) -> tuple[Parameter, ...]:
         """The nodal parameters, lift block then drag block, in ``p`` order."""
         out = []
-        for kind, letter, scale, bound in (("lift_correction", "L", self.cl_scale, self.cl_bound),
-                                           ("drag_correction", "D", self.cd_scale, self.cd_bound)):
-            for a in self.alpha_nodes_deg:
-                for e in self.eta_nodes:
+        # each node coordinate formatted once, not once per parameter (the refined grids of the
+        # aliasing term have ~2 000 nodes)
+        alphas = [(float(a), f"{a:g}") for a in self.alpha_nodes_deg]
+        etas = [(float(e), f"{e:g}") for e in self.eta_nodes]
+        for kind, letter, scale, bound in ((ParameterKind.LIFT_CORRECTION, "L", self.cl_scale, self.cl_bound),
+                                           (ParameterKind.DRAG_CORRECTION, "D", self.cd_scale, self.cd_bound)):
+            for a, a_text in alphas:
+                for e, e_text in etas:
                     out.append(Parameter(
-                        name=f"dC{letter}[alpha={a:g},eta={e:g}]", nominal=0.0, lower=-bound,
-                        upper=bound, scale=scale, unit="-", kind=kind, alpha_deg=float(a), eta=float(e),
-                        description=f"additive C_{letter} correction at alpha={a:g} deg, eta={e:g}"))
+                        name=f"dC{letter}[alpha={a_text},eta={e_text}]", nominal=0.0, lower=-bound,
+                        upper=bound, scale=scale, unit="-", kind=kind, alpha_deg=a, eta=e,
+                        description=f"additive C_{letter} correction at alpha={a_text} deg, eta={e_text}"))
         return tuple(out)
 
     def to_dict(self) -> dict:

@@ -787,3 +787,15 @@ def test_the_map_is_not_overconfident_for_prior_draws_in_the_span(coverage_twins
     not exceed it."""
     lo, nees, hi = _full_vector_nees(coverage_twins_map["c_prior_draws"])
     assert nees <= hi, (lo, nees, hi)
+
+
+def test_quadratic_diagonal_is_the_diagonal_of_the_sandwich():
+    """The bands' per-point variance diag(B C Bᵀ) (field_bands.quadratic_diagonal) against the
+    explicit product's diagonal, for a sparse hat-like B and a covariance C."""
+    from calib.parametrizations.field_bands import quadratic_diagonal
+
+    rng = np.random.default_rng(7420)
+    B = np.where(rng.random((40, 12)) < 0.3, rng.random((40, 12)), 0.0)
+    A = rng.standard_normal((12, 12))
+    C = A @ A.T
+    np.testing.assert_allclose(quadratic_diagonal(B, C), np.diag(B @ C @ B.T), rtol=1e-12, atol=1e-14)

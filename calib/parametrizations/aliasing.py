@@ -176,7 +176,7 @@ def fine_sensitivities(model, p: np.ndarray, conditions, sigma: np.ndarray, chan
         cols.append(f_idx.ravel())
     ev, G = fmodel.jacobian(p_fine, conditions)
     use = np.asarray(ok, bool) & ev.ok
-    W = np.concatenate([G[:, channel_index, :][..., c] for c in cols], axis=-1) / sigma[:, :, None]
+    W = G[:, channel_index, :][..., np.concatenate(cols)] / sigma[:, :, None]     # the measured channels indexed once
     W = np.where(use[:, None, None], W, 0.0).reshape(-1, sum(c.size for c in cols))
     return FineSensitivities(fine, W, int(cols[0].size))
 
@@ -260,12 +260,34 @@ def discrepancy_propagated(B: np.ndarray, field, fs: FineSensitivities, prior_st
     -------
     ndarray, shape (k, k) or (k,)
     """
-    D = discrepancy_correlation(field.grid, fs.fine, field.correlation_lengths(correlation_length))
-    n = D.shape[0]
+    # Σ_δ/σ_p² = K_ff − T K_cf − K_fc Tᵀ + T K_cc Tᵀ is never formed: K_ff and K_fc are Kronecker products
+    # of their α and η factors (:func:`grid_correlation`), so B K_ff costs k n_f (n_α + n_η) products
+    # (:func:`times_kron`) instead of k n_f², and the interpolant's terms go through the n_c coarse nodes
+    # (X = B T, Y = B K_fc): B Σ_δ Bᵀ/σ_p² = (B K_ff) Bᵀ − X Yᵀ − Y Xᵀ + X K_cc Xᵀ (equal to round-off).
+    coarse, fine = field.grid, fs.fine
+    lengths = field.correlation_lengths(correlation_length)
+    T = interpolation_matrix(coarse, fine)
+    n = T.shape[0]
+    ff = _correlation_factors(fine, fine, lengths)
+    fc = _correlation_factors(fine, coarse, lengths)
+    K_cc = grid_correlation(coarse, coarse, lengths)
     k = B.shape[0]
     out = np.zeros(k) if diagonal else np.zeros((k, k))
     for block, c_idx in enumerate((field.layout.lift_index, field.layout.drag_index)):
         var = float(np.mean(np.asarray(prior_std, float)[c_idx.ravel()] ** 2))
         Bb = B[:, block * n:(block + 1) * n]
-        out += var * (np.sum((Bb @ D) * Bb, axis=1) if diagonal else Bb @ D @ Bb.T)
+        BK, X, Y = times_kron(Bb, *ff), Bb @ T, times_kron(Bb, *fc)
+        XK = X @ K_cc
+        if diagonal:
+            out += var * (np.sum(BK * Bb, axis=1) - 2.0 * np.sum(X * Y, axis=1) + np.sum(XK * X, axis=1))
+        else:
+            XY = X @ Y.T
+            out += var * (BK @ Bb.T - XY - XY.T + XK @ X.T)
     return out if diagonal else 0.5 * (out + out.T)
+
+
+def _correlation_factors(a: CorrectionGrid, b: CorrectionGrid, lengths: tuple[float, float]
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """The α and η factors of :func:`grid_correlation` (a, b), whose Kronecker product it is [-]."""
+    return (se_correlation(a.alpha_nodes_deg[:, None] - b.alpha_nodes_deg[None], 0.0, (lengths[0], 1.0)),
+            se_correlation(0.0, a.eta_nodes[:, None] - b.eta_nodes[None], (1.0, lengths[1])))

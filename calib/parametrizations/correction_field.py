@@ -61,16 +61,17 @@ def node_layout(parameters: Sequence[Parameter]) -> NodeLayout:
     if not nodes:
         empty = np.zeros((0, 0), int)
         return NodeLayout(None, empty, empty)
-    alphas = np.unique(np.round([q.alpha_deg for _, q in nodes], 9))
-    etas = np.unique(np.round([q.eta for _, q in nodes], 9))
+    node_alpha = np.round(np.array([q.alpha_deg for _, q in nodes], float), 9)    # each list read once
+    node_eta = np.round(np.array([q.eta for _, q in nodes], float), 9)
+    alphas, etas = np.unique(node_alpha), np.unique(node_eta)
     if alphas.size < 2 or etas.size < 2:
         empty = np.zeros((0, 0), int)
         return NodeLayout(None, empty, empty)
     lift = -np.ones((alphas.size, etas.size), int)
     drag = -np.ones_like(lift)
     at = np.array([i for i, _ in nodes])
-    a = np.searchsorted(alphas, np.round([q.alpha_deg for _, q in nodes], 9))
-    e = np.searchsorted(etas, np.round([q.eta for _, q in nodes], 9))
+    a = np.searchsorted(alphas, node_alpha)
+    e = np.searchsorted(etas, node_eta)
     is_lift = np.array([q.kind == ParameterKind.LIFT_CORRECTION for _, q in nodes], bool)
     lift[a[is_lift], e[is_lift]] = at[is_lift]
     drag[a[~is_lift], e[~is_lift]] = at[~is_lift]

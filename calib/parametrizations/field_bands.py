@@ -69,6 +69,13 @@ def bounded_interval(estimate, std, lower, confidence: float = 0.95) -> tuple[np
     return lo, hi
 
 
+def quadratic_diagonal(B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """diag(B C Bᵀ) without forming it: Σ_jk B_ij C_jk B_ik per row, one matrix product (BLAS) and
+    one row sum; numpy's three-operand einsum loops over i, j, k in C instead (over 10× slower at
+    121 × 5 points and 61 parameters). Equal to round-off."""
+    return np.sum((B @ C) * B, axis=1)
+
+
 def polar_bands(field, p_hat: np.ndarray, cov_p: np.ndarray, cov_frozen: np.ndarray | None, alpha_deg, eta,
                 confidence: float, prior_std: np.ndarray | None, correlation_length: float,
                 cd_min: float | None) -> dict:
@@ -101,13 +108,13 @@ def polar_bands(field, p_hat: np.ndarray, cov_p: np.ndarray, cov_frozen: np.ndar
         out[f"d{letter}"] = (Bf @ p_hat).reshape(A.shape)
         rep = 0.0 if prior_std is None else \
             field.representation_variance(A, E, block, prior_std, correlation_length).reshape(A.shape)
-        var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0).reshape(A.shape) + rep
+        var = np.maximum(quadratic_diagonal(Bf, cov_p), 0.0).reshape(A.shape) + rep
         out[f"d{letter}_half_width"] = z * np.sqrt(var)
         floor = field.drag_floor(A, E, cd_min) if block == "drag" else -np.inf
         out[f"d{letter}_lower"], out[f"d{letter}_upper"] = bounded_interval(out[f"d{letter}"], np.sqrt(var),
                                                                             floor, confidence)
         if cov_frozen is not None:
-            vf = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_frozen, Bf), 0.0).reshape(A.shape) + rep
+            vf = np.maximum(quadratic_diagonal(Bf, cov_frozen), 0.0).reshape(A.shape) + rep
             out[f"d{letter}_prior_fraction"] = np.where(var > 0, vf / np.where(var > 0, var, 1.0), 1.0)
     if field.nominal_coefficients is not None:
         cl0, cd0 = field.nominal_coefficients(A, E)
@@ -136,7 +143,7 @@ def band_coverage(field, p_hat: np.ndarray, cov_p: np.ndarray, alpha_deg, eta, t
     for block, truth in (("lift", truth_dcl), ("drag", truth_dcd)):
         Bf = field.basis(alpha_deg, eta, block)
         est = Bf @ p_hat
-        var = np.maximum(np.einsum("ij,jk,ik->i", Bf, cov_p, Bf), 0.0)
+        var = np.maximum(quadratic_diagonal(Bf, cov_p), 0.0)
         if prior_std is not None:
             var = var + field.representation_variance(alpha_deg, eta, block, prior_std, correlation_length)
         floor = field.drag_floor(alpha_deg, eta, cd_min).reshape(-1) if block == "drag" else -np.inf
