@@ -174,12 +174,14 @@ class Namer:
         self._effects = effects
         self._fits = fits = self._fit(round_no, labels, effects)
         rnd, best = self._judge(fits)
-        if best is not None and best.kind != "model_form" and self._named_fits:
-            best = self._earns_place(rnd, best)
-        elif best is not None and best.kind != "model_form":
+        if best is not None and best.kind != "model_form":
+            # model form first, in every round: a physical effect is named over a significant
+            # model-form candidate only when it also explains most of what that candidate leaves
             form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
             if form is not None:
                 best = self._over_model_form(round_no, rnd, best, form)
+        if best is not None and best.kind != "model_form" and self._named_fits:
+            best = self._earns_place(rnd, best)
         if best is not None and best.kind == "model_form":
             rnd["reason"] = ("model form (the BEM's own induction model, not a missing physical effect): "
                              + rnd["reason"])
