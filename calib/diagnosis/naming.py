@@ -49,6 +49,17 @@ from calib.words import p_is
 #: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way).
 LATER_EFFECT_SHARE = 0.65
 
+#: Collinearity with the model form named so far above which a physical effect is "not separable
+#: from model form" and not named [-]: the squared multiple correlation (Cramér–Rao, i.e. in the
+#: Fisher metric of the joint fit) of each of the effect's parameters with the named model-form
+#: parameters, all of them at or above it. Measured (2026-11-27, NREL 5-MW, the battery's 63 points,
+#: on top of momentum_balance and tip_loss; lifting-line fast-wake control seeds 26008-26009):
+#: wind_tunnel_blockage 0.93-0.94, wind_speed_scale 0.84-0.88, lift_offset 0.85 (they move the
+#: loads as the induction model's strength does); pitch_offset 0.30-0.46, rotational augmentation
+#: 0.01-0.41, reynolds_number 0.01-0.45, erosion's onset 0.01-0.15. A correlation of 0.8 halves
+#: the Fisher information left to the effect five times over (1 − R² = 0.2).
+MODEL_FORM_COLLINEARITY = 0.8
+
 
 def fit_task(task: dict) -> dict:
     """Fit one candidate (module-level so executors can ship it to other processes).
@@ -113,6 +124,7 @@ class Namer:
         self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
         self._effects = {}                        # the current round's candidate effects by label
         self._named_fits = []                     # the CandidateFit of each named effect
+        self._collinearity = {}                   # the round's R² of each candidate with the named model form
         self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
 
     def run(self, candidates) -> None:
@@ -174,7 +186,9 @@ class Namer:
         self._effects = effects
         self._fits = fits = self._fit(round_no, labels, effects)
         rnd, best = self._judge(fits)
-        if best is not None and best.kind != "model_form":
+        if best is None and rnd["verdict"] == "ambiguous":
+            best = self._ambiguous_with_model_form(round_no, rnd, fits)
+        elif best is not None and best.kind != "model_form":
             # model form first, in every round: a physical effect is named over a significant
             # model-form candidate only when it also explains most of what that candidate leaves
             form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
@@ -182,6 +196,8 @@ class Namer:
                 best = self._over_model_form(round_no, rnd, best, form)
         if best is not None and best.kind != "model_form" and self._named_fits:
             best = self._earns_place(rnd, best)
+        if best is not None and best.kind != "model_form" and self.model_form:
+            best = self._separable(rnd, best)
         if best is not None and best.kind == "model_form":
             rnd["reason"] = ("model form (the BEM's own induction model, not a missing physical effect): "
                              + rnd["reason"])
@@ -205,6 +221,41 @@ class Namer:
                      f"{fit_now['chi2_per_dof']:.3g}, {p_is(fit_now['p_value'])}); no further effect is looked for")
             return True
         return False
+
+    def _separable(self, rnd: dict, best: CandidateFit) -> CandidateFit | None:
+        """``best`` when it can be told from the model form named so far, else None with ``rnd``
+        turned ``none``: every parameter's squared multiple correlation with the named model-form
+        parameters at or above :data:`MODEL_FORM_COLLINEARITY` (the effect moves the loads as the
+        induction model's own parameters do, so the data cannot say which of the two it is)."""
+        r2 = self._collinearity.get(best.name)
+        if r2 is None or not np.all(np.isfinite(r2)) or float(np.min(r2)) < MODEL_FORM_COLLINEARITY:
+            return best
+        form = ", ".join(self.model_form)
+        rnd.update(verdict="none", reason=(
+            f"{best.name} is not separable from model form: its parameter{'s' if len(r2) > 1 else ''} "
+            f"correlate{'' if len(r2) > 1 else 's'} with {form} at R² = "
+            f"{', '.join(f'{v:.2f}' for v in r2)} (at least {MODEL_FORM_COLLINEARITY:g} is not separable), so "
+            f"its fit (Λ = {best.lr_statistic:.4g}, {best.effect_text}) cannot tell a missing effect from the "
+            f"form of {form}: not named"))
+        return None
+
+    def _ambiguous_with_model_form(self, round_no: int, rnd: dict, fits: list) -> CandidateFit | None:
+        """An ``ambiguous`` round between a physical effect and a model-form candidate, model form
+        first: the model-form candidate when the physical one does not earn its place on top of
+        it (:meth:`_over_model_form`), else None (the round stays ambiguous)."""
+        pair = [next((f for f in fits if f.effect == name and f.significant), None) for name in rnd["ambiguous"]]
+        if any(f is None for f in pair) or sorted(f.kind for f in pair) != ["model_form", "physical"]:
+            return None
+        physical, form = sorted(pair, key=lambda f: f.kind != "physical")
+        before = rnd["reason"]
+        named = self._over_model_form(round_no, rnd, physical, form)
+        if named is form:
+            rnd.pop("ambiguous", None)
+            rnd.pop("separate", None)
+            rnd["reason"] += f" (the round was ambiguous: {before})"
+            return form
+        rnd["reason"] = before
+        return None
 
     def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, form: CandidateFit) -> CandidateFit:
         """``best`` (physical) when it also earns its place on top of the significant model-form
@@ -309,6 +360,7 @@ class Namer:
         agree = pattern_agreement((values - self.base_values) / sigma,
                                   self.field_change - (self.base_values - self.y0) / sigma)
         params = parameter_records(res, own)
+        self._collinearity[label] = self._model_form_r2(res, own)
         size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
                                            meas.conditions.wind_speed)
         return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
@@ -317,6 +369,28 @@ class Namer:
                             spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
                             at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
                             effect_text=words, kind=self.family.kind(label.split(":")[0]))
+
+    def _model_form_r2(self, res, own: list) -> np.ndarray | None:
+        """Squared multiple correlation of each of ``own`` with the named model-form parameters
+        (Cramér–Rao correlation of the joint fit ``res``), or None when none is named."""
+        idx, k = [], 0
+        for e in self.base_effects:
+            n = len(e.parameters())
+            if self.family.kind(e.name) == "model_form":
+                idx += list(range(k, k + n))
+            k += n
+        corr = getattr(getattr(res, "identifiability", None), "correlation", None)
+        if not idx or corr is None:
+            return None
+        out = []
+        for j in own:
+            sub = idx + [j]
+            with np.errstate(all="ignore"):
+                try:
+                    out.append(1.0 - 1.0 / np.linalg.inv(np.asarray(corr)[np.ix_(sub, sub)])[-1, -1])
+                except np.linalg.LinAlgError:
+                    out.append(np.nan)
+        return np.array(out, float)
 
     def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
         """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
