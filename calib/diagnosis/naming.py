@@ -8,9 +8,12 @@ with the measurement that would tell the two rivals apart (:func:`separation_of`
 :class:`Namer` holds the rounds' state.
 
 A model-form candidate (the BEM's own induction model: ``Effect.kind = "model_form"``) is named as
-model form, not as a physical effect. A physical effect must earn its place
-(:data:`LATER_EFFECT_SHARE`): after an earlier effect, and over a significant model-form candidate
-(fitted on top of it), it must explain most of the misfit the model without it leaves.
+model form, not as a physical effect. Model form comes first, in every round: a physical effect
+must earn its place (:data:`LATER_EFFECT_SHARE`): after an earlier effect, and over a significant
+model-form candidate (fitted on top of it; also when the round is ambiguous between the two), it
+must explain most of the misfit the model without it leaves; and once model form is named, an
+effect that correlates with it at :data:`MODEL_FORM_COLLINEARITY` or more (Fisher metric) is not
+separable from it and not named.
 """
 
 from __future__ import annotations
