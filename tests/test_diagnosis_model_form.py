@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from calib.diagnosis.command import run_diagnose
-from calib.diagnosis.naming import MODEL_FORM_COLLINEARITY, LATER_EFFECT_SHARE
+from calib.diagnosis.model_form import MODEL_FORM_COLLINEARITY
+from calib.diagnosis.naming import LATER_EFFECT_SHARE
 from calib.effects import EFFECTS
 
 DATA = Path(__file__).resolve().parent / "data" / "lifting_line"

@@ -9,11 +9,9 @@ with the measurement that would tell the two rivals apart (:func:`separation_of`
 
 A model-form candidate (the BEM's own induction model: ``Effect.kind = "model_form"``) is named as
 model form, not as a physical effect. Model form comes first, in every round: a physical effect
-must earn its place (:data:`LATER_EFFECT_SHARE`): after an earlier effect, and over a significant
-model-form candidate (fitted on top of it; also when the round is ambiguous between the two), it
-must explain most of the misfit the model without it leaves; and once model form is named, an
-effect that correlates with it at :data:`MODEL_FORM_COLLINEARITY` or more (Fisher metric) is not
-separable from it and not named.
+must earn its place (:data:`LATER_EFFECT_SHARE`) after an earlier effect and over a significant
+model-form candidate (also in a round ambiguous between the two), and one not separable from the
+model form named (:mod:`calib.diagnosis.model_form`) is not named.
 """
 
 from __future__ import annotations
@@ -25,6 +23,7 @@ import numpy as np
 from calib.calibration.calibrator import Calibrator
 from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
 from calib.diagnosis.figures_of_merit import effect_size, gap
+from calib.diagnosis.model_form import model_form_r2, not_separable
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
 from calib.diagnosis.result import CandidateFit
 from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
@@ -51,17 +50,6 @@ from calib.words import p_is
 #: 0.65 lies between the two (χ² − dof scatters by √(2 dof), 22 on these 252 residuals: ±4 % of a
 #: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way).
 LATER_EFFECT_SHARE = 0.65
-
-#: Collinearity with the model form named so far above which a physical effect is "not separable
-#: from model form" and not named [-]: the squared multiple correlation (Cramér–Rao, i.e. in the
-#: Fisher metric of the joint fit) of each of the effect's parameters with the named model-form
-#: parameters, all of them at or above it. Measured (2026-11-27, NREL 5-MW, the battery's 63 points,
-#: on top of momentum_balance and tip_loss; lifting-line fast-wake control seeds 26008-26009):
-#: wind_tunnel_blockage 0.93-0.94, wind_speed_scale 0.84-0.88, lift_offset 0.85 (they move the
-#: loads as the induction model's strength does); pitch_offset 0.30-0.46, rotational augmentation
-#: 0.01-0.41, reynolds_number 0.01-0.45, erosion's onset 0.01-0.15. A correlation of 0.8 halves
-#: the Fisher information left to the effect five times over (1 − R² = 0.2).
-MODEL_FORM_COLLINEARITY = 0.8
 
 
 def fit_task(task: dict) -> dict:
@@ -226,21 +214,10 @@ class Namer:
         return False
 
     def _separable(self, rnd: dict, best: CandidateFit) -> CandidateFit | None:
-        """``best`` when it can be told from the model form named so far, else None with ``rnd``
-        turned ``none``: every parameter's squared multiple correlation with the named model-form
-        parameters at or above :data:`MODEL_FORM_COLLINEARITY` (the effect moves the loads as the
-        induction model's own parameters do, so the data cannot say which of the two it is)."""
-        r2 = self._collinearity.get(best.name)
-        if r2 is None or not np.all(np.isfinite(r2)) or float(np.min(r2)) < MODEL_FORM_COLLINEARITY:
-            return best
-        form = ", ".join(self.model_form)
-        rnd.update(verdict="none", reason=(
-            f"{best.name} is not separable from model form: its parameter{'s' if len(r2) > 1 else ''} "
-            f"correlate{'' if len(r2) > 1 else 's'} with {form} at R² = "
-            f"{', '.join(f'{v:.2f}' for v in r2)} (at least {MODEL_FORM_COLLINEARITY:g} is not separable), so "
-            f"its fit (Λ = {best.lr_statistic:.4g}, {best.effect_text}) cannot tell a missing effect from the "
-            f"form of {form}: not named"))
-        return None
+        """``best``, or None with ``rnd`` turned ``none`` when it is not separable from the model
+        form named so far (:func:`calib.diagnosis.model_form.not_separable`)."""
+        reason = not_separable(self._collinearity.get(best.name), best, self.model_form)
+        return best if reason is None else rnd.update(verdict="none", reason=reason)   # dict.update: None
 
     def _ambiguous_with_model_form(self, round_no: int, rnd: dict, fits: list) -> CandidateFit | None:
         """An ``ambiguous`` round between a physical effect and a model-form candidate, model form
@@ -251,10 +228,8 @@ class Namer:
             return None
         physical, form = sorted(pair, key=lambda f: f.kind != "physical")
         before = rnd["reason"]
-        named = self._over_model_form(round_no, rnd, physical, form)
-        if named is form:
-            rnd.pop("ambiguous", None)
-            rnd.pop("separate", None)
+        if self._over_model_form(round_no, rnd, physical, form) is form:
+            rnd.pop("ambiguous", None), rnd.pop("separate", None)
             rnd["reason"] += f" (the round was ambiguous: {before})"
             return form
         rnd["reason"] = before
@@ -363,7 +338,9 @@ class Namer:
         agree = pattern_agreement((values - self.base_values) / sigma,
                                   self.field_change - (self.base_values - self.y0) / sigma)
         params = parameter_records(res, own)
-        self._collinearity[label] = self._model_form_r2(res, own)
+        corr = getattr(getattr(res, "identifiability", None), "correlation", None)
+        self._collinearity[label] = model_form_r2(corr, [(e.parameters(), self.family.kind(e.name))
+                                                         for e in self.base_effects], own)
         size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
                                            meas.conditions.wind_speed)
         return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
@@ -372,28 +349,6 @@ class Namer:
                             spec=self.family.spec(effect), model_values=values, effect=label.split(":")[0],
                             at_bound=[q["name"] for q in params if q["at_bound"]], effect_size=size,
                             effect_text=words, kind=self.family.kind(label.split(":")[0]))
-
-    def _model_form_r2(self, res, own: list) -> np.ndarray | None:
-        """Squared multiple correlation of each of ``own`` with the named model-form parameters
-        (Cramér–Rao correlation of the joint fit ``res``), or None when none is named."""
-        idx, k = [], 0
-        for e in self.base_effects:
-            n = len(e.parameters())
-            if self.family.kind(e.name) == "model_form":
-                idx += list(range(k, k + n))
-            k += n
-        corr = getattr(getattr(res, "identifiability", None), "correlation", None)
-        if not idx or corr is None:
-            return None
-        out = []
-        for j in own:
-            sub = idx + [j]
-            with np.errstate(all="ignore"):
-                try:
-                    out.append(1.0 - 1.0 / np.linalg.inv(np.asarray(corr)[np.ix_(sub, sub)])[-1, -1])
-                except np.linalg.LinAlgError:
-                    out.append(np.nan)
-        return np.array(out, float)
 
     def _judge(self, fits: list) -> tuple[dict, CandidateFit | None]:
         """The round's record (BIC weights set, candidates sorted by BIC) and the candidate it
