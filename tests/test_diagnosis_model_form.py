@@ -53,3 +53,27 @@ def test_what_the_model_form_leaves_is_not_named(doc):
     assert last["verdict"] == "none"
     assert ("not separable from model form" in last["reason"]) or ("would explain only" in last["reason"])
     assert 0.5 < MODEL_FORM_COLLINEARITY < 1.0
+
+
+def test_model_form_r2_is_the_squared_multiple_correlation():
+    """Closed forms: with one model-form parameter, R² = ρ²; with two uncorrelated ones,
+    R² = ρ₁² + ρ₂²; a physical base effect does not count; no model form: None."""
+    import numpy as np
+
+    from calib.diagnosis.model_form import model_form_r2
+
+    rho = 0.9
+    c2 = np.array([[1.0, rho], [rho, 1.0]])
+    assert np.allclose(model_form_r2(c2, [(("m",), "model_form")], [1]), [rho ** 2], rtol=1e-12)
+    assert model_form_r2(c2, [(("x",), "physical")], [1]) is None
+    assert model_form_r2(None, [(("m",), "model_form")], [1]) is None
+    r1, r2 = 0.6, 0.5
+    c3 = np.array([[1.0, 0.0, r1], [0.0, 1.0, r2], [r1, r2, 1.0]])
+    got = model_form_r2(c3, [(("m",), "model_form"), (("t",), "model_form")], [2])
+    assert np.allclose(got, [r1 ** 2 + r2 ** 2], rtol=1e-12)
+    # a physical effect between them is left out of the sub-matrix
+    c4 = np.eye(4)
+    c4[0, 3] = c4[3, 0] = rho
+    c4[1, 3] = c4[3, 1] = 0.3
+    got = model_form_r2(c4, [(("m",), "model_form"), (("x",), "physical"), (("t",), "model_form")], [3])
+    assert np.allclose(got, [rho ** 2], rtol=1e-12)
