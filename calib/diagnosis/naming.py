@@ -8,9 +8,10 @@ with the measurement that would tell the two rivals apart (:func:`separation_of`
 :class:`Namer` holds the rounds' state.
 
 A model-form candidate (the BEM's own induction model: ``Effect.kind = "model_form"``) is named as
-model form, not as a physical effect. A physical effect must earn its place
-(:data:`LATER_EFFECT_SHARE`): after an earlier effect, and over a significant model-form candidate
-(fitted on top of it), it must explain most of the misfit the model without it leaves.
+model form, not as a physical effect. Model form comes first, in every round: a physical effect
+must earn its place (:data:`LATER_EFFECT_SHARE`) after an earlier effect and over a significant
+model-form candidate (also in a round ambiguous between the two), and one not separable from the
+model form named (:mod:`calib.diagnosis.model_form`) is not named.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 from calib.calibration.calibrator import Calibrator
 from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
 from calib.diagnosis.figures_of_merit import effect_size, gap
+from calib.diagnosis.model_form import model_form_r2, not_separable
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
 from calib.diagnosis.result import CandidateFit
 from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
@@ -113,6 +115,7 @@ class Namer:
         self.remaining, self._fits = [], []       # _fits: the current round's fits (kept if it fails)
         self._effects = {}                        # the current round's candidate effects by label
         self._named_fits = []                     # the CandidateFit of each named effect
+        self._collinearity = {}                   # the round's R² of each candidate with the named model form
         self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
 
     def run(self, candidates) -> None:
@@ -174,12 +177,18 @@ class Namer:
         self._effects = effects
         self._fits = fits = self._fit(round_no, labels, effects)
         rnd, best = self._judge(fits)
-        if best is not None and best.kind != "model_form" and self._named_fits:
-            best = self._earns_place(rnd, best)
+        if best is None and rnd["verdict"] == "ambiguous":
+            best = self._ambiguous_with_model_form(round_no, rnd, fits)
         elif best is not None and best.kind != "model_form":
+            # model form first, in every round: a physical effect is named over a significant
+            # model-form candidate only when it also explains most of what that candidate leaves
             form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
             if form is not None:
                 best = self._over_model_form(round_no, rnd, best, form)
+        if best is not None and best.kind != "model_form" and self._named_fits:
+            best = self._earns_place(rnd, best)
+        if best is not None and best.kind != "model_form" and self.model_form:
+            best = self._separable(rnd, best)
         if best is not None and best.kind == "model_form":
             rnd["reason"] = ("model form (the BEM's own induction model, not a missing physical effect): "
                              + rnd["reason"])
@@ -203,6 +212,28 @@ class Namer:
                      f"{fit_now['chi2_per_dof']:.3g}, {p_is(fit_now['p_value'])}); no further effect is looked for")
             return True
         return False
+
+    def _separable(self, rnd: dict, best: CandidateFit) -> CandidateFit | None:
+        """``best``, or None with ``rnd`` turned ``none`` when it is not separable from the model
+        form named so far (:func:`calib.diagnosis.model_form.not_separable`)."""
+        reason = not_separable(self._collinearity.get(best.name), best, self.model_form)
+        return best if reason is None else rnd.update(verdict="none", reason=reason)   # dict.update: None
+
+    def _ambiguous_with_model_form(self, round_no: int, rnd: dict, fits: list) -> CandidateFit | None:
+        """An ``ambiguous`` round between a physical effect and a model-form candidate, model form
+        first: the model-form candidate when the physical one does not earn its place on top of
+        it (:meth:`_over_model_form`), else None (the round stays ambiguous)."""
+        pair = [next((f for f in fits if f.effect == name and f.significant), None) for name in rnd["ambiguous"]]
+        if any(f is None for f in pair) or sorted(f.kind for f in pair) != ["model_form", "physical"]:
+            return None
+        physical, form = sorted(pair, key=lambda f: f.kind != "physical")
+        before = rnd["reason"]
+        if self._over_model_form(round_no, rnd, physical, form) is form:
+            rnd.pop("ambiguous", None), rnd.pop("separate", None)
+            rnd["reason"] += f" (the round was ambiguous: {before})"
+            return form
+        rnd["reason"] = before
+        return None
 
     def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, form: CandidateFit) -> CandidateFit:
         """``best`` (physical) when it also earns its place on top of the significant model-form
@@ -307,6 +338,9 @@ class Namer:
         agree = pattern_agreement((values - self.base_values) / sigma,
                                   self.field_change - (self.base_values - self.y0) / sigma)
         params = parameter_records(res, own)
+        corr = getattr(getattr(res, "identifiability", None), "correlation", None)
+        self._collinearity[label] = model_form_r2(corr, [(e.parameters(), self.family.kind(e.name))
+                                                         for e in self.base_effects], own)
         size, words, exceeds = effect_size(values, self.base_values, self.tolerance, list(meas.channels),
                                            meas.conditions.wind_speed)
         return CandidateFit(label, params, chi2, k, -0.5 * chi2, chi2 + k * np.log(self.n_res), lr, p,
