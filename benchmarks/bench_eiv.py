@@ -178,20 +178,26 @@ def markdown(figures: dict) -> str:
     for setup_name, title in (("field", "Polars and global biases"), ("globals", "Global biases alone (polars known)")):
         f = figures[setup_name]
         field = bool(f["n_field_nodes"])
-        head = "| estimator |" + (" field bias RMS [scales] | excess over oracle | field coverage |" if field else "") + \
-            " wind_scale bias | wind_scale cover | pitch_offset bias [deg] | pitch_offset cover | verdicts | converged | CPU s |"
-        rows = [f"### {title}", "", head, "|" + "---|" * (head.count("|") - 1)]
+        rows = [f"### {title}", ""]
+        if field:
+            rows += ["| estimator | field bias RMS [scales] | excess over oracle | field coverage | converged | CPU s |",
+                     "|---|---|---|---|---|---|"]
+            rows += [f"| {est} | {num(f[est]['field_bias_rms'])} | {num(f[est]['field_excess_bias_rms'])} | "
+                     f"{num(f[est]['field_coverage'], '{:.1%}')} | {f[est]['converged']}/{f['n_replicates']} | "
+                     f"{f[est]['cpu_s_mean']:.1f} |" for est in (*ESTIMATORS, "oracle")]
+            rows += [""]
+        rows += ["| estimator | wind_scale bias | cover | pitch_offset bias [deg] | cover | identified (wind_scale / pitch_offset) |"
+                 + ("" if field else " converged | CPU s |"),
+                 "|---|---|---|---|---|---|" + ("" if field else "---|---|")]
         for est in (*ESTIMATORS, "oracle"):
             r = f[est]
-            cells = [est]
-            if field:
-                cells += [num(r["field_bias_rms"]), num(r["field_excess_bias_rms"]), num(r["field_coverage"], "{:.1%}")]
-            cells += [f"{r['wind_scale_bias']:+.4f} ± {num(r['wind_scale_bias_se'], '{:.4f}')}",
-                      f"{r['wind_scale_coverage']:.0%}",
-                      f"{r['pitch_offset_bias']:+.3f} ± {num(r['pitch_offset_bias_se'], '{:.3f}')}",
-                      f"{r['pitch_offset_coverage']:.0%}",
-                      "; ".join(f"{g}: " + ", ".join(f"{v} {n}" for v, n in r[f"{g}_verdicts"].items()) for g in GLOBAL),
-                      f"{r['converged']}/{f['n_replicates']}", f"{r['cpu_s_mean']:.1f}"]
+            cells = [est, f"{r['wind_scale_bias']:+.4f} ± {num(r['wind_scale_bias_se'], '{:.4f}')}",
+                     f"{r['wind_scale_coverage']:.0%}",
+                     f"{r['pitch_offset_bias']:+.3f} ± {num(r['pitch_offset_bias_se'], '{:.3f}')}",
+                     f"{r['pitch_offset_coverage']:.0%}",
+                     " / ".join(str(r[f"{g}_verdicts"].get("identified", 0)) for g in GLOBAL)]
+            if not field:
+                cells += [f"{r['converged']}/{f['n_replicates']}", f"{r['cpu_s_mean']:.1f}"]
             rows.append("| " + " | ".join(cells) + " |")
         ratios = (f"field {f['field_bias_ratio_vs_output_error_ml']:.2g} (excess over the oracle "
                   f"{f['field_excess_bias_ratio_vs_output_error_ml']:.2g}), " if field else "")
@@ -203,7 +209,8 @@ def markdown(figures: dict) -> str:
     return "\n".join(parts) + ("\nBias: mean error over the replicates ± its standard error; field bias: RMS over the "
                                "correction nodes of the mean error, in parameter scales; excess over oracle: the same of "
                                "the mean difference from the oracle's estimate on the same records; cover: share of the "
-                               "95 % intervals holding the truth; CPU seconds per calibration (time.process_time, "
+                               "95 % intervals holding the truth; identified: replicates whose identifiability verdict on the global bias "
+                               "is `identified` (the others: `confounded`); CPU seconds per calibration (time.process_time, "
                                "loaded machine).")
 
 

@@ -92,7 +92,9 @@ def test_zero_covariance_collapses_the_band_onto_steady_power_curve(wind_tunnel_
     for q in ("power", "thrust", "pitch", "rotor_speed"):
         x = pc.draws[q]
         assert np.all(x == x[0]), q                                 # every draw is the same curve
-        np.testing.assert_array_equal(x[0][r2], getattr(pc.central, q)[r2])
+        # the draws are solved batched (one solve over every draw's points), the central curve alone: another
+        # summation order in the compiled kernel, so equal to round-off rather than to the bit
+        np.testing.assert_allclose(x[0][r2], getattr(pc.central, q)[r2], rtol=1e-12)
     # above rated the draws start their pitch search from the central curve: the same rated power to 1e-4
     np.testing.assert_allclose(pc.draws["power"][0][~r2], pc.central.power[~r2], rtol=1e-4)
     ref = steady_power_curve(rotor, v, settings=model.settings, polars=model.polars)

@@ -39,7 +39,9 @@ def _table(header, rows, numbers=()) -> str:
 
 def _parameter_text(q: dict) -> str:
     """"name = value ± std unit", with "(at lower bound)" / "(at upper bound)" when it is."""
-    text = f"{q['name']} = {q['value']:.4g} ± {q['std']:.2g}{_unit(q)}"
+    value = 0.0 if abs(q["value"]) <= 1e-9 * abs(q["std"]) else q["value"]   # round-off about zero reads 0
+    # a minus sign (U+2212) in the exponent: no line break inside the number
+    text = f"{q['name']} = {value:.4g} ± {q['std']:.2g}".replace("e-", "e\u2212") + _unit(q)
     return text + (f" (at {q['at_bound']} bound)" if q.get("at_bound") else "")
 
 
