@@ -13,7 +13,7 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.powercurve.batch import batchable, batched_solver
-from calib.powercurve.schedule import PITCH_NOT_CONVERGED, ScheduledCurve
+from calib.powercurve.schedule import ScheduledCurve, scheduled_arrays
 from calib.types import OperatingConditions
 
 __all__ = ["BATCH_DRAWS", "QUANTITIES", "schedule_batch", "solve_draws"]
@@ -94,10 +94,7 @@ def _variable_batch(self, bsolve, n_draws, wind_speed, air_density, guess=None, 
     pitch = np.full(D * n, float(self.fine_pitch))
     res = bsolve(draw, OperatingConditions(vf, rpm, pitch, air_density))
     n_points += D * n
-    power, thrust, cp, ct = res.power.copy(), res.thrust.copy(), res.cp.copy(), res.ct.copy()
-    status = res.status.copy()
-    region = np.full(D * n, 2)
-    above = np.flatnonzero(res.ok & (res.power > self.rated_power))
+    above, rated = np.flatnonzero(res.ok & (res.power > self.rated_power)), None
     if above.size:
         g = None if guess is None else np.interp(vf[above], guess.wind_speed, guess.pitch)
         slope = None
@@ -108,13 +105,8 @@ def _variable_batch(self, bsolve, n_draws, wind_speed, air_density, guess=None, 
         b, r, ok, m = self.pitch_to_rated(bsolve, draw[above], vf[above], rpm[above], air_density, g, slope,
                                            per_point=True)
         n_points += m
-        pitch[above] = b
-        power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
-        status[above] = np.where(r.status != 0, r.status, np.where(ok, 0, PITCH_NOT_CONVERGED))
-        region[above] = 3
-    bad = status != 0
-    for x in (power, thrust, cp, ct):
-        x[bad] = np.nan
+        rated = (b, r, ok)
+    power, thrust, cp, ct, status, region = scheduled_arrays(res, pitch, above, rated)
     shape = (D, n)
     return ScheduledCurve(np.broadcast_to(v, shape), rpm.reshape(shape), pitch.reshape(shape), power.reshape(shape),
                           thrust.reshape(shape), cp.reshape(shape), ct.reshape(shape), status.reshape(shape),

@@ -280,10 +280,7 @@ class VariableSpeed:
         pitch = np.full(v.shape, float(self.fine_pitch))
         res = solve(p, OperatingConditions(v, rpm, pitch, air_density))
         n_points += v.size
-        power, thrust, cp, ct = res.power.copy(), res.thrust.copy(), res.cp.copy(), res.ct.copy()
-        status = res.status.copy()
-        region = np.full(v.shape, 2)
-        above = np.flatnonzero(res.ok & (res.power > self.rated_power))
+        above, rated = np.flatnonzero(res.ok & (res.power > self.rated_power)), None
         if above.size:
             g = None if guess is None else np.interp(v[above], guess.wind_speed, guess.pitch)
             slope = None
@@ -292,13 +289,8 @@ class VariableSpeed:
                 g = np.where(np.isfinite(hint_pitch), hint_pitch, g)
             b, r, ok, n = self.pitch_to_rated(solve, p, v[above], rpm[above], air_density, g, slope)
             n_points += n
-            pitch[above] = b
-            power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
-            status[above] = np.where(r.status != 0, r.status, np.where(ok, 0, PITCH_NOT_CONVERGED))
-            region[above] = 3
-        bad = status != 0
-        for x in (power, thrust, cp, ct):
-            x[bad] = np.nan
+            rated = (b, r, ok)
+        power, thrust, cp, ct, status, region = scheduled_arrays(res, pitch, above, rated)
         return ScheduledCurve(v, rpm, pitch, power, thrust, cp, ct, status, region, tsr, n_points)
 
     def pitch_to_rated(self, solve, p, v, rpm, rho, guess, slope=None, max_iter=12, per_point=False):
@@ -387,3 +379,22 @@ class _Rows:
 
 SCHEDULE_KINDS = {"variable_speed": VariableSpeed, "fixed_speed": FixedSpeed, "table": TableSchedule}
 """Schedule kinds by name."""
+
+
+def scheduled_arrays(res, pitch: np.ndarray, above: np.ndarray, rated=None) -> tuple:
+    """Power [W], thrust [N], C_P, C_T, status, region (2/3) per point: ``res`` solved at fine pitch, the points
+    ``above`` rated from ``rated`` = (pitch [deg], result, converged) of the pitch search (``pitch`` updated in
+    place); failed points NaN (:data:`PITCH_NOT_CONVERGED` where the pitch search did not converge)."""
+    power, thrust, cp, ct = res.power.copy(), res.thrust.copy(), res.cp.copy(), res.ct.copy()
+    status = res.status.copy()
+    region = np.full(status.shape, 2)
+    if rated is not None:
+        b, r, ok = rated
+        pitch[above] = b
+        power[above], thrust[above], cp[above], ct[above] = r.power, r.thrust, r.cp, r.ct
+        status[above] = np.where(r.status != 0, r.status, np.where(ok, 0, PITCH_NOT_CONVERGED))
+        region[above] = 3
+    bad = status != 0
+    for x in (power, thrust, cp, ct):
+        x[bad] = np.nan
+    return power, thrust, cp, ct, status, region
