@@ -173,8 +173,9 @@ def markdown(table: dict) -> str:
     rows = [("| set-up | data set | counts as right | right / total | alone | first verdicts | all named | "
              "χ²/dof before (median) | s / diagnosis |"), "|---|---|---|---|---|---|---|---|---|"]
     for row in table.values():
-        named = ", ".join(f"{k} {v}" for k, v in row["named_first"].items())
-        full = ", ".join(f"{k} {v}" for k, v in row["named_all"].items())
+        # " + " between names, so that a cell of several names wraps between them on a narrow page
+        named = ", ".join(f"{k.replace('+', ' + ')} {v}" for k, v in row["named_first"].items())
+        full = ", ".join(f"{k.replace('+', ' + ')} {v}" for k, v in row["named_all"].items())
         chi2 = row["chi2_per_dof_before_median"]
         rows.append(f"| {row['setup']} | {row['data_set']} | {' or '.join(row['right_names'])} | "
                     f"{row['right']} / {row['n']} | {row['alone']} | {named} | {full} | "
