@@ -15,14 +15,53 @@ import subprocess
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], capture_output=True, text=True, cwd=ROOT, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
 def commit() -> str:
     """The short hash of the checked-out commit ("unknown" outside a git checkout)."""
+    return _git("rev-parse", "--short", "HEAD") or "unknown"
+
+
+def process_start() -> float | None:
+    """When this process started, in seconds since the epoch (Linux ``/proc``; None elsewhere)."""
     try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT,
-                             timeout=10).stdout.strip()
-    except OSError:
-        out = ""
-    return out or "unknown"
+        with open("/proc/self/stat") as fh:
+            ticks = int(fh.read().rsplit(")", 1)[1].split()[19])       # field 22: starttime, clock ticks after boot
+        with open("/proc/stat") as fh:
+            boot = next(int(line.split()[1]) for line in fh if line.startswith("btime "))
+        return boot + ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
+
+
+def run_commit() -> dict:
+    """The commit the run started on, and the one checked out now if HEAD moved during the run.
+
+    A battery of an hour can see commits land before it publishes; the figures belong to the code it
+    started with: what HEAD was when this process started, read from HEAD's reflog (its entries carry
+    the time HEAD moved). ``{"commit": ...}`` alone when HEAD did not move or the reflog cannot say;
+    ``commit_at_publish`` beside it when it moved.
+    """
+    now = commit()
+    start = process_start()
+    if start is None or now == "unknown":
+        return {"commit": now}
+    then = now
+    for line in _git("reflog", "--date=unix", "--format=%h %gd", "HEAD").splitlines():
+        sha, _, ref = line.partition(" ")
+        try:
+            moved = int(ref[ref.index("{") + 1:ref.index("}")])
+        except ValueError:
+            break
+        if moved <= start:
+            then = sha
+            break
+    return {"commit": then} if then == now else {"commit": then, "commit_at_publish": now}
 
 
 def publish(name: str, figures: dict, command: str, markdown: str | None = None) -> str:
@@ -36,7 +75,7 @@ def publish(name: str, figures: dict, command: str, markdown: str | None = None)
     os.makedirs(os.path.dirname(path), exist_ok=True)
     extra = {} if markdown is None else {"markdown": markdown}
     with open(path + ".part", "w") as fh:
-        json.dump({"date": datetime.date.today().isoformat(), "commit": commit(), "command": command, **figures,
+        json.dump({"date": datetime.date.today().isoformat(), **run_commit(), "command": command, **figures,
                    **extra}, fh, indent=1, default=str)
     os.replace(path + ".part", path)
     return path

@@ -37,9 +37,15 @@ def on_page_markdown(markdown, page, config, files):
 BENCH = re.compile(r"^<!-- bench: (\w+) -->$", re.M)
 
 
+def _stamp(data: dict) -> str:
+    """The commit a run started on, and the one it published at when HEAD moved during the run."""
+    moved = data.get("commit_at_publish")
+    return f"`{data['commit']}`" + (f" (published at `{moved}`)" if moved else "")
+
+
 def _prediction_tables(data: dict) -> str:
     """The extrapolation benchmark's tables (benchmarks/bench_prediction.py)."""
-    out = [f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`"
+    out = [f"*From `{data['command']}`, {data['date']}, commit {_stamp(data)}"
            + (f"; {data['note']}" if data.get("note") else "") + ".*", "",
            "| family (splits) | MAP: calibrated ≤ nominal | within 2√(2/N) | inside 95 % | "
            "truncated: ≤ nominal | within | inside |", "|---|---|---|---|---|---|---|"]
@@ -84,7 +90,7 @@ def _coverage_tables(load) -> str:
     """The coverage twins (c) and (d), both estimators (benchmarks/bench_coverage.py)."""
     runs = {e: load(f"coverage_{e}") for e in ("map", "truncated")}
     cols = [(t, e) for t in ("c_prior_draws", "d_prior_draws_outside_span") for e in ("map", "truncated")]
-    out = [f"*{e}: from `{r['command']}`, {r['date']}, commit `{r['commit']}`, {r['n_seeds']} seeds.*"
+    out = [f"*{e}: from `{r['command']}`, {r['date']}, commit {_stamp(r)}, {r['n_seeds']} seeds.*"
            for e, r in runs.items()]
     out += ["", "| | " + " | ".join(f"({t[0]}) {e}" for t, e in cols) + " |", "|---" * (len(cols) + 1) + "|"]
 
@@ -113,7 +119,7 @@ def _coverage_tables(load) -> str:
 def _speed_tables(data: dict) -> str:
     """``make bench``'s figures (benchmarks/run_all.py, speed suite)."""
     m = data["machine"]
-    out = [f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`, on {m['cpu_count']} cores "
+    out = [f"*From `{data['command']}`, {data['date']}, commit {_stamp(data)}, on {m['cpu_count']} cores "
            f"({m['platform']}, Python {m['python']}); ratios are measured within the one run.*", "",
            "| benchmark | ratio | detail | target |", "|---|---|---|---|"]
     for r in data["ratios"]:
@@ -207,7 +213,7 @@ def _published_markdown(data: dict, name: str) -> str:
     the wide ones split by :data:`SPLITS`."""
     body = re.sub(r"^## ", "### ", data["markdown"].strip(), flags=re.M)    # the page owns the sections
     body = _split_tables(body, SPLITS.get(name, ()), name)
-    return f"*From `{data['command']}`, {data['date']}, commit `{data['commit']}`.*\n\n" + body + "\n"
+    return f"*From `{data['command']}`, {data['date']}, commit {_stamp(data)}.*\n\n" + body + "\n"
 
 
 def _bench(markdown: str, config) -> str:

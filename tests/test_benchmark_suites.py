@@ -41,3 +41,29 @@ def test_every_benchmark_module_has_the_run_the_suites_call():
     for name in run_all.discover("all"):
         tree = ast.parse((BENCH / f"{name}.py").read_text())
         assert any(isinstance(n, ast.FunctionDef) and n.name == "run" for n in tree.body), f"{name}.py has no run()"
+
+
+def test_published_figures_carry_the_commit_the_run_started_on(monkeypatch):
+    """A battery that runs for an hour while commits land is stamped with HEAD at its start (reflog), and
+    says which commit was checked out when it published."""
+    import publish
+
+    reflog = "ccc3333 HEAD@{3000}\nbbb2222 HEAD@{2000}\naaa1111 HEAD@{1000}"
+    monkeypatch.setattr(publish, "_git", lambda *a: "ccc3333" if a[0] == "rev-parse" else reflog)
+    monkeypatch.setattr(publish, "process_start", lambda: 2500.0)
+    assert publish.run_commit() == {"commit": "bbb2222", "commit_at_publish": "ccc3333"}
+    monkeypatch.setattr(publish, "process_start", lambda: 3500.0)
+    assert publish.run_commit() == {"commit": "ccc3333"}
+    monkeypatch.setattr(publish, "process_start", lambda: None)
+    assert publish.run_commit() == {"commit": "ccc3333"}
+
+
+def test_this_process_started_before_now():
+    import time
+
+    import publish
+
+    start = publish.process_start()
+    if start is None:
+        pytest.skip("no /proc: the start time is unknown and the stamp falls back to HEAD")
+    assert time.time() - 7 * 86400 < start <= time.time() + 1
