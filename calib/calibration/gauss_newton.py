@@ -132,6 +132,14 @@ ROUNDOFF_STEP = 1e-12
 #: The damping μ at the start and after a rejected step, at least [-].
 MIN_DAMPING = 1e-6
 
+#: The MAP's secant curvature (:func:`_secant_update`) is kept only after a step accepted at the first
+#: damping with at least this ratio of actual to predicted decrease; else it restarts from zero [-].
+SECANT_RHO = 0.25
+
+#: A Gauss–Newton step accepted at the first damping with a ratio of actual to predicted decrease below
+#: this overshot (the residuals' curvature adds to JᵀJ's): the secant curvature starts from it [-].
+SECANT_START = 0.5
+
 
 def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
                 optimizer: str = "sqpmethod", stop: StopRule = StopRule(),
@@ -183,7 +191,8 @@ def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.nd
     EstimationOutcome
         ``cost`` includes the prior term.
     """
-    return _gauss_newton(problem, prior_root, u0, optimizer, stop, callback, stage, prior_weight=1.0)
+    return _gauss_newton(problem, prior_root, u0, optimizer, stop, callback, stage, prior_weight=1.0,
+                         secant=True)
 
 
 @dataclass
@@ -198,6 +207,7 @@ class _Iteration:
     theta: np.ndarray
     lin: Linearization
     mu: float = MIN_DAMPING
+    curvature: np.ndarray | None = None   # the secant estimate of the residuals' curvature S (None: Gauss-Newton)
     status: EstimationStatus = EstimationStatus.MAX_ITERATIONS
     message: str = ""
     history: list = field(default_factory=list)
@@ -218,10 +228,14 @@ class _Trial:
     lin: Linearization
     cost: float
     qp: QpSolution
+    rho: float = 1.0          # actual / predicted decrease
+    first_try: bool = True    # accepted without raising the damping
 
 
-def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight) -> EstimationOutcome:
-    """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map`."""
+def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight,
+                  secant: bool = False) -> EstimationOutcome:
+    """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map` (with ``secant``
+    the residuals' curvature added to its model, :func:`_secant_update`)."""
     qp = get_optimizer(optimizer)
     basis = np.asarray(basis, float)
     statement = problem.statement
@@ -236,6 +250,8 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
     # a damped trial is only evaluated when the model's Jacobian costs simulations of its own (finite
     # differences: 2 n more per point); with exact derivatives the Jacobian comes with the values
     linearize_trials = problem.model.capabilities.derivatives == "exact"
+    if secant:
+        run.curvature = np.zeros((basis.shape[1], basis.shape[1]))
     it = 0
     for it in range(1, stop.max_iterations + 1):
         H, g, dH = _normal_equations(run)
@@ -243,13 +259,30 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
         trial, x = _damped_step(run, qp, optimizer, H, g, dH, cost_now, linearize_trials)
         if run.status == EstimationStatus.QP_FAILED:
             break
+        secant_used = run.curvature is not None and bool(np.any(run.curvature))
         if trial is None:
+            if secant_used:         # the secant model failed: Gauss-Newton's decides
+                run.curvature[:] = 0.0
+                continue
             _no_step(run, x, stop, it)
             break
+        before = run.lin
         decrease, step = _take(run, trial, cost_now, stage, it, callback)
         if stop.small_decrease(decrease, trial.cost) or stop.small_step(step, run.theta):
+            if secant_used and not trial.first_try:     # a damped secant step: Gauss-Newton's decides
+                run.curvature[:] = 0.0
+                continue
             _stopped(run, trial.qp, stop, step, optimizer, it)
             break
+        if run.curvature is not None:
+            # Gauss-Newton's steps overshooting (accepted at once, but the cost fell by less than
+            # SECANT_START of the decrease predicted) start the secant curvature; a secant step the
+            # model predicted poorly, or that needed more damping, resets it to Gauss-Newton's
+            good = trial.first_try and (trial.rho >= SECANT_RHO if secant_used else trial.rho < SECANT_START)
+            if good:
+                run.curvature = _secant_update(run.curvature, before, run.lin, run.basis, trial.x, prior_weight)
+            else:
+                run.curvature[:] = 0.0
     problem.remember(run.lin)
     return EstimationOutcome(run.theta, run.lin.p, run.cost(run.lin, run.theta), it, run.status, run.message,
                              run.lin, run.history)
@@ -273,6 +306,8 @@ def _normal_equations(run: _Iteration) -> tuple[np.ndarray, np.ndarray, np.ndarr
     J = -(run.lin.M @ run.basis)
     r = run.lin.residual.reshape(-1)
     H = J.T @ J + run.prior_weight * np.eye(run.basis.shape[1])
+    if run.curvature is not None:
+        H = H + _psd_part(run.curvature)
     g = J.T @ r + run.prior_weight * run.theta
     dH = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
     return H, g, dH
@@ -284,7 +319,7 @@ def _damped_step(run: _Iteration, qp, optimizer: str, H, g, dH, cost_now: float,
     (None, the last step tried) when the tries run out; (None, None) with the status set when
     the QP fails."""
     x = None
-    for _ in range(DAMPING_TRIES):
+    for i in range(DAMPING_TRIES):
         sol = qp(H + run.mu * np.diag(dH), g, run.basis, run.lb - run.basis @ run.theta, run.ub - run.basis @ run.theta)
         if not sol.success and not np.all(np.isfinite(sol.x)):
             run.end(EstimationStatus.QP_FAILED, f"{optimizer}: {sol.message}")
@@ -297,7 +332,7 @@ def _damped_step(run: _Iteration, qp, optimizer: str, H, g, dH, cost_now: float,
         if trial.n_failed <= run.lin.n_failed and cost_trial <= cost_now:
             rho = (cost_now - cost_trial) / predicted if predicted > 0 else 1.0
             run.mu = max(run.mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
-            return _Trial(x, trial, cost_trial, sol), x
+            return _Trial(x, trial, cost_trial, sol, rho, i == 0), x
         run.mu = max(run.mu * 4.0, MIN_DAMPING)
     return None, x
 
@@ -362,3 +397,66 @@ def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.n
     if limit < 1.0:
         alpha = max(0.0, limit * (1.0 - 1e-12))
     return alpha * x
+
+
+def _secant_update(S: np.ndarray, before: Linearization, after: Linearization, basis: np.ndarray, x: np.ndarray,
+                   prior_weight: float) -> np.ndarray:
+    r"""The structured secant update of S ≈ Σ_i r_i ∇²r_i, the residuals' curvature the Gauss–Newton
+    model JᵀJ leaves out (Dennis, Gay & Welsch 1981, NL2SOL; Dennis & Schnabel 1983, §10.3).
+
+    After the step x from (J, r) to (J₊, r₊) the updated S₊ satisfies the secant condition
+    S₊ x = y♯ = (J₊ − J)ᵀ r₊ and is the symmetric change of S least in a norm weighted by the gradient
+    change y = J₊ᵀ r₊ − Jᵀ r + w x (w the prior weight):
+
+    .. math::  S_+ = τS + \frac{z yᵀ + y zᵀ}{yᵀx} − \frac{zᵀx}{(yᵀx)^2}\, y yᵀ,
+               \qquad z = y♯ − τ S x,\quad τ = \min(1, |xᵀy♯| / |xᵀSx|)
+
+    (τ the NL2SOL sizing). Unchanged when yᵀx ≤ 0 or the points that converged differ.
+    Where a noisy fit's many small residuals add curvature in the weakly determined
+    directions the Gauss–Newton steps overshoot by a constant factor and converge
+    linearly; on ``bench_scaling``'s 648-point case the true curvature along the steps was
+    1.8-1.9 times JᵀJ's (an alternating error shrinking by 0.85 per iteration).
+
+    Parameters
+    ----------
+    S : ndarray, shape (n_theta, n_theta)
+    before, after : Linearization
+        At θ and θ + x, with sensitivities.
+    basis : ndarray, shape (n_params, n_theta)
+    x : ndarray, shape (n_theta,)
+        The step [scale units].
+    prior_weight : float
+
+    Returns
+    -------
+    ndarray, shape (n_theta, n_theta)
+
+    References
+    ----------
+    J.E. Dennis, D.M. Gay, R.E. Welsch, An adaptive nonlinear least-squares algorithm,
+    ACM Trans. Math. Softw. 7 (1981) 348-368.
+    J.E. Dennis, R.B. Schnabel, Numerical Methods for Unconstrained Optimization and Nonlinear
+    Equations, Prentice-Hall (1983), §10.3.
+    """
+    if before.M is None or after.M is None or not np.array_equal(before.ok, after.ok):
+        return S
+    J0, J1 = -(before.M @ basis), -(after.M @ basis)
+    r0, r1 = before.residual.reshape(-1), after.residual.reshape(-1)
+    y_sharp = (J1 - J0).T @ r1
+    y = J1.T @ r1 - J0.T @ r0 + prior_weight * x
+    ys = float(y @ x)
+    if not ys > 0.0:
+        return S
+    Sx = S @ x
+    xSx = float(x @ Sx)
+    tau = min(1.0, abs(float(x @ y_sharp)) / abs(xSx)) if xSx != 0.0 else 1.0
+    z = y_sharp - tau * Sx
+    out = tau * S + (np.outer(z, y) + np.outer(y, z)) / ys - (float(z @ x) / ys ** 2) * np.outer(y, y)
+    return 0.5 * (out + out.T)
+
+
+def _psd_part(S: np.ndarray) -> np.ndarray:
+    """S with its negative eigenvalues set to zero: the secant curvature lengthens no step beyond
+    Gauss–Newton's, whose JᵀJ (+ I) keeps the subproblem convex."""
+    w, Q = np.linalg.eigh(S)
+    return (Q * np.clip(w, 0.0, None)) @ Q.T
