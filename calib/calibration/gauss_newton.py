@@ -22,12 +22,20 @@ C_D ≥ C_D,min at the grid points) in scaled units. The named optimizer of
 3. :func:`_take`: the accepted step becomes the state, recorded;
 4. :class:`StopRule`: stop on a small cost decrease or a small step.
 
+The MAP adds to H the residuals' curvature S ≈ Σ r_i ∇²r_i that JᵀJ leaves out, by the structured
+secant update of NL2SOL (:func:`_secant_update`; Dennis, Gay & Welsch 1981), once a Gauss–Newton step
+has overshot (accepted at once with less than half the predicted decrease) and while its steps are
+predicted well; only its positive part, so no step is longer than Gauss–Newton's. A secant step
+that needed more damping, or the subproblem with S failing, hands over to Gauss–Newton's model.
+
 References
 ----------
 C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
 from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
 J. Nocedal, S.J. Wright, Numerical Optimization, 2nd ed., Springer (2006), ch. 10, 18.
 H.B. Nielsen, Damping parameter in Marquardt's method, IMM-REP-1999-05, DTU (1999).
+J.E. Dennis, D.M. Gay, R.E. Welsch, An adaptive nonlinear least-squares algorithm, ACM Trans. Math.
+Softw. 7 (1981) 348-368.
 """
 
 from __future__ import annotations
@@ -257,12 +265,17 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
         H, g, dH = _normal_equations(run)
         cost_now = run.cost(run.lin, run.theta)
         trial, x = _damped_step(run, qp, optimizer, H, g, dH, cost_now, linearize_trials)
-        if run.status == EstimationStatus.QP_FAILED:
-            break
         secant_used = run.curvature is not None and bool(np.any(run.curvature))
+        if run.status == EstimationStatus.QP_FAILED:
+            if not secant_used:
+                break
+            run.curvature[:] = 0.0      # the subproblem with the secant curvature failed: Gauss-Newton's
+            run.end(EstimationStatus.MAX_ITERATIONS, f"stopped after {stop.max_iterations} iterations")
+            continue
         if trial is None:
-            if secant_used:         # the secant model failed: Gauss-Newton's decides
+            if secant_used:         # the secant model failed: Gauss-Newton's decides, from the least damping
                 run.curvature[:] = 0.0
+                run.mu = MIN_DAMPING
                 continue
             _no_step(run, x, stop, it)
             break
