@@ -136,3 +136,38 @@ def test_the_secant_map_finds_the_same_minimum_in_fewer_iterations():
         assert np.max(np.abs(est.theta - u_ref) / sigma_u) < 0.01
         assert est.cost == pytest.approx(cost_ref, abs=1e-4)     # ½ (0.01 σ)² in each of 4 directions: 2e-4
     assert 2 * out.iterations < plain.iterations
+
+
+def test_a_failing_subproblem_with_the_secant_curvature_hands_over_to_gauss_newton(monkeypatch):
+    """The first subproblem that carries a secant curvature fails (no finite step): the iteration goes
+    on with Gauss–Newton's model instead of stopping as ``qp_failed``, and ends at the same minimum."""
+    from calib.calibration.qp import QpSolution, get_optimizer
+
+    prob, _ = _problem(misfit=0.5)
+    L = np.diag([2.0, 1.0, 2.0, 1.0])
+    stop = StopRule(max_iterations=200, decrease_tolerance=1e-6)
+    reference = estimate_map(prob, L, stop=stop)
+    state = {"armed": False, "failed": 0}
+    psd = gn._psd_part
+
+    def spy_psd(S):
+        out = psd(S)
+        state["armed"] = state["armed"] or (bool(np.any(out)) and not state["failed"])
+        return out
+
+    real = get_optimizer("sqpmethod")
+
+    def flaky(*args):
+        if state["armed"]:
+            state["armed"], state["failed"] = False, state["failed"] + 1
+            return QpSolution(np.full(args[0].shape[0], np.nan), False, "made to fail")
+        return real(*args)
+
+    monkeypatch.setattr(gn, "_psd_part", spy_psd)
+    monkeypatch.setattr(gn, "get_optimizer", lambda name: flaky)
+    out = estimate_map(prob, L, stop=stop)
+    assert state["failed"] == 1
+    assert out.status == EstimationStatus.CONVERGED
+    J = -(prob.linearize(out.p).M @ L)
+    sigma_u = np.sqrt(np.diag(np.linalg.inv(J.T @ J + np.eye(4))))
+    assert np.max(np.abs(out.theta - reference.theta) / sigma_u) < 0.01
