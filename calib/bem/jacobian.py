@@ -89,7 +89,6 @@ def project(sens: SectionSensitivities, quantity: str, weights: np.ndarray) -> n
     ndarray, shape (n_points, n_params)
     """
     D = sens.columns[quantity]
-    n_par = sens.n_params
     Dw = np.einsum("ksic,i->kc", D, weights)
     G = Dw[:, [0]] * sens.pitch + Dw[:, [1]] * sens.wind_speed
     for b in sens.blocks:
