@@ -73,3 +73,14 @@ def test_the_projection_is_refused_where_it_would_not_be_exact():
     floor = CorrectionGrid(fine.alpha_nodes_deg, fine.eta_nodes, cl_bound=10.0, cd_bound=10.0,
                            cd_floor=2 * grid.cd_floor)
     assert model.field_jacobian(floor, p, cond) is None                     # another drag floor
+
+
+def test_a_pickled_model_leaves_the_kept_solve_behind():
+    import pickle
+
+    model, grid, p, cond = _case(BemSettings(use_tilt=False))
+    before = len(pickle.dumps(model))
+    model.jacobian(p, cond)
+    copy = pickle.loads(pickle.dumps(model))
+    assert len(pickle.dumps(model)) == before and getattr(copy, "_last_jacobian", None) is None
+    np.testing.assert_array_equal(copy.evaluate(p, cond).values, model.evaluate(p, cond).values)

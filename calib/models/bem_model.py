@@ -171,6 +171,12 @@ class BemModel:
         self._last_jacobian = (np.array(p, float), conditions, res, ev)
         return ev, G
 
+    def __getstate__(self) -> dict:
+        """Pickled (to worker processes) without the last solve :meth:`field_jacobian` keeps."""
+        state = self.__dict__.copy()
+        state.pop("_last_jacobian", None)
+        return state
+
     def field_jacobian(self, grid: CorrectionGrid, p, conditions: OperatingConditions):
         """The exact sensitivities to the nodal values of a correction field on ``grid`` that equals this
         model's field at ``p`` wherever the sections are, from the last :meth:`jacobian` at the same
