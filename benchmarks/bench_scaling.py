@@ -5,7 +5,8 @@ thrust with 1 % noise, 6 × 5 correction nodes and a pitch offset; its smooth tr
 grid, pitch offset 0.2°), with the tip-speed ratio × pitch grid refined: 12 × 6 = 72 points (the
 workflow), 36 × 18 = 648 and 72 × 36 = 2592 over the same ranges. Each size is calibrated with
 the default settings of each estimator once (wall and CPU seconds (``time.process_time``, this
-process), a time per point, the Gauss–Newton iterations (every fit), the model calls, the status and χ²/dof); a linear cost gives the same seconds per point at every size. The truncated estimator's
+process), a time per point, the Gauss–Newton iterations (every fit), the model calls, the status
+and χ²/dof); a linear cost gives the same seconds per point at every size. The truncated estimator's
 largest size is skipped unless ``--all`` (221 s there before the MAP estimator existed).
 
 Run: ``python benchmarks/bench_scaling.py [--all]`` (make bench).

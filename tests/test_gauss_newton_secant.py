@@ -7,6 +7,7 @@ import pytest
 from scipy.optimize import minimize
 
 from calib.calibration import gauss_newton as gn
+from calib.calibration.secant import psd_part, secant_update
 from calib.calibration.gauss_newton import EstimationStatus, StopRule, estimate_map
 from calib.calibration.problem import LeastSquaresProblem, Linearization, ProblemStatement
 from calib.models.base import Capabilities, Channel, Evaluation, OperatingConditions, Parameter
@@ -77,7 +78,7 @@ def test_the_update_satisfies_the_secant_condition_and_stays_symmetric():
     rng = np.random.default_rng(0)
     A = rng.standard_normal((4, 4))
     for S in (np.zeros((4, 4)), 1e-3 * (A + A.T)):
-        S1 = gn._secant_update(S, before, after, basis, x, 1.0)
+        S1 = secant_update(S, before, after, basis, x, 1.0)
         np.testing.assert_allclose(S1, S1.T, atol=1e-14 * np.abs(S1).max())
         np.testing.assert_allclose(S1 @ x, y_sharp, rtol=1e-9, atol=1e-12 * np.abs(y_sharp).max())
 
@@ -91,15 +92,15 @@ def test_no_update_without_positive_curvature_or_when_points_fail():
     after = _lin(prob, p0 + x)
     flipped = Linearization(after.p, after.residual, after.ok.copy(), after.M, after.evaluation)
     flipped.ok[0] = False
-    assert gn._secant_update(S, before, flipped, np.eye(4), x, 1.0) is S
+    assert secant_update(S, before, flipped, np.eye(4), x, 1.0) is S
     same = Linearization(before.p, before.residual, before.ok, before.M, before.evaluation)
-    assert gn._secant_update(S, before, same, np.eye(4), np.zeros(4), 1.0) is S     # yᵀx = 0
+    assert secant_update(S, before, same, np.eye(4), np.zeros(4), 1.0) is S     # yᵀx = 0
 
 
 def test_the_psd_part_drops_only_the_negative_eigenvalues():
     Q, _ = np.linalg.qr(np.random.default_rng(1).standard_normal((5, 5)))
     w = np.array([-2.0, -0.5, 0.0, 1.0, 3.0])
-    P = gn._psd_part((Q * w) @ Q.T)
+    P = psd_part((Q * w) @ Q.T)
     np.testing.assert_allclose(P, (Q * np.clip(w, 0, None)) @ Q.T, atol=1e-12)
 
 
@@ -113,7 +114,8 @@ def _exact_map(prob, L, u0=None):
         J = -(lin.M @ L)
         return 0.5 * float(r @ r + u @ u), J.T @ r + u
 
-    res = minimize(f, np.zeros(L.shape[1]) if u0 is None else u0, jac=True, method="BFGS", options={"gtol": 1e-8, "maxiter": 2000})
+    start = np.zeros(L.shape[1]) if u0 is None else u0
+    res = minimize(f, start, jac=True, method="BFGS", options={"gtol": 1e-8, "maxiter": 2000})
     assert np.linalg.norm(res.jac) < 1e-4, res.message      # stationary (BFGS may stop on round-off)
     return res.x, res.fun
 
@@ -148,7 +150,7 @@ def test_a_failing_subproblem_with_the_secant_curvature_hands_over_to_gauss_newt
     stop = StopRule(max_iterations=200, decrease_tolerance=1e-6)
     reference = estimate_map(prob, L, stop=stop)
     state = {"armed": False, "failed": 0}
-    psd = gn._psd_part
+    psd = gn.psd_part
 
     def spy_psd(S):
         out = psd(S)
@@ -163,7 +165,7 @@ def test_a_failing_subproblem_with_the_secant_curvature_hands_over_to_gauss_newt
             return QpSolution(np.full(args[0].shape[0], np.nan), False, "made to fail")
         return real(*args)
 
-    monkeypatch.setattr(gn, "_psd_part", spy_psd)
+    monkeypatch.setattr(gn, "psd_part", spy_psd)
     monkeypatch.setattr(gn, "get_optimizer", lambda name: flaky)
     out = estimate_map(prob, L, stop=stop)
     assert state["failed"] == 1

@@ -22,11 +22,9 @@ C_D ≥ C_D,min at the grid points) in scaled units. The named optimizer of
 3. :func:`_take`: the accepted step becomes the state, recorded;
 4. :class:`StopRule`: stop on a small cost decrease or a small step.
 
-The MAP adds to H the residuals' curvature S ≈ Σ r_i ∇²r_i that JᵀJ leaves out, by the structured
-secant update of NL2SOL (:func:`_secant_update`; Dennis, Gay & Welsch 1981), once a Gauss–Newton step
-has overshot (accepted at once with less than half the predicted decrease) and while its steps are
-predicted well; only its positive part, so no step is longer than Gauss–Newton's. A secant step
-that needed more damping, or the subproblem with S failing, hands over to Gauss–Newton's model.
+The MAP adds to H the residuals' curvature S ≈ Σ r_i ∇²r_i that JᵀJ leaves out (:mod:`calib.calibration.secant`)
+once a Gauss–Newton step has overshot, while its steps are predicted well; a secant step that needed
+more damping, or the subproblem with S failing, hands over to Gauss–Newton's model.
 
 References
 ----------
@@ -34,8 +32,6 @@ C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line
 from rotor loads, J. Wind Eng. Ind. Aerodyn. 124 (2014) 29-45.
 J. Nocedal, S.J. Wright, Numerical Optimization, 2nd ed., Springer (2006), ch. 10, 18.
 H.B. Nielsen, Damping parameter in Marquardt's method, IMM-REP-1999-05, DTU (1999).
-J.E. Dennis, D.M. Gay, R.E. Welsch, An adaptive nonlinear least-squares algorithm, ACM Trans. Math.
-Softw. 7 (1981) 348-368.
 """
 
 from __future__ import annotations
@@ -48,6 +44,7 @@ import numpy as np
 
 from calib.calibration.problem import LeastSquaresProblem, Linearization
 from calib.calibration.qp import QpSolution, get_optimizer
+from calib.calibration.secant import SECANT_RHO, SECANT_START, psd_part, secant_update
 
 
 class EstimationStatus(StrEnum):
@@ -139,14 +136,6 @@ ROUNDOFF_STEP = 1e-12
 
 #: The damping μ at the start and after a rejected step, at least [-].
 MIN_DAMPING = 1e-6
-
-#: The MAP's secant curvature (:func:`_secant_update`) is kept only after a step accepted at the first
-#: damping with at least this ratio of actual to predicted decrease; else it restarts from zero [-].
-SECANT_RHO = 0.25
-
-#: A Gauss–Newton step accepted at the first damping with a ratio of actual to predicted decrease below
-#: this overshot (the residuals' curvature adds to JᵀJ's): the secant curvature starts from it [-].
-SECANT_START = 0.5
 
 
 def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
@@ -243,7 +232,7 @@ class _Trial:
 def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight,
                   secant: bool = False) -> EstimationOutcome:
     """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map` (with ``secant``
-    the residuals' curvature added to its model, :func:`_secant_update`)."""
+    the residuals' curvature added to its model, :mod:`calib.calibration.secant`)."""
     qp = get_optimizer(optimizer)
     basis = np.asarray(basis, float)
     statement = problem.statement
@@ -288,12 +277,9 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
             _stopped(run, trial.qp, stop, step, optimizer, it)
             break
         if run.curvature is not None:
-            # Gauss-Newton's steps overshooting (accepted at once, but the cost fell by less than
-            # SECANT_START of the decrease predicted) start the secant curvature; a secant step the
-            # model predicted poorly, or that needed more damping, resets it to Gauss-Newton's
-            good = trial.first_try and (trial.rho >= SECANT_RHO if secant_used else trial.rho < SECANT_START)
-            if good:
-                run.curvature = _secant_update(run.curvature, before, run.lin, run.basis, trial.x, prior_weight)
+            # an overshooting Gauss-Newton step starts it; a poorly predicted or damped secant step resets it
+            if trial.first_try and (trial.rho >= SECANT_RHO if secant_used else trial.rho < SECANT_START):
+                run.curvature = secant_update(run.curvature, before, run.lin, run.basis, trial.x, prior_weight)
             else:
                 run.curvature[:] = 0.0
     problem.remember(run.lin)
@@ -320,7 +306,7 @@ def _normal_equations(run: _Iteration) -> tuple[np.ndarray, np.ndarray, np.ndarr
     r = run.lin.residual.reshape(-1)
     H = J.T @ J + run.prior_weight * np.eye(run.basis.shape[1])
     if run.curvature is not None:
-        H = H + _psd_part(run.curvature)
+        H = H + psd_part(run.curvature)
     g = J.T @ r + run.prior_weight * run.theta
     dH = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
     return H, g, dH
@@ -411,65 +397,3 @@ def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.n
         alpha = max(0.0, limit * (1.0 - 1e-12))
     return alpha * x
 
-
-def _secant_update(S: np.ndarray, before: Linearization, after: Linearization, basis: np.ndarray, x: np.ndarray,
-                   prior_weight: float) -> np.ndarray:
-    r"""The structured secant update of S ≈ Σ_i r_i ∇²r_i, the residuals' curvature the Gauss–Newton
-    model JᵀJ leaves out (Dennis, Gay & Welsch 1981, NL2SOL; Dennis & Schnabel 1983, §10.3).
-
-    After the step x from (J, r) to (J₊, r₊) the updated S₊ satisfies the secant condition
-    S₊ x = y♯ = (J₊ − J)ᵀ r₊ and is the symmetric change of S least in a norm weighted by the gradient
-    change y = J₊ᵀ r₊ − Jᵀ r + w x (w the prior weight):
-
-    .. math::  S_+ = τS + \frac{z yᵀ + y zᵀ}{yᵀx} − \frac{zᵀx}{(yᵀx)^2}\, y yᵀ,
-               \qquad z = y♯ − τ S x,\quad τ = \min(1, |xᵀy♯| / |xᵀSx|)
-
-    (τ the NL2SOL sizing). Unchanged when yᵀx ≤ 0 or the points that converged differ.
-    Where a noisy fit's many small residuals add curvature in the weakly determined
-    directions the Gauss–Newton steps overshoot by a constant factor and converge
-    linearly; on ``bench_scaling``'s 648-point case the true curvature along the steps was
-    1.8-1.9 times JᵀJ's (an alternating error shrinking by 0.85 per iteration).
-
-    Parameters
-    ----------
-    S : ndarray, shape (n_theta, n_theta)
-    before, after : Linearization
-        At θ and θ + x, with sensitivities.
-    basis : ndarray, shape (n_params, n_theta)
-    x : ndarray, shape (n_theta,)
-        The step [scale units].
-    prior_weight : float
-
-    Returns
-    -------
-    ndarray, shape (n_theta, n_theta)
-
-    References
-    ----------
-    J.E. Dennis, D.M. Gay, R.E. Welsch, An adaptive nonlinear least-squares algorithm,
-    ACM Trans. Math. Softw. 7 (1981) 348-368.
-    J.E. Dennis, R.B. Schnabel, Numerical Methods for Unconstrained Optimization and Nonlinear
-    Equations, Prentice-Hall (1983), §10.3.
-    """
-    if before.M is None or after.M is None or not np.array_equal(before.ok, after.ok):
-        return S
-    J0, J1 = -(before.M @ basis), -(after.M @ basis)
-    r0, r1 = before.residual.reshape(-1), after.residual.reshape(-1)
-    y_sharp = (J1 - J0).T @ r1
-    y = J1.T @ r1 - J0.T @ r0 + prior_weight * x
-    ys = float(y @ x)
-    if not ys > 0.0:
-        return S
-    Sx = S @ x
-    xSx = float(x @ Sx)
-    tau = min(1.0, abs(float(x @ y_sharp)) / abs(xSx)) if xSx != 0.0 else 1.0
-    z = y_sharp - tau * Sx
-    out = tau * S + (np.outer(z, y) + np.outer(y, z)) / ys - (float(z @ x) / ys ** 2) * np.outer(y, y)
-    return 0.5 * (out + out.T)
-
-
-def _psd_part(S: np.ndarray) -> np.ndarray:
-    """S with its negative eigenvalues set to zero: the secant curvature lengthens no step beyond
-    Gauss–Newton's, whose JᵀJ (+ I) keeps the subproblem convex."""
-    w, Q = np.linalg.eigh(S)
-    return (Q * np.clip(w, 0.0, None)) @ Q.T
