@@ -168,9 +168,10 @@ def fine_sensitivities(model, p: np.ndarray, conditions, sigma: np.ndarray, chan
     if projected is not None:
         ev, G = projected
         use = np.asarray(ok, bool) & ev.ok
-        W = G[:, channel_index, :] / sigma[:, :, None]
-        W = np.where(use[:, None, None], W, 0.0).reshape(-1, G.shape[2])
-        return FineSensitivities(fine, W, fine.n_lift)
+        W = G[:, list(channel_index), :]                # a copy, divided and zeroed in place
+        W /= sigma[:, :, None]
+        W[~use] = 0.0
+        return FineSensitivities(fine, W.reshape(-1, G.shape[2]), fine.n_lift)
     fmodel = model.with_grid(fine)
     flay, clay = fmodel.correction_field().layout, field.layout
     T = interpolation_matrix(coarse, fine)
