@@ -4,7 +4,8 @@ The kernel runs the same bracket, iteration and residual, in the same order of o
 values equal to the last bits of sin, cos, exp and acos (libm against numpy's loops). Those last
 bits differ between processors and libm versions, so iteration counts are compared with a
 tolerance (a last-bit difference in a residual may move a convergence test by one step in a
-rare section); roots, values and the number of roots per section are compared as solutions.
+rare section), and so are the counts of roots per section (a root at a bracket end or a
+near-tangent pair may be seen by one path only); roots and values are compared as solutions.
 """
 
 import numpy as np
@@ -32,14 +33,33 @@ def _grid(rotor, tsr=np.linspace(1.0, 60.0, 13), pitch=np.linspace(-10.0, 90.0, 
     return OperatingConditions(wind, np.full(wind.size, rpm), beta.ravel())
 
 
+#: Sections whose count of roots may differ between the two paths, at most (a fraction, and at least one).
+COUNT_MARGIN = 1e-3
+
+
 def _assert_same_counts(fast, slow):
     """Iterations per section equal but for at most one step in at most 0.1 % of the sections (last
-    bits of libm); roots found per section equal (a property of the residual, not of rounding)."""
+    bits of libm). Roots found per section: the count is a property of the residual only where its
+    roots stand clear of the search's bracket ends and of each other; a root within round-off of a
+    bracket end, or a pair near a tangency, may be seen by one path and not the other. So the counts
+    agree but in at most 0.1 % of the sections (and one), by at most two roots (a near-tangent pair),
+    at sections both paths searched (n_roots > 1 on one side); the kept root, which the values
+    follow, is compared as a solution (:func:`_assert_same`) at every section."""
     it_fast, it_slow = fast.sections["iterations"], slow.sections["iterations"]
     off = it_fast != it_slow
     assert np.all(np.abs(it_fast - it_slow) <= 1), "iteration counts differ by more than one step"
     assert off.sum() <= max(1, 1e-3 * off.size), f"{off.sum()} of {off.size} sections differ in iterations"
-    np.testing.assert_array_equal(fast.sections["n_roots"], slow.sections["n_roots"], err_msg="n_roots")
+    n_fast, n_slow = fast.sections["n_roots"], slow.sections["n_roots"]
+    np.testing.assert_array_equal(np.isnan(n_fast), np.isnan(n_slow), err_msg="sections with a root")
+    n_fast, n_slow = np.nan_to_num(n_fast), np.nan_to_num(n_slow)
+    differ = n_fast != n_slow
+    assert differ.sum() <= max(1, COUNT_MARGIN * differ.size), \
+        f"{differ.sum()} of {differ.size} sections differ in their count of roots"
+    assert np.all(np.abs(n_fast - n_slow) <= 2), "a count of roots differs by more than a near-tangent pair"
+    assert np.all(np.maximum(n_fast, n_slow)[differ] > 1), "a count differs at a section with one root on both paths"
+    # the points flagged for several roots differ only where a section's count does
+    flagged = (n_fast > 1).any(axis=tuple(range(1, n_fast.ndim))) != (n_slow > 1).any(axis=tuple(range(1, n_slow.ndim)))
+    assert not np.any(flagged & ~differ.any(axis=tuple(range(1, differ.ndim))))
 
 
 def _assert_same(fast, slow):

@@ -32,6 +32,8 @@ class Block:
         Its columns in :attr:`SectionSensitivities.columns` (after the pitch and wind columns).
     probe_map : ProbeMap or None
         For a probed effect: arrays of shape (n_points, n_sectors, n_stations, m).
+    effect : str
+        The effect's name.
     """
 
     offset: int
@@ -39,6 +41,7 @@ class Block:
     column: int
     n_columns: int
     probe_map: ProbeMap | None = None
+    effect: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +60,9 @@ class SectionSensitivities:
         conditions stage with respect to ``p``.
     blocks : tuple of Block
     n_params : int
+    alpha_deg : ndarray, shape (n_points, n_sectors, n_stations) or None
+        The angle of attack of every converged section at the root [deg], NaN elsewhere (where the
+        probes read the polars: :func:`project_probes` maps them on another grid's nodes).
     """
 
     columns: dict
@@ -64,6 +70,7 @@ class SectionSensitivities:
     wind_speed: np.ndarray
     blocks: tuple
     n_params: int
+    alpha_deg: np.ndarray | None = None
 
 
 def project(sens: SectionSensitivities, quantity: str, weights: np.ndarray) -> np.ndarray:
@@ -82,15 +89,38 @@ def project(sens: SectionSensitivities, quantity: str, weights: np.ndarray) -> n
     ndarray, shape (n_points, n_params)
     """
     D = sens.columns[quantity]
-    n_pts, n_par = D.shape[0], sens.n_params
     Dw = np.einsum("ksic,i->kc", D, weights)
     G = Dw[:, [0]] * sens.pitch + Dw[:, [1]] * sens.wind_speed
     for b in sens.blocks:
         if b.probe_map is None:
             G[:, b.offset:b.offset + b.n_params] += Dw[:, b.column:b.column + b.n_columns]
-            continue
-        pm = b.probe_map
-        contrib = D[..., b.column + pm.probe] * weights[None, None, :, None] * pm.weight
-        flat = (np.arange(n_pts)[:, None, None, None] * n_par + b.offset + pm.index).reshape(-1)
-        G += np.bincount(flat, contrib.reshape(-1), n_pts * n_par).reshape(n_pts, n_par)
+        else:
+            G[:, b.offset:b.offset + b.n_params] += project_probes(D, b.column, b.probe_map, weights, b.n_params)
     return G
+
+
+def project_probes(D: np.ndarray, column: int, probe_map: ProbeMap, weights: np.ndarray, n_out: int) -> np.ndarray:
+    """d/dq of Σ_sectors Σ_stations w_i Q[k, s, i] for the n_out parameters q that reach the sections
+    through probes, ``d Q / d q[index[..., m]] += weight[..., m] d Q / d probe[probe[m]]``
+    (:class:`calib.bem.stages.ProbeMap`).
+
+    Parameters
+    ----------
+    D : ndarray, shape (n_points, n_sectors, n_stations, n_columns)
+        A quantity's section derivatives (:attr:`SectionSensitivities.columns`).
+    column : int
+        The column of probe 0.
+    probe_map : ProbeMap
+        Arrays of shape (n_points, n_sectors, n_stations, m), zero weight at inactive sections.
+    weights : ndarray, shape (n_stations,)
+    n_out : int
+
+    Returns
+    -------
+    ndarray, shape (n_points, n_out)
+    """
+    n_pts = D.shape[0]
+    pm = probe_map
+    contrib = D[..., column + pm.probe] * weights[None, None, :, None] * pm.weight
+    flat = (np.arange(n_pts)[:, None, None, None] * n_out + pm.index).reshape(-1)
+    return np.bincount(flat, contrib.reshape(-1), n_pts * n_out).reshape(n_pts, n_out)

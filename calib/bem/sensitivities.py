@@ -58,6 +58,7 @@ def batch_sensitivities(chain: BoundChain, values, roots, sec, pctx, thrust_weig
     columns = eliminate_phi(values, roots, sec)
     n_pts, n_par = sec.shape[0], chain.n_params
     blocks = []
+    alpha_sites = None
     for entry in chain.entries:
         if entry.effect.stage == "conditions":
             continue
@@ -65,7 +66,9 @@ def batch_sensitivities(chain: BoundChain, values, roots, sec, pctx, thrust_weig
         if entry.probed:
             pm = _scatter_probe_map(entry.effect.probe_map(chain.theta(entry), values.alpha_deg, sec.ctx),
                                     roots, sec)
-        blocks.append(Block(entry.offset, entry.n_params, entry.column - 1, entry.n_columns, pm))
+            if alpha_sites is None:
+                alpha_sites = _scatter_sites(dl.value(values.alpha_deg), roots, sec)
+        blocks.append(Block(entry.offset, entry.n_params, entry.column - 1, entry.n_columns, pm, entry.effect.name))
     # conditions stage on duals: columns of its parameters, then the thrust
     k_pt = chain.n_point_columns + int(chain.reads_thrust)
     V_p, B_p = np.zeros((n_pts, n_par)), np.zeros((n_pts, n_par))
@@ -83,14 +86,15 @@ def batch_sensitivities(chain: BoundChain, values, roots, sec, pctx, thrust_weig
             B_p[:, sl] = dB[:, entry.column:entry.column + entry.n_params]
         if chain.reads_thrust:
             V_T, B_T = dV[:, -1], dB[:, -1]
-    sens = SectionSensitivities(columns, B_p, V_p, tuple(blocks), n_par)
+    sens = SectionSensitivities(columns, B_p, V_p, tuple(blocks), n_par, alpha_sites)
     if chain.reads_thrust:
         # fixed point T = T_bem(C(T, p), p): implicit function per point
         dT_direct = project(sens, "Np", thrust_weights)
         Dw = np.einsum("ksic,i->kc", columns["Np"][..., :2], thrust_weights)
         with np.errstate(all="ignore"):
             dT = dT_direct / (1.0 - Dw[:, 1] * V_T - Dw[:, 0] * B_T)[:, None]
-        sens = SectionSensitivities(columns, B_p + B_T[:, None] * dT, V_p + V_T[:, None] * dT, tuple(blocks), n_par)
+        sens = SectionSensitivities(columns, B_p + B_T[:, None] * dT, V_p + V_T[:, None] * dT, tuple(blocks), n_par,
+                                    alpha_sites)
     return sens
 
 
@@ -110,3 +114,11 @@ def _scatter_probe_map(pm: ProbeMap, roots, sec) -> ProbeMap:
     index[sec.sel] = np.where(roots.converged[:, None], pm.index, 0)
     weight[sec.sel] = np.where(roots.converged[:, None], pm.weight, 0.0)
     return ProbeMap(index.reshape(sec.shape + (m,)), weight.reshape(sec.shape + (m,)), np.asarray(pm.probe))
+
+
+def _scatter_sites(alpha_deg: np.ndarray, roots, sec) -> np.ndarray:
+    """The converged active sections' angle of attack [deg] in an (n_points, n_sectors, n_stations)
+    array, NaN elsewhere."""
+    out = np.full(int(np.prod(sec.shape)), np.nan)
+    out[sec.sel] = np.where(roots.converged, alpha_deg, np.nan)
+    return out.reshape(sec.shape)

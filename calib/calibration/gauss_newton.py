@@ -22,6 +22,10 @@ C_D ≥ C_D,min at the grid points) in scaled units. The named optimizer of
 3. :func:`_take`: the accepted step becomes the state, recorded;
 4. :class:`StopRule`: stop on a small cost decrease or a small step.
 
+The MAP adds to H the residuals' curvature S ≈ Σ r_i ∇²r_i that JᵀJ leaves out (:mod:`calib.calibration.secant`)
+once a Gauss–Newton step has overshot, while its steps are predicted well; a secant step that needed
+more damping, or the subproblem with S failing, hands over to Gauss–Newton's model.
+
 References
 ----------
 C.L. Bottasso, S. Cacciola, X. Iriarte, Calibration of wind turbine lifting line models
@@ -40,6 +44,7 @@ import numpy as np
 
 from calib.calibration.problem import LeastSquaresProblem, Linearization
 from calib.calibration.qp import QpSolution, get_optimizer
+from calib.calibration.secant import SECANT_RHO, SECANT_START, psd_part, secant_update
 
 
 class EstimationStatus(StrEnum):
@@ -183,7 +188,8 @@ def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.nd
     EstimationOutcome
         ``cost`` includes the prior term.
     """
-    return _gauss_newton(problem, prior_root, u0, optimizer, stop, callback, stage, prior_weight=1.0)
+    return _gauss_newton(problem, prior_root, u0, optimizer, stop, callback, stage, prior_weight=1.0,
+                         secant=True)
 
 
 @dataclass
@@ -198,6 +204,7 @@ class _Iteration:
     theta: np.ndarray
     lin: Linearization
     mu: float = MIN_DAMPING
+    curvature: np.ndarray | None = None   # the secant estimate of the residuals' curvature S (None: Gauss-Newton)
     status: EstimationStatus = EstimationStatus.MAX_ITERATIONS
     message: str = ""
     history: list = field(default_factory=list)
@@ -218,10 +225,14 @@ class _Trial:
     lin: Linearization
     cost: float
     qp: QpSolution
+    rho: float = 1.0          # actual / predicted decrease
+    first_try: bool = True    # accepted without raising the damping
 
 
-def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight) -> EstimationOutcome:
-    """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map`."""
+def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight,
+                  secant: bool = False) -> EstimationOutcome:
+    """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map` (with ``secant``
+    the residuals' curvature added to its model, :mod:`calib.calibration.secant`)."""
     qp = get_optimizer(optimizer)
     basis = np.asarray(basis, float)
     statement = problem.statement
@@ -236,20 +247,41 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
     # a damped trial is only evaluated when the model's Jacobian costs simulations of its own (finite
     # differences: 2 n more per point); with exact derivatives the Jacobian comes with the values
     linearize_trials = problem.model.capabilities.derivatives == "exact"
+    if secant:
+        run.curvature = np.zeros((basis.shape[1], basis.shape[1]))
     it = 0
     for it in range(1, stop.max_iterations + 1):
         H, g, dH = _normal_equations(run)
         cost_now = run.cost(run.lin, run.theta)
         trial, x = _damped_step(run, qp, optimizer, H, g, dH, cost_now, linearize_trials)
+        secant_used = run.curvature is not None and bool(np.any(run.curvature))
         if run.status == EstimationStatus.QP_FAILED:
-            break
+            if not secant_used:
+                break
+            run.curvature[:] = 0.0      # the subproblem with the secant curvature failed: Gauss-Newton's
+            run.end(EstimationStatus.MAX_ITERATIONS, f"stopped after {stop.max_iterations} iterations")
+            continue
         if trial is None:
+            if secant_used:         # the secant model failed: Gauss-Newton's decides, from the least damping
+                run.curvature[:] = 0.0
+                run.mu = MIN_DAMPING
+                continue
             _no_step(run, x, stop, it)
             break
+        before = run.lin
         decrease, step = _take(run, trial, cost_now, stage, it, callback)
         if stop.small_decrease(decrease, trial.cost) or stop.small_step(step, run.theta):
+            if secant_used and not trial.first_try:     # a damped secant step: Gauss-Newton's decides
+                run.curvature[:] = 0.0
+                continue
             _stopped(run, trial.qp, stop, step, optimizer, it)
             break
+        if run.curvature is not None:
+            # an overshooting Gauss-Newton step starts it; a poorly predicted or damped secant step resets it
+            if trial.first_try and (trial.rho >= SECANT_RHO if secant_used else trial.rho < SECANT_START):
+                run.curvature = secant_update(run.curvature, before, run.lin, run.basis, trial.x, prior_weight)
+            else:
+                run.curvature[:] = 0.0
     problem.remember(run.lin)
     return EstimationOutcome(run.theta, run.lin.p, run.cost(run.lin, run.theta), it, run.status, run.message,
                              run.lin, run.history)
@@ -273,6 +305,8 @@ def _normal_equations(run: _Iteration) -> tuple[np.ndarray, np.ndarray, np.ndarr
     J = -(run.lin.M @ run.basis)
     r = run.lin.residual.reshape(-1)
     H = J.T @ J + run.prior_weight * np.eye(run.basis.shape[1])
+    if run.curvature is not None:
+        H = H + psd_part(run.curvature)
     g = J.T @ r + run.prior_weight * run.theta
     dH = np.maximum(np.diag(H), 1e-12 * max(np.max(np.diag(H)), 1e-300))
     return H, g, dH
@@ -284,7 +318,7 @@ def _damped_step(run: _Iteration, qp, optimizer: str, H, g, dH, cost_now: float,
     (None, the last step tried) when the tries run out; (None, None) with the status set when
     the QP fails."""
     x = None
-    for _ in range(DAMPING_TRIES):
+    for i in range(DAMPING_TRIES):
         sol = qp(H + run.mu * np.diag(dH), g, run.basis, run.lb - run.basis @ run.theta, run.ub - run.basis @ run.theta)
         if not sol.success and not np.all(np.isfinite(sol.x)):
             run.end(EstimationStatus.QP_FAILED, f"{optimizer}: {sol.message}")
@@ -297,7 +331,7 @@ def _damped_step(run: _Iteration, qp, optimizer: str, H, g, dH, cost_now: float,
         if trial.n_failed <= run.lin.n_failed and cost_trial <= cost_now:
             rho = (cost_now - cost_trial) / predicted if predicted > 0 else 1.0
             run.mu = max(run.mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
-            return _Trial(x, trial, cost_trial, sol), x
+            return _Trial(x, trial, cost_trial, sol, rho, i == 0), x
         run.mu = max(run.mu * 4.0, MIN_DAMPING)
     return None, x
 
@@ -362,3 +396,4 @@ def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.n
     if limit < 1.0:
         alpha = max(0.0, limit * (1.0 - 1e-12))
     return alpha * x
+

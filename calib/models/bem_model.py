@@ -8,7 +8,8 @@ from typing import Sequence
 import numpy as np
 
 from calib.bem.chain import EffectChain
-from calib.bem.jacobian import project
+from calib.bem.jacobian import project, project_probes
+from calib.bem.stages import ProbeMap
 from calib.bem.outputs import channel_specs, channel_values, multipliers
 from calib.bem.polar_grid import SectionPolars
 from calib.bem.solver import BemSettings, integration_weights, interior_stations, solve_bem
@@ -166,6 +167,61 @@ class BemModel:
         for c, spec in enumerate(self._specs):
             scale = multipliers(spec, self.rotor.n_blades, res.omega) / res.n_sectors
             G[:, c, :] = project(res.sensitivities, spec.quantity, spec.weights) * scale[:, None]
+        G[~res.ok] = np.nan
+        self._last_jacobian = (np.array(p, float), conditions, res, ev)
+        return ev, G
+
+    def __getstate__(self) -> dict:
+        """Pickled (to worker processes) without the last solve :meth:`field_jacobian` keeps."""
+        state = self.__dict__.copy()
+        state.pop("_last_jacobian", None)
+        return state
+
+    def field_jacobian(self, grid: CorrectionGrid, p, conditions: OperatingConditions):
+        """The exact sensitivities to the nodal values of a correction field on ``grid`` that equals this
+        model's field at ``p`` wherever the sections are, from the last :meth:`jacobian` at the same
+        ``p`` and ``conditions`` (the same object), without another solve; None when there is none or
+        when a loaded section of a converged point lies outside ``grid``'s nodes or the drag floors differ.
+
+        Where the two fields agree the BEM's roots and section derivatives are the same; the field
+        enters a section only through its two probes (an additive C_L and C_D), so the derivatives
+        with respect to ``grid``'s nodes are the probes' derivatives times ``grid``'s hat functions
+        at the section's (α, η) (:func:`calib.bem.jacobian.project_probes`). The caller states the
+        agreement (e.g. a refinement whose nodal values interpolate this field,
+        :func:`calib.parametrizations.aliasing.fine_sensitivities`).
+
+        Returns
+        -------
+        evaluation : Evaluation
+        G : ndarray, shape (n_points, n_channels, 2 * grid.n_lift)
+            d y / d (lift nodes, then drag nodes) in ``grid.basis`` order; NaN on failed points.
+        """
+        last = getattr(self, "_last_jacobian", None)
+        if (last is None or last[1] is not conditions or self.grid is None or grid.cd_floor != self.grid.cd_floor
+                or not np.array_equal(last[0], np.asarray(p, float))):
+            return None
+        _, _, res, ev = last
+        sens = res.sensitivities
+        block = next((b for b in sens.blocks if b.effect == CorrectionFieldEffect.name), None)
+        if block is None or sens.alpha_deg is None:
+            return None
+        alpha = sens.alpha_deg
+        eta = np.broadcast_to(self.rotor.eta, alpha.shape)
+        site = np.isfinite(alpha)
+        loaded = site & res.ok[:, None, None] & self._interior[None, None, :]
+        a, e = alpha[loaded], eta[loaded]
+        if a.size and (a.min() < grid.alpha_nodes_deg[0] or a.max() > grid.alpha_nodes_deg[-1]
+                       or e.min() < grid.eta_nodes[0] or e.max() > grid.eta_nodes[-1]):
+            return None
+        index, value, _ = grid.basis(np.where(site, alpha, grid.alpha_nodes_deg[0]), eta)
+        value = np.where(site[..., None], value, 0.0)
+        pm = ProbeMap(np.concatenate([index, index + grid.n_lift], axis=-1), np.concatenate([value, value], axis=-1),
+                      np.array([0, 0, 0, 0, 1, 1, 1, 1]))
+        G = np.zeros((len(conditions), len(self._specs), 2 * grid.n_lift))
+        for c, spec in enumerate(self._specs):
+            scale = multipliers(spec, self.rotor.n_blades, res.omega) / res.n_sectors
+            G[:, c, :] = project_probes(sens.columns[spec.quantity], block.column, pm, spec.weights,
+                                        2 * grid.n_lift) * scale[:, None]
         G[~res.ok] = np.nan
         return ev, G
 

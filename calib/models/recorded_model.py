@@ -114,6 +114,13 @@ class RecordedModel:
     def correction_field(self):
         return self._model.correction_field()
 
+    def field_jacobian(self, grid, p, conditions: OperatingConditions):
+        """The wrapped model's projected field sensitivities (not recorded: they reuse its last
+        Jacobian without a model call); None when it has none or its last Jacobian was not at ``p``
+        and ``conditions`` (a chunked or replayed call)."""
+        projected = getattr(self._model, "field_jacobian", None)
+        return None if projected is None else projected(grid, p, conditions)
+
     def with_grid(self, grid):
         """The wrapped model on another grid (not recorded: it serves the uncertainty's fine grid)."""
         return self._model.with_grid(grid)

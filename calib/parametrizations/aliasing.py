@@ -161,6 +161,17 @@ def fine_sensitivities(model, p: np.ndarray, conditions, sigma: np.ndarray, chan
     field = model.correction_field()
     coarse = field.grid
     fine = refined_grid(coarse, alpha_deg, eta, factor)
+    # the fine nodal values interpolate the estimate's field, so the fine model's solve is the estimate's:
+    # a model that kept that solve's section derivatives maps them on the fine nodes without solving again
+    projected = getattr(model, "field_jacobian", None)
+    projected = projected(fine, p, conditions) if projected is not None else None
+    if projected is not None:
+        ev, G = projected
+        use = np.asarray(ok, bool) & ev.ok
+        W = G[:, list(channel_index), :]                # a copy, divided and zeroed in place
+        W /= sigma[:, :, None]
+        W[~use] = 0.0
+        return FineSensitivities(fine, W.reshape(-1, G.shape[2]), fine.n_lift)
     fmodel = model.with_grid(fine)
     flay, clay = fmodel.correction_field().layout, field.layout
     T = interpolation_matrix(coarse, fine)
