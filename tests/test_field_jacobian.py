@@ -84,3 +84,24 @@ def test_a_pickled_model_leaves_the_kept_solve_behind():
     copy = pickle.loads(pickle.dumps(model))
     assert len(pickle.dumps(model)) == before and getattr(copy, "_last_jacobian", None) is None
     np.testing.assert_array_equal(copy.evaluate(p, cond).values, model.evaluate(p, cond).values)
+
+
+def test_a_recorded_model_passes_the_projection_through(tmp_path):
+    """`calib run` wraps the model in a history record: the projection must reach through it (the same
+    W as the bare model), and a record answered from the history (no solve behind it) refuses it."""
+    from calib.history import open_history
+    from calib.models.recorded_model import RecordedModel
+
+    model, grid, p, cond = _case(BemSettings(use_tilt=False))
+    history = open_history(tmp_path, {"command": "run", "inputs": {"workflow file": "a" * 64}}, resume=False)
+    rec = RecordedModel(model, history, "test")
+    ev, _ = rec.jacobian(p, cond)
+    a, e = model.correction_field().seen(ev)
+    fine = refined_grid(grid, a, e)
+    through = rec.field_jacobian(fine, p, cond)
+    assert through is not None
+    np.testing.assert_array_equal(through[1], model.field_jacobian(fine, p, cond)[1])
+    fresh, _, _, cond2 = _case(BemSettings(use_tilt=False))
+    replay = RecordedModel(fresh, history, "test")
+    replay.jacobian(p, cond2)                            # answered from the record: the model did not solve
+    assert replay.n_replayed == 1 and replay.field_jacobian(fine, p, cond2) is None
