@@ -265,7 +265,8 @@ def test_cli_designs_through_the_bundled_fmu(tmp_path, capsys):
     out = tmp_path / "fmu"
     assert main(["design", str(ROOT / "workflows" / "bundled_fmu.toml"), "--budget", "4", "--points", "4x2",
                  "--out", str(out)]) == 0
-    assert "chosen by Bayesian D-optimality from 8 candidates" in capsys.readouterr().out
+    assert "chosen by Bayesian D-optimality with a model discrepancy (κ 1, ℓ 0.25) from 8 candidates" in \
+        capsys.readouterr().out
     with open(out / "parameters.csv") as fh:
         prm = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     assert len(prm) == 16

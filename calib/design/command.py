@@ -49,6 +49,9 @@ def add_design_parser(sub):
                    "envelope (kept), the rest chosen by the criterion (default 0)")
     p.add_argument("--between-nodes", action="store_true", help="add the variance of the correction field "
                    "between and beyond the nodes (its smooth-field prior) to the candidates' noise")
+    p.add_argument("--discrepancy", default="1:0.25", help="a smooth model discrepancy over the operating plane "
+                   "in the criterion, SCALE[:LENGTH]: its sigma relative to the noise and its correlation length as a "
+                   "fraction of the envelope (default 1:0.25), so that the points spread; none: trust the model's form")
     p.add_argument("--draws", type=int, default=0, help="pseudo-Bayesian: average the criterion over this many "
                    "prior draws of the correction field too (default 0: at the linearization point only)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --draws (default 0)")
@@ -98,6 +101,7 @@ def _counts(text):
 def _design(args, problem, n_tsr, n_pitch):
     from calib.design import design
     from calib.design.candidates import check_inside, user_grid
+    from calib.design.discrepancy import parse_discrepancy
 
     env = problem.envelope
     candidates = user_grid(_grid_spec(args.grid, "--grid"), env, "--grid") if args.grid else None
@@ -107,7 +111,8 @@ def _design(args, problem, n_tsr, n_pitch):
     fixed = _fixed(args.fixed, env) if args.fixed else None
     params = [s.strip() for s in args.parameters.split(",") if s.strip()] if args.parameters else None
     return design(problem, args.budget, candidates, fixed, args.criterion, params, targets, args.repeats,
-                  n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed, cover=args.cover)
+                  n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed, cover=args.cover,
+                  discrepancy=parse_discrepancy(args.discrepancy))
 
 
 def run_design(args, printer=print) -> int:
