@@ -78,3 +78,21 @@ def test_bad_discrepancy_is_refused(text, message):
 def test_none_turns_it_off():
     assert parse_discrepancy("none") is None
     assert parse_discrepancy("2:0.5") == Discrepancy(2.0, 0.5)
+
+
+def test_relaxed_bound_is_above_every_subset_and_tight_for_equal_candidates():
+    """The continuous-relaxation bound ≥ the best of all 56 three-point subsets of 8 random candidates; for
+    equal candidates every subset has log det log(1 + N h²), which the bound reaches."""
+    from itertools import combinations
+
+    from calib.design.bound import relaxed_logdet_bound
+
+    rng = np.random.default_rng(5)
+    H = rng.normal(size=(8, 2, 3))
+    best = max(np.linalg.slogdet(precision(H, list(c)))[1] for c in combinations(range(8), 3))
+    b = relaxed_logdet_bound(H, 3, iterations=500)
+    assert b["bound"] >= best - 1e-9
+    assert b["relaxed"] <= b["bound"] + 1e-12
+    assert b["bound"] - best < 0.5
+    same = np.full((6, 1, 1), 0.7)
+    assert relaxed_logdet_bound(same, 4)["bound"] == pytest.approx(np.log(1 + 4 * 0.49), abs=2e-3)

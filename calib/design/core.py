@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calib.design import candidates as cand
+from calib.design.bound import relaxed_logdet_bound
 from calib.design.criteria import a_criterion, d_criterion, determined_directions
 from calib.design.discrepancy import Discrepancy, augment, basis
 from calib.design.problem import DesignProblem
@@ -48,12 +49,17 @@ class DesignResult:
     s_design, s_full, s_uniform : ndarray
         Singular values of the prior-whitened sensitivities (s > 1: determined by the data).
     logdet : dict
-        log det of the whitened precision: design, full, uniform, greedy (before exchange) [-].
+        log det of the whitened precision: design, full, uniform, greedy (before exchange), and ``bound``,
+        the most any design of the budget's distinct points can reach (:mod:`calib.design.bound`; without
+        fixed points or repeats) [-].
     uniform : ndarray of int
         The space-filling design of the same size.
     criterion : str
     seconds : dict
         CPU seconds (time.process_time) of the sensitivities and of the selection [s].
+    logdet_curve : ndarray
+        log det of the parameters' whitened precision after each greedy point (the information curve,
+        whatever the criterion; ``selection.greedy_order`` names the points) [-].
     """
 
     problem: DesignProblem
@@ -76,6 +82,7 @@ class DesignResult:
     H: np.ndarray = field(repr=False, default=None)
     robustness: dict = field(default_factory=dict)
     cover: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    logdet_curve: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_determined(self) -> dict:
@@ -229,6 +236,7 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
     robust = _robustness(crit, H_sel, sel.design, budget, fixed_u, max_repeats) if H_draws else {}
     t_sel = time.process_time() - t1
     sel.design = usable_idx[sel.design]
+    sel.greedy_order = usable_idx[sel.greedy_order]
     chosen = sel.design
     uniform = usable_idx[cand.space_filling(candidates.subset(usable_idx), env.radius, budget)]
     A_d, A_f, A_u = precision(H, chosen), precision(H, usable_idx), precision(H, uniform)
@@ -238,12 +246,27 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
         sel.greedy_gains[:budget - fixed_idx.size])) if crit.kind == "d" and not H_draws and disc is None \
         else float("nan")
     n = H.shape[-1]
+    curve = _logdet_curve(H, fixed_idx, sel.greedy_order)
+    if fixed_idx.size == 0 and max_repeats == 1:
+        logdet["bound"] = relaxed_logdet_bound(H[usable_idx], budget, start=[where[int(i)] for i in chosen],
+                                               iterations=100)["bound"]
     F = {k: A - np.eye(n) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
     return DesignResult(problem, candidates, ok, chosen, fixed_idx, sel, _sigma(problem, np.eye(n)),
                         _sigma(problem, A_d), _sigma(problem, A_f), _sigma(problem, A_u),
                         determined_directions(F["design"]), determined_directions(F["full"]),
                         determined_directions(F["uniform"]), logdet, uniform, crit.name,
-                        {"sensitivities": t_sens, "selection": t_sel}, H, robust, cover_idx)
+                        {"sensitivities": t_sens, "selection": t_sel}, H, robust, cover_idx, curve)
+
+
+def _logdet_curve(H, fixed_idx, order) -> np.ndarray:
+    """log det of the parameters' whitened precision (the model's form) after the fixed points and each
+    greedy point in turn, shape (len(order),) [-]."""
+    A = precision(H, fixed_idx)
+    out = np.empty(len(order))
+    for k, j in enumerate(order):
+        A = A + H[j].T @ H[j]
+        out[k] = np.linalg.slogdet(A)[1]
+    return out
 
 
 def _fixed_indices(fixed, candidates, ok, env, budget, cover):
