@@ -160,8 +160,8 @@ def _relative_levels(workflow, setup, channels, notes) -> dict:
     return {c: float(v) if v is not None else fill for c, v in rel.items()}
 
 
-def problem_from_workflow(path, sensors=None, after=None, executor=None, between_nodes: bool = False
-                          ) -> DesignProblem:
+def problem_from_workflow(path, sensors=None, after=None, executor=None, between_nodes: bool = False,
+                          effects=()) -> DesignProblem:
     """The design problem of a workflow file.
 
     Parameters
@@ -179,6 +179,9 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
     between_nodes : bool
         Add the variance of the correction field between and beyond the nodes to the candidates' noise
         (native BEM with a correction grid and ``prior_correlation`` > 0).
+    effects : sequence, optional
+        Effects the native BEM carries (e.g. those a ``[diagnosis]`` named,
+        :func:`calib.diagnosis.in_workflow.named_effect_specs`), their parameters estimated too.
     """
     from calib.calibration.calibrator import Calibrator
     from calib.calibration.map_fit import MapFit
@@ -201,7 +204,7 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         from calib.models.from_config import executor_of
         executor = own = executor_of(setup.executor, src)
     try:
-        model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor))
+        model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor, effects))
         ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
         if not np.any(ev.ok):
             raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
