@@ -37,6 +37,10 @@ __all__ = ["Discrepancy", "basis", "augment", "parse_discrepancy"]
 #: Inducing points at most (over the active axes of the envelope).
 MAX_INDUCING = 64
 
+#: An axis of the envelope is an axis of the discrepancy when its range exceeds this: a fraction of λ's and of
+#: the rotor speed's upper end, degrees of pitch and yaw (a measured table's scatter about one setting is no axis).
+MIN_SPAN = {"tsr": 0.02, "pitch": 0.5, "rotor_speed": 0.02, "yaw": 1.0}
+
 
 @dataclass(frozen=True)
 class Discrepancy:
@@ -76,11 +80,13 @@ def parse_discrepancy(text: str, source: str = "--discrepancy") -> Discrepancy |
 
 
 def _unit(cond: OperatingConditions, env: Envelope) -> np.ndarray:
-    """The active coordinates (those the envelope spans) scaled to [0, 1], shape (n_points, n_axes)."""
+    """The active coordinates (those the envelope spans by more than :data:`MIN_SPAN`) scaled to [0, 1] over
+    the envelope, shape (n_points, n_axes)."""
     X = np.column_stack([cond.tip_speed_ratio(env.radius), cond.pitch, cond.rotor_speed, cond.yaw])
     lo = np.array([env.tsr[0], env.pitch[0], env.rotor_speed[0], env.yaw[0]])
     hi = np.array([env.tsr[1], env.pitch[1], env.rotor_speed[1], env.yaw[1]])
-    active = hi > lo
+    active = (hi - lo) > np.array([MIN_SPAN["tsr"] * abs(hi[0]), MIN_SPAN["pitch"],
+                                   MIN_SPAN["rotor_speed"] * abs(hi[2]), MIN_SPAN["yaw"]])
     return (X[:, active] - lo[active]) / (hi - lo)[active]
 
 
