@@ -161,7 +161,7 @@ def _relative_levels(workflow, setup, channels, notes) -> dict:
 
 
 def problem_from_workflow(path, sensors=None, after=None, executor=None, between_nodes: bool = False,
-                          effects=()) -> DesignProblem:
+                          effects=(), history=None, progress=None) -> DesignProblem:
     """The design problem of a workflow file.
 
     Parameters
@@ -182,6 +182,12 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
     effects : sequence, optional
         Effects the native BEM carries (e.g. those a ``[diagnosis]`` named,
         :func:`calib.diagnosis.in_workflow.named_effect_specs`), their parameters estimated too.
+    history : History, optional
+        For an FMU: every model call (the sensitivities in chunks of the executor's workers' points) is
+        written to this run history and, when it resumes a killed or finished design, answered from it
+        (:func:`calib.models.recorded_model.recorded`): a rerun simulates nothing it has on record.
+    progress : callable(done, total, label), optional
+        For an FMU: called after each chunk of points (e.g. :func:`calib.logs.progress_line`).
     """
     from calib.calibration.calibrator import Calibrator
     from calib.calibration.map_fit import MapFit
@@ -205,6 +211,11 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         executor = own = executor_of(setup.executor, src)
     try:
         model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor, effects))
+        if setup.is_fmu and history is not None:
+            from calib.models.recorded_model import recorded
+
+            chunk = max(int(getattr(executor, "workers", 1) or 1), 1)
+            model = recorded(model, history, "design", chunk, progress=progress)
         ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
         if not np.any(ev.ok):
             raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
