@@ -67,7 +67,11 @@ def summary(res) -> dict:
     n = len(res.design)
     gains = sel.greedy_gains
     k_next = n - res.fixed.size
-    nxt = float(gains[k_next]) if gains.size > k_next else None
+    curve = res.logdet_curve
+    # the next point's gain of the parameters' log det along the greedy order (the criterion's own gain
+    # when the curve is short); with a discrepancy the criterion's gain also counts its coefficients
+    nxt = (float(curve[k_next] - curve[k_next - 1]) if 1 <= k_next < curve.size
+           else float(gains[k_next]) if gains.size > k_next else None)
     return {"workflow": pr.source, "criterion": res.criterion, "prior": pr.prior_from, "budget": n,
             "candidates": int(len(res.ok)), "candidates_failed": res.n_failed, "fixed": int(res.fixed.size),
             "distinct_points": int(np.unique(res.design).size), "envelope": pr.envelope.words(),
