@@ -213,18 +213,8 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
                          + (f"; {len(ok) - usable} failed" if usable < len(ok) else "") + ")", "--budget",
                          field="budget")
     fixed_idx, cover_idx = _fixed_indices(fixed, candidates, ok, env, budget, cover)
-    if discrepancy is not None:
-        phi = basis(candidates, env, discrepancy)
-        H_crit = augment(H, phi, discrepancy)
-        H_draws = [(augment(Hk, phi, discrepancy), okk) for Hk, okk in H_draws]
-        disc = (discrepancy, H_crit.shape[-1] - H.shape[-1])
-    else:
-        H_crit, disc = H, None
-    crit = _criterion(criterion, problem, parameters, targets if targets is not None else candidates.subset(
-        np.flatnonzero(ok)), disc)
-    if disc is not None:
-        crit = dataclasses.replace(crit, name=f"{crit.name} with a model discrepancy (κ {discrepancy.scale:g}, "
-                                              f"ℓ {discrepancy.length:g})")
+    H_crit, H_draws, crit, disc = _with_discrepancy(problem, candidates, H, H_draws, ok, discrepancy, criterion,
+                                                    parameters, targets)
     t1 = time.process_time()
     usable_idx = np.flatnonzero(ok)
     Hu = H_crit[usable_idx]
@@ -241,10 +231,9 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
     uniform = usable_idx[cand.space_filling(candidates.subset(usable_idx), env.radius, budget)]
     A_d, A_f, A_u = precision(H, chosen), precision(H, usable_idx), precision(H, uniform)
     logdet = {k: float(np.linalg.slogdet(A)[1]) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
-    logdet["greedy"] = float(np.linalg.slogdet(precision(Hu, np.concatenate(
-        [[where[int(i)] for i in fixed_idx], np.zeros(0, int)]).astype(int)))[1] + np.sum(
-        sel.greedy_gains[:budget - fixed_idx.size])) if crit.kind == "d" and not H_draws and disc is None \
-        else float("nan")
+    logdet["greedy"] = float(np.linalg.slogdet(precision(Hu, np.array([where[int(i)] for i in fixed_idx], int)))[1]
+                             + np.sum(sel.greedy_gains[:budget - fixed_idx.size])) \
+        if crit.kind == "d" and not H_draws and disc is None else float("nan")
     n = H.shape[-1]
     curve = _logdet_curve(H, fixed_idx, sel.greedy_order)
     if fixed_idx.size == 0 and max_repeats == 1:
@@ -256,6 +245,24 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
                         determined_directions(F["design"]), determined_directions(F["full"]),
                         determined_directions(F["uniform"]), logdet, uniform, crit.name,
                         {"sensitivities": t_sens, "selection": t_sel}, H, robust, cover_idx, curve)
+
+
+def _with_discrepancy(problem, candidates, H, H_draws, ok, discrepancy, criterion, parameters, targets):
+    """The blocks the criterion acts on (with the discrepancy's columns when given), the draws' blocks, the
+    criterion, and (discrepancy, its number of coefficients) or None."""
+    if discrepancy is not None:
+        phi = basis(candidates, problem.envelope, discrepancy)
+        H_crit = augment(H, phi, discrepancy)
+        H_draws = [(augment(Hk, phi, discrepancy), okk) for Hk, okk in H_draws]
+        disc = (discrepancy, H_crit.shape[-1] - H.shape[-1])
+    else:
+        H_crit, disc = H, None
+    crit = _criterion(criterion, problem, parameters, targets if targets is not None else candidates.subset(
+        np.flatnonzero(ok)), disc)
+    if disc is not None:
+        crit = dataclasses.replace(crit, name=f"{crit.name} with a model discrepancy (κ {discrepancy.scale:g}, "
+                                              f"ℓ {discrepancy.length:g})")
+    return H_crit, H_draws, crit, disc
 
 
 def _logdet_curve(H, fixed_idx, order) -> np.ndarray:

@@ -211,11 +211,7 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         executor = own = executor_of(setup.executor, src)
     try:
         model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor, effects))
-        if setup.is_fmu and history is not None:
-            from calib.models.recorded_model import recorded
-
-            chunk = max(int(getattr(executor, "workers", 1) or 1), 1)
-            model = recorded(model, history, "design", chunk, progress=progress)
+        model = _recorded(model, setup, executor, history, progress)
         ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
         if not np.any(ev.ok):
             raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
@@ -250,6 +246,17 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         if own is not None:
             own.close()
         raise
+
+
+def _recorded(model, setup, executor, history, progress):
+    """An FMU's model with its calls recorded in ``history`` in chunks of the executor's workers' points (a
+    kill loses at most one chunk; :func:`calib.models.recorded_model.recorded`); else ``model``."""
+    if not setup.is_fmu or history is None:
+        return model
+    from calib.models.recorded_model import recorded
+
+    chunk = max(int(getattr(executor, "workers", 1) or 1), 1)
+    return recorded(model, history, "design", chunk, progress=progress)
 
 
 def _posterior_of(rdir, names, scale):
