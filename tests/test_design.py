@@ -210,6 +210,8 @@ def test_cli_designs_from_a_native_bem_workflow(tmp_path, capsys):
     (["--budget", "5", "--grid", "tsr=2:9:0.5;pitch=-2:8:2"], "outside the operating envelope"),
     (["--budget", "5", "--sensors", "hub,strain_gauge"], "sensor group 'strain_gauge'"),
     (["--budget", "5", "--fixed", "3.1,0.5"], "is not a candidate"),
+    (["--budget", "5", "--discrepancy", "1:x"], "expected SCALE[:LENGTH]"),
+    (["--budget", "5", "--resume"], "--resume is for an FMU"),
 ])
 def test_cli_errors(args, message, tmp_path, capsys):
     assert main(["design", str(WORKFLOW), "--out", str(tmp_path / "d")] + args) == 2
@@ -265,12 +267,22 @@ def test_cli_designs_through_the_bundled_fmu(tmp_path, capsys):
     out = tmp_path / "fmu"
     assert main(["design", str(ROOT / "workflows" / "bundled_fmu.toml"), "--budget", "4", "--points", "4x2",
                  "--out", str(out)]) == 0
-    assert "chosen by Bayesian D-optimality from 8 candidates" in capsys.readouterr().out
+    assert "chosen by Bayesian D-optimality with a model discrepancy (κ 1, ℓ 0.25) from 8 candidates" in \
+        capsys.readouterr().out
     with open(out / "parameters.csv") as fh:
         prm = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     assert len(prm) == 16
     assert all(float(r["sigma_design"]) <= float(r["sigma_prior"]) * (1 + 1e-9) for r in prm)
     assert any(float(r["sigma_design"]) < 0.5 * float(r["sigma_prior"]) for r in prm)
+    # the sensitivities were recorded in out/history: a rerun with --resume simulates nothing and designs the same
+    with open(out / "test_matrix.csv") as fh:
+        first = fh.read()
+    assert main(["design", str(ROOT / "workflows" / "bundled_fmu.toml"), "--budget", "4", "--points", "4x2",
+                 "--out", str(out), "--resume"]) == 0
+    text = capsys.readouterr().out
+    assert "model calls: 0 computed" in text and "resuming from" in text
+    with open(out / "test_matrix.csv") as fh:
+        assert fh.read() == first
 
 
 def test_sensor_groups_parse_costs_stations_and_taps():

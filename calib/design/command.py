@@ -49,9 +49,14 @@ def add_design_parser(sub):
                    "envelope (kept), the rest chosen by the criterion (default 0)")
     p.add_argument("--between-nodes", action="store_true", help="add the variance of the correction field "
                    "between and beyond the nodes (its smooth-field prior) to the candidates' noise")
+    p.add_argument("--discrepancy", default="1:0.25", help="a smooth model discrepancy over the operating plane "
+                   "in the criterion, SCALE[:LENGTH]: its sigma relative to the noise and its correlation length as a "
+                   "fraction of the envelope (default 1:0.25), so that the points spread; none: trust the model's form")
     p.add_argument("--draws", type=int, default=0, help="pseudo-Bayesian: average the criterion over this many "
                    "prior draws of the correction field too (default 0: at the linearization point only)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --draws (default 0)")
+    p.add_argument("--resume", action="store_true", help="an FMU's design: answer the model calls on record in "
+                   "OUT/history (of a killed or finished run with the same inputs) instead of simulating them again")
     return p
 
 
@@ -98,6 +103,7 @@ def _counts(text):
 def _design(args, problem, n_tsr, n_pitch):
     from calib.design import design
     from calib.design.candidates import check_inside, user_grid
+    from calib.design.discrepancy import parse_discrepancy
 
     env = problem.envelope
     candidates = user_grid(_grid_spec(args.grid, "--grid"), env, "--grid") if args.grid else None
@@ -107,12 +113,39 @@ def _design(args, problem, n_tsr, n_pitch):
     fixed = _fixed(args.fixed, env) if args.fixed else None
     params = [s.strip() for s in args.parameters.split(",") if s.strip()] if args.parameters else None
     return design(problem, args.budget, candidates, fixed, args.criterion, params, targets, args.repeats,
-                  n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed, cover=args.cover)
+                  n_tsr=n_tsr, n_pitch=n_pitch, draws=args.draws, seed=args.seed, cover=args.cover,
+                  discrepancy=parse_discrepancy(args.discrepancy))
+
+
+def _history(args, wf: Path, out: Path, printer):
+    """An FMU workflow's run history in OUT/history (:func:`calib.history.open_history`): new, or with
+    ``--resume`` reopened, refused when the workflow's inputs changed; None for the native BEM (its
+    sensitivities are one cheap call)."""
+    from calib.history import open_history
+    from calib.workflow.schema import load_workflow
+    from calib.workflow.setup import prepare, run_inputs
+
+    workflow = load_workflow(wf)
+    if not prepare(workflow).is_fmu:
+        if args.resume:
+            raise InputError("--resume is for an FMU's design (the native BEM's sensitivities are not recorded)",
+                             "--resume", field="resume")
+        return None
+    out.mkdir(parents=True, exist_ok=True)
+    arguments = {k: v for k, v in sorted(vars(args).items()) if k not in ("resume", "out", "func", "command")
+                 and isinstance(v, (str, int, float, bool, type(None)))}
+    hist = open_history(out, {"command": "design", "workflow": str(wf.resolve()), "arguments": arguments,
+                              "inputs": run_inputs(workflow)}, args.resume)
+    hist.event("start", resumed=args.resume, records=hist.n_records)
+    if args.resume:
+        printer(f"[calib design] resuming from {hist.folder}: {hist.n_records} model calls on record")
+    return hist
 
 
 def run_design(args, printer=print) -> int:
     from calib.design import problem_from_workflow
     from calib.design.report import paragraph, write_outputs
+    from calib.logs import progress_line
 
     if args.budget <= 0:
         raise InputError(f"--budget must be a whole number of points > 0, got {args.budget}", "--budget",
@@ -123,13 +156,17 @@ def run_design(args, printer=print) -> int:
         raise InputError(f"no such workflow file: {wf}", "WORKFLOW", field="workflow")
     t0 = time.process_time()
     sensors = [s for s in args.sensors.split(",") if s.strip()] if args.sensors else None
-    problem = problem_from_workflow(wf, sensors=sensors, after=args.after,
-                                    between_nodes=args.between_nodes)
+    out = Path(args.out) if args.out else wf.parent / "design"
+    hist = _history(args, wf, out, printer)
+    problem = problem_from_workflow(wf, sensors=sensors, after=args.after, between_nodes=args.between_nodes,
+                                    history=hist, progress=progress_line if hist is not None else None)
     try:
         res = _design(args, problem, n_tsr, n_pitch)
     finally:
         problem.close()
-    out = Path(args.out) if args.out else wf.parent / "design"
+    if hist is not None:
+        hist.event("finished", computed=hist.computed, replayed=hist.replayed)
+        printer(f"[calib design] model calls: {hist.calls_sentence()}")
     paths = write_outputs(res, out)
     printer(paragraph(res))
     printer(f"[calib design] {len(res.ok)} candidates, sensitivities {res.seconds['sensitivities']:.1f} s CPU, "

@@ -8,21 +8,27 @@ space-filling design of the same size.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from calib.design import candidates as cand
+from calib.design.bound import relaxed_logdet_bound
 from calib.design.criteria import a_criterion, d_criterion, determined_directions
+from calib.design.discrepancy import Discrepancy, augment, basis
 from calib.design.problem import DesignProblem
 from calib.design.select import Selection, precision, select
 from calib.errors import InputError
 from calib.types import OperatingConditions
 
-__all__ = ["DesignResult", "design", "CRITERIA"]
+__all__ = ["DesignResult", "design", "CRITERIA", "DEFAULT_DISCREPANCY"]
 
 CRITERIA = ("d", "a", "prediction")
+
+#: The default discrepancy: as large as the noise, correlated over a quarter of the envelope.
+DEFAULT_DISCREPANCY = Discrepancy(1.0, 0.25)
 
 
 @dataclass
@@ -43,12 +49,17 @@ class DesignResult:
     s_design, s_full, s_uniform : ndarray
         Singular values of the prior-whitened sensitivities (s > 1: determined by the data).
     logdet : dict
-        log det of the whitened precision: design, full, uniform, greedy (before exchange) [-].
+        log det of the whitened precision: design, full, uniform, greedy (before exchange), and ``bound``,
+        the most any design of the budget's distinct points can reach (:mod:`calib.design.bound`; without
+        fixed points or repeats) [-].
     uniform : ndarray of int
         The space-filling design of the same size.
     criterion : str
     seconds : dict
         CPU seconds (time.process_time) of the sensitivities and of the selection [s].
+    logdet_curve : ndarray
+        log det of the parameters' whitened precision after each greedy point (the information curve,
+        whatever the criterion; ``selection.greedy_order`` names the points) [-].
     """
 
     problem: DesignProblem
@@ -71,6 +82,7 @@ class DesignResult:
     H: np.ndarray = field(repr=False, default=None)
     robustness: dict = field(default_factory=dict)
     cover: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    logdet_curve: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_determined(self) -> dict:
@@ -102,7 +114,10 @@ def _sigma(problem: DesignProblem, A: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(np.einsum("ij,ij->i", LA, problem.L), 0.0, None)) * problem.scale
 
 
-def _criterion(kind, problem, parameters, targets):
+def _criterion(kind, problem, parameters, targets, disc=None):
+    """The criterion on the whitened parameters, or on the parameters and the discrepancy's coefficients
+    (zero weight on the coefficients for A; the true response, model plus discrepancy, for prediction)."""
+    extra = 0 if disc is None else disc[1]
     if kind == "d":
         return d_criterion()
     if kind == "a":
@@ -118,9 +133,12 @@ def _criterion(kind, problem, parameters, targets):
         idx = [problem.names.index(q) for q in parameters]
         # posterior variance over prior variance of each named parameter: C = Lᵀ e_j / σ_prior,j
         Lt = problem.L.T[:, idx]
-        return a_criterion(Lt / np.linalg.norm(Lt, axis=0), f"A-optimality on {', '.join(parameters)}")
+        C = np.vstack([Lt / np.linalg.norm(Lt, axis=0), np.zeros((extra, len(idx)))])
+        return a_criterion(C, f"A-optimality on {', '.join(parameters)}")
     if kind == "prediction":
         Ht, ok = problem.blocks(targets)
+        if disc is not None:
+            Ht = augment(Ht, basis(targets, problem.envelope, disc[0]), disc[0])
         T = Ht[ok].reshape(-1, Ht.shape[-1]).T             # (n, n_targets·m): prediction variance over noise variance
         return a_criterion(T, f"prediction variance at {int(ok.sum())} target points")
     raise InputError(f"unknown criterion {kind!r}; expected one of {', '.join(CRITERIA)}", "--criterion",
@@ -131,7 +149,7 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
            fixed: OperatingConditions | None = None, criterion: str = "d", parameters=None,
            targets: OperatingConditions | None = None, max_repeats: int = 1, n_tsr: int = 25, n_pitch: int = 16,
            n_rotor_speed: int = 1, curve_to: int | None = None, draws: int = 0, seed: int = 0,
-           cover: int = 0) -> DesignResult:
+           cover: int = 0, discrepancy: Discrepancy | None = DEFAULT_DISCREPANCY) -> DesignResult:
     """Choose ``budget`` operating points for a campaign.
 
     Parameters
@@ -162,6 +180,12 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
         With draws > 0, the pseudo-Bayesian design: the criterion averaged over the linearization point
         and ``draws`` prior draws of the correction field (seeded by ``seed``), each with its own
         sensitivities; ``robustness`` then says how the locally optimal design at each draw differs.
+    discrepancy : Discrepancy or None
+        A smooth model discrepancy over the operating plane (:mod:`calib.design.discrepancy`; default
+        as large as the noise, correlated over a quarter of the envelope): the criterion acts on the
+        parameters and the discrepancy's coefficients together, so that neighbouring points stop
+        counting as independent and the design spreads over the envelope. None: the model's form trusted. The reported σ, log det and directions stay
+        those of the parameters under the model's own form.
 
     Returns
     -------
@@ -189,11 +213,11 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
                          + (f"; {len(ok) - usable} failed" if usable < len(ok) else "") + ")", "--budget",
                          field="budget")
     fixed_idx, cover_idx = _fixed_indices(fixed, candidates, ok, env, budget, cover)
-    crit = _criterion(criterion, problem, parameters, targets if targets is not None else candidates.subset(
-        np.flatnonzero(ok)))
+    H_crit, H_draws, crit, disc = _with_discrepancy(problem, candidates, H, H_draws, ok, discrepancy, criterion,
+                                                    parameters, targets)
     t1 = time.process_time()
     usable_idx = np.flatnonzero(ok)
-    Hu = H[usable_idx]
+    Hu = H_crit[usable_idx]
     where = {int(j): k for k, j in enumerate(usable_idx)}
     curve = curve_to if curve_to is not None else min(2 * budget, usable * max_repeats)
     fixed_u = [where[int(i)] for i in fixed_idx]
@@ -202,20 +226,54 @@ def design(problem: DesignProblem, budget: int, candidates: OperatingConditions 
     robust = _robustness(crit, H_sel, sel.design, budget, fixed_u, max_repeats) if H_draws else {}
     t_sel = time.process_time() - t1
     sel.design = usable_idx[sel.design]
+    sel.greedy_order = usable_idx[sel.greedy_order]
     chosen = sel.design
     uniform = usable_idx[cand.space_filling(candidates.subset(usable_idx), env.radius, budget)]
     A_d, A_f, A_u = precision(H, chosen), precision(H, usable_idx), precision(H, uniform)
     logdet = {k: float(np.linalg.slogdet(A)[1]) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
-    logdet["greedy"] = float(np.linalg.slogdet(precision(Hu, np.concatenate(
-        [[where[int(i)] for i in fixed_idx], np.zeros(0, int)]).astype(int)))[1] + np.sum(
-        sel.greedy_gains[:budget - fixed_idx.size])) if crit.kind == "d" and not H_draws else float("nan")
+    logdet["greedy"] = float(np.linalg.slogdet(precision(Hu, np.array([where[int(i)] for i in fixed_idx], int)))[1]
+                             + np.sum(sel.greedy_gains[:budget - fixed_idx.size])) \
+        if crit.kind == "d" and not H_draws and disc is None else float("nan")
     n = H.shape[-1]
+    curve = _logdet_curve(H, fixed_idx, sel.greedy_order)
+    if fixed_idx.size == 0 and max_repeats == 1:
+        logdet["bound"] = relaxed_logdet_bound(H[usable_idx], budget, start=[where[int(i)] for i in chosen],
+                                               iterations=100)["bound"]
     F = {k: A - np.eye(n) for k, A in (("design", A_d), ("full", A_f), ("uniform", A_u))}
     return DesignResult(problem, candidates, ok, chosen, fixed_idx, sel, _sigma(problem, np.eye(n)),
                         _sigma(problem, A_d), _sigma(problem, A_f), _sigma(problem, A_u),
                         determined_directions(F["design"]), determined_directions(F["full"]),
                         determined_directions(F["uniform"]), logdet, uniform, crit.name,
-                        {"sensitivities": t_sens, "selection": t_sel}, H, robust, cover_idx)
+                        {"sensitivities": t_sens, "selection": t_sel}, H, robust, cover_idx, curve)
+
+
+def _with_discrepancy(problem, candidates, H, H_draws, ok, discrepancy, criterion, parameters, targets):
+    """The blocks the criterion acts on (with the discrepancy's columns when given), the draws' blocks, the
+    criterion, and (discrepancy, its number of coefficients) or None."""
+    if discrepancy is not None:
+        phi = basis(candidates, problem.envelope, discrepancy)
+        H_crit = augment(H, phi, discrepancy)
+        H_draws = [(augment(Hk, phi, discrepancy), okk) for Hk, okk in H_draws]
+        disc = (discrepancy, H_crit.shape[-1] - H.shape[-1])
+    else:
+        H_crit, disc = H, None
+    crit = _criterion(criterion, problem, parameters, targets if targets is not None else candidates.subset(
+        np.flatnonzero(ok)), disc)
+    if disc is not None:
+        crit = dataclasses.replace(crit, name=f"{crit.name} with a model discrepancy (κ {discrepancy.scale:g}, "
+                                              f"ℓ {discrepancy.length:g})")
+    return H_crit, H_draws, crit, disc
+
+
+def _logdet_curve(H, fixed_idx, order) -> np.ndarray:
+    """log det of the parameters' whitened precision (the model's form) after the fixed points and each
+    greedy point in turn, shape (len(order),) [-]."""
+    A = precision(H, fixed_idx)
+    out = np.empty(len(order))
+    for k, j in enumerate(order):
+        A = A + H[j].T @ H[j]
+        out[k] = np.linalg.slogdet(A)[1]
+    return out
 
 
 def _fixed_indices(fixed, candidates, ok, env, budget, cover):

@@ -53,12 +53,11 @@ def gain_figure(res) -> Figure:
     ax.set_xlabel("points in the design")
     ax.set_ylabel("criterion gain [-]")
     ax.grid(alpha=0.3)
-    if res.selection.greedy_gains.size and np.isfinite(res.logdet.get("full", np.nan)) and res.logdet["full"] > 0 \
-            and np.isfinite(res.logdet.get("greedy", np.nan)):
+    curve = res.logdet_curve
+    if curve.size and np.isfinite(res.logdet.get("full", np.nan)) and res.logdet["full"] > 0:
         ax2 = ax.twinx()
-        base = res.logdet["greedy"] - np.sum(g[:len(res.design) - n0])
-        ax2.plot(k, 100 * (base + np.cumsum(g)) / res.logdet["full"], "-", color="C1",
-                 label="log det, % of the full candidate set")
+        ax2.plot(k[:curve.size], 100 * curve / res.logdet["full"], "-", color="C1",
+                 label="log det of the parameters, % of the full candidate set")
         ax2.set_ylabel("% of the full set's log det")
         ax2.legend(fontsize=7.5, loc="center right")
     ax.legend(fontsize=7.5, loc="upper right")

@@ -160,8 +160,8 @@ def _relative_levels(workflow, setup, channels, notes) -> dict:
     return {c: float(v) if v is not None else fill for c, v in rel.items()}
 
 
-def problem_from_workflow(path, sensors=None, after=None, executor=None, between_nodes: bool = False
-                          ) -> DesignProblem:
+def problem_from_workflow(path, sensors=None, after=None, executor=None, between_nodes: bool = False,
+                          effects=(), history=None, progress=None) -> DesignProblem:
     """The design problem of a workflow file.
 
     Parameters
@@ -179,6 +179,15 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
     between_nodes : bool
         Add the variance of the correction field between and beyond the nodes to the candidates' noise
         (native BEM with a correction grid and ``prior_correlation`` > 0).
+    effects : sequence, optional
+        Effects the native BEM carries (e.g. those a ``[diagnosis]`` named,
+        :func:`calib.diagnosis.in_workflow.named_effect_specs`), their parameters estimated too.
+    history : History, optional
+        For an FMU: every model call (the sensitivities in chunks of the executor's workers' points) is
+        written to this run history and, when it resumes a killed or finished design, answered from it
+        (:func:`calib.models.recorded_model.recorded`): a rerun simulates nothing it has on record.
+    progress : callable(done, total, label), optional
+        For an FMU: called after each chunk of points (e.g. :func:`calib.logs.progress_line`).
     """
     from calib.calibration.calibrator import Calibrator
     from calib.calibration.map_fit import MapFit
@@ -201,7 +210,8 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         from calib.models.from_config import executor_of
         executor = own = executor_of(setup.executor, src)
     try:
-        model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor))
+        model, channels = check_groups(groups, lambda ch: setup.model(grid, ch, executor, effects))
+        model = _recorded(model, setup, executor, history, progress)
         ev = model.evaluate(np.array([q.nominal for q in model.parameters], float), reference)
         if not np.any(ev.ok):
             raise InputError("the nominal model fails at every data point of the workflow", src, field="model")
@@ -236,6 +246,17 @@ def problem_from_workflow(path, sensors=None, after=None, executor=None, between
         if own is not None:
             own.close()
         raise
+
+
+def _recorded(model, setup, executor, history, progress):
+    """An FMU's model with its calls recorded in ``history`` in chunks of the executor's workers' points (a
+    kill loses at most one chunk; :func:`calib.models.recorded_model.recorded`); else ``model``."""
+    if not setup.is_fmu or history is None:
+        return model
+    from calib.models.recorded_model import recorded
+
+    chunk = max(int(getattr(executor, "workers", 1) or 1), 1)
+    return recorded(model, history, "design", chunk, progress=progress)
 
 
 def _posterior_of(rdir, names, scale):

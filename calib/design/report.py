@@ -67,7 +67,11 @@ def summary(res) -> dict:
     n = len(res.design)
     gains = sel.greedy_gains
     k_next = n - res.fixed.size
-    nxt = float(gains[k_next]) if gains.size > k_next else None
+    curve = res.logdet_curve
+    # the next point's gain of the parameters' log det along the greedy order (the criterion's own gain
+    # when the curve is short); with a discrepancy the criterion's gain also counts its coefficients
+    nxt = (float(curve[k_next] - curve[k_next - 1]) if 1 <= k_next < curve.size
+           else float(gains[k_next]) if gains.size > k_next else None)
     return {"workflow": pr.source, "criterion": res.criterion, "prior": pr.prior_from, "budget": n,
             "candidates": int(len(res.ok)), "candidates_failed": res.n_failed, "fixed": int(res.fixed.size),
             "distinct_points": int(np.unique(res.design).size), "envelope": pr.envelope.words(),
@@ -77,9 +81,22 @@ def summary(res) -> dict:
             "next_point_gain": nxt, "next_point_gain_percent": (100 * nxt / res.logdet["design"]
                                                                  if nxt is not None and res.logdet["design"] > 0
                                                                  else None),
-            "greedy_gains": gains.tolist(), "exchanges": sel.exchanges, "exchange_passes": sel.passes,
+            "greedy_gains": gains.tolist(), "greedy_order": [int(j) + 1 for j in sel.greedy_order],
+            "logdet_curve": res.logdet_curve.tolist(), "points_for_90_percent_of_full": _points_for(res, 0.9),
+            "bound_share_of_full": (res.logdet["bound"] / res.logdet["full"] if "bound" in res.logdet
+                                    and res.logdet["full"] > 0 else None),
+            "exchanges": sel.exchanges, "exchange_passes": sel.passes,
             "cpu_seconds": res.seconds, "notes": pr.notes, "group_values": group_values(res),
             "robustness": res.robustness}
+
+
+def _points_for(res, share: float):
+    """Points of the greedy sequence after which the parameters' log det reaches ``share`` of the full
+    set's (None if the curve does not reach it)."""
+    c = res.logdet_curve
+    if not c.size or not res.logdet["full"] > 0 or not np.any(c >= share * res.logdet["full"]):
+        return None
+    return int(res.fixed.size + np.argmax(c >= share * res.logdet["full"]) + 1)
 
 
 def paragraph(res) -> str:
@@ -96,6 +113,13 @@ def paragraph(res) -> str:
         words.append(f"They carry {100 * s['gain_fraction_of_full']:.0f} % of the full set's information "
                      f"(log det {res.logdet['design']:.1f} of {res.logdet['full']:.1f}; space-filling "
                      f"{res.logdet['uniform']:.1f}).")
+        if s["bound_share_of_full"] is not None:
+            words.append(f"No design of {n} points can carry more than {100 * s['bound_share_of_full']:.0f} % (a "
+                         "bound from the continuous relaxation).")
+        n90 = s["points_for_90_percent_of_full"]
+        words.append(f"90 % of the full set's information takes {n90} points in the greedy order." if n90 else
+                     f"The greedy curve ({res.logdet_curve.size + res.fixed.size} points) does not reach 90 % of "
+                     "the full set's information.")
     if s["next_point_gain_percent"] is not None:
         words.append(f"Point {n + 1} would add {s['next_point_gain_percent']:.1f} % to the design's log det.")
     ratio = res.sigma_design / np.where(res.sigma_prior > 0, res.sigma_prior, np.inf)

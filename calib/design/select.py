@@ -43,6 +43,8 @@ class Selection:
         asked (the marginal-gain curve; may run past the budget) [-].
     greedy_value : float
         The criterion after the greedy part at the budget, before exchange [-].
+    greedy_order : ndarray of int
+        The candidate added at each greedy step (as many as ``greedy_gains``).
     exchanges : int
         Points the exchange replaced.
     passes : int
@@ -53,6 +55,7 @@ class Selection:
     value: float
     greedy_gains: np.ndarray
     greedy_value: float
+    greedy_order: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     exchanges: int = 0
     passes: int = 0
     notes: list = field(default_factory=list)
@@ -101,8 +104,8 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
     fixed = [int(i) for i in fixed]
     counts = np.bincount(np.asarray(fixed, int), minlength=n_c) if fixed else np.zeros(n_c, int)
     steps = min(max(budget, curve_to or 0), n_c * max_repeats) - len(fixed)
-    design, counts, Ainv, value, gains = _greedy(criterion, H, budget, fixed, counts, max_repeats, steps)
-    out = Selection(np.array(design, int), value, np.array(gains), value)
+    design, counts, Ainv, value, gains, order = _greedy(criterion, H, budget, fixed, counts, max_repeats, steps)
+    out = Selection(np.array(design, int), value, np.array(gains), value, np.array(order, int))
     if exchange:
         _exchange(criterion, H, out, design, counts, Ainv, len(fixed), max_repeats, max_passes)
     return out
@@ -110,11 +113,11 @@ def select(criterion: Criterion, H: np.ndarray, budget: int, fixed=(), max_repea
 
 def _greedy(criterion, H, budget, fixed, counts, max_repeats, steps):
     """Forward selection from ``fixed``: the design, counts and A⁻¹ at ``budget`` points, the
-    criterion there, and the gains of all ``steps`` points added."""
+    criterion there, and the gains and candidates of all ``steps`` points added."""
     A = precision(H, fixed)
     Ainv = np.linalg.inv(A)
     value = criterion.value(A, Ainv)
-    design, gains = list(fixed), []
+    design, gains, order = list(fixed), [], []
     kept = (list(design), counts.copy(), Ainv.copy(), value)
     for _ in range(max(steps, 0)):
         g = criterion.gains(Ainv, H)
@@ -127,9 +130,10 @@ def _greedy(criterion, H, budget, fixed, counts, max_repeats, steps):
         Ainv = woodbury(Ainv, H[..., c, :, :])
         value += float(g[c])
         gains.append(float(g[c]))
+        order.append(c)
         if len(design) == budget:
             kept = (list(design), counts.copy(), Ainv.copy(), value)
-    return (*kept, gains)
+    return (*kept, gains, order)
 
 
 def _exchange(criterion, H, out, design, counts, Ainv, n_fixed, max_repeats, max_passes):

@@ -1,0 +1,158 @@
+"""Campaign design on real sensors: which of the five Phase VI pressure-tap stations to add to the hub loads.
+
+The data: ``workflows/phase_vi.toml`` (NREL Phase VI sequence H, six wind speeds 7-25 m/s at 72 rpm:
+torque, thrust and the tap coefficients c_n, c_t at r/R = 0.30, 0.47, 0.63, 0.80, 0.95). The model:
+the workflow's native BEM with the effect its diagnosis names (run once here), its prior and its
+stated noise fractions.
+
+1. *The design's choice.* :func:`calib.design.groups.subset_scores` scores every choice of k of the five
+   stations (k = 1, 2, 3; the hub loads always): the held-out prediction variance of torque and thrust
+   (one wind speed left out at a time, model plus the default discrepancy), and the D_s value of the
+   parameters. The design picks the subset with the smallest held-out variance (the check below is a
+   held-out prediction). Nothing measured enters this step.
+2. *Realized.* Every subset's calibration (hub loads plus its taps) validated as the workflow validates
+   it: :func:`calib.workflow.validation.leave_one_out` over the wind speeds, torque and thrust predicted at
+   the speed left out. Score: the mean over torque and thrust of the mean |error| calibrated over the
+   nominal model's (smaller is better).
+3. *Agreement.* Per k, the design's pick against the median subset (a random choice of k stations is
+   each subset with equal probability, so its median score is the median over subsets), and the
+   Spearman rank correlation of the design's scores with the realized ones (over the 5, 10 and 10
+   subsets).
+
+``python benchmarks/bench_design_phase_vi.py`` (26 leave-one-out validations of six folds each).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from itertools import combinations
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, ROOT)
+
+from calib.design import problem_from_workflow  # noqa: E402
+from calib.design.core import DEFAULT_DISCREPANCY  # noqa: E402
+from calib.design.groups import subset_scores  # noqa: E402
+from calib.diagnosis.core import diagnose  # noqa: E402
+from calib.diagnosis.in_workflow import named_effect_specs  # noqa: E402
+from calib.measurements import read_measurements  # noqa: E402
+from calib.workflow import load_workflow, prepare  # noqa: E402
+from calib.workflow.validation import ValidationSettings, leave_one_out  # noqa: E402
+
+SUITE = "validate"
+WORKFLOW = os.path.join(ROOT, "workflows", "phase_vi.toml")
+STATIONS = ("0.30", "0.47", "0.63", "0.80", "0.95")
+HUB = ("torque", "thrust")
+
+
+def spearman(a, b) -> float:
+    """Spearman's rank correlation of two score lists (average ranks for ties) [-]."""
+    from scipy.stats import spearmanr
+
+    return float(spearmanr(a, b).statistic)
+
+
+def realized(setup, meas, grid, effects, stations) -> dict:
+    """Leave one wind speed out with the hub loads and the taps at ``stations``: torque and thrust."""
+    chans = list(HUB) + [f"{q}@{s}" for q in ("cn", "ct") for s in stations]
+    t = time.process_time()
+    val = leave_one_out(lambda: setup.model(grid, chans, None, effects), meas.select_channels(chans),
+                        setup.calibration, ValidationSettings("wind_speed", HUB))
+    out = {"stations": list(stations), "cpu_s": time.process_time() - t}
+    ratios = []
+    for ch in HUB:
+        s = val.summary(ch)
+        out[ch] = {k: s[k] for k in ("mean_abs_error_calibrated", "mean_abs_error_nominal", "inside", "folds",
+                                     "failed")}
+        ratios.append(s["mean_abs_error_calibrated"] / s["mean_abs_error_nominal"])
+    out["score"] = float(np.mean(ratios))
+    statuses = {}
+    for r in val.rows:
+        if r.channel == HUB[0]:
+            statuses[r.status] = statuses.get(r.status, 0) + 1
+    out["statuses"] = statuses
+    print(f"[design-phase-vi] hub + taps {', '.join(stations) or 'none'}: torque "
+          f"{out['torque']['mean_abs_error_calibrated']:.0f} N m, thrust {out['thrust']['mean_abs_error_calibrated']:.0f}"
+          f" N (score {out['score']:.3f}, {out['cpu_s']:.0f} s CPU)", flush=True)
+    return out
+
+
+def run_bench() -> dict:
+    workflow = load_workflow(WORKFLOW)
+    setup = prepare(workflow)
+    meas = read_measurements(os.path.join(workflow.base_dir, workflow.measurements.file), setup.channels)
+    grid = setup.grid(meas.conditions)
+    dset, _ = setup.diagnosis
+    t = time.process_time()
+    diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration, dset, rotor_source=setup.rotor_spec)
+    effects = named_effect_specs(diag, skip=setup.nuisance)
+    print(f"[design-phase-vi] diagnosis names {diag.effects} ({time.process_time() - t:.0f} s CPU)", flush=True)
+    problem = problem_from_workflow(WORKFLOW, sensors=list(HUB) + [f"taps@{s}" for s in STATIONS], effects=effects)
+    cond = meas.conditions
+    t = time.process_time()
+    design = {k: subset_scores(problem, cond, k, always=HUB, targets=HUB, discrepancy=DEFAULT_DISCREPANCY)
+              for k in (1, 2, 3)}
+    plain = {k: subset_scores(problem, cond, k, always=HUB, targets=HUB) for k in (1, 2, 3)}
+    t_design = time.process_time() - t
+    base = realized(setup, meas, grid, effects, ())
+    every = realized(setup, meas, grid, effects, STATIONS)
+    out = {"named": list(diag.effects), "parameters": len(problem.names), "points": len(cond),
+           "design_cpu_s": t_design, "hub_only": base, "all_five": every, "k": {}}
+    for k in (1, 2, 3):
+        subsets = list(combinations(STATIONS, k))
+        real = [realized(setup, meas, grid, effects, s) for s in subsets]
+        score = np.array([r["score"] for r in real])
+        var = np.array([d["heldout_variance"] for d in design[k]])
+        ds = np.array([d["logdet"] for d in design[k]])
+        var_plain = np.array([d["heldout_variance"] for d in plain[k]])
+        pick = int(np.argmin(var))
+        best = int(np.argmin(score))
+        out["k"][str(k)] = {
+            "subsets": [" + ".join(s) for s in subsets], "realized": real, "score": score.tolist(),
+            "heldout_variance": var.tolist(), "ds_logdet": ds.tolist(), "heldout_variance_plain": var_plain.tolist(),
+            "design_pick": " + ".join(subsets[pick]), "design_pick_score": float(score[pick]),
+            "median_score": float(np.median(score)), "best": " + ".join(subsets[best]), "best_score": float(score[best]),
+            "pick_rank": int(np.sum(score < score[pick])) + 1,
+            "pick_at_least_median": bool(score[pick] <= np.median(score)),
+            "spearman_heldout_variance": spearman(var, score), "spearman_ds": spearman(-ds, score),
+            "spearman_heldout_variance_plain": spearman(var_plain, score)}
+    return out
+
+
+def markdown(out: dict) -> str:
+    rows = [f"NREL Phase VI sequence H ({out['points']} wind speeds), the workflow's model with the named effect "
+            f"({', '.join(out['named']) or 'none'}; {out['parameters']} parameters). Score: the mean over torque and "
+            "thrust of the held-out mean |error| calibrated over the nominal model's, one wind speed left out at a time "
+            f"(hub loads alone {out['hub_only']['score']:.3f}, with all five stations {out['all_five']['score']:.3f}).",
+            "", "| k | design's pick (r/R) | its score | median subset | best subset (score) | rank of the pick | "
+            "Spearman: held-out variance, D_s |", "|---|---|---|---|---|---|---|"]
+    for k, r in out["k"].items():
+        rows.append(f"| {k} | {r['design_pick']} | {r['design_pick_score']:.3f} | {r['median_score']:.3f} | "
+                    f"{r['best']} ({r['best_score']:.3f}) | {r['pick_rank']} of {len(r['score'])} | "
+                    f"{r['spearman_heldout_variance']:.2f}, {r['spearman_ds']:.2f} |")
+    r1 = out["k"]["1"]
+    rows += ["", "Single stations (k = 1): held-out prediction variance the design predicts [σ²] and the realized "
+             "score:", "", "| station r/R | predicted variance | D_s | realized score | torque / thrust error [N m, N] |",
+             "|---|---|---|---|---|"]
+    for name, v, d, real in zip(r1["subsets"], r1["heldout_variance"], r1["ds_logdet"], r1["realized"]):
+        rows.append(f"| {name} | {v:.3g} | {d:.1f} | {real['score']:.3f} | "
+                    f"{real['torque']['mean_abs_error_calibrated']:.0f} / {real['thrust']['mean_abs_error_calibrated']:.0f} |")
+    return "\n".join(rows) + "\n"
+
+
+def run() -> dict:
+    """Entry point of ``benchmarks/run_all.py``: the study, published for the validation page."""
+    from publish import command_line, publish
+
+    out = run_bench()
+    publish("design_phase_vi", out, command_line(), markdown(out))
+    return out
+
+
+if __name__ == "__main__":
+    print(markdown(run()))
