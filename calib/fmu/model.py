@@ -24,8 +24,9 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 and ψ the azimuth of blade 1 (0 = up).
 
 Jacobians: finite differences (central by default, or forward), cold or warm-started from the
-settled base state, as :mod:`calib.fmu.differences` says; a base run already simulated at the
-same point and parameters is reused (:mod:`calib.fmu.base_runs`); what the simulations cost is
+settled base state, as :mod:`calib.fmu.differences` says; a cold run (base or perturbed) already
+simulated at the same point and parameter values, by this model or another of the same plan, is reused
+(:mod:`calib.fmu.base_runs`); what the simulations cost is
 counted (:meth:`FmuModel.simulation_summary`).
 """
 
@@ -239,13 +240,15 @@ class FmuModel:
         fills their results), the others run on the executor with the adaptive timeout."""
         run, results = self._faults.plan(tasks, p, len(self._plan.signals))
         policy = self._faults.policy()
-        send, self._tally.reused = self.base_runs.split(self._plan.key, tasks, run, results, self._tally.reused,
-                                                        cold=not (self.warm_start and self.can_get_state))
+        cold, canon = not (self.warm_start and self.can_get_state), self._params.canonical
+        send, n_base, n_runs = self.base_runs.split(self._plan.key, tasks, run, results, cold, canon)
+        self._tally.reused += n_base
+        self._tally.reused_perturbed += n_runs
         jobs = [(self._plan, tasks[k], self.isolate, policy) for k in send]
         done = self._tally.timed_map(self.executor, fw.run_point, jobs, self.progress)
         for k, r in zip(send, done):
             results[k] = r
-            self.base_runs.put(self._plan.key, tasks[k], r.base)
+            self.base_runs.put_result(self._plan.key, tasks[k], r, cold, canon)
         self._faults.record(tasks, results, run, p, conditions)
         return results
 

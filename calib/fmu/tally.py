@@ -29,6 +29,8 @@ class SimulationTally:
         Runs made (base and perturbed runs; quarantined points are not simulated).
     reused : int
         Base runs not simulated again: their outcome was known (:mod:`calib.fmu.base_runs`).
+    reused_perturbed : int
+        Perturbed runs not simulated again (cold runs at the same point and parameter values known).
     simulated_s : float
         Model time simulated, settling included [s].
     busy_s : float
@@ -43,6 +45,7 @@ class SimulationTally:
     tasks: int = 0
     simulations: int = 0
     reused: int = 0
+    reused_perturbed: int = 0
     simulated_s: float = 0.0
     busy_s: float = 0.0
     wall_s: float = 0.0
@@ -78,7 +81,7 @@ class SimulationTally:
     def summary(self) -> dict:
         """Plain (JSON-able) dict: the attributes and ``parallel_efficiency``."""
         return {"calls": self.calls, "tasks": self.tasks, "simulations": self.simulations,
-                "reused_base_runs": self.reused,
+                "reused_base_runs": self.reused, "reused_perturbed_runs": self.reused_perturbed,
                 "simulated_s": self.simulated_s, "busy_worker_s": self.busy_s, "wall_s": self.wall_s,
                 "workers": self.workers, "parallel_efficiency": self.efficiency}
 
@@ -87,8 +90,10 @@ def tally_sentence(summary: dict) -> str:
     """One line of :meth:`SimulationTally.summary` for the report and the console."""
     eff = summary["parallel_efficiency"]
     reused = summary.get("reused_base_runs", 0)
+    perturbed = summary.get("reused_perturbed_runs", 0)
     return (f"{summary['simulations']} simulations ({summary['tasks']} points in {summary['calls']} calls"
-            + (f", {reused} base runs reused" if reused else "") + "), "
+            + (f", {reused} base runs reused" if reused else "")
+            + (f", {perturbed} perturbed runs reused" if perturbed else "") + "), "
             f"{summary['simulated_s']:.4g} s simulated, {summary['busy_worker_s']:.3g} s busy on "
             f"{summary['workers']} worker(s) in {summary['wall_s']:.3g} s wall: parallel efficiency "
             + ("n/a" if eff is None else f"{eff:.2f}"))
