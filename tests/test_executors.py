@@ -248,3 +248,24 @@ def _cold(make, base_runs=None, parameters=None):
                     corrections=False, switches=m._options["switches"], settings=m._options["settings"],
                     steady=m._options["steady"], jacobian=dict(warm_start=False), executor=SerialExecutor(),
                     base_runs=base_runs)
+
+
+def test_process_totals_add_every_model_call_and_reset():
+    """The process-wide tally (what a diagnosis benchmark reads) is the sum of the models' own tallies."""
+    from calib.fmu.plan import PointResult, RunOutcome
+    from calib.fmu.tally import SimulationTally, process_totals
+
+    def result(n_runs, busy):
+        run = RunOutcome(0, "", np.zeros(1), np.zeros((2, 1)), np.zeros((1, 3), complex), simulated=2.0)
+        return PointResult(0, run, [run] * (n_runs - 1), busy=busy)
+
+    process_totals(reset=True)
+    a, b = SimulationTally(), SimulationTally()
+    a.record([result(3, 0.5), result(1, 0.25)], 1.0, 2)
+    b.record([result(5, 1.0)], 2.0, 2)
+    t = process_totals()
+    assert (t["calls"], t["tasks"], t["simulations"]) == (2, 3, 9) == (a.calls + b.calls, a.tasks + b.tasks,
+                                                                         a.simulations + b.simulations)
+    assert t["simulated_s"] == pytest.approx(18.0) and t["busy_worker_s"] == pytest.approx(1.75)
+    assert t["parallel_efficiency"] == pytest.approx(1.75 / (3.0 * 2))
+    assert process_totals(reset=True)["simulations"] == 9 and process_totals()["simulations"] == 0

@@ -62,7 +62,9 @@ class SimulationTally:
 
     def record(self, results, wall: float, workers: int) -> None:
         """Add one executor call: its :class:`~calib.fmu.plan.PointResult` list, its wall time [s] and the
-        executor's worker count."""
+        executor's worker count (added to this process's :func:`process_totals` too)."""
+        if self is not _TOTALS:
+            _TOTALS.record(results, wall, workers)
         self.calls += 1
         self.tasks += len(results)
         self.wall_s += float(wall)
@@ -84,6 +86,19 @@ class SimulationTally:
                 "reused_base_runs": self.reused, "reused_perturbed_runs": self.reused_perturbed,
                 "simulated_s": self.simulated_s, "busy_worker_s": self.busy_s, "wall_s": self.wall_s,
                 "workers": self.workers, "parallel_efficiency": self.efficiency}
+
+
+_TOTALS = SimulationTally()
+
+
+def process_totals(reset: bool = False) -> dict:
+    """What every FMU model of this process simulated so far (all their executor calls), as
+    :meth:`SimulationTally.summary` (``reused_*`` are per model, not added here); with ``reset`` start
+    again from zero. For a benchmark that runs models it does not hold (e.g. a diagnosis)."""
+    out = _TOTALS.summary()
+    if reset:
+        _TOTALS.__init__()
+    return out
 
 
 def tally_sentence(summary: dict) -> str:
