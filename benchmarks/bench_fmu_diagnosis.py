@@ -161,7 +161,8 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                                  "simulations": sims[-1]})
                 print(f"[fmu diagnosis] {variant} {name} seed {k}: {d.effect} ({seconds[-1]:.0f} s; "
                       f"{sims[-1]['simulations']} simulations, {sims[-1]['simulated_s']:.4g} s simulated, "
-                      f"{sims[-1]['busy_worker_s']:.3g} s busy)", flush=True)
+                      f"{sims[-1]['busy_worker_s']:.3g} s busy; runs reused: {sims[-1]['reused_base_runs']} base, "
+                      f"{sims[-1]['reused_perturbed_runs']} perturbed)", flush=True)
             want = "none" if name == "control" else name
             right = sum(1 for v in verdicts if v["variant"] == variant and v["data_set"] == name and
                         (v["effect"] == want or (v["effect"] == "ambiguous" and want in v["ambiguous"])))

@@ -263,9 +263,11 @@ def test_process_totals_add_every_model_call_and_reset():
     a, b = SimulationTally(), SimulationTally()
     a.record([result(3, 0.5), result(1, 0.25)], 1.0, 2)
     b.record([result(5, 1.0)], 2.0, 2)
+    b.add_reused(4, 7)
     t = process_totals()
     assert (t["calls"], t["tasks"], t["simulations"]) == (2, 3, 9) == (a.calls + b.calls, a.tasks + b.tasks,
                                                                          a.simulations + b.simulations)
     assert t["simulated_s"] == pytest.approx(18.0) and t["busy_worker_s"] == pytest.approx(1.75)
     assert t["parallel_efficiency"] == pytest.approx(1.75 / (3.0 * 2))
+    assert (t["reused_base_runs"], t["reused_perturbed_runs"]) == (4, 7) == (b.reused, b.reused_perturbed)
     assert process_totals(reset=True)["simulations"] == 9 and process_totals()["simulations"] == 0

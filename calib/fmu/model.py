@@ -242,8 +242,7 @@ class FmuModel:
         policy = self._faults.policy()
         cold, canon = not (self.warm_start and self.can_get_state), self._params.canonical
         send, n_base, n_runs = self.base_runs.split(self._plan.key, tasks, run, results, cold, canon)
-        self._tally.reused += n_base
-        self._tally.reused_perturbed += n_runs
+        self._tally.add_reused(n_base, n_runs)
         jobs = [(self._plan, tasks[k], self.isolate, policy) for k in send]
         done = self._tally.timed_map(self.executor, fw.run_point, jobs, self.progress)
         for k, r in zip(send, done):

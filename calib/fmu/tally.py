@@ -75,6 +75,13 @@ class SimulationTally:
             self.simulated_s += sum(o.simulated for o in runs)
             self.busy_s += r.busy
 
+    def add_reused(self, base: int, perturbed: int) -> None:
+        """Count runs not simulated again (known outcomes, :mod:`calib.fmu.base_runs`), here and in
+        :func:`process_totals`."""
+        for t in ((self, _TOTALS) if self is not _TOTALS else (self,)):
+            t.reused += int(base)
+            t.reused_perturbed += int(perturbed)
+
     @property
     def efficiency(self) -> float | None:
         """Busy worker time / (wall time x workers) [-]; None before any call."""
@@ -93,7 +100,7 @@ _TOTALS = SimulationTally()
 
 def process_totals(reset: bool = False) -> dict:
     """What every FMU model of this process simulated so far (all their executor calls), as
-    :meth:`SimulationTally.summary` (``reused_*`` are per model, not added here); with ``reset`` start
+    :meth:`SimulationTally.summary`; with ``reset`` start
     again from zero. For a benchmark that runs models it does not hold (e.g. a diagnosis)."""
     out = _TOTALS.summary()
     if reset:
