@@ -26,7 +26,8 @@ control, the data set's parameter (or ``ambiguous`` with it) on the others.
 ``run(n_seeds=1)``: 47.6 min on the shared 2-core machine (2026-11-25; 2-3 min per control,
 7-15 min per named effect), every verdict right, variant B's figures equal to A's. Writes ``bench_output/fmu_diagnosis.json`` and ``.md`` and publishes the table for the validation page
 (``docs/validation/data/diagnosis_fmu.json``); two worker
-processes per diagnosis.
+processes per diagnosis. Each diagnosis also states its FMU simulations (count, model time simulated, busy
+worker seconds: :func:`calib.fmu.tally.process_totals`), the figure to compare across machines.
 """
 
 from __future__ import annotations
@@ -125,6 +126,7 @@ def truth_values(variant: str, values: dict, folder: Path):
 def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures."""
     from calib.diagnosis.command import run_diagnose
+    from calib.fmu.tally import process_totals
     from calib.measurements import Measurements
     t_start = time.perf_counter()
     WORK.mkdir(parents=True, exist_ok=True)
@@ -136,7 +138,7 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
             t0 = time.perf_counter()
             clean = truth_values(variant, values, WORK)
             truth_seconds = time.perf_counter() - t0
-            named, seconds = [], []
+            named, seconds, sims = [], [], []
             for k in range(n_seeds):
                 rng = np.random.default_rng(SEED0 + 10 * k)
                 sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
@@ -146,21 +148,29 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                 data = WORK / f"{variant}_{name}_{k}.csv"
                 meas.write_csv(data)
                 t1 = time.perf_counter()
+                process_totals(reset=True)
                 d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}"), str(config),
                                  printer=lambda line: None, history=False)
                 seconds.append(time.perf_counter() - t1)
+                sims.append(process_totals())
                 named.append(d.effect)
                 verdicts.append({"variant": variant, "data_set": name, "seed": k, "effect": d.effect,
                                  "effects": d.effects, "chi2_per_dof_before": d.before["chi2_per_dof"],
                                  "ambiguous": d.rounds[0].get("ambiguous", []) if d.rounds else [],
-                                 "reason": d.rounds[0]["reason"] if d.rounds else "", "notes": d.notes})
-                print(f"[fmu diagnosis] {variant} {name} seed {k}: {d.effect} ({seconds[-1]:.0f} s)", flush=True)
+                                 "reason": d.rounds[0]["reason"] if d.rounds else "", "notes": d.notes,
+                                 "simulations": sims[-1]})
+                print(f"[fmu diagnosis] {variant} {name} seed {k}: {d.effect} ({seconds[-1]:.0f} s; "
+                      f"{sims[-1]['simulations']} simulations, {sims[-1]['simulated_s']:.4g} s simulated, "
+                      f"{sims[-1]['busy_worker_s']:.3g} s busy; runs reused: {sims[-1]['reused_base_runs']} base, "
+                      f"{sims[-1]['reused_perturbed_runs']} perturbed)", flush=True)
             want = "none" if name == "control" else name
             right = sum(1 for v in verdicts if v["variant"] == variant and v["data_set"] == name and
                         (v["effect"] == want or (v["effect"] == "ambiguous" and want in v["ambiguous"])))
             rows.append({"variant": variant, "data_set": name, "right": right, "total": n_seeds,
                          "verdicts": dict(Counter(named)), "seconds_per_diagnosis": float(np.mean(seconds)),
                          "truth_seconds": truth_seconds,
+                         "simulations_per_diagnosis": float(np.mean([t["simulations"] for t in sims])),
+                         "busy_worker_s_per_diagnosis": float(np.mean([t["busy_worker_s"] for t in sims])),
                          "chi2_per_dof_before_median": float(np.median(
                              [v["chi2_per_dof_before"] for v in verdicts[-n_seeds:]]))})
     out = {"n_seeds": n_seeds, "rows": rows, "verdicts": verdicts, "wall_seconds": time.perf_counter() - t_start,
@@ -169,12 +179,14 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     OUT_JSON.write_text(json.dumps(out, indent=1))
     lines = [f"# calib diagnose on the bundled FMUs ({n_seeds} seeds, {out['wall_seconds'] / 60:.1f} min)", "",
              "Truth: the FMU at 72 steps/rev, 10 + 4 revolutions; model: the same FMU at 24 steps/rev, 4 + 2.", "",
-             "| variant | data set | right / total | verdicts | χ²/dof before (median) | s / diagnosis |",
-             "|---|---|---|---|---|---|"]
+             "| variant | data set | right / total | verdicts | χ²/dof before (median) | simulations / diagnosis "
+             "| s / diagnosis |",
+             "|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['variant']} | {r['data_set']} | {r['right']} / {r['total']} | "
                      f"{', '.join(f'{k} {v}' for k, v in r['verdicts'].items())} | "
-                     f"{r['chi2_per_dof_before_median']:.3g} | {r['seconds_per_diagnosis']:.0f} |")
+                     f"{r['chi2_per_dof_before_median']:.3g} | {r['simulations_per_diagnosis']:.0f} | "
+                     f"{r['seconds_per_diagnosis']:.0f} |")
     OUT_MD.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     from publish import command_line, publish

@@ -188,12 +188,86 @@ def test_a_base_run_simulated_before_is_reused_bit_for_bit(small_model):
         m.close()
 
 
-def _cold(make, base_runs=None):
+def test_cold_perturbed_runs_are_reused_across_calls_and_models(small_model):
+    """Issue 38 (c): a cold perturbed run is a cold run at the perturbed values. A Jacobian taken again at the
+    same point and parameters simulates nothing; a model calibrating one more parameter (a diagnosis
+    candidate on top of the base model), at the base model's point with the new parameter at its start
+    value, simulates only the new parameter's runs. Every value and column is that of fresh simulations
+    (a model with its own cache), bit for bit."""
+    from calib.fmu.base_runs import BaseRunCache
+
+    make_warm, cond = small_model
+    n = len(cond)
+    shared = BaseRunCache()
+    base = _cold(make_warm, shared)
+    p = np.array([q.nominal for q in base.parameters]) + 0.02
+    ev0, G0 = base.jacobian(p, cond)
+    ev1, G1 = base.jacobian(p, cond)
+    s = base.simulation_summary()
+    assert s["simulations"] == n * 3 and s["calls"] == 1          # the second call sent nothing
+    assert s["reused_base_runs"] == n and s["reused_perturbed_runs"] == 2 * n
+    np.testing.assert_array_equal(G1, G0)
+    np.testing.assert_array_equal(ev1.values, ev0.values)
+    bigger = _cold(make_warm, shared, ["pitch_offset_blade1", "pitch_offset_blade2"])
+    fresh = _cold(make_warm, None, ["pitch_offset_blade1", "pitch_offset_blade2"])
+    assert bigger.parameters[1].nominal == 0.0
+    q = np.array([p[0], 0.0])
+    ev2, G2 = bigger.jacobian(q, cond)
+    ev3, G3 = fresh.jacobian(q, cond)
+    s2 = bigger.simulation_summary()
+    assert s2["simulations"] == 2 * n, s2                               # only the new parameter's two runs
+    assert s2["reused_base_runs"] == n and s2["reused_perturbed_runs"] == 2 * n
+    assert fresh.simulation_summary()["simulations"] == 5 * n
+    np.testing.assert_array_equal(G2, G3)
+    np.testing.assert_array_equal(G2[:, :, 0], G0[:, :, 0])
+    np.testing.assert_array_equal(ev2.values, ev3.values)
+    assert np.all(np.isfinite(G3)) and np.abs(G3[:, :, 1]).max() > 0
+    for m in (base, bigger, fresh):
+        m.close()
+
+
+def test_canonical_parameter_key_ignores_values_at_the_start_value(small_model):
+    """The reuse key of a parameter vector names only the values off the FMU's start values: a model with an
+    extra parameter at its start value has the key of one without it; any other value, -0.0 included, differs."""
+    make_warm, _ = small_model
+    one = _cold(make_warm, None)
+    two = _cold(make_warm, None, ["pitch_offset_blade1", "pitch_offset_blade2"])
+    key = lambda m, p: m._params.canonical(m._params.assignments(np.asarray(p, float)))  # noqa: E731
+    assert key(one, [0.3]) == key(two, [0.3, 0.0]) != key(two, [0.3, 0.1])
+    assert key(two, [0.3, -0.0]) != key(one, [0.3])
+    assert key(one, [0.0]) == () and len(key(two, [0.3, 0.1])) == 2
+
+
+def _cold(make, base_runs=None, parameters=None):
     """The small model with warm start off (perturbed runs from scratch)."""
     from calib.fmu.model import FmuModel
 
     m = make(SerialExecutor())
-    return FmuModel(m.fmu_path, m.mapping, [c.name for c in m.channels], parameters=[q.name for q in m.parameters],
+    return FmuModel(m.fmu_path, m.mapping, [c.name for c in m.channels],
+                    parameters=parameters or [q.name for q in m.parameters],
                     corrections=False, switches=m._options["switches"], settings=m._options["settings"],
                     steady=m._options["steady"], jacobian=dict(warm_start=False), executor=SerialExecutor(),
                     base_runs=base_runs)
+
+
+def test_process_totals_add_every_model_call_and_reset():
+    """The process-wide tally (what a diagnosis benchmark reads) is the sum of the models' own tallies."""
+    from calib.fmu.plan import PointResult, RunOutcome
+    from calib.fmu.tally import SimulationTally, process_totals
+
+    def result(n_runs, busy):
+        run = RunOutcome(0, "", np.zeros(1), np.zeros((2, 1)), np.zeros((1, 3), complex), simulated=2.0)
+        return PointResult(0, run, [run] * (n_runs - 1), busy=busy)
+
+    process_totals(reset=True)
+    a, b = SimulationTally(), SimulationTally()
+    a.record([result(3, 0.5), result(1, 0.25)], 1.0, 2)
+    b.record([result(5, 1.0)], 2.0, 2)
+    b.add_reused(4, 7)
+    t = process_totals()
+    assert (t["calls"], t["tasks"], t["simulations"]) == (2, 3, 9) == (a.calls + b.calls, a.tasks + b.tasks,
+                                                                         a.simulations + b.simulations)
+    assert t["simulated_s"] == pytest.approx(18.0) and t["busy_worker_s"] == pytest.approx(1.75)
+    assert t["parallel_efficiency"] == pytest.approx(1.75 / (3.0 * 2))
+    assert (t["reused_base_runs"], t["reused_perturbed_runs"]) == (4, 7) == (b.reused, b.reused_perturbed)
+    assert process_totals(reset=True)["simulations"] == 9 and process_totals()["simulations"] == 0

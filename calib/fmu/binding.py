@@ -14,6 +14,7 @@ Nothing here runs the FMU.
 from __future__ import annotations
 
 import json
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,6 +76,11 @@ class _Writer:
         return fp.Assignment(type_, tuple(s.vr for s in self.slots.values()), tuple(np.asarray(flat).tolist()))
 
 
+def _bits(x: float) -> bytes:
+    """The 8 bytes of a double (-0.0 and 0.0 differ, as they may in the FMU's arithmetic)."""
+    return struct.pack("<d", float(x))
+
+
 @dataclass(frozen=True)
 class ParameterBinding:
     """The calibrated parameters and how a parameter vector becomes FMU assignments."""
@@ -93,6 +99,18 @@ class ParameterBinding:
             c = self.conv
             flat[self.index] = (c[:, 2] * p - c[:, 1]) / c[:, 0]
         return (self.writer.assignment(flat, "real"),) if self.writer.slots else ()
+
+    def canonical(self, assignments: tuple) -> tuple:
+        """A key of the parameter values ``assignments`` (from :meth:`assignments`) that does not depend on
+        which parameters a model calibrates: (value reference, element, FMU value) of each value off the
+        FMU's start value, by value reference. Two models of one FMU calibrating different parameters write
+        the same values when their keys are equal (a value at its start value is the FMU's own)."""
+        if not assignments:
+            return ()
+        values = assignments[0].values
+        off = [(s.vr, e, values[s.offset + e]) for s in self.writer.slots.values() for e in range(s.size)
+               if _bits(values[s.offset + e]) != _bits(self.base[s.offset + e])]
+        return tuple(sorted(off))
 
 
 @dataclass(frozen=True)

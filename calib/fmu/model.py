@@ -23,10 +23,10 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 (amplitude, unit of x) and ``x_1p_phase`` ... (deg), with x ≈ mean + Σ A_n cos(nψ + φ_n)
 and ψ the azimuth of blade 1 (0 = up).
 
-Jacobians: finite differences (central by default, or forward), cold or warm-started from the
-settled base state, as :mod:`calib.fmu.differences` says; a base run already simulated at the
-same point and parameters is reused (:mod:`calib.fmu.base_runs`); what the simulations cost is
-counted (:meth:`FmuModel.simulation_summary`).
+Jacobians: finite differences (central by default, or forward), cold or warm-started from the settled
+base state (:mod:`calib.fmu.differences`); a cold run (base or perturbed) simulated before at the same point
+and parameter values, by any model of the same plan, is reused (:mod:`calib.fmu.base_runs`); what the
+simulations cost is counted (:meth:`FmuModel.simulation_summary`).
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ class FmuModel:
     progress : callable(done, total), optional
         Called as operating points finish.
     base_runs : BaseRunCache, optional
-        Base runs simulated before, shared with other models (:mod:`calib.fmu.base_runs`); default its own.
+        Runs simulated before, shared with other models (:mod:`calib.fmu.base_runs`); default its own.
 
     Notes
     -----
@@ -239,13 +239,14 @@ class FmuModel:
         fills their results), the others run on the executor with the adaptive timeout."""
         run, results = self._faults.plan(tasks, p, len(self._plan.signals))
         policy = self._faults.policy()
-        send, self._tally.reused = self.base_runs.split(self._plan.key, tasks, run, results, self._tally.reused,
-                                                        cold=not (self.warm_start and self.can_get_state))
+        cold, canon = not (self.warm_start and self.can_get_state), self._params.canonical
+        send, *reused = self.base_runs.split(self._plan.key, tasks, run, results, cold, canon)
+        self._tally.add_reused(*reused)
         jobs = [(self._plan, tasks[k], self.isolate, policy) for k in send]
         done = self._tally.timed_map(self.executor, fw.run_point, jobs, self.progress)
         for k, r in zip(send, done):
             results[k] = r
-            self.base_runs.put(self._plan.key, tasks[k], r.base)
+            self.base_runs.put_result(self._plan.key, tasks[k], r, cold, canon)
         self._faults.record(tasks, results, run, p, conditions)
         return results
 
@@ -269,8 +270,7 @@ class FmuModel:
         return self._tally.summary()
 
     def clear_quarantine(self) -> None:
-        """Simulate quarantined points again from now on (e.g. a new stage with another
-        model setting); the timeout statistics are kept."""
+        """Simulate quarantined points again from now on (e.g. a new stage); the timeout statistics are kept."""
         self._faults.clear()
 
     def _tasks(self, p, conditions, perturb: bool, start_states=None):

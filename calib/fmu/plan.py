@@ -139,6 +139,9 @@ class PointTask:
     known_base : RunOutcome or None
         The outcome of this base run, simulated before (:mod:`calib.fmu.base_runs`): not simulated
         again (perturbed runs then start cold).
+    known_runs : tuple of (RunOutcome or None), optional
+        Per perturbed run, its outcome when a cold run at the same parameters was simulated before
+        (:mod:`calib.fmu.base_runs`): not simulated again. Only for cold perturbed runs (``warm`` off).
     """
 
     index: int
@@ -152,6 +155,7 @@ class PointTask:
     keep_state: bool = False
     start_state: bytes | None = None
     known_base: "RunOutcome | None" = None
+    known_runs: "tuple | None" = None
 
 
 @dataclass

@@ -338,6 +338,9 @@ class Simulator:
                 return
         for j in range(task.skip, len(task.perturbations)):
             outcome = None
+            if not warm and task.known_runs is not None and task.known_runs[j] is not None:
+                yield ("run", j, task.known_runs[j])      # a cold run at these parameters, simulated before
+                continue
             if warm and (state is None or owner != self.instantiations or not self._healthy) and blob is not None:
                 try:
                     state, t_state = self._restore_point(blob)

@@ -29,6 +29,8 @@ class SimulationTally:
         Runs made (base and perturbed runs; quarantined points are not simulated).
     reused : int
         Base runs not simulated again: their outcome was known (:mod:`calib.fmu.base_runs`).
+    reused_perturbed : int
+        Perturbed runs not simulated again (cold runs at the same point and parameter values known).
     simulated_s : float
         Model time simulated, settling included [s].
     busy_s : float
@@ -43,6 +45,7 @@ class SimulationTally:
     tasks: int = 0
     simulations: int = 0
     reused: int = 0
+    reused_perturbed: int = 0
     simulated_s: float = 0.0
     busy_s: float = 0.0
     wall_s: float = 0.0
@@ -59,7 +62,9 @@ class SimulationTally:
 
     def record(self, results, wall: float, workers: int) -> None:
         """Add one executor call: its :class:`~calib.fmu.plan.PointResult` list, its wall time [s] and the
-        executor's worker count."""
+        executor's worker count (added to this process's :func:`process_totals` too)."""
+        if self is not _TOTALS:
+            _TOTALS.record(results, wall, workers)
         self.calls += 1
         self.tasks += len(results)
         self.wall_s += float(wall)
@@ -70,6 +75,13 @@ class SimulationTally:
             self.simulated_s += sum(o.simulated for o in runs)
             self.busy_s += r.busy
 
+    def add_reused(self, base: int, perturbed: int) -> None:
+        """Count runs not simulated again (known outcomes, :mod:`calib.fmu.base_runs`), here and in
+        :func:`process_totals`."""
+        for t in ((self, _TOTALS) if self is not _TOTALS else (self,)):
+            t.reused += int(base)
+            t.reused_perturbed += int(perturbed)
+
     @property
     def efficiency(self) -> float | None:
         """Busy worker time / (wall time x workers) [-]; None before any call."""
@@ -78,17 +90,32 @@ class SimulationTally:
     def summary(self) -> dict:
         """Plain (JSON-able) dict: the attributes and ``parallel_efficiency``."""
         return {"calls": self.calls, "tasks": self.tasks, "simulations": self.simulations,
-                "reused_base_runs": self.reused,
+                "reused_base_runs": self.reused, "reused_perturbed_runs": self.reused_perturbed,
                 "simulated_s": self.simulated_s, "busy_worker_s": self.busy_s, "wall_s": self.wall_s,
                 "workers": self.workers, "parallel_efficiency": self.efficiency}
+
+
+_TOTALS = SimulationTally()
+
+
+def process_totals(reset: bool = False) -> dict:
+    """What every FMU model of this process simulated so far (all their executor calls), as
+    :meth:`SimulationTally.summary`; with ``reset`` start
+    again from zero. For a benchmark that runs models it does not hold (e.g. a diagnosis)."""
+    out = _TOTALS.summary()
+    if reset:
+        _TOTALS.__init__()
+    return out
 
 
 def tally_sentence(summary: dict) -> str:
     """One line of :meth:`SimulationTally.summary` for the report and the console."""
     eff = summary["parallel_efficiency"]
     reused = summary.get("reused_base_runs", 0)
+    perturbed = summary.get("reused_perturbed_runs", 0)
     return (f"{summary['simulations']} simulations ({summary['tasks']} points in {summary['calls']} calls"
-            + (f", {reused} base runs reused" if reused else "") + "), "
+            + (f", {reused} base runs reused" if reused else "")
+            + (f", {perturbed} perturbed runs reused" if perturbed else "") + "), "
             f"{summary['simulated_s']:.4g} s simulated, {summary['busy_worker_s']:.3g} s busy on "
             f"{summary['workers']} worker(s) in {summary['wall_s']:.3g} s wall: parallel efficiency "
             + ("n/a" if eff is None else f"{eff:.2f}"))
