@@ -20,6 +20,8 @@ import numpy as np
 from calib.errors import InputError
 from calib.powercurve.aep import aep_weights
 from calib.powercurve.draws import solve_draws
+from calib.powercurve.field import prior_split as split_prior
+from calib.powercurve.field import split_variance, variance_at_amplitude
 from calib.powercurve.linearized import delta_method
 from calib.powercurve.schedule import ScheduledCurve
 from calib.powercurve.statements import posterior_statement, schedule_warnings
@@ -98,6 +100,13 @@ class CalibratedPowerCurve:
         The covariance the draws came from.
     warnings : list of str
         What the schedule could not do (:func:`calib.powercurve.statements.schedule_warnings`), for the report's first paragraph.
+    field_cov : ndarray, shape (n_bins, n_bins) or None
+        Covariance of power across the bins from the field between the nodes [W²]
+        (:func:`calib.powercurve.field.field_covariance`; its diagonal is ``field_std``²); None where the
+        prediction leaves that term out (then the AEP adds ``field_std`` linearly over the bins, an upper bound).
+    prior_split : dict or None
+        The nodal covariance by prior-dominated and data-determined directions and the empirical-Bayes
+        amplitude (:func:`calib.powercurve.field.prior_split`); None when not a MAP result with a prior check.
     """
 
     wind_speed: np.ndarray
@@ -122,6 +131,8 @@ class CalibratedPowerCurve:
     n_bem_points: int = 0
     cov: np.ndarray | None = None
     warnings: list = field(default_factory=list)
+    field_cov: np.ndarray | None = None
+    prior_split: dict | None = None
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -180,11 +191,20 @@ class CalibratedPowerCurve:
         """AEP [MWh] per wind distribution with its 1-σ per source, P50 and P90.
 
         P50 is the central curve's AEP; sources: the calibration through the draws (and, beside
-        it, its delta-method value, not added again), the model discrepancy and the between-node
-        field (fully correlated across bins: added linearly over the bins), each measurement item
-        (category B: fully correlated across bins). The total adds the sources in quadrature;
-        P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where the distribution has weight
-        are left out of the draws' σ and counted. Without draws the delta method's σ enters the total.
+        it, its delta-method value, not added again), the model discrepancy (fully correlated
+        across bins: added linearly over the bins, an upper bound), the field between the nodes
+        (through its covariance across the bins, ``field_cov``: σ² = c Σ cᵀ; linearly where that is
+        not available), each measurement item (category B: fully correlated across bins). The total
+        adds the sources in quadrature; P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where
+        the distribution has weight are left out of the draws' σ and counted. Without draws the delta
+        method's σ enters the total.
+
+        Beside it, for a MAP result with a prior check (``prior_split``): the delta method's
+        calibration variance split into its data-determined and prior-dominated directions
+        (``sigma_calibration_split_mwh``) and ``empirical_bayes``: the total σ and P90 with the
+        field's prior amplitude at the prior check's τ̂ (and at its 95 % interval's ends) instead of
+        the stated 1, the nodal part by :func:`calib.powercurve.field.variance_at_amplitude` and the
+        field between the nodes scaled by τ², the estimate kept.
         """
         if not 0 < availability <= 1:
             raise InputError(f"availability must be in (0, 1], got {availability!r}", "--availability",
@@ -206,14 +226,31 @@ class CalibratedPowerCurve:
             else:
                 sig_delta = float("nan")
             sig["model discrepancy"] = float(c @ np.nan_to_num(self.discrepancy_std))
-            sig["field between nodes"] = float(c @ np.nan_to_num(self.field_std))
+            if self.field_cov is not None:
+                sig["field between nodes"] = float(np.sqrt(max(c @ self.field_cov @ c, 0.0)))
+            else:
+                sig["field between nodes"] = float(c @ np.nan_to_num(self.field_std))
             for m, u in self.measurement_std().items():
                 sig[m] = float(c @ np.nan_to_num(u)) / eta          # u is electrical already
             # without draws (--draws 0) the calibration enters the total by its delta-method value
             cal = sig["calibration (draws)"] if np.isfinite(sig["calibration (draws)"]) else sig_delta
             total = float(np.sqrt(np.nan_to_num(cal) ** 2 + sum(np.nan_to_num(s) ** 2 for k, s in sig.items()
                                                              if k != "calibration (draws)")))
-            rows.append({"distribution": name, "aep_mwh": central, "nominal_aep_mwh": nominal,
+            split, eb = None, None
+            if self.prior_split is not None and self.grad_power is not None:
+                g = c @ np.nan_to_num(self.grad_power)
+                split = {k: float(np.sqrt(x)) for k, x in split_variance(self.prior_split, g).items()}
+                others = sum(np.nan_to_num(s) ** 2 for k, s in sig.items()
+                             if k not in ("calibration (draws)", "field between nodes"))
+                eb = {}
+                for label in ("tau", "tau_lower", "tau_upper"):
+                    t = self.prior_split[label]
+                    if not np.isfinite(t):
+                        continue
+                    var = variance_at_amplitude(self.prior_split, g, t) + (t * sig["field between nodes"]) ** 2 + others
+                    eb[label] = {"amplitude": t, "sigma_total_mwh": float(np.sqrt(var)),
+                                 "p90_mwh": central - 1.2815515655446004 * float(np.sqrt(var))}
+            rows.append({"distribution": name, "sigma_calibration_split_mwh": split, "empirical_bayes": eb, "aep_mwh": central, "nominal_aep_mwh": nominal,
                          "draws_mean_aep_mwh": float(np.mean(aep_d)) if aep_d.size else float("nan"),
                          "sigma_mwh": sig, "sigma_calibration_delta_mwh": sig_delta, "sigma_total_mwh": total,
                          "p50_mwh": central, "p90_mwh": central - 1.2815515655446004 * total,
@@ -304,6 +341,14 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     warnings = schedule_warnings(schedule, central)
     notes += posterior_statement(result)
 
+    disc, fld, envelope, fld_cov = _prediction_terms(result, model, central, air_density, notes)
+    if fld_cov is not None and result.uncertainty.cov_alias.shape == cov.shape:
+        # the field term replaces the nodal aliasing term (as predict_outputs does): drawing from
+        # Cov(p̂) with Cov_alias in it as well counted the field between the nodes twice
+        cov = cov - np.asarray(result.uncertainty.cov_alias, float)
+        notes.append("the parameter draws and the delta method use Cov(p̂) − Cov_alias: the field between the nodes "
+                     "enters once, as its own term (correlated across the bins), not also through the nodes")
+
     pm = _power_model(model)
     delta, grad, pitch_grad, dP_dpitch = {}, None, None, None
     if pm is not None:
@@ -318,22 +363,25 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     notes += how
     seconds = time.perf_counter() - t0
 
-    disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
     return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
-                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
+                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
+                                fld_cov, split_prior(result, model, cov))
 
 
 def _prediction_terms(result, model, central, air_density, notes):
-    """The model-discrepancy and between-node field 1-σ of power per bin [W] (zero in region 3) and
-    the envelope flags, from :func:`calib.calibration.prediction.predict_outputs` at the central
-    schedule; a sentence on each appended to ``notes``."""
+    """The model-discrepancy and between-node field 1-σ of power per bin [W] (zero in region 3), the
+    envelope flags, from :func:`calib.calibration.prediction.predict_outputs` at the central
+    schedule, and the field's covariance of power across the bins [W²]
+    (:func:`calib.powercurve.field.field_covariance`, None where the prediction leaves the field out);
+    a sentence on each appended to ``notes``."""
     v = central.wind_speed
-    disc, fld, envelope = np.zeros(v.size), np.zeros(v.size), ("",) * v.size
+    disc, fld, envelope, fld_cov = np.zeros(v.size), np.zeros(v.size), ("",) * v.size, None
     try:
-        pred = result.predict(OperatingConditions(v, central.rotor_speed, central.pitch, air_density),
-                              _result_channels_model(model, result))
+        cond = OperatingConditions(v, central.rotor_speed, central.pitch, air_density)
+        rmodel = _result_channels_model(model, result)
+        pred = result.predict(cond, rmodel)
         envelope = tuple(pred.envelope) if pred.envelope else envelope
         # power is the torque times the rotor speed (a condition): a calibration on torque carries its
         # terms to power exactly, scaled by Ω
@@ -345,6 +393,14 @@ def _prediction_terms(result, model, central, air_density, notes):
             disc = np.where(r2, scale * np.nan_to_num(pred.discrepancy_std[:, i]), 0.0)
             if pred.field_std is not None:
                 fld = np.where(r2, scale * np.nan_to_num(pred.field_std[:, i]), 0.0)
+            from calib.powercurve.field import field_covariance
+            raw = field_covariance(result, rmodel, cond, source)
+            if raw is not None:
+                # at the amplitude predict_outputs gives each point (inside the envelope the stated
+                # prior's, outside it pred.field_amplitude), times Ω for torque, zero in region 3
+                amp = np.where(pred.outside, pred.field_amplitude, 1.0) if pred.envelope else np.ones(v.size)
+                d = np.where(r2 & np.isfinite(scale * amp), scale * amp, 0.0)
+                fld_cov = d[:, None] * raw * d[None, :]
             notes.append(f"model discrepancy of {source}: {pred.discrepancy or 'none recorded'}; field between the "
                          f"nodes: {pred.representation}; both added in quadrature per bin"
                          f"{' (as torque x rotor speed)' if source == 'torque' else ''}, zero in region 3")
@@ -353,7 +409,7 @@ def _prediction_terms(result, model, central, air_density, notes):
                          "field term for power (only the parameter uncertainty)")
     except InputError as exc:
         notes.append(f"no discrepancy term and no envelope check: {exc}")
-    return disc, fld, envelope
+    return disc, fld, envelope, fld_cov
 
 
 def _result_channels_model(model, result):
