@@ -141,7 +141,14 @@ def replicate(truth: dict, name: str, seed: int, work: Path, n_draws: int) -> di
             "sigma_total_mwh": r["sigma_total_mwh"], "sigma_calibration_draws_mwh": sig_cal,
             "sigma_calibration_delta_mwh": r["sigma_calibration_delta_mwh"],
             "covered_total": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_total_mwh"]),
-            "covered_calibration": bool(abs(r["p50_mwh"] - true) <= Z90 * sig_cal)}
+            "covered_calibration": bool(abs(r["p50_mwh"] - true) <= Z90 * sig_cal),
+            "sigma_field_mwh": r["sigma_mwh"]["field between nodes"],
+            "sigma_field_linear_mwh": float(c @ np.nan_to_num(pc.field_std)),
+            "sigma_split_mwh": r["sigma_calibration_split_mwh"], "empirical_bayes": r["empirical_bayes"]}
+        eb = (r["empirical_bayes"] or {}).get("tau")
+        if eb:
+            out["aep"][r["distribution"]]["covered_empirical_bayes"] = bool(abs(r["p50_mwh"] - true)
+                                                                            <= Z90 * eb["sigma_total_mwh"])
     return out
 
 
@@ -159,6 +166,8 @@ def summarize(records: dict) -> dict:
             err_cal = np.array([x["calibrated_mwh"] - x["true_mwh"] for x in a])
             err_nom = np.array([x["nominal_mwh"] - x["true_mwh"] for x in a])
             ratio = np.array([x["sigma_calibration_delta_mwh"] / x["sigma_calibration_draws_mwh"] for x in a])
+            eb = [x for x in a if "covered_empirical_bayes" in x]
+            split = [x["sigma_split_mwh"] for x in a if x.get("sigma_split_mwh")]
             per[dist] = {"replicates": len(a), "true_mwh": a[0]["true_mwh"],
                          "coverage_90_total": float(np.mean([x["covered_total"] for x in a])),
                          "coverage_90_calibration_only": float(np.mean([x["covered_calibration"] for x in a])),
@@ -168,6 +177,22 @@ def summarize(records: dict) -> dict:
                          "error_ratio_nominal_over_calibrated": float(np.median(np.abs(err_nom))
                                                                       / max(np.median(np.abs(err_cal)), 1e-12)),
                          "median_sigma_total_mwh": float(np.median([x["sigma_total_mwh"] for x in a])),
+                         # sharpness: the interval's median half-width against the median realized error
+                         "median_halfwidth_over_median_error": float(Z90 * np.median([x["sigma_total_mwh"] for x in a])
+                                                                     / max(np.median(np.abs(err_cal)), 1e-12)),
+                         "error_over_sigma_rms": float(np.sqrt(np.mean((err_cal / np.array(
+                             [x["sigma_total_mwh"] for x in a])) ** 2))),
+                         "coverage_90_empirical_bayes": float(np.mean([x["covered_empirical_bayes"] for x in eb]))
+                         if eb else None,
+                         "median_sigma_empirical_bayes_mwh": float(np.median([x["empirical_bayes"]["tau"]
+                                                                             ["sigma_total_mwh"] for x in eb]))
+                         if eb else None,
+                         "median_tau_hat": float(np.median([x["empirical_bayes"]["tau"]["amplitude"] for x in eb]))
+                         if eb else None,
+                         "median_sigma_field_mwh": float(np.median([x["sigma_field_mwh"] for x in a])),
+                         "median_sigma_field_linear_mwh": float(np.median([x["sigma_field_linear_mwh"] for x in a])),
+                         "median_sigma_nodal_data_mwh": float(np.median([x["data"] for x in split])) if split else None,
+                         "median_sigma_nodal_prior_mwh": float(np.median([x["prior"] for x in split])) if split else None,
                          "delta_over_draws_sigma_median": float(np.nanmedian(ratio)),
                          "delta_over_draws_sigma_min": float(np.nanmin(ratio)),
                          "delta_over_draws_sigma_max": float(np.nanmax(ratio))}

@@ -394,7 +394,8 @@ def _prediction_terms(result, model, central, air_density, notes):
             if pred.field_std is not None:
                 fld = np.where(r2, scale * np.nan_to_num(pred.field_std[:, i]), 0.0)
             from calib.powercurve.field import field_covariance
-            raw = field_covariance(result, rmodel, cond, source)
+            in_model = source in [c.name for c in rmodel.channels]
+            raw = field_covariance(result, rmodel, cond, source) if in_model else None
             if raw is not None:
                 # at the amplitude predict_outputs gives each point (inside the envelope the stated
                 # prior's, outside it pred.field_amplitude), times Ω for torque, zero in region 3

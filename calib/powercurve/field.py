@@ -112,21 +112,31 @@ def prior_split(result, model, cov: np.ndarray) -> dict | None:
     C = fld.node_correlation(float(st.get("prior_correlation", 0.0)))
     if C.shape != cov.shape:
         return None
-    w, V = np.linalg.eigh(C)
+    mask = np.zeros(cov.shape[0], bool)
+    lay = fld.layout
+    for idx in (lay.lift_index, lay.drag_index):
+        mask[idx[idx >= 0].ravel()] = True
+    return split_covariance(cov, sd, C, mask, float(pc["amplitude"]), float(pc.get("lower", np.nan)),
+                            float(pc.get("upper", np.nan)))
+
+
+def split_covariance(cov, prior_std, correlation, field_mask, tau: float = 1.0, tau_lower: float = np.nan,
+                     tau_upper: float = np.nan) -> dict:
+    """:func:`prior_split` from its parts: the Laplace covariance ``cov`` = (H + P⁻¹)⁻¹ [parameter
+    units²], the prior 1-σ ``prior_std`` [parameter units] and correlation ``correlation`` (P = D C D,
+    block-diagonal), the field's parameters ``field_mask`` and the prior check's amplitude."""
+    cov = np.asarray(cov, float)
+    sd = np.asarray(prior_std, float)
+    w, V = np.linalg.eigh(np.asarray(correlation, float))
     Ch = (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T                # C^½ (symmetric)
     Chi = (V / np.sqrt(np.clip(w, 1e-12, None))) @ V.T
     # P = D C D = (D C^½)(D C^½)ᵀ: whiten with (D C^½)⁻¹ = C^-½ D⁻¹ on the left, its transpose on the right
     Ph, Pmh = sd[:, None] * Ch, Chi / sd[None, :]
     Bm = Pmh @ cov @ Pmh.T
-    Bm = 0.5 * (Bm + Bm.T)
-    b, U = np.linalg.eigh(Bm)
+    b, U = np.linalg.eigh(0.5 * (Bm + Bm.T))
     b = np.clip(b, 1e-12, 1.0)
-    mask = np.zeros(cov.shape[0], bool)
-    lay = fld.layout
-    for idx in (lay.lift_index, lay.drag_index):
-        mask[idx[idx >= 0].ravel()] = True
-    return {"half": Ph @ U, "b": b, "U": U, "field": mask, "tau": float(pc["amplitude"]),
-            "tau_lower": float(pc.get("lower", np.nan)), "tau_upper": float(pc.get("upper", np.nan))}
+    return {"half": Ph @ U, "b": b, "U": U, "field": np.asarray(field_mask, bool), "tau": float(tau),
+            "tau_lower": float(tau_lower), "tau_upper": float(tau_upper)}
 
 
 def split_variance(split: dict, g: np.ndarray) -> dict:
