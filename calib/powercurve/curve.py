@@ -23,6 +23,7 @@ from calib.powercurve.draws import solve_draws
 from calib.powercurve.field import prior_split as split_prior
 from calib.powercurve.field import split_variance, variance_at_amplitude
 from calib.powercurve.linearized import delta_method
+from calib.powercurve.measurement import aep_uncertainty
 from calib.powercurve.schedule import ScheduledCurve
 from calib.powercurve.statements import posterior_statement, schedule_warnings
 from calib.types import OperatingConditions
@@ -194,7 +195,9 @@ class CalibratedPowerCurve:
         it, its delta-method value, not added again), the model discrepancy (fully correlated
         across bins: added linearly over the bins, an upper bound), the field between the nodes
         (through its covariance across the bins, ``field_cov``: σ² = c Σ cᵀ; linearly where that is
-        not available), each measurement item (category B: fully correlated across bins). The total
+        not available), each measurement item (combined as IEC 61400-12-1 does,
+        :func:`calib.powercurve.measurement.aep_uncertainty`: category B correlated across the bins,
+        category A not; ``sigma_measurement_mwh`` per category). The total
         adds the sources in quadrature; P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where
         the distribution has weight are left out of the draws' σ and counted. Without draws the delta
         method's σ enters the total.
@@ -230,8 +233,9 @@ class CalibratedPowerCurve:
                 sig["field between nodes"] = float(np.sqrt(max(c @ self.field_cov @ c, 0.0)))
             else:
                 sig["field between nodes"] = float(c @ np.nan_to_num(self.field_std))
-            for m, u in self.measurement_std().items():
-                sig[m] = float(c @ np.nan_to_num(u)) / eta          # u is electrical already
+            # the items act on the electrical power: weights per W electrical are c / η
+            meas = aep_uncertainty(self.measurements, self.wind_speed, eta * P, c / eta)
+            sig.update(meas["items"])
             # without draws (--draws 0) the calibration enters the total by its delta-method value
             cal = sig["calibration (draws)"] if np.isfinite(sig["calibration (draws)"]) else sig_delta
             total = float(np.sqrt(np.nan_to_num(cal) ** 2 + sum(np.nan_to_num(s) ** 2 for k, s in sig.items()
@@ -250,7 +254,8 @@ class CalibratedPowerCurve:
                     var = variance_at_amplitude(self.prior_split, g, t) + (t * sig["field between nodes"]) ** 2 + others
                     eb[label] = {"amplitude": t, "sigma_total_mwh": float(np.sqrt(var)),
                                  "p90_mwh": central - 1.2815515655446004 * float(np.sqrt(var))}
-            rows.append({"distribution": name, "sigma_calibration_split_mwh": split, "empirical_bayes": eb, "aep_mwh": central, "nominal_aep_mwh": nominal,
+            rows.append({"distribution": name, "sigma_calibration_split_mwh": split, "empirical_bayes": eb,
+                         "sigma_measurement_mwh": {k: meas[k] for k in ("A", "B", "total")}, "aep_mwh": central, "nominal_aep_mwh": nominal,
                          "draws_mean_aep_mwh": float(np.mean(aep_d)) if aep_d.size else float("nan"),
                          "sigma_mwh": sig, "sigma_calibration_delta_mwh": sig_delta, "sigma_total_mwh": total,
                          "p50_mwh": central, "p90_mwh": central - 1.2815515655446004 * total,
