@@ -148,9 +148,13 @@ def run_powercurve(args, printer=print) -> int:
         raise InputError(f"no such result folder: {rdir}", "RESULT_DIR", field="result_dir")
     result = load_result(rdir)
     model = result.rebuild_model()
-    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
-        raise InputError("calib powercurve needs a native-BEM result (an FMU result is not supported yet)",
-                         str(rdir), field="model")
+    from calib.powercurve.fmu import is_fmu_model
+    if is_fmu_model(model) and args.schedule == "rotor" or is_fmu_model(model) and args.schedule.endswith(".fst"):
+        raise InputError("an FMU result's power curve needs --schedule fixed (with --rotor-speed and --pitch) or "
+                         "--schedule TABLE.csv", "--schedule", field="schedule")
+    if not is_fmu_model(model) and (not hasattr(model, "solve") or not hasattr(model, "rotor")):
+        raise InputError(f"calib powercurve needs a native-BEM or FMU result; this one's model is a "
+                         f"{type(model).__name__}", str(rdir), field="model")
     schedule = _schedule(args, model)
     out = Path(args.out) if args.out else (rdir if rdir.is_dir() else rdir.parent) / "powercurve"
     pc = calibrated_power_curve(result, wind, schedule, args.density, args.draws, args.seed, items, model,
@@ -201,6 +205,8 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
                          f"draws' σ (which scatters by ±{100 * scatter:.0f} % with {pc.n_draws} draws)"
                          + (f", more than {100 * limit:.0f} % off at {_ranges(pc.wind_speed, np.isin(pc.wind_speed, off))} m/s."
                             if off.size else f", within {100 * limit:.0f} % in every bin with a spread."))
+    if pc.simulations is not None:
+        words.append(f"The FMU ran {pc.simulations} simulations for this power curve.")
     words.append(f"{pc.failed_draws} of {pc.n_draws} draws had a failed BEM solve in some bin "
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")

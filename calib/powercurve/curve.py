@@ -22,6 +22,7 @@ from calib.powercurve.aep import aep_weights
 from calib.powercurve.draws import solve_draws
 from calib.powercurve.field import prior_split as split_prior
 from calib.powercurve.field import split_variance, variance_at_amplitude
+from calib.powercurve.fmu import FmuPowerModel, is_fmu_model
 from calib.powercurve.linearized import delta_method
 from calib.powercurve.measurement import aep_uncertainty
 from calib.powercurve.schedule import ScheduledCurve
@@ -105,6 +106,8 @@ class CalibratedPowerCurve:
         Covariance of power across the bins from the field between the nodes [W²]
         (:func:`calib.powercurve.field.field_covariance`; its diagonal is ``field_std``²); None where the
         prediction leaves that term out (then the AEP adds ``field_std`` linearly over the bins, an upper bound).
+    simulations : int or None
+        Simulations an FMU model ran for this curve (None for the native BEM).
     prior_split : dict or None
         The nodal covariance by prior-dominated and data-determined directions and the empirical-Bayes
         amplitude (:func:`calib.powercurve.field.prior_split`); None when not a MAP result with a prior check.
@@ -134,6 +137,7 @@ class CalibratedPowerCurve:
     warnings: list = field(default_factory=list)
     field_cov: np.ndarray | None = None
     prior_split: dict | None = None
+    simulations: int | None = None
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -311,7 +315,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     Raises
     ------
     InputError
-        A negative density, a model without ``solve`` (an FMU: not yet supported here), a
+        A negative density, an FMU result with another schedule than a fixed speed or a table, a
         parameter count that differs from the result's, a rotor without a schedule and none given.
     """
     from calib.powercurve.schedule import VariableSpeed
@@ -321,9 +325,16 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     if n_draws < 0:
         raise InputError(f"--draws must be >= 0, got {n_draws}", "--draws", field="draws")
     model = result.rebuild_model() if model is None else model
-    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
-        raise InputError("the power curve needs the native BEM model (an FMU result is not supported by "
-                         "calib powercurve yet)", result.name, field="model")
+    fmu = None
+    if is_fmu_model(model):
+        if getattr(schedule, "kind", None) not in ("fixed_speed", "table"):
+            raise InputError("an FMU result's power curve needs a fixed-speed or table schedule (--schedule fixed "
+                             "--rotor-speed RPM --pitch DEG, or --schedule TABLE.csv): the variable-speed schedule is "
+                             "the native BEM's only", result.name, field="schedule")
+        model = fmu = FmuPowerModel(model, result.name)
+    elif not hasattr(model, "solve") or not hasattr(model, "rotor"):
+        raise InputError(f"the power curve needs the native BEM model or an FMU; the result's model is a "
+                         f"{type(model).__name__}", result.name, field="model")
     schedule = VariableSpeed.from_rotor(model.rotor, tsr_rule) if schedule is None else schedule
     if hasattr(schedule, "check_reachable"):
         schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
@@ -367,12 +378,19 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                                dP_dpitch, batched, progress, result.name)
     notes += how
     seconds = time.perf_counter() - t0
+    n_sim = None
+    if fmu is not None:
+        n_sim = fmu.simulation_count() - fmu.simulations_before
+        executor = getattr(fmu, "executor", None)
+        notes.append(f"the FMU ran {n_sim} simulations for this power curve (the central, nominal and "
+                     f"{draws_p.shape[0]} draws' schedules, one evaluation per draw with its bins on the executor "
+                     f"{type(executor).__name__ if executor is not None else 'serial'}; the prediction's terms)")
 
     return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
-                                fld_cov, split_prior(result, model, cov))
+                                fld_cov, split_prior(result, model, cov), n_sim)
 
 
 def _prediction_terms(result, model, central, air_density, notes):

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from calib.errors import InputError
 from calib.types import OperatingConditions
 
 __all__ = ["field_covariance"]
@@ -103,8 +104,11 @@ def prior_split(result, model, cov: np.ndarray) -> dict | None:
     pc = result.uncertainty.prior_check or {}
     if st.get("estimator") != "map" or not pc or pc.get("failed") or "amplitude" not in pc:
         return None
-    fld = model.correction_field() if hasattr(model, "correction_field") else None
-    if fld is None or fld.grid is None:
+    try:
+        fld = model.correction_field() if hasattr(model, "correction_field") else None
+    except (AttributeError, ValueError, InputError):        # a model without a correction field
+        fld = None
+    if fld is None or getattr(fld, "grid", None) is None:
         return None
     sd = np.asarray(result.uncertainty.prior_std, float)
     if sd.size != cov.shape[0] or not np.all(sd > 0):
