@@ -430,7 +430,7 @@ def test_a_result_without_a_posterior_says_what_is_left_out(wind_tunnel_result):
 def test_a_torque_calibration_carries_its_field_and_discrepancy_to_power_times_the_rotor_speed(wind_tunnel_result):
     """Power is torque × Ω with Ω a condition: a result calibrated on torque (Phase VI) gives the power curve the
     torque's between-node field and discrepancy σ times Ω [rad/s], the same as a power calibration would."""
-    from calib.powercurve.curve import _prediction_terms
+    from calib.powercurve.terms import prediction_terms as _prediction_terms
     _, result = wind_tunnel_result
     model = result.rebuild_model()
     pc = calibrated_power_curve(result, iec_bins(5.0, 15.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=0, model=model)
