@@ -377,14 +377,15 @@ def _statistic_lines(aep_rows) -> list[str]:
     split, eb = r.get("sigma_calibration_split_mwh"), (r.get("empirical_bayes") or {})
     if not split:
         return []
-    out = ["", f"At {r['distribution']}, the calibration's nodal 1-σ (delta method) is {split['data']:.3g} MWh "
-           f"along the directions the data determine and {split['prior']:.3g} MWh along those the prior dominates; "
-           f"the field between the nodes adds {r['sigma_mwh']['field between nodes']:.3g} MWh."]
+    out = ["", f"At {r['distribution']}, the calibration's nodal 1-σ (delta method) is {_energy(split['data'])} "
+           f"along the directions the data determine and {_energy(split['prior'])} along those the prior dominates; "
+           f"the field between the nodes adds {_energy(r['sigma_mwh']['field between nodes'])}."]
     if "tau" in eb:
         t = eb["tau"]
-        rng = "".join(f", {eb[k]['sigma_total_mwh']:.3g} MWh at its interval's {w} end τ = {eb[k]['amplitude']:.2g}"
+        rng = "".join(f", {_energy(eb[k]['sigma_total_mwh'])} at its interval's {w} end τ = {eb[k]['amplitude']:.2g}"
                       for k, w in (("tau_lower", "lower"), ("tau_upper", "upper")) if k in eb)
         out[-1] += (f" With the field's prior amplitude at the prior check's τ̂ = {t['amplitude']:.2g} instead of the "
-                    f"stated 1 (empirical Bayes, the estimate kept), the total 1-σ would be {t['sigma_total_mwh']:.3g} "
-                    f"MWh instead of {r['sigma_total_mwh']:.3g} (P90 {t['p90_mwh']:.4g} MWh){rng}.")
+                    f"stated 1 (empirical Bayes, the estimate kept), the total 1-σ would be "
+                    f"{_energy(t['sigma_total_mwh'])} instead of {_energy(r['sigma_total_mwh'])} (P90 "
+                    f"{_energy(t['p90_mwh'])}){rng}.")
     return out
