@@ -46,7 +46,8 @@ def _variable_speed(model, rule):
 
 
 def _scaled(result, factor):
-    return result.replace(uncertainty=dataclasses.replace(result.uncertainty, cov_p=result.uncertainty.cov_p * factor))
+    u = result.uncertainty
+    return result.replace(uncertainty=dataclasses.replace(u, cov_p=u.cov_p * factor, cov_alias=u.cov_alias * factor))
 
 
 # ------------------------------------------------------------------------------ (a) delta method vs draws
@@ -66,7 +67,7 @@ def test_delta_method_agrees_with_draws_where_near_linear(wind_tunnel_result, ki
     # 300 draws: the sample σ scatters by 1/sqrt(2·299) = 4.1 %; 13 % is 3.2 of those
     np.testing.assert_allclose(dd[spread], sd[spread], rtol=0.13)
     # the same draws through the linearization: no sampling scatter, so tighter
-    D, _ = posterior_draws(result.estimate.p_hat, small.uncertainty.cov_p, -np.inf, np.inf, 300, 3)
+    D, _ = posterior_draws(result.estimate.p_hat, pc.cov, -np.inf, np.inf, 300, 3)
     lin = (D - result.estimate.p_hat) @ pc.grad_power.T
     np.testing.assert_allclose(np.std(lin, axis=0, ddof=1)[spread], sd[spread], rtol=0.03)
     if kind == "variable":
@@ -84,7 +85,8 @@ def test_zero_covariance_collapses_the_band_onto_steady_power_curve(wind_tunnel_
     nominal_p = model.chain.nominal()
     zero = result.replace(estimate=dataclasses.replace(result.estimate, p_hat=nominal_p),
                           uncertainty=dataclasses.replace(result.uncertainty,
-                                                          cov_p=np.zeros_like(result.uncertainty.cov_p)))
+                                                          cov_p=np.zeros_like(result.uncertainty.cov_p),
+                                                          cov_alias=np.zeros_like(result.uncertainty.cov_p)))
     rotor, schedule = _variable_speed(model, "design")
     v = iec_bins(4.0, 20.0, 0.5)
     pc = calibrated_power_curve(zero, v, schedule, n_draws=5, model=model)
@@ -181,9 +183,13 @@ def test_powercurve_command_writes_tables_figures_and_report(wind_tunnel_result,
     out = tmp_path / "pc"
     assert main(["powercurve", str(stage), "--schedule", "fixed", "--rotor-speed", "72", "--pitch", "3",
                  "--wind", "5:15:0.5", "--draws", "20", "--out", str(out), "--weibull", "2,7",
-                 "--measurement", "anemometer=wind:2", "--measurement", "transducer=power:0.5"]) == 0
+                 "--measurement", "anemometer=wind:2", "--measurement", "transducer=power:0.5",
+                 "--measurement", "scatter=power:1:A"]) == 0
     printed = capsys.readouterr().out
     assert "Calibrated AEP at Weibull k=2 A=7 m/s" in printed and "P90" in printed
+    report = (out / "report.md").read_text()
+    assert "| scatter | A | power | 1 % | uncorrelated across bins (quadrature) |" in report
+    assert "| anemometer | B | wind | 2 % | correlated across bins (linear) |" in report
     for name in ("powercurve.csv", "powercurve.json", "aep.csv", "aep.json", "powercurve.png", "cp_tsr.png",
                  "aep.png", "report.md"):
         assert (out / name).stat().st_size > 0, name
@@ -235,6 +241,9 @@ def test_schedule_table(tmp_path, wind_tunnel_result):
     (["{stage}"], "--schedule"),                 # the Phase VI rotor has no schedule of its own
     (["{stage}", "--schedule", "fixed"], "--rotor-speed"),
     (["{stage}", "--schedule", "missing.csv"], "missing.csv"),
+    (["{stage}", "--measurement", "scatter=power:1:C"], "--measurement"),
+    (["{stage}", "--schedule", "fixed", "--rotor-speed", "72", "--pitch", "3", "--histogram", "nohist.csv"],
+     "--histogram"),
 ])
 def test_bad_input_is_a_clean_error_naming_the_option(wind_tunnel_result, tmp_path, capsys, args, names):
     stage, _ = wind_tunnel_result
@@ -280,8 +289,8 @@ def test_failed_solves_are_counted_never_dropped(wind_tunnel_result):
     model = _FailingAt(result.rebuild_model(), 10.0, p_hat[0])
     v = iec_bins(5.0, 15.0, 1.0)
     pc = calibrated_power_curve(result, v, FixedSpeed(72.0, 3.0), n_draws=30, seed=1, model=model)
-    D, _ = posterior_draws(p_hat, result.uncertainty.cov_p,
-                           [q.lower for q in model.parameters], [q.upper for q in model.parameters], 30, 1)
+    D, _ = posterior_draws(p_hat, pc.cov, [q.lower for q in model.parameters], [q.upper for q in model.parameters],
+                           30, 1)
     n_bad = int(np.count_nonzero(D[:, 0] > p_hat[0]))
     assert 0 < n_bad < 30
     assert pc.failed_per_bin.tolist() == [n_bad if x == 10.0 else 0 for x in v]
@@ -421,11 +430,11 @@ def test_a_result_without_a_posterior_says_what_is_left_out(wind_tunnel_result):
 def test_a_torque_calibration_carries_its_field_and_discrepancy_to_power_times_the_rotor_speed(wind_tunnel_result):
     """Power is torque × Ω with Ω a condition: a result calibrated on torque (Phase VI) gives the power curve the
     torque's between-node field and discrepancy σ times Ω [rad/s], the same as a power calibration would."""
-    from calib.powercurve.curve import _prediction_terms
+    from calib.powercurve.terms import prediction_terms as _prediction_terms
     _, result = wind_tunnel_result
     model = result.rebuild_model()
     pc = calibrated_power_curve(result, iec_bins(5.0, 15.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=0, model=model)
-    ref_disc, ref_field, _ = _prediction_terms(result, model, pc.central, 1.225, [])
+    ref_disc, ref_field, _, _ = _prediction_terms(result, model, pc.central, 1.225, [])
     assert np.all(ref_field > 0)
     omega = pc.central.rotor_speed * np.pi / 30.0
 
@@ -445,7 +454,53 @@ def test_a_torque_calibration_carries_its_field_and_discrepancy_to_power_times_t
                                        discrepancy_std=pred.discrepancy_std * per)
 
     notes = []
-    disc, fld, _ = _prediction_terms(TorqueResult(), model, pc.central, 1.225, notes)
+    disc, fld, _, _ = _prediction_terms(TorqueResult(), model, pc.central, 1.225, notes)
     np.testing.assert_allclose(fld, ref_field, rtol=1e-12)
     np.testing.assert_allclose(disc, ref_disc, rtol=1e-12, atol=1e-9)
     assert "as torque x rotor speed" in notes[-1]
+
+
+def test_the_field_between_the_nodes_enters_once_and_correlated_across_the_bins(wind_tunnel_result):
+    """The draws and the delta method use Cov(p̂) − Cov_alias when the field term is in (as predict_outputs does,
+    which replaces the nodal aliasing term by the field's own); the field's covariance across the bins has the
+    prediction's field σ² on its diagonal (another code path: predict_outputs) and gives the AEP a σ no larger
+    than the per-bin σ added linearly (Cauchy-Schwarz)."""
+    from calib.powercurve.command import distributions
+    _, result = wind_tunnel_result
+    u = result.uncertainty
+    assert u.gain.size and np.any(u.cov_alias != 0)
+    pc = calibrated_power_curve(result, iec_bins(5.0, 15.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=0)
+    np.testing.assert_allclose(pc.cov, u.cov_p - u.cov_alias, rtol=0, atol=1e-15 * np.abs(u.cov_p).max())
+    assert pc.field_cov is not None and np.all(pc.field_std > 0)
+    np.testing.assert_allclose(np.sqrt(np.diag(pc.field_cov)), pc.field_std, rtol=1e-8)
+    corr = pc.field_cov / np.outer(pc.field_std, pc.field_std)
+    assert np.all(np.abs(corr) <= 1 + 1e-9) and np.any(corr < 0.999)   # correlated, not perfectly
+    from calib.powercurve.aep import aep_weights
+    for row in pc.aep_table(distributions()):
+        cdf = distributions()[row["distribution"]]
+        c = aep_weights(pc.wind_speed, cdf) * pc.generator_efficiency / 1e6
+        linear = float(c @ pc.field_std)
+        assert row["sigma_mwh"]["field between nodes"] <= linear * (1 + 1e-9)
+        split = row["sigma_calibration_split_mwh"]
+        assert np.hypot(split["data"], split["prior"]) == pytest.approx(row["sigma_calibration_delta_mwh"], rel=1e-6)
+        assert row["empirical_bayes"]["tau"]["amplitude"] == pytest.approx(u.prior_check["amplitude"])
+
+
+def test_a_measured_histogram_headlines_the_aep(wind_tunnel_result, tmp_path, capsys):
+    """A histogram of a Rayleigh 7 m/s distribution in 0.25 m/s bins gives the Rayleigh row's AEP to 0.5 %
+    (an independent reference: the closed-form distribution), and headlines the report."""
+    stage, _ = wind_tunnel_result
+    edges = np.arange(0.0, 30.01, 0.25)
+    F = rayleigh_cdf(edges, 7.0)
+    hist = tmp_path / "hist.csv"
+    hist.write_text("# Rayleigh 7 m/s in hours\nwind_speed [m/s],hours [h]\n"
+                    + "".join(f"{0.5 * (a + b):g},{8760 * (fb - fa):.6f}\n"
+                              for a, b, fa, fb in zip(edges[:-1], edges[1:], F[:-1], F[1:])))
+    out = tmp_path / "pc"
+    assert main(["powercurve", str(stage), "--schedule", "fixed", "--rotor-speed", "72", "--pitch", "3",
+                 "--wind", "5:15:0.5", "--draws", "0", "--out", str(out), "--histogram", str(hist)]) == 0
+    assert "Calibrated AEP at histogram hist.csv" in capsys.readouterr().out
+    import json
+    rows = {r["distribution"]: r for r in json.loads((out / "aep.json").read_text())["aep"]}
+    h = next(r for k, r in rows.items() if k.startswith("histogram"))
+    assert h["p50_mwh"] == pytest.approx(rows["Rayleigh 7 m/s"]["p50_mwh"], rel=5e-3)

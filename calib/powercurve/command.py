@@ -31,7 +31,7 @@ DESCRIPTION = ("The power curve of the model a calibration produced, with interv
                "(the rotor's variable-speed pitch-regulated schedule, a fixed speed and pitch, or a table) is "
                "re-solved for every posterior draw of the calibrated parameters (Gaussian, from the Laplace "
                "covariance, clipped to the bounds); beside the draws, the delta method. IEC 61400-12-1 bins, "
-               "AEP for Rayleigh mean wind speeds 4-11 m/s and an optional Weibull, with P50, P90 and the "
+               "AEP for Rayleigh mean wind speeds 4-11 m/s, an optional Weibull and a measured histogram, with P50, P90 and the "
                "1-sigma of each source (calibration, model discrepancy, stated measurement items). Writes "
                "tables (CSV, JSON), figures and report.md; prints its first paragraph.")
 
@@ -58,10 +58,13 @@ def add_powercurve_arguments(p) -> None:
     p.add_argument("--rotor-speed", type=float, default=None, help="rotor speed [rpm] of --schedule fixed")
     p.add_argument("--pitch", type=float, default=None, help="pitch [deg] of --schedule fixed")
     p.add_argument("--weibull", default=None, help="a user wind distribution K,A (shape [-], scale [m/s])")
+    p.add_argument("--histogram", default=None, metavar="CSV", help="a measured wind-speed histogram: columns "
+                   "wind_speed [m/s] (bin centres) and hours or frequency; its AEP row headlines the report")
     p.add_argument("--availability", type=float, default=1.0, help="availability factor on the AEP (default 1)")
-    p.add_argument("--measurement", action="append", default=[], metavar="NAME=KIND:PERCENT",
-                   help="a stated measurement uncertainty (1-sigma), KIND wind, density or power; repeatable, "
-                        "e.g. --measurement anemometer=wind:2 --measurement transducer=power:0.5")
+    p.add_argument("--measurement", action="append", default=[], metavar="NAME=KIND:PERCENT[:A|B]",
+                   help="a stated measurement uncertainty (1-sigma), KIND wind, density or power, IEC 61400-12-1 "
+                        "category B (default: correlated across bins) or A (uncorrelated); repeatable, "
+                        "e.g. --measurement anemometer=wind:2 --measurement scatter=power:1:A")
     p.add_argument("--out", default=None, help="output folder (default RESULT_DIR/powercurve)")
 
 
@@ -111,12 +114,15 @@ def _schedule(args, model):
     return schedule_from_table(s)
 
 
-def distributions(weibull=None) -> dict:
-    """The standard's Rayleigh table and an optional Weibull (k, A), as name -> cdf."""
+def distributions(weibull=None, histogram=None) -> dict:
+    """The standard's Rayleigh table, an optional Weibull (k, A) and an optional measured histogram
+    (:class:`calib.powercurve.histogram.WindHistogram`), as name -> cdf."""
     out = {f"Rayleigh {m:g} m/s": (lambda v, m=m: rayleigh_cdf(v, m)) for m in IEC_RAYLEIGH_MEANS}
     if weibull is not None:
         k, A = weibull
         out[f"Weibull k={k:g} A={A:g} m/s"] = lambda v: weibull_cdf(v, k, A)
+    if histogram is not None:
+        out[histogram.name()] = histogram.cdf
     return out
 
 
@@ -132,21 +138,29 @@ def run_powercurve(args, printer=print) -> int:
         raise InputError(f"--availability must be in (0, 1], got {args.availability!r}", "--availability",
                          field="availability")
     weibull = _weibull(args.weibull)
+    histogram = None
+    if getattr(args, "histogram", None):
+        from calib.powercurve.histogram import read_wind_histogram
+        histogram = read_wind_histogram(args.histogram)
     items = [parse_measurement(m) for m in args.measurement]
     rdir = Path(args.result_dir)
     if not rdir.exists():
         raise InputError(f"no such result folder: {rdir}", "RESULT_DIR", field="result_dir")
     result = load_result(rdir)
     model = result.rebuild_model()
-    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
-        raise InputError("calib powercurve needs a native-BEM result (an FMU result is not supported yet)",
-                         str(rdir), field="model")
+    from calib.powercurve.fmu import is_fmu_model
+    if is_fmu_model(model) and args.schedule == "rotor" or is_fmu_model(model) and args.schedule.endswith(".fst"):
+        raise InputError("an FMU result's power curve needs --schedule fixed (with --rotor-speed and --pitch) or "
+                         "--schedule TABLE.csv", "--schedule", field="schedule")
+    if not is_fmu_model(model) and (not hasattr(model, "solve") or not hasattr(model, "rotor")):
+        raise InputError(f"calib powercurve needs a native-BEM or FMU result; this one's model is a "
+                         f"{type(model).__name__}", str(rdir), field="model")
     schedule = _schedule(args, model)
     out = Path(args.out) if args.out else (rdir if rdir.is_dir() else rdir.parent) / "powercurve"
     pc = calibrated_power_curve(result, wind, schedule, args.density, args.draws, args.seed, items, model,
                                 progress=lambda d, n: printer(f"[calib powercurve] draws {d}/{n}"))
-    paths = write_outputs(pc, out, distributions(weibull), args.availability)
-    printer(summary_paragraph(pc, pc.aep_table(distributions(weibull), args.availability)))
+    paths = write_outputs(pc, out, distributions(weibull, histogram), args.availability)
+    printer(summary_paragraph(pc, pc.aep_table(distributions(weibull, histogram), args.availability)))
     printer(f"[calib powercurve] {pc.n_draws} draws in {pc.seconds:.1f} s ({pc.n_bem_points} BEM points); "
             f"wrote {', '.join(p.name for p in paths)} to {out}")
     return 0
@@ -154,9 +168,10 @@ def run_powercurve(args, printer=print) -> int:
 
 # ---------------------------------------------------------------------------------------- words
 def _headline(rows):
-    for r in rows:
-        if r["distribution"].startswith("Weibull"):
-            return r
+    for prefix in ("histogram", "Weibull"):
+        for r in rows:
+            if r["distribution"].startswith(prefix):
+                return r
     return next((r for r in rows if r["distribution"] == "Rayleigh 8 m/s"), rows[0])
 
 
@@ -190,6 +205,8 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
                          f"draws' σ (which scatters by ±{100 * scatter:.0f} % with {pc.n_draws} draws)"
                          + (f", more than {100 * limit:.0f} % off at {_ranges(pc.wind_speed, np.isin(pc.wind_speed, off))} m/s."
                             if off.size else f", within {100 * limit:.0f} % in every bin with a spread."))
+    if pc.simulations is not None:
+        words.append(f"The FMU ran {pc.simulations} simulations for this power curve.")
     words.append(f"{pc.failed_draws} of {pc.n_draws} draws had a failed BEM solve in some bin "
                  f"({int(pc.failed_per_bin.sum())} bin solves); {int(np.count_nonzero(~pc.central.ok))} central bins "
                  f"failed; {pc.n_clipped} draws were clipped to a parameter bound.")
@@ -295,8 +312,15 @@ def write_outputs(pc: CalibratedPowerCurve, out, cdfs: dict, availability: float
              atomic_write_text(out / "powercurve.json", json.dumps(_jsonable({**_meta(pc), "bins": rows}), indent=1))]
     flat = []
     for r in aep_rows:
-        f = {k: v for k, v in r.items() if k != "sigma_mwh"}
+        f = {k: v for k, v in r.items() if not isinstance(v, dict) and v is not None}
         f.update({f"sigma_{k}_mwh": v for k, v in r["sigma_mwh"].items()})
+        f.update({f"sigma_measurement_category_{k}_mwh": v for k, v in r["sigma_measurement_mwh"].items()})
+        split = r.get("sigma_calibration_split_mwh") or {}
+        f.update({f"sigma_calibration_delta_{k}_directions_mwh": v for k, v in split.items()})
+        eb = (r.get("empirical_bayes") or {}).get("tau")
+        if eb:
+            f.update({"empirical_bayes_amplitude": eb["amplitude"], "empirical_bayes_sigma_total_mwh":
+                      eb["sigma_total_mwh"], "empirical_bayes_p90_mwh": eb["p90_mwh"]})
         flat.append(f)
     paths.append(atomic_write_text(out / "aep.csv", _csv_text(flat, "AEP [MWh], IEC 61400-12-1 formula")))
     paths.append(atomic_write_text(out / "aep.json", json.dumps(_jsonable({**_meta(pc), "aep": aep_rows}), indent=1)))
@@ -316,7 +340,6 @@ def report_text(pc: CalibratedPowerCurve, aep_rows) -> str:
              f"Schedule: {pc.schedule.describe()}. Air density {pc.air_density:g} kg/m³; generator efficiency "
              f"{pc.generator_efficiency:g} (AEP on electrical power).", ""]
     lines += [f"- {n}" for n in pc.notes]
-    lines += [f"- measurement item {m.words()} (category B: correlated across bins)" for m in pc.measurements]
     lines += ["", "![power curve](powercurve.png)", "", "![C_P(λ)](cp_tsr.png)", "", "![AEP](aep.png)", "",
               "| distribution | P50 [MWh] | P90 [MWh] | nominal [MWh] | σ total | σ calibration (draws) | σ delta |",
               "|---|---|---|---|---|---|---|"]
@@ -324,4 +347,45 @@ def report_text(pc: CalibratedPowerCurve, aep_rows) -> str:
         lines.append(f"| {r['distribution']} | {r['p50_mwh']:.4g} | {r['p90_mwh']:.4g} | {r['nominal_aep_mwh']:.4g} | "
                      f"{r['sigma_total_mwh']:.3g} | {r['sigma_mwh']['calibration (draws)']:.3g} | "
                      f"{r['sigma_calibration_delta_mwh']:.3g} |")
+    lines += _measurement_table(pc, aep_rows) + _statistic_lines(aep_rows)
     return "\n".join(lines) + "\n"
+
+
+def _measurement_table(pc: CalibratedPowerCurve, aep_rows) -> list[str]:
+    """The stated measurement items as IEC 61400-12-1 tabulates them, with their AEP 1-σ at the headline
+    distribution (category B added linearly over the bins, category A in quadrature; Annex E)."""
+    if not pc.measurements:
+        return ["", "No measurement uncertainty items were stated (``--measurement NAME=KIND:PERCENT[:A|B]``)."]
+    r = _headline(aep_rows)
+    how = {"A": "uncorrelated across bins (quadrature)", "B": "correlated across bins (linear)"}
+    lines = ["", f"Measurement uncertainty items (IEC 61400-12-1 categories; AEP at {r['distribution']}):", "",
+             "| item | category | quantity | stated 1-σ | over the bins | σ AEP [MWh] |", "|---|---|---|---|---|---|"]
+    for m in pc.measurements:
+        lines.append(f"| {m.name} | {m.category} | {m.kind} | {100 * m.relative:g} % | {how[m.category]} "
+                     f"| {r['sigma_mwh'][m.name]:.3g} |")
+    t = r["sigma_measurement_mwh"]
+    lines += [f"| category A combined | A | | | quadrature | {t['A']:.3g} |",
+              f"| category B combined | B | | | quadrature of the items | {t['B']:.3g} |",
+              f"| measurement total | A + B | | | quadrature | {t['total']:.3g} |"]
+    return lines
+
+
+def _statistic_lines(aep_rows) -> list[str]:
+    """Where the calibration's AEP variance comes from (data-determined or prior-dominated directions) and the
+    empirical-Bayes alternative (:func:`calib.powercurve.field.prior_split`), at the headline distribution."""
+    r = _headline(aep_rows)
+    split, eb = r.get("sigma_calibration_split_mwh"), (r.get("empirical_bayes") or {})
+    if not split:
+        return []
+    out = ["", f"At {r['distribution']}, the calibration's nodal 1-σ (delta method) is {_energy(split['data'])} "
+           f"along the directions the data determine and {_energy(split['prior'])} along those the prior dominates; "
+           f"the field between the nodes adds {_energy(r['sigma_mwh']['field between nodes'])}."]
+    if "tau" in eb:
+        t = eb["tau"]
+        rng = "".join(f", {_energy(eb[k]['sigma_total_mwh'])} at its interval's {w} end τ = {eb[k]['amplitude']:.2g}"
+                      for k, w in (("tau_lower", "lower"), ("tau_upper", "upper")) if k in eb)
+        out[-1] += (f" With the field's prior amplitude at the prior check's τ̂ = {t['amplitude']:.2g} instead of the "
+                    f"stated 1 (empirical Bayes, the estimate kept), the total 1-σ would be "
+                    f"{_energy(t['sigma_total_mwh'])} instead of {_energy(r['sigma_total_mwh'])} (P90 "
+                    f"{_energy(t['p90_mwh'])}){rng}.")
+    return out

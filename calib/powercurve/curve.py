@@ -18,12 +18,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calib.errors import InputError
-from calib.powercurve.aep import aep_weights
 from calib.powercurve.draws import solve_draws
+from calib.powercurve.field import prior_split as split_prior
+from calib.powercurve.budget import aep_rows
+from calib.powercurve.fmu import FmuPowerModel, is_fmu_model
 from calib.powercurve.linearized import delta_method
+from calib.powercurve.terms import prediction_terms
 from calib.powercurve.schedule import ScheduledCurve
 from calib.powercurve.statements import posterior_statement, schedule_warnings
-from calib.types import OperatingConditions
 
 __all__ = ["CalibratedPowerCurve", "calibrated_power_curve", "iec_bins", "posterior_draws"]
 
@@ -98,6 +100,15 @@ class CalibratedPowerCurve:
         The covariance the draws came from.
     warnings : list of str
         What the schedule could not do (:func:`calib.powercurve.statements.schedule_warnings`), for the report's first paragraph.
+    field_cov : ndarray, shape (n_bins, n_bins) or None
+        Covariance of power across the bins from the field between the nodes [W²]
+        (:func:`calib.powercurve.field.field_covariance`; its diagonal is ``field_std``²); None where the
+        prediction leaves that term out (then the AEP adds ``field_std`` linearly over the bins, an upper bound).
+    simulations : int or None
+        Simulations an FMU model ran for this curve (None for the native BEM).
+    prior_split : dict or None
+        The nodal covariance by prior-dominated and data-determined directions and the empirical-Bayes
+        amplitude (:func:`calib.powercurve.field.prior_split`); None when not a MAP result with a prior check.
     """
 
     wind_speed: np.ndarray
@@ -122,6 +133,9 @@ class CalibratedPowerCurve:
     n_bem_points: int = 0
     cov: np.ndarray | None = None
     warnings: list = field(default_factory=list)
+    field_cov: np.ndarray | None = None
+    prior_split: dict | None = None
+    simulations: int | None = None
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -180,46 +194,24 @@ class CalibratedPowerCurve:
         """AEP [MWh] per wind distribution with its 1-σ per source, P50 and P90.
 
         P50 is the central curve's AEP; sources: the calibration through the draws (and, beside
-        it, its delta-method value, not added again), the model discrepancy and the between-node
-        field (fully correlated across bins: added linearly over the bins), each measurement item
-        (category B: fully correlated across bins). The total adds the sources in quadrature;
-        P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where the distribution has weight
-        are left out of the draws' σ and counted. Without draws the delta method's σ enters the total.
+        it, its delta-method value, not added again), the model discrepancy (fully correlated
+        across bins: added linearly over the bins, an upper bound), the field between the nodes
+        (through its covariance across the bins, ``field_cov``: σ² = c Σ cᵀ; linearly where that is
+        not available), each measurement item (combined as IEC 61400-12-1 does,
+        :func:`calib.powercurve.measurement.aep_uncertainty`: category B correlated across the bins,
+        category A not; ``sigma_measurement_mwh`` per category). The total
+        adds the sources in quadrature; P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where
+        the distribution has weight are left out of the draws' σ and counted. Without draws the delta
+        method's σ enters the total.
+
+        Beside it, for a MAP result with a prior check (``prior_split``): the delta method's
+        calibration variance split into its data-determined and prior-dominated directions
+        (``sigma_calibration_split_mwh``) and ``empirical_bayes``: the total σ and P90 with the
+        field's prior amplitude at the prior check's τ̂ (and at its 95 % interval's ends) instead of
+        the stated 1, the nodal part by :func:`calib.powercurve.field.variance_at_amplitude` and the
+        field between the nodes scaled by τ², the estimate kept.
         """
-        if not 0 < availability <= 1:
-            raise InputError(f"availability must be in (0, 1], got {availability!r}", "--availability",
-                             field="availability")
-        eta = self.generator_efficiency
-        rows = []
-        for name, cdf in cdfs.items():
-            c = aep_weights(self.wind_speed, cdf) * availability * eta / 1e6     # MWh per W
-            P = self.central.power
-            central = float(c @ P) if np.all(np.isfinite(P[c > 0])) else float("nan")
-            nominal = float(c @ np.nan_to_num(self.nominal.power))
-            Pd = self.draws["power"]
-            used = np.all(np.isfinite(Pd[:, c > 0]), axis=1)
-            aep_d = np.nan_to_num(Pd[used]) @ c
-            sig = {"calibration (draws)": float(np.std(aep_d, ddof=1)) if aep_d.size > 1 else float("nan")}
-            if self.grad_power is not None and self.cov is not None:
-                g = c @ np.nan_to_num(self.grad_power)
-                sig_delta = float(np.sqrt(max(g @ self.cov @ g, 0.0)))
-            else:
-                sig_delta = float("nan")
-            sig["model discrepancy"] = float(c @ np.nan_to_num(self.discrepancy_std))
-            sig["field between nodes"] = float(c @ np.nan_to_num(self.field_std))
-            for m, u in self.measurement_std().items():
-                sig[m] = float(c @ np.nan_to_num(u)) / eta          # u is electrical already
-            # without draws (--draws 0) the calibration enters the total by its delta-method value
-            cal = sig["calibration (draws)"] if np.isfinite(sig["calibration (draws)"]) else sig_delta
-            total = float(np.sqrt(np.nan_to_num(cal) ** 2 + sum(np.nan_to_num(s) ** 2 for k, s in sig.items()
-                                                             if k != "calibration (draws)")))
-            rows.append({"distribution": name, "aep_mwh": central, "nominal_aep_mwh": nominal,
-                         "draws_mean_aep_mwh": float(np.mean(aep_d)) if aep_d.size else float("nan"),
-                         "sigma_mwh": sig, "sigma_calibration_delta_mwh": sig_delta, "sigma_total_mwh": total,
-                         "p50_mwh": central, "p90_mwh": central - 1.2815515655446004 * total,
-                         "draws_used": int(used.sum()), "draws_left_out": int((~used).sum()),
-                         "availability": availability})
-        return rows
+        return aep_rows(self, cdfs, availability)
 
 
 def _power_model(model):
@@ -269,7 +261,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     Raises
     ------
     InputError
-        A negative density, a model without ``solve`` (an FMU: not yet supported here), a
+        A negative density, an FMU result with another schedule than a fixed speed or a table, a
         parameter count that differs from the result's, a rotor without a schedule and none given.
     """
     from calib.powercurve.schedule import VariableSpeed
@@ -279,23 +271,12 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     if n_draws < 0:
         raise InputError(f"--draws must be >= 0, got {n_draws}", "--draws", field="draws")
     model = result.rebuild_model() if model is None else model
-    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
-        raise InputError("the power curve needs the native BEM model (an FMU result is not supported by "
-                         "calib powercurve yet)", result.name, field="model")
+    model, fmu = _solvable(model, schedule, result.name)
     schedule = VariableSpeed.from_rotor(model.rotor, tsr_rule) if schedule is None else schedule
     if hasattr(schedule, "check_reachable"):
         schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
     v = np.asarray(wind_speed, float)
-    p_hat = np.asarray(result.estimate.p_hat, float)
-    if p_hat.size != len(model.parameters):
-        raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
-                         field="parameters")
-    cov = np.asarray(result.uncertainty.cov_p, float)
-    if cov.shape != (p_hat.size, p_hat.size) or not np.all(np.isfinite(cov)):
-        raise InputError(f"the result records no usable covariance of the estimate (result.uncertainty.cov_p has "
-                         f"shape {cov.shape}, {int(np.count_nonzero(~np.isfinite(cov)))} non-finite entries; expected "
-                         f"a finite {p_hat.size}x{p_hat.size} matrix): there is no posterior to draw from or to "
-                         "linearize; re-run the calibration", result.name, field="uncertainty.cov_p")
+    p_hat, cov = _estimate(result, model)
     lower = np.array([q.lower for q in model.parameters], float)
     upper = np.array([q.upper for q in model.parameters], float)
     notes = []
@@ -303,6 +284,14 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
     warnings = schedule_warnings(schedule, central)
     notes += posterior_statement(result)
+
+    disc, fld, envelope, fld_cov = prediction_terms(result, model, central, air_density, notes)
+    if fld_cov is not None and result.uncertainty.cov_alias.shape == cov.shape:
+        # the field term replaces the nodal aliasing term (as predict_outputs does): drawing from
+        # Cov(p̂) with Cov_alias in it as well counted the field between the nodes twice
+        cov = cov - np.asarray(result.uncertainty.cov_alias, float)
+        notes.append("the parameter draws and the delta method use Cov(p̂) − Cov_alias: the field between the nodes "
+                     "enters once, as its own term (correlated across the bins), not also through the nodes")
 
     pm = _power_model(model)
     delta, grad, pitch_grad, dP_dpitch = {}, None, None, None
@@ -317,50 +306,46 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                                dP_dpitch, batched, progress, result.name)
     notes += how
     seconds = time.perf_counter() - t0
+    n_sim = None if fmu is None else fmu.simulation_count() - fmu.simulations_before
+    if fmu is not None:
+        executor = getattr(fmu, "executor", None)
+        notes.append(f"the FMU ran {n_sim} simulations for this power curve (the central, nominal and "
+                     f"{draws_p.shape[0]} draws' schedules, one evaluation per draw with its bins on the executor "
+                     f"{type(executor).__name__ if executor is not None else 'serial'}; the prediction's terms)")
 
-    disc, fld, envelope = _prediction_terms(result, model, central, air_density, notes)
     return CalibratedPowerCurve(v, float(air_density), schedule, central, nominal, out, status, tsr, delta, grad,
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
-                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings)
+                                float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
+                                fld_cov, split_prior(result, model, cov), n_sim)
 
 
-def _prediction_terms(result, model, central, air_density, notes):
-    """The model-discrepancy and between-node field 1-σ of power per bin [W] (zero in region 3) and
-    the envelope flags, from :func:`calib.calibration.prediction.predict_outputs` at the central
-    schedule; a sentence on each appended to ``notes``."""
-    v = central.wind_speed
-    disc, fld, envelope = np.zeros(v.size), np.zeros(v.size), ("",) * v.size
-    try:
-        pred = result.predict(OperatingConditions(v, central.rotor_speed, central.pitch, air_density),
-                              _result_channels_model(model, result))
-        envelope = tuple(pred.envelope) if pred.envelope else envelope
-        # power is the torque times the rotor speed (a condition): a calibration on torque carries its
-        # terms to power exactly, scaled by Ω
-        source = "power" if "power" in pred.channels else "torque" if "torque" in pred.channels else None
-        if source is not None:
-            i = list(pred.channels).index(source)
-            scale = 1.0 if source == "power" else central.rotor_speed * np.pi / 30.0
-            r2 = central.region != 3
-            disc = np.where(r2, scale * np.nan_to_num(pred.discrepancy_std[:, i]), 0.0)
-            if pred.field_std is not None:
-                fld = np.where(r2, scale * np.nan_to_num(pred.field_std[:, i]), 0.0)
-            notes.append(f"model discrepancy of {source}: {pred.discrepancy or 'none recorded'}; field between the "
-                         f"nodes: {pred.representation}; both added in quadrature per bin"
-                         f"{' (as torque x rotor speed)' if source == 'torque' else ''}, zero in region 3")
-        else:
-            notes.append("the calibration has no power or torque channel: no model-discrepancy or between-node "
-                         "field term for power (only the parameter uncertainty)")
-    except InputError as exc:
-        notes.append(f"no discrepancy term and no envelope check: {exc}")
-    return disc, fld, envelope
+def _solvable(model, schedule, name):
+    """``model`` with the ``solve`` the schedules call (an FMU wrapped in :class:`FmuPowerModel`, which is
+    also returned second; None for the native BEM), or an :class:`InputError` naming ``name``."""
+    if is_fmu_model(model):
+        if getattr(schedule, "kind", None) not in ("fixed_speed", "table"):
+            raise InputError("an FMU result's power curve needs a fixed-speed or table schedule (--schedule fixed "
+                             "--rotor-speed RPM --pitch DEG, or --schedule TABLE.csv): the variable-speed schedule is "
+                             "the native BEM's only", name, field="schedule")
+        fmu = FmuPowerModel(model, name)
+        return fmu, fmu
+    if not hasattr(model, "solve") or not hasattr(model, "rotor"):
+        raise InputError(f"the power curve needs the native BEM model or an FMU; the result's model is a "
+                         f"{type(model).__name__}", name, field="model")
+    return model, None
 
 
-def _result_channels_model(model, result):
-    """``model`` with the result's channels (what :func:`predict_outputs` needs)."""
-    names = [c.name for c in model.channels]
-    if all(c in names for c in result.channels):
-        return model
-    from calib.models.bem_model import BemModel
-    return BemModel(model.rotor, model.grid, tuple(result.channels), model.settings, model.nuisance,
-                    model.rotor_source, model.effects)
+def _estimate(result, model):
+    """p̂ and Cov(p̂) of ``result`` [parameter units], checked against ``model``'s parameters."""
+    p_hat = np.asarray(result.estimate.p_hat, float)
+    if p_hat.size != len(model.parameters):
+        raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
+                         field="parameters")
+    cov = np.asarray(result.uncertainty.cov_p, float)
+    if cov.shape != (p_hat.size, p_hat.size) or not np.all(np.isfinite(cov)):
+        raise InputError(f"the result records no usable covariance of the estimate (result.uncertainty.cov_p has "
+                         f"shape {cov.shape}, {int(np.count_nonzero(~np.isfinite(cov)))} non-finite entries; expected "
+                         f"a finite {p_hat.size}x{p_hat.size} matrix): there is no posterior to draw from or to "
+                         "linearize; re-run the calibration", result.name, field="uncertainty.cov_p")
+    return p_hat, cov
