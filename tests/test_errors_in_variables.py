@@ -67,7 +67,7 @@ def test_negative_condition_sigma_names_file_line_and_column(tmp_path):
     ({"condition_sigma": {"wind_speed": -0.1}}, "condition_sigma.wind_speed"),
     ({"condition_relative_sigma": {"pitch": float("nan")}}, "condition_relative_sigma.pitch"),
     ({"condition_sigma": {"yaw": 1.0}}, "condition_sigma.yaw"),
-    ({"errors_in_variables": "joint"}, "errors_in_variables"),
+    ({"errors_in_variables": "orthogonal"}, "errors_in_variables"),
     ({"max_eiv_iterations": 0}, "max_eiv_iterations"),
 ])
 def test_bad_condition_settings_name_the_key(settings, field):
