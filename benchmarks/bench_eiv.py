@@ -22,7 +22,7 @@ nodes, in parameter scales; over all nodes and over those the marginal estimator
 better than half their prior σ) and of the global biases (``wind_scale`` [-], ``pitch_offset``
 [deg]), and the coverage of the 95 % intervals (±1.96 σ of the Laplace covariance) over replicates.
 
-``python benchmarks/bench_eiv.py [N]`` (N replicates, default 50; about 10 s CPU per replicate).
+``python benchmarks/bench_eiv.py [N]`` (N replicates, default 50; about 20 s CPU per replicate).
 """
 
 from __future__ import annotations
