@@ -135,3 +135,72 @@ def test_joint_removes_the_output_error_bias_of_the_global_biases():
 
 def test_joint_is_a_valid_setting():
     CalibrationSettings(errors_in_variables="joint").validate()
+
+
+@pytest.fixture(scope="module")
+def calibrated():
+    """The global biases calibrated (joint estimator) on a 30-record campaign."""
+    rotor = load_rotor("nrel5mw")
+    bem = BemSettings(use_tilt=False)
+    model = BemModel(rotor, None, CHANNELS, bem, nuisance=("wind_scale", "pitch_offset"))
+    truth = BemModel(rotor, None, CHANNELS, bem, nuisance=())
+    meas, _ = synthesize_campaign(truth, np.zeros(0), CampaignSpec(n_records=30), seed=5)
+    res = Calibrator(model, meas, CalibrationSettings(errors_in_variables="joint", **FAST)).run()
+    return model, res
+
+
+def test_prediction_at_uncertain_conditions_matches_monte_carlo(calibrated):
+    """The conditions' share of a prediction's variance against the sample variance of the calibrated
+    model's outputs at conditions drawn about the stated ones with the stated σ; the total is the
+    exact-condition variance plus that share."""
+    from calib.types import OperatingConditions
+    model, res = calibrated
+    cond = OperatingConditions([6.0, 9.0, 14.0], [7.0, 10.5, 12.1], [0.0, 0.0, 5.0], [1.2, 1.225, 1.25])
+    su = np.array([[0.18, 0.0, 0.2], [0.27, 0.1, 0.2], [0.42, 0.0, 0.3]])
+    exact = res.predict(cond, model=model)
+    pred = res.predict(cond, model=model, condition_sigma=su)
+    assert exact.condition_std is None
+    np.testing.assert_allclose(pred.std ** 2, exact.std ** 2 + pred.condition_std ** 2, rtol=1e-9)
+    np.testing.assert_allclose(pred.values, exact.values)
+    rng = np.random.default_rng(3)
+    n = 2000
+    for k in range(3):
+        e = rng.standard_normal((n, 3)) * su[k]
+        draws = OperatingConditions(cond.wind_speed[k] + e[:, 0], cond.rotor_speed[k] + e[:, 1],
+                                    cond.pitch[k] + e[:, 2], np.full(n, cond.air_density[k]))
+        y = model.evaluate(res.estimate.p_hat, draws).values[:, :3]
+        # sample std of n = 2000 draws: standard error about 1.6 %; the linearization's own error a few %
+        np.testing.assert_allclose(pred.condition_std[k], y.std(axis=0, ddof=1), rtol=0.08)
+
+
+def test_prediction_refuses_a_negative_condition_sigma(calibrated):
+    from calib.errors import InputError
+    from calib.types import OperatingConditions
+    model, res = calibrated
+    cond = OperatingConditions([8.0], [9.0], [0.0])
+    with pytest.raises(InputError, match=">= 0") as exc:
+        res.predict(cond, model=model, condition_sigma=np.array([[0.1, -0.1, 0.0]]))
+    assert exc.value.field == "condition_sigma"
+
+
+def test_calib_predict_carries_the_data_condition_sigma(calibrated, tmp_path):
+    """``calib predict`` on a table with wind_speed_sigma and pitch_sigma columns: wider intervals
+    than without, by the conditions' share it prints."""
+    from calib.calibration.predict_command import run_predict
+    model, res = calibrated
+    res.save(tmp_path / "res")
+    rows = "wind_speed,rotor_speed,pitch,air_density,wind_speed_sigma,pitch_sigma\n8,9.5,0,1.225,0.24,0.2\n12,12.1,4,1.225,0.36,0.2\n"
+    (tmp_path / "a.csv").write_text(rows)
+    (tmp_path / "b.csv").write_text("\n".join(",".join(r.split(",")[:4]) for r in rows.splitlines()) + "\n")
+    lines = []
+    run_predict(tmp_path / "res", tmp_path / "a.csv", tmp_path / "a_out.csv", printer=lines.append)
+    run_predict(tmp_path / "res", tmp_path / "b.csv", tmp_path / "b_out.csv", printer=lines.append)
+    assert any("carry the conditions' uncertainty" in line for line in lines)
+    import csv
+
+    def widths(path):
+        rows = list(csv.DictReader(line for line in open(path) if not line.startswith("#")))
+        lo = [k for k in rows[0] if k.startswith("power_lower")][0]
+        hi = [k for k in rows[0] if k.startswith("power_upper")][0]
+        return np.array([float(r[hi]) - float(r[lo]) for r in rows])
+    assert np.all(widths(tmp_path / "a_out.csv") > 1.5 * widths(tmp_path / "b_out.csv"))

@@ -175,7 +175,12 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     for line in setup_lines(result.provenance.model_spec, result.conditions, meas.conditions.as_dict(), str(data),
                             rotor_name):
         printer(line)
-    pred = result.predict(meas.conditions, model=model, confidence=confidence)
+    sigma_u = None
+    if meas.condition_sigma:   # the data's wind_speed_sigma, rotor_speed_sigma, pitch_sigma columns
+        from calib.calibration.settings import UNCERTAIN_CONDITIONS
+        sigma_u = np.column_stack([np.broadcast_to(np.asarray(meas.condition_sigma.get(c, 0.0), float), meas.n_points)
+                                   for c in UNCERTAIN_CONDITIONS])
+    pred = result.predict(meas.conditions, model=model, confidence=confidence, condition_sigma=sigma_u)
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})
     figures = {"n_points": int(pred.values.shape[0]), "n_failed": int(np.count_nonzero(pred.status != 0))}
     printer(f"calib predict: {figures['n_points']} points, {figures['n_failed']} failed; wrote {out}")
@@ -203,6 +208,12 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
             share = np.nanmedian(pred.field_std ** 2 / pred.std ** 2, axis=0)
         printer("  the field between and beyond the nodes' share of the interval variance (median over the points): "
                 + ", ".join(f"{c} {100 * v:.0f} %" for c, v in zip(pred.channels, share) if np.isfinite(v)))
+    if pred.condition_std is not None:
+        with np.errstate(all="ignore"):
+            share = np.nanmedian(pred.condition_std ** 2 / pred.std ** 2, axis=0)
+        printer("  intervals carry the conditions' uncertainty (the data's _sigma columns); its share of the interval "
+                "variance (median over the points): " + ", ".join(
+                    f"{c} {100 * v:.0f} %" for c, v in zip(pred.channels, share) if np.isfinite(v)))
     common = [c for c in meas.channels if c in pred.channels]
     if common:
         chi = {}
