@@ -213,8 +213,12 @@ def markdown(figures: dict) -> str:
             sentences.append(f"output error (ML noise) / {est}: {ratios}wind_scale "
                              f"{f['wind_scale_bias_ratio_vs_output_error_ml' + suffix]:.2g}, pitch_offset "
                              f"{f['pitch_offset_bias_ratio_vs_output_error_ml' + suffix]:.2g}")
+        spread = ", ".join(f"{est} {f[est]['pitch_offset_bias_se'] * np.sqrt(f['n_replicates']):.2f} / "
+                           f"{f[est]['pitch_offset_sigma_median']:.2f}" for est in (*ESTIMATORS, "oracle")
+                           if f[est]['pitch_offset_bias_se'] is not None)
         rows += ["", f"{f['n_replicates']} replicates of {f['n_records']} records (seeds {f['first_seed']}…). "
-                 f"Bias ratio {'; '.join(sentences)}.", ""]
+                 f"Bias ratio {'; '.join(sentences)}. Pitch offset, spread of the estimates over the replicates / "
+                 f"median σ [deg]: {spread}.", ""]
         parts.append("\n".join(rows))
     return "\n".join(parts) + ("\nBias: mean error over the replicates ± its standard error; field bias: RMS over the "
                                "correction nodes of the mean error, in parameter scales; excess over oracle: the same of "
