@@ -15,7 +15,7 @@ drag correction field. Calibrated with the MAP estimator (a 6 × 3 node correcti
 - ``marginal``: the stated condition σ through the effective covariance
   (:mod:`calib.calibration.errors_in_variables`);
 - ``joint``: each record's true conditions estimated beside the parameters, their readings as
-  priors (:class:`calib.calibration.errors_in_variables.JointProblem`).
+  priors (:class:`calib.calibration.eiv_joint.JointProblem`).
 
 Figures per estimator: the bias (mean error over replicates) of the correction nodes (RMS over the
 nodes, in parameter scales; over all nodes and over those the marginal estimator determines to

@@ -10,7 +10,8 @@ from scipy.optimize import minimize
 from calib.bem import BemSettings
 from calib.calibration import CalibrationSettings, Calibrator
 from calib.calibration.eiv_campaign import CampaignSpec, synthesize_campaign
-from calib.calibration.errors_in_variables import (JointProblem, MarginalProblem, condition_sensitivities,
+from calib.calibration.eiv_joint import JointProblem
+from calib.calibration.errors_in_variables import (MarginalProblem, condition_sensitivities,
                                                    effective_cholesky)
 from calib.calibration.problem import ProblemStatement
 from calib.models.bem_model import BemModel
@@ -204,3 +205,15 @@ def test_calib_predict_carries_the_data_condition_sigma(calibrated, tmp_path):
         hi = [k for k in rows[0] if k.startswith("power_upper")][0]
         return np.array([float(r[hi]) - float(r[lo]) for r in rows])
     assert np.all(widths(tmp_path / "a_out.csv") > 1.5 * widths(tmp_path / "b_out.csv"))
+
+
+def test_joint_with_zero_condition_sigma_is_the_output_error_fit(setup):
+    """No condition σ stated, or all zero: the joint setting leaves the calibration the output-error fit
+    (the path the bit-identical workflow test of test_errors_in_variables.py runs)."""
+    import dataclasses
+
+    from calib.calibration.errors_in_variables import uncertain_conditions
+    _, meas, _, _ = setup
+    zero = dataclasses.replace(meas, condition_sigma={k: np.zeros_like(v) for k, v in meas.condition_sigma.items()})
+    assert uncertain_conditions(zero, CalibrationSettings(errors_in_variables="joint")) is None
+    assert uncertain_conditions(meas, CalibrationSettings(errors_in_variables="joint")) is not None

@@ -51,7 +51,8 @@ from typing import Callable
 
 import numpy as np
 
-from calib.calibration.errors_in_variables import fit_errors_in_variables, uncertain_conditions
+from calib.calibration.eiv_joint import fit_errors_in_variables
+from calib.calibration.errors_in_variables import uncertain_conditions
 from calib.calibration.map_fit import MapFit
 from calib.calibration.noise import initial_sigma
 from calib.calibration.problem import LeastSquaresProblem, ProblemStatement
