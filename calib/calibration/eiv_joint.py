@@ -69,9 +69,10 @@ class JointProblem(MarginalProblem):
     ----------
     delta : ndarray, shape (n_points, 3)
         The estimated condition errors δ* at the last solve [m/s, rpm, deg].
-    n_latent_solves, n_latent_not_settled, n_failed_differences : int
+    n_latent_solves, n_latent_not_settled, n_latent_halvings, n_failed_differences : int
         Solves of the points' conditions, those that did not settle within
-        ``MAX_LATENT_ITERATIONS`` steps, and the largest count of points whose J_u failed.
+        ``MAX_LATENT_ITERATIONS`` steps, points whose step was halved (summed over steps), and the
+        largest count of points whose J_u failed.
 
     References
     ----------
@@ -91,6 +92,7 @@ class JointProblem(MarginalProblem):
         self.delta = np.zeros_like(self.sigma_u)
         self.n_latent_solves = 0
         self.n_latent_not_settled = 0
+        self.n_latent_halvings = 0
         self.n_failed_differences = 0
         self._latent = None      # (p, state) of the last solve
         self._factors = {}       # id(linearization) -> (linearization, its solve's state)
@@ -154,21 +156,20 @@ class JointProblem(MarginalProblem):
                 break
             lam = np.ones(len(delta))
             todo = ok & np.any(step != 0.0, axis=1)
-            accepted = np.zeros(len(delta), bool)
             new_delta = delta.copy()
-            for _ in range(MAX_LATENT_HALVINGS):
-                trial = delta + lam[:, None] * step
-                ev_t, y_t, ok_t, cost_t = self._evaluate_at(p, np.where(todo[:, None], trial, delta))
+            for halving in range(MAX_LATENT_HALVINGS):
+                trial = np.where(todo[:, None], delta + lam[:, None] * step, delta)
+                ev_t, y_t, ok_t, cost_t = self._evaluate_at(p, trial)
                 better = todo & ok_t & (cost_t <= cost * (1.0 + 1e-12) + 1e-12)
                 new_delta[better] = trial[better]
-                accepted |= better
                 todo &= ~better
                 if not np.any(todo):
                     break
                 lam[todo] *= 0.5
-            if np.all(accepted == (ok & np.any(step != 0.0, axis=1))) and np.array_equal(new_delta, trial):
-                delta, ev, y, ok, cost = new_delta, ev_t, y_t, ok_t, cost_t      # one trial took every point
-            else:
+            self.n_latent_halvings += int(np.count_nonzero(lam < 1.0))
+            if halving == 0 and np.array_equal(new_delta, trial):
+                delta, ev, y, ok, cost = new_delta, ev_t, y_t, ok_t, cost_t      # the full step taken everywhere
+            else:    # steps halved, or refused, at some points: the outputs at the conditions taken
                 delta = new_delta
                 ev, y, ok, cost = self._evaluate_at(p, delta)
         self.n_latent_solves += 1
@@ -250,6 +251,7 @@ def fit_joint(cal, problem: LeastSquaresProblem, sigma_u: np.ndarray, p: np.ndar
                  "(condition scatter left out there)")
     cal.emit({"stage": "errors_in_variables", "estimator": "joint", "iteration": 1,
               "latent_solves": joint.n_latent_solves, "latent_not_settled": joint.n_latent_not_settled,
+              "latent_halvings": joint.n_latent_halvings,
               "n_failed_differences": joint.n_failed_differences, "status": fit.status})
     return joint, fit, f"{fit.message}; {text}" if fit.message else text
 
