@@ -215,14 +215,16 @@ class JointProblem(MarginalProblem):
         r = self._reduced_residual(y, ok, state)
         self._cache = Linearization(p.copy(), r, ok, self._whitened_sensitivities(G, ok), ev)
         self._factors[id(self._cache)] = (self._cache, state)
-        while len(self._factors) > 8:            # the few linearizations an estimator goes back to
+        while len(self._factors) > 32:           # the linearizations an estimator may go back to
             self._factors.pop(next(iter(self._factors)))
         self._use_factors(self._cache)
         return self._cache
 
     def _use_factors(self, lin: Linearization) -> None:
-        """Make the effective covariances and the conditions at ``lin`` the current ones."""
-        state = self._factors[id(lin)][1]
+        """Make the effective covariances and the conditions at ``lin`` the current ones (solved again
+        at its parameters if it is no longer among the last linearizations kept)."""
+        kept = self._factors.get(id(lin))
+        state = kept[1] if kept is not None and kept[0] is lin else self.solve_conditions(lin.p)
         self.chol, self.delta = state["chol"], state["delta"]
         self.sigma = np.sqrt(np.einsum("kcd,kcd->kc", self.chol, self.chol))
 
