@@ -217,3 +217,18 @@ def test_joint_with_zero_condition_sigma_is_the_output_error_fit(setup):
     zero = dataclasses.replace(meas, condition_sigma={k: np.zeros_like(v) for k, v in meas.condition_sigma.items()})
     assert uncertain_conditions(zero, CalibrationSettings(errors_in_variables="joint")) is None
     assert uncertain_conditions(meas, CalibrationSettings(errors_in_variables="joint")) is not None
+
+
+def test_remembering_an_old_linearization_restores_its_factors(setup):
+    """An estimator going back to a linearization older than those the problem keeps (bench_eiv seed
+    4040): its conditions are solved again, its factors made current, no error."""
+    prob = joint_problem(setup)
+    first = prob.linearize(np.array([1.02, 0.3]))
+    chol_first = prob.chol.copy()
+    for k in range(34):
+        prob.linearize(np.array([1.02 + 1e-4 * (k + 1), 0.3]))
+    assert not np.allclose(prob.chol, chol_first, rtol=1e-9, atol=0)
+    prob.remember(first)
+    # solved again from another start: the same conditions to within the inner tolerance (1e-3 σ)
+    np.testing.assert_allclose(prob.chol, chol_first, rtol=1e-4, atol=1e-9 * np.max(np.abs(chol_first)))
+    assert prob.linearize(first.p) is first
