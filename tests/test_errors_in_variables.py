@@ -67,7 +67,7 @@ def test_negative_condition_sigma_names_file_line_and_column(tmp_path):
     ({"condition_sigma": {"wind_speed": -0.1}}, "condition_sigma.wind_speed"),
     ({"condition_relative_sigma": {"pitch": float("nan")}}, "condition_relative_sigma.pitch"),
     ({"condition_sigma": {"yaw": 1.0}}, "condition_sigma.yaw"),
-    ({"errors_in_variables": "joint"}, "errors_in_variables"),
+    ({"errors_in_variables": "orthogonal"}, "errors_in_variables"),
     ({"max_eiv_iterations": 0}, "max_eiv_iterations"),
 ])
 def test_bad_condition_settings_name_the_key(settings, field):
@@ -183,21 +183,22 @@ def test_marginal_removes_the_output_error_bias_of_the_global_biases(globals_mod
 
 
 def test_field_scada_workflow_runs_with_errors_in_variables(tmp_path):
-    """The shipped field workflow (docs/user_guide/field_data.md): the marginal fit settles, its χ² is
+    """The shipped field workflow (docs/user_guide/field_data.md): the joint fit settles, its χ² is
     that of the stated noise, the known truth of the synthetic export (wind_scale 1/0.97, pitch offset
     0.5 deg; workflows/data/make_field_scada_csv.py) lies within the intervals, and the same
     workflow without errors in variables misfits by the conditions' scatter."""
     [stage] = run_workflow(WORKFLOWS / "field_scada.toml", tmp_path / "eiv", progress=False, history=False)
     res = stage.result
     assert res.estimate.status == "converged"
-    assert "errors in variables (marginal)" in res.estimate.message and "NOT settled" not in res.estimate.message
+    assert "errors in variables (joint)" in res.estimate.message and "NOT settled" not in res.estimate.message
     assert res.fit.chi2_after / res.dof < 1.5
     names = [q["name"] for q in res.parameters]
     for name, truth, k in (("wind_scale", 1.0 / 0.97, 2.0), ("pitch_offset", 0.5, 3.0)):
         j = names.index(name)
         assert abs(res.estimate.p_hat[j] - truth) < k * res.uncertainty.std_p[j], name
-    text = (WORKFLOWS / "field_scada.toml").read_text().replace('errors_in_variables = "marginal"',
+    text = (WORKFLOWS / "field_scada.toml").read_text().replace('errors_in_variables = "joint"',
                                                                    'errors_in_variables = "ignore"')
+    assert 'errors_in_variables = "ignore"' in text
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / "field_scada.csv").write_bytes((WORKFLOWS / "data" / "field_scada.csv").read_bytes())
     (tmp_path / "oe.toml").write_text(text)

@@ -51,7 +51,8 @@ from typing import Callable
 
 import numpy as np
 
-from calib.calibration.errors_in_variables import fit_marginal, uncertain_conditions
+from calib.calibration.eiv_joint import fit_errors_in_variables
+from calib.calibration.errors_in_variables import uncertain_conditions
 from calib.calibration.map_fit import MapFit
 from calib.calibration.noise import initial_sigma
 from calib.calibration.problem import LeastSquaresProblem, ProblemStatement
@@ -201,7 +202,7 @@ class Calibrator:
         noise_iters = st.max_noise_iterations if st.noise in ("ml", "relative_ml") else 1
         p = statement.p0.copy() if self.start is None else self.start.copy()
         if sigma_u is not None:   # errors in variables
-            problem, fit, message = fit_marginal(self, problem, sigma_u, p)
+            problem, fit, message = fit_errors_in_variables(self, problem, sigma_u, p)
             p, status, noise_iters = fit.p, fit.status, 0
         for k_noise in range(noise_iters):
             fit = self.fitter.fit(problem, p)

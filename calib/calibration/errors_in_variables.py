@@ -1,4 +1,6 @@
-r"""Errors in variables: operating conditions measured with an uncertainty (the *marginal* estimator).
+r"""Errors in variables: operating conditions measured with an uncertainty (the *marginal* estimator;
+the *joint* one, which shares its sensitivities and factors, and the choice between them in
+:mod:`calib.calibration.eiv_joint`).
 
 Each point's measured conditions u_k = (V, Ω, β)_k (wind speed [m/s], rotor speed [rpm], pitch
 [deg]) differ from the true ones by a zero-mean error with covariance Σ_u,k (diagonal: the
@@ -40,7 +42,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from calib.calibration.problem import LeastSquaresProblem, Linearization
+from calib.calibration.problem import LeastSquaresProblem
 from calib.calibration.settings import UNCERTAIN_CONDITIONS
 from calib.errors import InputError
 from calib.types import OperatingConditions
@@ -128,7 +130,7 @@ def uncertain_conditions(m, settings) -> np.ndarray | None:
         Condition σ stated with a noise model the marginal estimator does not support
         (:func:`check_noise_mode`).
     """
-    if settings.errors_in_variables != "marginal":
+    if settings.errors_in_variables not in ("marginal", "joint"):
         return None
     sigma_u = condition_sigma(m, settings)
     if sigma_u is not None:
@@ -241,19 +243,11 @@ class MarginalProblem(LeastSquaresProblem):
         self.n_failed_points_total += int(np.count_nonzero(~ok))
         return r, ok
 
-    def linearize(self, p: np.ndarray) -> Linearization:
-        """Outputs, whitened residuals and sensitivities L_k⁻¹ ∂y_k/∂p̃ at ``p`` (cached)."""
-        p = np.asarray(p, float)
-        if self._cache is not None and self._cache.M is not None and np.array_equal(self._cache.p, p):
-            return self._cache
-        ev, G = self.model.jacobian(p, self.conditions)
-        self.n_jacobians += 1
-        r, ok = self._residual(ev)
+    def _whitened_sensitivities(self, G: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """L_k⁻¹ ∂y_k/∂p̃ per point (the whitening hook of :meth:`LeastSquaresProblem.linearize`)."""
         Gs = np.nan_to_num(G[:, self.statement.channel_index, :] * self.statement.scale[None, None, :],
                            nan=0.0, posinf=0.0, neginf=0.0)
-        M = np.where(ok[:, None, None], self._whiten(Gs), 0.0).reshape(-1, G.shape[-1])
-        self._cache = Linearization(p.copy(), r, ok, M, ev)
-        return self._cache
+        return np.where(ok[:, None, None], self._whiten(Gs), 0.0).reshape(-1, G.shape[-1])
 
 
 def marginal_problem(model, m, sigma_y: np.ndarray, sigma_u: np.ndarray, statement, p: np.ndarray,

@@ -157,6 +157,27 @@ def calibration_fluid(meas, recorded: dict | None, printer=print):
     return dataclasses.replace(meas, conditions=cond)
 
 
+def data_condition_sigma(meas) -> np.ndarray | None:
+    """The data's ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma`` columns as an
+    (n_points, 3) array [m/s, rpm, deg] (0 for a condition without a column), None without any."""
+    if not meas.condition_sigma:
+        return None
+    from calib.calibration.settings import UNCERTAIN_CONDITIONS
+    return np.column_stack([np.broadcast_to(np.asarray(meas.condition_sigma.get(c, 0.0), float), meas.n_points)
+                            for c in UNCERTAIN_CONDITIONS])
+
+
+def print_condition_share(pred: Prediction, printer) -> None:
+    """Print the conditions' share of the interval variance (median over the points), if any."""
+    if pred.condition_std is None:
+        return
+    with np.errstate(all="ignore"):
+        share = np.nanmedian(pred.condition_std ** 2 / pred.std ** 2, axis=0)
+    printer("  intervals carry the conditions' uncertainty (the data's _sigma columns); its share of the interval "
+            "variance (median over the points): " + ", ".join(
+                f"{c} {100 * v:.0f} %" for c, v in zip(pred.channels, share) if np.isfinite(v)))
+
+
 def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confidence: float = 0.95,
                 printer=print) -> dict:
     """Predict the result's channels at the conditions of ``data``; returns the χ² figures (if measured).
@@ -170,12 +191,11 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
     result = load_result(result_dir)
     meas = calibration_fluid(read_measurements(data, None, allow_no_channels=True), result.conditions, printer)
     model = result.rebuild_model()
-    spec = result.provenance.model_spec or {}
-    rotor_name = (spec.get("rotor_data") or {}).get("name")   # the native BEM's rotor, if any
+    rotor_name = ((result.provenance.model_spec or {}).get("rotor_data") or {}).get("name")   # the native BEM's, if any
     for line in setup_lines(result.provenance.model_spec, result.conditions, meas.conditions.as_dict(), str(data),
                             rotor_name):
         printer(line)
-    pred = result.predict(meas.conditions, model=model, confidence=confidence)
+    pred = result.predict(meas.conditions, model=model, confidence=confidence, condition_sigma=data_condition_sigma(meas))
     write_prediction_csv(out, meas.conditions.as_dict(), pred, {})
     figures = {"n_points": int(pred.values.shape[0]), "n_failed": int(np.count_nonzero(pred.status != 0))}
     printer(f"calib predict: {figures['n_points']} points, {figures['n_failed']} failed; wrote {out}")
@@ -203,6 +223,7 @@ def run_predict(result_dir: str | Path, data: str | Path, out: str | Path, confi
             share = np.nanmedian(pred.field_std ** 2 / pred.std ** 2, axis=0)
         printer("  the field between and beyond the nodes' share of the interval variance (median over the points): "
                 + ", ".join(f"{c} {100 * v:.0f} %" for c, v in zip(pred.channels, share) if np.isfinite(v)))
+    print_condition_share(pred, printer)
     common = [c for c in meas.channels if c in pred.channels]
     if common:
         chi = {}

@@ -46,6 +46,9 @@ class Prediction:
     field_amplitude : float
         The amplitude :func:`field_amplitude` chose for points outside the envelope, in units of the
         stated prior [-].
+    condition_std : ndarray, shape (n_points, n_channels) or None
+        The part of ``std`` from the conditions' uncertainty (``condition_sigma`` of
+        :func:`predict_outputs`), None when the conditions are exact [channel units].
     """
 
     channels: tuple
@@ -63,6 +66,7 @@ class Prediction:
     discrepancy: str = ""
     field_std: np.ndarray | None = None
     field_amplitude: float = 1.0
+    condition_std: np.ndarray | None = None
 
     def to_dataframe(self, conditions):
         """One row per point with its ``conditions`` (:func:`calib.calibration.frames.prediction_frame`)."""
@@ -76,14 +80,20 @@ class Prediction:
             np.zeros(self.values.shape[0], bool)
 
 
-def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Prediction:
+def predict_outputs(result, conditions, model, confidence: float = 0.95,
+                    condition_sigma: np.ndarray | None = None) -> Prediction:
     """Model outputs at new conditions with intervals from the estimate's covariance.
 
     The variance of each output is g Cov(p̂) gᵀ with g its row of the model Jacobian at p̂
     and Cov(p̂) the covariance including the frozen directions (docs/theory.md, Predictions), plus
     the model discrepancy of a channel the calibration did not fit within its noise
     (:mod:`calib.calibration.discrepancy`): an interval of the *model output* as a description of
-    the rotor, not of a new measurement (add the noise σ for that).
+    the rotor, not of a new measurement (add the noise σ for that). At uncertain conditions
+    (``condition_sigma``) the conditions' share diag(J_u Σ_u J_uᵀ) is added, J_u the outputs'
+    sensitivities to the point's wind speed, rotor speed and pitch at p̂
+    (:func:`calib.calibration.errors_in_variables.condition_sensitivities`): the first-order
+    variance of the output at conditions known to within their σ (independent of the parameters'
+    uncertainty).
 
     Parameters
     ----------
@@ -93,10 +103,17 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
         The calibrated model (:meth:`calib.calibration.result.CalibrationResult.rebuild_model`).
     confidence : float
         Two-sided confidence of the intervals [-].
+    condition_sigma : ndarray, shape (n_points, 3), optional
+        1-σ of each point's wind speed [m/s], rotor speed [rpm] and pitch [deg], >= 0.
 
     Returns
     -------
     Prediction
+
+    Raises
+    ------
+    InputError
+        ``condition_sigma`` of the wrong shape, negative or not finite.
     """
     from scipy import stats
 
@@ -129,6 +146,17 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     disc = fit_discrepancy(result) if result.fit.measured.size else None
     d_var = np.zeros(values.shape) if disc is None else \
         disc.variance(conditions.as_dict(), result.provenance.rotor_radius, np.nan_to_num(values))
+    c_var = None
+    if condition_sigma is not None:
+        from calib.calibration.errors_in_variables import condition_sensitivities
+        su = np.asarray(condition_sigma, float)
+        if su.shape != (values.shape[0], 3) or not np.all(np.isfinite(su)) or np.any(su < 0):
+            raise InputError(f"condition_sigma must be {values.shape[0]} x 3 finite values >= 0 (wind speed [m/s], "
+                             f"rotor speed [rpm], pitch [deg]), got shape {su.shape}", result.name,
+                             field="condition_sigma")
+        J_u, _ = condition_sensitivities(model, result.estimate.p_hat, conditions, idx, su)
+        c_var = np.einsum("kcu,ku->kc", J_u ** 2, su ** 2)
+        var = var + c_var
     std = np.sqrt(np.maximum(var, 0.0) + d_var)
     z = float(stats.norm.ppf(0.5 * (1 + confidence)))
     std = np.where(ev.ok[:, None], std, np.nan)
@@ -136,7 +164,8 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95) -> Pred
     return Prediction(tuple(result.channels), tuple(result.channel_units), values, std, values - z * std,
                       values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope),
                       representation, np.where(ev.ok[:, None], np.sqrt(d_var), np.nan),
-                      "" if disc is None else disc.words(), np.where(ev.ok[:, None], field_std, np.nan), amplitude)
+                      "" if disc is None else disc.words(), np.where(ev.ok[:, None], field_std, np.nan), amplitude,
+                      None if c_var is None else np.where(ev.ok[:, None], np.sqrt(c_var), np.nan))
 
 
 #: Largest amplitude of the field between and beyond the nodes a band carries, in units of the stated

@@ -211,6 +211,13 @@ class LeastSquaresProblem:
         ev, G = self.model.jacobian(p, self.conditions)
         self.n_jacobians += 1
         r, ok = self._residual(ev)
-        M = whitened_sensitivities(G[:, self.statement.channel_index, :], self.sigma, self.statement.scale, ok)
+        M = self._whitened_sensitivities(G, ok)
         self._cache = Linearization(p.copy(), r, ok, M, ev)
         return self._cache
+
+    def _whitened_sensitivities(self, G: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """The whitening hook of :meth:`linearize`: R^(−½) ∂y/∂p̃ of the measured channels, shape
+        (n_points * n_channels, n_params), zero rows at failed points (``G`` the model's full
+        Jacobian, shape (n_points, n_outputs, n_params)). A problem with another noise covariance
+        (:class:`calib.calibration.errors_in_variables.MarginalProblem`) overrides it."""
+        return whitened_sensitivities(G[:, self.statement.channel_index, :], self.sigma, self.statement.scale, ok)

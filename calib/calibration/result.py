@@ -220,10 +220,12 @@ class CalibrationResult:
                         for k in order if ok[k // w.shape[1]]]
         return out
 
-    def predict(self, conditions, model=None, confidence: float = 0.95) -> Prediction:
+    def predict(self, conditions, model=None, confidence: float = 0.95, condition_sigma=None) -> Prediction:
         """Model outputs at new conditions with intervals from the estimate's covariance
-        (:func:`calib.calibration.prediction.predict_outputs`; ``model`` default: rebuilt from ``model_spec``)."""
-        return predict_outputs(self, conditions, self.rebuild_model() if model is None else model, confidence)
+        (:func:`calib.calibration.prediction.predict_outputs`; ``model`` default: rebuilt from ``model_spec``;
+        ``condition_sigma`` (n_points, 3): the conditions' 1-σ carried into the intervals)."""
+        return predict_outputs(self, conditions, self.rebuild_model() if model is None else model, confidence,
+                               condition_sigma)
 
     def rebuild_model(self):
         """The forward model rebuilt from ``model_spec``.

@@ -13,7 +13,7 @@ from calib.errors import InputError
 NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
 RETAIN_MODES = ("threshold", "all")
 ESTIMATORS = ("map", "truncated")
-ERRORS_IN_VARIABLES = ("marginal", "ignore")
+ERRORS_IN_VARIABLES = ("marginal", "joint", "ignore")
 UNCERTAIN_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
 
 
@@ -141,11 +141,13 @@ class CalibrationSettings:
         Confidence level of the polar bands.
     band_eta : tuple of float, optional
         Spanwise positions of the polar bands (default: the η nodes).
-    errors_in_variables : {"marginal", "ignore"}
+    errors_in_variables : {"marginal", "joint", "ignore"}
         What the conditions' uncertainty does (:mod:`calib.calibration.errors_in_variables`):
         ``"marginal"`` (default) fits with each point's effective covariance
         R_k + J_u,k Σ_u,k J_u,kᵀ wherever a condition σ is stated (none stated: the output-error
-        fit, unchanged); ``"ignore"`` fits as if the conditions were exact (output error).
+        fit, unchanged); ``"joint"`` estimates each point's true conditions beside the parameters
+        (their measured values as priors, eliminated point by point); ``"ignore"`` fits as if the
+        conditions were exact (output error).
     condition_sigma : dict condition -> float, optional
         Absolute 1-σ of the measured conditions, ``wind_speed`` [m/s], ``rotor_speed`` [rpm],
         ``pitch`` [deg], >= 0; adds in quadrature to the table's ``<condition>_sigma`` columns.
@@ -154,7 +156,7 @@ class CalibrationSettings:
         for a nacelle anemometer's 3 % scatter per 10-minute mean), >= 0; adds in quadrature.
     max_eiv_iterations : int
         Most fits of the marginal estimator, each with the conditions' sensitivities
-        re-linearized at the last estimate.
+        re-linearized at the last estimate (the joint estimator re-linearizes within its one fit).
     """
 
     estimator: str = "map"
