@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy import stats
 
 from calib.calibration.calibrator import Calibrator
 from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
@@ -255,7 +256,9 @@ class Namer:
         :data:`calib.diagnosis.model_form.MODEL_FORM_COLLINEARITY` is not separable from it and
         left out; the best of the others by BIC is named when it explains
         :data:`LATER_EFFECT_SHARE` of what the joint model form leaves beyond the noise and the
-        model-form tolerance. A form member alone is not the model form: on lifting-line data
+        model-form tolerance; none is named when the model with the joint model form is already
+        consistent with the noise and the tolerance (χ² test at ``significance``: the share of so small
+        a misfit is noise). A form member alone is not the model form: on lifting-line data
         with rotational augmentation (fast wake) the effect explained 45-51 % of what
         ``tip_loss`` alone leaves but 86-92 % of what ``tip_loss`` and ``momentum_balance``
         together leave, against 49-51 % on the control without an effect (2026-11-28).
@@ -277,6 +280,18 @@ class Namer:
             if "error" in out:
                 return best
             chi2_form = self._chi2(out["values"])
+        dof_form = self.n_res - n_base
+        p_form = float(stats.chi2.sf(chi2_form, dof_form))
+        if p_form >= self.dset.significance:
+            # with the model form the model is consistent with the noise: no physical effect is needed
+            # (a share of a misfit that small is noise: χ² − dof scatters by √(2 dof))
+            rnd.update(verdict=form.effect, reason=(
+                f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), {p_is(form.p_value)}; "
+                f"effect {form.effect_text}; {best.name} fits better (ΔBIC = {form.bic - best.bic:.3g}), but with "
+                f"{' + '.join(self.named + [names])} (model form {names}, all fitted jointly) the model is consistent "
+                f"with the noise and the model-form tolerance (χ²/dof {chi2_form / dof_form:.3g}, {p_is(p_form)} ≥ "
+                f"significance {self.dset.significance:g}): the misfit is the model's form, not {best.effect}"))
+            return form
         physical = [best] + [f for f in fits if f.kind == "physical" and f.significant and f.effect != best.effect]
         labels, seen = [], set()
         for f in physical:
@@ -307,9 +322,9 @@ class Namer:
         said = "; ".join(f"{lab} {100 * share_of[lab]:.0f} %" + (
             f" (R² {float(np.min(r2)):.2f} with the model form)" if r2 is not None and len(r2) else "")
                          for _, lab, _, r2 in on_top)
-        said = (f"on top of {' + '.join(self.named + [names])} (model form {names}, fitted jointly: χ² "
-                f"{chi2_form:.4g}) the physical candidates "
-                f"explain of the misfit it leaves beyond the noise and the model-form tolerance: {said}")
+        said = (f"on top of {' + '.join(self.named + [names])} (model form {names}, all fitted jointly: χ² "
+                f"{chi2_form:.4g}), of the misfit left beyond the noise and the model-form tolerance the physical "
+                f"candidates explain: {said}")
         if tied:
             said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
                      "for every parameter)")
