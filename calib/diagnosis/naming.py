@@ -9,9 +9,10 @@ with the measurement that would tell the two rivals apart (:func:`separation_of`
 
 A model-form candidate (the BEM's own induction model: ``Effect.kind = "model_form"``) is named as
 model form, not as a physical effect. Model form comes first, in every round: a physical effect
-must earn its place (:data:`LATER_EFFECT_SHARE`) after an earlier effect and over a significant
-model-form candidate (also in a round ambiguous between the two), and one not separable from the
-model form named (:mod:`calib.diagnosis.model_form`) is not named.
+must earn its place (:data:`LATER_EFFECT_SHARE`) after an earlier effect and over the round's
+significant model-form candidates, all of them fitted together (also in a round ambiguous between a
+physical effect and a model-form candidate), and one not separable from the model form
+(:mod:`calib.diagnosis.model_form`) is not named.
 """
 
 from __future__ import annotations
@@ -254,7 +255,8 @@ class Namer:
         :data:`OVER_FORM_EFFECTS` effects by BIC) are each fitted on top of the joint model form;
         one whose parameters all correlate with the model form at R² ≥
         :data:`calib.diagnosis.model_form.MODEL_FORM_COLLINEARITY` is not separable from it and
-        left out; the best of the others by BIC is named when it explains
+        left out unless it is ``best`` (in family the true wind-speed scale or blockage is both
+        the best fit alone and collinear with ``momentum_balance``); the best of the others by BIC is named when it explains
         :data:`LATER_EFFECT_SHARE` of what the joint model form leaves beyond the noise and the
         model-form tolerance; none is named when the model with the joint model form is already
         consistent with the noise and the tolerance (χ² test at ``significance``: the share of so small
@@ -315,7 +317,9 @@ class Namer:
         if not on_top:
             return best
         on_top.sort(key=lambda t: t[0])
-        apart = [t for t in on_top if not_separable(t[3], best, [names]) is None]
+        # a candidate not separable from the model form stands in for it, unless it is the round's best fit
+        # on its own too (in family a wind-speed scale or a blockage is that, R² 0.86-0.94 with momentum_balance)
+        apart = [t for t in on_top if t[1] == best.name or not_separable(t[3], best, [names]) is None]
         tied = [t[1] for t in on_top if t not in apart]
         excess = chi2_form - (self.n_res - n_base)
         share_of = {t[1]: (chi2_form - t[2]) / excess if excess > 0 else float("inf") for t in on_top}
@@ -327,7 +331,7 @@ class Namer:
                 f"candidates explain: {said}")
         if tied:
             said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
-                     "for every parameter)")
+                     "for every parameter) and not the best fit on its own: left out")
         if apart and share_of[apart[0][1]] >= LATER_EFFECT_SHARE:
             winner = next(f for f in fits if f.name == apart[0][1])
             if winner is not best:
