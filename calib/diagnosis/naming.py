@@ -255,8 +255,9 @@ class Namer:
         :data:`OVER_FORM_EFFECTS` effects by BIC) are each fitted on top of the joint model form;
         one whose parameters all correlate with the model form at R² ≥
         :data:`calib.diagnosis.model_form.MODEL_FORM_COLLINEARITY` is not separable from it and
-        left out unless it is ``best`` (in family the true wind-speed scale or blockage is both
-        the best fit alone and collinear with ``momentum_balance``); the best of the others by BIC is named when it explains
+        left out unless it is ``best`` and no effect is named yet (in family the true wind-speed
+        scale or blockage is both the best fit alone and collinear with ``momentum_balance``); the
+        best of the others by BIC is named when it explains
         :data:`LATER_EFFECT_SHARE` of what the joint model form leaves beyond the noise and the
         model-form tolerance; none is named when the model with the joint model form is already
         consistent with the noise and the tolerance (χ² test at ``significance``: the share of so small
@@ -317,9 +318,11 @@ class Namer:
         if not on_top:
             return best
         on_top.sort(key=lambda t: t[0])
-        # a candidate not separable from the model form stands in for it, unless it is the round's best fit
-        # on its own too (in family a wind-speed scale or a blockage is that, R² 0.86-0.94 with momentum_balance)
-        apart = [t for t in on_top if t[1] == best.name or not_separable(t[3], best, [names]) is None]
+        # a candidate not separable from the model form stands in for it, unless it is the first effect and
+        # the round's best fit on its own too (in family a wind-speed scale or a blockage is that, R² 0.86-0.94
+        # with momentum_balance); after an effect it may stand in for that effect's form as well
+        apart = [t for t in on_top if (t[1] == best.name and not self.named)
+                 or not_separable(t[3], best, [names]) is None]
         tied = [t[1] for t in on_top if t not in apart]
         excess = chi2_form - (self.n_res - n_base)
         share_of = {t[1]: (chi2_form - t[2]) / excess if excess > 0 else float("inf") for t in on_top}
@@ -331,7 +334,7 @@ class Namer:
                 f"candidates explain: {said}")
         if tied:
             said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
-                     "for every parameter) and not the best fit on its own: left out")
+                     "for every parameter) and not the first effect and the best fit on its own: left out")
         if apart and share_of[apart[0][1]] >= LATER_EFFECT_SHARE:
             winner = next(f for f in fits if f.name == apart[0][1])
             if winner is not best:
