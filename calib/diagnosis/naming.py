@@ -20,12 +20,12 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import stats
 
 from calib.calibration.calibrator import Calibrator
 from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
 from calib.diagnosis.figures_of_merit import effect_size, gap
-from calib.diagnosis.model_form import MODEL_FORM_COLLINEARITY, model_form_r2, not_separable
+from calib.diagnosis.model_form import model_form_r2, not_separable
+from calib.diagnosis.over_model_form import over_model_form
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
 from calib.diagnosis.result import CandidateFit
 from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
@@ -52,10 +52,6 @@ from calib.words import p_is
 #: 0.65 lies between the two (χ² − dof scatters by √(2 dof), 22 on these 252 residuals: ±4 % of a
 #: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way).
 LATER_EFFECT_SHARE = 0.65
-
-#: At most this many physical effects (the best variant of each, by BIC) are fitted on top of the
-#: model form when one beats a significant model-form candidate (:meth:`Namer._over_model_form`).
-OVER_FORM_EFFECTS = 4
 
 
 def fit_task(task: dict) -> dict:
@@ -247,115 +243,9 @@ class Namer:
 
     def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, forms: list,
                          fits: list) -> CandidateFit:
-        """A physical candidate when one earns its place on top of the round's significant model-form
-        candidates ``forms`` (all of them, fitted jointly), else the best of ``forms``: a misfit the
-        model's own form explains is not named as a physical effect.
-
-        The significant physical candidates (the best variant of each effect, ``best`` and up to
-        :data:`OVER_FORM_EFFECTS` effects by BIC) are each fitted on top of the joint model form;
-        one whose parameters all correlate with the model form at R² ≥
-        :data:`calib.diagnosis.model_form.MODEL_FORM_COLLINEARITY` is not separable from it and
-        left out unless it is ``best`` and no effect is named yet (in family the true wind-speed
-        scale or blockage is both the best fit alone and collinear with ``momentum_balance``); the
-        best of the others by BIC is named when it explains
-        :data:`LATER_EFFECT_SHARE` of what the joint model form leaves beyond the noise and the
-        model-form tolerance; none is named when the model with the joint model form is already
-        consistent with the noise and the tolerance (χ² test at ``significance``: the share of so small
-        a misfit is noise). A form member alone is not the model form: on lifting-line data
-        with rotational augmentation (fast wake) the effect explained 45-51 % of what
-        ``tip_loss`` alone leaves but 86-92 % of what ``tip_loss`` and ``momentum_balance``
-        together leave, against 49-51 % on the control without an effect (2026-11-28).
-        """
-        form = forms[0]                                  # fits are sorted by BIC: the best model form
-        base = self.base_effects
-        for f in forms:
-            base = self.family.add(base, f)
-        n_base = self.family.n_parameters(base)
-        names = " + ".join(f.name for f in forms)
-        if len(forms) == 1:
-            chi2_form = form.chi2
-        else:
-            n_before = self.family.n_parameters(self.base_effects)
-            out = fit_task({"name": names, "measurements": self.meas, "settings": self.known,
-                            "own": list(range(n_before, n_base)),
-                            "model": self.wrap(self.family.candidate_model(base[:-1], base[-1]),
-                                               f"round {round_no + 1}: {names} (model form, jointly)")})
-            if "error" in out:
-                return best
-            chi2_form = self._chi2(out["values"])
-        dof_form = self.n_res - n_base
-        p_form = float(stats.chi2.sf(chi2_form, dof_form))
-        if p_form >= self.dset.significance:
-            # with the model form the model is consistent with the noise: no physical effect is needed
-            # (a share of a misfit that small is noise: χ² − dof scatters by √(2 dof))
-            rnd.update(verdict=form.effect, reason=(
-                f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), {p_is(form.p_value)}; "
-                f"effect {form.effect_text}; {best.name} fits better (ΔBIC = {form.bic - best.bic:.3g}), but with "
-                f"{' + '.join(self.named + [names])} (model form {names}, all fitted jointly) the model is consistent "
-                f"with the noise and the model-form tolerance (χ²/dof {chi2_form / dof_form:.3g}, {p_is(p_form)} ≥ "
-                f"significance {self.dset.significance:g}): the misfit is the model's form, not {best.effect}"))
-            return form
-        physical = [best] + [f for f in fits if f.kind == "physical" and f.significant and f.effect != best.effect]
-        labels, seen = [], set()
-        for f in physical:
-            if f.effect not in seen and len(labels) < OVER_FORM_EFFECTS:
-                seen.add(f.effect)
-                labels.append(f.name)
-        tasks = [{"name": f"{lab} over {names}", "measurements": self.meas, "settings": self.known,
-                  "own": list(range(n_base, n_base + len(self._effects[lab].parameters()))),
-                  "model": self.wrap(self.family.candidate_model(base, self._effects[lab]),
-                                     f"round {round_no + 1}: {lab} over {names}")} for lab in labels]
-        outs = self.executor.map(fit_task, tasks, None)
-        kinds = [(e.parameters(), self.family.kind(e.name)) for e in base]
-        on_top = []                     # (bic, label, χ², R² with the model form or None)
-        for lab, task, out in zip(labels, tasks, outs):
-            if "error" in out:
-                continue
-            chi2 = self._chi2(out["values"])
-            corr = getattr(getattr(out["result"], "identifiability", None), "correlation", None)
-            r2 = model_form_r2(corr, kinds, task["own"])
-            on_top.append((chi2 + len(task["own"]) * np.log(self.n_res), lab, chi2, r2))
-        if not on_top:
-            return best
-        on_top.sort(key=lambda t: t[0])
-        # a candidate not separable from the model form stands in for it, unless it is the first effect and
-        # the round's best fit on its own too (in family a wind-speed scale or a blockage is that, R² 0.86-0.94
-        # with momentum_balance); after an effect it may stand in for that effect's form as well
-        apart = [t for t in on_top if (t[1] == best.name and not self.named)
-                 or not_separable(t[3], best, [names]) is None]
-        tied = [t[1] for t in on_top if t not in apart]
-        excess = chi2_form - (self.n_res - n_base)
-        share_of = {t[1]: (chi2_form - t[2]) / excess if excess > 0 else float("inf") for t in on_top}
-        said = "; ".join(f"{lab} {100 * share_of[lab]:.0f} %" + (
-            f" (R² {float(np.min(r2)):.2f} with the model form)" if r2 is not None and len(r2) else "")
-                         for _, lab, _, r2 in on_top)
-        said = (f"on top of {' + '.join(self.named + [names])} (model form {names}, all fitted jointly: χ² "
-                f"{chi2_form:.4g}), of the misfit left beyond the noise and the model-form tolerance the physical "
-                f"candidates explain: {said}")
-        if tied:
-            said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
-                     "for every parameter) and not the first effect and the best fit on its own: left out")
-        if apart and share_of[apart[0][1]] >= LATER_EFFECT_SHARE:
-            winner = next(f for f in fits if f.name == apart[0][1])
-            if winner is not best:
-                rnd.update(verdict=winner.effect, reason=(
-                    f"{winner.name}: Λ = {winner.lr_statistic:.4g} for {winner.n_params} parameter(s), "
-                    f"{p_is(winner.p_value)}; effect {winner.effect_text}; {best.name} fits better alone "
-                    f"(ΔBIC = {winner.bic - best.bic:.3g}), but on top of the model form {winner.name} fits best"))
-            rnd["reason"] += f"; {said}"
-            self._over_form = winner
-            return winner
-        rnd.update(verdict=form.effect, reason=(
-            f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), {p_is(form.p_value)}; effect "
-            f"{form.effect_text}; {best.name} fits better (ΔBIC = {form.bic - best.bic:.3g}), but {said}; none "
-            f"separable from it explains {100 * LATER_EFFECT_SHARE:.0f} %: the misfit is the model's form, not "
-            f"{best.effect}"))
-        return form
-
-    def _chi2(self, values: np.ndarray) -> float:
-        """χ² of model outputs ``values`` against the measurements (against σ and the tolerance) [-]."""
-        ok = np.isfinite(values).all(axis=1)
-        return float(np.sum(((self.meas.values - values) / self.meas.sigma)[ok] ** 2))
+        """:func:`calib.diagnosis.over_model_form.over_model_form` (the physical candidate that earns its
+        place over the joint model form ``forms``, else the best of ``forms``)."""
+        return over_model_form(self, round_no, rnd, best, forms, fits, LATER_EFFECT_SHARE, fit_task)
 
     def _earns_place(self, rnd: dict, best: CandidateFit) -> CandidateFit | None:
         """``best`` when a later effect earns its place, else None with ``rnd`` turned ``none``.
