@@ -37,12 +37,14 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
     The significant physical candidates (the best variant of each effect, ``best`` and up to
     :data:`OVER_FORM_EFFECTS` effects by BIC) are each fitted on top of the joint model form; one
     whose parameters all correlate with it at R² ≥ :data:`MODEL_FORM_COLLINEARITY` is not separable
-    and left out, unless it is ``best`` and no effect is named yet (in family the true wind-speed scale
-    or blockage is both the best fit alone and collinear with ``momentum_balance``); the best of the
+    and left out; when that is ``best`` and no effect is named yet, ``best`` is named if it explains
+    ``share`` of what the best model-form candidate alone leaves (the rule before the joint model
+    form: in family the true wind-speed scale or blockage is collinear with ``momentum_balance``,
+    R² 0.86-0.94, and a small one is absorbed by the joint model form); else the best of the
     others by BIC is named when it explains ``share`` of what the joint model form leaves beyond the
-    noise and the model-form tolerance (χ² − dof). None is named when the model with the joint model
-    form already passes the global χ² test at ``significance`` (the share of so small a misfit is
-    noise: χ² − dof scatters by √(2 dof)). A physical candidate named here is kept in
+    noise and the model-form tolerance (χ² − dof). After a physical effect, none is named when the
+    model with the joint model form already passes the global χ² test at ``significance`` (the share
+    of so small a misfit is noise: χ² − dof scatters by √(2 dof)). A physical candidate named here is kept in
     ``namer._over_form`` (it skips the later-effect share test). ``fit_task`` fits one candidate
     (:func:`calib.diagnosis.naming.fit_task`).
     """
@@ -55,18 +57,26 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
     p_form = float(stats.chi2.sf(chi2_form, dof_form))
     head = (f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), {p_is(form.p_value)}; "
             f"effect {form.effect_text}; {best.name} fits better (ΔBIC = {form.bic - best.bic:.3g}), but ")
-    if p_form >= namer.dset.significance:
+    on_top = _on_top(namer, round_no, best, fits, base, n_base, names, fit_task)
+    if not on_top:
+        return best
+    apart = [t for t in on_top if not_separable(t[3], best, [names]) is None]
+    first = next((t for t in on_top if t[1] == best.name), None)
+    if not namer.named and first is not None and first not in apart and \
+            _single_form_share(namer, round_no, best, form, fit_task) >= share:
+        # the first effect, not separable from the joint model form: judged against the best model-form
+        # candidate alone (in family the true wind-speed scale and blockage, R² 0.86-0.94 with momentum_balance)
+        rnd["reason"] += (f"; not separable from {names} together, but on top of {form.name} alone it explains at "
+                          f"least {100 * share:.0f} % of the misfit {form.name} leaves")
+        return best
+    after_effect = any(namer.family.kind(n) != "model_form" for n in namer.named)
+    if after_effect and p_form >= namer.dset.significance:
         rnd.update(verdict=form.effect, reason=head + (
             f"with {' + '.join(namer.named + [names])} (model form {names}, all fitted jointly) the model is "
             f"consistent with the noise and the model-form tolerance (χ²/dof {chi2_form / dof_form:.3g}, "
             f"{p_is(p_form)} ≥ significance {namer.dset.significance:g}): the misfit is the model's form, not "
             f"{best.effect}"))
         return form
-    on_top = _on_top(namer, round_no, best, fits, base, n_base, names, fit_task)
-    if not on_top:
-        return best
-    apart = [t for t in on_top if (t[1] == best.name and not namer.named)
-             or not_separable(t[3], best, [names]) is None]
     excess = chi2_form - dof_form
     share_of = {t[1]: (chi2_form - t[2]) / excess if excess > 0 else float("inf") for t in on_top}
     said = "; ".join(f"{lab} {100 * share_of[lab]:.0f} %" + (
@@ -78,7 +88,7 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
     tied = [t[1] for t in on_top if t not in apart]
     if tied:
         said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
-                 "for every parameter) and not the first effect and the best fit on its own: left out")
+                 "for every parameter): left out")
     if apart and share_of[apart[0][1]] >= share:
         winner = next(f for f in fits if f.name == apart[0][1])
         if winner is not best:
@@ -138,3 +148,19 @@ def _on_top(namer, round_no: int, best: CandidateFit, fits: list, base: list, n_
         on_top.append((chi2 + len(task["own"]) * np.log(namer.n_res), lab, chi2,
                        model_form_r2(corr, kinds, task["own"])))
     return sorted(on_top, key=lambda t: t[0])
+
+
+def _single_form_share(namer, round_no: int, best: CandidateFit, form: CandidateFit, fit_task) -> float:
+    """Share of the misfit the model with ``form`` (one model-form candidate) leaves beyond the noise and
+    the tolerance that ``best`` explains on top of it [-] (0 when the fit fails)."""
+    base = namer.family.add(namer.base_effects, form)
+    n_base = namer.family.n_parameters(base)
+    effect = namer._effects[best.name]
+    out = fit_task({"name": f"{best.name} over {form.name}", "measurements": namer.meas, "settings": namer.known,
+                    "own": list(range(n_base, n_base + len(effect.parameters()))),
+                    "model": namer.wrap(namer.family.candidate_model(base, effect),
+                                        f"round {round_no + 1}: {best.name} over {form.name}")})
+    if "error" in out:
+        return 0.0
+    excess = form.chi2 - (namer.n_res - n_base)
+    return (form.chi2 - chi2_of(namer, out["values"])) / excess if excess > 0 else float("inf")
