@@ -13,7 +13,10 @@ verdict and never a second effect).
 Run: ``python benchmarks/bench_lifting_line_battery.py [n_seeds [first_seed]]`` (default 10 seeds from
 26000, the seeds the diagnosis's model-form rules were developed on; ``make validate``).
 Writes ``bench_output/lifting_line_battery/`` and publishes the tables for the diagnosis validation
-page (``docs/validation/data/diagnosis_out_of_method.json``).
+page (``docs/validation/data/diagnosis_out_of_method.json``). A truth JSON already in a battery's folder
+with the same settings, points and data sets is reused (``lifting_line_battery.reusable_truth``: the
+lifting line is deterministic; about 6 min of solves per wake saved), so a re-run after a change of the
+diagnosis only diagnoses.
 """
 
 from __future__ import annotations

@@ -184,6 +184,29 @@ def write_csv(tr: dict, name: str, seed: int, path: Path) -> Path:
                      f"wake, set-up {SETUP}, data set {name}, noise seed {seed}", path)
 
 
+def reusable_truth(path: Path, names, settings: ll.LiftingLineSettings) -> dict | None:
+    """The truth JSON at ``path`` when it holds every data set of ``names`` with the same settings, operating
+    points and descriptions (the lifting line is deterministic: the same loads again), else None.
+
+    A truth made by another version of ``lifting_line.py`` with the same settings is reused too: delete
+    the file (or write to a new folder) after changing the solver.
+    """
+    from calib.rotor.library import load_rotor  # noqa: PLC0415
+
+    try:
+        tr = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+    pts = campaign.operating_points(load_rotor("nrel5mw").rotor_radius)
+    same_points = all(np.allclose(np.asarray(tr["points"][k], float), np.asarray(v, float), rtol=0, atol=0)
+                      for k, v in pts.items() if k in tr.get("points", {}))
+    sets = tr.get("data_sets", {})
+    if (tr.get("settings") != json.loads(json.dumps(dataclasses.asdict(settings))) or not same_points
+            or any(n not in sets or sets[n].get("describe") != DATA_SETS[n] for n in names)):
+        return None
+    return {**tr, "data_sets": {n: sets[n] for n in names}}
+
+
 def write_battery(n_seeds: int, out: Path, names=None, say=print,
                   settings: ll.LiftingLineSettings = ll.LiftingLineSettings()) -> dict:
     """Truth, ``n_seeds`` noisy CSVs per data set and ``config_rigid.toml`` under ``out``.
@@ -202,7 +225,12 @@ def write_battery(n_seeds: int, out: Path, names=None, say=print,
     t0 = time.perf_counter()
     out = Path(out)
     names = list(names or DATA_SETS)
-    tr = truth(names, settings, say=say)
+    tr = reusable_truth(out / f"truth_{SETUP}.json", names, settings)
+    if tr is None:
+        tr = truth(names, settings, say=say)
+    else:
+        say(f"[lifting line battery] truth reused from {out / f'truth_{SETUP}.json'} (same settings, points and "
+            "data sets; the solves are deterministic)")
     out.mkdir(parents=True, exist_ok=True)
     (out / f"truth_{SETUP}.json").write_text(json.dumps(tr))
     files = []

@@ -9,9 +9,10 @@ with the measurement that would tell the two rivals apart (:func:`separation_of`
 
 A model-form candidate (the BEM's own induction model: ``Effect.kind = "model_form"``) is named as
 model form, not as a physical effect. Model form comes first, in every round: a physical effect
-must earn its place (:data:`LATER_EFFECT_SHARE`) after an earlier effect and over a significant
-model-form candidate (also in a round ambiguous between the two), and one not separable from the
-model form named (:mod:`calib.diagnosis.model_form`) is not named.
+must earn its place (:data:`LATER_EFFECT_SHARE`) after an earlier effect and over the round's
+significant model-form candidates, all of them fitted together (also in a round ambiguous between a
+physical effect and a model-form candidate), and one not separable from the model form
+(:mod:`calib.diagnosis.model_form`) is not named.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from calib.calibration.calibrator import Calibrator
 from calib.diagnosis.candidate_parameters import STUCK_TOLERANCE, away_start, parameter_records
 from calib.diagnosis.figures_of_merit import effect_size, gap
 from calib.diagnosis.model_form import model_form_r2, not_separable
+from calib.diagnosis.over_model_form import over_model_form
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
 from calib.diagnosis.result import CandidateFit
 from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
@@ -116,6 +118,7 @@ class Namer:
         self._effects = {}                        # the current round's candidate effects by label
         self._named_fits = []                     # the CandidateFit of each named effect
         self._collinearity = {}                   # the round's R² of each candidate with the named model form
+        self._over_form = None                    # the round's physical effect that earned its place over model form
         self.tolerance = np.zeros(y0.shape[1]) if tolerance is None else np.asarray(tolerance, float)
 
     def run(self, candidates) -> None:
@@ -174,7 +177,7 @@ class Namer:
         labels, effects = self._applicable()
         if not labels:
             return True
-        self._effects = effects
+        self._effects, self._over_form = effects, None
         self._fits = fits = self._fit(round_no, labels, effects)
         rnd, best = self._judge(fits)
         if best is None and rnd["verdict"] == "ambiguous":
@@ -182,10 +185,12 @@ class Namer:
         elif best is not None and best.kind != "model_form":
             # model form first, in every round: a physical effect is named over a significant
             # model-form candidate only when it also explains most of what that candidate leaves
-            form = next((f for f in fits if f.kind == "model_form" and f.significant), None)
-            if form is not None:
-                best = self._over_model_form(round_no, rnd, best, form)
-        if best is not None and best.kind != "model_form" and self._named_fits:
+            forms = [f for f in fits if f.kind == "model_form" and f.significant]
+            if forms:
+                best = self._over_model_form(round_no, rnd, best, forms, fits)
+        if best is not None and best.kind != "model_form" and self._named_fits and best is not self._over_form:
+            # (a physical effect that earned its place on top of the named effects and the round's model
+            # form has passed the stricter test already)
             best = self._earns_place(rnd, best)
         if best is not None and best.kind != "model_form" and self.model_form:
             best = self._separable(rnd, best)
@@ -227,42 +232,20 @@ class Namer:
         if any(f is None for f in pair) or sorted(f.kind for f in pair) != ["model_form", "physical"]:
             return None
         physical, form = sorted(pair, key=lambda f: f.kind != "physical")
+        forms = [f for f in fits if f.kind == "model_form" and f.significant]
         before = rnd["reason"]
-        if self._over_model_form(round_no, rnd, physical, form) is form:
+        if self._over_model_form(round_no, rnd, physical, forms, fits) is form:
             rnd.pop("ambiguous", None), rnd.pop("separate", None)
             rnd["reason"] += f" (the round was ambiguous: {before})"
             return form
         rnd["reason"] = before
         return None
 
-    def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, form: CandidateFit) -> CandidateFit:
-        """``best`` (physical) when it also earns its place on top of the significant model-form
-        candidate ``form`` (:data:`LATER_EFFECT_SHARE` of what ``form`` leaves), else ``form``: a
-        misfit the model's own form explains is not named as a physical effect."""
-        base = self.family.add(self.base_effects, form)
-        n_base = self.family.n_parameters(base)
-        effect = self._effects[best.name]
-        task = {"name": f"{best.name} over {form.name}", "measurements": self.meas, "settings": self.known,
-                "own": list(range(n_base, n_base + len(effect.parameters()))),
-                "model": self.wrap(self.family.candidate_model(base, effect),
-                                   f"round {round_no + 1}: {best.name} over {form.name}")}
-        out = fit_task(task)
-        if "error" in out:
-            return best
-        ok = np.isfinite(out["values"]).all(axis=1)
-        chi2 = float(np.sum(((self.meas.values - out["values"]) / self.meas.sigma)[ok] ** 2))
-        excess = form.chi2 - (self.n_res - n_base)
-        share = (form.chi2 - chi2) / excess if excess > 0 else float("inf")
-        said = (f"on top of {form.name} (model form) it explains {100 * share:.0f} % of the misfit {form.name} "
-                f"leaves beyond the noise and the model-form tolerance")
-        if share >= LATER_EFFECT_SHARE:
-            rnd["reason"] += f"; {said}"
-            return best
-        rnd.update(verdict=form.effect, reason=(
-            f"{form.name}: Λ = {form.lr_statistic:.4g} for {form.n_params} parameter(s), {p_is(form.p_value)}; effect "
-            f"{form.effect_text}; {best.name} fits better (ΔBIC = {form.bic - best.bic:.3g}), but {said}, under "
-            f"{100 * LATER_EFFECT_SHARE:.0f} %: the misfit is the model's form, not {best.effect}"))
-        return form
+    def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, forms: list,
+                         fits: list) -> CandidateFit:
+        """:func:`calib.diagnosis.over_model_form.over_model_form` (the physical candidate that earns its
+        place over the joint model form ``forms``, else the best of ``forms``)."""
+        return over_model_form(self, round_no, rnd, best, forms, fits, LATER_EFFECT_SHARE, fit_task)
 
     def _earns_place(self, rnd: dict, best: CandidateFit) -> CandidateFit | None:
         """``best`` when a later effect earns its place, else None with ``rnd`` turned ``none``.
