@@ -273,13 +273,7 @@ def markdown(out: dict) -> str:
     rows += ["", f"**Against other designs of {out['budget']} points** (held-out error: RMS of (prediction − "
              f"truth)/σ on a 11 × 7 test grid, out-of-family truth, MAP from {st['seeds']} noise draws each, the same "
              f"draws for every design; random: {out['comparison']['random (median)']['designs']} designs):", "",
-             "| design | points | log det | held-out error [σ] | random designs beaten (log det, error) | "
-             "noise draws below the random median |", "|---|---|---|---|---|---|"]
-    for name, r in out["comparison"].items():
-        beat = (f"{100 * r['beats_random_logdet']:.0f} %, {100 * r['beats_random_error']:.0f} %"
-                if "beats_random_error" in r else "–")
-        below = f"{r['seeds_below_random_median']} of {len(r['per_seed'])}" if "seeds_below_random_median" in r else "–"
-        rows.append(f"| {name} | {r['points']} | {r['logdet']:.1f} | {r['prediction_error']:.2f} | {beat} | {below} |")
+             *_comparison_rows(out)]
     rows += ["", "**Information against size** (greedy log det as a share of the full candidate set's):", "",
              "| candidate set | points at 25 % | share (D-optimal) | share (default) | most any design can reach | "
              "points for 90 % | directions at 25 % (full set) |", "|---|---|---|---|---|---|---|"]
@@ -320,15 +314,20 @@ def comparison_markdown(out: dict) -> str:
     """The comparison table alone (the replicate)."""
     st, rnd = out["settings"], out["comparison"]["random (median)"]
     rows = [f"Replicate: noise seeds {st['seed0']}–{st['seed0'] + st['seeds'] - 1}, {rnd['designs']} other random "
-            f"designs (seed {st['random_seed']}).", "",
-            "| design | points | log det | held-out error [σ] | random designs beaten (log det, error) | "
+            f"designs (seed {st['random_seed']}).", "", *_comparison_rows(out)]
+    return "\n".join(rows) + "\n"
+
+
+def _comparison_rows(out: dict) -> list[str]:
+    """The table of the design against the other designs of the same size (header and one row each)."""
+    rows = ["| design | points | log det | held-out error [σ] | random designs beaten (log det, error) | "
             "noise draws below the random median |", "|---|---|---|---|---|---|"]
     for name, r in out["comparison"].items():
         beat = (f"{100 * r['beats_random_logdet']:.0f} %, {100 * r['beats_random_error']:.0f} %"
                 if "beats_random_error" in r else "–")
         below = f"{r['seeds_below_random_median']} of {len(r['per_seed'])}" if "seeds_below_random_median" in r else "–"
         rows.append(f"| {name} | {r['points']} | {r['logdet']:.1f} | {r['prediction_error']:.2f} | {beat} | {below} |")
-    return "\n".join(rows) + "\n"
+    return rows
 
 
 if __name__ == "__main__":

@@ -191,25 +191,15 @@ class CalibratedPowerCurve:
 
     # ------------------------------------------------------------------ AEP
     def aep_table(self, cdfs: dict, availability: float = 1.0) -> list[dict]:
-        """AEP [MWh] per wind distribution with its 1-σ per source, P50 and P90.
+        """AEP [MWh] per wind distribution with its 1-σ per source, P50 and P90: the sources, how they
+        combine and the prior split are described at :func:`calib.powercurve.budget.aep_rows`.
 
-        P50 is the central curve's AEP; sources: the calibration through the draws (and, beside
-        it, its delta-method value, not added again), the model discrepancy (fully correlated
-        across bins: added linearly over the bins, an upper bound), the field between the nodes
-        (through its covariance across the bins, ``field_cov``: σ² = c Σ cᵀ; linearly where that is
-        not available), each measurement item (combined as IEC 61400-12-1 does,
-        :func:`calib.powercurve.measurement.aep_uncertainty`: category B correlated across the bins,
-        category A not; ``sigma_measurement_mwh`` per category). The total
-        adds the sources in quadrature; P90 = P50 − 1.2816 σ (normal). Draws with a failed bin where
-        the distribution has weight are left out of the draws' σ and counted. Without draws the delta
-        method's σ enters the total.
-
-        Beside it, for a MAP result with a prior check (``prior_split``): the delta method's
-        calibration variance split into its data-determined and prior-dominated directions
-        (``sigma_calibration_split_mwh``) and ``empirical_bayes``: the total σ and P90 with the
-        field's prior amplitude at the prior check's τ̂ (and at its 95 % interval's ends) instead of
-        the stated 1, the nodal part by :func:`calib.powercurve.field.variance_at_amplitude` and the
-        field between the nodes scaled by τ², the estimate kept.
+        Parameters
+        ----------
+        cdfs : dict
+            Wind distributions by name (their cumulative distribution functions of wind speed).
+        availability : float
+            Availability factor in (0, 1].
         """
         return aep_rows(self, cdfs, availability)
 
