@@ -25,8 +25,11 @@ phase_vi: $(STAMP)
 test-browser:
 	bash tests/install_browser.sh
 
+# the tests run in PYTEST_WORKERS processes (pytest-xdist), whole files per process so that a module's
+# set-up runs once; `make test PYTEST_WORKERS=auto` uses every core, `PYTEST_WORKERS=0` runs in this process
+PYTEST_WORKERS ?= 2
 test: $(STAMP) test-browser
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 
 # the statistical suite (coverage, NEES, the diagnosis over seeds, the whole conformance matrix; CI runs
 # it after `make test`)

@@ -290,7 +290,7 @@ def _build_into(work: Path, fmu_path: Path, spec: variant_spec.VariantSpec, toke
         + list((stage / "binaries").rglob("*.dll"))
     if not binaries:
         raise FmuBuildError(f"the build produced no shared library under {stage / 'binaries'}")
-    tmp_zip = fmu_path.with_suffix(".fmu.part")
+    tmp_zip = work / (fmu_path.name + ".part")     # in this build's own folder: concurrent builds never share it
     with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
         for path in sorted(stage.rglob("*")):
             rel = path.relative_to(stage).as_posix()
