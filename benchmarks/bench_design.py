@@ -226,11 +226,13 @@ def weak_markdown(out: dict) -> str:
              f"spread averaged over {out.get('n_draws', 20)} prior draws of the correction field (pseudo-Bayesian) "
              "over the design's.", "",
              "| truth | draws | Laplace σ / posterior σ | at the estimates' mean / design | realized / at the "
-             "estimates' mean | prior draws / design |", "|---|---|---|---|---|---|"]
+             "estimates' mean | prior draws / design | realized / prior draws |", "|---|---|---|---|---|---|---|"]
+    pseudo = np.array(out["pseudo_bayesian_over_nominal"])
     for truth, sets in out["truths"].items():
         for label, r in sets.items():
             rows.append(f"| {truth} | {label} | {_range(r['laplace'])} | {_range(r['relinearized'])} | "
-                        f"{_range(r['realized_over_relinearized'])} | {_range(out['pseudo_bayesian_over_nominal'])} |")
+                        f"{_range(r['realized_over_relinearized'])} | {_range(pseudo)} | "
+                        f"{_range(np.array(r['realized']) / pseudo)} |")
     return "\n".join(rows) + "\n"
 
 
