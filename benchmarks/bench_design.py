@@ -212,21 +212,21 @@ def weak_markdown(out: dict) -> str:
     s = np.array(out["s"])
     rows = [f"Along the {len(s)} directions the design determines (s {s.min():.2f}–{s.max():.1f}); ratios to the "
             "design's linear-Gaussian spread s/(1 + s²) of a MAP estimate at a fixed truth, range over the "
-            f"directions, and along the weakest (s = {s[-1]:.2f}):", "",
-            "| truth | draws | replicates | realized | weakest | same draws, linear model | weakest | "
-            "realized / linear, same draws | weakest |", "|---|---|---|---|---|---|---|---|---|"]
+            f"directions and, in brackets, along the weakest (s = {s[-1]:.2f}):", "",
+            "| truth | draws | replicates | realized | linear model, same draws | realized / linear |",
+            "|---|---|---|---|---|---|"]
     for truth, sets in out["truths"].items():
         for label, r in sets.items():
-            rows.append(f"| {truth} | {label} | {r['replicates']} | {_range(r['realized'])} | {r['realized'][-1]:.2f} | "
-                        f"{_range(r['linear_same_draws'])} | {r['linear_same_draws'][-1]:.2f} | "
-                        f"{_range(r['realized_over_linear'])} | {r['realized_over_linear'][-1]:.2f} |")
+            rows.append(f"| {truth} | {label} | {r['replicates']} | {_range(r['realized'])} ({r['realized'][-1]:.2f}) | "
+                        f"{_range(r['linear_same_draws'])} ({r['linear_same_draws'][-1]:.2f}) | "
+                        f"{_range(r['realized_over_linear'])} ({r['realized_over_linear'][-1]:.2f}) |")
     rows += ["", "Predictions at other linearization points (ranges over the directions): the Laplace σ the "
              "calibration reports at its estimates over the design's posterior σ; the linear-Gaussian spread with "
              "the sensitivities at the estimates' mean over the design's, and the realized spread over it; the "
              f"spread averaged over {out.get('n_draws', 20)} prior draws of the correction field (pseudo-Bayesian) "
              "over the design's.", "",
-             "| truth | draws | Laplace σ / posterior σ | at the estimates' mean / design | realized / at the "
-             "estimates' mean | prior draws / design | realized / prior draws |", "|---|---|---|---|---|---|---|"]
+             "| truth | draws | Laplace / posterior | at the mean / design | realized / at the mean | "
+             "prior draws / design | realized / prior draws |", "|---|---|---|---|---|---|---|"]
     pseudo = np.array(out["pseudo_bayesian_over_nominal"])
     for truth, sets in out["truths"].items():
         for label, r in sets.items():
