@@ -19,7 +19,7 @@ step the difference study of ``bench_fmu_run.py`` measured above the FMU's outpu
    (its median over the replicates).
 
 Every replicate's estimate is appended to ``bench_output/design_fmu/replicates.jsonl`` as it finishes, so
-a killed run resumes where it stopped (``--fresh`` starts over). ``python benchmarks/bench_design_fmu.py
+a killed run resumes where it stopped (``--fresh`` starts over; :func:`run`, as ``make validate`` calls it, always does). ``python benchmarks/bench_design_fmu.py
 [REPS] [--fresh]`` (default 100); :func:`run` publishes ``design_fmu``.
 """
 
@@ -207,8 +207,9 @@ def markdown(out: dict) -> str:
     return "\n".join(rows) + "\n"
 
 
-def run(reps: int = 100, fresh: bool = False) -> dict:
-    """Entry point of ``benchmarks/run_all.py``: the study, published for the validation page."""
+def run(reps: int = 100, fresh: bool = True) -> dict:
+    """Entry point of ``benchmarks/run_all.py``: the study, published for the validation page (from scratch;
+    the command line resumes unless given ``--fresh``)."""
     from publish import command_line, publish
 
     out = run_bench(reps, fresh)
