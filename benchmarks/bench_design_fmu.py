@@ -19,8 +19,9 @@ step the difference study of ``bench_fmu_run.py`` measured above the FMU's outpu
    (its median over the replicates).
 
 Every replicate's estimate is appended to ``bench_output/design_fmu/replicates.jsonl`` as it finishes, so
-a killed run resumes where it stopped (``--fresh`` starts over; :func:`run`, as ``make validate`` calls it, always does). ``python benchmarks/bench_design_fmu.py
-[REPS] [--fresh]`` (default 100); :func:`run` publishes ``design_fmu``.
+a killed run resumes where it stopped (``--fresh`` starts over; :func:`run`, as ``make validate`` calls
+it, always does). ``python benchmarks/bench_design_fmu.py [REPS] [--fresh]`` (default 100); :func:`run`
+publishes ``design_fmu``.
 """
 
 from __future__ import annotations

@@ -141,7 +141,8 @@ def ranking_noise(real: list, design_scores, n_boot: int = 2000, n_perm: int = 2
     jack = np.array([_scores(cal, nom, np.delete(np.arange(n_f), f)) for f in range(n_f)])
     return {"observed": obs, "ceiling_median": float(np.median(ceiling)),
             "ceiling_5_95": np.percentile(ceiling, [5, 95]).tolist(),
-            "between_resamples_median": float(np.median(pairs)), "between_resamples_5_95": np.percentile(pairs, [5, 95]).tolist(), "design_median": float(np.nanmedian(design)),
+            "between_resamples_median": float(np.median(pairs)),
+            "between_resamples_5_95": np.percentile(pairs, [5, 95]).tolist(), "design_median": float(np.nanmedian(design)),
             "design_5_95": np.nanpercentile(design, [5, 95]).tolist(),
             "p_permutation": float(np.mean(perm >= rho(rs, rd) - 1e-12)),
             "p_below_ceiling": float(np.mean(ceiling <= obs + 1e-12)),
