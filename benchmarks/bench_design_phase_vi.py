@@ -76,10 +76,80 @@ def realized(setup, meas, grid, effects, stations) -> dict:
         if r.channel == HUB[0]:
             statuses[r.status] = statuses.get(r.status, 0) + 1
     out["statuses"] = statuses
+    out["folds"] = {ch: [{"group": float(r.group), "measured": float(r.measured), "nominal": float(r.nominal),
+                          "predicted": float(r.predicted)} for r in val.rows if r.channel == ch] for ch in HUB}
     print(f"[design-phase-vi] hub + taps {', '.join(stations) or 'none'}: torque "
           f"{out['torque']['mean_abs_error_calibrated']:.0f} N m, thrust {out['thrust']['mean_abs_error_calibrated']:.0f}"
           f" N (score {out['score']:.3f}, {out['cpu_s']:.0f} s CPU)", flush=True)
     return out
+
+
+def _fold_errors(real: list) -> tuple[np.ndarray, np.ndarray]:
+    """|error| calibrated, shape (subsets, channels, folds), and nominal, (channels, folds), of the held-out
+    torque and thrust (the folds in the same order for every subset)."""
+    cal = np.array([[[abs(f["measured"] - f["predicted"]) for f in r["folds"][ch]] for ch in HUB] for r in real])
+    nom = np.array([[abs(f["measured"] - f["nominal"]) for f in real[0]["folds"][ch]] for ch in HUB])
+    return cal, nom
+
+
+def _scores(cal, nom, idx) -> np.ndarray:
+    """The realized score of every subset from the folds ``idx`` (a resample): the mean over torque and
+    thrust of the mean |error| calibrated over the nominal's."""
+    return np.mean(cal[:, :, idx].mean(axis=-1) / nom[:, idx].mean(axis=-1), axis=1)
+
+
+def ranking_noise(real: list, design_scores, n_boot: int = 2000, n_perm: int = 20000, seed: int = 39) -> dict:
+    """How noisy the realized ranking is, and whether the design's agrees with it within that noise.
+
+    The realized score of a subset rests on six held-out wind speeds. Resampling the folds with replacement
+    (the same resample for every subset, Efron & Tibshirani 1993, ch. 6) gives:
+
+    - ``ceiling``: Spearman between the realized scores and those of a resample, median and 5-95 %: how
+      well a ranking that *is* the realized one agrees with a realization of it, the most any predicted
+      ranking can expect;
+    - ``design``: Spearman between the design's scores and a resample's realized ones, median and 5-95 %;
+    - ``between_resamples``: Spearman between two independent resamples (both scatter, so lower than the
+      ceiling; the ceiling compares with the data themselves and is optimistic);
+    - ``p_permutation``: the chance that a ranking unrelated to the realized one reaches the observed Spearman
+      (the design's scores permuted at random, ``n_perm`` permutations; one-sided);
+    - ``p_below_ceiling``: the share of resamples whose ceiling Spearman is at or below the design's observed
+      one: small means the design's ranking disagrees with the realized one beyond the folds' noise;
+    - ``pick_best``, ``pick_at_least_median``: the share of resamples where the design's pick is the best subset,
+      is at least as good as the median subset.
+    """
+    from scipy.stats import rankdata
+
+    cal, nom = _fold_errors(real)
+    n_f = cal.shape[-1]
+    rng = np.random.default_rng(seed)
+    score = _scores(cal, nom, np.arange(n_f))
+    d = np.asarray(design_scores, float)
+    obs = spearman(d, score)
+    boot = np.array([_scores(cal, nom, rng.integers(0, n_f, n_f)) for _ in range(n_boot)])
+    rb = rankdata(boot, axis=1)                                         # Spearman: Pearson of the ranks
+
+    def rho(a, B):
+        a, B = a - a.mean(), B - B.mean(axis=-1, keepdims=True)
+        den = np.sqrt(np.sum(a * a) * np.sum(B * B, axis=-1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.sum(a * B, axis=-1) / den
+    rd, rs = rankdata(d), rankdata(score)
+    ceiling, design = rho(rs, rb), rho(rd, rb)
+    pairs = np.array([rho(a, b) for a, b in zip(rb[0::2], rb[1::2])])
+    perm = rho(rs, np.array([rng.permutation(rd) for _ in range(n_perm)]))
+    pick = int(np.argmin(d))
+    jack = np.array([_scores(cal, nom, np.delete(np.arange(n_f), f)) for f in range(n_f)])
+    return {"observed": obs, "ceiling_median": float(np.median(ceiling)),
+            "ceiling_5_95": np.percentile(ceiling, [5, 95]).tolist(),
+            "between_resamples_median": float(np.median(pairs)),
+            "between_resamples_5_95": np.percentile(pairs, [5, 95]).tolist(), "design_median": float(np.nanmedian(design)),
+            "design_5_95": np.nanpercentile(design, [5, 95]).tolist(),
+            "p_permutation": float(np.mean(perm >= rho(rs, rd) - 1e-12)),
+            "p_below_ceiling": float(np.mean(ceiling <= obs + 1e-12)),
+            "pick_best": float(np.mean(np.argmin(boot, axis=1) == pick)),
+            "pick_at_least_median": float(np.mean(boot[:, pick] <= np.median(boot, axis=1))),
+            "score_jackknife_sd": (np.sqrt((n_f - 1) / n_f * np.sum((jack - jack.mean(0)) ** 2, axis=0))).tolist(),
+            "bootstraps": n_boot, "permutations": n_perm}
 
 
 def run_bench() -> dict:
@@ -120,7 +190,8 @@ def run_bench() -> dict:
             "pick_rank": int(np.sum(score < score[pick])) + 1,
             "pick_at_least_median": bool(score[pick] <= np.median(score)),
             "spearman_heldout_variance": spearman(var, score), "spearman_ds": spearman(-ds, score),
-            "spearman_heldout_variance_plain": spearman(var_plain, score)}
+            "spearman_heldout_variance_plain": spearman(var_plain, score),
+            "noise": ranking_noise(real, var), "noise_ds": ranking_noise(real, -ds)}
     return out
 
 
@@ -135,6 +206,18 @@ def markdown(out: dict) -> str:
         rows.append(f"| {k} | {r['design_pick']} | {r['design_pick_score']:.3f} | {r['median_score']:.3f} | "
                     f"{r['best']} ({r['best_score']:.3f}) | {r['pick_rank']} of {len(r['score'])} | "
                     f"{r['spearman_heldout_variance']:.2f}, {r['spearman_ds']:.2f} |")
+    rows += ["", "**How noisy the realized ranking is** (the six folds resampled with replacement, "
+             f"{out['k']['1']['noise']['bootstraps']} resamples; Spearman of the design's held-out variance with the "
+             "realized scores; the ceiling: the realized ranking against its own resamples; permutation p: the "
+             "chance of the observed Spearman from a ranking unrelated to the realized one):", "",
+             "| k | Spearman, observed | on resamples: median (5–95 %) | ceiling: median (5–95 %) | "
+             "permutation p | resamples with the pick best, at least median |", "|---|---|---|---|---|---|"]
+    for k, r in out["k"].items():
+        q = r["noise"]
+        rows.append(f"| {k} | {q['observed']:.2f} | {q['design_median']:.2f} ({q['design_5_95'][0]:.2f} to "
+                    f"{q['design_5_95'][1]:.2f}) | {q['ceiling_median']:.2f} ({q['ceiling_5_95'][0]:.2f} to "
+                    f"{q['ceiling_5_95'][1]:.2f}) | {q['p_permutation']:.2f} | {100 * q['pick_best']:.0f} %, "
+                    f"{100 * q['pick_at_least_median']:.0f} % |")
     r1 = out["k"]["1"]
     rows += ["", "Single stations (k = 1): held-out prediction variance the design predicts [σ²] and the realized "
              "score:", "", "| station r/R | predicted variance | D_s | realized score | torque / thrust error [N m, N] |",

@@ -212,6 +212,9 @@ def test_cli_designs_from_a_native_bem_workflow(tmp_path, capsys):
     (["--budget", "5", "--fixed", "3.1,0.5"], "is not a candidate"),
     (["--budget", "5", "--discrepancy", "1:x"], "expected SCALE[:LENGTH]"),
     (["--budget", "5", "--resume"], "--resume is for an FMU"),
+    (["--budget", "5", "--choose", "1"], "--choose 1: expected 1..0"),
+    (["--budget", "5", "--sensors", "hub,taps@0.30", "--choose", "2"], "--choose 2: expected 1..1"),
+    (["--budget", "5", "--sensors", "hub,taps@0.30", "--always", "root", "--choose", "1"], "--always 'root'"),
 ])
 def test_cli_errors(args, message, tmp_path, capsys):
     assert main(["design", str(WORKFLOW), "--out", str(tmp_path / "d")] + args) == 2
@@ -295,3 +298,20 @@ def test_sensor_groups_parse_costs_stations_and_taps():
     for bad, message in (("hub:0", "cost"), ("station@1.5", "radial position"), ("hub,hub", "twice")):
         with pytest.raises(InputError, match=message):
             parse_groups(bad.split(","), ["power"])
+
+
+def test_cli_choose_ranks_every_choice_of_k_sensor_groups(tmp_path, capsys):
+    """``--choose 2``: the three pairs of three tap stations added to the hub loads, ranked by the held-out
+    prediction variance (rising), each pair once, its cost the sum of its groups'."""
+    out = tmp_path / "ch"
+    assert main(["design", str(WORKFLOW), "--budget", "6", "--points", "6x3", "--sensors",
+                 "hub,taps@0.30,taps@0.63:2,taps@0.95", "--always", "hub", "--choose", "2", "--out", str(out)]) == 0
+    assert "sensor_choice.csv ranks them all" in capsys.readouterr().out
+    with open(out / "sensor_choice.csv") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    assert sorted(r["groups"] for r in rows) == ["taps@0.30 + taps@0.63", "taps@0.30 + taps@0.95",
+                                                 "taps@0.63 + taps@0.95"]
+    var = [float(r["heldout_variance"]) for r in rows]
+    assert var == sorted(var) and [int(r["rank"]) for r in rows] == [1, 2, 3]
+    cost = {r["groups"]: float(r["cost_per_point"]) for r in rows}
+    assert cost["taps@0.30 + taps@0.63"] == 3.0 and cost["taps@0.30 + taps@0.95"] == 2.0

@@ -55,6 +55,12 @@ def add_design_parser(sub):
     p.add_argument("--draws", type=int, default=0, help="pseudo-Bayesian: average the criterion over this many "
                    "prior draws of the correction field too (default 0: at the linearization point only)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --draws (default 0)")
+    p.add_argument("--choose", type=int, default=None, help="also score every choice of K of the optional sensor "
+                   "groups (those of --sensors not in --always) at the design's points, by the held-out prediction "
+                   "variance of the --always groups' channels (one wind speed left out at a time); writes "
+                   "sensor_choice.csv")
+    p.add_argument("--always", default=None, help="with --choose: the sensor groups always measured, NAME,... "
+                   "(default: the first of --sensors)")
     p.add_argument("--resume", action="store_true", help="an FMU's design: answer the model calls on record in "
                    "OUT/history (of a killed or finished run with the same inputs) instead of simulating them again")
     return p
@@ -142,6 +148,46 @@ def _history(args, wf: Path, out: Path, printer):
     return hist
 
 
+def _choose(args, problem, res) -> dict:
+    """Every choice of ``--choose`` K optional sensor groups scored at the design's points
+    (:func:`calib.design.groups.subset_scores`), ranked by the held-out prediction variance of the
+    ``--always`` groups' channels."""
+    from calib.design.discrepancy import parse_discrepancy
+    from calib.design.groups import subset_scores
+
+    names = [g.name for g in problem.groups]
+    always = [s.strip() for s in args.always.split(",") if s.strip()] if args.always else names[:1]
+    bad = [g for g in always if g not in names]
+    if bad:
+        raise InputError(f"--always {bad[0]!r} is not one of the --sensors groups ({', '.join(names)})", "--always",
+                         field="always")
+    optional = [g for g in problem.groups if g.name not in always]
+    if not optional or not 1 <= args.choose <= len(optional):
+        raise InputError(f"--choose {args.choose}: expected 1..{len(optional)}, the optional sensor groups (those of "
+                         f"--sensors not in --always: {', '.join(g.name for g in optional) or 'none'})", "--choose",
+                         field="choose")
+    targets = [c for g in problem.groups if g.name in always for c in g.channels]
+    cond = res.candidates.subset(res.design)
+    scores = subset_scores(problem, cond, args.choose, always=always, targets=targets,
+                           discrepancy=parse_discrepancy(args.discrepancy))
+    cost = {g.name: g.cost for g in problem.groups}
+    rows = [{"rank": 0, "groups": " + ".join(s["groups"]), "cost_per_point": float(sum(cost[g] for g in s["groups"])),
+             "heldout_variance": s["heldout_variance"], "ds_logdet": s["logdet"]} for s in scores]
+    rows.sort(key=lambda r: r["heldout_variance"])
+    for k, r in enumerate(rows):
+        r["rank"] = k + 1
+    return {"k": args.choose, "always": always, "targets": targets, "points": len(cond), "rows": rows}
+
+
+def choice_sentence(choice: dict) -> str:
+    """The sensor choice in words."""
+    best, rows = choice["rows"][0], choice["rows"]
+    return (f"Of {len(rows)} choices of {choice['k']} sensor group(s) to add to {' + '.join(choice['always'])}, "
+            f"{best['groups']} predicts {', '.join(choice['targets'])} best at a held-out wind speed (variance "
+            f"{best['heldout_variance']:.3g} noise variances, the worst choice {rows[-1]['heldout_variance']:.3g}); "
+            "sensor_choice.csv ranks them all.")
+
+
 def run_design(args, printer=print) -> int:
     from calib.design import problem_from_workflow
     from calib.design.report import paragraph, write_outputs
@@ -162,6 +208,7 @@ def run_design(args, printer=print) -> int:
                                     history=hist, progress=progress_line if hist is not None else None)
     try:
         res = _design(args, problem, n_tsr, n_pitch)
+        choice = _choose(args, problem, res) if args.choose is not None else None
     finally:
         problem.close()
     if hist is not None:
@@ -169,6 +216,10 @@ def run_design(args, printer=print) -> int:
         printer(f"[calib design] model calls: {hist.calls_sentence()}")
     paths = write_outputs(res, out)
     printer(paragraph(res))
+    if choice is not None:
+        from calib.design.report import write_choice
+        paths.append(write_choice(choice, out))
+        printer(choice_sentence(choice))
     printer(f"[calib design] {len(res.ok)} candidates, sensitivities {res.seconds['sensitivities']:.1f} s CPU, "
             f"selection {res.seconds['selection']:.1f} s CPU ({res.selection.exchanges} exchanges), total "
             f"{time.process_time() - t0:.1f} s CPU; wrote {', '.join(p.name for p in paths)} to {out}")

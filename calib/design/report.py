@@ -13,7 +13,7 @@ import numpy as np
 from calib.design.select import precision
 from calib.report.atomic import atomic_write_text
 
-__all__ = ["matrix_rows", "parameter_rows", "group_values", "summary", "paragraph", "write_outputs"]
+__all__ = ["matrix_rows", "parameter_rows", "group_values", "summary", "paragraph", "write_outputs", "write_choice"]
 
 
 def matrix_rows(res) -> list[dict]:
@@ -178,3 +178,12 @@ def write_outputs(res, out) -> list[Path]:
               f"{r['rotor_speed [rpm]']:.4g} | {r['repeats']} |" for r in matrix_rows(res)]
     paths.append(atomic_write_text(out / "report.md", "\n".join(lines) + "\n"))
     return paths
+
+
+def write_choice(choice: dict, out) -> Path:
+    """``sensor_choice.csv``: every choice of k optional sensor groups, ranked by the held-out prediction
+    variance of the always-measured channels [their noise variances] (``calib design --choose``)."""
+    return atomic_write_text(Path(out) / "sensor_choice.csv", _csv(choice["rows"], (
+        f"calib design --choose {choice['k']}: groups added to {' + '.join(choice['always'])}, ranked by the held-out "
+        f"prediction variance of {' '.join(choice['targets'])} [noise variances] at the design's {choice['points']} "
+        "points, one wind speed left out at a time; ds_logdet: information on the parameters")))
