@@ -35,7 +35,7 @@ def setup():
     statement = ProblemStatement(pars, nominal_vector(pars), [q.scale for q in pars], [q.lower for q in pars],
                                  [q.upper for q in pars], np.full(n, 1.0), np.ones(n, bool), tuple(range(3)))
     sigma_u = np.c_[meas.condition_sigma["wind_speed"], np.zeros(len(meas.conditions)),
-                    meas.condition_sigma["pitch"]]
+                    meas.condition_sigma["pitch"], np.zeros(len(meas.conditions))]
     return model, meas, statement, sigma_u
 
 
@@ -261,7 +261,7 @@ def test_a_point_at_a_kink_is_stationary_and_counted_not_stuck():
     # point 1: smooth, read at 7 m/s, output 7.1.
     cond = OperatingConditions(np.array([10.05, 7.0]), np.array([10.0, 10.0]), np.zeros(2))
     prob = JointProblem(_KinkModel(), cond, np.array([[9.992], [7.1]]), np.full((2, 1), 0.05),
-                        np.array([[0.1, 0.0, 0.0], [0.1, 0.0, 0.0]]), statement)
+                        np.array([[0.1, 0.0, 0.0, 0.0], [0.1, 0.0, 0.0, 0.0]]), statement)
     state = prob.solve_conditions(np.array([1.0]))
     assert state["settled"] and state["n_kink"] == 1 and state["n_refused"] == 0 and state["n_moving"] == 0
     assert prob.n_latent_not_settled == 0 and prob.n_latent_kink_points == 1

@@ -69,13 +69,13 @@ class JointProblem(MarginalProblem):
         As :class:`calib.calibration.problem.LeastSquaresProblem` (``conditions`` as measured).
     sigma_y : ndarray, shape (n_points, n_channels)
         Output 1-σ [channel units], > 0.
-    sigma_u : ndarray, shape (n_points, 3)
-        The conditions' 1-σ (:func:`condition_sigma`) [m/s, rpm, deg].
+    sigma_u : ndarray, shape (n_points, 4)
+        The conditions' 1-σ (:func:`condition_sigma`) [m/s, rpm, deg, kg/m³].
 
     Attributes
     ----------
-    delta : ndarray, shape (n_points, 3)
-        The estimated condition errors δ* at the last solve [m/s, rpm, deg].
+    delta : ndarray, shape (n_points, 4)
+        The estimated condition errors δ* at the last solve [m/s, rpm, deg, kg/m³].
     n_latent_solves, n_latent_not_settled, n_latent_halvings, n_failed_differences : int
         Solves of the points' conditions, those that did not settle (a point still moving after
         ``MAX_LATENT_ITERATIONS`` steps, or stuck: its step refused at every halving while its
@@ -142,7 +142,7 @@ class JointProblem(MarginalProblem):
         Returns
         -------
         dict
-            ``delta`` (n_points, 3), ``evaluation``, ``J_u`` (n_points, n_channels, 3), ``chol``,
+            ``delta`` (n_points, 4), ``evaluation``, ``J_u`` (n_points, n_channels, 4), ``chol``,
             ``ok`` (points converged at their estimated conditions), ``settled``, ``iterations``,
             ``n_kink``, ``n_refused``, ``n_moving`` (points stationary at a kink, stuck, still
             moving at the step limit).
