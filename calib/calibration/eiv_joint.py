@@ -135,6 +135,28 @@ class JointProblem(MarginalProblem):
         self.n_evaluations += 1
         return (ev, *self._point_costs(delta, ev))
 
+    def _line_search(self, p, delta, step, cost, moving):
+        """The points' steps, halved per point where the cost would rise (at most
+        ``MAX_LATENT_HALVINGS`` tries): ((δ, evaluation, outputs, ok, cost) at the conditions taken,
+        the points whose every try was refused)."""
+        lam = np.ones(len(delta))
+        todo = moving.copy()
+        new_delta = delta.copy()
+        for halving in range(MAX_LATENT_HALVINGS):
+            trial = np.where(todo[:, None], delta + lam[:, None] * step, delta)
+            ev_t, y_t, ok_t, cost_t = self._evaluate_at(p, trial)
+            better = todo & ok_t & (cost_t <= cost * (1.0 + 1e-12) + 1e-12)
+            new_delta[better] = trial[better]
+            todo &= ~better
+            if not np.any(todo):
+                break
+            lam[todo] *= 0.5
+        self.n_latent_halvings += int(np.count_nonzero(lam < 1.0))
+        if halving == 0 and np.array_equal(new_delta, trial):
+            return (new_delta, ev_t, y_t, ok_t, cost_t), todo      # the full step taken everywhere
+        # steps halved, or refused, at some points: the outputs at the conditions taken
+        return (new_delta, *self._evaluate_at(p, new_delta)), todo
+
     def solve_conditions(self, p: np.ndarray) -> dict:
         """δ*(p): each point's condition errors minimizing its joint cost at ``p`` (class docstring),
         started from the last solve's; with the evaluation, J_u and C_k's Cholesky factors there.
@@ -178,27 +200,10 @@ class JointProblem(MarginalProblem):
             moving = ok & ~kink & ~refused & (move >= LATENT_SETTLED)
             if not np.any(moving) or it == MAX_LATENT_ITERATIONS:
                 break
-            lam = np.ones(len(delta))
-            todo = moving.copy()
-            new_delta = delta.copy()
-            for halving in range(MAX_LATENT_HALVINGS):
-                trial = np.where(todo[:, None], delta + lam[:, None] * step, delta)
-                ev_t, y_t, ok_t, cost_t = self._evaluate_at(p, trial)
-                better = todo & ok_t & (cost_t <= cost * (1.0 + 1e-12) + 1e-12)
-                new_delta[better] = trial[better]
-                todo &= ~better
-                if not np.any(todo):
-                    break
-                lam[todo] *= 0.5
+            (delta, ev, y, ok, cost), todo = self._line_search(p, delta, step, cost, moving)
             at_kink = move * LATENT_SMALLEST_STEP < LATENT_SETTLED
             kink |= todo & at_kink
             refused |= todo & ~at_kink
-            self.n_latent_halvings += int(np.count_nonzero(lam < 1.0))
-            if halving == 0 and np.array_equal(new_delta, trial):
-                delta, ev, y, ok, cost = new_delta, ev_t, y_t, ok_t, cost_t      # the full step taken everywhere
-            else:    # steps halved, or refused, at some points: the outputs at the conditions taken
-                delta = new_delta
-                ev, y, ok, cost = self._evaluate_at(p, delta)
         n_moving, n_refused, n_kink = int(np.count_nonzero(moving)), int(np.count_nonzero(refused)), \
             int(np.count_nonzero(kink))
         settled = not (n_moving or n_refused)
