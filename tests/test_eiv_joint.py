@@ -35,7 +35,7 @@ def setup():
     statement = ProblemStatement(pars, nominal_vector(pars), [q.scale for q in pars], [q.lower for q in pars],
                                  [q.upper for q in pars], np.full(n, 1.0), np.ones(n, bool), tuple(range(3)))
     sigma_u = np.c_[meas.condition_sigma["wind_speed"], np.zeros(len(meas.conditions)),
-                    meas.condition_sigma["pitch"]]
+                    meas.condition_sigma["pitch"], np.zeros(len(meas.conditions))]
     return model, meas, statement, sigma_u
 
 
@@ -232,3 +232,42 @@ def test_remembering_an_old_linearization_restores_its_factors(setup):
     # solved again from another start: the same conditions to within the inner tolerance (1e-3 σ)
     np.testing.assert_allclose(prob.chol, chol_first, rtol=1e-4, atol=1e-9 * np.max(np.abs(chol_first)))
     assert prob.linearize(first.p) is first
+
+
+class _KinkModel:
+    """y = p·g(V) with g piecewise linear in V, its slope 1 below V = 10 m/s and 3 above (a kink like a
+    node of a polar table); one channel."""
+
+    def evaluate(self, p, conditions):
+        from types import SimpleNamespace
+        v = np.asarray(conditions.wind_speed, float)
+        g = np.where(v < 10.0, v, 10.0 + 3.0 * (v - 10.0))
+        return SimpleNamespace(values=(p[0] * g)[:, None], ok=np.ones(v.size, bool))
+
+
+def test_a_point_at_a_kink_is_stationary_and_counted_not_stuck():
+    """A reading whose joint cost has its minimum at the kink: the one-sided Gauss–Newton step is refused
+    at every halving, the point is counted as stationary at a kink (not as NOT settled) and its δ is the
+    kink's to within the settling tolerance; a smooth point beside it settles by its step size. Independent
+    reference: the joint cost's minimum over a fine grid of δ."""
+    from calib.calibration.eiv_joint import LATENT_SETTLED
+    from calib.calibration.problem import ProblemStatement
+    from calib.types import OperatingConditions, Parameter
+
+    par = Parameter("gain", 1.0, 0.5, 2.0, 0.1)
+    statement = ProblemStatement((par,), [1.0], [0.1], [0.5], [2.0], [1.0], [True], (0,))
+    # point 0: read at 10.05 m/s (σ_V 0.1), output 9.992 (σ 0.05): the joint cost falls toward the kink
+    # V = 10 (δ = -0.05) from both sides (slopes -1.8 and +4.6 per m/s there), so its minimum sits at it.
+    # point 1: smooth, read at 7 m/s, output 7.1.
+    cond = OperatingConditions(np.array([10.05, 7.0]), np.array([10.0, 10.0]), np.zeros(2))
+    prob = JointProblem(_KinkModel(), cond, np.array([[9.992], [7.1]]), np.full((2, 1), 0.05),
+                        np.array([[0.1, 0.0, 0.0, 0.0], [0.1, 0.0, 0.0, 0.0]]), statement)
+    state = prob.solve_conditions(np.array([1.0]))
+    assert state["settled"] and state["n_kink"] == 1 and state["n_refused"] == 0 and state["n_moving"] == 0
+    assert prob.n_latent_not_settled == 0 and prob.n_latent_kink_points == 1
+    grid = np.linspace(-0.3, 0.3, 600001)
+    for k, (v0, z) in enumerate(((10.05, 9.992), (7.0, 7.1))):
+        v = v0 + grid
+        g = np.where(v < 10.0, v, 10.0 + 3.0 * (v - 10.0))
+        cost = 0.5 * ((z - g) / 0.05) ** 2 + 0.5 * (grid / 0.1) ** 2
+        assert abs(state["delta"][k, 0] - grid[np.argmin(cost)]) < 2 * LATENT_SETTLED * 0.1

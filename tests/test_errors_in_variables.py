@@ -98,7 +98,7 @@ def test_effective_covariance_matches_monte_carlo(globals_model):
     p = nominal_vector(model.parameters)
     cond = OperatingConditions([7.0, 13.0], [9.0, 12.1], [0.0, 6.0])
     idx = list(range(len(CHANNELS)))
-    sigma_u = np.array([[0.07, 0.0, 0.1], [0.13, 0.0, 0.1]])
+    sigma_u = np.array([[0.07, 0.0, 0.1, 0.0], [0.13, 0.0, 0.1, 0.0]])
     J, n_failed = condition_sensitivities(model, p, cond, idx, sigma_u)
     assert n_failed == 0 and np.all(J[:, :, 1] == 0.0)
     sigma_y = 1e-3 * np.abs(model.evaluate(p, cond).values[:, idx])
@@ -107,7 +107,7 @@ def test_effective_covariance_matches_monte_carlo(globals_model):
     rng = np.random.default_rng(7)
     n = 400
     for k in range(2):
-        e = rng.standard_normal((n, 3)) * sigma_u[k]
+        e = rng.standard_normal((n, 4)) * sigma_u[k]
         draws = OperatingConditions(cond.wind_speed[k] + e[:, 0], np.full(n, cond.rotor_speed[k]),
                                     cond.pitch[k] + e[:, 2])
         y = model.evaluate(p, draws).values[:, idx]
@@ -251,3 +251,53 @@ def test_the_diagnosis_refuses_condition_sigma_naming_the_key(globals_model):
         diagnose(load_rotor("nrel5mw"), meas, grid, BemSettings(use_tilt=False),
                  CalibrationSettings(noise="known", condition_sigma={"pitch": 0.2}, **FAST))
     assert exc.value.field == "errors_in_variables"
+
+
+def test_air_density_sigma_column_is_read_and_checked(tmp_path):
+    """``air_density_sigma`` read (kg/m3) into the conditions' σ; a negative one
+    refused naming file, line and column; ``condition_sigma.air_density`` a valid setting."""
+    m = read_measurements(write(tmp_path, "wind_speed,rotor_speed,pitch,air_density,power,air_density_sigma [kg/m3]\n"
+                                          "8,10,0,1.2,1.5e6,0.004\n9,11,0,1.21,2e6,0\n"))
+    np.testing.assert_allclose(m.condition_sigma["air_density"], [0.004, 0.0])
+    su = condition_sigma(m, CalibrationSettings())
+    assert su.shape == (2, 4) and su[0, 3] == pytest.approx(0.004) and np.all(su[:, :3] == 0.0)
+    with pytest.raises(InputError) as exc:
+        read_measurements(write(tmp_path, "wind_speed,rotor_speed,pitch,air_density,power,air_density_sigma\n"
+                                          "8,10,0,1.2,1.5e6,0.004\n9,11,0,1.21,2e6,-0.004\n", "bad.csv"))
+    assert exc.value.line == 3 and exc.value.field == "air_density_sigma" and "column 6" in exc.value.message
+    CalibrationSettings(condition_sigma={"air_density": 0.004}).validate()
+
+
+def test_density_sigma_share_is_the_loads_proportion_to_density(globals_model):
+    """The BEM's loads are proportional to ρ (its induction does not depend on ρ), so a density σ alone
+    gives every load the σ y σ_ρ/ρ exactly (closed form) in the effective covariance's share J_u Σ_u J_uᵀ,
+    the channels of a point fully correlated."""
+    model, _ = globals_model
+    p = nominal_vector(model.parameters)
+    cond = OperatingConditions([7.0, 13.0], [9.0, 12.1], [0.0, 6.0], [1.15, 1.3])
+    idx = list(range(len(CHANNELS)))
+    sigma_u = np.array([[0.0, 0.0, 0.0, 0.004], [0.0, 0.0, 0.0, 0.006]])
+    J, n_failed = condition_sensitivities(model, p, cond, idx, sigma_u)
+    y = model.evaluate(p, cond).values[:, idx]
+    assert n_failed == 0 and np.all(J[:, :, :3] == 0.0)
+    expected = np.abs(y) * (sigma_u[:, 3] / cond.air_density)[:, None]
+    np.testing.assert_allclose(np.abs(J[:, :, 3]) * sigma_u[:, 3:], expected, rtol=1e-6)
+
+
+def test_joint_and_marginal_carry_a_density_sigma(globals_model):
+    """A campaign whose recorded densities scatter about the true ones (σ_ρ 1 %, stated in
+    ``condition_sigma.air_density``): both estimators converge, and the stated σ widens the joint
+    estimate's intervals of the global biases against the joint fit that takes the densities as exact."""
+    model, truth = globals_model
+    meas, true = synthesize_campaign(truth, np.zeros(0), CampaignSpec(n_records=40), seed=31)
+    rng = np.random.default_rng(5)
+    err = 0.01 * true.air_density * rng.standard_normal(len(true))
+    noisy = dataclasses.replace(meas, conditions=dataclasses.replace(meas.conditions, air_density=true.air_density + err))
+    sig = {"air_density": 0.0123}
+    fits = {}
+    for mode in ("marginal", "joint"):
+        cal = Calibrator(model, noisy, CalibrationSettings(errors_in_variables=mode, condition_sigma=sig, **FAST))
+        fits[mode] = cal.run()
+        assert str(fits[mode].estimate.status) == "converged"
+    exact = Calibrator(model, noisy, CalibrationSettings(errors_in_variables="joint", **FAST)).run()
+    assert np.all(fits["joint"].uncertainty.std_p > exact.uncertainty.std_p)

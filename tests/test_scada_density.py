@@ -36,3 +36,22 @@ def test_against_openoa_compute_air_density():
     mine = air_density([293.15, 268.15], [1.0e5, 0.95e5], [0.5, 0.9])
     assert np.allclose(mine, openoa, rtol=3.0e-5)
     assert not np.allclose(mine, openoa, rtol=1.0e-6)
+
+
+@pytest.mark.parametrize("t, b, phi, st, sb, sphi", [
+    (288.15, 101325.0, 0.0, 1.0, 300.0, 0.0),       # dry air: σ_T 1 K, σ_B 3 hPa
+    (303.15, 98000.0, 0.8, 0.5, 100.0, 0.05),      # warm humid air: the humidity term matters
+])
+def test_density_sigma_against_monte_carlo(t, b, phi, st, sb, sphi):
+    """σ_ρ by sensitivity factors against the sample σ of ρ over 200 000 draws of the sensors' errors
+    (standard error of a sample σ: 0.16 %), and against the dry-air closed form
+    σ_ρ/ρ = √((σ_T/T)² + (σ_B/B)²)."""
+    from calib.scada import air_density_sigma
+    rng = np.random.default_rng(11)
+    n = 200_000
+    draws = air_density(t + st * rng.standard_normal(n), b + sb * rng.standard_normal(n),
+                        phi + sphi * rng.standard_normal(n))
+    sigma = air_density_sigma(t, b, st, sb, phi, sphi)
+    assert sigma == pytest.approx(draws.std(ddof=1), rel=0.01)
+    if phi == 0.0:
+        assert sigma / air_density(t, b) == pytest.approx(np.hypot(st / t, sb / b), rel=1e-12)

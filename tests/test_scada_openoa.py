@@ -102,3 +102,25 @@ def test_calib_scada_command_without_rotor_speed_says_so(tmp_path, capsys):
     from calib.cli import main
     assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--bins-out", str(tmp_path / "b.csv")]) == 2
     assert "rotor_speed" in capsys.readouterr().err
+
+
+def test_calib_scada_writes_the_density_sigma_of_its_sensors(tmp_path, capsys):
+    """``--temperature-sigma`` and ``--pressure-sigma`` give the kept records an ``air_density_sigma``
+    column; for the extract's dry air at the given 965 hPa it is the closed form
+    σ_ρ/ρ = √((σ_T/T)² + (σ_B/B)²) with T = B/(R₀ ρ); a negative sensor σ is refused naming the flag."""
+    from calib.cli import main
+    out = tmp_path / "records.csv"
+    assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--records-out", str(out),
+                 "--fill", "rotor_speed=15", "--temperature-sigma", "0.5", "--pressure-sigma", "3"]) == 0
+    # read as a plain table: the extract's records table also holds a record at 0 m/s, which
+    # read_measurements refuses (a wind speed must be > 0)
+    lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
+    names = lines[0].split(",")
+    table = dict(zip(names, np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]]).T))
+    rho = table["air_density"]
+    t = 96500.0 / (287.05 * rho)
+    assert rho.size > 100
+    np.testing.assert_allclose(table["air_density_sigma"] / rho, np.hypot(0.5 / t, 300.0 / 96500.0), rtol=1e-6)
+    assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--records-out", str(out),
+                 "--fill", "rotor_speed=15", "--temperature-sigma", "-1", "--pressure-sigma", "3"]) == 2
+    assert "--temperature-sigma" in capsys.readouterr().err

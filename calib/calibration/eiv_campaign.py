@@ -109,11 +109,33 @@ def synthesize_campaign(model, p_true: np.ndarray, spec: CampaignSpec, seed: int
     if not np.all(ev.ok):
         raise RuntimeError(f"the truth fails at {int(np.sum(~ev.ok))} record(s): {ev.failure_summary()}")
     y = ev.values[:, [names.index(c) for c in channels]]
+    return campaign_from_truth(y, true, spec, rng, channels, f"synthetic seed {seed}"), true
+
+
+def campaign_from_truth(y: np.ndarray, true: OperatingConditions, spec: CampaignSpec, rng: np.random.Generator,
+                        channels, source: str) -> Measurements:
+    """The measurements of records whose noise-free outputs ``y`` at the ``true`` conditions come from
+    any truth (the native BEM in :func:`synthesize_campaign`, another code in the out-of-family
+    campaign): output noise and the measured conditions of the module docstring, drawn from ``rng``
+    after the true conditions (:func:`true_conditions`).
+
+    Parameters
+    ----------
+    y : ndarray, shape (n_records, n_channels)
+        Noise-free outputs [channel units], in the order of ``channels``.
+    true : OperatingConditions
+    spec : CampaignSpec
+    rng : numpy.random.Generator
+    channels : sequence of str
+        Each channel's σ fraction is ``spec.output_sigma``'s.
+    source : str
+    """
+    fractions = dict(spec.output_sigma)
     sigma = np.array([fractions[c] for c in channels]) * np.sqrt(np.mean(y ** 2, axis=0))
     z = y + sigma * rng.standard_normal(y.shape)
     v_m = spec.anemometer_scale * true.wind_speed * (1.0 + spec.wind_scatter * rng.standard_normal(len(true)))
     beta_m = true.pitch - spec.pitch_offset + spec.pitch_scatter * rng.standard_normal(len(true))
     measured = OperatingConditions(v_m, true.rotor_speed, beta_m, true.air_density)
     cond_sigma = {"wind_speed": spec.wind_scatter * v_m, "pitch": np.full(len(true), spec.pitch_scatter)}
-    return (Measurements(measured, channels, z, np.broadcast_to(sigma, z.shape).copy(), source=f"synthetic seed {seed}",
-                         condition_sigma=cond_sigma), true)
+    return Measurements(measured, tuple(channels), z, np.broadcast_to(sigma, z.shape).copy(), source=source,
+                        condition_sigma=cond_sigma)

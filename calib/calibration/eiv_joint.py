@@ -31,6 +31,13 @@ LATENT_SETTLED = 1e-3
 MAX_LATENT_ITERATIONS = 20
 #: Most step halvings of a point whose inner step raised its cost.
 MAX_LATENT_HALVINGS = 8
+#: A point whose Gauss–Newton step raised its cost at every halving, down to the smallest fraction
+#: tried (``LATENT_SMALLEST_STEP`` of the step), while that fraction of the step is below
+#: ``LATENT_SETTLED`` σ, sits at a *kink* of the model's outputs in its conditions (a node of the
+#: piecewise-linear polar tables or correction field, where ∂y/∂u jumps and the one-sided step
+#: overshoots): it is stationary along its step to within the settling tolerance and counts as
+#: settled (counted apart). A refused step larger than that leaves the point stuck: NOT settled.
+LATENT_SMALLEST_STEP = 0.5 ** (MAX_LATENT_HALVINGS - 1)
 
 
 class JointProblem(MarginalProblem):
@@ -62,17 +69,23 @@ class JointProblem(MarginalProblem):
         As :class:`calib.calibration.problem.LeastSquaresProblem` (``conditions`` as measured).
     sigma_y : ndarray, shape (n_points, n_channels)
         Output 1-σ [channel units], > 0.
-    sigma_u : ndarray, shape (n_points, 3)
-        The conditions' 1-σ (:func:`condition_sigma`) [m/s, rpm, deg].
+    sigma_u : ndarray, shape (n_points, 4)
+        The conditions' 1-σ (:func:`condition_sigma`) [m/s, rpm, deg, kg/m³].
 
     Attributes
     ----------
-    delta : ndarray, shape (n_points, 3)
-        The estimated condition errors δ* at the last solve [m/s, rpm, deg].
+    delta : ndarray, shape (n_points, 4)
+        The estimated condition errors δ* at the last solve [m/s, rpm, deg, kg/m³].
     n_latent_solves, n_latent_not_settled, n_latent_halvings, n_failed_differences : int
-        Solves of the points' conditions, those that did not settle within
-        ``MAX_LATENT_ITERATIONS`` steps, points whose step was halved (summed over steps), and the
-        largest count of points whose J_u failed.
+        Solves of the points' conditions, those that did not settle (a point still moving after
+        ``MAX_LATENT_ITERATIONS`` steps, or stuck: its step refused at every halving while its
+        smallest tried fraction is above ``LATENT_SETTLED`` σ), points whose step was halved (summed over steps), and the largest
+        count of points whose J_u failed.
+    n_latent_kink_points, n_latent_kink_solves : int
+        Points (summed over solves) stationary at a kink of the outputs (``LATENT_SMALLEST_STEP``), and
+        the solves with at least one; such a solve counts as settled.
+    n_latent_refused_points, n_latent_moving_points : int
+        Points (summed over solves) stuck, and still moving at the step limit.
 
     References
     ----------
@@ -92,6 +105,10 @@ class JointProblem(MarginalProblem):
         self.delta = np.zeros_like(self.sigma_u)
         self.n_latent_solves = 0
         self.n_latent_not_settled = 0
+        self.n_latent_kink_points = 0
+        self.n_latent_kink_solves = 0
+        self.n_latent_refused_points = 0
+        self.n_latent_moving_points = 0
         self.n_latent_halvings = 0
         self.n_failed_differences = 0
         self._latent = None      # (p, state) of the last solve
@@ -118,6 +135,28 @@ class JointProblem(MarginalProblem):
         self.n_evaluations += 1
         return (ev, *self._point_costs(delta, ev))
 
+    def _line_search(self, p, delta, step, cost, moving):
+        """The points' steps, halved per point where the cost would rise (at most
+        ``MAX_LATENT_HALVINGS`` tries): ((δ, evaluation, outputs, ok, cost) at the conditions taken,
+        the points whose every try was refused)."""
+        lam = np.ones(len(delta))
+        todo = moving.copy()
+        new_delta = delta.copy()
+        for halving in range(MAX_LATENT_HALVINGS):
+            trial = np.where(todo[:, None], delta + lam[:, None] * step, delta)
+            ev_t, y_t, ok_t, cost_t = self._evaluate_at(p, trial)
+            better = todo & ok_t & (cost_t <= cost * (1.0 + 1e-12) + 1e-12)
+            new_delta[better] = trial[better]
+            todo &= ~better
+            if not np.any(todo):
+                break
+            lam[todo] *= 0.5
+        self.n_latent_halvings += int(np.count_nonzero(lam < 1.0))
+        if halving == 0 and np.array_equal(new_delta, trial):
+            return (new_delta, ev_t, y_t, ok_t, cost_t), todo      # the full step taken everywhere
+        # steps halved, or refused, at some points: the outputs at the conditions taken
+        return (new_delta, *self._evaluate_at(p, new_delta)), todo
+
     def solve_conditions(self, p: np.ndarray) -> dict:
         """δ*(p): each point's condition errors minimizing its joint cost at ``p`` (class docstring),
         started from the last solve's; with the evaluation, J_u and C_k's Cholesky factors there.
@@ -125,8 +164,10 @@ class JointProblem(MarginalProblem):
         Returns
         -------
         dict
-            ``delta`` (n_points, 3), ``evaluation``, ``J_u`` (n_points, n_channels, 3), ``chol``,
-            ``ok`` (points converged at their estimated conditions), ``settled``, ``iterations``.
+            ``delta`` (n_points, 4), ``evaluation``, ``J_u`` (n_points, n_channels, 4), ``chol``,
+            ``ok`` (points converged at their estimated conditions), ``settled``, ``iterations``,
+            ``n_kink``, ``n_refused``, ``n_moving`` (points stationary at a kink, stuck, still
+            moving at the step limit).
         """
         p = np.asarray(p, float)
         if self._latent is not None and np.array_equal(self._latent[0], p):
@@ -138,7 +179,10 @@ class JointProblem(MarginalProblem):
         if np.any(~ok & np.any(delta != 0.0, axis=1)):     # a warm start where the model fails: from the reading
             delta[~ok] = 0.0
             ev, y, ok, cost = self._evaluate_at(p, delta)
-        settled, it = False, 0
+        scale_u = np.where(active_u, self.sigma_u, 1.0)
+        kink = np.zeros(len(delta), bool)       # refused at every halving, stationary to LATENT_SETTLED σ
+        refused = np.zeros(len(delta), bool)    # refused at every halving, a larger smallest step: stuck
+        it = 0
         for it in range(MAX_LATENT_ITERATIONS + 1):
             J, n_failed = condition_sensitivities(self.model, p, self.shifted(delta), self.statement.channel_index,
                                                   self.sigma_u)
@@ -150,33 +194,28 @@ class JointProblem(MarginalProblem):
             Cinv_b = np.linalg.solve(np.swapaxes(chol, 1, 2), w)[..., 0]   # C⁻¹ b
             target = np.where(ok[:, None], su2 * np.einsum("kcu,kc->ku", J, Cinv_b), delta)
             step = target - delta
-            move = np.max(np.abs(step) / np.where(active_u, self.sigma_u, 1.0), initial=0.0)
-            if move < LATENT_SETTLED or it == MAX_LATENT_ITERATIONS:
-                settled = move < LATENT_SETTLED
+            move = np.max(np.abs(step) / scale_u, axis=1)
+            # points are independent given p: one that settled, or whose step is refused at every
+            # halving (the same step again at the same δ), stays where it is
+            moving = ok & ~kink & ~refused & (move >= LATENT_SETTLED)
+            if not np.any(moving) or it == MAX_LATENT_ITERATIONS:
                 break
-            lam = np.ones(len(delta))
-            todo = ok & np.any(step != 0.0, axis=1)
-            new_delta = delta.copy()
-            for halving in range(MAX_LATENT_HALVINGS):
-                trial = np.where(todo[:, None], delta + lam[:, None] * step, delta)
-                ev_t, y_t, ok_t, cost_t = self._evaluate_at(p, trial)
-                better = todo & ok_t & (cost_t <= cost * (1.0 + 1e-12) + 1e-12)
-                new_delta[better] = trial[better]
-                todo &= ~better
-                if not np.any(todo):
-                    break
-                lam[todo] *= 0.5
-            self.n_latent_halvings += int(np.count_nonzero(lam < 1.0))
-            if halving == 0 and np.array_equal(new_delta, trial):
-                delta, ev, y, ok, cost = new_delta, ev_t, y_t, ok_t, cost_t      # the full step taken everywhere
-            else:    # steps halved, or refused, at some points: the outputs at the conditions taken
-                delta = new_delta
-                ev, y, ok, cost = self._evaluate_at(p, delta)
+            (delta, ev, y, ok, cost), todo = self._line_search(p, delta, step, cost, moving)
+            at_kink = move * LATENT_SMALLEST_STEP < LATENT_SETTLED
+            kink |= todo & at_kink
+            refused |= todo & ~at_kink
+        n_moving, n_refused, n_kink = int(np.count_nonzero(moving)), int(np.count_nonzero(refused)), \
+            int(np.count_nonzero(kink))
+        settled = not (n_moving or n_refused)
         self.n_latent_solves += 1
         self.n_latent_not_settled += int(not settled)
+        self.n_latent_kink_points += n_kink
+        self.n_latent_kink_solves += int(n_kink > 0)
+        self.n_latent_refused_points += n_refused
+        self.n_latent_moving_points += n_moving
         self.delta = delta
         state = {"delta": delta, "evaluation": ev, "J_u": J, "chol": chol, "ok": ok, "settled": settled,
-                 "iterations": it}
+                 "iterations": it, "n_kink": n_kink, "n_refused": n_refused, "n_moving": n_moving}
         self._latent = (p.copy(), state)
         return state
 
@@ -245,15 +284,25 @@ def fit_joint(cal, problem: LeastSquaresProblem, sigma_u: np.ndarray, p: np.ndar
     joint.n_evaluations, joint.n_jacobians = problem.n_evaluations, problem.n_jacobians
     joint.n_failed_points_total = problem.n_failed_points_total
     fit = cal.fitter.fit(joint, p)
-    text = (f"errors in variables (joint): the points' true conditions solved {joint.n_latent_solves} time(s), "
-            + ("every solve settled" if not joint.n_latent_not_settled else
-               f"{joint.n_latent_not_settled} NOT settled within {MAX_LATENT_ITERATIONS} steps"))
+    text = f"errors in variables (joint): the points' true conditions solved {joint.n_latent_solves} time(s), "
+    if not joint.n_latent_not_settled:
+        text += "every solve settled"
+    else:
+        text += (f"{joint.n_latent_not_settled} NOT settled ({joint.n_latent_refused_points} point(s) stuck: "
+                 f"step refused at every halving; {joint.n_latent_moving_points} still moving after "
+                 f"{MAX_LATENT_ITERATIONS} steps)")
+    if joint.n_latent_kink_points:
+        text += (f"; in {joint.n_latent_kink_solves} solve(s) {joint.n_latent_kink_points} point(s) stationary at a "
+                 f"kink of the outputs (step refused at every halving down to {LATENT_SMALLEST_STEP:g} of it, "
+                 f"below {LATENT_SETTLED:g} σ)")
     if joint.n_failed_differences:
         text += (f"; the conditions' sensitivities failed at {joint.n_failed_differences} point(s) "
                  "(condition scatter left out there)")
     cal.emit({"stage": "errors_in_variables", "estimator": "joint", "iteration": 1,
               "latent_solves": joint.n_latent_solves, "latent_not_settled": joint.n_latent_not_settled,
-              "latent_halvings": joint.n_latent_halvings,
+              "latent_halvings": joint.n_latent_halvings, "latent_kink_points": joint.n_latent_kink_points,
+              "latent_refused_points": joint.n_latent_refused_points,
+              "latent_moving_points": joint.n_latent_moving_points,
               "n_failed_differences": joint.n_failed_differences, "status": fit.status})
     return joint, fit, f"{fit.message}; {text}" if fit.message else text
 

@@ -2,15 +2,15 @@ r"""Errors in variables: operating conditions measured with an uncertainty (the 
 the *joint* one, which shares its sensitivities and factors, and the choice between them in
 :mod:`calib.calibration.eiv_joint`).
 
-Each point's measured conditions u_k = (V, Ω, β)_k (wind speed [m/s], rotor speed [rpm], pitch
-[deg]) differ from the true ones by a zero-mean error with covariance Σ_u,k (diagonal: the
+Each point's measured conditions u_k = (V, Ω, β, ρ)_k (wind speed [m/s], rotor speed [rpm], pitch
+[deg], air density [kg/m³]) differ from the true ones by a zero-mean error with covariance Σ_u,k (diagonal: the
 conditions' 1-σ, :func:`condition_sigma`). To first order the model output at the true conditions is
 y(p, u_k) − J_u,k e_k, so the measured outputs z_k scatter about y(p, u_k) with the *effective*
 covariance
 
 .. math::  C_k = R_k + J_{u,k} Σ_{u,k} J_{u,k}ᵀ,
 
-R_k = diag(σ_k²) the output noise and J_u,k = ∂y_k/∂u_k (n_channels × 3) the output sensitivities
+R_k = diag(σ_k²) the output noise and J_u,k = ∂y_k/∂u_k (n_channels × 4) the output sensitivities
 to the point's conditions. C_k is a full block per point (the channels of one point share the
 condition error) and block-diagonal over points. The marginal estimator whitens the residuals
 and sensitivities of each point with the Cholesky factor C_k = L_k L_kᵀ,
@@ -49,7 +49,7 @@ from calib.types import OperatingConditions
 
 
 #: Units of the conditions' σ (those of the conditions, :class:`calib.types.OperatingConditions`).
-CONDITION_UNITS = {"wind_speed": "m/s", "rotor_speed": "rpm", "pitch": "deg"}
+CONDITION_UNITS = {"wind_speed": "m/s", "rotor_speed": "rpm", "pitch": "deg", "air_density": "kg/m^3"}
 
 #: Length of the last fit's move ‖M (p̃_k+1 − p̃_k)‖ (the change of the whitened fitted outputs, in
 #: standard deviations of the data) below which the re-linearization of J_u has settled [-]: a
@@ -59,7 +59,8 @@ CONDITION_UNITS = {"wind_speed": "m/s", "rotor_speed": "rpm", "pitch": "deg"}
 EIV_SETTLED = 0.1
 
 #: Central-difference steps of J_u: relative to the condition's value (wind and rotor speed) and
-#: absolute (pitch [deg]). Small against the conditions' σ (3 % and 0.2 deg in the field), large
+#: absolute (pitch [deg]); the air density's relative. Small against the conditions' σ (3 % and 0.2 deg
+#: in the field, about 0.3 % for the density from temperature and pressure), large
 #: against the BEM's convergence tolerance.
 STEP_RELATIVE = 1e-4
 STEP_PITCH_DEG = 1e-3
@@ -69,7 +70,9 @@ STEP_PITCH_DEG = 1e-3
 def condition_sigma(m, settings) -> np.ndarray | None:
     """1-σ of every point's conditions [condition units], or None when none is stated or all are zero.
 
-    The table's ``wind_speed_sigma``, ``rotor_speed_sigma`` and ``pitch_sigma`` columns
+    The table's ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma`` and ``air_density_sigma``
+    columns (the last, where the density comes from a temperature and a pressure, e.g. from
+    :func:`calib.scada.density.air_density_sigma`)
     (:attr:`calib.measurements.Measurements.condition_sigma`), the settings' absolute
     ``condition_sigma`` and relative ``condition_relative_sigma`` (a fraction of each point's
     value) add in quadrature: σ² = σ_table² + σ_abs² + (r |u|)².
@@ -81,8 +84,8 @@ def condition_sigma(m, settings) -> np.ndarray | None:
 
     Returns
     -------
-    ndarray, shape (n_points, 3) or None
-        Columns :data:`UNCERTAIN_CONDITIONS` [m/s, rpm, deg].
+    ndarray, shape (n_points, 4) or None
+        Columns :data:`UNCERTAIN_CONDITIONS` [m/s, rpm, deg, kg/m³].
     """
     n = m.n_points
     var = np.zeros((n, len(UNCERTAIN_CONDITIONS)))
@@ -150,13 +153,14 @@ def condition_sensitivities(model, p: np.ndarray, conditions: OperatingCondition
         n_points conditions (as measured).
     channel_index : sequence of int
         The measured channels' columns in the model's output.
-    sigma_u : ndarray, shape (n_points, 3)
-        Conditions' σ; a condition with σ = 0 at every point is not differenced.
+    sigma_u : ndarray, shape (n_points, 4)
+        Conditions' σ (columns :data:`UNCERTAIN_CONDITIONS`); a condition with σ = 0 at every
+        point is not differenced.
 
     Returns
     -------
-    J_u : ndarray, shape (n_points, n_channels, 3)
-        [channel unit per m/s, rpm, deg]; zero for a condition without σ and at points where a
+    J_u : ndarray, shape (n_points, n_channels, 4)
+        [channel unit per m/s, rpm, deg, kg/m³]; zero for a condition without σ and at points where a
         difference failed.
     n_failed : int
         Points where a difference evaluation failed (their J_u row for that condition is zero).
@@ -186,8 +190,8 @@ def effective_cholesky(sigma_y: np.ndarray, J_u: np.ndarray, sigma_u: np.ndarray
     ----------
     sigma_y : ndarray, shape (n_points, n_channels)
         Output 1-σ [channel units], > 0.
-    J_u : ndarray, shape (n_points, n_channels, 3)
-    sigma_u : ndarray, shape (n_points, 3)
+    J_u : ndarray, shape (n_points, n_channels, 4)
+    sigma_u : ndarray, shape (n_points, 4)
 
     Returns
     -------
@@ -275,7 +279,7 @@ def fit_marginal(cal, problem: LeastSquaresProblem, sigma_u: np.ndarray, p: np.n
         Its fitter (MAP or truncated), statement, measurements, settings and progress records.
     problem : LeastSquaresProblem
         The output-error problem with the stated output σ.
-    sigma_u : ndarray, shape (n_points, 3)
+    sigma_u : ndarray, shape (n_points, 4)
         The conditions' 1-σ (:func:`condition_sigma`).
     p : ndarray, shape (n_params,)
         Start [parameter units].

@@ -158,8 +158,8 @@ def calibration_fluid(meas, recorded: dict | None, printer=print):
 
 
 def data_condition_sigma(meas) -> np.ndarray | None:
-    """The data's ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma`` columns as an
-    (n_points, 3) array [m/s, rpm, deg] (0 for a condition without a column), None without any."""
+    """The data's ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``, ``air_density_sigma`` columns
+    as an (n_points, 4) array [m/s, rpm, deg, kg/m^3] (0 for a condition without a column), None without any."""
     if not meas.condition_sigma:
         return None
     from calib.calibration.settings import UNCERTAIN_CONDITIONS

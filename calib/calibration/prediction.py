@@ -103,7 +103,7 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95,
         The calibrated model (:meth:`calib.calibration.result.CalibrationResult.rebuild_model`).
     confidence : float
         Two-sided confidence of the intervals [-].
-    condition_sigma : ndarray, shape (n_points, 3), optional
+    condition_sigma : ndarray, shape (n_points, 4) or (n_points, 3), optional
         1-σ of each point's wind speed [m/s], rotor speed [rpm] and pitch [deg], >= 0.
 
     Returns
@@ -150,9 +150,14 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95,
     if condition_sigma is not None:
         from calib.calibration.errors_in_variables import condition_sensitivities
         su = np.asarray(condition_sigma, float)
-        if su.shape != (values.shape[0], 3) or not np.all(np.isfinite(su)) or np.any(su < 0):
-            raise InputError(f"condition_sigma must be {values.shape[0]} x 3 finite values >= 0 (wind speed [m/s], "
-                             f"rotor speed [rpm], pitch [deg]), got shape {su.shape}", result.name,
+        from calib.calibration.settings import UNCERTAIN_CONDITIONS
+        n_u = len(UNCERTAIN_CONDITIONS)
+        if su.ndim == 2 and su.shape[1] == n_u - 1:     # no air-density σ: the three kinematic conditions'
+            su = np.c_[su, np.zeros(su.shape[0])]
+        if su.shape != (values.shape[0], n_u) or not np.all(np.isfinite(su)) or np.any(su < 0):
+            raise InputError(f"condition_sigma must be {values.shape[0]} x {n_u} (or x {n_u - 1}) finite values >= 0 "
+                             f"(wind speed [m/s], rotor speed [rpm], pitch [deg], air density [kg/m^3]), got shape "
+                             f"{su.shape}", result.name,
                              field="condition_sigma")
         J_u, _ = condition_sensitivities(model, result.estimate.p_hat, conditions, idx, su)
         c_var = np.einsum("kcu,ku->kc", J_u ** 2, su ** 2)

@@ -223,7 +223,7 @@ class CalibrationResult:
     def predict(self, conditions, model=None, confidence: float = 0.95, condition_sigma=None) -> Prediction:
         """Model outputs at new conditions with intervals from the estimate's covariance
         (:func:`calib.calibration.prediction.predict_outputs`; ``model`` default: rebuilt from ``model_spec``;
-        ``condition_sigma`` (n_points, 3): the conditions' 1-σ carried into the intervals)."""
+        ``condition_sigma`` (n_points, 4), or 3 without the air density's: the conditions' 1-σ carried into the intervals)."""
         return predict_outputs(self, conditions, self.rebuild_model() if model is None else model, confidence,
                                condition_sigma)
 

@@ -14,7 +14,7 @@ NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
 RETAIN_MODES = ("threshold", "all")
 ESTIMATORS = ("map", "truncated")
 ERRORS_IN_VARIABLES = ("marginal", "joint", "ignore")
-UNCERTAIN_CONDITIONS = ("wind_speed", "rotor_speed", "pitch")
+UNCERTAIN_CONDITIONS = ("wind_speed", "rotor_speed", "pitch", "air_density")
 
 
 @dataclass(frozen=True)
@@ -255,7 +255,7 @@ class CalibrationSettings:
         if self.errors_in_variables not in ERRORS_IN_VARIABLES:
             bad(f"unknown mode {self.errors_in_variables!r}; valid: {', '.join(ERRORS_IN_VARIABLES)}",
                 "errors_in_variables")
-        for key, what in (("condition_sigma", "absolute 1-σ in the condition's unit: m/s, rpm, deg"),
+        for key, what in (("condition_sigma", "absolute 1-σ in the condition's unit: m/s, rpm, deg, kg/m^3"),
                           ("condition_relative_sigma", "a fraction of the condition's value")):
             for c, v in (getattr(self, key) or {}).items():
                 if c not in UNCERTAIN_CONDITIONS:

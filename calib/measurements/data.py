@@ -63,8 +63,8 @@ class Measurements:
         ignored, rows dropped ...), one sentence each.
     condition_sigma : dict str -> ndarray, optional
         1-σ of the measured conditions per point, shape (n_points,) each, from the table's
-        ``wind_speed_sigma`` [m/s], ``rotor_speed_sigma`` [rpm] and ``pitch_sigma`` [deg] columns
-        (those given), >= 0; read by the errors-in-variables estimator
+        ``wind_speed_sigma`` [m/s], ``rotor_speed_sigma`` [rpm], ``pitch_sigma`` [deg] and
+        ``air_density_sigma`` [kg/m^3] columns (those given), >= 0; read by the errors-in-variables estimator
         (:mod:`calib.calibration.errors_in_variables`).
     """
 

@@ -20,7 +20,7 @@ Columns (order free; names are case-insensitive, spaces and hyphens count as ``_
   ``cn``, ``ct`` (force coefficients [-]) or ``fn``, ``ft`` (force per unit length [N/m]),
   e.g. ``cn@0.30`` is the normal-force coefficient at r/R = 0.30;
 - noise: ``<channel>_sigma``, the 1-σ noise of that channel, in the same unit;
-- condition uncertainty: ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``, the 1-σ
+- condition uncertainty: ``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``, ``air_density_sigma``, the 1-σ
   of a measured condition (>= 0), in the condition's units (read into
   :attr:`Measurements.condition_sigma` for the errors-in-variables estimator).
 
@@ -153,7 +153,8 @@ def measurements_from_text(text: str, path: Path, notes: list, sha256: str, chan
     declared = declared_units(table)
     rows = split_rows(table)
     channels, sig_cols = kept_channels(table, channels, allow_no_channels)
-    cond_sig_cols = [f"{c}_sigma" for c in ("wind_speed", "rotor_speed", "pitch") if f"{c}_sigma" in table.names]
+    cond_sig_cols = [f"{c}_sigma" for c in ("wind_speed", "rotor_speed", "pitch", "air_density")
+                     if f"{c}_sigma" in table.names]
     needed = list(REQUIRED_CONDITIONS) + [f for f in CONDITION_DEFAULTS if f in set(table.names)] + channels + sig_cols
     needed += cond_sig_cols
     index_of = {n: i for i, n in enumerate(table.names)}
@@ -223,7 +224,7 @@ def condition_sigma_columns(col: dict, columns: list[str], line_of: list[int], t
     Returns
     -------
     dict or None
-        Condition -> σ per point [m/s, rpm, deg]; None without such columns.
+        Condition -> σ per point [m/s, rpm, deg, kg/m^3]; None without such columns.
 
     Raises
     ------

@@ -12,13 +12,14 @@
 
 from calib.scada.analysis import PowerCurveAnalysis, power_curve, record_density
 from calib.scada.bins import PowerCurveBins, bin_index, method_of_bins
-from calib.scada.density import RHO_REFERENCE, air_density, normalized_wind_speed, vapour_pressure
+from calib.scada.density import (RHO_REFERENCE, air_density, air_density_sigma, normalized_wind_speed,
+                                 vapour_pressure)
 from calib.scada.filters import FILTERS, FilterReport, FilterSettings, apply_filters, frozen_runs
 from calib.scada.mapping import COLUMN_MAP, SIGNALS, column_map
 from calib.scada.reader import REQUIRED_SIGNALS, ScadaRecords, read_scada
 from calib.scada.table import write_bins_table, write_records_table
 
-__all__ = ["COLUMN_MAP", "FILTERS", "REQUIRED_SIGNALS", "RHO_REFERENCE", "SIGNALS", "FilterReport", "FilterSettings",
+__all__ = ["COLUMN_MAP", "air_density_sigma", "FILTERS", "REQUIRED_SIGNALS", "RHO_REFERENCE", "SIGNALS", "FilterReport", "FilterSettings",
            "PowerCurveAnalysis", "PowerCurveBins", "ScadaRecords", "air_density", "apply_filters", "bin_index",
            "column_map", "frozen_runs", "method_of_bins", "normalized_wind_speed", "power_curve", "read_scada",
            "record_density", "vapour_pressure", "write_bins_table", "write_records_table"]

@@ -9,6 +9,7 @@ import numpy as np
 
 from calib.errors import InputError
 from calib.scada.analysis import power_curve
+from calib.scada.density import air_density_sigma
 from calib.scada.filters import FILTERS, FilterSettings
 from calib.scada.reader import read_scada
 from calib.scada.table import write_bins_table, write_records_table
@@ -39,6 +40,11 @@ def add_scada_parser(sub) -> argparse.ArgumentParser:
                    "(iec, default) or with edges there (left, as OpenOA)")
     p.add_argument("--bins-out", default=None, help="write the bins (N >= 3) as a measurement table CSV")
     p.add_argument("--records-out", default=None, help="write the kept records as a measurement table CSV")
+    p.add_argument("--temperature-sigma", type=float, default=None, metavar="K",
+                   help="1-sigma of the temperature sensor [K]: with --pressure-sigma, the air density's sigma "
+                        "(IEC 61400-12-1 Annex E sensitivities) is written as air_density_sigma in --records-out")
+    p.add_argument("--pressure-sigma", type=float, default=None, metavar="HPA",
+                   help="1-sigma of the pressure (sensor or the --pressure given) [hPa]")
     p.add_argument("--fill", action="append", default=[], metavar="CONDITION=VALUE",
                    help="a condition the export lacks, held constant in the table, e.g. rotor_speed=17 [rpm]")
     return p
@@ -87,11 +93,31 @@ def scada_command(args) -> int:
             means.update({s: mine.get(s)[kept] for s in ("pitch", "rotor_speed") if mine.has(s)})
             if a.density is not None:
                 means["air_density"] = np.broadcast_to(a.density, kept.shape)[kept]
+            rho_sigma = _density_sigma(args, mine, pressure, kept) if a.density is not None else None
             out = write_records_table(means, mine.get("power")[kept], b, _with_suffix(args.records_out, suffix),
-                                      fill=fill, source=records.source,
+                                      fill=fill, source=records.source, density_sigma=rho_sigma,
                                       comments=[f"calib scada {records.source} turbine {name}"])
             print(f"  records written to {out}")
     return 0
+
+
+def _density_sigma(args, records, pressure, kept):
+    """The kept records' air-density σ from ``--temperature-sigma`` and ``--pressure-sigma``
+    (:func:`calib.scada.density.air_density_sigma`), None unless both are given and the density came
+    from temperature and pressure."""
+    if args.temperature_sigma is None and args.pressure_sigma is None:
+        return None
+    for flag, value in (("--temperature-sigma", args.temperature_sigma), ("--pressure-sigma", args.pressure_sigma)):
+        if value is None or not value >= 0 or not np.isfinite(value):
+            raise InputError(f"{flag} must be a number >= 0 with the other sensor's sigma, got {value!r}", flag)
+    if records.has("air_density") or not records.has("temperature"):
+        raise InputError("--temperature-sigma/--pressure-sigma need the density computed from temperature and "
+                         "pressure; this export " + ("measures the density itself" if records.has("air_density")
+                                                     else "has no temperature"), "--temperature-sigma")
+    b = records.get("pressure") if records.has("pressure") else np.full(len(records), float(pressure))
+    phi = records.get("humidity") if records.has("humidity") else 0.0
+    sigma = air_density_sigma(records.get("temperature"), b, args.temperature_sigma, 100.0 * args.pressure_sigma, phi)
+    return np.broadcast_to(sigma, kept.shape)[kept]
 
 
 def _with_suffix(path: str, suffix: str) -> str:

@@ -3,8 +3,9 @@
 
 Columns: the conditions ``wind_speed`` [m/s], ``rotor_speed`` [rpm], ``pitch`` [deg] and, where
 known, ``air_density`` [kg/m^3]; the channel ``power`` [W] with ``power_sigma``; and the
-conditions' own σ (``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``) for estimators
-that take errors in variables (today's ``read_measurements`` passes over them).
+conditions' own σ (``wind_speed_sigma``, ``rotor_speed_sigma``, ``pitch_sigma``, and for records
+``air_density_sigma`` from the temperature and pressure sensors' σ) for the errors-in-variables
+estimators.
 
 - bins: one row per bin with at least ``min_count`` records; ``power_sigma`` is σ/√N and a
   condition's σ is its scatter across the bin's records over √N (the uncertainty of the bin mean);
@@ -41,6 +42,8 @@ def _columns(source: str, means: dict, sigmas: dict, power, power_sigma, fill: d
     for name in CONDITIONS:
         if name in sigmas:
             cols[f"{name}_sigma"] = sigmas[name]
+    if "air_density" in means and "air_density" in sigmas:
+        cols["air_density_sigma"] = np.broadcast_to(np.asarray(sigmas["air_density"], float), power.shape)
     return cols, notes
 
 
@@ -82,10 +85,12 @@ def write_bins_table(bins: PowerCurveBins, path, *, min_count: int = 3, fill: di
 
 
 def write_records_table(means: dict, power, bins: PowerCurveBins, path, *, fill: dict | None = None,
-                        source: str = "records", comments=()) -> Path:
+                        source: str = "records", comments=(), density_sigma=None) -> Path:
     """Write records (``means``: condition -> array, ``power`` [W]) as a measurement table, with σ from
     the scatter of each record's bin in ``bins`` (module docstring); records in bins of one record
-    are left out and counted in a comment."""
+    are left out and counted in a comment. ``density_sigma`` [kg/m^3] (per record or one value): the
+    air density's own 1-σ (:func:`calib.scada.density.air_density_sigma`), written as
+    ``air_density_sigma`` beside a measured or computed ``air_density``."""
     k = bin_index(means["wind_speed"], bins)
     ok = k >= 0
     take = np.clip(k, 0, None)
@@ -94,6 +99,8 @@ def write_records_table(means: dict, power, bins: PowerCurveBins, path, *, fill:
         return np.where(ok, v[take], np.nan)
 
     sigmas = {name: scatter(bins.conditions[name]["std"]) for name in CONDITIONS if name in bins.conditions}
+    if density_sigma is not None:
+        sigmas["air_density"] = density_sigma
     cols, notes = _columns(source, means, sigmas, np.asarray(power, float), scatter(bins.power_std), fill)
     return _write(path, cols, list(comments) + notes + [f"records, sigma = scatter of the record's {bins.width:g} "
                                                         "m/s bin"])
