@@ -436,9 +436,11 @@ def test_two_candidates_equal_by_bic_are_told_apart_by_their_pattern_or_called_a
 
 def test_a_later_effect_is_named_only_when_it_explains_most_of_the_misfit_left(monkeypatch):
     """Issue 37, item 4: after a first effect, a candidate must explain (Λ) at least
-    LATER_EFFECT_SHARE of χ² − dof of the model with the first effect; a first effect at a bound
+    LATER_EFFECT_SHARE of χ² − dof of the model with the first effect, beyond the noise (the one-sided
+    share test of calib.diagnosis.share at the diagnosis' significance); a first effect at a bound
     is said to may not fit in form."""
     from calib.diagnosis.naming import LATER_EFFECT_SHARE
+    from calib.diagnosis.share import share_test
 
     class Family:
         def names_of(self, base):
@@ -458,14 +460,21 @@ def test_a_later_effect_is_named_only_when_it_explains_most_of_the_misfit_left(m
         n.base_chi2 = n.n_res - 1 + 100.0          # χ² − dof = 100 left with the first effect
         return n
 
-    for lr, named in ((LATER_EFFECT_SHARE * 100 - 1, False), (LATER_EFFECT_SHARE * 100 + 1, True)):
+    n = namer()
+    # Λ where the test's z reaches its critical value (one candidate compared: Φ⁻¹(1 − significance))
+    z_needed = share_test(0.0, 1, n.base_chi2, n.n_res - 1, LATER_EFFECT_SHARE, n.dset.significance).z_needed
+    edge = next(lr for lr in np.arange(60.0, 100.0, 0.01)
+                if share_test(lr, 1, n.base_chi2, n.n_res - 1, LATER_EFFECT_SHARE, n.dset.significance).passed)
+    assert edge > LATER_EFFECT_SHARE * 100 + 10      # 66 % of so small a misfit is within its noise
+    for lr, named in ((LATER_EFFECT_SHARE * 100 + 1, False), (edge - 0.1, False), (edge + 0.1, True)):
         fit = _fit("lift_offset", 20.0, 0.6)
         fit.lr_statistic = lr
         rnd = {"verdict": "lift_offset", "reason": "lift_offset: ..."}
         best = namer()._earns_place(rnd, fit)
         assert (best is fit) == named and rnd["verdict"] == ("lift_offset" if named else "none")
         if not named:
-            assert f"would explain only {lr:.0f} % of the misfit left with rotational_augmentation" in rnd["reason"]
+            assert f"would explain only {lr:.0f} % ± " in rnd["reason"]
+            assert f"(needs {z_needed:.2g})" in rnd["reason"]
     fit = _fit("lift_offset", 20.0, 0.6)
     fit.lr_statistic = 99.0
     rnd = {"verdict": "lift_offset", "reason": "lift_offset: ..."}
