@@ -520,3 +520,41 @@ def test_separation_probes_keep_to_the_rotors_operating_limits():
     assert probes.rotor_speed.min() >= sch.min_rotor_speed - 1e-9 and probes.rotor_speed.max() <= sch.max_rotor_speed + 1e-9
     assert probes.wind_speed.min() >= sch.cut_in - 1e-9 and probes.wind_speed.max() <= sch.cut_out + 1e-9
     assert f"rotor speed {sch.min_rotor_speed:.3g}–{sch.max_rotor_speed:.3g} rpm" in probe_limits(measured, sch)[2]
+
+
+def test_an_ambiguous_pair_of_physical_effects_is_weighed_over_the_model_form(monkeypatch):
+    """Model form first (issue 37): a round ambiguous between two physical effects while a model-form
+    candidate is significant names the model form when neither earns its place on top of it (the
+    round's reason keeps what was ambiguous); when one does, the round stays ambiguous as it was; with no
+    significant model-form candidate nothing is weighed."""
+    n = _namer(monkeypatch)
+    re_fit, ra_fit, form = (_fit("reynolds_number", 20.0, 0.6), _fit("rotational_augmentation", 21.0, 0.7),
+                            _fit("momentum_balance", 40.0, 0.2))
+    form.kind = "model_form"
+    asked = []
+
+    def judged(outcome):
+        def over(round_no, rnd, best, forms, fits):
+            asked.append((best.effect, [f.effect for f in forms]))
+            rnd.update(verdict="changed", reason="weighed")
+            return outcome
+        return over
+
+    def round_record():
+        return {"verdict": "ambiguous", "ambiguous": ["reynolds_number", "rotational_augmentation"],
+                "reason": "reynolds_number and rotational_augmentation fit about equally well", "separate": {}}
+
+    n._over_model_form = judged(form)
+    rnd = round_record()
+    assert n._ambiguous_with_model_form(0, rnd, [re_fit, ra_fit, form]) is form
+    assert asked == [("reynolds_number", ["momentum_balance"])]          # the better of the pair, by BIC
+    assert "ambiguous" not in rnd and "separate" not in rnd
+    assert rnd["reason"] == "weighed (the round was ambiguous: reynolds_number and rotational_augmentation fit " \
+                            "about equally well)"
+    n._over_model_form = judged(re_fit)
+    rnd = round_record()
+    assert n._ambiguous_with_model_form(0, rnd, [re_fit, ra_fit, form]) is None and rnd == round_record()
+    assert n._over_form is None
+    form.significant = False
+    asked.clear()
+    assert n._ambiguous_with_model_form(0, round_record(), [re_fit, ra_fit, form]) is None and not asked
