@@ -51,11 +51,8 @@ from calib.words import p_is
 #:   pitch offset, tests/test_diagnosis.py seeds 9300-9302) 100 % or more.
 #:
 #: 0.65 lies between the two (χ² − dof scatters by √(2 dof), 22 on these 252 residuals: ±4 % of a
-#: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way). A later effect
-#: (:meth:`Namer._earns_place`) must exceed it beyond that noise (:func:`calib.diagnosis.share.share_test`:
-#: one-sided at the diagnosis's significance over the round's physical candidates); over the joint model
-#: form (:func:`calib.diagnosis.over_model_form.over_model_form`, a choice between two explanations of
-#: one misfit) the point share decides.
+#: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way). A later effect must
+#: exceed it beyond that noise (:func:`calib.diagnosis.share.share_test`); over the joint model form, the point share.
 LATER_EFFECT_SHARE = 0.65
 
 
@@ -235,10 +232,8 @@ class Namer:
         effects) does not earn its place on top of the joint model form (:meth:`_over_model_form`), else
         None (the round stays ambiguous, as it was).
 
-        Two physical effects that fit about equally well may both be standing in for the induction
-        model's form: lifting line, fast wake, erosion hidden (seed 27000), round 1 was ambiguous between
-        ``reynolds_number`` and ``rotational_augmentation`` (ΔBIC 0.9) with erosion's fit pinned at its onset
-        bound, where on the other seeds ``momentum_balance`` is named first and erosion on top of it.
+        Two physical effects that fit about equally well may both stand in for the induction model's form
+        (lifting line, fast wake, erosion hidden, seed 27000: ``reynolds_number`` or ``rotational_augmentation``).
         """
         pair = [next((f for f in fits if f.effect == name and f.significant), None) for name in rnd["ambiguous"]]
         forms = [f for f in fits if f.kind == "model_form" and f.significant]

@@ -82,19 +82,7 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
         return form
     tests = {t[1]: share_test(chi2_form - t[2], t[4], chi2_form, dof_form, share, namer.dset.significance,
                               len(on_top)) for t in on_top}
-    said = "; ".join(f"{lab} {_percent(tests[lab].share)}" + (
-        f" (R² {float(np.min(r2)):.2f} with the model form)" if r2 is not None and len(r2) else "")
-                     for _, lab, _, r2, _ in on_top)
-    said = (f"on top of {' + '.join(namer.named + [names])} (model form {names}, all fitted jointly: χ² "
-            f"{chi2_form:.4g}), of the misfit left beyond the noise and the model-form tolerance the physical "
-            f"candidates explain: {said}")
-    tied = [t[1] for t in on_top if t not in apart]
-    if tied:
-        said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
-                 "for every parameter): left out")
-    if apart:
-        top = tests[apart[0][1]]
-        said += f"; {apart[0][1]}, the best separable: {_percent(top.share)} ± {_percent(top.sd)}"
+    said = _shares_said(namer, names, chi2_form, on_top, apart, tests)
     if apart and tests[apart[0][1]].share >= share:
         winner = next(f for f in fits if f.name == apart[0][1])
         if winner is not best:
@@ -109,6 +97,25 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
         f"{said}; none separable from it explains {100 * share:.0f} %: the misfit is the model's form, not "
         f"{best.effect}"))
     return form
+
+
+def _shares_said(namer, names: str, chi2_form: float, on_top: list, apart: list, tests: dict) -> str:
+    """The shares of the misfit left by the joint model form ``names`` that the candidates ``on_top``
+    explain, in words (with R², the ones left out as not separable, the best separable one's spread)."""
+    said = "; ".join(f"{lab} {_percent(tests[lab].share)}" + (
+        f" (R² {float(np.min(r2)):.2f} with the model form)" if r2 is not None and len(r2) else "")
+                     for _, lab, _, r2, _ in on_top)
+    said = (f"on top of {' + '.join(namer.named + [names])} (model form {names}, all fitted jointly: χ² "
+            f"{chi2_form:.4g}), of the misfit left beyond the noise and the model-form tolerance the physical "
+            f"candidates explain: {said}")
+    tied = [t[1] for t in on_top if t not in apart]
+    if tied:
+        said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
+                 "for every parameter): left out")
+    if apart:
+        top = tests[apart[0][1]]
+        said += f"; {apart[0][1]}, the best separable: {_percent(top.share)} ± {_percent(top.sd)}"
+    return said
 
 
 def _percent(share: float) -> str:
