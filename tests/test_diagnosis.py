@@ -436,9 +436,11 @@ def test_two_candidates_equal_by_bic_are_told_apart_by_their_pattern_or_called_a
 
 def test_a_later_effect_is_named_only_when_it_explains_most_of_the_misfit_left(monkeypatch):
     """Issue 37, item 4: after a first effect, a candidate must explain (Λ) at least
-    LATER_EFFECT_SHARE of χ² − dof of the model with the first effect; a first effect at a bound
+    LATER_EFFECT_SHARE of χ² − dof of the model with the first effect, beyond the noise (the one-sided
+    share test of calib.diagnosis.share at the diagnosis' significance); a first effect at a bound
     is said to may not fit in form."""
     from calib.diagnosis.naming import LATER_EFFECT_SHARE
+    from calib.diagnosis.share import share_test
 
     class Family:
         def names_of(self, base):
@@ -458,14 +460,21 @@ def test_a_later_effect_is_named_only_when_it_explains_most_of_the_misfit_left(m
         n.base_chi2 = n.n_res - 1 + 100.0          # χ² − dof = 100 left with the first effect
         return n
 
-    for lr, named in ((LATER_EFFECT_SHARE * 100 - 1, False), (LATER_EFFECT_SHARE * 100 + 1, True)):
+    n = namer()
+    # Λ where the test's z reaches its critical value (one candidate compared: Φ⁻¹(1 − significance))
+    z_needed = share_test(0.0, 1, n.base_chi2, n.n_res - 1, LATER_EFFECT_SHARE, n.dset.significance).z_needed
+    edge = next(lr for lr in np.arange(60.0, 100.0, 0.01)
+                if share_test(lr, 1, n.base_chi2, n.n_res - 1, LATER_EFFECT_SHARE, n.dset.significance).passed)
+    assert edge > LATER_EFFECT_SHARE * 100 + 10      # 66 % of so small a misfit is within its noise
+    for lr, named in ((LATER_EFFECT_SHARE * 100 + 1, False), (edge - 0.1, False), (edge + 0.1, True)):
         fit = _fit("lift_offset", 20.0, 0.6)
         fit.lr_statistic = lr
         rnd = {"verdict": "lift_offset", "reason": "lift_offset: ..."}
         best = namer()._earns_place(rnd, fit)
         assert (best is fit) == named and rnd["verdict"] == ("lift_offset" if named else "none")
         if not named:
-            assert f"would explain only {lr:.0f} % of the misfit left with rotational_augmentation" in rnd["reason"]
+            assert f"would explain only {lr:.0f} % ± " in rnd["reason"]
+            assert f"(needs {z_needed:.2g})" in rnd["reason"]
     fit = _fit("lift_offset", 20.0, 0.6)
     fit.lr_statistic = 99.0
     rnd = {"verdict": "lift_offset", "reason": "lift_offset: ..."}
@@ -511,3 +520,41 @@ def test_separation_probes_keep_to_the_rotors_operating_limits():
     assert probes.rotor_speed.min() >= sch.min_rotor_speed - 1e-9 and probes.rotor_speed.max() <= sch.max_rotor_speed + 1e-9
     assert probes.wind_speed.min() >= sch.cut_in - 1e-9 and probes.wind_speed.max() <= sch.cut_out + 1e-9
     assert f"rotor speed {sch.min_rotor_speed:.3g}–{sch.max_rotor_speed:.3g} rpm" in probe_limits(measured, sch)[2]
+
+
+def test_an_ambiguous_pair_of_physical_effects_is_weighed_over_the_model_form(monkeypatch):
+    """Model form first (issue 37): a round ambiguous between two physical effects while a model-form
+    candidate is significant names the model form when neither earns its place on top of it (the
+    round's reason keeps what was ambiguous); when one does, the round stays ambiguous as it was; with no
+    significant model-form candidate nothing is weighed."""
+    n = _namer(monkeypatch)
+    re_fit, ra_fit, form = (_fit("reynolds_number", 20.0, 0.6), _fit("rotational_augmentation", 21.0, 0.7),
+                            _fit("momentum_balance", 40.0, 0.2))
+    form.kind = "model_form"
+    asked = []
+
+    def judged(outcome):
+        def over(round_no, rnd, best, forms, fits):
+            asked.append((best.effect, [f.effect for f in forms]))
+            rnd.update(verdict="changed", reason="weighed")
+            return outcome
+        return over
+
+    def round_record():
+        return {"verdict": "ambiguous", "ambiguous": ["reynolds_number", "rotational_augmentation"],
+                "reason": "reynolds_number and rotational_augmentation fit about equally well", "separate": {}}
+
+    n._over_model_form = judged(form)
+    rnd = round_record()
+    assert n._ambiguous_with_model_form(0, rnd, [re_fit, ra_fit, form]) is form
+    assert asked == [("reynolds_number", ["momentum_balance"])]          # the better of the pair, by BIC
+    assert "ambiguous" not in rnd and "separate" not in rnd
+    assert rnd["reason"] == "weighed (the round was ambiguous: reynolds_number and rotational_augmentation fit " \
+                            "about equally well)"
+    n._over_model_form = judged(re_fit)
+    rnd = round_record()
+    assert n._ambiguous_with_model_form(0, rnd, [re_fit, ra_fit, form]) is None and rnd == round_record()
+    assert n._over_form is None
+    form.significant = False
+    asked.clear()
+    assert n._ambiguous_with_model_form(0, round_record(), [re_fit, ra_fit, form]) is None and not asked

@@ -28,6 +28,7 @@ from calib.diagnosis.model_form import model_form_r2, not_separable
 from calib.diagnosis.over_model_form import over_model_form
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
 from calib.diagnosis.result import CandidateFit
+from calib.diagnosis.share import share_test
 from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
 from calib.diagnosis.verdict import judge_round
 from calib.errors import CalibError, InputError
@@ -50,7 +51,8 @@ from calib.words import p_is
 #:   pitch offset, tests/test_diagnosis.py seeds 9300-9302) 100 % or more.
 #:
 #: 0.65 lies between the two (χ² − dof scatters by √(2 dof), 22 on these 252 residuals: ±4 % of a
-#: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way).
+#: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way). A later effect must
+#: exceed it beyond that noise (:func:`calib.diagnosis.share.share_test`); over the joint model form, the point share.
 LATER_EFFECT_SHARE = 0.65
 
 
@@ -225,20 +227,29 @@ class Namer:
         return best if reason is None else rnd.update(verdict="none", reason=reason)   # dict.update: None
 
     def _ambiguous_with_model_form(self, round_no: int, rnd: dict, fits: list) -> CandidateFit | None:
-        """An ``ambiguous`` round between a physical effect and a model-form candidate, model form
-        first: the model-form candidate when the physical one does not earn its place on top of
-        it (:meth:`_over_model_form`), else None (the round stays ambiguous)."""
+        """An ``ambiguous`` round while a model-form candidate is significant, model form first: the
+        best model-form candidate when the pair's physical effect (the better one, for a pair of physical
+        effects) does not earn its place on top of the joint model form (:meth:`_over_model_form`), else
+        None (the round stays ambiguous, as it was).
+
+        Two physical effects that fit about equally well may both stand in for the induction model's form
+        (lifting line, fast wake, erosion hidden, seed 27000: ``reynolds_number`` or ``rotational_augmentation``).
+        """
         pair = [next((f for f in fits if f.effect == name and f.significant), None) for name in rnd["ambiguous"]]
-        if any(f is None for f in pair) or sorted(f.kind for f in pair) != ["model_form", "physical"]:
-            return None
-        physical, form = sorted(pair, key=lambda f: f.kind != "physical")
         forms = [f for f in fits if f.kind == "model_form" and f.significant]
-        before = rnd["reason"]
-        if self._over_model_form(round_no, rnd, physical, forms, fits) is form:
+        if any(f is None for f in pair) or not forms or all(f.kind == "model_form" for f in pair):
+            return None
+        physical = min((f for f in pair if f.kind == "physical"), key=lambda f: f.bic)
+        form = next((f for f in pair if f.kind == "model_form"), None)
+        before = dict(rnd)
+        chosen = self._over_model_form(round_no, rnd, physical, forms, fits)
+        if chosen.kind == "model_form" and (form is None or chosen is form):
             rnd.pop("ambiguous", None), rnd.pop("separate", None)
-            rnd["reason"] += f" (the round was ambiguous: {before})"
-            return form
-        rnd["reason"] = before
+            rnd["reason"] += f" (the round was ambiguous: {before['reason']})"
+            return chosen
+        rnd.clear()
+        rnd.update(before)
+        self._over_form = None
         return None
 
     def _over_model_form(self, round_no: int, rnd: dict, best: CandidateFit, forms: list,
@@ -257,19 +268,24 @@ class Namer:
         """
         dof = self.n_res - self.family.n_parameters(self.base_effects)
         excess = self.base_chi2 - dof
-        share = best.lr_statistic / excess if excess > 0 else float("inf")
+        n_physical = len({f.effect for f in self._fits if f.kind != "model_form"})
+        test = share_test(best.lr_statistic, best.n_params, self.base_chi2, dof, LATER_EFFECT_SHARE,
+                          self.dset.significance, n_physical)
         pinned = [f for f in self._named_fits if f.at_bound]
         form = "".join(f"; {f.effect} sits at a bound ({f.bound_phrase()}): its form may not fit the data, and "
                        f"{best.effect} may stand in for that mismatch" for f in pinned)
-        if share >= LATER_EFFECT_SHARE:
-            rnd["reason"] += form
+        if test.passed:
+            rnd["reason"] += (f"; of the misfit left with {', '.join(self.named)} beyond the noise and the model-form "
+                              f"tolerance it explains {test.words(LATER_EFFECT_SHARE)}{form}")
             return best
         named = ", ".join(self.named)
         rnd.update(verdict="none", reason=(
-            f"{best.name} would explain only {100 * share:.0f} % of the misfit left with {named} beyond the noise "
-            f"and the model-form tolerance (Λ = {best.lr_statistic:.4g} of χ² − dof = {excess:.4g}; at least "
-            f"{100 * LATER_EFFECT_SHARE:.0f} % names a further effect): not named, as the misfit left is more "
-            f"likely the form of {named} than another effect ({best.effect_text}){form}"))
+            f"{best.name} would explain only {test.words(LATER_EFFECT_SHARE)} of the misfit left with {named} "
+            f"beyond the noise and the model-form tolerance (Λ = {best.lr_statistic:.4g} of χ² − dof = {excess:.4g}; "
+            f"a further effect is named when it explains at least {100 * LATER_EFFECT_SHARE:.0f} % beyond the noise, "
+            f"one-sided test at {self.dset.significance:g} over the round's {max(n_physical, 1)} physical "
+            f"candidates): not named, as the misfit left is more likely the form of {named} than another effect "
+            f"({best.effect_text}){form}"))
         return None
 
     def _applicable(self) -> tuple[list, dict]:

@@ -16,6 +16,7 @@ from scipy import stats
 
 from calib.diagnosis.model_form import MODEL_FORM_COLLINEARITY, model_form_r2, not_separable
 from calib.diagnosis.result import CandidateFit
+from calib.diagnosis.share import ShareTest, share_test
 from calib.words import p_is
 
 #: At most this many physical effects (the best variant of each, by BIC) are fitted on top of the
@@ -62,12 +63,14 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
         return best
     apart = [t for t in on_top if not_separable(t[3], best, [names]) is None]
     first = next((t for t in on_top if t[1] == best.name), None)
-    if not namer.named and first is not None and first not in apart and \
-            _single_form_share(namer, round_no, best, form, fit_task) >= share:
+    single = (_single_form_share(namer, round_no, best, form, share, fit_task)
+              if not namer.named and first is not None and first not in apart else None)
+    if single is not None and single.share >= share:
         # the first effect, not separable from the joint model form: judged against the best model-form
         # candidate alone (in family the true wind-speed scale and blockage, R² 0.86-0.94 with momentum_balance)
-        rnd["reason"] += (f"; not separable from {names} together, but on top of {form.name} alone it explains at "
-                          f"least {100 * share:.0f} % of the misfit {form.name} leaves")
+        rnd["reason"] += (f"; not separable from {names} together, but on top of {form.name} alone it explains "
+                          f"{_percent(single.share)} ± {_percent(single.sd)} of the misfit {form.name} leaves (at least "
+                          f"{100 * share:.0f} % names it)")
         return best
     after_effect = any(namer.family.kind(n) != "model_form" for n in namer.named)
     if after_effect and p_form >= namer.dset.significance:
@@ -77,19 +80,10 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
             f"{p_is(p_form)} ≥ significance {namer.dset.significance:g}): the misfit is the model's form, not "
             f"{best.effect}"))
         return form
-    excess = chi2_form - dof_form
-    share_of = {t[1]: (chi2_form - t[2]) / excess if excess > 0 else float("inf") for t in on_top}
-    said = "; ".join(f"{lab} {100 * share_of[lab]:.0f} %" + (
-        f" (R² {float(np.min(r2)):.2f} with the model form)" if r2 is not None and len(r2) else "")
-                     for _, lab, _, r2 in on_top)
-    said = (f"on top of {' + '.join(namer.named + [names])} (model form {names}, all fitted jointly: χ² "
-            f"{chi2_form:.4g}), of the misfit left beyond the noise and the model-form tolerance the physical "
-            f"candidates explain: {said}")
-    tied = [t[1] for t in on_top if t not in apart]
-    if tied:
-        said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
-                 "for every parameter): left out")
-    if apart and share_of[apart[0][1]] >= share:
+    tests = {t[1]: share_test(chi2_form - t[2], t[4], chi2_form, dof_form, share, namer.dset.significance,
+                              len(on_top)) for t in on_top}
+    said = _shares_said(namer, names, chi2_form, on_top, apart, tests)
+    if apart and tests[apart[0][1]].share >= share:
         winner = next(f for f in fits if f.name == apart[0][1])
         if winner is not best:
             rnd.update(verdict=winner.effect, reason=(
@@ -103,6 +97,29 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
         f"{said}; none separable from it explains {100 * share:.0f} %: the misfit is the model's form, not "
         f"{best.effect}"))
     return form
+
+
+def _shares_said(namer, names: str, chi2_form: float, on_top: list, apart: list, tests: dict) -> str:
+    """The shares of the misfit left by the joint model form ``names`` that the candidates ``on_top``
+    explain, in words (with R², the ones left out as not separable, the best separable one's spread)."""
+    said = "; ".join(f"{lab} {_percent(tests[lab].share)}" + (
+        f" (R² {float(np.min(r2)):.2f} with the model form)" if r2 is not None and len(r2) else "")
+                     for _, lab, _, r2, _ in on_top)
+    said = (f"on top of {' + '.join(namer.named + [names])} (model form {names}, all fitted jointly: χ² "
+            f"{chi2_form:.4g}), of the misfit left beyond the noise and the model-form tolerance the physical "
+            f"candidates explain: {said}")
+    tied = [t[1] for t in on_top if t not in apart]
+    if tied:
+        said += (f"; {', '.join(tied)} not separable from the model form (R² ≥ {MODEL_FORM_COLLINEARITY:g} "
+                 "for every parameter): left out")
+    if apart:
+        top = tests[apart[0][1]]
+        said += f"; {apart[0][1]}, the best separable: {_percent(top.share)} ± {_percent(top.sd)}"
+    return said
+
+
+def _percent(share: float) -> str:
+    return "all" if not np.isfinite(share) else f"{100 * share:.0f} %"
 
 
 def _joint_form(namer, round_no: int, forms: list, fit_task):
@@ -125,8 +142,8 @@ def _joint_form(namer, round_no: int, forms: list, fit_task):
 
 def _on_top(namer, round_no: int, best: CandidateFit, fits: list, base: list, n_base: int, names: str,
             fit_task) -> list:
-    """[(BIC, label, χ², R² with the model form or None)] of the physical candidates fitted on top of
-    ``base`` (the joint model form), sorted by BIC."""
+    """[(BIC, label, χ², R² with the model form or None, parameter count)] of the physical candidates
+    fitted on top of ``base`` (the joint model form), sorted by BIC."""
     physical = [best] + [f for f in fits if f.kind == "physical" and f.significant and f.effect != best.effect]
     labels, seen = [], set()
     for f in physical:
@@ -146,13 +163,15 @@ def _on_top(namer, round_no: int, best: CandidateFit, fits: list, base: list, n_
         chi2 = chi2_of(namer, out["values"])
         corr = getattr(getattr(out["result"], "identifiability", None), "correlation", None)
         on_top.append((chi2 + len(task["own"]) * np.log(namer.n_res), lab, chi2,
-                       model_form_r2(corr, kinds, task["own"])))
+                       model_form_r2(corr, kinds, task["own"]), len(task["own"])))
     return sorted(on_top, key=lambda t: t[0])
 
 
-def _single_form_share(namer, round_no: int, best: CandidateFit, form: CandidateFit, fit_task) -> float:
-    """Share of the misfit the model with ``form`` (one model-form candidate) leaves beyond the noise and
-    the tolerance that ``best`` explains on top of it [-] (0 when the fit fails)."""
+def _single_form_share(namer, round_no: int, best: CandidateFit, form: CandidateFit, share: float,
+                       fit_task) -> ShareTest | None:
+    """The share test (:func:`calib.diagnosis.share.share_test`) of ``best`` on top of ``form`` (one
+    model-form candidate): of the misfit the model with ``form`` leaves beyond the noise and the
+    tolerance, does ``best`` explain ``share``? None when the fit fails."""
     base = namer.family.add(namer.base_effects, form)
     n_base = namer.family.n_parameters(base)
     effect = namer._effects[best.name]
@@ -161,6 +180,6 @@ def _single_form_share(namer, round_no: int, best: CandidateFit, form: Candidate
                     "model": namer.wrap(namer.family.candidate_model(base, effect),
                                         f"round {round_no + 1}: {best.name} over {form.name}")})
     if "error" in out:
-        return 0.0
-    excess = form.chi2 - (namer.n_res - n_base)
-    return (form.chi2 - chi2_of(namer, out["values"])) / excess if excess > 0 else float("inf")
+        return None
+    return share_test(form.chi2 - chi2_of(namer, out["values"]), len(effect.parameters()), form.chi2,
+                      namer.n_res - n_base, share, namer.dset.significance)

@@ -1,0 +1,105 @@
+"""The share test of the naming rounds (issue 37, item 4): does a candidate explain at least a
+given share of the misfit a model leaves beyond the noise and the model-form tolerance, by more
+than the noise can make it seem to?
+
+A physical effect is named after another effect, or over the model form, only when its likelihood
+ratio Λ explains at least ``share`` (:data:`calib.diagnosis.naming.LATER_EFFECT_SHARE`) of the
+excess χ² − dof the model without it leaves. The share measured on one data set
+is a noisy estimate: χ² − dof scatters by about √(2 dof) (22 on 252 residuals), so the share of a
+misfit of 136 is known to about ±13 %. On the lifting-line fast-wake control (another method, no
+physical effect) the best separable physical candidate explains 47-59 % of what the joint model form
+leaves (seeds 26000-26004; 59 % on 27009); on seed 27009, once both model-form parameters were named,
+``pitch_offset`` explained 75 % ± 13 % of the misfit of 136 they left (Λ 102.7) and was named by the
+point threshold: a share within one standard deviation of it.
+
+:func:`share_test` therefore asks whether the share exceeds the threshold beyond the noise: a
+one-sided test of H0 "the candidate's true share is at most ``share``" at level
+``alpha / n_candidates`` (the best of ``n_candidates`` compared candidates is tested: Bonferroni's
+bound on the chance that any of them passes by noise).
+
+Model (linearized least squares, whitened residuals; Cochran's theorem): with the base model's
+residual r = d + ε (d its deterministic misfit, ε ~ N(0, I) over ``dof`` dimensions), the
+candidate's k parameters take A = Λ ~ χ'²_k(δ_A) and leave B ~ χ'²_{dof−k}(δ_B), independent, with
+δ_A + δ_B = |d|² the misfit beyond the noise (E[χ² − dof] = |d|²). The true share is
+δ_A / (δ_A + δ_B). T = (A − k) − s₀ (A + B − dof) has mean (1 − s₀) δ_A − s₀ δ_B, zero on the
+boundary of H0, and variance 2 (1 − s₀)² (k + 2 δ_A) + 2 s₀² (dof − k + 2 δ_B) (the noncentral
+χ²'s mean k + δ and variance 2 (k + 2 δ): Johnson, Kotz & Balakrishnan, Continuous Univariate
+Distributions, vol. 2, 2nd ed., Wiley 1995, ch. 29), evaluated on the boundary with δ_A = s₀ D and
+δ_B = (1 − s₀) D, D = max(χ² − dof, 0) the observed excess. z = T / √var; the candidate passes
+when z ≥ Φ⁻¹(1 − alpha / n_candidates).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from statistics import NormalDist
+
+
+@dataclasses.dataclass(frozen=True)
+class ShareTest:
+    """Result of :func:`share_test`.
+
+    Attributes
+    ----------
+    share : float
+        Λ / (χ² − dof): the share of the excess the candidate explains (inf when there is no excess) [-].
+    z : float
+        The test statistic (standard deviations above the threshold share) [-].
+    z_needed : float
+        Φ⁻¹(1 − alpha / n_candidates) [-].
+    sd : float
+        Standard deviation of the share estimate on the boundary of H0 [-] (√var / D; inf when D = 0).
+    passed : bool
+        z ≥ z_needed.
+    """
+
+    share: float
+    z: float
+    z_needed: float
+    sd: float
+    passed: bool
+
+    def words(self, threshold: float) -> str:
+        """E.g. ``"75 % ± 14 %, z = 0.7 above 65 % (needs 3.0)"``."""
+        share = "all" if not math.isfinite(self.share) else f"{100 * self.share:.0f} %"
+        sd = "" if not math.isfinite(self.sd) else f" ± {100 * self.sd:.0f} %"
+        return f"{share}{sd}, z = {self.z:.2g} above {100 * threshold:.0f} % (needs {self.z_needed:.2g})"
+
+
+def share_test(lr: float, n_params: int, chi2_base: float, dof_base: int, share: float, alpha: float,
+               n_candidates: int = 1) -> ShareTest:
+    """Whether a candidate explains at least ``share`` of the excess χ² − dof beyond the noise.
+
+    Parameters
+    ----------
+    lr : float
+        The candidate's likelihood ratio Λ = χ²_base − χ²_with [-].
+    n_params : int
+        The candidate's parameter count k [-].
+    chi2_base : float
+        χ² of the model without the candidate (against σ² + (tolerance·y)²) [-].
+    dof_base : int
+        Its degrees of freedom (residuals − parameters) [-].
+    share : float
+        The threshold share s₀ of the excess, in (0, 1) [-].
+    alpha : float
+        Level of the test over all compared candidates [-].
+    n_candidates : int
+        Candidates the tested one was the best of (Bonferroni) [-].
+
+    Returns
+    -------
+    ShareTest
+    """
+    k, m = float(n_params), float(dof_base)
+    excess = float(chi2_base) - m
+    point = lr / excess if excess > 0 else math.inf
+    d = max(excess, 0.0)
+    t = (lr - k) - share * excess
+    var = 2.0 * (1.0 - share) ** 2 * (k + 2.0 * share * d) + 2.0 * share ** 2 * (max(m - k, 0.0)
+                                                                               + 2.0 * (1.0 - share) * d)
+    z = t / math.sqrt(var) if var > 0 else (math.inf if t > 0 else -math.inf)
+    z_needed = NormalDist().inv_cdf(1.0 - alpha / max(int(n_candidates), 1))
+    sd = math.sqrt(var) / d if d > 0 else math.inf
+    return ShareTest(point, float(z), z_needed, sd, bool(z >= z_needed))

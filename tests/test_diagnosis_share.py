@@ -1,0 +1,75 @@
+"""The share test of the naming rounds (calib.diagnosis.share) against Monte Carlo least-squares fits.
+
+Independent reference: a linear Gaussian model fitted by least squares (numpy.linalg.lstsq), with a
+deterministic misfit d whose share in the candidate's columns (beyond the base model's) is set, and
+unit-variance noise; the base model and the model with the candidate are fitted to each draw and the
+test gets only what the diagnosis gets (Λ, k, χ² and dof of the base model).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from calib.diagnosis.share import share_test
+
+N_RES, K0, K1 = 252, 3, 2
+
+
+def _draws(true_share: float, excess: float, n_draws: int, seed: int):
+    """(Λ, χ²_base) of n_draws fits: base design of K0 columns, candidate of K1 columns, misfit of
+    size |d|² = excess of which true_share lies in the candidate's columns beyond the base's."""
+    rng = np.random.default_rng(seed)
+    x0 = rng.standard_normal((N_RES, K0))
+    x1 = rng.standard_normal((N_RES, K1))
+    q, _ = np.linalg.qr(np.column_stack([x0, x1, rng.standard_normal((N_RES, 1))]))
+    u_in, u_out = q[:, K0], q[:, K0 + K1]          # in the candidate's span beyond the base; outside both
+    d = math.sqrt(true_share * excess) * u_in + math.sqrt((1.0 - true_share) * excess) * u_out
+    y = d[:, None] + rng.standard_normal((N_RES, n_draws))
+
+    def chi2(x):
+        coef = np.linalg.lstsq(x, y, rcond=None)[0]
+        return np.sum((y - x @ coef) ** 2, axis=0)
+
+    base = chi2(x0)
+    return base - chi2(np.column_stack([x0, x1])), base
+
+
+@pytest.mark.parametrize("excess", [136.0, 600.0])
+def test_on_the_null_boundary_the_test_passes_at_its_level(excess):
+    """True share = threshold: the test passes in about alpha of the draws (normal approximation of a
+    noncentral χ² difference: within a third of alpha, 20 000 draws: Monte Carlo σ 0.0015)."""
+    alpha, s0 = 0.05, 0.65
+    lr, base = _draws(s0, excess, 20000, 1)
+    passed = np.mean([share_test(a, K1, b, N_RES - K0, s0, alpha).passed for a, b in zip(lr, base)])
+    assert abs(passed - alpha) < alpha / 3, passed
+
+
+def test_bonferroni_over_candidates_and_power():
+    """Inside the null (true share 0.5) and with four candidates compared it passes at most alpha/4;
+    a true share of 0.9 of a misfit of 600 (the size of a hidden effect on lifting-line data) passes
+    nearly always; the stated spread of the share matches the draws' (interquartile range / 1.349, within
+    10 %; the ratio's tails are longer than a normal's)."""
+    lr, base = _draws(0.5, 136.0, 20000, 2)
+    passed = np.mean([share_test(a, K1, b, N_RES - K0, 0.65, 0.01, 4).passed for a, b in zip(lr, base)])
+    assert passed <= 0.01 / 4
+    lr, base = _draws(0.9, 600.0, 2000, 3)
+    tests = [share_test(a, K1, b, N_RES - K0, 0.65, 0.01, 4) for a, b in zip(lr, base)]
+    assert np.mean([t.passed for t in tests]) > 0.99
+    lr, base = _draws(0.65, 136.0, 20000, 4)
+    shares = lr / (base - (N_RES - K0))
+    sd = share_test(0.65 * 136.0, K1, 136.0 + N_RES - K0, N_RES - K0, 0.65, 0.01).sd
+    spread = np.subtract(*np.percentile(shares, [75, 25])) / 1.349
+    assert abs(spread / sd - 1.0) < 0.1, (spread, sd)
+
+
+def test_no_excess_and_words():
+    """A base model within the noise (χ² ≤ dof): the share is 'all', and the test still asks Λ − k to stand
+    out of the noise of χ² (√(2 dof) s₀ = 14.5 here: Λ 5 does not, Λ 60 does); the words state the share,
+    its spread, z and the z needed."""
+    t = share_test(5.0, 1, 240.0, 250, 0.65, 0.01)
+    assert math.isinf(t.share) and not t.passed and t.words(0.65).startswith("all, z = ")
+    assert share_test(60.0, 1, 240.0, 250, 0.65, 0.01).passed
+    t = share_test(102.7, 1, 386.2, 250, 0.65, 0.01, 7)
+    assert not t.passed and 0.74 < t.share < 0.76
+    assert t.words(0.65).startswith("75 % ± ") and "above 65 % (needs 3)" in t.words(0.65)
