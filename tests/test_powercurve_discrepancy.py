@@ -1,5 +1,6 @@
 """The model discrepancy across the power-curve bins (issue 41): its second moments against a Monte Carlo of
-the Gaussian process's conditional draws, its diagonal against the prediction's per-point σ."""
+the Gaussian process's conditional draws, its diagonal against the prediction's per-point σ; and what the
+report says where the delta method and the draws disagree."""
 
 import dataclasses
 from pathlib import Path
@@ -64,14 +65,20 @@ def test_aep_discrepancy_variance_matches_a_monte_carlo_of_correlated_draws():
 
 
 @pytest.fixture(scope="module")
-def misfit_result(tmp_path_factory):
-    """A real calibration (workflows/wind_tunnel_hub_loads.toml) whose power data are given a smooth 4 %
-    misfit in λ, so the χ² test fires and a discrepancy process is fitted."""
+def wind_tunnel_result(tmp_path_factory):
+    """A real calibration: workflows/wind_tunnel_hub_loads.toml (Phase VI, MAP, power and thrust)."""
     from calib.calibration.result_files import load_result
 
     out = tmp_path_factory.mktemp("wt")
     assert main(["run", str(ROOT / "workflows" / "wind_tunnel_hub_loads.toml"), "--out", str(out), "-q"]) == 0
-    result = load_result(next(out.glob("stage*/result.json")).parent)
+    return load_result(next(out.glob("stage*/result.json")).parent)
+
+
+@pytest.fixture(scope="module")
+def misfit_result(wind_tunnel_result):
+    """The calibration with its power data given a smooth 4 % misfit in wind speed, so the χ² test fires
+    and a discrepancy process is fitted."""
+    result = wind_tunnel_result
     fit = result.fit
     i = list(result.channels).index("power")
     v = np.asarray(result.conditions["wind_speed"], float)
@@ -98,3 +105,46 @@ def test_the_power_curve_carries_the_discrepancy_across_the_bins(misfit_result):
         c = aep_weights(pc.wind_speed, distributions()[row["distribution"]]) * pc.generator_efficiency / 1e6
         s = row["sigma_mwh"]["model discrepancy"]
         assert 0 < s <= float(c @ pc.discrepancy_std) * (1 + 1e-9)
+
+
+def _variable(result, factor):
+    from calib.powercurve import VariableSpeed
+    from calib.rotor.geometry import OperatingSchedule
+
+    u = result.uncertainty
+    scaled = result.replace(uncertainty=dataclasses.replace(u, cov_p=u.cov_p * factor, cov_alias=u.cov_alias * factor))
+    model = scaled.rebuild_model()
+    sched = OperatingSchedule(rated_power=5000.0, min_rotor_speed=40.0, max_rotor_speed=72.0, design_tsr=5.0,
+                              fine_pitch=3.0, cut_in=4.0, cut_out=20.0)
+    return scaled, model, VariableSpeed.from_rotor(dataclasses.replace(model.rotor, schedule=sched))
+
+
+def test_the_report_says_where_and_why_the_delta_method_leaves_the_draws(wind_tunnel_result):
+    """A covariance 100× the posterior's puts the draws where the power is curved in the parameters: the
+    draws' mean AEP leaves the central curve's (a linear map would keep it), and the report names that
+    and the bins where some draws are capped at rated power (checked on the draws' power, not their
+    pitch); at 10⁻⁴× the covariance the two agree and the report says so."""
+    from calib.powercurve.command import distributions, summary_paragraph
+    from calib.powercurve.statements import capped_bins, delta_statement
+
+    v = iec_bins(5.0, 15.0, 1.0)
+    result, model, schedule = _variable(wind_tunnel_result, 100.0)
+    pc = calibrated_power_curve(result, v, schedule, n_draws=200, seed=4, model=model)
+    row = next(r for r in pc.aep_table(distributions()) if r["distribution"] == "Rayleigh 8 m/s")
+    n = row["draws_used"]
+    shift = row["draws_mean_aep_mwh"] - row["p50_mwh"]
+    assert abs(row["sigma_calibration_delta_mwh"] / row["sigma_mwh"]["calibration (draws)"] - 1) > 0.1
+    said = delta_statement(pc, row)
+    assert "more than" in said and "% off" in said
+    assert ("curved in the parameters" in said) == (abs(shift) > 3 * row["sigma_mwh"]["calibration (draws)"] / np.sqrt(n))
+    P = pc.draws["power"]
+    at_rated = np.isclose(P, schedule.rated_power, rtol=1e-4)
+    below = P < schedule.rated_power * (1 - 1e-4)
+    np.testing.assert_array_equal(capped_bins(pc), np.any(at_rated, axis=0) & np.any(below, axis=0))
+    assert capped_bins(pc).any() and "rated-power capping" in said
+    assert said in summary_paragraph(pc, pc.aep_table(distributions()))
+
+    small, model, schedule = _variable(wind_tunnel_result, 1e-4)
+    pc = calibrated_power_curve(small, v, schedule, n_draws=200, seed=4, model=model)
+    row = next(r for r in pc.aep_table(distributions()) if r["distribution"] == "Rayleigh 8 m/s")
+    assert delta_statement(pc, row).endswith("within 10 %.")
