@@ -459,17 +459,17 @@ def markdown(res: dict) -> str:
                          f"| {_f(a.get('median_halfwidth_over_median_error'), '.2f')} "
                          f"| {_f(a.get('error_over_sigma_rms'), '.2f')} |")
     lines += ["", "**Where the AEP's σ comes from** (medians over the replicates, MWh)", "",
-              "| hidden effect | Rayleigh mean | nodal, data | nodal, prior | field between nodes | same, linear "
-              "| model discrepancy | same, linear | total σ | error s.d. |", "|---|---|---|---|---|---|---|---|---|---|"]
+              "| hidden effect | Rayleigh mean | nodal, data | nodal, prior | field between nodes (linear) "
+              "| model discrepancy (linear) | total σ | error s.d. |", "|---|---|---|---|---|---|---|---|"]
     for name, s in res["effects"].items():
         for dist, a in s["aep"].items():
             lines.append(f"| {LABELS.get(name, name)} | {dist.split()[1]} m/s "
                          f"| {_f(a.get('median_sigma_nodal_data_mwh'), '.3g')} "
                          f"| {_f(a.get('median_sigma_nodal_prior_mwh'), '.3g')} "
                          f"| {_f(a.get('median_sigma_field_mwh'), '.3g')} "
-                         f"| {_f(a.get('median_sigma_field_linear_mwh'), '.3g')} "
+                         f"({_f(a.get('median_sigma_field_linear_mwh'), '.3g')}) "
                          f"| {_f(a.get('median_sigma_discrepancy_mwh'), '.3g')} "
-                         f"| {_f(a.get('median_sigma_discrepancy_linear_mwh'), '.3g')} "
+                         f"({_f(a.get('median_sigma_discrepancy_linear_mwh'), '.3g')}) "
                          f"| {a['median_sigma_total_mwh']:.3g} | {_f(a.get('error_sd_mwh'), '.3g')} |")
     diag = res.get("bias_diagnosis") or {}
     if diag:
