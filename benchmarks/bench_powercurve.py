@@ -51,7 +51,8 @@ EFFECTS = {"control": ("none", 0.0), "leading_edge_erosion": ("erosion", 0.0),
 RAYLEIGH = (6.0, 8.0, 10.0)
 BINS = (3.0, 25.0, 0.5)
 Z90 = 1.6448536269514722
-SEED0 = 41000
+#: First noise seed (41000-41049 published at 9a0decc; 49xxx used in development; fresh from 51000).
+SEED0 = 51000
 
 WORKFLOW = """# calib run workflow of bench_powercurve (written by benchmarks/bench_powercurve.py)
 name = "powercurve_{name}_{seed}"
@@ -143,12 +144,116 @@ def replicate(truth: dict, name: str, seed: int, work: Path, n_draws: int) -> di
             "covered_total": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_total_mwh"]),
             "covered_calibration": bool(abs(r["p50_mwh"] - true) <= Z90 * sig_cal),
             "sigma_field_mwh": r["sigma_mwh"]["field between nodes"],
+            "sigma_discrepancy_mwh": r["sigma_mwh"]["model discrepancy"],
+            "sigma_discrepancy_linear_mwh": float(c @ np.nan_to_num(pc.discrepancy_std)),
+            "draws_mean_minus_central_mwh": r["draws_mean_aep_mwh"] - r["p50_mwh"], "draws_used": r["draws_used"],
             "sigma_field_linear_mwh": float(c @ np.nan_to_num(pc.field_std)),
             "sigma_split_mwh": r["sigma_calibration_split_mwh"], "empirical_bayes": r["empirical_bayes"]}
         eb = (r["empirical_bayes"] or {}).get("tau")
         if eb:
             out["aep"][r["distribution"]]["covered_empirical_bayes"] = bool(abs(r["p50_mwh"] - true)
                                                                             <= Z90 * eb["sigma_total_mwh"])
+    return out
+
+
+def _calibrate(y, points, folder: Path, name: str, extra: str = ""):
+    """``calib run`` on the noise-free loads ``y`` (σ columns of the battery's noise, no noise added)."""
+    from oof_battery import campaign
+
+    from calib.calibration.result_files import load_result
+    from calib.cli import main
+    from calib.measurements import Measurements
+    from calib.types import OperatingConditions
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cond = OperatingConditions(points["wind_speed"], points["rotor_speed_rpm"], points["pitch_deg"])
+    Measurements(cond, campaign.CHANNELS, y, np.broadcast_to(campaign.noise_sigma(y), y.shape),
+                 source=f"bench_powercurve: noise-free CCBlade, {name}").write_csv(folder / "data.csv")
+    wf = WORKFLOW.format(name=name, seed="clean", csv="data.csv")
+    if extra:
+        wf = wf.replace('noise = "known"\n', f'noise = "known"\n{extra}\n')
+    (folder / "workflow.toml").write_text(wf)
+    if main(["run", str(folder / "workflow.toml"), "--out", str(folder / "run"), "-q"]) != 0:
+        raise RuntimeError(f"calib run on the noise-free {name} data failed")
+    return load_result(next((folder / "run").glob("stage*/result.json")).parent)
+
+
+#: The weak prior of the bias diagnosis: every node's prior 1-σ 10 scales instead of 1 (``prior_sigma``).
+WEAK_PRIOR = 10.0
+
+
+def bias_diagnosis(truth: dict, name: str, work: Path, n_draws: int = 200) -> dict:
+    """Where a calibrated AEP's bias comes from, on the noise-free truth (the replicates' mean MAP to first order).
+
+    At Rayleigh 8 m/s: the AEP error of the MAP on noise-free data (stated prior, and a weak prior of
+    :data:`WEAK_PRIOR` scales: what the prior's pull adds), the calibrated model's error at the truth's
+    own schedule (λ*, rotor speed, pitch: what the schedule adds), the relative power error in region 2,
+    and the AEP change between the two estimates, linearized (g = dAEP/dp), split over the stated
+    prior's whitened directions (data-determined b < ½, prior-dominated b ≥ ½;
+    :func:`calib.powercurve.field.prior_split`) beside the posterior σ of each group; the weak-prior
+    estimate's coordinate in the prior-dominated directions says how far from a prior draw the truth
+    lies there. Beside it the delta method against ``n_draws`` draws at the posterior covariance and
+    at 10⁻² of it (the linear regime): the curvature test of :func:`calib.powercurve.statements.delta_statement`.
+    """
+    import dataclasses as dc
+
+    from oof_battery import campaign
+
+    from calib.powercurve import aep_weights, calibrated_power_curve, iec_bins, rayleigh_cdf
+    from calib.types import OperatingConditions
+
+    d = truth["data_sets"][name]
+    y = np.column_stack([np.asarray(d[campaign.CCBLADE_KEYS[c]], float) for c in campaign.CHANNELS])
+    v = iec_bins(*BINS)
+    tp, cv = np.asarray(d["curve"]["power"], float), d["curve"]
+    res = _calibrate(y, truth["points"], work / f"clean_{name}", name)
+    weak = _calibrate(y, truth["points"], work / f"weak_{name}", name, f"prior_sigma = {WEAK_PRIOR:g}")
+    cdf = lambda x: rayleigh_cdf(x, 8.0)  # noqa: E731
+    pc = calibrated_power_curve(res, v, n_draws=n_draws, seed=1)
+    pcw = calibrated_power_curve(weak, v, n_draws=0)
+    c = aep_weights(v, cdf) * pc.generator_efficiency / 1e6
+    true = float(c @ tp)
+    model = res.rebuild_model()
+    at_truth = model.solve(res.estimate.p_hat, OperatingConditions(v, np.asarray(cv["rotor_speed"]),
+                                                                   np.asarray(cv["pitch"]), 1.225))
+    r2 = (np.asarray(cv["region"]) == 2) & (pc.central.region == 2) & (v >= 6.0) & (v <= 10.0)
+    out = {"true_aep_mwh": true, "error_mwh": float(c @ pc.central.power) - true,
+           "error_weak_prior_mwh": float(c @ pcw.central.power) - true,
+           "error_nominal_mwh": float(c @ pc.nominal.power) - true,
+           "error_at_truth_schedule_mwh": float(c @ np.where(np.asarray(cv["region"]) == 2, at_truth.power, tp)) - true,
+           "tsr_opt": {"truth": cv["tsr_opt"], "calibrated": float(pc.central.tsr_opt),
+                       "weak_prior": float(pcw.central.tsr_opt)},
+           "region2_power_error_pct": float(np.median(100 * (pc.central.power[r2] / tp[r2] - 1))),
+           "region2_power_error_weak_prior_pct": float(np.median(100 * (pcw.central.power[r2] / tp[r2] - 1))),
+           "region2_power_error_nominal_pct": float(np.median(100 * (pc.nominal.power[r2] / tp[r2] - 1))),
+           "power_chi2_per_point": float(np.mean(((res.fit.model_after[:, 0] - res.fit.measured[:, 0])
+                                                  / res.fit.sigma[:, 0]) ** 2))}
+    sp = pc.prior_split
+    if sp is not None and pc.grad_power is not None:
+        g = c @ np.nan_to_num(pc.grad_power)
+        gh = g @ sp["half"]
+        dw = np.linalg.solve(sp["half"], res.estimate.p_hat - weak.estimate.p_hat)
+        w_ref = np.linalg.solve(sp["half"], weak.estimate.p_hat - model.chain.nominal())
+        data = sp["b"] < 0.5
+        part = gh * dw
+        out["shrinkage_linear_mwh"] = {"data": float(part[data].sum()), "prior": float(part[~data].sum())}
+        out["posterior_sigma_mwh"] = {"data": float(np.sqrt(np.sum(gh[data] ** 2 * sp["b"][data]))),
+                                      "prior": float(np.sqrt(np.sum(gh[~data] ** 2 * sp["b"][~data])))}
+        # the weak-prior estimate in the prior-dominated directions, weighted by their AEP sensitivity
+        wt = np.abs(gh[~data])
+        out["weak_prior_coordinate_prior_dirs"] = float(np.sum(wt * np.abs(w_ref[~data])) / max(wt.sum(), 1e-300))
+        out["n_data_directions"] = int(data.sum())
+        out["tau_hat"] = sp["tau"]
+    rows = {}
+    for label, f in (("posterior", 1.0), ("posterior_x0.01", 1e-2)):
+        u = res.uncertainty
+        r = res if f == 1.0 else res.replace(uncertainty=dc.replace(u, cov_p=u.cov_p * f, cov_alias=u.cov_alias * f))
+        q = pc if f == 1.0 else calibrated_power_curve(r, v, n_draws=n_draws, seed=1)
+        row = q.aep_table({"Rayleigh 8 m/s": cdf})[0]
+        sd = row["sigma_mwh"]["calibration (draws)"]
+        rows[label] = {"delta_over_draws": row["sigma_calibration_delta_mwh"] / sd,
+                       "draws_shift_in_se": (row["draws_mean_aep_mwh"] - row["p50_mwh"]) / (sd / np.sqrt(row["draws_used"]))}
+    out["delta_vs_draws"] = rows
     return out
 
 
@@ -161,6 +266,12 @@ def ratio_ci(err_nom, err_cal, n_boot: int = 4000, seed: int = 0) -> list:
     k = np.random.default_rng(seed).integers(0, err_cal.size, (n_boot, err_cal.size))
     r = np.median(err_nom[k], axis=1) / np.maximum(np.median(err_cal[k], axis=1), 1e-12)
     return [float(x) for x in np.quantile(r, [0.025, 0.975])]
+
+
+def _median(a, key):
+    """Median of ``key`` over the records that have it (None when none has)."""
+    x = [r[key] for r in a if key in r and r[key] is not None]
+    return float(np.median(x)) if x else None
 
 
 def summarize(records: dict) -> dict:
@@ -205,6 +316,15 @@ def summarize(records: dict) -> dict:
                          if eb else None,
                          "median_sigma_field_mwh": float(np.median([x["sigma_field_mwh"] for x in a])),
                          "median_sigma_field_linear_mwh": float(np.median([x["sigma_field_linear_mwh"] for x in a])),
+                         "median_sigma_discrepancy_mwh": _median(a, "sigma_discrepancy_mwh"),
+                         "median_sigma_discrepancy_linear_mwh": _median(a, "sigma_discrepancy_linear_mwh"),
+                         "error_sd_mwh": float(np.std(err_cal, ddof=1)) if err_cal.size > 1 else None,
+                         "median_sigma_calibration_draws_mwh": _median(a, "sigma_calibration_draws_mwh"),
+                         # curvature: the draws' mean AEP off the central curve's, in standard errors of that mean
+                         "median_draws_shift_in_se": float(np.median([x["draws_mean_minus_central_mwh"]
+                                                                      / (x["sigma_calibration_draws_mwh"]
+                                                                         / np.sqrt(x["draws_used"])) for x in a]))
+                         if all("draws_used" in x for x in a) else None,
                          "median_sigma_nodal_data_mwh": float(np.median([x["data"] for x in split])) if split else None,
                          "median_sigma_nodal_prior_mwh": float(np.median([x["prior"] for x in split])) if split else None,
                          "delta_over_draws_sigma_median": float(np.nanmedian(ratio)),
@@ -339,16 +459,55 @@ def markdown(res: dict) -> str:
                          f"| {_f(a.get('median_halfwidth_over_median_error'), '.2f')} "
                          f"| {_f(a.get('error_over_sigma_rms'), '.2f')} |")
     lines += ["", "**Where the AEP's σ comes from** (medians over the replicates, MWh)", "",
-              "| hidden effect | Rayleigh mean | nodal, data | nodal, prior | field between nodes | same, added "
-              "linearly | total σ | τ̂ |", "|---|---|---|---|---|---|---|---|"]
+              "| hidden effect | Rayleigh mean | nodal, data | nodal, prior | field between nodes (linear) "
+              "| model discrepancy (linear) | total σ | error s.d. |", "|---|---|---|---|---|---|---|---|"]
     for name, s in res["effects"].items():
         for dist, a in s["aep"].items():
             lines.append(f"| {LABELS.get(name, name)} | {dist.split()[1]} m/s "
                          f"| {_f(a.get('median_sigma_nodal_data_mwh'), '.3g')} "
                          f"| {_f(a.get('median_sigma_nodal_prior_mwh'), '.3g')} "
                          f"| {_f(a.get('median_sigma_field_mwh'), '.3g')} "
-                         f"| {_f(a.get('median_sigma_field_linear_mwh'), '.3g')} "
-                         f"| {a['median_sigma_total_mwh']:.3g} | {_f(a.get('median_tau_hat'), '.2f')} |")
+                         f"({_f(a.get('median_sigma_field_linear_mwh'), '.3g')}) "
+                         f"| {_f(a.get('median_sigma_discrepancy_mwh'), '.3g')} "
+                         f"({_f(a.get('median_sigma_discrepancy_linear_mwh'), '.3g')}) "
+                         f"| {a['median_sigma_total_mwh']:.3g} | {_f(a.get('error_sd_mwh'), '.3g')} |")
+    diag = res.get("bias_diagnosis") or {}
+    if diag:
+        lines += ["", "**Where the bias comes from**: noise-free CCBlade data, Rayleigh 8 m/s, AEP error [MWh]", "",
+                  "| hidden effect | stated prior | at the truth's schedule | weak prior | nominal | region-2 power "
+                  "error, stated / weak / nominal | prior's pull, data / prior-dominated directions (their σ) "
+                  "| weak-prior estimate, prior-dominated directions [prior σ] | τ̂ |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for name, g in diag.items():
+            if "error" in g:
+                lines.append(f"| {LABELS.get(name, name)} | {g['error']} | | | | | | | |")
+                continue
+            sh, ps = g.get("shrinkage_linear_mwh") or {}, g.get("posterior_sigma_mwh") or {}
+            lines.append(f"| {LABELS.get(name, name)} | {g['error_mwh']:+.3g} | {g['error_at_truth_schedule_mwh']:+.3g} "
+                         f"| {g['error_weak_prior_mwh']:+.3g} | {g['error_nominal_mwh']:+.3g} "
+                         f"| {g['region2_power_error_pct']:+.2f} / {g['region2_power_error_weak_prior_pct']:+.2f} / "
+                         f"{g['region2_power_error_nominal_pct']:+.2f} % "
+                         f"| {_f(sh.get('data'), '+.3g')} ({_f(ps.get('data'), '.2g')}) / {_f(sh.get('prior'), '+.3g')} "
+                         f"({_f(ps.get('prior'), '.2g')}) | {_f(g.get('weak_prior_coordinate_prior_dirs'), '.2g')} "
+                         f"| {_f(g.get('tau_hat'), '.2f')} |")
+        lines += ["", "Stated prior: the MAP on the noise-free data (the replicates' mean estimate to first order); at "
+                  "the truth's schedule: the same model at the truth's λ*, rotor speed and pitch per bin (what the "
+                  "calibrated schedule adds is the difference); weak prior: every node's prior 1-σ "
+                  f"{WEAK_PRIOR:g} scales (what the prior's pull adds is the difference). Region-2 power error: the "
+                  "median relative error of the bins 6-10 m/s. Prior's pull: the AEP change from the weak-prior "
+                  "to the stated-prior estimate, linearized, in the stated prior's whitened directions the data "
+                  "determine and those the prior dominates, beside the posterior σ of each group; the weak-prior "
+                  "estimate's coordinate there (AEP-weighted mean |w|, in prior σ) says how far from a prior draw the "
+                  "truth's nodal representation lies."]
+        lines += ["", "**Delta method against the draws, noise-free data** (Rayleigh 8 m/s)", "",
+                  "| hidden effect | delta σ / draws σ | draws' mean − central [s.e.] | same at 10⁻² × Cov "
+                  "| same [s.e.] |", "|---|---|---|---|---|"]
+        for name, g in diag.items():
+            dd = g.get("delta_vs_draws")
+            if dd:
+                a, b = dd["posterior"], dd["posterior_x0.01"]
+                lines.append(f"| {LABELS.get(name, name)} | {a['delta_over_draws']:.2f} | {a['draws_shift_in_se']:+.1f} "
+                             f"| {b['delta_over_draws']:.2f} | {b['draws_shift_in_se']:+.1f} |")
     lines += ["", "**Error against the nominal model's, and the delta method**", "",
               "| hidden effect | Rayleigh mean | median \\|error\\| [MWh] | mean error ± s.e. [MWh] "
               "| nominal \\|error\\| [MWh] | nominal / calibrated (95 % CI) | delta σ / draws σ |",
@@ -375,6 +534,10 @@ def markdown(res: dict) -> str:
         e = res["effects_published"]
         lines += ["", f"The rows of both tables were published on {e['date']} at {e['commit']} by `{e['command']}`; the Phase VI "
                   "hold-out below was re-run alone at the commit this page states."]
+    ru = res.get("reused_from")
+    if ru:
+        lines += ["", f"Not re-run here: {' and '.join({'phase_vi': 'the Phase VI hold-out', 'speed': 'the speed'}.get(k, k) for k in ru['keys'])} "
+                  f"below, kept from the figures published on {ru['date']} at {ru['commit']}."]
     ph = res.get("phase_vi")
     if ph and "error" not in ph:
         lines += ["", f"Phase VI sequence H, calibrated on {', '.join(f'{x:g}' for x in ph['calibrated_on_m_s'])} m/s "
@@ -417,11 +580,14 @@ def _done(n_draws: int) -> dict:
     return out
 
 
-def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float | None = None) -> dict:
+def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float | None = None,
+        reuse: tuple = ()) -> dict:
     """Truths, replicates, figures; publishes ``powercurve.json`` (``run_all`` calls this).
 
     ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
-    figures then say how many replicates ran per effect (``replicates_run``).
+    figures then say how many replicates ran per effect (``replicates_run``). ``reuse``: keys of the
+    published figures (``"phase_vi"``, ``"speed"``) kept from the JSON already published instead of
+    re-run, with its date and commit under ``reused_from`` (the page says so).
     """
     from publish import command_line, publish
 
@@ -451,22 +617,36 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
                         log.flush()
                     records[n].append(rec)
                 print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
+        diagnosis = {}
+        for n in names:
+            try:
+                diagnosis[n] = bias_diagnosis(truth, n, work, n_draws)
+            except Exception as exc:  # noqa: BLE001  (said in the figures)
+                diagnosis[n] = {"error": f"{type(exc).__name__}: {exc}"}
     res = {"replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
            "truth_tsr_opt": {n: truth["data_sets"][n]["curve"]["tsr_opt"] for n in names},
-           "effects": summarize(records)}
-    with tempfile.TemporaryDirectory() as tmp:
-        try:
-            res["phase_vi"] = phase_vi_holdout(Path(tmp), n_draws)
-        except Exception as exc:  # noqa: BLE001  (said in the figures)
-            res["phase_vi"] = {"error": f"{type(exc).__name__}: {exc}"}
-    res["speed"] = speed()
+           "effects": summarize(records), "bias_diagnosis": diagnosis}
+    old = {}
+    if reuse:
+        old = json.loads((ROOT / "docs" / "validation" / "data" / "powercurve.json").read_text())
+        res["reused_from"] = {"keys": list(reuse), "date": old.get("date"), "commit": old.get("commit")}
+        for k in reuse:
+            res[k] = old.get(k)
+    if "phase_vi" not in reuse:
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                res["phase_vi"] = phase_vi_holdout(Path(tmp), n_draws)
+            except Exception as exc:  # noqa: BLE001  (said in the figures)
+                res["phase_vi"] = {"error": f"{type(exc).__name__}: {exc}"}
+    if "speed" not in reuse:
+        res["speed"] = speed()
     res["wall_seconds"] = time.perf_counter() - t0
     res["effects_run"] = names
     res["time_budget_utc"] = (None if stop_at is None else
                               time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(stop_at)))
     how = (f"python -c \"import bench_powercurve as B; B.run({n_replicates}, {n_draws}, effects={names!r}, "
-           f"stop_at=<{res['time_budget_utc']} UTC>)\" (in benchmarks/)"
-           if effects or stop_at is not None else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
+           f"stop_at=<{res['time_budget_utc']} UTC>, reuse={tuple(reuse)!r})\" (in benchmarks/)"
+           if effects or stop_at is not None or reuse else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
     publish("powercurve", res, command_line() if __name__ == "__main__" else how, markdown(res))
     return res
 

@@ -17,8 +17,10 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
     """AEP [MWh] per wind distribution with its 1-σ per source, P50 and P90.
 
     P50 is the central curve's AEP; sources: the calibration through the draws (and, beside
-    it, its delta-method value, not added again), the model discrepancy (fully correlated
-    across bins: added linearly over the bins, an upper bound), the field between the nodes
+    it, its delta-method value, not added again), the model discrepancy (through its second
+    moments across the bins, ``discrepancy_cov``: its conditional mean common to all bins, its
+    variance correlated by the process's kernel; linearly over the bins, an upper bound, where that
+    is not available), the field between the nodes
     (through its covariance across the bins, ``field_cov``: σ² = c Σ cᵀ; linearly where that is
     not available), each measurement item (combined as IEC 61400-12-1 does,
     :func:`calib.powercurve.measurement.aep_uncertainty`: category B correlated across the bins,
@@ -53,7 +55,10 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
             sig_delta = float(np.sqrt(max(g @ pc.cov @ g, 0.0)))
         else:
             sig_delta = float("nan")
-        sig["model discrepancy"] = float(c @ np.nan_to_num(pc.discrepancy_std))
+        if getattr(pc, "discrepancy_cov", None) is not None:
+            sig["model discrepancy"] = float(np.sqrt(max(c @ pc.discrepancy_cov @ c, 0.0)))
+        else:
+            sig["model discrepancy"] = float(c @ np.nan_to_num(pc.discrepancy_std))
         if pc.field_cov is not None:
             sig["field between nodes"] = float(np.sqrt(max(c @ pc.field_cov @ c, 0.0)))
         else:

@@ -106,6 +106,10 @@ class CalibratedPowerCurve:
         prediction leaves that term out (then the AEP adds ``field_std`` linearly over the bins, an upper bound).
     simulations : int or None
         Simulations an FMU model ran for this curve (None for the native BEM).
+    discrepancy_cov : ndarray, shape (n_bins, n_bins) or None
+        Second moments of power across the bins from the model discrepancy [W²]
+        (:func:`calib.powercurve.discrepancy.discrepancy_covariance`; its diagonal is ``discrepancy_std``²);
+        None where no discrepancy process applies (then the AEP adds ``discrepancy_std`` linearly).
     prior_split : dict or None
         The nodal covariance by prior-dominated and data-determined directions and the empirical-Bayes
         amplitude (:func:`calib.powercurve.field.prior_split`); None when not a MAP result with a prior check.
@@ -136,6 +140,7 @@ class CalibratedPowerCurve:
     field_cov: np.ndarray | None = None
     prior_split: dict | None = None
     simulations: int | None = None
+    discrepancy_cov: np.ndarray | None = None
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -275,7 +280,8 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     warnings = schedule_warnings(schedule, central)
     notes += posterior_statement(result)
 
-    disc, fld, envelope, fld_cov = prediction_terms(result, model, central, air_density, notes)
+    disc, fld, envelope, fld_cov, disc_cov = prediction_terms(result, model, central, air_density, notes,
+                                                              covariances=True)
     if fld_cov is not None and result.uncertainty.cov_alias.shape == cov.shape:
         # the field term replaces the nodal aliasing term (as predict_outputs does): drawing from
         # Cov(p̂) with Cov_alias in it as well counted the field between the nodes twice
@@ -307,7 +313,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
-                                fld_cov, split_prior(result, model, cov), n_sim)
+                                fld_cov, split_prior(result, model, cov), n_sim, disc_cov)
 
 
 def _solvable(model, schedule, name):

@@ -8,7 +8,7 @@ import numpy as np
 
 from calib.powercurve.schedule import ScheduledCurve
 
-__all__ = ["posterior_statement", "schedule_warnings"]
+__all__ = ["delta_statement", "posterior_statement", "schedule_warnings"]
 
 
 def posterior_statement(result) -> list[str]:
@@ -61,3 +61,57 @@ def schedule_warnings(schedule, central: ScheduledCurve) -> list[str]:
         out.append(f"the rotor is at its maximum speed {schedule.max_rotor_speed:g} rpm from the first bin "
                    f"({central.wind_speed[ok][0]:g} m/s): the speed limit is below what the tip-speed ratio asks there")
     return out
+
+
+def capped_bins(pc) -> np.ndarray:
+    """Bins where rated-power capping acts within the draws: some draws pitch to hold rated power there
+    (pitch above the schedule's fine pitch) and some do not (bool, shape (n_bins,)); none for a
+    schedule without a fine pitch (fixed speed, table)."""
+    fine = getattr(pc.schedule, "fine_pitch", None)
+    pitch = pc.draws.get("pitch")
+    if fine is None or pitch is None or pitch.shape[0] == 0 or getattr(pc.schedule, "kind", "") != "variable_speed":
+        return np.zeros(pc.wind_speed.size, bool)
+    ok = np.isfinite(pitch)
+    up = ok & (pitch > float(fine) + 1e-6)
+    return np.any(up, axis=0) & np.any(ok & ~up, axis=0)
+
+
+def delta_statement(pc, row) -> str:
+    """Whether the delta method's AEP 1-σ of the calibration is within 10 % of the draws' (or twice the
+    draws' own scatter, 1/√(2(N−1))) at the AEP table row ``row``, and where it is not, why.
+
+    Two causes are tested, from the draws themselves: a curvature of the power in the parameters
+    (a linear map keeps the draws' mean AEP at the central curve's; a mean more than 3 standard
+    errors σ/√N away says the map is curved: a variable-speed schedule runs region 2 at the maximum
+    of C_P over λ, where any parameter move that acts like a change of λ or pitch lowers the power
+    to second order, which the linearization misses) and rated-power capping (bins where some draws
+    reach rated power and others do not, :func:`capped_bins`); and draws clipped to a bound."""
+    sd, dl, n = row["sigma_mwh"].get("calibration (draws)"), row.get("sigma_calibration_delta_mwh"), row["draws_used"]
+    if n < 3 or not (np.isfinite(sd) and np.isfinite(dl) and sd > 0):
+        return ""
+    scatter = 1.0 / np.sqrt(2.0 * (n - 1))
+    limit = max(0.1, 2.0 * scatter)
+    ratio = dl / sd
+    head = f"At {row['distribution']} the delta method's AEP σ is {ratio:.2f} × the draws'"
+    if abs(ratio - 1.0) <= limit:
+        return f"{head}, within {100 * limit:.0f} %."
+    why = []
+    shift = row["draws_mean_aep_mwh"] - row["p50_mwh"]
+    se = sd / np.sqrt(n)
+    if abs(shift) > 3.0 * se:
+        region2 = getattr(pc.schedule, "kind", "") == "variable_speed" and shift < 0
+        why.append(f"the power is curved in the parameters: the draws' mean AEP lies {shift:+.3g} MWh from the central "
+                   f"curve's ({abs(shift) / se:.0f} standard errors; a linear map keeps it there)"
+                   + (", the schedule running region 2 at the maximum of C_P over λ, where a parameter move lowers "
+                      "the power to second order" if region2 else ""))
+    capped = capped_bins(pc)
+    if capped.any():
+        v = pc.wind_speed[capped]
+        where = f"{v.min():g}" if v.min() == v.max() else f"{v.min():g}–{v.max():g}"
+        why.append(f"rated-power capping: at {where} m/s some draws reach rated power and others do not")
+    if pc.n_clipped:
+        why.append(f"{pc.n_clipped} draws were clipped to a parameter bound")
+    if not why:
+        why.append(f"neither a curvature of the draws' mean nor rated-power capping was found (the draws' σ scatters by "
+                   f"±{100 * scatter:.0f} % with {n} draws)")
+    return f"{head}, more than {100 * limit:.0f} % off: " + "; ".join(why) + "."
