@@ -71,12 +71,21 @@ class StopRule:
         Stop also when an accepted step lowers the cost by at most this much [-]. The cost is
         half a χ², so a decrease δ means the step was about √(2δ) standard deviations of the
         estimate long (its Gauss–Newton model is ½ xᵀHx with H the inverse covariance).
+    noise_decrease : float
+        For a model whose cost is noisy (a simulator whose outputs jump by small amounts as its
+        inner iterations stop one step earlier or later; finite-difference derivatives): once a
+        step is rejected while the Gauss–Newton model's whole predicted decrease (the step of
+        least damping) is at most this [-], the iteration ends as converged to the model's noise:
+        the estimate is within about √(2 × noise_decrease) standard deviations of the model's
+        minimum and the cost does not decrease along the way there. 0 (default): off; the damping
+        then grows until a step is accepted or the tries run out.
     """
 
     max_iterations: int = 30
     tolerance: float = 1e-9
     step_tolerance: float = 1e-7
     decrease_tolerance: float = 0.0
+    noise_decrease: float = 0.0
 
     def small_step(self, step: float, theta: np.ndarray) -> bool:
         """A step [scale units] below the tolerance, relative to 1 + ‖θ‖."""
@@ -117,6 +126,10 @@ class EstimationOutcome:
     message: str
     linearization: Linearization
     history: list = field(default_factory=list)
+    rejected: int = 0
+    """Trial steps evaluated and rejected, in all."""
+    broyden_updates: int = 0
+    """Jacobians updated by Broyden's rule instead of taken from the model."""
 
     @property
     def converged(self) -> bool:
@@ -136,6 +149,16 @@ ROUNDOFF_STEP = 1e-12
 
 #: The damping μ at the start and after a rejected step, at least [-].
 MIN_DAMPING = 1e-6
+
+#: With ``StopRule.noise_decrease`` (a model whose trials cost simulations), after a rejected step the damping
+#: grows (×4, by the subproblem alone, no model call) until the step's scaled length ‖diag(H)^½ x‖ is at most
+#: this fraction of the rejected step's, as a trust region shrinks (Moré 1978: a factor in [0.1, 0.5]). Without
+#: it each rejection from μ = 1e-6 tried nearly the same step again: on ``bench_fmu_run`` 15 rejections in a
+#: row, 720 of 1 872 simulations.
+SHRINK_AFTER_REJECTION = 0.5
+
+#: The subproblems solved at most per iteration while shrinking the step (no model call each) [-].
+MAX_SHRINK_SOLVES = 30
 
 
 def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
@@ -167,7 +190,8 @@ def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndar
 
 def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.ndarray | None = None,
                  optimizer: str = "sqpmethod", stop: StopRule = StopRule(),
-                 callback: Callable[[dict], None] | None = None, stage: str = "map") -> EstimationOutcome:
+                 callback: Callable[[dict], None] | None = None, stage: str = "map",
+                 broyden: bool = False) -> EstimationOutcome:
     """Constrained maximum a posteriori estimate under the prior p̃ ~ N(0, P), P = L Lᵀ.
 
     In the prior-whitened coordinates u (p̃ = L u) the prior term is ½‖u‖², added to the cost
@@ -182,6 +206,12 @@ def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.nd
         Start (default 0, i.e. nominal).
     optimizer, stop, callback, stage
         As in :func:`estimate_ml`.
+    broyden : bool
+        After an accepted step, update the model Jacobian by Broyden's rank-one secant update from the
+        step's evaluation instead of a new model Jacobian (:func:`broyden_update`); a fresh model Jacobian
+        replaces the update when a step under it is rejected and before the iteration may stop, so the
+        estimate and its covariance rest on a model Jacobian. For models whose Jacobian costs simulations
+        of its own (finite differences); the residuals' secant curvature is then not used.
 
     Returns
     -------
@@ -189,7 +219,7 @@ def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.nd
         ``cost`` includes the prior term.
     """
     return _gauss_newton(problem, prior_root, u0, optimizer, stop, callback, stage, prior_weight=1.0,
-                         secant=True)
+                         secant=not broyden, broyden=broyden)
 
 
 @dataclass
@@ -208,6 +238,11 @@ class _Iteration:
     status: EstimationStatus = EstimationStatus.MAX_ITERATIONS
     message: str = ""
     history: list = field(default_factory=list)
+    noise_available: float | None = None  # set when a noisy model's iteration ended converged to its noise
+    rejected: int = 0                     # trial steps evaluated and rejected, in all
+    approximate: bool = False             # lin.M is a Broyden update, not the model's Jacobian
+    refresh: bool = False                 # a step under the Broyden update was rejected: a model Jacobian first
+    updates: int = 0                      # Broyden updates made
 
     def cost(self, at: Linearization, theta: np.ndarray) -> float:
         """Half the χ² at ``at``, plus the prior term of ``theta``."""
@@ -227,12 +262,14 @@ class _Trial:
     qp: QpSolution
     rho: float = 1.0          # actual / predicted decrease
     first_try: bool = True    # accepted without raising the damping
+    rejected: int = 0         # trial steps evaluated and rejected before it
 
 
 def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, stage, prior_weight,
-                  secant: bool = False) -> EstimationOutcome:
+                  secant: bool = False, broyden: bool = False) -> EstimationOutcome:
     """The damped Gauss–Newton iteration of :func:`estimate_ml` and :func:`estimate_map` (with ``secant``
-    the residuals' curvature added to its model, :mod:`calib.calibration.secant`)."""
+    the residuals' curvature added to its model, :mod:`calib.calibration.secant`; with ``broyden`` the
+    Jacobian updated from the accepted steps, :func:`broyden_update`)."""
     qp = get_optimizer(optimizer)
     basis = np.asarray(basis, float)
     statement = problem.statement
@@ -253,8 +290,20 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
     for it in range(1, stop.max_iterations + 1):
         H, g, dH = _normal_equations(run)
         cost_now = run.cost(run.lin, run.theta)
-        trial, x = _damped_step(run, qp, optimizer, H, g, dH, cost_now, linearize_trials)
+        trial, x = _damped_step(run, qp, optimizer, H, g, dH, cost_now, linearize_trials, stop)
         secant_used = run.curvature is not None and bool(np.any(run.curvature))
+        if run.refresh or (run.approximate and trial is None):   # rejected under the update, or stopping:
+            _fresh_jacobian(run, stop)                          # the model's Jacobian decides
+            continue
+        if run.noise_available is not None:
+            if secant_used:         # the secant model's prediction: Gauss-Newton's decides
+                run.noise_available = None
+                run.curvature[:] = 0.0
+                run.mu = MIN_DAMPING
+                run.end(EstimationStatus.MAX_ITERATIONS, f"stopped after {stop.max_iterations} iterations")
+                continue
+            _noise_stop(run, stop, it)
+            break
         if run.status == EstimationStatus.QP_FAILED:
             if not secant_used:
                 break
@@ -269,11 +318,15 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
             _no_step(run, x, stop, it)
             break
         before = run.lin
-        decrease, step = _take(run, trial, cost_now, stage, it, callback)
+        decrease, step = _take(run, trial, cost_now, stage, it, callback, broyden)
         if stop.small_decrease(decrease, trial.cost) or stop.small_step(step, run.theta):
             if secant_used and not trial.first_try:     # a damped secant step: Gauss-Newton's decides
                 run.curvature[:] = 0.0
                 continue
+            if run.approximate:         # small under the update: the model's Jacobian decides
+                _fresh_jacobian(run, stop)
+                if not _model_converged(run, qp, stop):
+                    continue
             _stopped(run, trial.qp, stop, step, optimizer, it)
             break
         if run.curvature is not None:
@@ -282,9 +335,11 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
                 run.curvature = secant_update(run.curvature, before, run.lin, run.basis, trial.x, prior_weight)
             else:
                 run.curvature[:] = 0.0
+    if run.approximate:                 # out of iterations under the update: the estimate's model Jacobian
+        run.lin = problem.linearize(run.lin.p)
     problem.remember(run.lin)
     return EstimationOutcome(run.theta, run.lin.p, run.cost(run.lin, run.theta), it, run.status, run.message,
-                             run.lin, run.history)
+                             run.lin, run.history, run.rejected, run.updates)
 
 
 def _feasible_start(basis: np.ndarray, theta0, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
@@ -313,25 +368,58 @@ def _normal_equations(run: _Iteration) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 def _damped_step(run: _Iteration, qp, optimizer: str, H, g, dH, cost_now: float,
-                 linearize_trials: bool) -> tuple[_Trial | None, np.ndarray | None]:
+                 linearize_trials: bool, stop: StopRule = StopRule()) -> tuple[_Trial | None, np.ndarray | None]:
     """The first damped step that lowers the cost without failing more points, with μ updated;
-    (None, the last step tried) when the tries run out; (None, None) with the status set when
-    the QP fails."""
-    x = None
-    for i in range(DAMPING_TRIES):
-        sol = qp(H + run.mu * np.diag(dH), g, run.basis, run.lb - run.basis @ run.theta, run.ub - run.basis @ run.theta)
+    (None, the last step tried) when the tries run out, or with ``stop.noise_decrease`` when a step
+    was rejected although the least damped step predicts no more than that decrease (the status set
+    converged and ``run.noise_available`` to that predicted decrease); (None, None) with the status
+    set when the QP fails."""
+    noisy = stop.noise_decrease > 0.0
+    root_d = np.sqrt(dH)
+
+    def solve(mu):
+        sol = qp(H + mu * np.diag(dH), g, run.basis, run.lb - run.basis @ run.theta, run.ub - run.basis @ run.theta)
         if not sol.success and not np.all(np.isfinite(sol.x)):
             run.end(EstimationStatus.QP_FAILED, f"{optimizer}: {sol.message}")
-            return None, None
+            return sol, None, 0.0
         x = _feasible_step(run.basis, run.theta, sol.x, run.lb, run.ub)
+        return sol, x, float(-(g @ x + 0.5 * x @ H @ x))
+
+    x = None
+    rejected_length = None      # the scaled length of the last rejected step (noisy models)
+    available = None            # the least damped step's predicted decrease (noisy models)
+    shrink_solves = 0
+    for i in range(DAMPING_TRIES):
+        sol, x, predicted = solve(run.mu)
+        if x is None:
+            return None, None
+        # after a rejection, a step of at most SHRINK_AFTER_REJECTION of its length, found by the subproblem alone
+        while (rejected_length is not None and np.linalg.norm(root_d * x) > SHRINK_AFTER_REJECTION * rejected_length
+               and shrink_solves < MAX_SHRINK_SOLVES):
+            run.mu *= 4.0
+            shrink_solves += 1
+            sol, x, predicted = solve(run.mu)
+            if x is None:
+                return None, None
         p_trial = run.problem.p_of(run.basis, run.theta + x)
         trial = run.problem.linearize(p_trial) if linearize_trials else run.problem.evaluate(p_trial)
-        predicted = -(g @ x + 0.5 * x @ H @ x)
         cost_trial = run.cost(trial, run.theta + x)
         if trial.n_failed <= run.lin.n_failed and cost_trial <= cost_now:
             rho = (cost_now - cost_trial) / predicted if predicted > 0 else 1.0
             run.mu = max(run.mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
-            return _Trial(x, trial, cost_trial, sol, rho, i == 0), x
+            return _Trial(x, trial, cost_trial, sol, rho, i == 0, i), x
+        run.rejected += 1
+        if run.approximate:     # the update mispredicted: a model Jacobian before any further damping
+            run.refresh = True
+            return None, x
+        if noisy:
+            if available is None:
+                available = predicted if run.mu <= MIN_DAMPING else solve(MIN_DAMPING)[2]
+            if available <= stop.noise_decrease:
+                run.noise_available = available
+                run.end(EstimationStatus.CONVERGED, "converged to the model's noise")
+                return None, x
+            rejected_length = float(np.linalg.norm(root_d * x))
         run.mu = max(run.mu * 4.0, MIN_DAMPING)
     return None, x
 
@@ -346,18 +434,103 @@ def _no_step(run: _Iteration, x: np.ndarray, stop: StopRule, it: int) -> None:
         run.end(EstimationStatus.STALLED, "no step decreased the cost (damping exhausted)")
 
 
-def _take(run: _Iteration, trial: _Trial, cost_now: float, stage: str, it: int, callback) -> tuple[float, float]:
-    """Move to the accepted trial (linearized there if it was only evaluated); record the
-    iteration; return the cost decrease and the step length [scale units]."""
+def _fresh_jacobian(run: _Iteration, stop: StopRule) -> None:
+    """The model's Jacobian at the current point in place of the Broyden update (its outputs are the
+    ones evaluated there), the damping and the status reset: the iteration goes on from there."""
+    run.lin = run.problem.linearize(run.lin.p)
+    run.approximate = run.refresh = False
+    run.noise_available = None
+    run.mu = MIN_DAMPING
+    run.end(EstimationStatus.MAX_ITERATIONS, f"stopped after {stop.max_iterations} iterations")
+
+
+def _model_converged(run: _Iteration, qp, stop: StopRule) -> bool:
+    """Whether the least damped step of the Gauss–Newton model at the current point (on a model
+    Jacobian) is below the stop rule's decrease or step tolerance (no model call)."""
+    H, g, dH = _normal_equations(run)
+    sol = qp(H + MIN_DAMPING * np.diag(dH), g, run.basis, run.lb - run.basis @ run.theta, run.ub - run.basis @ run.theta)
+    if not np.all(np.isfinite(sol.x)):
+        return False
+    x = _feasible_step(run.basis, run.theta, sol.x, run.lb, run.ub)
+    predicted = float(-(g @ x + 0.5 * x @ H @ x))
+    cost = run.cost(run.lin, run.theta)
+    return stop.small_decrease(predicted, cost) or stop.small_step(float(np.linalg.norm(x)), run.theta)
+
+
+def broyden_update(M: np.ndarray, r_old: np.ndarray, r_new: np.ndarray, s: np.ndarray, ok: np.ndarray,
+                   n_channels: int) -> np.ndarray:
+    """Broyden's rank-one secant update of the whitened sensitivities after a step.
+
+    M₊ = M + (Δy − M s) sᵀ / (sᵀ s), with Δy = −(r₊ − r) the change of the whitened outputs
+    (r = (z − y)/σ) over the step s = p̃₊ − p̃ [scale units]: the least change of M (Frobenius norm)
+    that satisfies the secant condition M₊ s = Δy (Dennis & Schnabel 1983, §8.1, Theorem 8.1.1;
+    Broyden 1965). Rows of failed points stay zero.
+
+    Parameters
+    ----------
+    M : ndarray, shape (n_points * n_channels, n_params)
+        Whitened scaled sensitivities before the step [1/scale units].
+    r_old, r_new : ndarray, shape (n_points * n_channels,)
+        Whitened residuals before and after the step [-].
+    s : ndarray, shape (n_params,)
+        The step in scaled parameters [scale units].
+    ok : ndarray of bool, shape (n_points,)
+        Converged points (the same before and after).
+    n_channels : int
+
+    Returns
+    -------
+    ndarray, shape of ``M``
+
+    References
+    ----------
+    C.G. Broyden, A class of methods for solving nonlinear simultaneous equations, Math. Comp. 19 (1965)
+    577-593. J.E. Dennis, R.B. Schnabel, Numerical Methods for Unconstrained Optimization and Nonlinear
+    Equations, Prentice-Hall (1983), ch. 8.
+    """
+    s = np.asarray(s, float)
+    ss = float(s @ s)
+    if not ss > 0.0:
+        return M.copy()
+    dy = -(np.asarray(r_new, float) - np.asarray(r_old, float))
+    u = (dy - M @ s) * np.repeat(np.asarray(ok, bool), n_channels)
+    return M + np.outer(u, s) / ss
+
+
+def _noise_stop(run: _Iteration, stop: StopRule, it: int) -> None:
+    """A rejected step although the least damped step predicted at most ``stop.noise_decrease``:
+    converged to the model's noise (the current point kept, its linearization cached)."""
+    run.problem.remember(run.lin)       # the cache may hold the rejected trial
+    run.end(EstimationStatus.CONVERGED,
+            f"converged to the model's noise in {it - 1} iterations (the Gauss-Newton step predicted a decrease of "
+            f"{run.noise_available:.2g} <= {stop.noise_decrease:g}, about {np.sqrt(2 * max(run.noise_available, 0)):.2f} "
+            "standard deviations, and raised the cost)")
+
+
+def _take(run: _Iteration, trial: _Trial, cost_now: float, stage: str, it: int, callback,
+          broyden: bool = False) -> tuple[float, float]:
+    """Move to the accepted trial (linearized there if it was only evaluated: by the model, or by
+    Broyden's update with ``broyden`` where the same points converged); record the iteration; return
+    the cost decrease and the step length [scale units]."""
     if trial.lin.M is None:             # the accepted trial's sensitivities
-        trial.lin = run.problem.linearize(trial.lin.p)
+        if broyden and np.array_equal(trial.lin.ok, run.lin.ok):
+            M = broyden_update(run.lin.M, run.lin.residual.reshape(-1), trial.lin.residual.reshape(-1),
+                               run.basis @ trial.x, trial.lin.ok, run.lin.residual.shape[1])
+            trial.lin = Linearization(trial.lin.p, trial.lin.residual, trial.lin.ok, M, trial.lin.evaluation)
+            run.approximate = True
+            run.updates += 1
+        else:
+            trial.lin = run.problem.linearize(trial.lin.p)
+            run.approximate = False
         trial.cost = run.cost(trial.lin, run.theta + trial.x)
     decrease = cost_now - trial.cost
     run.theta = run.theta + trial.x
     step = float(np.linalg.norm(trial.x))
     run.lin = trial.lin
     rec = {"stage": stage, "iteration": it, "cost": trial.cost, "step": step, "damping": run.mu,
-           "n_failed": run.lin.n_failed, "qp": trial.qp.message}
+           "n_failed": run.lin.n_failed, "qp": trial.qp.message, "rejected": trial.rejected}
+    if broyden:
+        rec["jacobian"] = "broyden" if run.approximate else "model"
     run.history.append(rec)
     if callback:
         callback(rec)
@@ -389,7 +562,7 @@ def _feasible_step(basis: np.ndarray, theta: np.ndarray, x: np.ndarray, lb: np.n
     # benchmark's twin (d), seed 5006, and the estimator stopped at χ² 23 000 as "converged";
     # what it leaves outside is far below the models' round-off margin (1e-9 scale units)
     moving = np.abs(d) > ROUNDOFF_STEP
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         up = np.where((d > 0) & moving, np.maximum(ub - start, 0.0) / d, np.inf)
         down = np.where((d < 0) & moving, np.minimum(lb - start, 0.0) / d, np.inf)
     limit = float(np.min(np.concatenate([up, down]))) if d.size else np.inf
