@@ -217,8 +217,9 @@ def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.nd
         After an accepted step, update the model Jacobian by Broyden's rank-one secant update from the
         step's evaluation instead of a new model Jacobian (:func:`broyden_update`); a fresh model Jacobian
         replaces the update when a step under it is rejected and before the iteration may stop, so the
-        estimate and its covariance rest on a model Jacobian. For models whose Jacobian costs simulations
-        of its own (finite differences); the residuals' secant curvature is then not used.
+        estimate and its covariance rest on a model Jacobian (taken there, or within
+        :data:`JACOBIAN_REUSE_STEP` of it). For models whose Jacobian costs simulations of its own (finite
+        differences); the residuals' secant curvature is then not used.
 
     Returns
     -------
