@@ -327,15 +327,15 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
                 continue
             _no_step(run, x, stop, it)
             break
-        before = run.lin
+        before, from_model = run.lin, not run.approximate
         decrease, step = _take(run, trial, cost_now, stage, it, callback, broyden)
         if stop.small_decrease(decrease, trial.cost) or stop.small_step(step, run.theta):
             if secant_used and not trial.first_try:     # a damped secant step: Gauss-Newton's decides
                 run.curvature[:] = 0.0
                 continue
-            if run.approximate:         # small under the update: the model's Jacobian decides
-                _fresh_jacobian(run, stop)
-                if not _model_converged(run, qp, stop):
+            if run.approximate:         # the estimate's model Jacobian; a step made under the update:
+                _fresh_jacobian(run, stop)  # the model's Jacobian decides whether it was the last
+                if not from_model and not _model_converged(run, qp, stop):
                     continue
             _stopped(run, trial.qp, stop, step, optimizer, it)
             break
