@@ -53,6 +53,9 @@ SEED = 38
 #: Jacobian measures the FMU's output jumps, not its slope), at half the runs of a central Jacobian.
 DIFFERENCES = "forward"
 RELATIVE_STEP = 0.1
+#: The workflow's ``[calibration] jacobian_updates`` (None: the default, ``auto``: Broyden's update for an FMU;
+#: ``--jacobian-updates model`` gives a finite-difference Jacobian after every accepted step, as before).
+JACOBIAN_UPDATES = None
 #: A study of minutes: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
 SUITE = "validate"
 
@@ -107,6 +110,7 @@ def prepare(out: Path, executor: str = "process") -> Path:
         "[grid]", "alpha_nodes_deg = [-10.0, -5.0, 0.0, 5.0, 10.0, 15.0, 20.0]",   # the FMU's default grid
         "eta_nodes = [0.2, 0.4, 0.6, 0.8, 1.0]",
         "[measurements]", f'file = "{table.name}"',
+        *(["[calibration]", f'jacobian_updates = "{JACOBIAN_UPDATES}"'] if JACOBIAN_UPDATES else []),
         "[executor]", f'kind = "{executor}"', "workers = 2",
         "[[stages]]", 'name = "rotor_loads"', f"channels = {_toml(CHANNELS)}", ""]))
     return wf
@@ -131,7 +135,27 @@ def run_once(wf: Path, out: Path) -> dict:
     with np.load(next(out.glob("stage1_*/result.npz"))) as z:
         fig["p_hat"], fig["sigma"] = z["estimate.p_hat"].tolist(), z["uncertainty.std_p"].tolist()
     fig["checks"] = res["provenance"]["checks"]
+    fig.update(counts(res))
     return fig
+
+
+def counts(res: dict) -> dict:
+    """The MAP's counts from a ``result.json``: iterations, model Jacobians and evaluations, rejected trial
+    steps, Broyden updates, final cost; the FMU simulations and model time of the calibration stage."""
+    hist = res["estimate"].get("history", [])
+    done = next((h for h in hist if h.get("stage") == "map_done"), {})
+    failures = res["fit"]["failures"]
+    out = {"map_iterations": done.get("iterations"), "rejected": done.get("rejected"),
+           "broyden_updates": done.get("broyden_updates"), "final_cost": done.get("cost"),
+           "map_status": done.get("status"), "model_jacobians": failures.get("model_jacobians"),
+           "model_evaluations": failures.get("model_evaluations"),
+           "accepted_steps": sum(1 for h in hist if h.get("stage") == "map" and "step" in h)}
+    text = next((v for k, v in res["provenance"]["checks"].items() if k.startswith("FMU simulations and")), "")
+    m = re.match(r"(\d+) simulations", text)
+    out["simulations"] = int(m.group(1)) if m else None
+    m = re.search(r"([\d.e+]+) s simulated", text)
+    out["model_time_s"] = float(m.group(1)) if m else None
+    return out
 
 
 #: The difference schemes the study compares: (scheme, relative step), and its reference. The FMU's outputs jump
@@ -186,7 +210,7 @@ def run(out: Path | None = None) -> dict:
 
 
 def main(argv=None) -> int:
-    global DIFFERENCES, RELATIVE_STEP
+    global DIFFERENCES, RELATIVE_STEP, JACOBIAN_UPDATES
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(ROOT / "bench_output" / "fmu_run"))
     ap.add_argument("--runs", type=int, default=1)
@@ -198,6 +222,8 @@ def main(argv=None) -> int:
     ap.add_argument("--relative-step", type=float, default=RELATIVE_STEP,
                     help=f"the [model] jacobian.relative_step of the workflow (default {RELATIVE_STEP:g}; the "
                          "mapping's: 0.01)")
+    ap.add_argument("--jacobian-updates", choices=("auto", "broyden", "model"), default=JACOBIAN_UPDATES,
+                    help="the [calibration] jacobian_updates of the workflow (default: the settings' auto)")
     ap.add_argument("--executor", choices=("process", "dask", "both"), default="process",
                     help="2 worker processes, a Dask LocalCluster of 2 workers, or both (estimates compared)")
     args = ap.parse_args(argv)
@@ -207,7 +233,7 @@ def main(argv=None) -> int:
                   f"{REFERENCE[1]:g}: max {e['max']:.2e}, p99 {e['p99']:.2e}, median {e['median']:.2e}, per parameter "
                   f"max {np.round(e['max_per_parameter'], 3).tolist()}")
         return 0
-    DIFFERENCES, RELATIVE_STEP = args.differences, args.relative_step
+    DIFFERENCES, RELATIVE_STEP, JACOBIAN_UPDATES = args.differences, args.relative_step, args.jacobian_updates
     out = Path(args.out)
     kinds = ("process", "dask") if args.executor == "both" else (args.executor,)
     estimates = {}
@@ -222,6 +248,9 @@ def main(argv=None) -> int:
             if label.startswith("FMU simulations and"):
                 print(f"[bench_fmu_run] {label}: {text}")
         print(f"[bench_fmu_run] wall           {fig['wall_s']:7.1f} s")
+        print("[bench_fmu_run] counts " + ", ".join(f"{k} {fig[k]}" for k in (
+            "map_status", "map_iterations", "accepted_steps", "model_jacobians", "model_evaluations", "rejected",
+            "broyden_updates", "simulations", "model_time_s", "final_cost")))
         print(f"[bench_fmu_run] p_hat {np.round(fig['p_hat'], 5).tolist()} sigma {np.round(fig['sigma'], 5).tolist()}")
         run_dir = out / (f"run{k + 1}" if kind == "process" else f"run{k + 1}_{kind}")
         (run_dir / "bench.json").write_text(json.dumps({name: v for name, v in fig.items() if name != "console"},

@@ -139,7 +139,7 @@ def test_unknown_optimizer_error_lists_valid_names():
 
 
 def test_a_step_leaving_the_bounds_is_cut_back_to_them():
-    from calib.calibration.gauss_newton import _feasible_step
+    from calib.calibration.estimation_parts import feasible_step as _feasible_step
     B = np.eye(2)
     theta = np.array([0.5, 0.0])
     x = np.array([1.0, 0.2])  # would reach 1.5 in the first coordinate, bound 1.0
@@ -154,7 +154,7 @@ def test_a_round_off_step_across_an_active_bound_does_not_stop_the_step():
     """A start exactly on a bound and a QP step that crosses it by round-off (1e-17, as a QP
     solver returns along an active constraint): the step is kept, not cut to zero (which
     stopped the estimator at nominal on the coverage benchmark's twin (d))."""
-    from calib.calibration.gauss_newton import _feasible_step
+    from calib.calibration.estimation_parts import feasible_step as _feasible_step
     B = np.linalg.qr(np.random.default_rng(7).standard_normal((3, 2)))[0]
     lb, ub = -np.ones(3), np.ones(3)
     theta = np.linalg.lstsq(B, np.array([-1.0, 0.2, 0.1]), rcond=None)[0]

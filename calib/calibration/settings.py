@@ -14,6 +14,7 @@ NOISE_MODES = ("known", "ml", "repeats", "relative", "relative_ml")
 RETAIN_MODES = ("threshold", "all")
 ESTIMATORS = ("map", "truncated")
 ERRORS_IN_VARIABLES = ("marginal", "joint", "ignore")
+JACOBIAN_UPDATES = ("auto", "broyden", "model")
 UNCERTAIN_CONDITIONS = ("wind_speed", "rotor_speed", "pitch", "air_density")
 
 
@@ -157,6 +158,12 @@ class CalibrationSettings:
     max_eiv_iterations : int
         Most fits of the marginal estimator, each with the conditions' sensitivities
         re-linearized at the last estimate (the joint estimator re-linearizes within its one fit).
+    jacobian_updates : {"auto", "broyden", "model"}
+        The MAP estimator's Jacobian after an accepted step of a model without exact derivatives (an
+        FMU): ``"broyden"`` updates it from the step's evaluation (Broyden's rank-one update; a model
+        Jacobian again when a step under it is rejected and before the estimate is final, so σ rests on
+        one), ``"model"`` takes a new finite-difference Jacobian each step; ``"auto"`` (default):
+        Broyden for such models. Models with exact derivatives always use the model's.
     """
 
     estimator: str = "map"
@@ -192,6 +199,7 @@ class CalibrationSettings:
     condition_sigma: dict | None = None
     condition_relative_sigma: dict | None = None
     max_eiv_iterations: int = 10
+    jacobian_updates: str = "auto"
     verbose: bool = False
 
     def validate(self, source: str = "CalibrationSettings", prefix: str = "") -> "CalibrationSettings":
@@ -204,6 +212,9 @@ class CalibrationSettings:
             bad(f"unknown noise mode {self.noise!r}; valid: {', '.join(NOISE_MODES)}", "noise")
         if self.estimator not in ESTIMATORS:
             bad(f"unknown estimator {self.estimator!r}; valid: {', '.join(ESTIMATORS)}", "estimator")
+        if self.jacobian_updates not in JACOBIAN_UPDATES:
+            bad(f"unknown Jacobian updates {self.jacobian_updates!r}; valid: {', '.join(JACOBIAN_UPDATES)}",
+                "jacobian_updates")
         if self.retain not in RETAIN_MODES:
             bad(f"unknown retain mode {self.retain!r}; valid: {', '.join(RETAIN_MODES)}", "retain")
         if isinstance(self.sigma_bar, str) and self.sigma_bar != "auto" or \
