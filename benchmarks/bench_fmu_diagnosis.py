@@ -197,5 +197,56 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     return out
 
 
+def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 0, executor: str = "process") -> dict:
+    """One diagnosis of :func:`run` (``variant``, ``data_set``, noise seed ``seed``) with its FMU
+    simulations counted per step: :func:`calib.fmu.tally.process_totals` read at every progress line
+    (the step that line starts or reports), so the counts say where the simulations went.
+
+    ``executor``: ``process`` (as :func:`run`) or ``dask`` (a Dask LocalCluster of 2 workers). Writes
+    nothing to the validation pages (counts only; the wall clock of a loaded machine is not published).
+    """
+    from calib.diagnosis.command import run_diagnose
+    from calib.fmu.tally import process_totals
+    from calib.measurements import Measurements
+    WORK.mkdir(parents=True, exist_ok=True)
+    config = WORK / f"config_{variant}_{executor}.toml"
+    text = config_text(variant)
+    if executor != "process":
+        text = text.replace('kind = "process"', f'kind = "{executor}"')
+    config.write_text(text)
+    clean = truth_values(variant, DATA_SETS[data_set], WORK)
+    rng = np.random.default_rng(SEED0 + 10 * seed)
+    sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
+    noisy = clean + rng.standard_normal(clean.shape) * sigma
+    meas = Measurements(conditions(), tuple(CHANNELS), noisy, np.broadcast_to(sigma, noisy.shape).copy(),
+                        source=f"fmu {variant} {data_set} seed {seed}")
+    data = WORK / f"{variant}_{data_set}_{seed}.csv"
+    meas.write_csv(data)
+    steps = []
+
+    def printer(line):
+        steps.append({"line": line, "cpu_s": time.process_time(), **process_totals()})
+        print(f"  [{steps[-1]['simulations']:5d} sims, {steps[-1]['reused_base_runs']:4d} + "
+              f"{steps[-1]['reused_perturbed_runs']:4d} reused] {line}", flush=True)
+
+    process_totals(reset=True)
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    d = run_diagnose(None, str(data), str(WORK / f"case_{variant}_{data_set}_{seed}_{executor}"), str(config),
+                     printer=printer, history=False)
+    out = {"variant": variant, "data_set": data_set, "seed": seed, "executor": executor, "effect": d.effect,
+           "effects": d.effects, "chi2_per_dof_before": d.before["chi2_per_dof"],
+           "chi2_per_dof_with_effects": d.with_effects["chi2_per_dof"], "totals": process_totals(),
+           "main_process_cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - t0, "steps": steps}
+    print(json.dumps({k: v for k, v in out.items() if k != "steps"}, indent=1))
+    return out
+
+
 if __name__ == "__main__":
-    run(int(sys.argv[1]) if len(sys.argv) > 1 else 1)
+    if len(sys.argv) > 1 and sys.argv[1] == "case":
+        # python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json]]
+        args = sys.argv[2:]
+        res = case(*(args[:2]), *(int(a) for a in args[2:3]), *(args[3:4]))
+        if len(args) > 4:
+            Path(args[4]).write_text(json.dumps(res, indent=1))
+    else:
+        run(int(sys.argv[1]) if len(sys.argv) > 1 else 1)
