@@ -22,7 +22,10 @@ Data sets (the truth's mapped parameters): ``control`` (nominal), ``pitch_offset
 (+1 deg on blade 1), ``stall_delay_strength`` (1.8 instead of 1). Right: ``none`` on the
 control, the data set's parameter (or ``ambiguous`` with it) on the others.
 
-``python benchmarks/bench_fmu_diagnosis.py [n_seeds]`` (default 1); under ``make validate``
+``python benchmarks/bench_fmu_diagnosis.py [n_seeds [process|dask]]`` (default 1, process; ``dask``
+runs the same diagnoses on a Dask LocalCluster of 2 workers and publishes nothing);
+``python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json]]`` runs one
+diagnosis with its simulations counted at every step (:func:`case`). Under ``make validate``
 ``run(n_seeds=1)``: 47.6 min on the shared 2-core machine (2026-11-25; 2-3 min per control,
 7-15 min per named effect), every verdict right, variant B's figures equal to A's. Writes ``bench_output/fmu_diagnosis.json`` and ``.md`` and publishes the table for the validation page
 (``docs/validation/data/diagnosis_fmu.json``); two worker
@@ -63,8 +66,9 @@ def _inline(table: dict) -> str:
     return "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in table.items()) + " }"
 
 
-def config_text(variant: str) -> str:
-    """The ``calib diagnose`` config of the model (the user's faster FMU configuration)."""
+def config_text(variant: str, executor: str = "process") -> str:
+    """The ``calib diagnose`` config of the model (the user's faster FMU configuration), its
+    simulations on ``executor`` (``process`` or ``dask``: a LocalCluster) with 2 workers."""
     return f"""[rotor]
 name = "nrel5mw"
 
@@ -90,7 +94,7 @@ max_effects = 1
 recalibrate = false
 
 [executor]
-kind = "process"
+kind = "{executor}"
 workers = 2
 """
 
@@ -123,8 +127,11 @@ def truth_values(variant: str, values: dict, folder: Path):
     return ev.values
 
 
-def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
-    """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures."""
+def run(n_seeds: int = 1, variants=("A", "B"), executor: str = "process") -> dict:
+    """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures.
+
+    ``executor``: ``process`` (published) or ``dask`` (a Dask LocalCluster of 2 workers; its figures
+    go to ``bench_output/fmu_diagnosis_dask.*`` and are not published)."""
     from calib.diagnosis.command import run_diagnose
     from calib.fmu.tally import process_totals
     from calib.measurements import Measurements
@@ -132,8 +139,8 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     WORK.mkdir(parents=True, exist_ok=True)
     rows, verdicts = [], []
     for variant in variants:
-        config = WORK / f"config_{variant}.toml"
-        config.write_text(config_text(variant))
+        config = WORK / f"config_{variant}{'' if executor == 'process' else '_' + executor}.toml"
+        config.write_text(config_text(variant, executor))
         for name, values in DATA_SETS.items():
             t0 = time.perf_counter()
             clean = truth_values(variant, values, WORK)
@@ -149,7 +156,7 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                 meas.write_csv(data)
                 t1 = time.perf_counter()
                 process_totals(reset=True)
-                d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}"), str(config),
+                d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}{'' if executor == 'process' else '_' + executor}"), str(config),
                                  printer=lambda line: None, history=False)
                 seconds.append(time.perf_counter() - t1)
                 sims.append(process_totals())
@@ -175,8 +182,11 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                              [v["chi2_per_dof_before"] for v in verdicts[-n_seeds:]]))})
     out = {"n_seeds": n_seeds, "rows": rows, "verdicts": verdicts, "wall_seconds": time.perf_counter() - t_start,
            "truth_steady": TRUTH_STEADY, "model_steady": MODEL_STEADY, "switches": SWITCHES}
-    OUT_JSON.parent.mkdir(parents=True, exist_ok=True)
-    OUT_JSON.write_text(json.dumps(out, indent=1))
+    out["executor"] = executor
+    suffix = "" if executor == "process" else "_" + executor
+    out_json, out_md = (p.with_name(p.stem + suffix + p.suffix) for p in (OUT_JSON, OUT_MD))
+    out_json.parent.mkdir(parents=True, exist_ok=True)
+    out_json.write_text(json.dumps(out, indent=1))
     lines = [f"# calib diagnose on the bundled FMUs ({n_seeds} seeds, {out['wall_seconds'] / 60:.1f} min)", "",
              "Truth: the FMU at 72 steps/rev, 10 + 4 revolutions; model: the same FMU at 24 steps/rev, 4 + 2.", "",
              "| variant | data set | right / total | verdicts | χ²/dof before (median) | simulations / diagnosis "
@@ -187,8 +197,10 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                      f"{', '.join(f'{k} {v}' for k, v in r['verdicts'].items())} | "
                      f"{r['chi2_per_dof_before_median']:.3g} | {r['simulations_per_diagnosis']:.0f} | "
                      f"{r['seconds_per_diagnosis']:.0f} |")
-    OUT_MD.write_text("\n".join(lines) + "\n")
+    out_md.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    if executor != "process":
+        return out
     from publish import command_line, publish
 
     publish("diagnosis_fmu", {k: v for k, v in out.items() if k != "verdicts"}, command_line(),
@@ -210,10 +222,7 @@ def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 
     from calib.measurements import Measurements
     WORK.mkdir(parents=True, exist_ok=True)
     config = WORK / f"config_{variant}_{executor}.toml"
-    text = config_text(variant)
-    if executor != "process":
-        text = text.replace('kind = "process"', f'kind = "{executor}"')
-    config.write_text(text)
+    config.write_text(config_text(variant, executor))
     clean = truth_values(variant, DATA_SETS[data_set], WORK)
     rng = np.random.default_rng(SEED0 + 10 * seed)
     sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
@@ -249,4 +258,5 @@ if __name__ == "__main__":
         if len(args) > 4:
             Path(args[4]).write_text(json.dumps(res, indent=1))
     else:
-        run(int(sys.argv[1]) if len(sys.argv) > 1 else 1)
+        # python benchmarks/bench_fmu_diagnosis.py [N_SEEDS [EXECUTOR]]
+        run(int(sys.argv[1]) if len(sys.argv) > 1 else 1, executor=sys.argv[2] if len(sys.argv) > 2 else "process")
