@@ -15,7 +15,12 @@ Steps
    tip-speed ratio, pitch and wind speed the residuals say where it is not.
 2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.calibrator.Calibrator`,
    automatic truncation) says which (α, η) region of the polars would have to change; with
-   ``noise = "ml"`` it also gives the noise σ the later steps use.
+   ``noise = "ml"`` it also gives the noise σ the later steps use, and runs before step 1. With a
+   stated noise step 1 and its χ² gate come first: a nominal model that passes the gate is not
+   localized (no candidate is fitted, so nothing uses the localized correction), unless the
+   recalibration is asked for, which on the nominal model with the stated σ is the localization's
+   fit (the same field model, σ and settings): it is run once and serves as both
+   (``Diagnosis.localization`` is None when it did not run).
 3. **Name**: every candidate effect of :data:`calib.effects.EFFECTS` (but the correction field)
    is switched into the model on its own and fitted by maximum likelihood (all its few
    parameters free); an effect with several model forms (rotational augmentation: Snel,
