@@ -250,8 +250,67 @@ def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 
     return out
 
 
+#: The difference schemes :func:`difference_error` compares (scheme, relative step) and its reference: the
+#: mapping's default (central 0.01), the step above the output jumps (bench_fmu_run's study), one-sided.
+SCHEMES = (("central", 0.01), ("forward", 0.1), ("central", 0.1))
+REFERENCE = ("central", 0.2)
+
+
+def difference_error(variant: str = "A") -> dict:
+    """The Jacobian of the diagnosis's FMU model (:func:`config_text`: the correction field's 8 nodes and
+    the 3 candidates, at nominal, at the campaign) by each of :data:`SCHEMES`, against :data:`REFERENCE`.
+
+    Per scheme and parameter: the column's relative error in the noise-whitened norm
+    ``||ΔG_j / σ|| / ||G_j / σ||`` and the largest entry ``|ΔG_kcj| σ_j / σ_kc`` with ``σ_j = 1 / ||G_j / σ||``
+    (the σ of that parameter fitted alone): the error of a linearized prediction over that σ, in noise σ;
+    σ the campaign's 1 % of each channel's RMS. Also the simulations each scheme made.
+    """
+    from calib.corrections import CorrectionGrid
+    from calib.executors import ProcessExecutor
+    from calib.fmu.base_runs import BaseRunCache
+    from calib.fmu.tally import process_totals
+    from calib.models.from_config import model_from_workflow
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    cond, grid = conditions(), CorrectionGrid([0.0, 10.0], [0.6, 1.0])
+    cache = BaseRunCache()
+    with ProcessExecutor(2) as ex:
+        def jacobian(differences, step):
+            model = model_from_workflow({"kind": "fmu", "variant": variant, "switches": SWITCHES, "steady": MODEL_STEADY,
+                                         "parameters": CANDIDATES, "corrections": True,
+                                         "jacobian": {"differences": differences, "relative_step": step}},
+                                        {"name": "nrel5mw"}, CHANNELS, str(WORK / "difference.toml"), WORK, grid=grid,
+                                        executor=ex)
+            model.base_runs = cache
+            try:
+                before = process_totals()["simulations"]
+                ev, G = model.jacobian(np.array([q.nominal for q in model.parameters]), cond)
+                return ev, G, [q.name for q in model.parameters], process_totals()["simulations"] - before
+            finally:
+                model.close()
+        ev, G_ref, names, n_ref = jacobian(*REFERENCE)
+        found = {k: jacobian(*k) for k in SCHEMES}
+    sigma = 0.01 * np.sqrt(np.nanmean(ev.values ** 2, axis=0))[None, :, None]
+    W = G_ref / sigma
+    norm = np.sqrt(np.nansum(W ** 2, axis=(0, 1)))
+    out = {"parameters": names, "reference": f"{REFERENCE[0]} {REFERENCE[1]:g}", "reference_simulations": n_ref}
+    for (scheme, step), (_, G, _, n) in found.items():
+        dW = (G - G_ref) / sigma
+        out[f"{scheme} {step:g}"] = {
+            "simulations": n,
+            "column_error": (np.sqrt(np.nansum(dW ** 2, axis=(0, 1))) / norm).tolist(),
+            "max_entry_error": (np.nanmax(np.abs(dW), axis=(0, 1)) / norm).tolist()}
+    return out
+
+
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "case":
+    if len(sys.argv) > 1 and sys.argv[1] == "difference-error":
+        # python benchmarks/bench_fmu_diagnosis.py difference-error [VARIANT [OUT.json]]
+        res = difference_error(*(sys.argv[2:3]))
+        print(json.dumps(res, indent=1))
+        if len(sys.argv) > 3:
+            Path(sys.argv[3]).write_text(json.dumps(res, indent=1))
+    elif len(sys.argv) > 1 and sys.argv[1] == "case":
         # python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json]]
         args = sys.argv[2:]
         res = case(*(args[:2]), *(int(a) for a in args[2:3]), *(args[3:4]))
