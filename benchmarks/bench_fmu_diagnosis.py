@@ -66,9 +66,10 @@ def _inline(table: dict) -> str:
     return "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in table.items()) + " }"
 
 
-def config_text(variant: str, executor: str = "process") -> str:
+def config_text(variant: str, executor: str = "process", jacobian: dict | None = None) -> str:
     """The ``calib diagnose`` config of the model (the user's faster FMU configuration), its
-    simulations on ``executor`` (``process`` or ``dask``: a LocalCluster) with 2 workers."""
+    simulations on ``executor`` (``process`` or ``dask``: a LocalCluster) with 2 workers;
+    ``jacobian``: overrides of the mapping's ``[jacobian]`` (default none: the mapping's)."""
     return f"""[rotor]
 name = "nrel5mw"
 
@@ -77,6 +78,7 @@ kind = "fmu"
 variant = "{variant}"
 switches = {_inline(SWITCHES)}
 steady = {_inline(MODEL_STEADY)}
+{"" if not jacobian else "jacobian = " + _inline(jacobian)}
 
 [grid]
 alpha_nodes_deg = [0.0, 10.0]
@@ -209,20 +211,23 @@ def run(n_seeds: int = 1, variants=("A", "B"), executor: str = "process") -> dic
     return out
 
 
-def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 0, executor: str = "process") -> dict:
+def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 0, executor: str = "process",
+         jacobian: dict | None = None) -> dict:
     """One diagnosis of :func:`run` (``variant``, ``data_set``, noise seed ``seed``) with its FMU
     simulations counted per step: :func:`calib.fmu.tally.process_totals` read at every progress line
     (the step that line starts or reports), so the counts say where the simulations went.
 
-    ``executor``: ``process`` (as :func:`run`) or ``dask`` (a Dask LocalCluster of 2 workers). Writes
+    ``executor``: ``process`` (as :func:`run`) or ``dask`` (a Dask LocalCluster of 2 workers); ``jacobian``
+    as :func:`config_text` (e.g. ``{"differences": "forward", "relative_step": 0.1}``). Writes
     nothing to the validation pages (counts only; the wall clock of a loaded machine is not published).
     """
     from calib.diagnosis.command import run_diagnose
     from calib.fmu.tally import process_totals
     from calib.measurements import Measurements
     WORK.mkdir(parents=True, exist_ok=True)
-    config = WORK / f"config_{variant}_{executor}.toml"
-    config.write_text(config_text(variant, executor))
+    tag = "" if not jacobian else "_" + "_".join(f"{v}" for v in jacobian.values())
+    config = WORK / f"config_{variant}_{executor}{tag}.toml"
+    config.write_text(config_text(variant, executor, jacobian))
     clean = truth_values(variant, DATA_SETS[data_set], WORK)
     rng = np.random.default_rng(SEED0 + 10 * seed)
     sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
@@ -240,9 +245,10 @@ def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 
 
     process_totals(reset=True)
     cpu0, t0 = time.process_time(), time.perf_counter()
-    d = run_diagnose(None, str(data), str(WORK / f"case_{variant}_{data_set}_{seed}_{executor}"), str(config),
+    d = run_diagnose(None, str(data), str(WORK / f"case_{variant}_{data_set}_{seed}_{executor}{tag}"), str(config),
                      printer=printer, history=False)
-    out = {"variant": variant, "data_set": data_set, "seed": seed, "executor": executor, "effect": d.effect,
+    out = {"variant": variant, "data_set": data_set, "seed": seed, "executor": executor, "jacobian": jacobian,
+           "effect": d.effect,
            "effects": d.effects, "chi2_per_dof_before": d.before["chi2_per_dof"],
            "chi2_per_dof_with_effects": d.with_effects["chi2_per_dof"], "totals": process_totals(),
            "main_process_cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - t0, "steps": steps}
@@ -311,9 +317,11 @@ if __name__ == "__main__":
         if len(sys.argv) > 3:
             Path(sys.argv[3]).write_text(json.dumps(res, indent=1))
     elif len(sys.argv) > 1 and sys.argv[1] == "case":
-        # python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json]]
+        # python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json
+        # [DIFFERENCES RELATIVE_STEP]]]
         args = sys.argv[2:]
-        res = case(*(args[:2]), *(int(a) for a in args[2:3]), *(args[3:4]))
+        jac = {"differences": args[5], "relative_step": float(args[6])} if len(args) > 6 else None
+        res = case(*(args[:2]), *(int(a) for a in args[2:3]), *(args[3:4]), jacobian=jac)
         if len(args) > 4:
             Path(args[4]).write_text(json.dumps(res, indent=1))
     else:
