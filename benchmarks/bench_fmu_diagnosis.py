@@ -22,7 +22,10 @@ Data sets (the truth's mapped parameters): ``control`` (nominal), ``pitch_offset
 (+1 deg on blade 1), ``stall_delay_strength`` (1.8 instead of 1). Right: ``none`` on the
 control, the data set's parameter (or ``ambiguous`` with it) on the others.
 
-``python benchmarks/bench_fmu_diagnosis.py [n_seeds]`` (default 1); under ``make validate``
+``python benchmarks/bench_fmu_diagnosis.py [n_seeds [process|dask]]`` (default 1, process; ``dask``
+runs the same diagnoses on a Dask LocalCluster of 2 workers and publishes nothing);
+``python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json]]`` runs one
+diagnosis with its simulations counted at every step (:func:`case`). Under ``make validate``
 ``run(n_seeds=1)``: 47.6 min on the shared 2-core machine (2026-11-25; 2-3 min per control,
 7-15 min per named effect), every verdict right, variant B's figures equal to A's. Writes ``bench_output/fmu_diagnosis.json`` and ``.md`` and publishes the table for the validation page
 (``docs/validation/data/diagnosis_fmu.json``); two worker
@@ -63,8 +66,10 @@ def _inline(table: dict) -> str:
     return "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in table.items()) + " }"
 
 
-def config_text(variant: str) -> str:
-    """The ``calib diagnose`` config of the model (the user's faster FMU configuration)."""
+def config_text(variant: str, executor: str = "process", jacobian: dict | None = None) -> str:
+    """The ``calib diagnose`` config of the model (the user's faster FMU configuration), its
+    simulations on ``executor`` (``process`` or ``dask``: a LocalCluster) with 2 workers;
+    ``jacobian``: overrides of the mapping's ``[jacobian]`` (default none: the mapping's)."""
     return f"""[rotor]
 name = "nrel5mw"
 
@@ -73,6 +78,7 @@ kind = "fmu"
 variant = "{variant}"
 switches = {_inline(SWITCHES)}
 steady = {_inline(MODEL_STEADY)}
+{"" if not jacobian else "jacobian = " + _inline(jacobian)}
 
 [grid]
 alpha_nodes_deg = [0.0, 10.0]
@@ -90,7 +96,7 @@ max_effects = 1
 recalibrate = false
 
 [executor]
-kind = "process"
+kind = "{executor}"
 workers = 2
 """
 
@@ -123,8 +129,11 @@ def truth_values(variant: str, values: dict, folder: Path):
     return ev.values
 
 
-def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
-    """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures."""
+def run(n_seeds: int = 1, variants=("A", "B"), executor: str = "process") -> dict:
+    """Diagnose every data set of both variants on ``n_seeds`` noise seeds; returns the figures.
+
+    ``executor``: ``process`` (published) or ``dask`` (a Dask LocalCluster of 2 workers; its figures
+    go to ``bench_output/fmu_diagnosis_dask.*`` and are not published)."""
     from calib.diagnosis.command import run_diagnose
     from calib.fmu.tally import process_totals
     from calib.measurements import Measurements
@@ -132,8 +141,8 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     WORK.mkdir(parents=True, exist_ok=True)
     rows, verdicts = [], []
     for variant in variants:
-        config = WORK / f"config_{variant}.toml"
-        config.write_text(config_text(variant))
+        config = WORK / f"config_{variant}{'' if executor == 'process' else '_' + executor}.toml"
+        config.write_text(config_text(variant, executor))
         for name, values in DATA_SETS.items():
             t0 = time.perf_counter()
             clean = truth_values(variant, values, WORK)
@@ -149,7 +158,7 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                 meas.write_csv(data)
                 t1 = time.perf_counter()
                 process_totals(reset=True)
-                d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}"), str(config),
+                d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}{'' if executor == 'process' else '_' + executor}"), str(config),
                                  printer=lambda line: None, history=False)
                 seconds.append(time.perf_counter() - t1)
                 sims.append(process_totals())
@@ -175,8 +184,11 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                              [v["chi2_per_dof_before"] for v in verdicts[-n_seeds:]]))})
     out = {"n_seeds": n_seeds, "rows": rows, "verdicts": verdicts, "wall_seconds": time.perf_counter() - t_start,
            "truth_steady": TRUTH_STEADY, "model_steady": MODEL_STEADY, "switches": SWITCHES}
-    OUT_JSON.parent.mkdir(parents=True, exist_ok=True)
-    OUT_JSON.write_text(json.dumps(out, indent=1))
+    out["executor"] = executor
+    suffix = "" if executor == "process" else "_" + executor
+    out_json, out_md = (p.with_name(p.stem + suffix + p.suffix) for p in (OUT_JSON, OUT_MD))
+    out_json.parent.mkdir(parents=True, exist_ok=True)
+    out_json.write_text(json.dumps(out, indent=1))
     lines = [f"# calib diagnose on the bundled FMUs ({n_seeds} seeds, {out['wall_seconds'] / 60:.1f} min)", "",
              "Truth: the FMU at 72 steps/rev, 10 + 4 revolutions; model: the same FMU at 24 steps/rev, 4 + 2.", "",
              "| variant | data set | right / total | verdicts | χ²/dof before (median) | simulations / diagnosis "
@@ -187,8 +199,10 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
                      f"{', '.join(f'{k} {v}' for k, v in r['verdicts'].items())} | "
                      f"{r['chi2_per_dof_before_median']:.3g} | {r['simulations_per_diagnosis']:.0f} | "
                      f"{r['seconds_per_diagnosis']:.0f} |")
-    OUT_MD.write_text("\n".join(lines) + "\n")
+    out_md.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    if executor != "process":
+        return out
     from publish import command_line, publish
 
     publish("diagnosis_fmu", {k: v for k, v in out.items() if k != "verdicts"}, command_line(),
@@ -197,5 +211,119 @@ def run(n_seeds: int = 1, variants=("A", "B")) -> dict:
     return out
 
 
+def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 0, executor: str = "process",
+         jacobian: dict | None = None) -> dict:
+    """One diagnosis of :func:`run` (``variant``, ``data_set``, noise seed ``seed``) with its FMU
+    simulations counted per step: :func:`calib.fmu.tally.process_totals` read at every progress line
+    (the step that line starts or reports), so the counts say where the simulations went.
+
+    ``executor``: ``process`` (as :func:`run`) or ``dask`` (a Dask LocalCluster of 2 workers); ``jacobian``
+    as :func:`config_text` (e.g. ``{"differences": "forward", "relative_step": 0.1}``). Writes
+    nothing to the validation pages (counts only; the wall clock of a loaded machine is not published).
+    """
+    from calib.diagnosis.command import run_diagnose
+    from calib.fmu.tally import process_totals
+    from calib.measurements import Measurements
+    WORK.mkdir(parents=True, exist_ok=True)
+    tag = "" if not jacobian else "_" + "_".join(f"{v}" for v in jacobian.values())
+    config = WORK / f"config_{variant}_{executor}{tag}.toml"
+    config.write_text(config_text(variant, executor, jacobian))
+    clean = truth_values(variant, DATA_SETS[data_set], WORK)
+    rng = np.random.default_rng(SEED0 + 10 * seed)
+    sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
+    noisy = clean + rng.standard_normal(clean.shape) * sigma
+    meas = Measurements(conditions(), tuple(CHANNELS), noisy, np.broadcast_to(sigma, noisy.shape).copy(),
+                        source=f"fmu {variant} {data_set} seed {seed}")
+    data = WORK / f"{variant}_{data_set}_{seed}.csv"
+    meas.write_csv(data)
+    steps = []
+
+    def printer(line):
+        steps.append({"line": line, "cpu_s": time.process_time(), **process_totals()})
+        print(f"  [{steps[-1]['simulations']:5d} sims, {steps[-1]['reused_base_runs']:4d} + "
+              f"{steps[-1]['reused_perturbed_runs']:4d} reused] {line}", flush=True)
+
+    process_totals(reset=True)
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    d = run_diagnose(None, str(data), str(WORK / f"case_{variant}_{data_set}_{seed}_{executor}{tag}"), str(config),
+                     printer=printer, history=False)
+    out = {"variant": variant, "data_set": data_set, "seed": seed, "executor": executor, "jacobian": jacobian,
+           "effect": d.effect,
+           "effects": d.effects, "chi2_per_dof_before": d.before["chi2_per_dof"],
+           "chi2_per_dof_with_effects": d.with_effects["chi2_per_dof"], "totals": process_totals(),
+           "main_process_cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - t0, "steps": steps}
+    print(json.dumps({k: v for k, v in out.items() if k != "steps"}, indent=1))
+    return out
+
+
+#: The difference schemes :func:`difference_error` compares (scheme, relative step) and its reference: the
+#: mapping's default (central 0.01), the step above the output jumps (bench_fmu_run's study), one-sided.
+SCHEMES = (("central", 0.01), ("forward", 0.1), ("central", 0.1))
+REFERENCE = ("central", 0.2)
+
+
+def difference_error(variant: str = "A") -> dict:
+    """The Jacobian of the diagnosis's FMU model (:func:`config_text`: the correction field's 8 nodes and
+    the 3 candidates, at nominal, at the campaign) by each of :data:`SCHEMES`, against :data:`REFERENCE`.
+
+    Per scheme and parameter: the column's relative error in the noise-whitened norm
+    ``||ΔG_j / σ|| / ||G_j / σ||`` and the largest entry ``|ΔG_kcj| σ_j / σ_kc`` with ``σ_j = 1 / ||G_j / σ||``
+    (the σ of that parameter fitted alone): the error of a linearized prediction over that σ, in noise σ;
+    σ the campaign's 1 % of each channel's RMS. Also the simulations each scheme made.
+    """
+    from calib.corrections import CorrectionGrid
+    from calib.executors import ProcessExecutor
+    from calib.fmu.base_runs import BaseRunCache
+    from calib.fmu.tally import process_totals
+    from calib.models.from_config import model_from_workflow
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    cond, grid = conditions(), CorrectionGrid([0.0, 10.0], [0.6, 1.0])
+    cache = BaseRunCache()
+    with ProcessExecutor(2) as ex:
+        def jacobian(differences, step):
+            model = model_from_workflow({"kind": "fmu", "variant": variant, "switches": SWITCHES, "steady": MODEL_STEADY,
+                                         "parameters": CANDIDATES, "corrections": True,
+                                         "jacobian": {"differences": differences, "relative_step": step}},
+                                        {"name": "nrel5mw"}, CHANNELS, str(WORK / "difference.toml"), WORK, grid=grid,
+                                        executor=ex)
+            model.base_runs = cache
+            try:
+                before = process_totals()["simulations"]
+                ev, G = model.jacobian(np.array([q.nominal for q in model.parameters]), cond)
+                return ev, G, [q.name for q in model.parameters], process_totals()["simulations"] - before
+            finally:
+                model.close()
+        ev, G_ref, names, n_ref = jacobian(*REFERENCE)
+        found = {k: jacobian(*k) for k in SCHEMES}
+    sigma = 0.01 * np.sqrt(np.nanmean(ev.values ** 2, axis=0))[None, :, None]
+    W = G_ref / sigma
+    norm = np.sqrt(np.nansum(W ** 2, axis=(0, 1)))
+    out = {"parameters": names, "reference": f"{REFERENCE[0]} {REFERENCE[1]:g}", "reference_simulations": n_ref}
+    for (scheme, step), (_, G, _, n) in found.items():
+        dW = (G - G_ref) / sigma
+        out[f"{scheme} {step:g}"] = {
+            "simulations": n,
+            "column_error": (np.sqrt(np.nansum(dW ** 2, axis=(0, 1))) / norm).tolist(),
+            "max_entry_error": (np.nanmax(np.abs(dW), axis=(0, 1)) / norm).tolist()}
+    return out
+
+
 if __name__ == "__main__":
-    run(int(sys.argv[1]) if len(sys.argv) > 1 else 1)
+    if len(sys.argv) > 1 and sys.argv[1] == "difference-error":
+        # python benchmarks/bench_fmu_diagnosis.py difference-error [VARIANT [OUT.json]]
+        res = difference_error(*(sys.argv[2:3]))
+        print(json.dumps(res, indent=1))
+        if len(sys.argv) > 3:
+            Path(sys.argv[3]).write_text(json.dumps(res, indent=1))
+    elif len(sys.argv) > 1 and sys.argv[1] == "case":
+        # python benchmarks/bench_fmu_diagnosis.py case [VARIANT DATA_SET SEED EXECUTOR [OUT.json
+        # [DIFFERENCES RELATIVE_STEP]]]
+        args = sys.argv[2:]
+        jac = {"differences": args[5], "relative_step": float(args[6])} if len(args) > 6 else None
+        res = case(*(args[:2]), *(int(a) for a in args[2:3]), *(args[3:4]), jacobian=jac)
+        if len(args) > 4:
+            Path(args[4]).write_text(json.dumps(res, indent=1))
+    else:
+        # python benchmarks/bench_fmu_diagnosis.py [N_SEEDS [EXECUTOR]]
+        run(int(sys.argv[1]) if len(sys.argv) > 1 else 1, executor=sys.argv[2] if len(sys.argv) > 2 else "process")

@@ -15,7 +15,12 @@ Steps
    tip-speed ratio, pitch and wind speed the residuals say where it is not.
 2. **Localize**: the SVD calibration of the correction field (:class:`calib.calibration.calibrator.Calibrator`,
    automatic truncation) says which (α, η) region of the polars would have to change; with
-   ``noise = "ml"`` it also gives the noise σ the later steps use.
+   ``noise = "ml"`` it also gives the noise σ the later steps use, and runs before step 1. With a
+   stated noise step 1 and its χ² gate come first: a nominal model that passes the gate is not
+   localized (no candidate is fitted, so nothing uses the localized correction), unless the
+   recalibration is asked for, which on the nominal model with the stated σ is the localization's
+   fit (the same field model, σ and settings): it is run once and serves as both
+   (``Diagnosis.localization`` is None when it did not run).
 3. **Name**: every candidate effect of :data:`calib.effects.EFFECTS` (but the correction field)
    is switched into the model on its own and fitted by maximum likelihood (all its few
    parameters free); an effect with several model forms (rotational augmentation: Snel,
@@ -70,6 +75,7 @@ import numpy as np
 from calib.bem import BemSettings
 from calib.calibration.calibrator import CalibrationSettings, Calibrator
 from calib.calibration.errors_in_variables import uncertain_conditions
+from calib.calibration.noise import initial_sigma
 from calib.corrections import CorrectionGrid
 from calib.diagnosis.bem_family import BemFamily, facility_effects
 from calib.diagnosis.figures_of_merit import find, gap
@@ -139,22 +145,38 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     say = progress or (lambda s: None)
     wrap = wrap or (lambda model, label: model)
 
-    # 2. localize (first: with noise = "ml" it gives the σ every later step uses)
-    loc, meas = _localize(family, measurements, cal, wrap, on_iteration, say)
-    sigma = loc.fit.sigma
-
-    # 1. find
-    y0, before, findings = _find_disagreement(family, meas, wrap, say, loc.noise_words())
+    if cal.noise in ESTIMATED_NOISE:
+        # 2. localize first: it estimates the σ every later step uses
+        loc, meas = _localize(family, measurements, cal, wrap, on_iteration, say)
+        # 1. find
+        y0, before, findings = _find_disagreement(family, meas, wrap, say, loc.noise_words())
+        consistent = None
+    else:
+        # 1. find first: the σ is stated, and a nominal model that passes the χ² gate needs no
+        # localization (its field fit is run only when the recalibration needs it, and then once)
+        meas = dataclasses.replace(measurements, sigma=initial_sigma(measurements, cal))
+        y0, before, findings = _find_disagreement(family, meas, wrap, say, _stated_noise_words(cal, meas, family))
+        consistent = _consistent(meas, y0, before, dset)
+        loc = None
+        if consistent is None or dset.recalibrate:
+            loc, _ = _localize(family, measurements, cal, wrap, on_iteration, say)
+        else:
+            say("localize: not run: the nominal model passes the χ² test against the stated noise, so there is "
+                "nothing to localize")
+    sigma = meas.sigma
 
     # 3. name, up to max_effects rounds (a round that fails ends the naming; earlier rounds stand),
     # against the noise plus the model-form tolerance
-    namer = _name_effects(family, meas, y0, before, loc.fit.model_after, cal, dset, executor, wrap, fit_progress, say)
+    namer = _name_effects(family, meas, y0, before, None if loc is None else loc.fit.model_after, cal, dset,
+                          executor, wrap, fit_progress, say, consistent)
     effect, effects_named = namer.verdict()
     n_fit = family.n_parameters(namer.base_effects)
     with_effects = gap(meas.values, namer.base_values, sigma, channels, n_fit)
 
-    # 4. add + recalibrate the field on top
-    recal = _recalibrate(family, namer, meas, cal, dset, wrap, on_iteration, say, effects_named)
+    # 4. add + recalibrate the field on top (with the stated σ and nothing named, the localization
+    # is that fit: it is reused, not run again)
+    same_fit = loc if (cal.noise not in ESTIMATED_NOISE and not namer.base_effects) else None
+    recal = _recalibrate(family, namer, meas, cal, dset, wrap, on_iteration, say, effects_named, same_fit)
     y_after = None if recal is None else recal.fit.model_after
     after = with_effects if recal is None else gap(meas.values, y_after, sigma, channels, n_fit + recal.n_retained)
     say(f"show: χ²/dof {before['chi2_per_dof']:.3g} -> {with_effects['chi2_per_dof']:.3g} with "
@@ -163,7 +185,43 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
     return Diagnosis(effect, effects_named, namer.rounds, before, with_effects, after, findings, loc, recal, channels,
                      meas.values, sigma, meas.conditions.as_dict(), y0, namer.base_values, y_after,
                      family.rotor_radius, time.perf_counter() - t0, namer.notes, "; ".join(namer.failures),
-                     model_form=namer.model_form)
+                     model_form=namer.model_form, channel_units=_channel_units(family, channels))
+
+
+def _channel_units(family, channels: list) -> list:
+    """The units of ``channels`` as the nominal model states them ("" where it does not)."""
+    units = {c.name: c.unit for c in family.nominal_model().channels}
+    return [units.get(c, "") for c in channels]
+
+
+def _stated_noise_words(cal: CalibrationSettings, meas: Measurements, family) -> str:
+    """Which stated noise the χ² is against, in the words of
+    :meth:`~calib.calibration.result.CalibrationResult.noise_words` (which says it for a fit)."""
+    how = {"known": "the stated σ", "repeats": "the σ of the repeated records",
+           "relative": "the stated σ relative to each point's value"}.get(cal.noise, cal.noise)
+    if cal.noise == "relative":
+        return f"{how} ({cal.noise})"
+    units = _channel_units(family, list(meas.channels))
+    return f"{how} ({cal.noise}): " + ", ".join(f"{c} {float(s):.3g} {u}" for c, u, s in
+                                                   zip(meas.channels, units, meas.sigma[0]))
+
+
+def _consistent(meas: Measurements, y0: np.ndarray, before: dict, dset: DiagnosisSettings) -> dict | None:
+    """The global χ² gate of a stated noise: the nominal model's :func:`gap` against the noise plus
+    the model-form tolerance (the naming's σ) when it passes at ``significance``, with
+    ``within_tolerance`` (it misses the noise alone); None when it fails (effects are looked for)."""
+    sigma = _naming_sigma(meas, y0, dset)
+    before_name = gap(meas.values, y0, sigma, list(meas.channels))
+    if before_name["p_value"] < dset.significance:
+        return None
+    return {"gap": before_name, "within_tolerance": before["p_value"] < dset.significance}
+
+
+def _naming_sigma(meas: Measurements, y0: np.ndarray, dset: DiagnosisSettings) -> np.ndarray:
+    """The naming's σ: the noise plus the model-form tolerance, shape (n_points, n_channels)
+    [channel units]."""
+    tol = dset.tolerance_of(list(meas.channels))
+    return np.hypot(meas.sigma, tol * np.abs(np.nan_to_num(y0)))
 
 
 def _refuse_condition_sigma(measurements: Measurements, cal: CalibrationSettings) -> None:
@@ -217,17 +275,20 @@ def _find_disagreement(family, meas: Measurements, wrap: Callable, say: Callable
     return y0, before, findings
 
 
-def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, field_after: np.ndarray,
+def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, field_after: np.ndarray | None,
                   cal: CalibrationSettings, dset: DiagnosisSettings, executor, wrap: Callable, fit_progress,
-                  say: Callable[[str], None]) -> Namer:
+                  say: Callable[[str], None], consistent: dict | None = None) -> Namer:
     """Step 3: the naming rounds, against the noise plus the model-form tolerance.
 
     Parameters
     ----------
     y0, field_after : ndarray, shape (n_points, n_channels)
-        The nominal model's outputs and the localized correction's [channel units].
+        The nominal model's outputs and the localized correction's [channel units]; ``field_after``
+        None when nothing was localized (then ``consistent`` is given: no candidate is fitted).
     before : dict
         The nominal model's :func:`gap` against the noise alone.
+    consistent : dict, optional
+        :func:`_consistent`'s passed gate of a stated noise, decided before the localization.
 
     Returns
     -------
@@ -243,9 +304,10 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
         executor = SerialExecutor()
     known = dataclasses.replace(cal, noise="known", sigma=None, retain="all")
     tol = dset.tolerance_of(channels)
-    meas_name = dataclasses.replace(meas, sigma=np.hypot(meas.sigma, tol * np.abs(np.nan_to_num(y0))))
+    meas_name = dataclasses.replace(meas, sigma=_naming_sigma(meas, y0, dset))
     before_name = gap(meas.values, y0, meas_name.sigma, channels)
-    namer = Namer(family, meas_name, y0, before_name["chi2"], (field_after - y0) / meas_name.sigma, dset,
+    field_change = None if field_after is None else (field_after - y0) / meas_name.sigma
+    namer = Namer(family, meas_name, y0, before_name["chi2"], field_change, dset,
                    known, executor, wrap, fit_progress, say, tol)
     for effect in getattr(family, "fixed", ()):
         namer.notes.append(f"every model includes Glauert's blockage at the known area ratio "
@@ -254,29 +316,37 @@ def _name_effects(family, meas: Measurements, y0: np.ndarray, before: dict, fiel
         if name in family.names:
             namer.notes.append(f"{name} is not a candidate: {why}")
             say(f"name: {namer.notes[-1]}")
-    # the global test gates everything, where the noise is stated: an estimated σ is fitted to the
-    # localization's residuals, so the nominal model would pass against it by construction
-    if cal.noise not in ESTIMATED_NOISE and before_name["p_value"] >= dset.significance:
-        namer.consistent(before_name, within_tolerance=before["p_value"] < dset.significance)
+    # the global test gates everything, where the noise is stated (decided before, by _consistent):
+    # an estimated σ is fitted to the localization's residuals, so the nominal model would pass
+    # against it by construction
+    if consistent is not None:
+        namer.consistent(consistent["gap"], within_tolerance=consistent["within_tolerance"])
     else:
         namer.run(candidates)
     return namer
 
 
-def _recalibrate(family, namer: Namer, meas, cal, dset, wrap, on_iteration, say, effects_named):
+def _recalibrate(family, namer: Namer, meas, cal, dset, wrap, on_iteration, say, effects_named, same_fit=None):
     """The correction field recalibrated on top of the named effects (a CalibrationResult), or
-    None when switched off or when it fails (the failure is noted)."""
+    None when switched off or when it fails (the failure is noted).
+
+    ``same_fit``: a result of this very fit (the localization, with a stated σ and nothing named:
+    the same field model, σ and settings), taken instead of fitting again."""
     if not dset.recalibrate:
         return None
-    model = wrap(family.field_model(namer.base_effects), "recalibration")
-    known_field = dataclasses.replace(cal, noise="known", sigma=None)
-    say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model"))
-    try:
-        recal = Calibrator(model, meas, known_field, _tagged(on_iteration, "recalibration"),
-                           name="recalibration").run()
-    except CalibError as exc:
-        namer.fail(f"the recalibration failed: {exc}; the figures after it are those with the named effect(s)")
-        return None
+    say("recalibrate: correction field on top of " + (", ".join(effects_named) or "the nominal model")
+        + (" (the localization's fit: the same model, σ and settings)" if same_fit is not None else ""))
+    if same_fit is not None:
+        recal = same_fit
+    else:
+        model = wrap(family.field_model(namer.base_effects), "recalibration")
+        known_field = dataclasses.replace(cal, noise="known", sigma=None)
+        try:
+            recal = Calibrator(model, meas, known_field, _tagged(on_iteration, "recalibration"),
+                               name="recalibration").run()
+        except CalibError as exc:
+            namer.fail(f"the recalibration failed: {exc}; the figures after it are those with the named effect(s)")
+            return None
     chi2 = gap(meas.values, recal.fit.model_after, meas.sigma, list(meas.channels))["chi2"]
     start = gap(meas.values, namer.base_values, meas.sigma, list(meas.channels))["chi2"]
     if not chi2 <= start * (1 + RECALIBRATION_SLACK):

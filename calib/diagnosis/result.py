@@ -62,7 +62,7 @@ class Diagnosis:
     with_effects: dict
     after: dict
     find: dict
-    localization: object               # CalibrationResult of the correction field alone
+    localization: object               # CalibrationResult of the correction field alone (None: not run, see core)
     recalibration: object              # CalibrationResult on top of the named effects (or None)
     channels: list
     measured: np.ndarray
@@ -77,6 +77,7 @@ class Diagnosis:
     failure: str = ""                  # why the diagnosis stopped early ("" when it ran to the end)
     setup: list = field(default_factory=list)   # calib.report.setup_statement.SetupItem: the set-up in force
     model_form: list = field(default_factory=list)  # model-form parameters named (in ``effects`` too), in order
+    channel_units: list = field(default_factory=list)   # units of ``channels``, as the model states them
 
     @property
     def candidates(self) -> list:
@@ -104,9 +105,10 @@ class Diagnosis:
                 "before": self.before, "with_effects": self.with_effects, "after": self.after,
                 "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,
                 "failure": self.failure, "setup": [i.as_dict() for i in self.setup],
-                "localization": {"n_retained": self.localization.n_retained,
-                                 "chi2_per_dof_after": self.localization.chi2_per_dof_after,
-                                 "status": self.localization.estimate.status},
+                "localization": None if self.localization is None else {
+                    "n_retained": self.localization.n_retained,
+                    "chi2_per_dof_after": self.localization.chi2_per_dof_after,
+                    "status": self.localization.estimate.status},
                 "recalibration": None if self.recalibration is None else {
                     "n_retained": self.recalibration.n_retained, "status": self.recalibration.estimate.status,
                     "chi2_per_dof_after": self.recalibration.chi2_per_dof_after}}

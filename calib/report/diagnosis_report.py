@@ -305,7 +305,8 @@ def _evidence_html(d, figs: dict[str, Path]) -> list[str]:
 def _gap_html(d, figs: dict[str, Path]) -> list[str]:
     """Where the nominal model misses (trends per channel, the residual figure) and how much the
     misfit shrank with the named effect(s) and the recalibration."""
-    units = dict(zip(d.localization.channels, d.localization.channel_units)) if d.localization is not None else {}
+    units = dict(zip(d.channels, d.channel_units)) if d.channel_units else (
+        dict(zip(d.localization.channels, d.localization.channel_units)) if d.localization is not None else {})
     gap_rows = [(html.escape(label), f"{g['chi2_per_dof']:.3g}", g["dof"], html.escape(p_text(g['p_value'])),
                  html.escape(", ".join(f"{c} {v:.4g} {units.get(c, '')}".rstrip() for c, v in g["rms"].items())))
                 for label, g in (("nominal", d.before), ("with " + (", ".join(d.effects) or "no effect"),
@@ -328,9 +329,13 @@ def _gap_html(d, figs: dict[str, Path]) -> list[str]:
 
 def _closing_html(d) -> list[str]:
     """The localization by the correction field alone, an empty recalibration, the notes and the set-up."""
-    body = [(f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
-             f"{d.localization.chi2_per_dof_after:.3g} (a θ is one combination of polar corrections the data "
-             f"determine; its eigenshape says where on the (α, r/R) plane it acts).</p>")]
+    if d.localization is None:
+        body = ["<p>Localization (correction field alone): not run. The nominal model passes the χ² test "
+                "against the stated noise, so there is no disagreement to localize.</p>"]
+    else:
+        body = [(f"<p>Localization (correction field alone): {d.localization.n_retained} θ retained, χ²/dof "
+                 f"{d.localization.chi2_per_dof_after:.3g} (a θ is one combination of polar corrections the data "
+                 f"determine; its eigenshape says where on the (α, r/R) plane it acts).</p>")]
     rec = d.recalibration
     if rec is not None and rec.n_retained == 0:
         body.append("<p>The recalibration retained 0 θ: nothing is left that the correction field explains "
