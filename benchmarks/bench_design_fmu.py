@@ -38,6 +38,9 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
+sys.path.insert(0, HERE)
+
+from bench_fmu_run import _toml  # noqa: E402  (the workflow TOML writer of the FMU run benchmark)
 
 SUITE = "validate"
 OUT = Path(ROOT) / "bench_output" / "design_fmu"
@@ -50,18 +53,6 @@ JACOBIAN = dict(differences="forward", relative_step=0.1)
 N = 6
 GRID = (6, 3)
 SEED = 3900
-
-
-def _toml(value) -> str:
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return f'"{value}"'
-    return repr(value)
 
 
 def workflow(out: Path = OUT) -> Path:
