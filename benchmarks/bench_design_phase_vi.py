@@ -19,13 +19,29 @@ stated noise fractions.
    Spearman rank correlation of the design's scores with the realized ones (over the 5, 10 and 10
    subsets).
 
-``python benchmarks/bench_design_phase_vi.py`` (26 leave-one-out validations of six folds each).
+4. *Four proxies* (pre-registered in the CHANGELOG before they were measured; no constant set from the
+   realized ranking), each compared with the realized ranking as in 3 and against its noise
+   (:func:`ranking_noise`):
+
+   (a) ``variance``: the held-out prediction variance of step 1 (default discrepancy κ = 1);
+   (b) ``variance_misfit``: the same with κ from the hub-only campaign's misfit, κ² = its held-out mean
+       squared torque/thrust error over the design's noise variance, minus 1 (:func:`misfit_kappa`);
+   (c) ``sequential``: the hub-only calibration's posterior as the prior, linearized at its MAP (``calib
+       design --after``), the torque/thrust model output's variance after the stations' data alone
+       (:func:`calib.design.groups.subset_sequential`, discrepancy at (b)'s κ);
+   (d) ``heldout_error``: the expected held-out squared error of the calibration as it is run (no discrepancy)
+       under a truth with the discrepancy at (b)'s κ, variance plus bias
+       (:func:`calib.design.groups.subset_heldout_error`).
+
+``python benchmarks/bench_design_phase_vi.py`` (26 leave-one-out validations of six folds each, one full
+hub-only calibration).
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
 import time
 from itertools import combinations
 
@@ -36,8 +52,10 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
 from calib.design import problem_from_workflow  # noqa: E402
+from calib.calibration.calibrator import Calibrator  # noqa: E402
 from calib.design.core import DEFAULT_DISCREPANCY  # noqa: E402
-from calib.design.groups import subset_scores  # noqa: E402
+from calib.design.discrepancy import Discrepancy  # noqa: E402
+from calib.design.groups import subset_heldout_error, subset_scores, subset_sequential  # noqa: E402
 from calib.diagnosis.core import diagnose  # noqa: E402
 from calib.diagnosis.in_workflow import named_effect_specs  # noqa: E402
 from calib.measurements import read_measurements  # noqa: E402
@@ -48,6 +66,59 @@ SUITE = "validate"
 WORKFLOW = os.path.join(ROOT, "workflows", "phase_vi.toml")
 STATIONS = ("0.30", "0.47", "0.63", "0.80", "0.95")
 HUB = ("torque", "thrust")
+#: The pre-registered proxies (smaller is better for each), in the order of the CHANGELOG.
+PROXIES = ("variance", "variance_misfit", "sequential", "heldout_error")
+PROXY_WORDS = {"variance": "(a) held-out variance, κ = 1", "variance_misfit": "(b) held-out variance, κ from the misfit",
+               "sequential": "(c) after the hub-only calibration", "heldout_error": "(d) held-out error, variance + bias"}
+
+
+def misfit_kappa(hub_only: dict, sigma: dict) -> float:
+    """The discrepancy's amplitude over the noise the hub-only campaign shows: κ² = the mean over torque and
+    thrust of its held-out mean squared error over the design's noise variance σ_c², minus 1 (0 when the
+    model is as good as the noise) [-]."""
+    r = [np.mean([(f["measured"] - f["predicted"]) ** 2 for f in hub_only["folds"][ch]]) / sigma[ch] ** 2
+         for ch in HUB]
+    return float(np.sqrt(max(np.mean(r) - 1.0, 0.0)))
+
+
+def hub_only_result(setup, meas, grid, effects, out_dir):
+    """The hub-only calibration on every wind speed, saved as a result folder for ``after``."""
+    res = Calibrator(setup.model(grid, list(HUB), None, effects), meas.select_channels(list(HUB)),
+                     setup.calibration, name="hub loads").run()
+    res.save(out_dir)
+    return res
+
+
+def tap_errors(setup, meas, grid, effects, p_hat) -> dict:
+    """After the fact (the taps measured; no design proxy): each station's c_n and c_t RMS error over the
+    measured RMS, of the nominal model and of the hub-only calibration's estimate ``p_hat``."""
+    chans = [f"{q}@{s}" for s in STATIONS for q in ("cn", "ct")]
+    model = setup.model(grid, chans, None, effects)
+    y = meas.select_channels(chans).values
+    rms = np.sqrt(np.mean(y ** 2, axis=0))
+    err = {}
+    for label, p in (("nominal", np.array([q.nominal for q in model.parameters], float)), ("hub_calibrated", p_hat)):
+        ev = model.evaluate(np.asarray(p, float), meas.conditions)
+        err[label] = (np.sqrt(np.mean((ev.values - y) ** 2, axis=0)) / rms).reshape(len(STATIONS), 2).tolist()
+    return err
+
+
+def proxy_scores(problem, after_problem, cond, kappa: float) -> dict:
+    """Every proxy's score of every subset of k stations, k = 1, 2, 3: {k: {proxy: list}}."""
+    misfit = Discrepancy(max(kappa, 1e-6), DEFAULT_DISCREPANCY.length)
+    out = {}
+    for k in (1, 2, 3):
+        kw = {"always": HUB, "targets": HUB}
+        out[k] = {
+            "variance": [d["heldout_variance"] for d in subset_scores(problem, cond, k, discrepancy=DEFAULT_DISCREPANCY,
+                                                                      **kw)],
+            "variance_misfit": [d["heldout_variance"] for d in subset_scores(problem, cond, k, discrepancy=misfit,
+                                                                             **kw)],
+            "sequential": [d["target_variance"] for d in subset_sequential(after_problem, cond, k, discrepancy=misfit,
+                                                                           **kw)],
+            "heldout_error": [d["heldout_error"] for d in subset_heldout_error(problem, cond, k, discrepancy=misfit,
+                                                                               **kw)]}
+    return out
 
 
 def spearman(a, b) -> float:
@@ -162,7 +233,8 @@ def run_bench() -> dict:
     diag = diagnose(setup.rotor, meas, grid, setup.settings, setup.calibration, dset, rotor_source=setup.rotor_spec)
     effects = named_effect_specs(diag, skip=setup.nuisance)
     print(f"[design-phase-vi] diagnosis names {diag.effects} ({time.process_time() - t:.0f} s CPU)", flush=True)
-    problem = problem_from_workflow(WORKFLOW, sensors=list(HUB) + [f"taps@{s}" for s in STATIONS], effects=effects)
+    sensors = list(HUB) + [f"taps@{s}" for s in STATIONS]
+    problem = problem_from_workflow(WORKFLOW, sensors=sensors, effects=effects)
     cond = meas.conditions
     t = time.process_time()
     design = {k: subset_scores(problem, cond, k, always=HUB, targets=HUB, discrepancy=DEFAULT_DISCREPANCY)
@@ -171,8 +243,23 @@ def run_bench() -> dict:
     t_design = time.process_time() - t
     base = realized(setup, meas, grid, effects, ())
     every = realized(setup, meas, grid, effects, STATIONS)
+    # what an engineer knows after the hub-load campaign: its calibration and its held-out misfit
+    sigma = dict(zip(problem.channels, problem.sigma))
+    kappa = misfit_kappa(base, sigma)
+    with tempfile.TemporaryDirectory() as tmp:
+        res = hub_only_result(setup, meas, grid, effects, tmp)
+        after = problem_from_workflow(WORKFLOW, sensors=sensors, effects=effects, after=tmp)
+    status = res.estimate.status
+    taps = tap_errors(setup, meas, grid, effects, res.estimate.p_hat)
+    t = time.process_time()
+    proxies = proxy_scores(problem, after, cond, kappa)
+    t_proxies = time.process_time() - t
+    print(f"[design-phase-vi] misfit κ {kappa:.2f}; hub-only calibration {status}; proxies {t_proxies:.0f} s CPU",
+          flush=True)
     out = {"named": list(diag.effects), "parameters": len(problem.names), "points": len(cond),
-           "design_cpu_s": t_design, "hub_only": base, "all_five": every, "k": {}}
+           "design_cpu_s": t_design, "hub_only": base, "all_five": every, "k": {},
+           "misfit_kappa": kappa, "hub_only_status": status, "proxies_cpu_s": t_proxies,
+           "sigma": {ch: float(sigma[ch]) for ch in HUB}, "tap_errors": taps}
     for k in (1, 2, 3):
         subsets = list(combinations(STATIONS, k))
         real = [realized(setup, meas, grid, effects, s) for s in subsets]
@@ -191,8 +278,23 @@ def run_bench() -> dict:
             "pick_at_least_median": bool(score[pick] <= np.median(score)),
             "spearman_heldout_variance": spearman(var, score), "spearman_ds": spearman(-ds, score),
             "spearman_heldout_variance_plain": spearman(var_plain, score),
-            "noise": ranking_noise(real, var), "noise_ds": ranking_noise(real, -ds)}
+            "noise": ranking_noise(real, var), "noise_ds": ranking_noise(real, -ds),
+            "proxies": {name: proxy_summary(proxies[k][name], score, real) for name in PROXIES}}
+    out["agrees_within_noise"] = {name: all(r["proxies"][name]["within_noise"] for r in out["k"].values())
+                                  for name in PROXIES}
     return out
+
+
+def proxy_summary(values, score, real) -> dict:
+    """A proxy's scores, its pick, and its agreement with the realized ranking against that ranking's noise:
+    within the noise when the observed Spearman is above the 5 % quantile of the realized ranking against
+    its own resamples (the pre-registered rule)."""
+    v = np.asarray(values, float)
+    noise = ranking_noise(real, v)
+    pick = int(np.argmin(v))
+    return {"values": v.tolist(), "spearman": noise["observed"], "pick": pick, "pick_score": float(score[pick]),
+            "pick_rank": int(np.sum(score < score[pick])) + 1, "noise": noise,
+            "within_noise": bool(noise["observed"] > noise["ceiling_5_95"][0])}
 
 
 def markdown(out: dict) -> str:
@@ -218,6 +320,19 @@ def markdown(out: dict) -> str:
                     f"{q['design_5_95'][1]:.2f}) | {q['ceiling_median']:.2f} ({q['ceiling_5_95'][0]:.2f} to "
                     f"{q['ceiling_5_95'][1]:.2f}) | {q['p_permutation']:.2f} | {100 * q['pick_best']:.0f} %, "
                     f"{100 * q['pick_at_least_median']:.0f} % |")
+    if "misfit_kappa" in out:
+        rows += ["", f"**Four proxies, pre-registered** (the CHANGELOG's issue-39 section; κ from the hub-only "
+                 f"campaign's misfit: {out['misfit_kappa']:.2f}). Each cell: Spearman with the realized scores, and "
+                 "the rank of the proxy's pick; within the noise (✓) when the Spearman is above the 5 % quantile of "
+                 "the realized ranking against its own resamples "
+                 f"({', '.join(format(out['k'][k]['noise']['ceiling_5_95'][0], '.2f') for k in ('1', '2', '3'))} for "
+                 "k = 1, 2, 3):", "", "| proxy | k = 1 (of 5) | k = 2 (of 10) | k = 3 (of 10) |", "|---|---|---|---|"]
+        for name in PROXIES:
+            cells = []
+            for k in ("1", "2", "3"):
+                q = out["k"][k]["proxies"][name]
+                cells.append(f"{q['spearman']:.2f}{' ✓' if q['within_noise'] else ''}, pick {q['pick_rank']}")
+            rows.append(f"| {PROXY_WORDS[name]} | " + " | ".join(cells) + " |")
     r1 = out["k"]["1"]
     rows += ["", "Single stations (k = 1): held-out prediction variance the design predicts [σ²] and the realized "
              "score:", "", "| station r/R | predicted variance | D_s | realized score | torque / thrust error [N m, N] |",
@@ -225,6 +340,15 @@ def markdown(out: dict) -> str:
     for name, v, d, real in zip(r1["subsets"], r1["heldout_variance"], r1["ds_logdet"], r1["realized"]):
         rows.append(f"| {name} | {v:.3g} | {d:.1f} | {real['score']:.3f} | "
                     f"{real['torque']['mean_abs_error_calibrated']:.0f} / {real['thrust']['mean_abs_error_calibrated']:.0f} |")
+    if "tap_errors" in out:
+        rows += ["", "After the fact, not a design proxy (the taps measured): each station's c_n and c_t RMS error over "
+                 "their measured RMS, the nominal model and the hub-only calibration's estimate, beside the realized "
+                 "score with that station:", "", "| station r/R | c_n: nominal, hub-calibrated | c_t: nominal, "
+                 "hub-calibrated | realized score |", "|---|---|---|---|"]
+        te = out["tap_errors"]
+        for i, (name, real) in enumerate(zip(r1["subsets"], r1["realized"])):
+            (n_cn, n_ct), (h_cn, h_ct) = te["nominal"][i], te["hub_calibrated"][i]
+            rows.append(f"| {name} | {n_cn:.2f}, {h_cn:.2f} | {n_ct:.2f}, {h_ct:.2f} | {real['score']:.3f} |")
     return "\n".join(rows) + "\n"
 
 
