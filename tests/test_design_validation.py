@@ -61,3 +61,19 @@ def test_ranking_noise_sees_noisy_folds():
     assert q["ceiling_5_95"][0] < 0.5
     sd = np.std(folds, axis=1, ddof=1) / np.sqrt(6)
     np.testing.assert_allclose(q["score_jackknife_sd"], sd, rtol=0.05)
+
+
+def test_misfit_kappa_and_the_within_noise_rule():
+    """κ² + 1 = the held-out mean square over σ² (here torque errors 3σ and 5σ: 17; thrust 4σ: 16; mean 16.5);
+    a model as good as the noise has κ 0. A proxy that ranks as the folds do is within the noise, its reverse
+    is not."""
+    hub = {"folds": {"torque": [{"measured": 0.0, "predicted": 3.0}, {"measured": 0.0, "predicted": -5.0}],
+                     "thrust": [{"measured": 10.0, "predicted": 2.0}]}}
+    assert bp.misfit_kappa(hub, {"torque": 1.0, "thrust": 2.0}) == pytest.approx(np.sqrt(15.5))
+    assert bp.misfit_kappa(hub, {"torque": 10.0, "thrust": 20.0}) == 0.0
+    true = np.array([0.3, 0.4, 0.5, 0.6, 0.7])
+    real = _real(true[:, None] * np.exp(0.05 * np.random.default_rng(4).normal(size=(5, 6))))
+    good = bp.proxy_summary(true, true, real)
+    bad = bp.proxy_summary(true[::-1], true, real)
+    assert good["within_noise"] and good["pick_rank"] == 1
+    assert not bad["within_noise"] and bad["pick_rank"] == 5
