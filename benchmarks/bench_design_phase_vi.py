@@ -33,7 +33,7 @@ stated noise fractions.
        under a truth with the discrepancy at (b)'s κ, variance plus bias
        (:func:`calib.design.groups.subset_heldout_error`).
 
-``python benchmarks/bench_design_phase_vi.py`` (26 leave-one-out validations of six folds each, one full
+``python benchmarks/bench_design_phase_vi.py`` (27 leave-one-out validations of six folds each, one full
 hub-only calibration).
 """
 
