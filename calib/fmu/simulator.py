@@ -206,13 +206,54 @@ class Simulator:
             times[k] = t
         return raw, times, self._counters() - c0, t
 
-    def _outcome(self, raw, times, counters, rotor_speed, steps, t0_wall, check: bool = True) -> RunOutcome:
-        p = self.plan
-        sig = p.signals
+    def _signals(self, raw: np.ndarray) -> np.ndarray:
+        """The samples ``raw`` (n_samples, read_count) as the plan's signals in package units."""
+        sig = self.plan.signals
         x = np.empty((raw.shape[0], len(sig)))
         for i, s in enumerate(sig):
             y = s.sign * (s.scale * raw[:, s.index] + s.offset)
             x[:, i] = np.mod(y, s.wrap) if s.wrap else y
+        return x
+
+    def _settled_window(self, t: float, h: float, max_settle: int, n_average: int):
+        """Settle revolution by revolution until the averaging window's own check holds at ``steady.settle_rtol``.
+
+        The window is the last ``average_revolutions`` revolutions simulated; after each further revolution
+        it moves on by one. It stops at the first window whose two halves agree to ``settle_rtol`` relative to
+        max(|mean|, std) on every checked signal (:func:`calib.fmu.windows.convergence_failures`, the
+        convergence check at a tighter tolerance), or after ``max_settle`` settling steps: then it is the
+        fixed window of ``settle_revolutions`` + ``average_revolutions``, sample for sample. Returns (samples,
+        sample times, counter increases over the window, end time, settling steps taken).
+        """
+        p = self.plan
+        n = p.steady.steps_per_revolution
+        revs = n_average // n
+        raw = np.empty((max_settle + n_average, p.read_count))
+        times = np.empty(max_settle + n_average)
+        counters = [self._counters()]
+        names = [s.name for s in p.signals]
+        k = 0
+        while True:
+            for _ in range(n if k >= n_average else n_average):
+                self._step(t, h)
+                t += h
+                raw[k] = self._read()
+                times[k] = t
+                k += 1
+                if k % n == 0:
+                    counters.append(self._counters())
+            settle = k - n_average
+            x = self._signals(raw[settle:k])
+            if settle >= max_settle or not np.all(np.isfinite(x[:, list(p.checked)])):
+                break
+            mean, halves, _ = window_statistics(x, None)
+            if not convergence_failures(mean, halves, x, p.steady.settle_rtol, p.checked, names):
+                break
+        return raw[settle:k], times[settle:k], counters[-1] - counters[-1 - revs], t, settle
+
+    def _outcome(self, raw, times, counters, rotor_speed, steps, t0_wall, check: bool = True) -> RunOutcome:
+        p = self.plan
+        x = self._signals(raw)
         if not rotor_speed > 0:
             psi = None                                    # standstill: no harmonics
         elif p.azimuth is not None:
@@ -220,7 +261,7 @@ class Simulator:
         else:                                             # no azimuth output: from the rotor speed, 0 at t = 0
             psi = 2.0 * np.pi * rotor_speed / 60.0 * times
         mean, halves, harm = window_statistics(x, psi)
-        names = [s.name for s in sig]
+        names = [s.name for s in p.signals]
         status, message = Status.CONVERGED, ""
         if not np.all(np.isfinite(x[:, list(p.checked)])):
             status, message = Status.SIMULATION_FAILED, "non-finite output in the averaging window"
@@ -245,6 +286,9 @@ class Simulator:
 
     def cold_run(self, task: PointTask, parameters, keep_state: bool):
         """Reset, set everything, initialize, settle (optionally save the state), average.
+
+        With ``steady.settle_rtol`` a run from scratch settles until its window's own check holds
+        (:meth:`_settled_window`), at most ``settle_revolutions``; its ``steps`` say how far.
 
         Returns
         -------
@@ -273,10 +317,16 @@ class Simulator:
                 self._set(task.inputs)
                 self._initialize(0.0)
                 self._exit_initialization()
-            _, _, _, t = self._window(t, h, n_settle, 0)
-            if keep_state:
-                state, t_state = self.get_state(), t
-            raw, times, counters, t = self._window(t, h, 0, n_average)
+            if self.plan.steady.settle_rtol is not None and task.start_state is None:
+                # settled until its own check holds: the state kept is the run's last (settled at least as far)
+                raw, times, counters, t, n_settle = self._settled_window(t, h, n_settle, n_average)
+                if keep_state:
+                    state, t_state = self.get_state(), t
+            else:
+                _, _, _, t = self._window(t, h, n_settle, 0)
+                if keep_state:
+                    state, t_state = self.get_state(), t
+                raw, times, counters, t = self._window(t, h, 0, n_average)
         except Exception as exc:  # noqa: BLE001 - an FMU error is this run's status
             return self._failure(exc, "simulation failed", t0_wall), None, 0.0
         outcome = self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall)
