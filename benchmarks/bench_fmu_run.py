@@ -269,6 +269,15 @@ def settling_study(long_revolutions: int = 24, warm_revolutions: int = 6) -> dic
         sim.free_state(state)
     sim.close()
     base, pert, cont, warm = map(np.array, (base, pert, cont, warm))
+    return {"cpu_s": cpu, "runs": len(tasks) * (1 + len(steps)) * 2, **settling_figures(base, pert, cont, warm, steps)}
+
+
+def settling_figures(base, pert, cont, warm, steps, A: int = 2) -> dict:
+    """The figures of :func:`settling_study` from its per-revolution means: ``base`` (points, revolutions,
+    channels) and ``pert`` (points, parameters, revolutions, channels) of cold runs, ``cont`` and ``warm`` the same
+    for the base run continued and the perturbed runs restored from its settled state; ``steps`` the forward
+    steps [package units]."""
+    warm_revolutions = cont.shape[1]
     settled = base[:, -A:].mean(1)
     noise = RELATIVE_NOISE * np.abs(settled)
     G_ref = (pert[:, :, -A:].mean(2) - settled[:, None]) / steps[None, :, None]
@@ -283,11 +292,10 @@ def settling_study(long_revolutions: int = 24, warm_revolutions: int = 6) -> dic
         e = np.abs(x - settled) / noise
         return {"max": float(e.max()), "median": float(np.median(e))}
 
-    out = {"cpu_s": cpu, "runs": len(tasks) * (1 + len(steps)) * 2, "reference_drift": level(base[:, -2 * A:-A].mean(1)),
-           "cold": {}, "warm": {}, "adaptive": {}}
+    out = {"reference_drift": level(base[:, -2 * A:-A].mean(1)), "cold": {}, "warm": {}, "adaptive": {}}
     for s in range(5):
         out["cold"][s] = {"level": level(base[:, s:s + A].mean(1)),
-                          "jacobian": jac_error((pert[:, :, s:s + A].mean(2) - base[:, None, s:s + A].mean(1))
+                          "jacobian": jac_error((pert[:, :, s:s + A].mean(2) - base[:, s:s + A].mean(1)[:, None])
                                                 / steps[None, :, None])}
         if s + A <= warm_revolutions:
             out["warm"][s] = {"jacobian": jac_error((warm[:, :, s:s + A].mean(2) - cont[:, s:s + A].mean(1)[:, None])
