@@ -308,7 +308,7 @@ def settling_figures(base, pert, cont, warm, steps, A: int = 2) -> dict:
                 return s
         return most
     for most in (2, 12):
-        for tol in (1e-3, 5e-4, 3e-4, 1e-4):
+        for tol in (1e-3, 7e-4, 5e-4, 3e-4, 1e-4):
             S = np.array([stop(x, tol, most) for x in base])
             SP = np.array([[stop(x, tol, most) for x in row] for row in pert])
             lev = np.array([x[s:s + A].mean(0) for x, s in zip(base, S)])
