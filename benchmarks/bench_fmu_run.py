@@ -229,8 +229,8 @@ def settling_study(long_revolutions: int = 24, warm_revolutions: int = 6) -> dic
                  switches=SWITCHES, steady=STEADY, isolate=False,
                  jacobian=dict(differences="forward", relative_step=RELATIVE_STEP))
     _, tasks, steps = m._tasks(np.array(TRUTH), conditions(), True)
-    plan, sim = m._plan, None
-    n, A = plan.steady.steps_per_revolution, 2
+    plan = m._plan
+    n = plan.steady.steps_per_revolution
     col = [s.index for s in plan.signals if s.name in CHANNELS]
     sim = Simulator(plan)
     cpu = {"instantiation": 0.0, "stepping": 0.0, "outputs": 0.0}
