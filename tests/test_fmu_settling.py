@@ -1,4 +1,4 @@
-"""Settling until a run's own check holds (``[steady] settle_rtol``, :meth:`calib.fmu.simulator.Simulator.cold_run`).
+"""Settling until a run's own check holds (``[steady] settle_rtol``, :func:`calib.fmu.settling.settled_window`).
 
 The reference for the rule is the fixed window the adapter has always used: a run with ``settle_rtol`` must be,
 sample for sample, the fixed run that settles the first number of revolutions whose window's halves agree to the

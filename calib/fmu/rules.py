@@ -41,7 +41,7 @@ class SteadyRule:
     perturbation_average_revolutions: int | None = None
     #: None: settle ``settle_revolutions`` always. A number: a cold run settles until the halves of its averaging
     #: window agree to this (relative, as ``convergence_rtol``), revolution by revolution, at most
-    #: ``settle_revolutions`` (:meth:`calib.fmu.simulator.Simulator.cold_run`)
+    #: ``settle_revolutions`` (:func:`calib.fmu.settling.settled_window`)
     settle_rtol: float | None = None
 
     def __post_init__(self):

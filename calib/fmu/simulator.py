@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from calib.fmu.plan import FMI_FATAL, PointResult, PointTask, RunOutcome, SimulationPlan
+from calib.fmu.settling import settled_window
 from calib.fmu.windows import convergence_failures, window_statistics
 from calib.types import Status
 
@@ -215,42 +216,6 @@ class Simulator:
             x[:, i] = np.mod(y, s.wrap) if s.wrap else y
         return x
 
-    def _settled_window(self, t: float, h: float, max_settle: int, n_average: int):
-        """Settle revolution by revolution until the averaging window's own check holds at ``steady.settle_rtol``.
-
-        The window is the last ``average_revolutions`` revolutions simulated; after each further revolution
-        it moves on by one. It stops at the first window whose two halves agree to ``settle_rtol`` relative to
-        max(|mean|, std) on every checked signal (:func:`calib.fmu.windows.convergence_failures`, the
-        convergence check at a tighter tolerance), or after ``max_settle`` settling steps: then it is the
-        fixed window of ``settle_revolutions`` + ``average_revolutions``, sample for sample. Returns (samples,
-        sample times, counter increases over the window, end time, settling steps taken).
-        """
-        p = self.plan
-        n = p.steady.steps_per_revolution
-        revs = n_average // n
-        raw = np.empty((max_settle + n_average, p.read_count))
-        times = np.empty(max_settle + n_average)
-        counters = [self._counters()]
-        names = [s.name for s in p.signals]
-        k = 0
-        while True:
-            for _ in range(n if k >= n_average else n_average):
-                self._step(t, h)
-                t += h
-                raw[k] = self._read()
-                times[k] = t
-                k += 1
-                if k % n == 0:
-                    counters.append(self._counters())
-            settle = k - n_average
-            x = self._signals(raw[settle:k])
-            if settle >= max_settle or not np.all(np.isfinite(x[:, list(p.checked)])):
-                break
-            mean, halves, _ = window_statistics(x, None)
-            if not convergence_failures(mean, halves, x, p.steady.settle_rtol, p.checked, names):
-                break
-        return raw[settle:k], times[settle:k], counters[-1] - counters[-1 - revs], t, settle
-
     def _outcome(self, raw, times, counters, rotor_speed, steps, t0_wall, check: bool = True) -> RunOutcome:
         p = self.plan
         x = self._signals(raw)
@@ -288,7 +253,7 @@ class Simulator:
         """Reset, set everything, initialize, settle (optionally save the state), average.
 
         With ``steady.settle_rtol`` a run from scratch settles until its window's own check holds
-        (:meth:`_settled_window`), at most ``settle_revolutions``; its ``steps`` say how far.
+        (:func:`calib.fmu.settling.settled_window`), at most ``settle_revolutions``; its ``steps`` say how far.
 
         Returns
         -------
@@ -319,7 +284,7 @@ class Simulator:
                 self._exit_initialization()
             if self.plan.steady.settle_rtol is not None and task.start_state is None:
                 # settled until its own check holds: the state kept is the run's last (settled at least as far)
-                raw, times, counters, t, n_settle = self._settled_window(t, h, n_settle, n_average)
+                raw, times, counters, t, n_settle = settled_window(self, t, h, n_settle, n_average)
                 if keep_state:
                     state, t_state = self.get_state(), t
             else:
