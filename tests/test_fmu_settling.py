@@ -104,3 +104,21 @@ def test_closer_to_the_settled_state_than_the_fixed_window(fmus):
     assert err_fixed > 5e-4
     assert err_adaptive < 5e-4
     assert err_adaptive < err_fixed / 2
+
+
+def test_warm_start_and_saved_states_after_an_adaptive_base_run(fmus):
+    """With a warm-started Jacobian the base run also keeps its state (taken at the run's end, settled at least as
+    far as its window): the base values are still the adaptive evaluation's, bit for bit; the perturbed runs
+    restored from that state run and converge."""
+    from calib.fmu.model import FmuModel
+    model = FmuModel(fmus["A"], mapping_path("A"), CHANNELS, parameters=PARAMETERS, corrections=False,
+                     switches=SWITCHES, steady=dict(WINDOW, settle_rtol=3e-4, settle_revolutions=10), isolate=False,
+                     jacobian=dict(warm_start=True, differences="forward", relative_step=0.1))
+    assert model.can_get_state
+    evaluation = model.evaluate(P, CONDITIONS)
+    model.base_runs.clear()
+    ev, G = model.jacobian(P, CONDITIONS)
+    assert np.all(ev.status == evaluation.status) and np.array_equal(ev.values, evaluation.values)
+    assert np.all(np.isfinite(G))
+    # more pitch on blade 1: less angle of attack, less lift, less flap moment on blade 1
+    assert G[0, 2, 0] < 0
