@@ -17,7 +17,8 @@ schemes tried (CHANGELOG, issue 38 item 1d).
 Printed, one line per phase: unit check [s], calibration [s], simulations (count), simulated
 seconds (model time), busy worker seconds, wall [s], and the estimate with its σ.
 ``python benchmarks/bench_fmu_run.py [--out DIR] [--runs N] [--executor process|dask|both] [--differences
-central|forward] [--relative-step H]``; under ``make
+central|forward] [--relative-step H] [--settle-rtol R --settle-revolutions N]``; ``--settling`` runs only
+:func:`settling_study` (settling, warm starts, the adaptive settle rule: CHANGELOG, issue 38); under ``make
 validate`` :func:`run` (one run; several minutes of simulation on 2 workers: a study, not a ``make bench``
 figure). ``--executor dask`` runs the same workflow on a Dask LocalCluster of 2 single-threaded worker
 processes; ``both`` runs the process executor, then Dask, and says whether the estimates and their σ are
@@ -43,6 +44,8 @@ CHANNELS = ["power", "thrust", "root_flap_moment_blade1", "root_flap_moment_blad
 SWITCHES = dict(dynamic_inflow=True, flexible_blades=False, tower_shadow=False, shear=False, gravity=False,
                 yaw=False, skewed_wake=False, stall_delay="snel")
 STEADY = dict(steps_per_revolution=16, settle_revolutions=2, average_revolutions=2)
+#: The measurements' window: 6 fixed settle revolutions (whatever the workflow's settling)
+FIXED_6 = dict(steps_per_revolution=16, settle_revolutions=6, average_revolutions=2)
 WIND = np.linspace(5.0, 16.0, 12)
 PITCH = [0.0, 1.5, 3.0, 4.5]
 RELATIVE_NOISE = 0.01
@@ -95,7 +98,7 @@ def prepare(out: Path, executor: str = "process") -> Path:
         from calib.fmu.model import FmuModel
         from calib.measurements import synthesize
         model = FmuModel(build_fmu("A"), mapping_path("A"), CHANNELS, parameters=PARAMETERS, corrections=False,
-                         switches=SWITCHES, steady=dict(STEADY, settle_revolutions=6), isolate=False)
+                         switches=SWITCHES, steady=FIXED_6, isolate=False)
         meas = synthesize(model, np.array(TRUTH), conditions(), relative_sigma={c: RELATIVE_NOISE for c in CHANNELS},
                           channels=CHANNELS, seed=SEED, source="bench_fmu_run truth")
         meas.write_csv(table)
@@ -201,6 +204,122 @@ def difference_error(sigma_p, workers: int = 2) -> dict:
     return out
 
 
+#: The posterior σ of the bench's estimate (CHANGELOG, issue 38: forward 0.1, Broyden), for the settling study's
+#: Jacobian error in noise σ
+SIGMA_P = (0.02071, 0.02304, 0.08896, 0.11253)
+
+
+def settling_study(long_revolutions: int = 24, warm_revolutions: int = 6) -> dict:
+    """Where a run's simulated time goes and what settling buys, at the bench's 48 points and the truth, in process.
+
+    Per point, cold runs (base and the 4 forward perturbations at 0.1 x scale) of ``long_revolutions``
+    revolutions give per-revolution means; the last two revolutions are the reference (settled). From them:
+    the level error of a window of ``s`` settle + 2 average revolutions; the error of a forward-difference
+    Jacobian made of such windows (a 1-σ linearized prediction, in noise σ, as :func:`difference_error`);
+    the adaptive rule (``[steady] settle_rtol``: stop at the first window whose halves agree to it). Warm
+    starts: the perturbed runs restored from the base run's state after 2 settle revolutions, settle ``s``,
+    average 2, differenced against the base run continued from the same state. And the CPU split of one run
+    (instantiation, stepping, output handling). Noise σ = 1 % of the settled value.
+    """
+    from calib.fmu.build import build_fmu, mapping_path
+    from calib.fmu.model import FmuModel
+    from calib.fmu.simulator import Simulator
+
+    m = FmuModel(build_fmu("A"), mapping_path("A"), CHANNELS, parameters=PARAMETERS, corrections=False,
+                 switches=SWITCHES, steady=STEADY, isolate=False,
+                 jacobian=dict(differences="forward", relative_step=RELATIVE_STEP))
+    _, tasks, steps = m._tasks(np.array(TRUTH), conditions(), True)
+    plan = m._plan
+    n = plan.steady.steps_per_revolution
+    col = [s.index for s in plan.signals if s.name in CHANNELS]
+    sim = Simulator(plan)
+    cpu = {"instantiation": 0.0, "stepping": 0.0, "outputs": 0.0}
+
+    def revolutions(task, params, count, state=None, t0=0.0):
+        h, _, _ = plan.steady.window(task.rotor_speed)
+        c0 = time.process_time()
+        if state is None:
+            sim._fresh()
+            sim._set(plan.fixed), sim._set(params), sim._set(task.inputs)
+            sim._initialize(0.0), sim._exit_initialization()
+        else:
+            sim.set_state(state)
+            sim._set(params)
+        c1 = time.process_time()
+        raw, _, _, t = sim._window(t0, h, 0, count * n)
+        c2 = time.process_time()
+        out = raw[:, col].reshape(count, n, -1).mean(axis=1)
+        cpu["instantiation"] += c1 - c0
+        cpu["stepping"] += c2 - c1
+        cpu["outputs"] += time.process_time() - c2
+        return out, t
+
+    base, pert, cont, warm = [], [], [], []
+    for t in tasks:
+        base.append(revolutions(t, t.base, long_revolutions)[0])
+        pert.append([revolutions(t, q, long_revolutions)[0] for q in t.perturbations])
+        h, _, _ = plan.steady.window(t.rotor_speed)
+        sim._fresh()
+        sim._set(plan.fixed), sim._set(t.base), sim._set(t.inputs)
+        sim._initialize(0.0), sim._exit_initialization()
+        _, _, _, ts = sim._window(0.0, h, 2 * n, 0)
+        state = sim.get_state()
+        cont.append(revolutions(t, t.base, warm_revolutions, state, ts)[0])
+        warm.append([revolutions(t, q, warm_revolutions, state, ts)[0] for q in t.perturbations])
+        sim.free_state(state)
+    sim.close()
+    base, pert, cont, warm = map(np.array, (base, pert, cont, warm))
+    return {"cpu_s": cpu, "runs": len(tasks) * (1 + len(steps)) * 2, **settling_figures(base, pert, cont, warm, steps)}
+
+
+def settling_figures(base, pert, cont, warm, steps, A: int = 2) -> dict:
+    """The figures of :func:`settling_study` from its per-revolution means: ``base`` (points, revolutions,
+    channels) and ``pert`` (points, parameters, revolutions, channels) of cold runs, ``cont`` and ``warm`` the same
+    for the base run continued and the perturbed runs restored from its settled state; ``steps`` the forward
+    steps [package units]."""
+    warm_revolutions = cont.shape[1]
+    settled = base[:, -A:].mean(1)
+    noise = RELATIVE_NOISE * np.abs(settled)
+    G_ref = (pert[:, :, -A:].mean(2) - settled[:, None]) / steps[None, :, None]
+    sig = np.asarray(SIGMA_P)
+
+    def jac_error(G):
+        e = np.abs(G - G_ref) * sig[None, :, None] / noise[:, None, :]
+        return {"max": float(e.max()), "p99": float(np.percentile(e, 99)), "median": float(np.median(e)),
+                "max_per_parameter": e.max(axis=(0, 2)).tolist()}
+
+    def level(x):
+        e = np.abs(x - settled) / noise
+        return {"max": float(e.max()), "median": float(np.median(e))}
+
+    out = {"reference_drift": level(base[:, -2 * A:-A].mean(1)), "cold": {}, "warm": {}, "adaptive": {}}
+    for s in range(5):
+        out["cold"][s] = {"level": level(base[:, s:s + A].mean(1)),
+                          "jacobian": jac_error((pert[:, :, s:s + A].mean(2) - base[:, s:s + A].mean(1)[:, None])
+                                                / steps[None, :, None])}
+        if s + A <= warm_revolutions:
+            out["warm"][s] = {"jacobian": jac_error((warm[:, :, s:s + A].mean(2) - cont[:, s:s + A].mean(1)[:, None])
+                                                    / steps[None, :, None])}
+
+    def stop(x, tol, most):   # the simulator's rule on per-revolution means: halves of the 2-revolution window
+        for s in range(most + 1):
+            w = x[s:s + A]
+            if np.all(np.abs(w[1] - w[0]) <= tol * np.abs(w.mean(0))):
+                return s
+        return most
+    for most in (2, 12):
+        for tol in (1e-3, 7e-4, 5e-4, 3e-4, 1e-4):
+            S = np.array([stop(x, tol, most) for x in base])
+            SP = np.array([[stop(x, tol, most) for x in row] for row in pert])
+            lev = np.array([x[s:s + A].mean(0) for x, s in zip(base, S)])
+            G = np.array([[(pert[k, j, SP[k, j]:SP[k, j] + A].mean(0) - lev[k]) / steps[j] for j in range(len(steps))]
+                          for k in range(len(base))])
+            out["adaptive"][f"{tol:g} at most {most}"] = {
+                "revolutions_per_run": float(A + (S.sum() + SP.sum()) / (S.size + SP.size)),
+                "level": level(lev), "jacobian": jac_error(G)}
+    return out
+
+
 def run(out: Path | None = None) -> dict:
     """One ``calib run`` of the benchmark (benchmarks/run_all.py): its phases' seconds, the FMU simulation
     counts the result states, the estimate and its σ."""
@@ -224,6 +343,13 @@ def main(argv=None) -> int:
                          "mapping's: 0.01)")
     ap.add_argument("--jacobian-updates", choices=("auto", "broyden", "model"), default=JACOBIAN_UPDATES,
                     help="the [calibration] jacobian_updates of the workflow (default: the settings' auto)")
+    ap.add_argument("--settle-rtol", type=float, default=None,
+                    help="the workflow's [model] steady.settle_rtol: settle each run until its window's halves agree "
+                         "to this (default: fixed settling)")
+    ap.add_argument("--settle-revolutions", type=int, default=STEADY["settle_revolutions"],
+                    help="the workflow's steady.settle_revolutions (with --settle-rtol: the most)")
+    ap.add_argument("--settling", action="store_true",
+                    help="only the settling and warm-start study at the 48 points (in process, one core, minutes)")
     ap.add_argument("--executor", choices=("process", "dask", "both"), default="process",
                     help="2 worker processes, a Dask LocalCluster of 2 workers, or both (estimates compared)")
     args = ap.parse_args(argv)
@@ -233,7 +359,16 @@ def main(argv=None) -> int:
                   f"{REFERENCE[1]:g}: max {e['max']:.2e}, p99 {e['p99']:.2e}, median {e['median']:.2e}, per parameter "
                   f"max {np.round(e['max_per_parameter'], 3).tolist()}")
         return 0
+    if args.settling:
+        study = settling_study()
+        print(json.dumps(study, indent=1))
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "settling.json").write_text(json.dumps(study, indent=1))
+        return 0
     DIFFERENCES, RELATIVE_STEP, JACOBIAN_UPDATES = args.differences, args.relative_step, args.jacobian_updates
+    STEADY["settle_revolutions"] = args.settle_revolutions
+    if args.settle_rtol is not None:
+        STEADY["settle_rtol"] = args.settle_rtol
     out = Path(args.out)
     kinds = ("process", "dask") if args.executor == "both" else (args.executor,)
     estimates = {}

@@ -19,7 +19,7 @@ from calib.errors import InputError
 _STEADY_KEYS = {"steps_per_revolution": Key(int, True), "settle_revolutions": Key(int, True),
                 "average_revolutions": Key(int, True), "standstill_step_size": Key(NUM),
                 "convergence_rtol": Key(NUM), "perturbation_settle_revolutions": Key(int),
-                "perturbation_average_revolutions": Key(int)}
+                "perturbation_average_revolutions": Key(int), "settle_rtol": Key(NUM)}
 #: upper bounds of the step counts: a larger one is a typo, and would run the FMU for days
 _STEADY_MAX = {"steps_per_revolution": 100_000, "settle_revolutions": 10_000, "average_revolutions": 10_000,
                "perturbation_settle_revolutions": 10_000, "perturbation_average_revolutions": 10_000}
@@ -39,6 +39,10 @@ class SteadyRule:
     convergence_rtol: float = 2e-3
     perturbation_settle_revolutions: int | None = None
     perturbation_average_revolutions: int | None = None
+    #: None: settle ``settle_revolutions`` always. A number: a cold run settles until the halves of its averaging
+    #: window agree to this (relative, as ``convergence_rtol``), revolution by revolution, at most
+    #: ``settle_revolutions`` (:func:`calib.fmu.settling.settled_window`)
+    settle_rtol: float | None = None
 
     def __post_init__(self):
         # a perturbed run restored from the settled base state settles and averages like the base
@@ -66,7 +70,7 @@ class SteadyRule:
 
     def replace(self, **changes) -> "SteadyRule":
         """A copy with some fields changed (validated)."""
-        data = {k: getattr(self, k) for k in self.__dataclass_fields__} | changes
+        data = {k: getattr(self, k) for k in self.__dataclass_fields__ if getattr(self, k) is not None} | changes
         return steady_rule(data, "steady settings", "steady")
 
 
@@ -84,13 +88,17 @@ def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
     """The validated ``[steady]`` table ``s`` (``where``: its name in messages; ``source``: the file)."""
     rule = settings_from_table(SteadyRule, s, where, source, _STEADY_KEYS)
     positive = {"steps_per_revolution": 1, "average_revolutions": 1, "perturbation_average_revolutions": 1}
-    for key in _STEADY_KEYS:
+    for key in (k for k in _STEADY_KEYS if k != "settle_rtol"):
         value = getattr(rule, key)
         low = positive.get(key, 0)
         high = _STEADY_MAX.get(key, float("inf"))
         if not (math.isfinite(value) and low <= value <= high):
             raise InputError(f"'{where}.{key}' must be in [{low}, {high:g}], got {value!r}", source,
                              field=f"{where}.{key}")
+    if rule.settle_rtol is not None and not (math.isfinite(rule.settle_rtol) and rule.settle_rtol > 0):
+        raise InputError(f"'{where}.settle_rtol' must be a number > 0 (or left out: settle "
+                         f"'{where}.settle_revolutions' always), got {rule.settle_rtol!r}", source,
+                         field=f"{where}.settle_rtol")
     if not rule.standstill_step_size > 0 or not rule.convergence_rtol > 0:
         raise InputError(f"'{where}.standstill_step_size' and '{where}.convergence_rtol' must be > 0", source,
                          field=where)

@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from calib.fmu.plan import FMI_FATAL, PointResult, PointTask, RunOutcome, SimulationPlan
+from calib.fmu.settling import settled_window
 from calib.fmu.windows import convergence_failures, window_statistics
 from calib.types import Status
 
@@ -206,13 +207,18 @@ class Simulator:
             times[k] = t
         return raw, times, self._counters() - c0, t
 
-    def _outcome(self, raw, times, counters, rotor_speed, steps, t0_wall, check: bool = True) -> RunOutcome:
-        p = self.plan
-        sig = p.signals
+    def _signals(self, raw: np.ndarray) -> np.ndarray:
+        """The samples ``raw`` (n_samples, read_count) as the plan's signals in package units."""
+        sig = self.plan.signals
         x = np.empty((raw.shape[0], len(sig)))
         for i, s in enumerate(sig):
             y = s.sign * (s.scale * raw[:, s.index] + s.offset)
             x[:, i] = np.mod(y, s.wrap) if s.wrap else y
+        return x
+
+    def _outcome(self, raw, times, counters, rotor_speed, steps, t0_wall, check: bool = True) -> RunOutcome:
+        p = self.plan
+        x = self._signals(raw)
         if not rotor_speed > 0:
             psi = None                                    # standstill: no harmonics
         elif p.azimuth is not None:
@@ -220,7 +226,7 @@ class Simulator:
         else:                                             # no azimuth output: from the rotor speed, 0 at t = 0
             psi = 2.0 * np.pi * rotor_speed / 60.0 * times
         mean, halves, harm = window_statistics(x, psi)
-        names = [s.name for s in sig]
+        names = [s.name for s in p.signals]
         status, message = Status.CONVERGED, ""
         if not np.all(np.isfinite(x[:, list(p.checked)])):
             status, message = Status.SIMULATION_FAILED, "non-finite output in the averaging window"
@@ -245,6 +251,9 @@ class Simulator:
 
     def cold_run(self, task: PointTask, parameters, keep_state: bool):
         """Reset, set everything, initialize, settle (optionally save the state), average.
+
+        With ``steady.settle_rtol`` a run from scratch settles until its window's own check holds
+        (:func:`calib.fmu.settling.settled_window`), at most ``settle_revolutions``; its ``steps`` say how far.
 
         Returns
         -------
@@ -273,10 +282,16 @@ class Simulator:
                 self._set(task.inputs)
                 self._initialize(0.0)
                 self._exit_initialization()
-            _, _, _, t = self._window(t, h, n_settle, 0)
-            if keep_state:
-                state, t_state = self.get_state(), t
-            raw, times, counters, t = self._window(t, h, 0, n_average)
+            if self.plan.steady.settle_rtol is not None and task.start_state is None:
+                # settled until its own check holds: the state kept is the run's last (settled at least as far)
+                raw, times, counters, t, n_settle = settled_window(self, t, h, n_settle, n_average)
+                if keep_state:
+                    state, t_state = self.get_state(), t
+            else:
+                _, _, _, t = self._window(t, h, n_settle, 0)
+                if keep_state:
+                    state, t_state = self.get_state(), t
+                raw, times, counters, t = self._window(t, h, 0, n_average)
         except Exception as exc:  # noqa: BLE001 - an FMU error is this run's status
             return self._failure(exc, "simulation failed", t0_wall), None, 0.0
         outcome = self._outcome(raw, times, counters, task.rotor_speed, n_settle + n_average, t0_wall)
