@@ -75,9 +75,9 @@ class JacobianRule:
     """How the adapter differentiates: central (two runs per parameter, error O(h²)) or forward
     differences (one run per parameter against the point's base run, error O(h)), and their warm start."""
 
-    relative_step: float = 1e-2
+    relative_step: float = 0.1
     warm_start: bool = True
-    differences: str = "central"
+    differences: str = "forward"
 
 
 def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
