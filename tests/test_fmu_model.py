@@ -388,9 +388,10 @@ def test_forward_differences_agree_with_central_at_half_the_runs(small_fmus, rot
 def test_the_bundled_mappings_and_the_rule_default_to_forward_differences_at_a_tenth_of_the_scale():
     """The difference default (issue 38): forward at relative step 0.1, in both bundled mappings and for a
     mapping without ``[jacobian]`` (a step of 0.01 scale measured the bundled FMU's output jumps)."""
+    import tomllib
+
     from calib.fmu.build import mapping_path
     from calib.fmu.rules import JacobianRule, jacobian_rule
-    import tomllib
     assert (JacobianRule().differences, JacobianRule().relative_step) == ("forward", 0.1)
     assert jacobian_rule({}, "none.toml").differences == "forward"
     for variant in ("A", "B"):
