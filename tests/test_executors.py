@@ -35,6 +35,8 @@ def test_unknown_executor_names_the_valid_ones():
 
 @pytest.fixture(scope="module")
 def small_model():
+    """The counts below are written for central differences (two runs per parameter), stated here since
+    the mappings' default became forward."""
     from calib.fmu.build import build_fmu, mapping_path
     from calib.fmu.model import FmuModel
     from calib.rotor.library import load_rotor
@@ -45,7 +47,7 @@ def small_model():
     make = lambda executor: FmuModel(path, mapping_path("B"), CHANNELS, parameters=["pitch_offset_blade1"],  # noqa: E731
                                      corrections=False,
                                      switches=QUIET, settings=FAST, steady=WINDOW, executor=executor,
-                                     jacobian=dict(warm_start=True))
+                                     jacobian=dict(warm_start=True, differences="central", relative_step=0.01))
     return make, conditions(rotor, tsr=(6.0, 8.0, 10.0), pitch=(0.0, 2.0))
 
 
@@ -246,7 +248,8 @@ def _cold(make, base_runs=None, parameters=None):
     return FmuModel(m.fmu_path, m.mapping, [c.name for c in m.channels],
                     parameters=parameters or [q.name for q in m.parameters],
                     corrections=False, switches=m._options["switches"], settings=m._options["settings"],
-                    steady=m._options["steady"], jacobian=dict(warm_start=False), executor=SerialExecutor(),
+                    steady=m._options["steady"], executor=SerialExecutor(),
+                    jacobian=dict(warm_start=False, differences="central", relative_step=0.01),
                     base_runs=base_runs)
 
 

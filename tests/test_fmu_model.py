@@ -365,9 +365,10 @@ def test_forward_differences_agree_with_central_at_half_the_runs(small_fmus, rot
     naming the valid ones."""
     cond = conditions(rotor, tsr=(6.0, 9.0), pitch=(0.0,))
     names = ["pitch_offset_blade1", "stall_delay_strength"]
-    central = quick_model(small_fmus["A"], "A", parameters=names, corrections=False)
+    central = quick_model(small_fmus["A"], "A", parameters=names, corrections=False,
+                          jacobian=dict(differences="central", relative_step=0.01))
     forward = quick_model(small_fmus["A"], "A", parameters=names, corrections=False,
-                          jacobian=dict(warm_start=True, differences="forward"))
+                          jacobian=dict(warm_start=True, differences="forward", relative_step=0.01))
     p = np.array([q.nominal for q in central.parameters])
     ev_c, G_c = central.jacobian(p, cond)
     ev_f, G_f = forward.jacobian(p, cond)
@@ -382,3 +383,18 @@ def test_forward_differences_agree_with_central_at_half_the_runs(small_fmus, rot
         quick_model(small_fmus["A"], "A", parameters=names, corrections=False, jacobian=dict(differences="backward"))
     central.close()
     forward.close()
+
+
+def test_the_bundled_mappings_and_the_rule_default_to_forward_differences_at_a_tenth_of_the_scale():
+    """The difference default (issue 38): forward at relative step 0.1, in both bundled mappings and for a
+    mapping without ``[jacobian]`` (a step of 0.01 scale measured the bundled FMU's output jumps)."""
+    import tomllib
+
+    from calib.fmu.build import mapping_path
+    from calib.fmu.rules import JacobianRule, jacobian_rule
+    assert (JacobianRule().differences, JacobianRule().relative_step) == ("forward", 0.1)
+    assert jacobian_rule({}, "none.toml").differences == "forward"
+    for variant in ("A", "B"):
+        data = tomllib.loads(mapping_path(variant).read_text())
+        rule = jacobian_rule(data, str(mapping_path(variant)))
+        assert (rule.differences, rule.relative_step) == ("forward", 0.1), variant

@@ -51,7 +51,8 @@ from calib.calibration.secant import SECANT_RHO, SECANT_START, psd_part, secant_
 
 def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndarray | None = None,
                 optimizer: str = "sqpmethod", stop: StopRule = StopRule(),
-                callback: Callable[[dict], None] | None = None, stage: str = "estimate") -> EstimationOutcome:
+                callback: Callable[[dict], None] | None = None, stage: str = "estimate",
+                broyden: bool = False) -> EstimationOutcome:
     """Constrained maximum-likelihood estimate of θ in p = p₀ + D B θ.
 
     Parameters
@@ -68,12 +69,15 @@ def estimate_ml(problem: LeastSquaresProblem, basis: np.ndarray, theta0: np.ndar
         Called after every iteration with keys stage, iteration, cost, step, damping, n_failed, qp.
     stage : str
         Name of the estimation in the callback's records.
+    broyden : bool
+        Broyden's update of the model Jacobian after an accepted step, as in :func:`estimate_map`.
 
     Returns
     -------
     EstimationOutcome
     """
-    return _gauss_newton(problem, basis, theta0, optimizer, stop, callback, stage, prior_weight=0.0)
+    return _gauss_newton(problem, basis, theta0, optimizer, stop, callback, stage, prior_weight=0.0,
+                         broyden=broyden)
 
 
 def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.ndarray | None = None,

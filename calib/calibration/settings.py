@@ -159,8 +159,8 @@ class CalibrationSettings:
         Most fits of the marginal estimator, each with the conditions' sensitivities
         re-linearized at the last estimate (the joint estimator re-linearizes within its one fit).
     jacobian_updates : {"auto", "broyden", "model"}
-        The MAP estimator's Jacobian after an accepted step of a model without exact derivatives (an
-        FMU): ``"broyden"`` updates it from the step's evaluation (Broyden's rank-one update; a model
+        The MAP and truncated estimators' Jacobian after an accepted step of a model without exact
+        derivatives (an FMU): ``"broyden"`` updates it from the step's evaluation (Broyden's rank-one update; a model
         Jacobian again when a step under it is rejected and before the estimate is final, so σ rests on
         one), ``"model"`` takes a new finite-difference Jacobian each step; ``"auto"`` (default):
         Broyden for such models. Models with exact derivatives always use the model's.

@@ -18,6 +18,7 @@ from scipy import stats
 
 from calib.calibration.gauss_newton import EstimationStatus, StopRule, estimate_ml
 from calib.calibration.identifiability import SvdAnalysis, observability, subspace_cosines, svd_analysis
+from calib.calibration.map_fit import MAP_NOISE_DECREASE
 from calib.calibration.outcome import FitOutcome
 from calib.calibration.problem import LeastSquaresProblem
 from calib.calibration.result import CalibrationResult
@@ -141,6 +142,12 @@ class TruncatedFit:
         svd = self.svd(problem, lin)
         last_estimate = None
         worst_cos = None
+        # a model without exact derivatives (an FMU): its Jacobian costs simulations and its cost is noisy, so
+        # each fit updates the Jacobian by Broyden's rule (``jacobian_updates``) and stops at the model's
+        # noise, as the MAP estimator does (calib.calibration.map_fit)
+        noisy = problem.model.capabilities.derivatives != "exact"
+        broyden = noisy and st.jacobian_updates in ("auto", "broyden")
+        stop = StopRule(st.max_iterations, st.tolerance, noise_decrease=MAP_NOISE_DECREASE if noisy else 0.0)
         # the last pass only checks the re-linearization of the last estimate, so that an
         # estimate whose retained set settled on the last allowed pass is not called unstable
         for k in range(st.max_relinearizations + 1):
@@ -161,8 +168,8 @@ class TruncatedFit:
             if k == st.max_relinearizations:
                 break
             theta0 = basis.T @ problem.scaled(p)
-            out = estimate_ml(problem, basis, theta0, st.optimizer, StopRule(st.max_iterations, st.tolerance),
-                              callback=self.cal.emit, stage=f"estimate[{k + 1}]")
+            out = estimate_ml(problem, basis, theta0, st.optimizer, stop, callback=self.cal.emit,
+                              stage=f"estimate[{k + 1}]", broyden=broyden)
             self.cal.emit({"stage": "relinearize", "iteration": k + 1, "n_retained": svd.n_retained,
                         "cost": out.cost, "estimate_status": out.status, "n_failed": out.linearization.n_failed})
             if out.status == EstimationStatus.QP_FAILED:

@@ -147,7 +147,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
 
     if cal.noise in ESTIMATED_NOISE:
         # 2. localize first: it estimates the σ every later step uses
-        loc, meas = _localize(family, measurements, cal, wrap, on_iteration, say)
+        loc, meas = _localize(family, measurements, cal, wrap, on_iteration, say, dset.recalibrate)
         # 1. find
         y0, before, findings = _find_disagreement(family, meas, wrap, say, loc.noise_words())
         consistent = None
@@ -159,7 +159,7 @@ def diagnose(rotor, measurements: Measurements, grid: CorrectionGrid, settings: 
         consistent = _consistent(meas, y0, before, dset)
         loc = None
         if consistent is None or dset.recalibrate:
-            loc, _ = _localize(family, measurements, cal, wrap, on_iteration, say)
+            loc, _ = _localize(family, measurements, cal, wrap, on_iteration, say, dset.recalibrate)
         else:
             say("localize: not run: the nominal model passes the χ² test against the stated noise, so there is "
                 "nothing to localize")
@@ -250,11 +250,17 @@ def _fit_settings(calibration: CalibrationSettings | None, diagnosis: DiagnosisS
 
 
 def _localize(family, measurements: Measurements, cal: CalibrationSettings, wrap: Callable, on_iteration,
-              say: Callable[[str], None]) -> tuple:
+              say: Callable[[str], None], recalibrates: bool) -> tuple:
     """Step 2: the correction field calibrated alone (a CalibrationResult), and ``measurements``
-    with the σ it used or estimated [channel units]."""
+    with the σ it used or estimated [channel units]. ``recalibrates``: the diagnosis recalibrates (with a
+    stated σ the localization may then be that result, so it keeps the calibration's every term)."""
     field_model = wrap(family.field_model(), "localization")
     say(f"localize: correction field, {len(field_model.parameters)} parameters")
+    if field_model.capabilities.derivatives != "exact" and not (recalibrates and cal.noise not in ESTIMATED_NOISE):
+        # a model whose Jacobians cost simulations (an FMU), and a fit that serves the σ, the pattern agreement
+        # and the report only, never as the recalibration's result: its prior check and frozen-curvature samples
+        # are not used (on the bundled FMU's named-effect case they were ~900 of its 1 254 simulations)
+        cal = dataclasses.replace(cal, prior_check=False, curvature_samples=0)
     loc = Calibrator(field_model, measurements, cal, _tagged(on_iteration, "localization"), name="localization").run()
     meas = dataclasses.replace(measurements, sigma=loc.fit.sigma)
     say(f"localize: {loc.n_retained} of {loc.n_params} θ retained, χ²/dof {loc.chi2_per_dof_after:.3g}")

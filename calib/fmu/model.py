@@ -23,7 +23,7 @@ every mapped output ``x`` gives the azimuth harmonics ``x_1p``, ``x_2p``, ``x_3p
 (amplitude, unit of x) and ``x_1p_phase`` ... (deg), with x ≈ mean + Σ A_n cos(nψ + φ_n)
 and ψ the azimuth of blade 1 (0 = up).
 
-Jacobians: finite differences (central by default, or forward), cold or warm-started from the settled
+Jacobians: finite differences (forward at 0.1 × scale by default, or central; :class:`calib.fmu.rules.JacobianRule`), cold or warm-started from the settled
 base state (:mod:`calib.fmu.differences`); a cold run (base or perturbed) simulated before at the same point
 and parameter values, by any model of the same plan, is reused (:mod:`calib.fmu.base_runs`); what the
 simulations cost is counted (:meth:`FmuModel.simulation_summary`).

@@ -77,11 +77,17 @@ class SteadyRule:
 @dataclass(frozen=True)
 class JacobianRule:
     """How the adapter differentiates: central (two runs per parameter, error O(h²)) or forward
-    differences (one run per parameter against the point's base run, error O(h)), and their warm start."""
+    differences (one run per parameter against the point's base run, error O(h)), and their warm start.
 
-    relative_step: float = 1e-2
+    Default forward at ``relative_step`` 0.1 (× each parameter's scale): a steady FMU output averaged
+    over a finite window jumps at isolated parameter values (the bundled FMU: ~0.014 noise σ), and a step
+    of 0.01 scale measures the jump instead of the slope. Measured on the bundled FMU's diagnosis model
+    (``benchmarks/bench_fmu_diagnosis.py difference-error A``, error against central 0.2): stall-delay
+    strength column central 0.01 87 %, forward 0.1 11 %, central 0.1 3 %; forward takes half the runs."""
+
+    relative_step: float = 0.1
     warm_start: bool = True
-    differences: str = "central"
+    differences: str = "forward"
 
 
 def steady_rule(s: dict, source: str, where: str = "steady") -> SteadyRule:
