@@ -230,15 +230,9 @@ class Namer:
         """An ``ambiguous`` round while a model-form candidate is significant, model form first: the
         best model-form candidate when the pair's physical effect (the better one, for a pair of physical
         effects) does not earn its place on top of the joint model form (:meth:`_over_model_form`); a third
-        physical effect, neither of the pair, when it is the one that earns its place there (as in an
-        unambiguous round, where the effect that fits best on top of the model form is named over one that
-        fits better alone); else None (the round stays ambiguous, as it was).
-
-        Two physical effects that fit about equally well may both stand in for the induction model's form
-        (lifting line, fast wake, erosion hidden, seeds 27000 and 26011: ``reynolds_number`` or
-        ``rotational_augmentation``, ΔBIC 0.9 and 2.5 alone; on top of ``momentum_balance`` + ``tip_loss``
-        erosion explains most of what they leave, separable from them). In an unambiguous round the same
-        comparison names erosion over ``rotational_augmentation`` fitting better alone by ΔBIC 29 (seed 26012).
+        physical effect when it is the one that earns its place there (as an unambiguous round names it over one
+        that fits better alone: lifting line, fast wake, seed 26012); else None (the round stays ambiguous). A
+        tied pair may both stand in for the induction model's form (same data, erosion hidden, seed 26011).
         """
         pair = [next((f for f in fits if f.effect == name and f.significant), None) for name in rnd["ambiguous"]]
         forms = [f for f in fits if f.kind == "model_form" and f.significant]
@@ -248,15 +242,12 @@ class Namer:
         form = next((f for f in pair if f.kind == "model_form"), None)
         before = dict(rnd)
         chosen = self._over_model_form(round_no, rnd, physical, forms, fits)
-        if chosen.kind == "model_form" and (form is None or chosen is form):
-            rnd.pop("ambiguous", None), rnd.pop("separate", None)
-            rnd["reason"] += f" (the round was ambiguous: {before['reason']})"
-            return chosen
-        if chosen.kind == "physical" and form is None and chosen.effect not in before["ambiguous"]:
-            # both rivals lost, on top of the joint model form, to a third effect separable from it
+        third = chosen.kind == "physical" and form is None and chosen.effect not in before["ambiguous"]
+        if third or (chosen.kind == "model_form" and (form is None or chosen is form)):
             rnd.pop("ambiguous", None), rnd.pop("separate", None)
             rnd["reason"] += (f" (the round was ambiguous between {' and '.join(before['ambiguous'])} alone; on top "
-                              f"of the model form {chosen.effect} fits best of the candidates separable from it)")
+                              f"of the model form {chosen.effect} fits best of the candidates separable from it)"
+                              if third else f" (the round was ambiguous: {before['reason']})")
             return chosen
         rnd.clear()
         rnd.update(before)
