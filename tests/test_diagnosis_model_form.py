@@ -116,3 +116,31 @@ def test_a_hidden_effect_is_judged_on_top_of_the_whole_model_form(ra_doc):
     shares = shares_on_top(named["reason"])
     share, r2 = next(v for c, v in shares.items() if c.startswith("rotational_augmentation"))
     assert share >= LATER_EFFECT_SHARE and r2 < MODEL_FORM_COLLINEARITY
+
+
+@pytest.fixture(scope="module")
+def erosion_doc(tmp_path_factory) -> dict:
+    """The diagnosis of the fast-wake erosion copy (seed 26011; one run, about 15 s of CPU)."""
+    out = tmp_path_factory.mktemp("fast_wake_erosion") / "diag"
+    run_diagnose("nrel5mw", DATA / "fast_wake_leading_edge_erosion_seed26011.csv", out,
+                 config=DATA / "config_rigid.toml", history=False, printer=lambda s: None)
+    return json.loads((out / "diagnosis.json").read_text())
+
+
+def test_an_ambiguous_pair_loses_to_a_third_effect_on_top_of_the_model_form(erosion_doc):
+    """Lifting line, fast wake, erosion hidden (development seed 26011). Alone, ``reynolds_number`` and
+    ``rotational_augmentation`` fit about equally well (ΔBIC 2.5: the round is ambiguous) and erosion third;
+    on top of ``momentum_balance`` + ``tip_loss`` fitted jointly, erosion is the best candidate separable
+    from them and explains at least the share a physical effect needs, the pair less. As in an unambiguous
+    round (the effect that fits best on top of the model form is named over one that fits better alone),
+    erosion is named; before, the round stayed ambiguous and erosion was missed."""
+    physical = [e for e in erosion_doc["effects"] if EFFECTS[e].kind != "model_form"]
+    assert erosion_doc["effect"] == "leading_edge_erosion", [r["reason"][:300] for r in erosion_doc["rounds"]]
+    assert physical == ["leading_edge_erosion"]          # alone: no second physical effect
+    first = erosion_doc["rounds"][0]
+    assert "the round was ambiguous between" in first["reason"]
+    shares = shares_on_top(first["reason"])
+    share, r2 = next(v for c, v in shares.items() if c.startswith("leading_edge_erosion"))
+    assert share >= LATER_EFFECT_SHARE and r2 < MODEL_FORM_COLLINEARITY
+    rivals = [v[0] for c, v in shares.items() if c.split(":")[0] in ("reynolds_number", "rotational_augmentation")]
+    assert len(rivals) == 2 and max(rivals) < share

@@ -229,11 +229,10 @@ class Namer:
     def _ambiguous_with_model_form(self, round_no: int, rnd: dict, fits: list) -> CandidateFit | None:
         """An ``ambiguous`` round while a model-form candidate is significant, model form first: the
         best model-form candidate when the pair's physical effect (the better one, for a pair of physical
-        effects) does not earn its place on top of the joint model form (:meth:`_over_model_form`), else
-        None (the round stays ambiguous, as it was).
-
-        Two physical effects that fit about equally well may both stand in for the induction model's form
-        (lifting line, fast wake, erosion hidden, seed 27000: ``reynolds_number`` or ``rotational_augmentation``).
+        effects) does not earn its place on top of the joint model form (:meth:`_over_model_form`); a third
+        physical effect when it is the one that earns its place there (as an unambiguous round names it over one
+        that fits better alone: lifting line, fast wake, seed 26012); else None (the round stays ambiguous). A
+        tied pair may both stand in for the induction model's form (same data, erosion hidden, seed 26011).
         """
         pair = [next((f for f in fits if f.effect == name and f.significant), None) for name in rnd["ambiguous"]]
         forms = [f for f in fits if f.kind == "model_form" and f.significant]
@@ -243,9 +242,12 @@ class Namer:
         form = next((f for f in pair if f.kind == "model_form"), None)
         before = dict(rnd)
         chosen = self._over_model_form(round_no, rnd, physical, forms, fits)
-        if chosen.kind == "model_form" and (form is None or chosen is form):
+        third = chosen.kind == "physical" and form is None and chosen.effect not in before["ambiguous"]
+        if third or (chosen.kind == "model_form" and (form is None or chosen is form)):
             rnd.pop("ambiguous", None), rnd.pop("separate", None)
-            rnd["reason"] += f" (the round was ambiguous: {before['reason']})"
+            rnd["reason"] += (f" (the round was ambiguous between {' and '.join(before['ambiguous'])} alone; on top "
+                              f"of the model form {chosen.effect} fits best of the candidates separable from it)"
+                              if third else f" (the round was ambiguous: {before['reason']})")
             return chosen
         rnd.clear()
         rnd.update(before)
