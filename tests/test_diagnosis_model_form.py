@@ -90,13 +90,17 @@ def test_model_form_r2_is_the_squared_multiple_correlation():
     assert np.allclose(got, [rho ** 2], rtol=1e-12)
 
 
+def _diagnosis_of(tmp_path_factory, folder: str, csv: str) -> dict:
+    """``diagnosis.json`` of ``calib diagnose`` on the lifting-line copy ``csv`` (rigid set-up)."""
+    out = tmp_path_factory.mktemp(folder) / "diag"
+    run_diagnose("nrel5mw", DATA / csv, out, config=DATA / "config_rigid.toml", history=False, printer=lambda s: None)
+    return json.loads((out / "diagnosis.json").read_text())
+
+
 @pytest.fixture(scope="module")
 def ra_doc(tmp_path_factory) -> dict:
     """The diagnosis of the fast-wake rotational-augmentation copy (one run, about 13 s of CPU)."""
-    out = tmp_path_factory.mktemp("fast_wake_ra") / "diag"
-    run_diagnose("nrel5mw", DATA / "fast_wake_rotational_augmentation_seed26000.csv", out,
-                 config=DATA / "config_rigid.toml", history=False, printer=lambda s: None)
-    return json.loads((out / "diagnosis.json").read_text())
+    return _diagnosis_of(tmp_path_factory, "fast_wake_ra", "fast_wake_rotational_augmentation_seed26000.csv")
 
 
 def test_a_hidden_effect_is_judged_on_top_of_the_whole_model_form(ra_doc):
@@ -121,10 +125,7 @@ def test_a_hidden_effect_is_judged_on_top_of_the_whole_model_form(ra_doc):
 @pytest.fixture(scope="module")
 def erosion_doc(tmp_path_factory) -> dict:
     """The diagnosis of the fast-wake erosion copy (seed 26011; one run, about 15 s of CPU)."""
-    out = tmp_path_factory.mktemp("fast_wake_erosion") / "diag"
-    run_diagnose("nrel5mw", DATA / "fast_wake_leading_edge_erosion_seed26011.csv", out,
-                 config=DATA / "config_rigid.toml", history=False, printer=lambda s: None)
-    return json.loads((out / "diagnosis.json").read_text())
+    return _diagnosis_of(tmp_path_factory, "fast_wake_erosion", "fast_wake_leading_edge_erosion_seed26011.csv")
 
 
 def test_an_ambiguous_pair_loses_to_a_third_effect_on_top_of_the_model_form(erosion_doc):
