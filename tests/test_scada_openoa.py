@@ -9,11 +9,13 @@ within 1 % of OpenOA's (committed in openoa_reference_R80711_2014-03.json, compu
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from calib.measurements import read_measurements
 from calib.scada import FilterSettings, power_curve, read_scada
 
 DATA = Path(__file__).parent / "data" / "scada"
@@ -95,7 +97,13 @@ def test_calib_scada_command_prints_counts_and_writes_bins(tmp_path, capsys):
                  "--fill", "rotor_speed=15"]) == 0
     text = capsys.readouterr().out
     assert "duplicate_stamp         6" in text and "frozen                115" in text
-    assert len(read_measurements(out).values) >= 20
+    # the bins with 3 or more records whose mean power is > 0 (the 0-3 m/s bins hold a parked or idling
+    # rotor: counted, not written), from the printed table's own rows
+    rows = [ln.split() for ln in text.splitlines() if re.match(r"\s+\d+\.\d\d\s+\d+\s", ln)]
+    operating = [r for r in rows if int(r[1]) >= 3 and float(r[3]) > 0]
+    assert len(operating) >= 15 and len(rows) > len(operating)
+    assert len(read_measurements(out).values) == len(operating)
+    assert f"{sum(int(r[1]) >= 3 for r in rows) - len(operating)} rows not in operation" in text
 
 
 def test_calib_scada_command_without_rotor_speed_says_so(tmp_path, capsys):
@@ -112,8 +120,6 @@ def test_calib_scada_writes_the_density_sigma_of_its_sensors(tmp_path, capsys):
     out = tmp_path / "records.csv"
     assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--records-out", str(out),
                  "--fill", "rotor_speed=15", "--temperature-sigma", "0.5", "--pressure-sigma", "3"]) == 0
-    # read as a plain table: the extract's records table also holds a record at 0 m/s, which
-    # read_measurements refuses (a wind speed must be > 0)
     lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
     names = lines[0].split(",")
     table = dict(zip(names, np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]]).T))
@@ -121,6 +127,13 @@ def test_calib_scada_writes_the_density_sigma_of_its_sensors(tmp_path, capsys):
     t = 96500.0 / (287.05 * rho)
     assert rho.size > 100
     np.testing.assert_allclose(table["air_density_sigma"] / rho, np.hypot(0.5 / t, 300.0 / 96500.0), rtol=1e-6)
+    # the records a calibration can use: in operation only (the parked records at 0 m/s and the idling ones
+    # with negative power are counted, not written), so calib reads the table back
+    assert np.all(table["wind_speed"] > 0) and np.all(table["power"] > 0)
+    assert "rows not in operation" in out.read_text()
+    assert "rows not in operation" in capsys.readouterr().out
+    meas = read_measurements(out)
+    assert len(meas.conditions.wind_speed) == rho.size
     assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--records-out", str(out),
                  "--fill", "rotor_speed=15", "--temperature-sigma", "-1", "--pressure-sigma", "3"]) == 2
     assert "--temperature-sigma" in capsys.readouterr().err

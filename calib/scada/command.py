@@ -84,9 +84,10 @@ def scada_command(args) -> int:
                   f"{b.power_sigma[i] / 1e3:13.2f} {b.conditions['wind_speed']['std'][i]:8.3f} {pitch_std[i]:9.3f}")
         suffix = f"_{name}" if len(records.turbines) > 1 else ""
         if args.bins_out:
+            said = []
             out = write_bins_table(b, _with_suffix(args.bins_out, suffix), fill=fill, source=records.source,
-                                   comments=[f"calib scada {records.source} turbine {name}"])
-            print(f"  bins written to {out}")
+                                   comments=[f"calib scada {records.source} turbine {name}"], said=said)
+            print(f"  bins written to {out}" + "".join(f"; {s}" for s in said))
         if args.records_out:
             kept = a.report.kept
             means = {"wind_speed": a.wind_speed[kept]}
@@ -94,10 +95,11 @@ def scada_command(args) -> int:
             if a.density is not None:
                 means["air_density"] = np.broadcast_to(a.density, kept.shape)[kept]
             rho_sigma = _density_sigma(args, mine, pressure, kept) if a.density is not None else None
+            said = []
             out = write_records_table(means, mine.get("power")[kept], b, _with_suffix(args.records_out, suffix),
                                       fill=fill, source=records.source, density_sigma=rho_sigma,
-                                      comments=[f"calib scada {records.source} turbine {name}"])
-            print(f"  records written to {out}")
+                                      comments=[f"calib scada {records.source} turbine {name}"], said=said)
+            print(f"  records written to {out}" + "".join(f"; {s}" for s in said))
     return 0
 
 

@@ -47,14 +47,28 @@ def _columns(source: str, means: dict, sigmas: dict, power, power_sigma, fill: d
     return cols, notes
 
 
-def _write(path: Path, cols: dict, comments: list[str]) -> Path:
+def _write(path: Path, cols: dict, comments: list[str], said: list | None = None) -> Path:
+    """Write the rows in operation with finite values and σ > 0; the rows left out are counted in the
+    file's comments and appended to ``said`` (for the console)."""
     path = Path(path)
-    keep = np.all([np.isfinite(v) for v in cols.values()], axis=0) & (cols["power_sigma"] > 0)
+    finite = np.all([np.isfinite(v) for v in cols.values()], axis=0) & (cols["power_sigma"] > 0)
+    # a steady operating point of the rotor model: wind and power > 0 (a parked, idling or motoring rotor
+    # below cut-in is in the IEC power curve's bins, never a calibration point; read_measurements refuses
+    # a wind speed <= 0)
+    with np.errstate(invalid="ignore"):
+        operating = (cols["wind_speed"] > 0) & (cols["power"] > 0)
+    keep = finite & operating
+    left = []
+    if np.any(finite & ~operating):
+        left.append(f"{int((finite & ~operating).sum())} rows not in operation (wind speed or power <= 0: parked, "
+                    "idling or below cut-in) not written")
+    if not finite.all():
+        left.append(f"{int((~finite).sum())} rows without a finite value or with sigma 0 not written")
+    if said is not None:
+        said += left
     with path.open("w") as fh:
-        for c in comments:
+        for c in [*comments, *left]:
             fh.write(f"# {c}\n")
-        if not keep.all():
-            fh.write(f"# {int((~keep).sum())} rows without a finite value or with sigma 0 not written\n")
         fh.write(",".join(cols) + "\n")
         for i in np.flatnonzero(keep):
             fh.write(",".join(f"{cols[c][i]:.10g}" for c in cols) + "\n")
@@ -62,8 +76,10 @@ def _write(path: Path, cols: dict, comments: list[str]) -> Path:
 
 
 def write_bins_table(bins: PowerCurveBins, path, *, min_count: int = 3, fill: dict | None = None,
-                     source: str = "bins", comments=()) -> Path:
-    """Write the bins with ``min_count`` or more records as a measurement table (module docstring).
+                     source: str = "bins", comments=(), said: list | None = None) -> Path:
+    """Write the bins with ``min_count`` or more records as a measurement table (module docstring); bins
+    not in operation (mean wind speed or power <= 0) are left out, counted in the file's comments and in
+    ``said``.
 
     Raises
     ------
@@ -81,16 +97,17 @@ def write_bins_table(bins: PowerCurveBins, path, *, min_count: int = 3, fill: di
                 sigmas[name] = d["std"][sel] / root_n
     cols, notes = _columns(source, means, sigmas, bins.power[sel], bins.power_sigma[sel], fill)
     return _write(path, cols, list(comments) + notes + [f"method of bins, width {bins.width:g} m/s, bins with "
-                                                        f"N >= {min_count}: {int(sel.sum())}"])
+                                                        f"N >= {min_count}: {int(sel.sum())}"], said)
 
 
 def write_records_table(means: dict, power, bins: PowerCurveBins, path, *, fill: dict | None = None,
-                        source: str = "records", comments=(), density_sigma=None) -> Path:
+                        source: str = "records", comments=(), density_sigma=None, said: list | None = None) -> Path:
     """Write records (``means``: condition -> array, ``power`` [W]) as a measurement table, with σ from
     the scatter of each record's bin in ``bins`` (module docstring); records in bins of one record
     are left out and counted in a comment. ``density_sigma`` [kg/m^3] (per record or one value): the
     air density's own 1-σ (:func:`calib.scada.density.air_density_sigma`), written as
-    ``air_density_sigma`` beside a measured or computed ``air_density``."""
+    ``air_density_sigma`` beside a measured or computed ``air_density``. Records not in operation (wind
+    speed or power <= 0) are left out, counted in the file's comments and in ``said``."""
     k = bin_index(means["wind_speed"], bins)
     ok = k >= 0
     take = np.clip(k, 0, None)
@@ -103,4 +120,4 @@ def write_records_table(means: dict, power, bins: PowerCurveBins, path, *, fill:
         sigmas["air_density"] = density_sigma
     cols, notes = _columns(source, means, sigmas, np.asarray(power, float), scatter(bins.power_std), fill)
     return _write(path, cols, list(comments) + notes + [f"records, sigma = scatter of the record's {bins.width:g} "
-                                                        "m/s bin"])
+                                                        "m/s bin"], said)
