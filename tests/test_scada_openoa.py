@@ -137,3 +137,14 @@ def test_calib_scada_writes_the_density_sigma_of_its_sensors(tmp_path, capsys):
     assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--records-out", str(out),
                  "--fill", "rotor_speed=15", "--temperature-sigma", "-1", "--pressure-sigma", "3"]) == 2
     assert "--temperature-sigma" in capsys.readouterr().err
+
+
+def test_calib_scada_refuses_a_fill_that_is_not_a_number(tmp_path, capsys):
+    """Two conditions in one ``--fill`` (or a word) is refused naming the flag and the condition, exit 2."""
+    from calib.cli import main
+    for bad in ("rotor_speed=15,pitch=0", "rotor_speed=fast", "rotor_speed=nan"):
+        assert main(["scada", str(EXTRACT), "--rated-power", "2050", "--pressure", "965", "--records-out",
+                     str(tmp_path / "r.csv"), "--fill", bad]) == 2
+        err = capsys.readouterr().err
+        assert "--fill rotor_speed" in err and "expected a number" in err and "Traceback" not in err
+    assert not (tmp_path / "r.csv").exists()

@@ -60,9 +60,21 @@ def _pairs(items, what):
     return out
 
 
+def _number(text: str, where: str) -> float:
+    """``text`` as a finite number, or an InputError naming ``where`` (one NAME=number per ``--fill``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise InputError(f"expected a number (one CONDITION=VALUE per --fill, e.g. --fill rotor_speed=15 "
+                         f"--fill pitch=0), got {text!r}", where)
+    return value
+
+
 def scada_command(args) -> int:
     mapping = {k: tuple(x.strip() for x in v.split(",")) for k, v in _pairs(args.map, "map").items()}
-    fill = {k: float(v) for k, v in _pairs(args.fill, "fill").items()}
+    fill = {k: _number(v, f"--fill {k}") for k, v in _pairs(args.fill, "fill").items()}
     records = read_scada(args.export, mapping=mapping, ignore=args.ignore, turbine=args.turbine)
     settings = FilterSettings(rated_power=1e3 * args.rated_power, fine_pitch=args.fine_pitch,
                               enabled=tuple(f for f in FILTERS if f not in args.skip))
