@@ -136,7 +136,6 @@ def run(n_seeds: int = 1, variants=("A", "B"), executor: str = "process") -> dic
     go to ``bench_output/fmu_diagnosis_dask.*`` and are not published)."""
     from calib.diagnosis.command import run_diagnose
     from calib.fmu.tally import process_totals
-    from calib.measurements import Measurements
     t_start = time.perf_counter()
     WORK.mkdir(parents=True, exist_ok=True)
     rows, verdicts = [], []
@@ -149,13 +148,7 @@ def run(n_seeds: int = 1, variants=("A", "B"), executor: str = "process") -> dic
             truth_seconds = time.perf_counter() - t0
             named, seconds, sims = [], [], []
             for k in range(n_seeds):
-                rng = np.random.default_rng(SEED0 + 10 * k)
-                sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
-                noisy = clean + rng.standard_normal(clean.shape) * sigma
-                meas = Measurements(conditions(), tuple(CHANNELS), noisy, np.broadcast_to(sigma, noisy.shape).copy(),
-                                    source=f"fmu {variant} {name} seed {k}")
-                data = WORK / f"{variant}_{name}_{k}.csv"
-                meas.write_csv(data)
+                data = noisy_table(variant, name, clean, k)
                 t1 = time.perf_counter()
                 process_totals(reset=True)
                 d = run_diagnose(None, str(data), str(WORK / f"diag_{variant}_{name}_{k}{'' if executor == 'process' else '_' + executor}"), str(config),
@@ -211,6 +204,20 @@ def run(n_seeds: int = 1, variants=("A", "B"), executor: str = "process") -> dic
     return out
 
 
+def noisy_table(variant: str, data_set: str, clean: np.ndarray, seed: int) -> Path:
+    """The data set's measurement table for noise seed ``seed``: the truth's outputs ``clean`` plus 1 % of each
+    channel's RMS as Gaussian noise, with that σ; written under :data:`WORK`, its path returned."""
+    from calib.measurements import Measurements
+    rng = np.random.default_rng(SEED0 + 10 * seed)
+    sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
+    noisy = clean + rng.standard_normal(clean.shape) * sigma
+    meas = Measurements(conditions(), tuple(CHANNELS), noisy, np.broadcast_to(sigma, noisy.shape).copy(),
+                        source=f"fmu {variant} {data_set} seed {seed}")
+    data = WORK / f"{variant}_{data_set}_{seed}.csv"
+    meas.write_csv(data)
+    return data
+
+
 def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 0, executor: str = "process",
          jacobian: dict | None = None) -> dict:
     """One diagnosis of :func:`run` (``variant``, ``data_set``, noise seed ``seed``) with its FMU
@@ -223,19 +230,12 @@ def case(variant: str = "A", data_set: str = "pitch_offset_blade1", seed: int = 
     """
     from calib.diagnosis.command import run_diagnose
     from calib.fmu.tally import process_totals
-    from calib.measurements import Measurements
     WORK.mkdir(parents=True, exist_ok=True)
     tag = "" if not jacobian else "_" + "_".join(f"{v}" for v in jacobian.values())
     config = WORK / f"config_{variant}_{executor}{tag}.toml"
     config.write_text(config_text(variant, executor, jacobian))
     clean = truth_values(variant, DATA_SETS[data_set], WORK)
-    rng = np.random.default_rng(SEED0 + 10 * seed)
-    sigma = 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
-    noisy = clean + rng.standard_normal(clean.shape) * sigma
-    meas = Measurements(conditions(), tuple(CHANNELS), noisy, np.broadcast_to(sigma, noisy.shape).copy(),
-                        source=f"fmu {variant} {data_set} seed {seed}")
-    data = WORK / f"{variant}_{data_set}_{seed}.csv"
-    meas.write_csv(data)
+    data = noisy_table(variant, data_set, clean, seed)
     steps = []
 
     def printer(line):
