@@ -131,3 +131,45 @@ def test_jacobian_updates_setting_is_checked(value):
     from calib.errors import InputError
     with pytest.raises(InputError, match="jacobian_updates"):
         CalibrationSettings(jacobian_updates=value).validate("run.toml", "calibration.")
+
+
+def test_the_reuse_distance_is_a_tenth_of_the_declared_difference_step():
+    """1e-3 scale units when the model declares no step (and at the FMU mappings' 0.01), 0.01 at 0.1."""
+    from calib.calibration.estimation_parts import JACOBIAN_REUSE_STEP, jacobian_reuse_step
+    assert jacobian_reuse_step(None) == JACOBIAN_REUSE_STEP == 1e-3
+    assert jacobian_reuse_step(0.01) == pytest.approx(1e-3, rel=1e-12)
+    assert jacobian_reuse_step(0.1) == pytest.approx(0.01, rel=1e-12)
+    assert jacobian_reuse_step(0.0) == JACOBIAN_REUSE_STEP
+
+
+class DeclaredStepModel(SteadyModel):
+    """:class:`SteadyModel` declaring its difference step ``h`` (scale 1: h scale units), as an FMU does."""
+
+    capabilities = Capabilities("SteadyModel", derivatives="finite_difference", difference_step=0.05)
+
+
+def test_a_declared_difference_step_keeps_the_model_jacobian_over_short_steps():
+    """Forward differences of step 0.05 scale units, started 0.003 from the MAP: the step there ends within
+    0.005 (a tenth of the declared step) of the model Jacobian's point and keeps that Jacobian, where the
+    undeclared 1e-3 makes it a secant update and then takes a second model Jacobian before stopping. Both
+    estimates within 0.1 posterior σ of the MAP with exact differences; the final linearization of the
+    declared model is its model Jacobian at the start (no update)."""
+    L = 3.0 * np.eye(4)
+    smooth = estimate_map(_problem(SteadyModel()), L, None, "sqpmethod", StopRule(30, 1e-12))
+    J = -(smooth.linearization.M @ L)
+    sd_u = np.sqrt(np.diag(np.linalg.inv(J.T @ J + np.eye(4))))
+    stop = StopRule(30, 1e-9, decrease_tolerance=5e-4, noise_decrease=5e-3)
+    start = smooth.p + np.array([0.003, -0.002, 0.002, -0.003])
+    found = {}
+    for cls in (SteadyModel, DeclaredStepModel):
+        prob = _problem(cls(h=0.05))
+        u0 = np.linalg.solve(L, prob.scaled(start))
+        out = estimate_map(prob, L, u0, "sqpmethod", stop, broyden=True)
+        assert out.status == EstimationStatus.CONVERGED
+        assert np.max(np.abs(np.linalg.solve(L, out.p - smooth.p)) / sd_u) < 0.1
+        found[cls] = out, prob.n_jacobians
+    (old, jac_old), (new, jac_new) = found[SteadyModel], found[DeclaredStepModel]
+    assert old.broyden_updates >= 1 and jac_old == 2
+    assert new.broyden_updates == 0 and jac_new == 1
+    at_start = _problem(DeclaredStepModel(h=0.05)).linearize(start)
+    np.testing.assert_array_equal(new.linearization.M, at_start.M)

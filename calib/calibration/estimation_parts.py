@@ -131,11 +131,30 @@ MIN_DAMPING = 1e-6
 SHRINK_AFTER_REJECTION = 0.5
 
 #: With Broyden updates: a step that ends within this distance (largest component of p̃ − p̃_J) of the point
-#: where the model Jacobian was taken keeps that Jacobian [scale units]. Finite-difference steps are 0.01-0.1
+#: where the model Jacobian was taken keeps that Jacobian [scale units], for a model that does not declare its
+#: difference step (:attr:`~calib.models.base.Capabilities.difference_step`; else
+#: :data:`JACOBIAN_REUSE_FRACTION` of it, :func:`jacobian_reuse_step`). Finite-difference steps are 0.01-0.1
 #: scale units (the FMU mappings' default and ``bench_fmu_run``'s), so the Jacobian there differs from one at
 #: the new point by far less than its own difference error, while a secant over such a step would measure
 #: the FMU's output jumps (0.014 noise σ) rather than its slope.
 JACOBIAN_REUSE_STEP = 1e-3
+
+#: With Broyden updates and a model that declares its difference step h [scale units]: a step ending within
+#: this fraction of h of the model Jacobian's point keeps that Jacobian (1e-3 at the FMU mappings' h = 0.01,
+#: :data:`JACOBIAN_REUSE_STEP`; 0.01 at the FMU default h = 0.1). A forward difference is the secant over
+#: [p̃, p̃ + h]: moving its base by h/10 changes it by a tenth of its own O(h) truncation error, while a secant
+#: over that short a step measures the output jumps (on ``bench_fmu_run`` at h = 0.1 the MAP's last step,
+#: 0.0047 scale units, was such an update, and the model Jacobian it then called for cost 192 simulations).
+JACOBIAN_REUSE_FRACTION = 0.1
+
+
+def jacobian_reuse_step(difference_step: float | None) -> float:
+    """The distance [scale units] within which a step keeps the model Jacobian under Broyden's update:
+    :data:`JACOBIAN_REUSE_FRACTION` × the model's difference step ``difference_step`` [scale units], or
+    :data:`JACOBIAN_REUSE_STEP` when the model does not declare it (None)."""
+    if difference_step is None or not np.isfinite(difference_step) or difference_step <= 0.0:
+        return JACOBIAN_REUSE_STEP
+    return JACOBIAN_REUSE_FRACTION * float(difference_step)
 
 #: The subproblems solved at most per iteration while shrinking the step (no model call each) [-].
 MAX_SHRINK_SOLVES = 30

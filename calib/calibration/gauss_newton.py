@@ -43,7 +43,7 @@ import numpy as np
 
 from calib.calibration.estimation_parts import (DAMPING_TRIES, JACOBIAN_REUSE_STEP, MAX_SHRINK_SOLVES, MIN_DAMPING,
                                                SHRINK_AFTER_REJECTION, EstimationOutcome, EstimationStatus, StopRule,
-                                               broyden_update, feasible_start, feasible_step)
+                                               broyden_update, feasible_start, feasible_step, jacobian_reuse_step)
 from calib.calibration.problem import LeastSquaresProblem, Linearization
 from calib.calibration.qp import QpSolution, get_optimizer
 from calib.calibration.secant import SECANT_RHO, SECANT_START, psd_part, secant_update
@@ -103,8 +103,9 @@ def estimate_map(problem: LeastSquaresProblem, prior_root: np.ndarray, u0: np.nd
         step's evaluation instead of a new model Jacobian (:func:`broyden_update`); a fresh model Jacobian
         replaces the update when a step under it is rejected and before the iteration may stop, so the
         estimate and its covariance rest on a model Jacobian (taken there, or within
-        :data:`JACOBIAN_REUSE_STEP` of it). For models whose Jacobian costs simulations of its own (finite
-        differences); the residuals' secant curvature is then not used.
+        :func:`~calib.calibration.estimation_parts.jacobian_reuse_step` of it: a tenth of the model's difference
+        step). For models whose Jacobian costs simulations of its own (finite differences); the residuals'
+        secant curvature is then not used.
 
     Returns
     -------
@@ -137,6 +138,7 @@ class _Iteration:
     refresh: bool = False                 # a step under the Broyden update was rejected: a model Jacobian first
     updates: int = 0                      # Broyden updates made
     anchor: np.ndarray | None = None      # p̃ where lin.M was taken from the model (None: an update)
+    reuse_step: float = JACOBIAN_REUSE_STEP   # a step ending this near the anchor keeps lin.M [scale units]
 
     def cost(self, at: Linearization, theta: np.ndarray) -> float:
         """Half the χ² at ``at``, plus the prior term of ``theta``."""
@@ -181,6 +183,7 @@ def _gauss_newton(problem, basis, theta0, optimizer, stop: StopRule, callback, s
     if secant:
         run.curvature = np.zeros((basis.shape[1], basis.shape[1]))
     run.anchor = basis @ theta
+    run.reuse_step = jacobian_reuse_step(getattr(problem.model.capabilities, "difference_step", None))
     it = 0
     for it in range(1, stop.max_iterations + 1):
         H, g, dH = _normal_equations(run)
@@ -357,7 +360,7 @@ def _take(run: _Iteration, trial: _Trial, cost_now: float, stage: str, it: int, 
     the cost decrease and the step length [scale units]."""
     if trial.lin.M is None:             # the accepted trial's sensitivities
         near = run.anchor is not None and np.max(np.abs(run.basis @ (run.theta + trial.x) - run.anchor)) \
-            <= JACOBIAN_REUSE_STEP
+            <= run.reuse_step
         if broyden and np.array_equal(trial.lin.ok, run.lin.ok) and near:
             # within a small fraction of the difference steps of the model Jacobian: that Jacobian
             trial.lin = Linearization(trial.lin.p, trial.lin.residual, trial.lin.ok, run.lin.M, trial.lin.evaluation)

@@ -333,10 +333,10 @@ class FmuModel:
     def capabilities(self) -> Capabilities:
         """Rebuildable from its spec, finite-difference Jacobians, workers to close; a correction field
         when :attr:`has_correction_field` (named ``FmuFieldModel`` in results then), never refinable (the
-        nodes are the FMU's own)."""
+        nodes are the FMU's own); the difference step its ``relative_step``."""
         field = self.has_correction_field
         return Capabilities("FmuFieldModel" if field else "FmuModel", correction_field=field, rebuildable=True,
-                            derivatives="finite_difference", closes=True)
+                            derivatives="finite_difference", closes=True, difference_step=self.relative_step)
 
     def correction_field(self) -> CorrectionField:
         """The correction field of ``[corrections]`` (when :attr:`has_correction_field`).

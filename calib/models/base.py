@@ -50,6 +50,9 @@ class Capabilities:
         How ``jacobian`` is computed.
     closes : bool
         ``close()`` releases worker processes or files; a caller that built the model calls it.
+    difference_step : float or None
+        With ``derivatives="finite_difference"``: the difference step of ``jacobian`` [scale units, i.e. a
+        fraction of each parameter's ``scale``]; None when not declared.
     """
 
     name: str
@@ -58,6 +61,7 @@ class Capabilities:
     rebuildable: bool = False
     derivatives: str = "finite_difference"
     closes: bool = False
+    difference_step: float | None = None
 
     def __post_init__(self):
         if self.derivatives not in DERIVATIVE_KINDS:
