@@ -99,3 +99,58 @@ def test_the_estimators_agree_within_their_sigma_on_the_same_data(workdir):
                 sa, sb = np.array(a["std_p"])[other], np.array(b["std_p"])[other]
                 z = np.abs(pa - pb) / np.hypot(sa, sb)
                 assert z.max() < 3.0, (key, a["cell"], b["cell"], [names[j] for j in other], z)
+
+
+#: The coverage twins of the uncertain cells: fresh seeds (never tuned on), and the rule, stated before
+#: the first run: the share of replicates whose NEES lies below the 95 % quantile of χ²(n) at least
+#: ``COVERAGE_FLOOR`` (binomial: a true 95 % falls below 34 of 40 with probability 1.6 %), and the mean
+#: NEES per degree of freedom in ``NEES_PER_DOF`` (sharpness: intervals neither too narrow nor too wide;
+#: the mean of 40 χ²(3)/3 has σ 0.13).
+EIV_COVERAGE_SEEDS = range(6000, 6040)
+COVERAGE_FLOOR = 34 / 40
+NEES_PER_DOF = (0.6, 1.5)
+
+
+def _eiv_coverage(model_kind: str, estimator: str, mode: str, workdir) -> tuple[float, float]:
+    """Share of the 95 % NEES regions holding the truth and the mean NEES per degree of freedom over
+    ``EIV_COVERAGE_SEEDS`` (output noise and the conditions' scatter drawn again per seed)."""
+    from scipy import stats
+
+    from calib.calibration import CalibrationSettings, Calibrator
+    from calib.measurements import synthesize
+    from conformance import NOISE, _exact_case, build_model, conditions_of, with_uncertain_conditions
+
+    p_true, _ = _exact_case(model_kind, str(workdir))
+    model, prior_std = build_model(model_kind, "stated", None, workdir)
+    channels = [c.name for c in model.channels]
+    nees = []
+    for seed in EIV_COVERAGE_SEEDS:
+        clean = synthesize(model, p_true, conditions_of(model_kind), relative_sigma={c: NOISE for c in channels},
+                           seed=seed)
+        meas = with_uncertain_conditions(clean, seed)
+        res = Calibrator(model, meas, CalibrationSettings(estimator=estimator, errors_in_variables=mode,
+                                                          prior_std=prior_std)).run()
+        assert res.estimate.status == "converged", (seed, res.estimate.message)
+        err = (res.estimate.p_hat - p_true) / res.estimate.scale
+        cov = res.uncertainty.cov_p / np.outer(res.estimate.scale, res.estimate.scale)
+        nees.append(float(err @ np.linalg.solve(cov, err)))
+    nees = np.array(nees)
+    return float(np.mean(nees <= stats.chi2.ppf(0.95, err.size))), float(nees.mean() / err.size)
+
+
+@pytest.mark.statistics
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_the_default_joint_estimator_covers_on_uncertain_conditions(estimator, workdir):
+    """The default errors-in-variables estimator (joint) on the native BEM with global biases
+    (``bem_effects``: pitch offset, wind-speed scale, lift offset), 40 fresh seeds: its 95 % regions
+    hold the truth as often as they say (rule: ``COVERAGE_FLOOR``, ``NEES_PER_DOF``)."""
+    covered, per_dof = _eiv_coverage("bem_effects", estimator, "joint", workdir)
+    assert covered >= COVERAGE_FLOOR and NEES_PER_DOF[0] <= per_dof <= NEES_PER_DOF[1], (covered, per_dof)
+
+
+@pytest.mark.statistics
+def test_the_coverage_rule_fails_the_fit_that_ignores_the_conditions_scatter(workdir):
+    """The same rule refuses the output-error fit on the same data (the conditions taken as exact):
+    the coverage test can fail."""
+    covered, per_dof = _eiv_coverage("bem_effects", "map", "ignore", workdir)
+    assert covered < COVERAGE_FLOOR or not NEES_PER_DOF[0] <= per_dof <= NEES_PER_DOF[1], (covered, per_dof)
