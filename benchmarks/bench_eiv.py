@@ -22,7 +22,9 @@ nodes, in parameter scales; over all nodes and over those the marginal estimator
 better than half their prior σ) and of the global biases (``wind_scale`` [-], ``pitch_offset``
 [deg]), and the coverage of the 95 % intervals (±1.96 σ of the Laplace covariance) over replicates.
 
-``python benchmarks/bench_eiv.py [N]`` (N replicates, default 50; about 20 s CPU per replicate).
+``python benchmarks/bench_eiv.py [N]`` (N replicates, default 50; about 20 s CPU per replicate of all
+three set-ups and five calibrations on an idle machine); publishes
+``docs/validation/data/errors_in_variables.json``.
 """
 
 from __future__ import annotations
@@ -300,8 +302,12 @@ def campaign_figures(kind: str, n_replicates: int, first_seed: int) -> dict:
 def run(n_replicates: int = 50, first_seed: int = 4000) -> dict:
     """The figures of ``n_replicates`` campaigns of each set-up: polars and global biases
     (``field``), global biases alone (``globals``), polars and global biases on records from
-    CCBlade (``ccblade``)."""
-    return {kind: campaign_figures(kind, n_replicates, first_seed) for kind in SETUPS}
+    CCBlade (``ccblade``); published for the errors-in-variables page (``make validate`` calls this)."""
+    from publish import command_line, publish
+
+    figures = {kind: campaign_figures(kind, n_replicates, first_seed) for kind in SETUPS}
+    figures["published"] = publish("errors_in_variables", figures, command_line(), markdown(figures))
+    return figures
 
 
 def not_converged(rec: dict) -> str:
@@ -393,9 +399,6 @@ def markdown(figures: dict) -> str:
 
 
 if __name__ == "__main__":
-    from publish import command_line, publish
-
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 50
-    result = run(n)
+    result = run(int(sys.argv[1]) if len(sys.argv) > 1 else 50)
     print(markdown(result))
-    print(publish("errors_in_variables", result, command_line(), markdown(result)))
+    print(result["published"])
