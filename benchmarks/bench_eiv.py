@@ -65,7 +65,7 @@ ESTIMATORS = {
 #: (the scatter of the conditions unmodelled) rejects most trial steps, and 10 of 50 field calibrations
 #: (seeds 4004, 4007, 4008, 4012, 4015, 4018, 4027, 4028, 4033, 4048 at 60fb45d) stopped at the cap of 30
 #: with 18–29 of the 30 steps rejected; seeds 4004 and 4007 converge at 47 and 50 iterations (42 and 43
-#: rejected) with the cost 1.2 % and 1.1 % lower. The other estimators stop well before 30 either way.
+#: rejected) with the cost 1.3 % and 1.1 % lower. The other estimators stop well before 30 either way.
 COMMON = {"prior_check": False, "tightening": False, "curvature_samples": 0, "max_iterations": 100}
 GLOBAL = ("wind_scale", "pitch_offset")
 SETUPS = {"field": "Polars and global biases", "globals": "Global biases alone (polars known)",
