@@ -27,7 +27,7 @@ sys.path.insert(0, HERE)
 #: A statistical study: run by `make validate` (benchmarks/run_all.py --suite validate), not `make bench`.
 SUITE = "validate"
 
-KEYS = ("model", "estimator", "prior", "executor", "noise")
+KEYS = ("model", "estimator", "prior", "executor", "noise", "conditions")
 
 
 def _markdown(rows: list[dict]) -> str:
@@ -35,8 +35,8 @@ def _markdown(rows: list[dict]) -> str:
     lines = [f"{n_pass} of {len(rows)} cells pass; a cell passes when the calibration ends `converged` with no "
              "failed point, every non-field parameter lies within 3 σ of its truth, the NEES of the whole scaled "
              "vector lies below the 99.9 % quantile of χ²(n), and the MAP's self-check is silent.", "",
-             "| model | estimator | prior | executor | noise | pass | worst \\|z\\| (parameter) | NEES / bound | s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| model | estimator | prior | executor | noise | conditions | pass | worst \\|z\\| (parameter) | NEES / bound | s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         mark = "yes" if r["passed"] else "**no**"
         lines.append(f"| {' | '.join(r[k] for k in KEYS)} | {mark} | {r['worst_z']:.2f} ({r['worst_parameter']}) | "

@@ -20,7 +20,13 @@ The dimensions:
 - executor (FMUs only; the native BEM is vectorized in-process): ``serial``, ``process`` (two
   workers), ``dask`` (a local cluster of two); every combination on the generic FMU, the bundled
   FMUs on the pool in the pairs of ``BUNDLED_ON_THE_POOL``;
-- noise: ``known`` (the data's σ), ``ml`` (one σ per channel estimated with the fit).
+- noise: ``known`` (the data's σ), ``ml`` (one σ per channel estimated with the fit);
+- conditions: ``exact`` (the data's conditions are the true ones) or ``uncertain`` (cells whose id
+  ends in ``-eiv``: the measured wind speed scatters 3 % and the pitch 0.2 deg about the true ones,
+  the σ stated in the table, so the default ``errors_in_variables = "joint"`` runs; issue 40).
+  Uncertain conditions with ``ml`` noise are refused by design (the residuals' scatter would count
+  the conditions' share twice): those cells pass when the calibration refuses them naming
+  ``calibration.noise``.
 
 Every model kind has one truth and one data set (seed fixed per model, not tuned), shared by all
 its cells, so cells that differ only in the path must agree: the serial, process and Dask cells
@@ -60,6 +66,15 @@ ESTIMATORS = ("map", "truncated")
 PRIORS = ("default", "stated", "mixed")
 EXECUTORS = ("serial", "process", "dask")
 NOISES = ("known", "ml")
+CONDITIONS = ("exact", "uncertain")
+
+#: The measured conditions of the ``uncertain`` cells: the wind speed's relative 1-σ [-] and the
+#: pitch's [deg] (a nacelle anemometer's scatter per 10-minute mean and a pitch reading's, issue 40);
+#: the rotor speed and the density exact.
+WIND_SCATTER = 0.03
+PITCH_SCATTER = 0.2
+#: Seed offset of the uncertain cells' data from the model's ``SEED`` (fresh: never tuned on).
+EIV_SEED_OFFSET = 100
 
 #: Every non-field parameter within this many σ of its truth (issue 34's acceptance).
 Z_MAX = 3.0
@@ -113,10 +128,23 @@ class Cell:
     prior: str
     executor: str
     noise: str
+    conditions: str = "exact"
 
     @property
     def id(self) -> str:
-        return "-".join((self.model, self.estimator, self.prior, self.executor, self.noise))
+        return "-".join((self.model, self.estimator, self.prior, self.executor, self.noise)) + \
+            ("-eiv" if self.uncertain else "")
+
+    @property
+    def uncertain(self) -> bool:
+        """The data's conditions are measured with an uncertainty (errors in variables)."""
+        return self.conditions == "uncertain"
+
+    @property
+    def refused(self) -> bool:
+        """A combination the calibration refuses by design: uncertain conditions with ML noise
+        (:func:`calib.calibration.errors_in_variables.check_noise_mode`)."""
+        return self.uncertain and self.noise == "ml"
 
     @property
     def is_fmu(self) -> bool:
@@ -140,6 +168,30 @@ def matrix() -> list[Cell]:
         if m == "fmu_generic" or (x == "serial" and not m.startswith("fmu")) or \
                 (m.startswith("fmu") and (x == "serial" or (x == "process" and (e, p, n) in BUNDLED_ON_THE_POOL))):
             out.append(Cell(m, e, p, x, n))
+    return out + eiv_matrix()
+
+
+#: The bundled FMU's cells with uncertain conditions (FMI 3.0, ``fmu_b``): each estimator and prior
+#: mode once, the process pool once, and the refusal of ML noise (a joint fit through a bundled FMU
+#: costs minutes: its J_u takes 2 simulations per point and uncertain condition per inner step).
+BUNDLED_EIV = (("map", "stated", "serial", "known"), ("truncated", "mixed", "process", "known"),
+               ("map", "default", "serial", "known"), ("map", "default", "serial", "ml"))
+
+
+def eiv_matrix() -> list[Cell]:
+    """The cells with uncertain conditions the default ``errors_in_variables = "joint"`` reaches: the
+    native BEM models with every estimator, prior and noise model; the generic FMU with every
+    estimator, prior and noise model serially and with each executor once per estimator; the bundled
+    FMI 3.0 FMU in the combinations of ``BUNDLED_EIV``."""
+    out = []
+    for m, e, p, n in itertools.product(MODELS, ESTIMATORS, PRIORS, NOISES):
+        if not m.startswith("fmu"):
+            out.append(Cell(m, e, p, "serial", n, "uncertain"))
+        elif m == "fmu_generic":
+            out.append(Cell(m, e, p, "serial", n, "uncertain"))
+            if p == "stated" and n == "known":
+                out += [Cell(m, e, p, x, n, "uncertain") for x in EXECUTORS if x != "serial"]
+    out += [Cell("fmu_b", e, p, x, n, "uncertain") for e, p, x, n in BUNDLED_EIV]
     return out
 
 
@@ -154,7 +206,12 @@ FAST = [Cell("fmu_generic", "map", "stated", "serial", "known"),
         Cell("bem_field", "truncated", "default", "serial", "ml"),
         Cell("bem_effects", "map", "mixed", "serial", "ml"),
         Cell("bem_effects", "truncated", "stated", "serial", "known"),
-        Cell("fmu_b", "map", "mixed", "serial", "known")]
+        Cell("fmu_b", "map", "mixed", "serial", "known"),
+        Cell("bem_field", "map", "stated", "serial", "known", "uncertain"),
+        Cell("bem_effects", "truncated", "default", "serial", "known", "uncertain"),
+        Cell("bem_effects", "map", "mixed", "serial", "ml", "uncertain"),
+        Cell("fmu_generic", "map", "stated", "serial", "known", "uncertain"),
+        Cell("fmu_generic", "truncated", "stated", "process", "known", "uncertain")]
 
 
 # ---------------------------------------------------------------------------------------------- models
@@ -258,9 +315,49 @@ def is_field(name: str) -> bool:
     return name.startswith(("dCL", "dCD"))
 
 
+def with_uncertain_conditions(meas, seed: int):
+    """``meas`` (made at the true conditions) with measured conditions scattered about them: wind
+    speed × (1 + ``WIND_SCATTER`` ε), pitch + ``PITCH_SCATTER`` ε, and those σ stated in the table
+    (``condition_sigma``: the wind's relative to its reading)."""
+    import dataclasses
+
+    rng = np.random.default_rng(seed)
+    true = meas.conditions
+    n = len(true)
+    wind = true.wind_speed * (1.0 + WIND_SCATTER * rng.standard_normal(n))
+    pitch = true.pitch + PITCH_SCATTER * rng.standard_normal(n)
+    return dataclasses.replace(meas, conditions=dataclasses.replace(true, wind_speed=wind, pitch=pitch),
+                               condition_sigma={"wind_speed": WIND_SCATTER * wind,
+                                                "pitch": np.full(n, PITCH_SCATTER)})
+
+
+def _case(model: str, workdir: str, conditions: str = "exact"):
+    """The truth (full vector) and the measurements of one model kind, made once; ``uncertain``: the
+    same truth, outputs drawn again at the true conditions (seed ``SEED + EIV_SEED_OFFSET``) and
+    the conditions measured with scatter (:func:`with_uncertain_conditions`)."""
+    p_true, meas = _exact_case(model, workdir)
+    if conditions == "exact":
+        return p_true, meas
+    return p_true, _uncertain_case(model, workdir)
+
+
 @lru_cache(maxsize=None)
-def _case(model: str, workdir: str):
-    """The truth (full vector) and the measurements of one model kind, made once."""
+def _uncertain_case(model: str, workdir: str):
+    p_true, _ = _exact_case(model, workdir)
+    m, _ = build_model(model, "default", None, Path(workdir))
+    try:
+        channels = [c.name for c in m.channels]
+        seed = SEED[model] + EIV_SEED_OFFSET
+        meas = synthesize(m, p_true, conditions_of(model), relative_sigma={c: NOISE for c in channels}, seed=seed)
+    finally:
+        if model.startswith("fmu"):
+            m.close()
+    return with_uncertain_conditions(meas, seed)
+
+
+@lru_cache(maxsize=None)
+def _exact_case(model: str, workdir: str):
+    """The truth (full vector) and the measurements at exact conditions of one model kind, made once."""
     m, _ = build_model(model, "default", None, Path(workdir))
     try:
         cond = conditions_of(model)
@@ -303,13 +400,15 @@ def _executor(kind: str):
 
 def run_cell(cell: Cell, workdir: Path) -> dict:
     """Calibrate one cell and judge it; a dict of its figures and ``passed`` with the reasons it failed."""
-    p_true, meas = _case(cell.model, str(workdir))
+    p_true, meas = _case(cell.model, str(workdir), cell.conditions)
     executor = _executor(cell.executor) if cell.is_fmu else None
     t0 = time.perf_counter()
     model = None
     try:
         model, prior_std = build_model(cell.model, cell.prior, executor, workdir)
         settings = CalibrationSettings(estimator=cell.estimator, noise=cell.noise, prior_std=prior_std or None)
+        if cell.refused:
+            return _refusal(cell, lambda: Calibrator(model, meas, settings, name=cell.id).run(), t0)
         res = Calibrator(model, meas, settings, name=cell.id).run()
     finally:
         if model is not None and cell.is_fmu:
@@ -329,6 +428,8 @@ def run_cell(cell: Cell, workdir: Path) -> dict:
     nees_bound = float(stats.chi2.ppf(NEES_LEVEL, n))
     agreement = res.provenance.checks.get("MAP and ML", "")
     why = []
+    if cell.uncertain and "errors in variables (joint)" not in res.estimate.message:
+        why.append(f"not the joint errors-in-variables fit: {res.estimate.message}")
     if res.estimate.status != "converged":
         why.append(f"status {res.estimate.status}: {res.estimate.message}")
     if res.fit.failures.get("final", 0):
@@ -342,4 +443,23 @@ def run_cell(cell: Cell, workdir: Path) -> dict:
     return {"cell": cell.id, **vars(cell), "status": res.estimate.status, "worst_parameter": names[worst],
             "worst_z": float(abs(z[worst])), "nees": nees, "dof": n, "nees_bound": nees_bound,
             "agreement": agreement, "p_hat": res.estimate.p_hat.tolist(), "std_p": res.uncertainty.std_p.tolist(),
-            "names": names, "wall_s": wall, "passed": not why, "why": "; ".join(why)}
+            "names": names, "wall_s": wall, "passed": not why, "why": "; ".join(why),
+            "model_evaluations": res.fit.failures.get("model_evaluations"),
+            "model_jacobians": res.fit.failures.get("model_jacobians")}
+
+
+def _refusal(cell: Cell, calibrate, t0: float) -> dict:
+    """Judge a combination refused by design: it must raise an ``InputError`` naming ``calibration.noise``."""
+    from calib.errors import InputError
+
+    why = []
+    try:
+        calibrate()
+        why.append("calibrated instead of refusing ML noise with uncertain conditions")
+    except InputError as exc:
+        if exc.field != "calibration.noise":
+            why.append(f"refused naming {exc.field!r}, not 'calibration.noise': {exc}")
+    return {"cell": cell.id, **vars(cell), "status": "refused", "worst_parameter": "-", "worst_z": float("nan"),
+            "nees": float("nan"), "dof": 0, "nees_bound": float("nan"), "agreement": "", "p_hat": None,
+            "std_p": None, "names": [], "wall_s": time.perf_counter() - t0, "passed": not why,
+            "why": "; ".join(why)}

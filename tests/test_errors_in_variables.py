@@ -120,8 +120,11 @@ def test_effective_covariance_matches_monte_carlo(globals_model):
 
 
 def test_zero_condition_sigma_leaves_a_shipped_workflow_bit_identical(tmp_path):
+    """The in-family twins unchanged when every condition σ is zero, under the default estimator (the
+    workflow states none: ``errors_in_variables`` is the default, ``joint``)."""
     text = (WORKFLOWS / "wind_tunnel_hub_loads.toml").read_text()
-    assert "[calibration]\n" in text
+    assert "[calibration]\n" in text and "errors_in_variables" not in text
+    assert CalibrationSettings().errors_in_variables == "joint"
     zero = text.replace("[calibration]\n", "[calibration]\ncondition_sigma = {wind_speed = 0.0, pitch = 0.0}\n")
     a = tmp_path / "a.toml"
     b = tmp_path / "b.toml"
