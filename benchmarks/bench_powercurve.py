@@ -178,11 +178,12 @@ def discrepancy_check(result, pc, curve: dict, v: np.ndarray):
 
     Realized: the truth's power minus the calibrated model's at the truth's own schedule, in the truth's
     region-2 bins (what a discrepancy term should describe: the model form at the calibrated parameters,
-    the schedule's share left out). Stated: the process's conditional mean ŷμ and conditional
-    covariance ŷΣŷ at the bins (:func:`calib.powercurve.discrepancy.discrepancy_moments`, the central
+    the schedule's share left out). Stated: the process's conditional mean uμ and conditional
+    covariance uΣu at the bins (u the process's unit: ŷ for a relative one, its reference for one in
+    channel units) (:func:`calib.powercurve.discrepancy.discrepancy_moments`, the central
     schedule, zero in region 3). Returns None without a power process, else a function of the AEP
-    weights c [MWh per W] giving ``realized_mwh``, ``mean_mwh`` (c·ŷμ), ``conditional_sd_mwh``
-    (√(cŷ)ᵀΣ(cŷ)) and the process's ``amplitude`` and ``length``."""
+    weights c [MWh per W] giving ``realized_mwh``, ``mean_mwh`` (c·uμ), ``conditional_sd_mwh``
+    (√(cu)ᵀΣ(cu)) and the process's ``amplitude`` (a fraction of u), ``units`` and ``length`` (per condition)."""
     from calib.calibration.discrepancy import fit_discrepancy
     from calib.powercurve.discrepancy import discrepancy_moments
     from calib.types import OperatingConditions
@@ -194,7 +195,7 @@ def discrepancy_check(result, pc, curve: dict, v: np.ndarray):
     x = dis.features({"wind_speed": v, "rotor_speed": pc.central.rotor_speed, "pitch": pc.central.pitch},
                      result.provenance.rotor_radius)
     mu, S = discrepancy_moments(process, x)
-    yh = np.where(pc.central.region != 3, np.nan_to_num(pc.central.power), 0.0)
+    yh = np.where(pc.central.region != 3, process.unit(np.nan_to_num(pc.central.power)), 0.0)
     model = result.rebuild_model()
     at = model.solve(result.estimate.p_hat, OperatingConditions(v, np.asarray(curve["rotor_speed"], float),
                                                                np.asarray(curve["pitch"], float), 1.225))
@@ -205,7 +206,8 @@ def discrepancy_check(result, pc, curve: dict, v: np.ndarray):
         cy = c * yh
         return {"realized_mwh": float(c @ gap), "mean_mwh": float(cy @ mu),
                 "conditional_sd_mwh": float(np.sqrt(max(cy @ S @ cy, 0.0))),
-                "amplitude": float(process.amplitude), "length": float(process.length)}
+                "amplitude": float(process.amplitude), "units": process.units,
+                "length": np.broadcast_to(np.asarray(process.length, float), (3,)).tolist()}
     return per
 
 
@@ -418,7 +420,9 @@ def _discrepancy_summary(checks: list) -> dict | None:
             "standardized_rms": rms((r - m) / np.maximum(sd, 1e-12)),
             "realized_mean_correlation": float(np.corrcoef(r, m)[0, 1]) if len(checks) > 2 else None,
             "median_amplitude": float(np.median([x["amplitude"] for x in checks])),
-            "median_length": float(np.median([x["length"] for x in checks]))}
+            "median_length": np.median(np.array([np.broadcast_to(np.asarray(x["length"], float), (3,))
+                                                 for x in checks]), axis=0).tolist(),
+            "units": {u: sum(x.get("units", "relative") == u for x in checks) for u in ("relative", "channel")}}
 
 
 def summarize(records: dict) -> dict:
