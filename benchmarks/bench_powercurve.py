@@ -785,7 +785,8 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
     ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
     figures then say how many replicates ran per effect (``replicates_run``). ``reuse``: keys of the
     published figures (``"phase_vi"``, ``"speed"``) kept from the JSON already published instead of
-    re-run, with its date and commit under ``reused_from`` (the page says so).
+    re-run, with its date and commit under ``reused_from`` (the page says so); also ``"resolution"`` and
+    ``"bias_diagnosis"`` (the noise-free diagnoses, the slowest part after the replicates).
     """
     from publish import command_line, publish
 
@@ -816,12 +817,13 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
                     records[n].append(rec)
                 print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
         floor = effect_vs_noise(truth, names)
-        try:
-            resol = resolution(truth, [n for n in names if n != "control"], work)
-        except Exception as exc:  # noqa: BLE001  (said in the figures)
-            resol = {"error": f"{type(exc).__name__}: {exc}"}
-        diagnosis = {}
-        for n in names:
+        resol, diagnosis = None, {}
+        if "resolution" not in reuse:
+            try:
+                resol = resolution(truth, [n for n in names if n != "control"], work)
+            except Exception as exc:  # noqa: BLE001  (said in the figures)
+                resol = {"error": f"{type(exc).__name__}: {exc}"}
+        for n in names if "bias_diagnosis" not in reuse else ():
             try:
                 diagnosis[n] = bias_diagnosis(truth, n, work, n_draws)
             except Exception as exc:  # noqa: BLE001  (said in the figures)
