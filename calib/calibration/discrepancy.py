@@ -172,13 +172,17 @@ def _kernel(a: np.ndarray, b: np.ndarray, length) -> np.ndarray:
     return np.exp(-0.5 * (d ** 2).sum(axis=-1))
 
 
-def _nll_grad(theta: np.ndarray, d2: np.ndarray, e: np.ndarray, s2: np.ndarray, grad: bool = True):
+def _nll_grad(theta: np.ndarray, d2: np.ndarray, e: np.ndarray, s2: np.ndarray, grad: bool = True,
+              unit_kernel: np.ndarray | None = None):
     """Negative log marginal likelihood of e ~ N(0, τ²K + diag(s2)) and (``grad``) its gradient in
     θ = (log τ, log ℓ_1..log ℓ_D) (Rasmussen & Williams 2006, eqs. 5.8-5.9); ``d2`` (D, n, n) the squared
-    differences per condition."""
+    differences per condition; ``unit_kernel``: K at θ's lengths when already known (the likelihood alone)."""
     tau2, ell = np.exp(2.0 * theta[0]), np.exp(theta[1:])
-    scaled = d2 / ell[:, None, None] ** 2
-    K = tau2 * np.exp(-0.5 * scaled.sum(axis=0))
+    if not grad and unit_kernel is not None:
+        K = tau2 * unit_kernel
+    else:
+        scaled = d2 / ell[:, None, None] ** 2
+        K = tau2 * np.exp(-0.5 * scaled.sum(axis=0))
     L = np.linalg.cholesky(K + np.diag(s2))
     if not grad:
         w = np.linalg.solve(L, e)
@@ -204,7 +208,10 @@ def _fit_process(x: np.ndarray, e: np.ndarray, s2: np.ndarray) -> tuple[float, f
     best = None
     for length in LENGTHS:
         th = np.log(np.full(x.shape[1], length))
-        opt = minimize_scalar(lambda lt, th=th: _nll_grad(np.concatenate([[lt], th]), d2, e, s2, grad=False),
+        ell = np.exp(th)
+        unit = np.exp(-0.5 * (d2 / ell[:, None, None] ** 2).sum(axis=0))      # as _nll_grad forms it
+        opt = minimize_scalar(lambda lt, th=th, unit=unit: _nll_grad(np.concatenate([[lt], th]), d2, e, s2,
+                                                                     grad=False, unit_kernel=unit),
                               bounds=(top - 12.0, top), method="bounded", options={"xatol": 1e-3})
         if best is None or opt.fun < best[0]:
             best = (float(opt.fun), np.concatenate([[opt.x], th]))
