@@ -52,8 +52,9 @@ RAYLEIGH = (6.0, 8.0, 10.0)
 BINS = (3.0, 25.0, 0.5)
 Z90 = 1.6448536269514722
 #: First noise seed (41000-41049 published at 9a0decc, 51000-51049 at 8edf44a on the 6 × 5 field; 49xxx
-#: and 59xxx used in development; fresh from 52000 on the 12 × 5 field).
-SEED0 = 52000
+#: and 59xxx used in development; 52000-52049 published on the 12 × 5 field at 20ad3c0; 53000-53049 never
+#: used before issue 41's physical between-node lengths and ARD discrepancy, nothing tuned on them).
+SEED0 = 53000
 #: The correction field's α nodes [deg]: 12, every 1.82° from −4 to 16°. The 6 nodes of 4° (until
 #: 8edf44a) left a region-2 bias that the noise-free resolution test (:func:`resolution`) traces to the
 #: field's discretization along α (erosion +79.5 → +13.7 MWh at Rayleigh 8 m/s; η refined: +78.1).
@@ -177,11 +178,12 @@ def discrepancy_check(result, pc, curve: dict, v: np.ndarray):
 
     Realized: the truth's power minus the calibrated model's at the truth's own schedule, in the truth's
     region-2 bins (what a discrepancy term should describe: the model form at the calibrated parameters,
-    the schedule's share left out). Stated: the process's conditional mean ŷμ and conditional
-    covariance ŷΣŷ at the bins (:func:`calib.powercurve.discrepancy.discrepancy_moments`, the central
+    the schedule's share left out). Stated: the process's conditional mean uμ and conditional
+    covariance uΣu at the bins (u the process's unit: ŷ for a relative one, its reference for one in
+    channel units) (:func:`calib.powercurve.discrepancy.discrepancy_moments`, the central
     schedule, zero in region 3). Returns None without a power process, else a function of the AEP
-    weights c [MWh per W] giving ``realized_mwh``, ``mean_mwh`` (c·ŷμ), ``conditional_sd_mwh``
-    (√(cŷ)ᵀΣ(cŷ)) and the process's ``amplitude`` and ``length``."""
+    weights c [MWh per W] giving ``realized_mwh``, ``mean_mwh`` (c·uμ), ``conditional_sd_mwh``
+    (√(cu)ᵀΣ(cu)) and the process's ``amplitude`` (a fraction of u), ``units`` and ``length`` (per condition)."""
     from calib.calibration.discrepancy import fit_discrepancy
     from calib.powercurve.discrepancy import discrepancy_moments
     from calib.types import OperatingConditions
@@ -193,7 +195,7 @@ def discrepancy_check(result, pc, curve: dict, v: np.ndarray):
     x = dis.features({"wind_speed": v, "rotor_speed": pc.central.rotor_speed, "pitch": pc.central.pitch},
                      result.provenance.rotor_radius)
     mu, S = discrepancy_moments(process, x)
-    yh = np.where(pc.central.region != 3, np.nan_to_num(pc.central.power), 0.0)
+    yh = np.where(pc.central.region != 3, process.unit(np.nan_to_num(pc.central.power)), 0.0)
     model = result.rebuild_model()
     at = model.solve(result.estimate.p_hat, OperatingConditions(v, np.asarray(curve["rotor_speed"], float),
                                                                np.asarray(curve["pitch"], float), 1.225))
@@ -204,7 +206,8 @@ def discrepancy_check(result, pc, curve: dict, v: np.ndarray):
         cy = c * yh
         return {"realized_mwh": float(c @ gap), "mean_mwh": float(cy @ mu),
                 "conditional_sd_mwh": float(np.sqrt(max(cy @ S @ cy, 0.0))),
-                "amplitude": float(process.amplitude), "length": float(process.length)}
+                "amplitude": float(process.amplitude), "units": process.units,
+                "length": np.broadcast_to(np.asarray(process.length, float), (3,)).tolist()}
     return per
 
 
@@ -417,7 +420,9 @@ def _discrepancy_summary(checks: list) -> dict | None:
             "standardized_rms": rms((r - m) / np.maximum(sd, 1e-12)),
             "realized_mean_correlation": float(np.corrcoef(r, m)[0, 1]) if len(checks) > 2 else None,
             "median_amplitude": float(np.median([x["amplitude"] for x in checks])),
-            "median_length": float(np.median([x["length"] for x in checks]))}
+            "median_length": np.median(np.array([np.broadcast_to(np.asarray(x["length"], float), (3,))
+                                                 for x in checks]), axis=0).tolist(),
+            "units": {u: sum(x.get("units", "relative") == u for x in checks) for u in ("relative", "channel")}}
 
 
 def summarize(records: dict) -> dict:
@@ -780,7 +785,8 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
     ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
     figures then say how many replicates ran per effect (``replicates_run``). ``reuse``: keys of the
     published figures (``"phase_vi"``, ``"speed"``) kept from the JSON already published instead of
-    re-run, with its date and commit under ``reused_from`` (the page says so).
+    re-run, with its date and commit under ``reused_from`` (the page says so); also ``"resolution"`` and
+    ``"bias_diagnosis"`` (the noise-free diagnoses, the slowest part after the replicates).
     """
     from publish import command_line, publish
 
@@ -811,12 +817,13 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
                     records[n].append(rec)
                 print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
         floor = effect_vs_noise(truth, names)
-        try:
-            resol = resolution(truth, [n for n in names if n != "control"], work)
-        except Exception as exc:  # noqa: BLE001  (said in the figures)
-            resol = {"error": f"{type(exc).__name__}: {exc}"}
-        diagnosis = {}
-        for n in names:
+        resol, diagnosis = None, {}
+        if "resolution" not in reuse:
+            try:
+                resol = resolution(truth, [n for n in names if n != "control"], work)
+            except Exception as exc:  # noqa: BLE001  (said in the figures)
+                resol = {"error": f"{type(exc).__name__}: {exc}"}
+        for n in names if "bias_diagnosis" not in reuse else ():
             try:
                 diagnosis[n] = bias_diagnosis(truth, n, work, n_draws)
             except Exception as exc:  # noqa: BLE001  (said in the figures)

@@ -161,7 +161,7 @@ def test_structured_propagation_equals_the_dense_discrepancy_covariance():
     B = rng.standard_normal((7, 2 * n))
     prior_std = np.abs(rng.standard_normal(len(model.parameters))) + 0.5
     length = 1.3
-    D = discrepancy_correlation(COARSE, fine, field.correlation_lengths(length))
+    D = discrepancy_correlation(COARSE, fine, field.between_node_lengths(length))
     lay = field.layout
     var = [np.mean(prior_std[idx.ravel()] ** 2) for idx in (lay.lift_index, lay.drag_index)]
     dense = sum(var[b] * B[:, b * n:(b + 1) * n] @ D @ B[:, b * n:(b + 1) * n].T for b in (0, 1))

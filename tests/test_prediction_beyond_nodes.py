@@ -64,7 +64,7 @@ def test_beyond_the_nodes_the_interval_is_the_prior_s(calibrated):
     flay = fmodel.correction_field().layout
     T = interpolation_matrix(field.grid, fine)
     D = discrepancy_correlation(field.grid, fine,
-                                field.correlation_lengths(res.provenance.settings["prior_correlation"]))
+                                field.between_node_lengths(res.provenance.settings["prior_correlation"]))
     w, Q = np.linalg.eigh(D)
     root = Q * np.sqrt(np.clip(w, 0.0, None))
     lay = field.layout

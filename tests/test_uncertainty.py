@@ -257,7 +257,7 @@ def test_representation_variance_is_the_interpolation_error_of_a_smooth_field(le
     points, interpolate the nodes with the hat functions, and compare the variance of the
     interpolation error with the closed form (zero at a node, the prior far from the grid)."""
     field, grid = _field()
-    la, le = field.correlation_lengths(length)
+    la, le = field.between_node_lengths(length)
     a_test = np.array([5.0, 3.5, 8.0, 11.0, 17.0, 40.0])     # cell centre, inside, node, ..., ramp, far
     e_test = np.array([0.65, 0.3, 0.5, 0.95, 0.6, 0.6])
     An, En = np.meshgrid(grid.alpha_nodes_deg, grid.eta_nodes, indexing="ij")
@@ -799,3 +799,26 @@ def test_quadratic_diagonal_is_the_diagonal_of_the_sandwich():
     A = rng.standard_normal((12, 12))
     C = A @ A.T
     np.testing.assert_allclose(quadratic_diagonal(B, C), np.diag(B @ C @ B.T), rtol=1e-12, atol=1e-14)
+
+
+def test_between_node_variance_falls_as_the_grid_is_refined_and_stays_on_a_coarse_grid():
+    """Issue 41: the field between the nodes has physical lengths (prior_correlation × the longer of the
+    grid's spacing and REFERENCE_SPACING). Halfway between two α nodes on an η node line, the interpolation
+    error of a field of correlation ρ(Δα) = exp(−Δα²/2ℓ²) has relative variance
+    1 − 2 exp(−h²/8ℓ²) + ½(1 + exp(−h²/2ℓ²)) (hand closed form): with ℓ = h on grids coarser than the
+    reference (unchanged by refining to the reference), with ℓ = 6° (fixed) on finer ones, where it falls
+    about as (h/ℓ)⁴."""
+    from calib.parametrizations.field_prior import REFERENCE_SPACING
+
+    def closed(h, ell):
+        return 1.0 - 2.0 * np.exp(-h ** 2 / (8 * ell ** 2)) + 0.5 * (1.0 + np.exp(-h ** 2 / (2 * ell ** 2)))
+
+    assert REFERENCE_SPACING[0] == 6.0
+    rel = {}
+    for h in (12.0, 8.0, 6.0, 3.0, 1.5):
+        field, grid = _field(tuple(np.arange(-6.0, 18.0 + 1e-9, h)), (0.2, 0.4, 0.6, 0.8, 1.0))
+        a = grid.alpha_nodes_deg[1] + 0.5 * h
+        rel[h] = float(field.representation_variance(a, 0.6, "lift", np.full(field.n_params, 1.0), 1.0)[0])
+        assert rel[h] == pytest.approx(closed(h, max(h, 6.0)), rel=1e-9), h
+    assert rel[12.0] == pytest.approx(rel[6.0]) and rel[6.0] == pytest.approx(0.0383, abs=5e-4)   # coarse: kept
+    assert rel[6.0] > 10 * rel[3.0] > 100 * rel[1.5]                                               # refined: falls

@@ -62,7 +62,9 @@ class CalibrationSettings:
         [-] (:meth:`calib.parametrizations.CorrectionField.node_correlation`): neighbouring
         nodes of a block are correlated as samples of a field the chosen grid resolves
         (ρ = exp(−½) = 0.61 at one spacing). It sets the prior covariance of the frozen
-        directions and the representation variance between the nodes; 0 gives independent
+        directions and the representation variance between the nodes (there with physical
+        lengths, no shorter than ``prior_correlation`` × (6°, 0.2):
+        :func:`calib.parametrizations.field_prior.between_node_lengths`); 0 gives independent
         nodes and the roughest field between them. On the wind-tunnel twins (10 noise seeds
         each, truth inside and outside the span) the marginal likelihood of the data, with
         the prior scale at its type-II ML value, was highest at 1 among 0, 1, 1.5, 2 and 3.

@@ -263,7 +263,8 @@ def discrepancy_propagated(B: np.ndarray, field, fs: FineSensitivities, prior_st
     prior_std : ndarray, shape (n_params,)
         Prior 1-σ per parameter [parameter unit]; each block's mean variance sets its σ_p².
     correlation_length : float
-        Of the smooth-field prior, in node spacings.
+        ``prior_correlation`` [-]; the lengths are the field's between the nodes, physical
+        (:meth:`CorrectionField.between_node_lengths`): the term falls as the grid is refined.
     diagonal : bool
         Only the variances (shape (k,)), without forming the k × k matrix.
 
@@ -276,7 +277,7 @@ def discrepancy_propagated(B: np.ndarray, field, fs: FineSensitivities, prior_st
     # (:func:`times_kron`) instead of k n_f², and the interpolant's terms go through the n_c coarse nodes
     # (X = B T, Y = B K_fc): B Σ_δ Bᵀ/σ_p² = (B K_ff) Bᵀ − X Yᵀ − Y Xᵀ + X K_cc Xᵀ (equal to round-off).
     coarse, fine = field.grid, fs.fine
-    lengths = field.correlation_lengths(correlation_length)
+    lengths = field.between_node_lengths(correlation_length)
     T = interpolation_matrix(coarse, fine)
     n = T.shape[0]
     ff = _correlation_factors(fine, fine, lengths)

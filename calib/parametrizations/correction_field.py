@@ -25,7 +25,7 @@ import numpy as np
 from calib.corrections import CorrectionGrid
 from calib.errors import InputError
 from calib.parametrizations.field_bands import band_coverage, polar_bands
-from calib.parametrizations.field_prior import se_correlation, spacing_lengths, unresolved_variance
+from calib.parametrizations.field_prior import between_node_lengths, se_correlation, spacing_lengths, unresolved_variance
 from calib.types import Evaluation, Parameter, ParameterKind
 
 FIELD_KINDS = (ParameterKind.LIFT_CORRECTION, ParameterKind.DRAG_CORRECTION)
@@ -271,6 +271,12 @@ class CorrectionField:
         """ℓ_α [deg] and ℓ_η [-] of the smooth-field prior for ``length`` node spacings (the
         grid's mean spacings; :meth:`node_correlation`)."""
         return spacing_lengths(self.grid, length)
+
+    def between_node_lengths(self, length: float) -> tuple[float, float]:
+        """ℓ_α [deg] and ℓ_η [-] of the field between the nodes for ``prior_correlation`` = ``length``:
+        physical, no shorter than ``length`` × :data:`calib.parametrizations.field_prior.REFERENCE_SPACING`
+        (:func:`calib.parametrizations.field_prior.between_node_lengths`)."""
+        return between_node_lengths(self.grid, length)
 
     def representation_variance(self, alpha_deg, eta, block: str, prior_std: np.ndarray,
                                 correlation_length: float = DEFAULT_PRIOR_CORRELATION) -> np.ndarray:

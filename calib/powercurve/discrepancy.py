@@ -2,7 +2,7 @@
 
 :func:`calib.calibration.prediction.predict_outputs` gives the model discrepancy's 1-σ per point
 (:mod:`calib.calibration.discrepancy`: a Gaussian process δ(x) over the scaled tip-speed ratio,
-pitch and wind speed, in relative units, fitted to the calibration residuals; Kennedy & O'Hagan
+pitch and wind speed, relative or in channel units, fitted to the calibration residuals; Kennedy & O'Hagan
 2001). An integral quantity such as the AEP needs its covariance across the bins. Adding the
 per-bin σ linearly over the bins treats the discrepancy as fully correlated, an upper bound
 (Cauchy-Schwarz); the process itself says how correlated two bins are.
@@ -10,19 +10,20 @@ per-bin σ linearly over the bins treats the discrepancy as fully correlated, an
 Notes
 -----
 The prediction keeps the calibrated model's value ŷ; the discrepancy adds its second moment at
-the new points. Given the calibration residuals e (relative, noise variances S), the process at
+the new points. Given the calibration residuals e (in the process's unit u: relative, u = |ŷ|, or
+the channel's, u constant; noise variances S), the process at
 new points x has the conditional mean μ = k(x)ᵀ (τ²K + S)⁻¹ e and covariance
 Σ(x, x') = τ² k_ℓ(x, x') − k(x)ᵀ (τ²K + S)⁻¹ k(x'), with k(x) = τ² k_ℓ(x, X) and k_ℓ the
-squared-exponential kernel exp(−|x − x'|² / 2ℓ²) (Rasmussen & Williams 2006, eq. 2.24). The error
-of the bins' outputs is ŷ ∘ δ, so its second-moment matrix is
+squared-exponential kernel exp(−Σ_d (x_d − x'_d)² / 2ℓ_d²) (Rasmussen & Williams 2006, eq. 2.24). The
+error of the bins' outputs is u ∘ δ, so its second-moment matrix is
 
 .. math::
-    D_{ij} = ŷ_i ŷ_j (μ_i μ_j + Σ_{ij}),
+    D_{ij} = u_i u_j (μ_i μ_j + Σ_{ij}),
 
-whose diagonal is ``predict_outputs``' μ² + v per point times ŷ² (the discrepancy σ², a test
+whose diagonal is ``predict_outputs``' μ² + v per point times u² (the discrepancy σ², a test
 checks it). The conditional mean is one realization common to all bins (fully correlated, with
 its sign); the conditional variance is correlated over the kernel's length ℓ. An AEP c · P then
-has the discrepancy's mean square cᵀ D c = (c · ŷμ)² + (c ∘ ŷ)ᵀ Σ (c ∘ ŷ) [W² h²].
+has the discrepancy's mean square cᵀ D c = (c · uμ)² + (c ∘ u)ᵀ Σ (c ∘ u) [W² h²].
 
 References
 ----------
@@ -37,15 +38,16 @@ import numpy as np
 __all__ = ["discrepancy_correlation", "discrepancy_covariance", "discrepancy_moments"]
 
 
-def _se_kernel(a: np.ndarray, b: np.ndarray, length: float) -> np.ndarray:
-    """Squared-exponential kernel exp(−|a − b|² / 2ℓ²) between the rows of ``a`` and ``b`` [-]."""
-    d2 = ((np.asarray(a, float)[:, None, :] - np.asarray(b, float)[None, :, :]) ** 2).sum(axis=-1)
-    return np.exp(-0.5 * d2 / length ** 2)
+def _se_kernel(a: np.ndarray, b: np.ndarray, length) -> np.ndarray:
+    """Squared-exponential kernel exp(−Σ_d (a_d − b_d)² / 2ℓ_d²) between the rows of ``a`` and ``b``
+    (``length`` one ℓ or one per column) [-]."""
+    d = (np.asarray(a, float)[:, None, :] - np.asarray(b, float)[None, :, :]) / np.asarray(length, float)
+    return np.exp(-0.5 * (d ** 2).sum(axis=-1))
 
 
 def discrepancy_moments(process, x_new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Conditional mean μ (n,) and covariance Σ (n, n) of one channel's discrepancy process at the
-    scaled conditions ``x_new`` (n, 3) [relative, relative²].
+    scaled conditions ``x_new`` (n, 3) [in the process's unit u, u²].
 
     Parameters
     ----------
@@ -63,10 +65,11 @@ def discrepancy_moments(process, x_new: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def discrepancy_covariance(process, x_new: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Second-moment matrix D = ŷŷᵀ ∘ (μμᵀ + Σ) of the discrepancy of outputs ``values`` ŷ (n,)
-    at ``x_new`` (n, 3) [channel unit²] (module notes)."""
+    """Second-moment matrix D = uuᵀ ∘ (μμᵀ + Σ) of the discrepancy of outputs ``values`` ŷ (n,)
+    at ``x_new`` (n, 3) [channel unit²] (module notes), u the process's unit there (|ŷ| for a relative
+    process, its constant reference for one in channel units)."""
     mean, cov = discrepancy_moments(process, x_new)
-    y = np.asarray(values, float)
+    y = process.unit(values)
     return y[:, None] * (np.outer(mean, mean) + cov) * y[None, :]
 
 

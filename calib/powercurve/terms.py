@@ -79,8 +79,8 @@ def discrepancy_terms(result, cond, source, disc, notes):
         return None
     R = discrepancy_correlation(process, dis.features(cond.as_dict(), result.provenance.rotor_radius))
     notes.append(f"the model discrepancy of {source} enters the AEP through its covariance across the bins (the "
-                 f"process's conditional mean common to all bins, its variance correlated over the length "
-                 f"{process.length:g} of the calibration span)")
+                 f"process's conditional mean common to all bins, its variance correlated over the lengths "
+                 f"{process.length_words()} of the calibration span)")
     return disc[:, None] * R * disc[None, :]
 
 
