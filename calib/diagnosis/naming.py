@@ -28,7 +28,7 @@ from calib.diagnosis.model_form import model_form_r2, not_separable
 from calib.diagnosis.over_model_form import over_model_form
 from calib.diagnosis.ranking import likelihood_ratio, pattern_agreement
 from calib.diagnosis.result import CandidateFit
-from calib.diagnosis.share import share_test
+from calib.diagnosis.share import share_record, share_test
 from calib.diagnosis.separation import envelope_words, probe_conditions, probe_limits, separating_probes
 from calib.diagnosis.verdict import judge_round
 from calib.errors import CalibError, InputError
@@ -273,6 +273,8 @@ class Namer:
         n_physical = len({f.effect for f in self._fits if f.kind != "model_form"})
         test = share_test(best.lr_statistic, best.n_params, self.base_chi2, dof, LATER_EFFECT_SHARE,
                           self.dset.significance, n_physical)
+        rnd.setdefault("shares", []).append(share_record(best.name, best.effect, best.lr_statistic, best.n_params,
+                                                         self.base_chi2, dof, n_physical, "test", test))
         pinned = [f for f in self._named_fits if f.at_bound]
         form = "".join(f"; {f.effect} sits at a bound ({f.bound_phrase()}): its form may not fit the data, and "
                        f"{best.effect} may stand in for that mismatch" for f in pinned)

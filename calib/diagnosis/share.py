@@ -103,3 +103,26 @@ def share_test(lr: float, n_params: int, chi2_base: float, dof_base: int, share:
     z_needed = NormalDist().inv_cdf(1.0 - alpha / max(int(n_candidates), 1))
     sd = math.sqrt(var) / d if d > 0 else math.inf
     return ShareTest(point, float(z), z_needed, sd, bool(z >= z_needed))
+
+
+def share_record(fit_name: str, effect: str, lr: float, n_params: int, chi2_base: float, dof_base: int,
+                 n_candidates: int, decision: str, test: ShareTest) -> dict:
+    """One decision taken on a share, as a round of ``diagnosis.json`` records it (``shares``): enough to
+    recompute :func:`share_test` at any threshold.
+
+    Parameters
+    ----------
+    fit_name, effect : str
+        The candidate (variant label) and its effect's name.
+    lr, n_params, chi2_base, dof_base, n_candidates
+        As :func:`share_test` takes them [-].
+    decision : str
+        ``"point"`` (the point share decides: a physical effect over the model form) or ``"test"`` (the
+        share test decides: a later effect).
+    test : ShareTest
+        The test as it was made.
+    """
+    return {"candidate": fit_name, "effect": effect, "lr": float(lr), "n_params": int(n_params),
+            "chi2_base": float(chi2_base), "dof_base": int(dof_base), "n_candidates": int(max(n_candidates, 1)),
+            "decision": decision, "share": float(test.share), "sd": float(test.sd), "z": float(test.z),
+            "z_needed": float(test.z_needed)}
