@@ -16,7 +16,7 @@ from scipy import stats
 
 from calib.diagnosis.model_form import MODEL_FORM_COLLINEARITY, model_form_r2, not_separable
 from calib.diagnosis.result import CandidateFit
-from calib.diagnosis.share import ShareTest, share_record, share_test
+from calib.diagnosis.share import share_record, share_test
 from calib.words import p_is
 
 #: At most this many physical effects (the best variant of each, by BIC) are fitted on top of the
