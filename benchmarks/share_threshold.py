@@ -34,19 +34,21 @@ CCBLADE_STAND_INS = ((0.49, "lift_offset", 25009), (0.51, "lift_offset", 25010),
 
 def decisions(logs) -> list:
     """Every decision on a share in the records of ``logs`` (``verdicts.jsonl`` files), labelled ``true``
-    when the candidate is one of its data set's right names; a decision recorded identically in two rounds
-    (the same fit weighed again) once."""
+    when the candidate is one of its data set's right names and no right name was named in an earlier round
+    (the data hold one effect: the uniform table's second right name after the first is a stand-in); a
+    decision recorded identically in two rounds (the same fit weighed again) once."""
     out = []
     for log in logs:
         for rec in runner._load(Path(log)):
-            seen = set()
+            seen, right = set(), campaign.DATA_SETS[rec["data_set"]]["right"]
             for k, rnd in enumerate(rec.get("rounds", [])):
+                found = any(r["verdict"] in right for r in rec["rounds"][:k])
                 for s in rnd.get("shares", []):
                     key = (s["candidate"], round(s["lr"], 6), round(s["chi2_base"], 6), s["decision"])
                     if key in seen:
                         continue
                     seen.add(key)
-                    out.append({**s, "true": s["effect"] in campaign.DATA_SETS[rec["data_set"]]["right"],
+                    out.append({**s, "true": s["effect"] in right and not found,
                                 "where": f"{Path(log).parent.name}/{rec['data_set']}/seed {rec['seed']}/round {k + 1}"})
     return out
 
