@@ -53,7 +53,7 @@ from calib.words import p_is
 #: 0.65 lies between the two (χ² − dof scatters by √(2 dof), 22 on these 252 residuals: ±4 % of a
 #: misfit of 560, ±34 % of one of 65, so a small misfit's share is rough either way). A later effect must
 #: exceed it beyond that noise (:func:`calib.diagnosis.share.share_test`); over the joint model form, the point share.
-LATER_EFFECT_SHARE = 0.65
+LATER_EFFECT_SHARE = 0.62
 
 
 def fit_task(task: dict) -> dict:
