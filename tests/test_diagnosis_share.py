@@ -119,3 +119,23 @@ def test_a_test_decision_needs_its_z_and_empty_populations_are_refused():
     assert naming_probability(test, 0.65, 0.01) < 0.2 < 0.6 < naming_probability(point, 0.65, 0.01)
     with pytest.raises(ValueError, match="both kinds"):
         balanced_threshold([point], [], 0.01)
+
+
+def test_the_threshold_is_the_rule_on_the_development_decisions():
+    """LATER_EFFECT_SHARE is what the pre-stated rule (balanced misses and false namings) gives on the
+    development decisions (tests/data/share_threshold/development.json: benchmarks/share_threshold.py on the
+    lifting-line battery, both wakes, seeds 26000-26019, plus three CCBlade stand-ins): a constant changed
+    without re-measuring, or records that no longer support it, fail here."""
+    import json
+    from pathlib import Path
+
+    from calib.diagnosis.naming import LATER_EFFECT_SHARE
+    from calib.diagnosis.share import balanced_threshold
+
+    doc = json.loads((Path(__file__).resolve().parent / "data" / "share_threshold" / "development.json").read_text())
+    true = [r for r in doc["decisions"] if r["true"]]
+    stand = [r for r in doc["decisions"] if not r["true"]]
+    assert len(true) > 100 and len(stand) > 200
+    rule = balanced_threshold(true, stand, doc["alpha"])
+    assert rule["threshold"] == pytest.approx(LATER_EFFECT_SHARE, abs=1e-9), rule
+    assert abs(rule["miss"] - rule["false"]) < 0.005 and rule["miss"] < 0.05
