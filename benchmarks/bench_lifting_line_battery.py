@@ -61,7 +61,9 @@ def markdown(figures: dict) -> str:
     parts = [f"{figures['n_seeds']} noise seeds per data set ({figures['seeds']}), rigid set-up, 1 % noise, "
              "`calib diagnose` with its defaults (no recalibration). Right = the first physical verdict names the "
              "data set's effect; controls: `none`. alone = no second physical effect; a model-form parameter "
-             "is shown beside the verdict. The diagnosis's model-form rules were developed on seeds 26000..26009."]
+             "is shown beside the verdict. The diagnosis's model-form rules were developed on seeds 26000..26009, the "
+             "later-effect share threshold set by a rule stated beforehand on 26000..26019 "
+             "(`benchmarks/share_threshold.py`)."]
     for label, table in figures["tables"].items():
         parts += ["", f"**Lifting line, {label}**", "", runner.markdown(table)]
     return "\n".join(parts)

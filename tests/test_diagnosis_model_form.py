@@ -145,3 +145,8 @@ def test_an_ambiguous_pair_loses_to_a_third_effect_on_top_of_the_model_form(eros
     assert share >= LATER_EFFECT_SHARE and r2 < MODEL_FORM_COLLINEARITY
     rivals = [v[0] for c, v in shares.items() if c.split(":")[0] in ("reynolds_number", "rotational_augmentation")]
     assert len(rivals) == 2 and max(rivals) < share
+    # the decision is recorded with what recomputes it (benchmarks/share_threshold.py reads it): a point decision
+    rec = [s for s in first["shares"] if s["effect"] == "leading_edge_erosion"]
+    assert len(rec) == 1 and rec[0]["decision"] == "point", first.get("shares")
+    assert rec[0]["share"] == pytest.approx(rec[0]["lr"] / (rec[0]["chi2_base"] - rec[0]["dof_base"]), rel=1e-12)
+    assert round(100 * rec[0]["share"]) == round(100 * share)

@@ -7,6 +7,7 @@ test gets only what the diagnosis gets (Λ, k, χ² and dof of the base model).
 """
 
 import math
+from statistics import NormalDist
 
 import numpy as np
 import pytest
@@ -73,3 +74,68 @@ def test_no_excess_and_words():
     t = share_test(102.7, 1, 386.2, 250, 0.65, 0.01, 7)
     assert not t.passed and 0.74 < t.share < 0.76
     assert t.words(0.65).startswith("75 % ± ") and "above 65 % (needs 3)" in t.words(0.65)
+
+
+def _record(share: float, excess: float, decision: str = "point", n_candidates: int = 1) -> dict:
+    """A decision in share_record's form: one parameter, 250 dof, Λ = share × excess."""
+    return {"lr": share * excess, "n_params": 1, "chi2_base": 250.0 + excess, "dof_base": 250,
+            "n_candidates": n_candidates, "decision": decision}
+
+
+def test_the_balanced_threshold_solves_miss_equals_false():
+    """One true effect and one stand-in, point decisions: the errors balance where 1 − Φ(z_true(t)) =
+    Φ(z_stand(t)), i.e. z_true(t) + z_stand(t) = 0 (solved here by scipy's brentq on the test's own z,
+    independently of the grid search); the stand-in's share of a small misfit is the noisier, so the
+    threshold lies nearer the true effect's share than the midpoint."""
+    from scipy.optimize import brentq
+
+    from calib.diagnosis.share import balanced_threshold
+
+    true, stand = _record(0.80, 600.0), _record(0.45, 100.0)
+
+    def zsum(t):
+        return (share_test(true["lr"], 1, true["chi2_base"], 250, t, 0.01).z
+                + share_test(stand["lr"], 1, stand["chi2_base"], 250, t, 0.01).z)
+
+    t_ref = brentq(zsum, 0.4, 0.9)
+    rule = balanced_threshold([true], [stand], 0.01, grid_step=0.0005)
+    assert abs(rule["exact"] - t_ref) < 0.001, (rule["exact"], t_ref)
+    assert rule["threshold"] == round(t_ref, 2)
+    assert abs(rule["miss"] - rule["false"]) < 0.01
+    assert t_ref > (0.80 + 0.45) / 2           # the noisier stand-in's side is held further off
+
+
+def test_a_test_decision_needs_its_z_and_empty_populations_are_refused():
+    """A stand-in decided by the share test is named only when z exceeds z_needed (Bonferroni over its
+    candidates): its naming probability is Φ(z − z_needed), far below the point decision's Φ(z); the rule
+    needs both kinds of decision."""
+    from calib.diagnosis.share import balanced_threshold, naming_probability
+
+    point, test = _record(0.75, 300.0), _record(0.75, 300.0, "test", 6)
+    z = share_test(point["lr"], 1, point["chi2_base"], 250, 0.65, 0.01).z
+    z_needed = share_test(test["lr"], 1, test["chi2_base"], 250, 0.65, 0.01, 6).z_needed
+    assert naming_probability(point, 0.65, 0.01) == pytest.approx(NormalDist().cdf(z), rel=1e-12)
+    assert naming_probability(test, 0.65, 0.01) == pytest.approx(NormalDist().cdf(z - z_needed), rel=1e-12)
+    assert naming_probability(test, 0.65, 0.01) < 0.2 < 0.6 < naming_probability(point, 0.65, 0.01)
+    with pytest.raises(ValueError, match="both kinds"):
+        balanced_threshold([point], [], 0.01)
+
+
+def test_the_threshold_is_the_rule_on_the_development_decisions():
+    """LATER_EFFECT_SHARE is what the pre-stated rule (balanced misses and false namings) gives on the
+    development decisions (tests/data/share_threshold/development.json: benchmarks/share_threshold.py on the
+    lifting-line battery, both wakes, seeds 26000-26019, plus three CCBlade stand-ins): a constant changed
+    without re-measuring, or records that no longer support it, fail here."""
+    import json
+    from pathlib import Path
+
+    from calib.diagnosis.naming import LATER_EFFECT_SHARE
+    from calib.diagnosis.share import balanced_threshold
+
+    doc = json.loads((Path(__file__).resolve().parent / "data" / "share_threshold" / "development.json").read_text())
+    true = [r for r in doc["decisions"] if r["true"]]
+    stand = [r for r in doc["decisions"] if not r["true"]]
+    assert len(true) > 100 and len(stand) > 200
+    rule = balanced_threshold(true, stand, doc["alpha"])
+    assert rule["threshold"] == pytest.approx(LATER_EFFECT_SHARE, abs=1e-9), rule
+    assert abs(rule["miss"] - rule["false"]) < 0.005 and rule["miss"] < 0.05

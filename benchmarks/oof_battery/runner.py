@@ -94,7 +94,7 @@ def verdict_of(doc: dict) -> dict:
     for rnd in doc.get("rounds", []):
         cands = sorted(rnd.get("candidates", []), key=lambda c: c.get("bic", math.inf))[:3]
         rounds.append({"verdict": rnd.get("verdict"), "reason": rnd.get("reason", ""),
-                       "ambiguous": rnd.get("ambiguous") or _pair(rnd),
+                       "ambiguous": rnd.get("ambiguous") or _pair(rnd), "shares": rnd.get("shares", []),
                        "best": [{"name": c.get("name"), "lr": c.get("lr_statistic"), "p": c.get("p_value"),
                                  "bic": c.get("bic"), "significant": c.get("significant"), "status": c.get("status"),
                                  "at_bound": c.get("at_bound", []),

@@ -16,7 +16,7 @@ from scipy import stats
 
 from calib.diagnosis.model_form import MODEL_FORM_COLLINEARITY, model_form_r2, not_separable
 from calib.diagnosis.result import CandidateFit
-from calib.diagnosis.share import ShareTest, share_test
+from calib.diagnosis.share import share_record, share_test
 from calib.words import p_is
 
 #: At most this many physical effects (the best variant of each, by BIC) are fitted on top of the
@@ -63,9 +63,12 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
         return best
     apart = [t for t in on_top if not_separable(t[3], best, [names]) is None]
     first = next((t for t in on_top if t[1] == best.name), None)
-    single = (_single_form_share(namer, round_no, best, form, share, fit_task)
-              if not namer.named and first is not None and first not in apart else None)
-    if single is not None and single.share >= share:
+    single, single_args = (_single_form_share(namer, round_no, best, form, share, fit_task)
+                           if not namer.named and first is not None and first not in apart else (None, ()))
+    if single is not None:
+        rnd.setdefault("shares", []).append(share_record(best.name, best.effect, *single_args, "point", single))
+        single = single if single.share >= share else None
+    if single is not None:
         # the first effect, not separable from the joint model form: judged against the best model-form
         # candidate alone (in family the true wind-speed scale and blockage, R² 0.86-0.94 with momentum_balance)
         rnd["reason"] += (f"; not separable from {names} together, but on top of {form.name} alone it explains "
@@ -83,6 +86,12 @@ def over_model_form(namer, round_no: int, rnd: dict, best: CandidateFit, forms: 
     tests = {t[1]: share_test(chi2_form - t[2], t[4], chi2_form, dof_form, share, namer.dset.significance,
                               len(on_top)) for t in on_top}
     said = _shares_said(namer, names, chi2_form, on_top, apart, tests)
+    if apart:
+        lab = apart[0][1]
+        rnd.setdefault("shares", []).append(share_record(
+            lab, next(f.effect for f in fits if f.name == lab), chi2_form - apart[0][2], apart[0][4], chi2_form,
+            dof_form, len(on_top),
+            "point", tests[lab]))
     if apart and tests[apart[0][1]].share >= share:
         winner = next(f for f in fits if f.name == apart[0][1])
         if winner is not best:
@@ -168,10 +177,11 @@ def _on_top(namer, round_no: int, best: CandidateFit, fits: list, base: list, n_
 
 
 def _single_form_share(namer, round_no: int, best: CandidateFit, form: CandidateFit, share: float,
-                       fit_task) -> ShareTest | None:
+                       fit_task) -> tuple:
     """The share test (:func:`calib.diagnosis.share.share_test`) of ``best`` on top of ``form`` (one
     model-form candidate): of the misfit the model with ``form`` leaves beyond the noise and the
-    tolerance, does ``best`` explain ``share``? None when the fit fails."""
+    tolerance, does ``best`` explain ``share``? With the test's arguments (Λ, k, χ², dof, candidates);
+    (None, ()) when the fit fails."""
     base = namer.family.add(namer.base_effects, form)
     n_base = namer.family.n_parameters(base)
     effect = namer._effects[best.name]
@@ -180,6 +190,6 @@ def _single_form_share(namer, round_no: int, best: CandidateFit, form: Candidate
                     "model": namer.wrap(namer.family.candidate_model(base, effect),
                                         f"round {round_no + 1}: {best.name} over {form.name}")})
     if "error" in out:
-        return None
-    return share_test(form.chi2 - chi2_of(namer, out["values"]), len(effect.parameters()), form.chi2,
-                      namer.n_res - n_base, share, namer.dset.significance)
+        return None, ()
+    args = (form.chi2 - chi2_of(namer, out["values"]), len(effect.parameters()), form.chi2, namer.n_res - n_base, 1)
+    return share_test(*args[:4], share, namer.dset.significance), args

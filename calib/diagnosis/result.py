@@ -100,7 +100,7 @@ class Diagnosis:
                 "ambiguous": self.ambiguous,
                 "candidates": [c.to_dict() for c in self.candidates],
                 "rounds": [{"base": r["base"], "verdict": r["verdict"], "reason": r["reason"],
-                            **{k: r[k] for k in ("ambiguous", "separate") if k in r},
+                            **{k: r[k] for k in ("ambiguous", "separate", "shares") if k in r},
                             "candidates": [c.to_dict() for c in r["candidates"]]} for r in self.rounds],
                 "before": self.before, "with_effects": self.with_effects, "after": self.after,
                 "find": self.find, "channels": self.channels, "wall_time": self.wall_time, "notes": self.notes,

@@ -103,3 +103,73 @@ def share_test(lr: float, n_params: int, chi2_base: float, dof_base: int, share:
     z_needed = NormalDist().inv_cdf(1.0 - alpha / max(int(n_candidates), 1))
     sd = math.sqrt(var) / d if d > 0 else math.inf
     return ShareTest(point, float(z), z_needed, sd, bool(z >= z_needed))
+
+
+def share_record(fit_name: str, effect: str, lr: float, n_params: int, chi2_base: float, dof_base: int,
+                 n_candidates: int, decision: str, test: ShareTest) -> dict:
+    """One decision taken on a share, as a round of ``diagnosis.json`` records it (``shares``): enough to
+    recompute :func:`share_test` at any threshold.
+
+    Parameters
+    ----------
+    fit_name, effect : str
+        The candidate (variant label) and its effect's name.
+    lr, n_params, chi2_base, dof_base, n_candidates
+        As :func:`share_test` takes them [-].
+    decision : str
+        ``"point"`` (the point share decides: a physical effect over the model form) or ``"test"`` (the
+        share test decides: a later effect).
+    test : ShareTest
+        The test as it was made.
+    """
+    return {"candidate": fit_name, "effect": effect, "lr": float(lr), "n_params": int(n_params),
+            "chi2_base": float(chi2_base), "dof_base": int(dof_base), "n_candidates": int(max(n_candidates, 1)),
+            "decision": decision, "share": float(test.share), "sd": float(test.sd), "z": float(test.z),
+            "z_needed": float(test.z_needed)}
+
+
+def naming_probability(record: dict, threshold: float, alpha: float) -> float:
+    """The chance that the decision ``record`` (:func:`share_record`'s form) names its candidate at
+    ``threshold``, given the share's own noise: Φ(z − z_req), z the share test's statistic at
+    ``threshold`` and z_req its z_needed for a ``"test"`` decision, 0 for a ``"point"`` one [-]."""
+    test = share_test(record["lr"], record["n_params"], record["chi2_base"], record["dof_base"], threshold, alpha,
+                      record["n_candidates"])
+    return NormalDist().cdf(test.z - (test.z_needed if record["decision"] == "test" else 0.0))
+
+
+def balanced_threshold(true: list, stand_ins: list, alpha: float, grid_step: float = 0.001) -> dict:
+    """The share threshold that balances the two errors of the naming (the rule of issue 37 that sets
+    :data:`calib.diagnosis.naming.LATER_EFFECT_SHARE`).
+
+    Miss rate M(t): the mean over ``true`` decisions (a hidden effect the data hold) of
+    1 − :func:`naming_probability`; false-naming rate F(t): the mean over ``stand_ins`` (an effect the data
+    do not hold) of :func:`naming_probability`. M rises and F falls with t; the threshold is the grid point
+    in [0.30, 0.95] where |M − F| is least, rounded to 0.01.
+
+    Parameters
+    ----------
+    true, stand_ins : list of dict
+        Decisions in :func:`share_record`'s form (at least one each).
+    alpha : float
+        The diagnosis's significance [-].
+    grid_step : float
+        Spacing of the thresholds tried [-].
+
+    Returns
+    -------
+    dict
+        ``threshold`` (rounded to 0.01), ``exact`` (the grid point), ``miss`` and ``false`` (M and F there),
+        ``curve`` [(t, M, F)] every 0.05.
+    """
+    if not true or not stand_ins:
+        raise ValueError("balanced_threshold needs decisions of both kinds (true effects and stand-ins)")
+    n = int(round((0.95 - 0.30) / grid_step))
+    rows = []
+    for i in range(n + 1):
+        t = 0.30 + i * grid_step
+        miss = sum(1.0 - naming_probability(r, t, alpha) for r in true) / len(true)
+        false = sum(naming_probability(r, t, alpha) for r in stand_ins) / len(stand_ins)
+        rows.append((t, miss, false))
+    t, miss, false = min(rows, key=lambda r: abs(r[1] - r[2]))
+    step = max(1, int(round(0.05 / grid_step)))
+    return {"threshold": round(t, 2), "exact": t, "miss": miss, "false": false, "curve": rows[::step]}
