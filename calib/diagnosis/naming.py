@@ -43,18 +43,13 @@ from calib.words import p_is
 #: threshold where the mean chance of missing a true hidden effect equals the mean chance of naming a
 #: stand-in, each decision's chance from its own noise (the share test's z at the threshold; a later
 #: effect must also pass its z_needed). Measured 2026-11-28 on the lifting-line battery, both wakes,
-#: every data set, development seeds 26000-26019 (369 decisions recorded in ``diagnosis.json``,
-#: ``tests/data/share_threshold/development.json``) plus the three CCBlade stand-ins of seeds
-#: 25000-25019 (49-54 %):
-#:
-#: - true effects (121 point decisions: erosion, rotational augmentation, the uniform table, over the
-#:   model form): 60-96 %; the lowest are fast-wake erosion (60, 62, 64, 65, 65 %, ± 4-5 %);
-#: - stand-ins decided by the point share (102): 1-56 % (the highest a fast-wake control, 56 %); by the
-#:   share test (146, later effects): 4-117 %, the high ones shares of small misfits (± 10-20 %);
-#: - balance at 0.620 (miss 2.6 %, false naming 2.7 %); 0.62 also on seeds 26000-26009 alone.
-#:
-#: A later effect must exceed it beyond the share's noise (:func:`calib.diagnosis.share.share_test`);
-#: over the joint model form, the point share decides.
+#: every data set, development seeds 26000-26019 (369 decisions, ``tests/data/share_threshold/
+#: development.json``) plus the three CCBlade stand-ins of seeds 25000-25019 (49-54 %): true effects
+#: (121 point decisions over the model form) 60-96 %, the lowest fast-wake erosion (60-65 %, ± 4-5 %);
+#: stand-ins by the point share (102) 1-56 %, by the share test (146 later effects) 4-117 %, the high
+#: ones shares of small misfits (± 10-20 %); balance at 0.620 (miss 2.6 %, false naming 2.7 %), 0.62
+#: also on seeds 26000-26009 alone. A later effect must exceed it beyond the share's noise
+#: (:func:`calib.diagnosis.share.share_test`); over the joint model form, the point share decides.
 LATER_EFFECT_SHARE = 0.62
 
 
