@@ -103,8 +103,7 @@ class ChannelDiscrepancy:
 
     def unit(self, values: np.ndarray) -> np.ndarray:
         """u at predictions ``values`` [channel unit]: |ŷ| (relative) or :attr:`reference` (channel)."""
-        values = np.asarray(values, float)
-        return np.abs(values) if self.units == "relative" else np.full(values.shape, float(self.reference))
+        return _unit(self.units, np.asarray(values, float), self.reference)
 
     def length_words(self) -> str:
         """ℓ per condition in words."""
@@ -226,6 +225,11 @@ def _fit_process(x: np.ndarray, e: np.ndarray, s2: np.ndarray) -> tuple[float, f
     return best[0], float(np.exp(best[1][0])), np.clip(np.exp(best[1][1:]), *LENGTH_BOUNDS)
 
 
+def _unit(units: str, y: np.ndarray, reference: float) -> np.ndarray:
+    """The unit u of the residuals at predictions ``y`` [channel unit]: |ŷ| (``"relative"``) or ``reference``."""
+    return np.abs(y) if units == "relative" else np.full(y.shape, float(reference))
+
+
 def _fit_channel(channel: str, x: np.ndarray, r: np.ndarray, s: np.ndarray, y: np.ndarray,
                  p_value: float) -> ChannelDiscrepancy:
     """The process of residuals ``r`` = z − ŷ with noise 1-σ ``s`` [channel units] at predictions ``y``, in
@@ -233,12 +237,12 @@ def _fit_channel(channel: str, x: np.ndarray, r: np.ndarray, s: np.ndarray, y: n
     ref = float(np.sqrt(np.mean(y ** 2)))
     fits = {}
     for units in UNITS:
-        u = np.abs(y) if units == "relative" else np.full(y.shape, ref)
+        u = _unit(units, y, ref)
         nll, tau, ell = _fit_process(x, r / u, (s / u) ** 2)
         fits[units] = (nll + float(np.log(u).sum()), tau, ell)       # in channel units: + Σ log u
     units = min(fits, key=lambda k: fits[k][0])
     _, tau, ell = fits[units]
-    u = np.abs(y) if units == "relative" else np.full(y.shape, ref)
+    u = _unit(units, y, ref)
     inverse = np.linalg.inv(tau ** 2 * _kernel(x, x, ell) + np.diag((s / u) ** 2))
     return ChannelDiscrepancy(channel, tau, ell, p_value, x, inverse @ (r / u), inverse, units, ref)
 
