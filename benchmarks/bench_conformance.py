@@ -39,8 +39,11 @@ def _markdown(rows: list[dict]) -> str:
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         mark = "yes" if r["passed"] else "**no**"
-        lines.append(f"| {' | '.join(r[k] for k in KEYS)} | {mark} | {r['worst_z']:.2f} ({r['worst_parameter']}) | "
-                     f"{r['nees']:.1f} / {r['nees_bound']:.1f} | {r['wall_s']:.1f} |")
+        if r.get("status") == "refused":  # refused by design (ML noise with uncertain conditions): nothing to judge
+            judged = "refused, naming `calibration.noise` | –"
+        else:
+            judged = f"{r['worst_z']:.2f} ({r['worst_parameter']}) | {r['nees']:.1f} / {r['nees_bound']:.1f}"
+        lines.append(f"| {' | '.join(r[k] for k in KEYS)} | {mark} | {judged} | {r['wall_s']:.1f} |")
     failed = [r for r in rows if not r["passed"]]
     if failed:
         lines += ["", "Why the failing cells fail:", ""]
