@@ -7,7 +7,6 @@ import sys
 
 from calib import __version__
 from calib.errors import CalibError
-from calib.scada.command import add_scada_parser
 
 
 def _demo(args) -> int:
@@ -89,6 +88,10 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``calib`` parser. The commands' modules are imported here and in the commands, not when this module is
+    imported: a worker process of the process pool or of Dask imports the main module of ``calib`` (the console
+    script, which imports this one) before its first task, and the calibration stack (scipy.stats) cost each
+    worker about 1 CPU s there (issue 38, ``benchmarks/bench_fmu_cost.py``)."""
     parser = argparse.ArgumentParser(prog="calib", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"calib {__version__}")
@@ -143,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
                            description=BUILD_DESCRIPTION)
     add_build_arguments(b)
     b.set_defaults(func=_fmu_build)
+    from calib.scada.command import add_scada_parser
     add_scada_parser(sub)
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
