@@ -88,10 +88,8 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``calib`` parser. The commands' modules are imported here and in the commands, not when this module is
-    imported: a worker process of the process pool or of Dask imports the main module of ``calib`` (the console
-    script, which imports this one) before its first task, and the calibration stack (scipy.stats) cost each
-    worker about 1 CPU s there (issue 38, ``benchmarks/bench_fmu_cost.py``)."""
+    """The ``calib`` parser; commands' modules imported here, not with this module: a pool or Dask worker imports the
+    ``calib`` script, hence this module, before its first task (the calibration stack: ~1 CPU s each, issue 38)."""
     parser = argparse.ArgumentParser(prog="calib", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"calib {__version__}")
