@@ -7,7 +7,6 @@ import sys
 
 from calib import __version__
 from calib.errors import CalibError
-from calib.scada.command import add_scada_parser
 
 
 def _demo(args) -> int:
@@ -88,6 +87,9 @@ DESCRIPTION = """calibrate wind-turbine lifting-line (BEM) models from measured 
 'calib COMMAND --help' describes each command."""
 
 
+# The commands' modules are imported in build_parser and in the commands, not with this module: a worker of the
+# process pool or of Dask imports the main module of `calib` (the console script, which imports this one) before
+# its first task, and the calibration stack (scipy.stats) cost each worker about 1 CPU s there (issue 38).
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="calib", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -143,11 +145,16 @@ def build_parser() -> argparse.ArgumentParser:
                            description=BUILD_DESCRIPTION)
     add_build_arguments(b)
     b.set_defaults(func=_fmu_build)
-    add_scada_parser(sub)
+    _add_scada(sub)
     p = sub.add_parser("rotors", help="list the embedded rotors",
                        description="List the embedded rotors with radius, blade count, stations, precone, tilt.")
     p.set_defaults(func=_rotors)
     return _add_powercurve(parser, sub)
+
+
+def _add_scada(sub):
+    from calib.scada.command import add_scada_parser
+    add_scada_parser(sub)
 
 
 def _add_powercurve(parser, sub):

@@ -115,6 +115,29 @@ def test_pool_workers_end_when_the_run_is_killed(tmp_path):
     assert not alive(), f"pool workers {alive()} outlived the killed run"
 
 
+def test_a_pool_worker_of_the_calib_command_does_not_import_the_calibration_stack(tmp_path):
+    """A spawned pool worker runs the main module of its parent before its first task; for ``calib run`` that is
+    the console script, which imports :mod:`calib.cli`. Only the worker's tasks may import the calibration stack
+    (scipy.stats: about 1 CPU s per worker, issue 38)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "calib_script.py"           # what pip writes as the `calib` console script, plus a task
+    script.write_text(
+        "import sys\n"
+        "from calib.cli import main\n\n"
+        "def loaded(_):\n"
+        "    import sys\n"
+        "    return sorted(m for m in ('scipy', 'scipy.stats', 'calib.calibration', 'matplotlib') if m in sys.modules)\n\n"
+        "if __name__ == '__main__':\n"
+        "    from calib.executors import ProcessExecutor\n"
+        "    with ProcessExecutor(workers=1) as ex:\n"
+        "        print(ex.map(loaded, [0])[0], 'calib.cli' in sys.modules, flush=True)\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["[]", "True"], out.stdout
+
+
 class CountingExecutor(SerialExecutor):
     """A serial executor that counts its calls and the tasks it ran."""
 
