@@ -26,15 +26,14 @@ its truth, measured three ways, CPU seconds (``time.process_time``) unless said 
 :func:`floor`: the wall of ``calib run`` if only the FMU's stepping took time (its simulations x the stepping of
 one / 2 workers), and how many such simulations fit in the issue's 20 s.
 
-``python benchmarks/bench_fmu_cost.py [--repeats N]`` prints the split and writes ``bench_output/fmu_cost.json``
-(nothing is published: CPU splits, not wall clocks; the CHANGELOG states the figures of a run). Under
-``make validate`` :func:`run`.
+``python benchmarks/bench_fmu_cost.py [--repeats N]`` prints the split and publishes it
+(``docs/validation/data/fmu_cost.json``, the speed page's section "Through an FMU"): CPU seconds, which a loaded
+machine inflates by a few per cent only, with the load average beside them. Under ``make validate`` :func:`run`.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import sys
@@ -51,7 +50,6 @@ import bench_fmu_run  # noqa: E402
 #: A study of a minute of CPU on 2 workers (``make validate``), not a ``make bench`` figure.
 SUITE = "validate"
 ROOT = HERE.parent
-OUT_JSON = ROOT / "bench_output" / "fmu_cost.json"
 #: Simulations of ``calib run`` of :mod:`bench_fmu_run` at 12c1033 (CHANGELOG, issue 38): the floor's count, the
 #: unit check's 48 and the calibration's 1 152 (its result's count; 192 more base runs reused, not simulated)
 BENCH_SIMULATIONS = 48 + 1152
@@ -262,7 +260,34 @@ def run(repeats: int = 3) -> dict:
     out = {"fmpy": fmpy_split(plan, tasks, repeats), "simulator": simulator_split(plan, tasks)}
     out["pipeline"] = pipeline_split(out["simulator"]["ms_per_simulation"]["total"])
     out["floor"] = floor(out)
+    from publish import command_line, publish
+    out["published"] = publish("fmu_cost", out, command_line(), _markdown(out))
     return out
+
+
+def _markdown(out: dict) -> str:
+    """The split of one simulation's CPU and the floor, as the speed page shows them."""
+    sim, fmpy, pipe, fl = (out[k] for k in ("simulator", "fmpy", "pipeline", "floor"))
+    ms, steps = sim["ms_per_simulation"], fmpy["steps_per_run"]
+    tight = fmpy["ms_per_run"]["fmi2DoStep per step, tight ctypes loop"] * steps
+    rows = [("the FMU's stepping, `doStep` per step (through calib's simulator)", ms["doStep"]),
+            ("the same steps in a tight ctypes loop (the FMU's own cost)", tight),
+            ("reading the outputs", ms["getReal (one ctypes call per step)"]),
+            ("calib's own: setters, initialization, window statistics, status",
+             ms["everything else (setters, initialization, window statistics, status)"]),
+            ("instantiation (once per worker, then `reset`)", ms["instantiation"]),
+            ("between processes: pipes, pickling, the pool workers' relay", pipe["inter_process_ms_per_simulation"])]
+    lines = ["| part of one simulation | CPU ms |", "|---|---|"]
+    lines += [f"| {what} | {v:.3g} |" for what, v in rows]
+    lines += ["", f"One simulation is {steps:.0f} communication steps; the FMU integrates {fmpy['internal_steps_per_simulation']:.0f} "
+              f"internal steps of at most {fmpy['internal_step_s']} s in them, {fmpy['us_per_internal_step']:.1f} µs each "
+              f"(a BEM solve of every blade element). The FMU's stepping is "
+              f"{100 * ms['doStep'] / ms['total']:.1f} % of a simulation in process. **The floor of `calib run`** if "
+              f"nothing but the FMU's stepping took time: {fl['simulations']} simulations x {fl['stepping_ms_per_simulation']:.1f} ms "
+              f"/ 2 workers = **{fl['wall_floor_s']:.1f} s**; the issue's 20 s holds {fl['simulations_in_20_s']} such "
+              f"simulations. Load average {pipe['load_before']:.1f} before and {pipe['load_after']:.1f} after the "
+              f"pipeline's {pipe['simulations']} simulations."]
+    return "\n".join(lines) + "\n"
 
 
 def floor(out: dict, simulations: int = BENCH_SIMULATIONS, workers: int = 2) -> dict:
@@ -288,8 +313,7 @@ def main(argv=None) -> int:
             print(f"[bench_fmu_cost] {part:9s} {k:70s} {v}")
     for k in ("internal_steps_per_simulation", "internal_step_s", "us_per_internal_step"):
         print(f"[bench_fmu_cost] fmpy      {k:70s} {out['fmpy'][k]}")
-    OUT_JSON.parent.mkdir(parents=True, exist_ok=True)
-    OUT_JSON.write_text(json.dumps(out, indent=1))
+    print(f"[bench_fmu_cost] wrote {out['published']}")
     return 0
 
 
