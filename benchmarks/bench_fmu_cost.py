@@ -270,8 +270,8 @@ def _markdown(out: dict) -> str:
     sim, fmpy, pipe, fl = (out[k] for k in ("simulator", "fmpy", "pipeline", "floor"))
     ms, steps = sim["ms_per_simulation"], fmpy["steps_per_run"]
     tight = fmpy["ms_per_run"]["fmi2DoStep per step, tight ctypes loop"] * steps
-    rows = [("the FMU's stepping, `doStep` per step (through calib's simulator)", ms["doStep"]),
-            ("the same steps in a tight ctypes loop (the FMU's own cost)", tight),
+    rows = [("the FMU's stepping: every `doStep` of the run, through calib's simulator", ms["doStep"]),
+            ("the same steps in a tight ctypes loop: the FMU's own cost", tight),
             ("reading the outputs", ms["getReal (one ctypes call per step)"]),
             ("calib's own: setters, initialization, window statistics, status",
              ms["everything else (setters, initialization, window statistics, status)"]),
