@@ -391,7 +391,7 @@ def publish_variant(key: str, figures: dict) -> str:
     import json
     import tempfile
 
-    from publish import ROOT, command_line, publish
+    from publish import ROOT, command_line, publish, run_commit
 
     path = os.path.join(ROOT, "docs", "validation", "data", "errors_in_variables_marginal.json")
     with open(os.path.join(tempfile.gettempdir(), "calib_bench_eiv_marginal.lock"), "w") as lock:
@@ -400,7 +400,7 @@ def publish_variant(key: str, figures: dict) -> str:
         if os.path.exists(path):
             with open(path) as fh:
                 old = {k: v for k, v in json.load(fh).items() if k in VARIANTS or k == "fresh"}
-        merged = {**old, key: {**figures, "command": command_line()}}
+        merged = {**old, key: {**figures, "command": command_line(), "run_commit": run_commit()["commit"]}}
         merged["verdicts"] = verdicts(merged)
         return publish("errors_in_variables_marginal", merged, command_line(), markdown(merged))
 
