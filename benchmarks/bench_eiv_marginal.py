@@ -54,7 +54,9 @@ Rules, stated before the runs (development seeds 4000…, those of :mod:`bench_e
 
 ``python benchmarks/bench_eiv_marginal.py [N] [VARIANT ...]`` (N replicates, default 25; about 3 s CPU per
 estimator and replicate, 10 s for the prototype, on an idle machine); ``--fresh N`` runs the prototype
-and the library's estimators on N fresh campaigns (seeds 4200…) of the ``classical`` variant. Publishes
+and the library's estimators on N fresh campaigns (seeds 4200…) of the ``classical`` variant; ``--republish``
+re-makes the tables and the rules' verdicts from the published figures (each variant keeps its command and
+commit). Publishes
 ``docs/validation/data/errors_in_variables_marginal.json`` (each variant as it is done, keeping the others').
 """
 
@@ -470,7 +472,9 @@ def markdown(figures: dict) -> str:
         elif "coverage" in v:
             lines.append(f"{key} (prototype): coverage {num(v['coverage'], '{:.1%}')}, "
                          f"{'in' if v['coverage_in_band'] else 'NOT in'} 90–99 %")
-    return "\n".join(rows) + "\n\nExcess over joint (oracle): RMS over the correction nodes of the mean of p̂ − p̂_joint " \
+    runs = [f"{key}: `{figures[key].get('command', '?')}` at {figures[key].get('run_commit', 'a commit not recorded')}"
+            for key in LABELS if key in figures]
+    return "\n".join(rows) + "\n\nRuns: " + "; ".join(runs) + ".\n\nExcess over joint (oracle): RMS over the correction nodes of the mean of p̂ − p̂_joint " \
         "(p̂ − p̂_oracle) on the same records [scales]; the oracle, on the centred campaigns only, was added after the " \
         "first runs showed the joint estimator move there; cover: share of the 95 % intervals holding the truth; directions: " \
         "eigen-directions of the posterior against the prior with the data's precision above the prior's " \
@@ -483,7 +487,17 @@ if __name__ == "__main__":
     if "--keep" in args:
         i = args.index("--keep")
         keep, args = args[i + 1], args[:i] + args[i + 2:]
-    if args[:1] == ["--fresh"]:
+    if args[:1] == ["--republish"]:      # the page's tables and the rules' verdicts re-made from the published figures
+        import json
+
+        from publish import ROOT, command_line, publish
+
+        path = os.path.join(ROOT, "docs", "validation", "data", "errors_in_variables_marginal.json")
+        with open(path) as fh:
+            merged = {k: v for k, v in json.load(fh).items() if k in VARIANTS or k == "fresh"}
+        merged["verdicts"] = verdicts(merged)
+        result = {"published": publish("errors_in_variables_marginal", merged, command_line(), markdown(merged))}
+    elif args[:1] == ["--fresh"]:
         n = int(args[1]) if len(args) > 1 else 20
         result = {"fresh": variant_figures("classical", n, FRESH_SEED, (*ESTIMATORS, *PROTOTYPES))}
         result["published"] = publish_variant("fresh", result["fresh"])
