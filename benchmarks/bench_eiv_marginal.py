@@ -26,6 +26,9 @@ Each *variant* of the campaign switches one of them off, with the same seeds and
 - ``centred``: readings drawn from the design and the truth about them (u = ū − e, Berkson errors, the
   same σ: r_V of the reading, σ_β): E[u | ū] = ū; outputs y(u);
 - ``centred_linearized``: both: the marginal estimator's model is then exact (its control);
+- ``centred_wind``, ``centred_pitch``: one condition's readings centred, the other's classical (added
+  after the first runs pointed at the centring, with the oracle of :mod:`bench_eiv` beside them and on
+  ``centred``: the joint estimator, the first rule's reference, moves on centred campaigns);
 - ``half_scatter``, ``quarter_scatter``: ``classical`` with r_V and σ_β halved and quartered. A bias
   from the second-order terms scales as σ_u², one from anything first order as σ_u.
 
@@ -33,7 +36,9 @@ Besides the library's estimators, on the ``classical`` and ``centred`` campaigns
 the library, not a default): ``marginal_mean_corrected``, the marginal estimator on a model whose output is
 the records' mean over their stated condition errors, ȳ(p, ū) = y(p, ū) + c(p, ū) (the same two-point rule,
 the stated σ of each record; its Jacobian the same combination of the model's), i.e. the curvature term
-put into the marginal estimator's mean.
+put into the marginal estimator's mean; and (added after the first runs) ``marginal_centred_mean``, the
+same with each wind reading first moved to E[V | V̄] ≈ V̄ (1 + 2 r²), the centre of the truth given a
+reading with a relative error r about a flat spread of true wind speeds.
 
 Figures per variant and estimator, as :mod:`bench_eiv`'s: the bias of the correction field (RMS over the
 nodes of the mean error, in parameter scales) and its excess over the joint estimator's on the same
