@@ -29,6 +29,10 @@ Each *variant* of the campaign switches one of them off, with the same seeds and
 - ``centred_wind``, ``centred_pitch``: one condition's readings centred, the other's classical (added
   after the first runs pointed at the centring, with the oracle of :mod:`bench_eiv` beside them and on
   ``centred``: the joint estimator, the first rule's reference, moves on centred campaigns);
+- ``free_rotor_speed``: ``classical`` with the true rotor speed from a tip-speed ratio drawn per record
+  (added after ``centred_wind`` pointed at the wind readings: on the operating curve the measured rotor
+  speed pins the true wind speed below rated, so the truth given the readings is not spread about the
+  wind reading at all);
 - ``half_scatter``, ``quarter_scatter``: ``classical`` with r_V and σ_β halved and quartered. A bias
   from the second-order terms scales as σ_u², one from anything first order as σ_u.
 
@@ -97,14 +101,17 @@ VARIANTS = {
     "centred_linearized": {"scatter": 1.0, "readings": "centred", "outputs": "linearized"},
     "centred_wind": {"scatter": 1.0, "readings": "centred_wind", "outputs": "model"},
     "centred_pitch": {"scatter": 1.0, "readings": "centred_pitch", "outputs": "model"},
+    "free_rotor_speed": {"scatter": 1.0, "readings": "classical", "outputs": "model", "rotor": "free"},
     "half_scatter": {"scatter": 0.5, "readings": "classical", "outputs": "model"},
     "quarter_scatter": {"scatter": 0.25, "readings": "classical", "outputs": "model"},
 }
 #: Variants on which the prototype runs beside the library's estimators.
-PROTOTYPE_ON = ("classical", "centred")
+PROTOTYPE_ON = ("classical", "centred", "free_rotor_speed")
 #: Variants on which the oracle runs too (added after the first runs: on the centred campaigns the joint
 #: estimator, the first rule's reference, moved; the oracle is the reference that does not).
-ORACLE_ON = ("centred", "centred_wind", "centred_pitch")
+ORACLE_ON = ("centred", "centred_wind", "centred_pitch", "free_rotor_speed")
+#: Tip-speed ratios the ``free_rotor_speed`` variant draws per record [-].
+FREE_TSR = (6.0, 9.0)
 ESTIMATORS = ("marginal", "joint")
 PROTOTYPE = "marginal_mean_corrected"
 #: The second prototype (added after the first runs pointed at the readings' centring): the mean over the
@@ -222,7 +229,7 @@ class MeanCorrectedModel:
 
 
 def campaign(truth, pt, spec: CampaignSpec, seed: int, readings: str = "classical", outputs: str = "model",
-             channels=bench_eiv.CHANNELS) -> tuple[Measurements, OperatingConditions]:
+             channels=bench_eiv.CHANNELS, rotor: str = "curve") -> tuple[Measurements, OperatingConditions]:
     """One campaign of a variant (module docstring): the measurements and the true conditions.
 
     The random numbers are :func:`calib.calibration.eiv_campaign.synthesize_campaign`'s, drawn in its
@@ -232,10 +239,20 @@ def campaign(truth, pt, spec: CampaignSpec, seed: int, readings: str = "classica
     ``centred_pitch`` (that condition centred, the other classical); ``outputs``:
     ``model`` y(p_true, u), ``linearized`` y(ū) + J_u(ū)(u − ū) or ``curvature_removed`` y(u) − c(u),
     all at the truth's parameters and in its frame (no global biases: the anemometer's scale and the
-    pitch offset are put into the measured conditions as there).
+    pitch offset are put into the measured conditions as there). ``rotor``: ``curve``, the rotor speed
+    from the spec's tip-speed ratio (so that below rated the measured rotor speed pins the true wind
+    speed), or ``free``, from a tip-speed ratio drawn per record in :data:`FREE_TSR` (a generator of its
+    own, seeded [seed, 1], so that the other draws stay those of ``curve``).
     """
     rng = np.random.default_rng(seed)
-    design = true_conditions(spec, float(truth.rotor_radius), rng)
+    radius = float(truth.rotor_radius)
+    design = true_conditions(spec, radius, rng)
+    if rotor == "free":
+        tsr = np.random.default_rng([seed, 1]).uniform(*FREE_TSR, len(design))
+        design = _with(design, rotor_speed=np.clip(tsr * design.wind_speed / radius * 30.0 / np.pi,
+                                                   *spec.rotor_speed_range))
+    elif rotor != "curve":
+        raise ValueError(f"rotor must be 'curve' or 'free', got {rotor!r}")
     fractions = dict(spec.output_sigma)
     noise = rng.standard_normal((len(design), len(channels)))
     eps_v, eps_b = rng.standard_normal(len(design)), rng.standard_normal(len(design))
@@ -346,7 +363,7 @@ def variant_figures(variant: str, n_replicates: int, first_seed: int, estimators
                                 *(("oracle",) if variant in ORACLE_ON else ()))
     runs = []
     for k, seed in enumerate(range(first_seed, first_seed + n_replicates)):
-        meas, true = campaign(truth, pt, spec, seed, v["readings"], v["outputs"])
+        meas, true = campaign(truth, pt, spec, seed, v["readings"], v["outputs"], rotor=v.get("rotor", "curve"))
         runs.append({est: calibrate(model, meas, est, seed, true, spec) for est in estimators})
         print(f"{variant} replicate {k + 1}/{n_replicates}",
               {e: (round(float(r["p"][-2]), 4), round(float(r["p"][-1]), 3)) for e, r in runs[-1].items()}, flush=True)
@@ -434,6 +451,7 @@ LABELS = {"classical": "classical (the bench's campaigns)", "linearized": "(A) o
           "curvature_removed": "(B) outputs' curvature mean removed", "centred": "readings centred (Berkson)",
           "centred_linearized": "readings centred, outputs linear (marginal exact)",
           "centred_wind": "wind readings centred, pitch classical", "centred_pitch": "pitch readings centred, wind classical",
+          "free_rotor_speed": "classical, rotor speed off the operating curve",
           "half_scatter": "(C) scatter ½", "quarter_scatter": "(C) scatter ¼",
           "fresh": "classical, fresh seeds"}
 
