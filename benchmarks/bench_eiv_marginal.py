@@ -86,11 +86,11 @@ from calib.calibration import CalibrationSettings, Calibrator  # noqa: E402
 from calib.calibration.eiv_campaign import CampaignSpec, true_conditions  # noqa: E402
 from calib.calibration.errors_in_variables import condition_sensitivities  # noqa: E402
 from calib.measurements import Measurements  # noqa: E402
-from calib.models.base import Capabilities  # noqa: E402
 from calib.calibration.settings import UNCERTAIN_CONDITIONS  # noqa: E402
-from calib.types import Evaluation, OperatingConditions, nominal_vector  # noqa: E402
+from calib.types import OperatingConditions, nominal_vector  # noqa: E402
 
 import bench_eiv  # noqa: E402
+from eiv_mean_model import MeanCorrectedModel, mean_correction, with_conditions  # noqa: E402
 
 SUITE = "validate"
 VARIANTS = {
@@ -128,106 +128,6 @@ SECOND_ORDER, FIRST_ORDER = 1.5, 1.25
 RUNS: dict = {}
 
 
-def _with(conditions: OperatingConditions, **values) -> OperatingConditions:
-    return dataclasses.replace(conditions, **values)
-
-
-def mean_correction(evaluate, conditions: OperatingConditions, sigma: np.ndarray) -> tuple[list, np.ndarray]:
-    """The two-point Gauss rule of E[y(u + e)] − y(u), e ~ N(0, diag σ²), over wind speed and pitch.
-
-    c(u) = Σ_d ½ [y(u + σ_d e_d) + y(u − σ_d e_d) − 2 y(u)] (exact for outputs cubic in each condition;
-    the cross terms vanish for independent errors).
-
-    Parameters
-    ----------
-    evaluate : callable
-        conditions -> (values, ok) or any result; called at the shifted conditions.
-    conditions : OperatingConditions
-    sigma : ndarray, shape (n_points, 2)
-        1-σ of wind speed [m/s] and pitch [deg].
-
-    Returns
-    -------
-    results : list
-        ``evaluate``'s results at u + σ_V, u − σ_V, u + σ_β, u − σ_β.
-    weights : ndarray
-        Of the four results; with weight −2 · ½ · 2 = −2 on y(u) itself: c = Σ w_i y_i − 2 y(u).
-    """
-    shifted = []
-    for j, name in ((0, "wind_speed"), (1, "pitch")):
-        u = getattr(conditions, name)
-        shifted += [_with(conditions, **{name: u + sigma[:, j]}), _with(conditions, **{name: u - sigma[:, j]})]
-    return [evaluate(c) for c in shifted], np.full(4, 0.5)
-
-
-class MeanCorrectedModel:
-    """PROTOTYPE (issue 40, not in the library): a model whose output is its mean over the records'
-    condition errors, ȳ(p, u) = y(p, u) + c(p, u) (:func:`mean_correction`), its Jacobian the same
-    combination of the model's. Built for one campaign: ``sigma`` holds its records' stated σ of the
-    wind reading [m/s] and pitch [deg], so it evaluates batches of exactly those records."""
-
-    def __init__(self, model, sigma: np.ndarray, centre_wind: bool = False):
-        self._model = model
-        self._sigma = np.asarray(sigma, float)
-        self._centre_wind = centre_wind
-
-    def _centred(self, conditions: OperatingConditions) -> OperatingConditions:
-        """With ``centre_wind``: each wind reading V̄ moved to E[V | V̄] = V̄ (1 + 2 r²), r = σ_V / V̄ its stated
-        relative σ (a reading V̄ = V (1 + r ε) of a true V spread flatly about it)."""
-        if not self._centre_wind:
-            return conditions
-        r = self._sigma[:, 0] / conditions.wind_speed
-        return _with(conditions, wind_speed=conditions.wind_speed * (1.0 + 2.0 * r ** 2))
-
-    def __getattr__(self, name):
-        return getattr(self._model, name)
-
-    @property
-    def capabilities(self) -> Capabilities:
-        """The model's, not refinable (its ``with_grid`` would drop the mean)."""
-        return dataclasses.replace(self._model.capabilities, refinable=False)
-
-    @property
-    def parameters(self):
-        return self._model.parameters
-
-    @property
-    def channels(self):
-        return self._model.channels
-
-    def _check(self, conditions):
-        if len(conditions) != len(self._sigma):
-            raise ValueError(f"MeanCorrectedModel holds the σ of {len(self._sigma)} records, got {len(conditions)}")
-
-    @staticmethod
-    def _combine(centre: Evaluation, shifted: list, values: list, weights) -> tuple[Evaluation, np.ndarray]:
-        ok = centre.ok.copy()
-        for ev in shifted:
-            ok &= ev.ok
-        mean = (1.0 - weights.sum()) * values[0] + sum(w * v for w, v in zip(weights, values[1:]))
-        status = np.where(ok | ~centre.ok, centre.status, np.max([ev.status for ev in shifted], axis=0))
-        return dataclasses.replace(centre, status=status), mean
-
-    def evaluate(self, p, conditions: OperatingConditions) -> Evaluation:
-        self._check(conditions)
-        conditions = self._centred(conditions)
-        centre = self._model.evaluate(p, conditions)
-        shifted, w = mean_correction(lambda c: self._model.evaluate(p, c), conditions, self._sigma)
-        ev, mean = self._combine(centre, shifted, [centre.values] + [e.values for e in shifted], w)
-        return dataclasses.replace(ev, values=np.where(ev.ok[:, None], mean, np.nan))
-
-    def jacobian(self, p, conditions: OperatingConditions):
-        self._check(conditions)
-        conditions = self._centred(conditions)
-        centre, G = self._model.jacobian(p, conditions)
-        pairs, w = mean_correction(lambda c: self._model.jacobian(p, c), conditions, self._sigma)
-        shifted = [e for e, _ in pairs]
-        ev, mean = self._combine(centre, shifted, [centre.values] + [e.values for e in shifted], w)
-        _, Gm = self._combine(centre, shifted, [G] + [g for _, g in pairs], w)
-        ev = dataclasses.replace(ev, values=np.where(ev.ok[:, None], mean, np.nan))
-        return ev, np.where(ev.ok[:, None, None], Gm, np.nan)
-
-
 def campaign(truth, pt, spec: CampaignSpec, seed: int, readings: str = "classical", outputs: str = "model",
              channels=bench_eiv.CHANNELS, rotor: str = "curve") -> tuple[Measurements, OperatingConditions]:
     """One campaign of a variant (module docstring): the measurements and the true conditions.
@@ -249,7 +149,7 @@ def campaign(truth, pt, spec: CampaignSpec, seed: int, readings: str = "classica
     design = true_conditions(spec, radius, rng)
     if rotor == "free":
         tsr = np.random.default_rng([seed, 1]).uniform(*FREE_TSR, len(design))
-        design = _with(design, rotor_speed=np.clip(tsr * design.wind_speed / radius * 30.0 / np.pi,
+        design = with_conditions(design, rotor_speed=np.clip(tsr * design.wind_speed / radius * 30.0 / np.pi,
                                                    *spec.rotor_speed_range))
     elif rotor != "curve":
         raise ValueError(f"rotor must be 'curve' or 'free', got {rotor!r}")
@@ -260,9 +160,9 @@ def campaign(truth, pt, spec: CampaignSpec, seed: int, readings: str = "classica
     if readings not in ("classical", "centred", "centred_wind", "centred_pitch"):
         raise ValueError(f"readings must be 'classical', 'centred', 'centred_wind' or 'centred_pitch', got {readings!r}")
     wind_centred, pitch_centred = readings in ("centred", "centred_wind"), readings in ("centred", "centred_pitch")
-    true = _with(design, wind_speed=design.wind_speed * (1.0 - r * eps_v) if wind_centred else design.wind_speed,
+    true = with_conditions(design, wind_speed=design.wind_speed * (1.0 - r * eps_v) if wind_centred else design.wind_speed,
                  pitch=design.pitch - sb * eps_b if pitch_centred else design.pitch)
-    read = _with(design, wind_speed=design.wind_speed if wind_centred else design.wind_speed * (1.0 + r * eps_v),
+    read = with_conditions(design, wind_speed=design.wind_speed if wind_centred else design.wind_speed * (1.0 + r * eps_v),
                  pitch=design.pitch if pitch_centred else design.pitch + sb * eps_b)
     idx = [[c.name for c in truth.channels].index(c) for c in channels]
 
@@ -306,7 +206,7 @@ def calibrate(model, meas: Measurements, name: str, seed: int, true=None, spec=N
     kept, noise known: as :func:`bench_eiv.replicate`)."""
     settings = {"noise": "known"} if name == "oracle" else bench_eiv.ESTIMATORS["marginal" if name in PROTOTYPES else name]
     if name == "oracle":
-        meas = dataclasses.replace(meas, condition_sigma=None, conditions=_with(
+        meas = dataclasses.replace(meas, condition_sigma=None, conditions=with_conditions(
             true, wind_speed=spec.anemometer_scale * true.wind_speed, pitch=true.pitch - spec.pitch_offset))
     if name in PROTOTYPES:
         model = MeanCorrectedModel(model, np.c_[meas.condition_sigma["wind_speed"], meas.condition_sigma["pitch"]],

@@ -53,7 +53,7 @@ def test_centred_readings_hold_the_truth_at_the_stated_error(field):
 
 def test_the_two_point_mean_is_exact_for_cubics():
     """E[(u + e)³] − u³ = 3 u σ² for e ~ N(0, σ²), in wind speed and pitch at once."""
-    from bench_eiv_marginal import mean_correction
+    from eiv_mean_model import mean_correction
     from calib.types import OperatingConditions
 
     u = OperatingConditions(np.array([5.0, 9.0, 14.0]), np.full(3, 10.0), np.array([0.0, 1.0, 6.0]), np.full(3, 1.2))
@@ -71,7 +71,8 @@ def test_the_two_point_mean_is_exact_for_cubics():
 def test_the_prototype_jacobian_is_the_derivative_of_its_outputs(field):
     """MeanCorrectedModel's G against central differences of its own outputs (a field node, the wind
     scale and the pitch offset), and its outputs above the model's where power is convex in the wind."""
-    from bench_eiv_marginal import MeanCorrectedModel, campaign
+    from bench_eiv_marginal import campaign
+    from eiv_mean_model import MeanCorrectedModel
 
     model, truth, pt, p_true, spec, _ = field
     m, _ = campaign(truth, pt, dataclasses.replace(spec, n_records=12), 4001)
