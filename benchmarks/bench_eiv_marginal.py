@@ -315,22 +315,13 @@ def publish_variant(key: str, figures: dict) -> str:
     """Publish one variant's figures (``key``: a variant, or ``fresh``) into
     ``docs/validation/data/errors_in_variables_marginal.json``, keeping the others' and re-applying the
     rules; each keeps the command that made it. Returns the path."""
-    import fcntl
-    import json
-    import tempfile
+    from publish import publish_part, run_commit
 
-    from publish import ROOT, command_line, publish, run_commit
+    def finish(merged):
+        return {**merged, "verdicts": verdicts(merged)}
 
-    path = os.path.join(ROOT, "docs", "validation", "data", "errors_in_variables_marginal.json")
-    with open(os.path.join(tempfile.gettempdir(), "calib_bench_eiv_marginal.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        old = {}
-        if os.path.exists(path):
-            with open(path) as fh:
-                old = {k: v for k, v in json.load(fh).items() if k in VARIANTS or k == "fresh"}
-        merged = {**old, key: {**figures, "command": command_line(), "run_commit": run_commit()["commit"]}}
-        merged["verdicts"] = verdicts(merged)
-        return publish("errors_in_variables_marginal", merged, command_line(), markdown(merged))
+    return publish_part("errors_in_variables_marginal", key, {**figures, "run_commit": run_commit()["commit"]},
+                        lambda k, v: k in VARIANTS or k == "fresh", markdown, finish)
 
 
 def run(n_replicates: int = 25, first_seed: int = FIRST_SEED, variants=tuple(VARIANTS), fresh: int = 20) -> dict:

@@ -72,14 +72,6 @@ class MeanCorrectedModel:
         """The model's, not refinable (its ``with_grid`` would drop the mean)."""
         return dataclasses.replace(self._model.capabilities, refinable=False)
 
-    @property
-    def parameters(self):
-        return self._model.parameters
-
-    @property
-    def channels(self):
-        return self._model.channels
-
     def _check(self, conditions):
         if len(conditions) != len(self._sigma):
             raise ValueError(f"MeanCorrectedModel holds the σ of {len(self._sigma)} records, got {len(conditions)}")
