@@ -389,8 +389,9 @@ def markdown(figures: dict) -> str:
     runs = [f"{key}: `{figures[key].get('command', '?')}` at {figures[key].get('run_commit', 'a commit not recorded')}"
             for key in LABELS if key in figures]
     return "\n".join(rows) + "\n\nRuns: " + "; ".join(runs) + ".\n\nExcess over joint (oracle): RMS over the correction nodes of the mean of p̂ − p̂_joint " \
-        "(p̂ − p̂_oracle) on the same records [scales]; the oracle, on the centred campaigns only, was added after the " \
-        "first runs showed the joint estimator move there; cover: share of the 95 % intervals holding the truth; directions: " \
+        "(p̂ − p̂_oracle) on the same records [scales]; the oracle (the same records at the true conditions read without " \
+        "scatter), on the centred and the free-rotor-speed campaigns only, was added after the first runs showed the " \
+        "joint estimator move on centred ones; cover: share of the 95 % intervals holding the truth; directions: " \
         "eigen-directions of the posterior against the prior with the data's precision above the prior's " \
         "(bench_eiv.direction_coverage). Rules (stated before the runs): " + "; ".join(lines) + ".\n"
 
