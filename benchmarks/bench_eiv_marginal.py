@@ -63,7 +63,9 @@ Rules, stated before the runs (development seeds 4000…, those of :mod:`bench_e
 
 ``python benchmarks/bench_eiv_marginal.py [N] [VARIANT ...]`` (N replicates, default 25; about 3 s CPU per
 estimator and replicate, 10 s for the prototype, on an idle machine); ``--fresh N`` runs the prototype
-and the library's estimators on N fresh campaigns (seeds 4200…) of the ``classical`` variant; ``--republish``
+and the library's estimators on N fresh campaigns (seeds 4200…) of the ``classical`` variant, ``--fresh N
+VARIANT ...`` the library's estimators (and the oracle where the variant has it) on fresh campaigns of those
+variants (a check of the development seeds' findings; published as ``fresh_VARIANT``); ``--republish``
 re-makes the tables and the rules' verdicts from the published figures (each variant keeps its command and
 commit). Publishes
 ``docs/validation/data/errors_in_variables_marginal.json`` (each variant as it is done, keeping the others').
@@ -279,10 +281,12 @@ def variant_figures(variant: str, n_replicates: int, first_seed: int, estimators
 def verdicts(figures: dict) -> dict:
     """The rules of the module docstring applied to the published variants."""
     out = {}
-    base = figures.get("classical", {}).get("marginal")
     for name, f in figures.items():
+        # a fresh-seed variant against the classical campaigns of the same fresh seeds
+        variant = name[len("fresh_"):] if name.startswith("fresh_") else name
+        base = figures.get("fresh" if name.startswith("fresh_") else "classical", {}).get("marginal")
         # the scatter variants switch no cause off: they are judged by the scaling rule alone
-        if name not in VARIANTS or name == "classical" or base is None or VARIANTS[name]["scatter"] != 1.0:
+        if variant not in VARIANTS or variant == "classical" or base is None or VARIANTS[variant]["scatter"] != 1.0:
             continue
         for est in ("marginal", *PROTOTYPES):
             if est not in f:
@@ -321,7 +325,7 @@ def publish_variant(key: str, figures: dict) -> str:
         return {**merged, "verdicts": verdicts(merged)}
 
     return publish_part("errors_in_variables_marginal", key, {**figures, "run_commit": run_commit()["commit"]},
-                        lambda k, v: k in VARIANTS or k == "fresh", markdown, finish)
+                        lambda k, v: k in VARIANTS or k.startswith("fresh"), markdown, finish)
 
 
 def run(n_replicates: int = 25, first_seed: int = FIRST_SEED, variants=tuple(VARIANTS), fresh: int = 20) -> dict:
@@ -355,7 +359,8 @@ def markdown(figures: dict) -> str:
     rows = ["| campaign | estimator | field bias RMS [scales] | excess over joint | excess over oracle | "
             "data-determined directions: cover (n) | pitch_offset bias [deg] | cover | wind_scale bias | cover | converged |",
             "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for key, label in LABELS.items():
+    fresh = {k: f"{LABELS[k[6:]]}, fresh seeds" for k in figures if k.startswith("fresh_") and k[6:] in LABELS}
+    for key, label in {**LABELS, **fresh}.items():
         if key not in figures:
             continue
         f = figures[key]
@@ -387,7 +392,7 @@ def markdown(figures: dict) -> str:
             lines.append(f"{key} (prototype): coverage {num(v['coverage'], '{:.1%}')}, "
                          f"{'in' if v['coverage_in_band'] else 'NOT in'} 90–99 %")
     runs = [f"{key}: `{figures[key].get('command', '?')}` at {figures[key].get('run_commit', 'a commit not recorded')}"
-            for key in LABELS if key in figures]
+            for key in (*LABELS, *sorted(k for k in figures if k.startswith("fresh_"))) if key in figures]
     return "\n".join(rows) + "\n\nRuns: " + "; ".join(runs) + ".\n\nExcess over joint (oracle): RMS over the correction nodes of the mean of p̂ − p̂_joint " \
         "(p̂ − p̂_oracle) on the same records [scales]; the oracle (the same records at the true conditions read without " \
         "scatter), on the centred and the free-rotor-speed campaigns only, was added after the first runs showed the " \
@@ -409,9 +414,15 @@ if __name__ == "__main__":
 
         path = os.path.join(ROOT, "docs", "validation", "data", "errors_in_variables_marginal.json")
         with open(path) as fh:
-            merged = {k: v for k, v in json.load(fh).items() if k in VARIANTS or k == "fresh"}
+            merged = {k: v for k, v in json.load(fh).items() if k in VARIANTS or k.startswith("fresh")}
         merged["verdicts"] = verdicts(merged)
         result = {"published": publish("errors_in_variables_marginal", merged, command_line(), markdown(merged))}
+    elif args[:1] == ["--fresh"] and len(args) > 2:
+        result = {}
+        for variant in args[2:]:
+            est = (*ESTIMATORS, *(("oracle",) if variant in ORACLE_ON else ()))
+            result[f"fresh_{variant}"] = variant_figures(variant, int(args[1]), FRESH_SEED, est)
+            result["published"] = publish_variant(f"fresh_{variant}", result[f"fresh_{variant}"])
     elif args[:1] == ["--fresh"]:
         n = int(args[1]) if len(args) > 1 else 20
         result = {"fresh": variant_figures("classical", n, FRESH_SEED, (*ESTIMATORS, *PROTOTYPES))}
