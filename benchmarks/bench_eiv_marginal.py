@@ -65,7 +65,8 @@ Rules, stated before the runs (development seeds 4000…, those of :mod:`bench_e
 estimator and replicate, 10 s for the prototype, on an idle machine); ``--fresh N`` runs the prototype
 and the library's estimators on N fresh campaigns (seeds 4200…) of the ``classical`` variant, ``--fresh N
 VARIANT ...`` the library's estimators (and the oracle where the variant has it) on fresh campaigns of those
-variants (a check of the development seeds' findings; published as ``fresh_VARIANT``); ``--republish``
+variants (a check of the development seeds' findings; published as ``fresh_VARIANT``; ``make validate``
+runs every variant and then ``--fresh 20 classical centred_wind free_rotor_speed``); ``--republish``
 re-makes the tables and the rules' verdicts from the published figures (each variant keeps its command and
 commit). Publishes
 ``docs/validation/data/errors_in_variables_marginal.json`` (each variant as it is done, keeping the others').
@@ -328,17 +329,29 @@ def publish_variant(key: str, figures: dict) -> str:
                         lambda k, v: k in VARIANTS or k.startswith("fresh"), markdown, finish)
 
 
+#: Variants whose development-seed finding is checked on fresh seeds too (``fresh_VARIANT``).
+FRESH_VARIANTS = ("centred_wind", "free_rotor_speed")
+
+
+def fresh_figures(variant: str, n_replicates: int) -> dict:
+    """A variant on ``n_replicates`` fresh campaigns (seeds :data:`FRESH_SEED`…): ``classical`` with the
+    prototypes, the others with the library's estimators and, where the variant has it, the oracle."""
+    extra = PROTOTYPES if variant == "classical" else ("oracle",) if variant in ORACLE_ON else ()
+    return variant_figures(variant, n_replicates, FRESH_SEED, (*ESTIMATORS, *extra))
+
+
 def run(n_replicates: int = 25, first_seed: int = FIRST_SEED, variants=tuple(VARIANTS), fresh: int = 20) -> dict:
-    """Every variant on ``n_replicates`` development campaigns, then the ``classical`` one on ``fresh``
-    fresh campaigns (seeds :data:`FRESH_SEED`…, with the prototype); each published as it is done
-    (``make validate`` calls this)."""
+    """Every variant on ``n_replicates`` development campaigns, then the ``classical`` one and
+    :data:`FRESH_VARIANTS` on ``fresh`` fresh campaigns; each published as it is done (``make validate``
+    calls this)."""
     figures = {}
     for variant in variants:
         figures[variant] = variant_figures(variant, n_replicates, first_seed)
         figures["published"] = publish_variant(variant, figures[variant])
-    if fresh:
-        figures["fresh"] = variant_figures("classical", fresh, FRESH_SEED, (*ESTIMATORS, *PROTOTYPES))
-        figures["published"] = publish_variant("fresh", figures["fresh"])
+    for variant in ("classical", *FRESH_VARIANTS) if fresh else ():
+        key = "fresh" if variant == "classical" else f"fresh_{variant}"
+        figures[key] = fresh_figures(variant, fresh)
+        figures["published"] = publish_variant(key, figures[key])
     return figures
 
 
@@ -417,16 +430,13 @@ if __name__ == "__main__":
             merged = {k: v for k, v in json.load(fh).items() if k in VARIANTS or k.startswith("fresh")}
         merged["verdicts"] = verdicts(merged)
         result = {"published": publish("errors_in_variables_marginal", merged, command_line(), markdown(merged))}
-    elif args[:1] == ["--fresh"] and len(args) > 2:
-        result = {}
-        for variant in args[2:]:
-            est = (*ESTIMATORS, *(("oracle",) if variant in ORACLE_ON else ()))
-            result[f"fresh_{variant}"] = variant_figures(variant, int(args[1]), FRESH_SEED, est)
-            result["published"] = publish_variant(f"fresh_{variant}", result[f"fresh_{variant}"])
     elif args[:1] == ["--fresh"]:
         n = int(args[1]) if len(args) > 1 else 20
-        result = {"fresh": variant_figures("classical", n, FRESH_SEED, (*ESTIMATORS, *PROTOTYPES))}
-        result["published"] = publish_variant("fresh", result["fresh"])
+        result = {}
+        for variant in args[2:] or ("classical",):
+            key = "fresh" if variant == "classical" else f"fresh_{variant}"
+            result[key] = fresh_figures(variant, n)
+            result["published"] = publish_variant(key, result[key])
     else:
         result = run(int(args[0]) if args else 25, variants=tuple(args[1:]) or tuple(VARIANTS), fresh=0)
     if keep:
