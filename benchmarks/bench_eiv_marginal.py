@@ -61,8 +61,9 @@ Rules, stated before the runs (development seeds 4000…, those of :mod:`bench_e
 - the prototype is evidence for a fix when it meets the first rule on the development seeds and on
   fresh seeds (4200…, never used for tuning: the prototype has no tuned constant either).
 
-``python benchmarks/bench_eiv_marginal.py [N] [VARIANT ...]`` (N replicates, default 25; about 3 s CPU per
-estimator and replicate, 10 s for the prototype, on an idle machine); ``--fresh N`` runs the prototype
+``python benchmarks/bench_eiv_marginal.py [N] [VARIANT ...]`` (N replicates, default 25; about 1 s CPU per
+calibration of the library's estimators and 2 s of a prototype, seed 4000 on the loaded machine of the first run;
+the whole of ``make validate``'s share about 45 min of wall clock there); ``--fresh N`` runs the prototype
 and the library's estimators on N fresh campaigns (seeds 4200…) of the ``classical`` variant, ``--fresh N
 VARIANT ...`` the library's estimators (and the oracle where the variant has it) on fresh campaigns of those
 variants (a check of the development seeds' findings; published as ``fresh_VARIANT``; ``make validate``
