@@ -304,22 +304,11 @@ def publish_setup(kind: str, figures: dict) -> str:
     """Publish one set-up's figures into ``docs/validation/data/errors_in_variables.json``, keeping the
     other set-ups' (so that set-ups run in separate processes, or one that finished before a later
     one failed, are published); each set-up keeps the command that made it. Returns the path."""
-    import fcntl
-    import json
-    import tempfile
+    from publish import publish_part
 
-    from publish import ROOT, command_line, publish
-
-    path = os.path.join(ROOT, "docs", "validation", "data", "errors_in_variables.json")
-    with open(os.path.join(tempfile.gettempdir(), "calib_bench_eiv.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        old = {}
-        if os.path.exists(path):
-            with open(path) as fh:
-                # a set-up published before the figures of this form (no solve statuses) is not kept
-                old = {k: v for k, v in json.load(fh).items() if k in SETUPS and "identifiability" in v}
-        merged = {**old, kind: {**figures, "command": command_line()}}
-        return publish("errors_in_variables", merged, command_line(), markdown(merged))
+    # a set-up published before the figures of this form (no solve statuses) is not kept
+    return publish_part("errors_in_variables", kind, figures, lambda k, v: k in SETUPS and "identifiability" in v,
+                        markdown)
 
 
 def run(n_replicates: int = 50, first_seed: int = 4000, setups=tuple(SETUPS)) -> dict:

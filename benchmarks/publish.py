@@ -87,3 +87,26 @@ def command_line() -> str:
 
     script = os.path.relpath(os.path.abspath(sys.argv[0]), ROOT)
     return " ".join(["python", script, *sys.argv[1:]])
+
+
+def publish_part(name: str, key: str, figures: dict, keep, tables, finish=None) -> str:
+    """Publish one part (``key``) of a benchmark whose parts run in separate processes into
+    ``docs/validation/data/<name>.json``, keeping the parts already there that ``keep(key, value)``
+    accepts (so that parts run apart, or one that finished before a later one failed, are all
+    published); each part keeps the command that made it. ``finish(merged)`` may add figures computed
+    over the parts; ``tables(merged)`` is the page's Markdown. A lock serializes processes publishing
+    the same file. Returns the path."""
+    import fcntl
+    import tempfile
+
+    path = os.path.join(ROOT, "docs", "validation", "data", f"{name}.json")
+    with open(os.path.join(tempfile.gettempdir(), f"calib_publish_{name}.lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        old = {}
+        if os.path.exists(path):
+            with open(path) as fh:
+                old = {k: v for k, v in json.load(fh).items() if keep(k, v)}
+        merged = {**old, key: {**figures, "command": command_line()}}
+        if finish is not None:
+            merged = finish(merged)
+        return publish(name, merged, command_line(), tables(merged))

@@ -67,3 +67,31 @@ def test_this_process_started_before_now():
     if start is None:
         pytest.skip("no /proc: the start time is unknown and the stamp falls back to HEAD")
     assert time.time() - 7 * 86400 < start <= time.time() + 1
+
+
+def test_parts_published_apart_are_all_kept(monkeypatch, tmp_path):
+    """publish_part: a benchmark's parts run in separate processes all reach the file, the parts ``keep``
+    refuses are dropped, ``finish`` sees every part, each part keeps its command."""
+    import json
+
+    import publish
+
+    monkeypatch.setattr(publish, "ROOT", str(tmp_path))
+    monkeypatch.setattr(publish, "run_commit", lambda: {"commit": "abc1234"})
+    monkeypatch.setattr(publish, "command_line", lambda: "python benchmarks/bench_x.py")
+
+    def tables(merged):
+        return "| " + " | ".join(sorted(k for k in merged if k.startswith("part"))) + " |"
+
+    def finish(merged):
+        return {**merged, "total": sum(v["n"] for k, v in merged.items() if k.startswith("part"))}
+
+    keep = lambda k, v: k.startswith("part")                                       # noqa: E731
+    publish.publish_part("x", "part_a", {"n": 1}, keep, tables, finish)
+    path = publish.publish_part("x", "part_b", {"n": 2}, keep, tables, finish)
+    data = json.loads(open(path).read())
+    assert data["part_a"] == {"n": 1, "command": "python benchmarks/bench_x.py"} and data["part_b"]["n"] == 2
+    assert data["total"] == 3 and data["markdown"] == "| part_a | part_b |" and data["commit"] == "abc1234"
+    path = publish.publish_part("x", "part_c", {"n": 4}, lambda k, v: k == "part_b", tables)
+    data = json.loads(open(path).read())
+    assert "part_a" not in data and "total" not in data and data["part_c"]["n"] == 4
