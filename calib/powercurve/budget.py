@@ -61,9 +61,7 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
             sig_delta = float(np.sqrt(max(g @ pc.cov @ g, 0.0)))
         else:
             sig_delta = float("nan")
-        cs = getattr(pc, "sampling_cov", None)
-        sig_sampling = (float(np.sqrt(max(g @ cs @ g, 0.0))) if cs is not None and np.isfinite(sig_delta)
-                        and cs.shape == pc.cov.shape else float("nan"))
+        sig_sampling = _sampling_sigma(pc, g if np.isfinite(sig_delta) else None)
         if getattr(pc, "discrepancy_cov", None) is not None:
             sig["model discrepancy"] = float(np.sqrt(max(c @ pc.discrepancy_cov @ c, 0.0)))
         else:
@@ -102,3 +100,12 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
                      "draws_used": int(used.sum()), "draws_left_out": int((~used).sum()),
                      "availability": availability})
     return rows
+
+
+def _sampling_sigma(pc, g) -> float:
+    """√(g Cov_s gᵀ) with ``pc.sampling_cov`` (:func:`calib.powercurve.sampling.sampling_covariance`) and the AEP
+    gradient ``g`` [MWh per parameter unit]; NaN without either."""
+    cs = getattr(pc, "sampling_cov", None)
+    if g is None or cs is None or cs.shape != (g.size, g.size):
+        return float("nan")
+    return float(np.sqrt(max(g @ cs @ g, 0.0)))
