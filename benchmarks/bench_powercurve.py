@@ -669,7 +669,9 @@ def markdown(res: dict) -> str:
     gr = res.get("grid")
     field = "" if not gr else f" correction field {len(gr['alpha_nodes_deg'])} α × {len(gr['eta_nodes'])} η nodes,"
     lines = [f"Out-of-family truth (CCBlade {res.get('wisdem_version', '?')}), NREL 5-MW rigid,{field} "
-             f"{res['replicates']} noise replicates per effect, {res['draws']} posterior draws each.", "",
+             f"{res['replicates']} noise replicates per effect"
+             f"{' (noise seeds ' + _ranges_words(res['seeds']) + ')' if res.get('seeds') else ''}, "
+             f"{res['draws']} posterior draws each.", "",
              "**Coverage and sharpness of the 90 % interval of the AEP**", "",
              "| hidden effect | Rayleigh mean | true AEP [MWh] | 90 % cover | cover, empirical Bayes "
              "| half-width / median \\|error\\| | rms error / σ |", "|---|---|---|---|---|---|---|"]
@@ -825,6 +827,17 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _ranges_words(seeds) -> str:
+    """Seeds as runs of consecutive numbers, "54000-54030 + 54035-54049"."""
+    seeds, runs = sorted(seeds), []
+    for x in seeds:
+        if runs and x == runs[-1][1] + 1:
+            runs[-1][1] = x
+        else:
+            runs.append([x, x])
+    return " + ".join(f"{a}-{b}" if a != b else f"{a}" for a, b in runs)
+
+
 def records_path(n_draws: int) -> Path:
     """The replicates done so far (a killed run resumes from it): one JSON line per replicate."""
     path = ROOT / "bench_output" / "powercurve" / f"records_{n_draws}_draws.jsonl"
@@ -847,12 +860,13 @@ def _done(n_draws: int) -> dict:
 
 
 def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float | None = None,
-        reuse: tuple = (), seed0: int = SEED0) -> dict:
+        reuse: tuple = (), seed0: int = SEED0, seeds=None) -> dict:
     """Truths, replicates, figures; publishes ``powercurve.json`` (``run_all`` calls this).
 
     ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
     figures then say how many replicates ran per effect (``replicates_run``); ``seed0``: the first noise
-    seed (replicate k has seed ``seed0 + k``). ``reuse``: keys of the
+    seed (replicate k has seed ``seed0 + k``); ``seeds``: the noise seeds instead (then ``n_replicates`` is their
+    count; replicates run in parallel processes into the records file are collected this way). ``reuse``: keys of the
     published figures (``"phase_vi"``, ``"speed"``) kept from the JSON already published instead of
     re-run, with its date and commit under ``reused_from`` (the page says so); also ``"resolution"`` and
     ``"bias_diagnosis"`` (the noise-free diagnoses, the slowest part after the replicates).
@@ -870,18 +884,20 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
         records = {n: [] for n in names}
         done = _done(n_draws)
         with open(records_path(n_draws), "a") as log:
-            for k in range(n_replicates):
+            seed_list = [seed0 + k for k in range(n_replicates)] if seeds is None else [int(x) for x in seeds]
+            n_replicates = len(seed_list)
+            for k, seed in enumerate(seed_list):
                 if stop_at is not None and time.time() > stop_at:
                     print(f"[bench_powercurve] time budget reached after {k} replicates", flush=True)
                     break
                 for n in names:
-                    rec = done.get((n, seed0 + k))
+                    rec = done.get((n, seed))
                     if rec is None:
                         try:
-                            rec = replicate(truth, n, seed0 + k, work, n_draws)
+                            rec = replicate(truth, n, seed, work, n_draws)
                         except Exception as exc:  # noqa: BLE001  (counted, never dropped)
-                            rec = {"seed": seed0 + k, "error": f"{type(exc).__name__}: {exc}"}
-                        log.write(json.dumps({"name": n, "seed": seed0 + k, "record": rec}) + "\n")
+                            rec = {"seed": seed, "error": f"{type(exc).__name__}: {exc}"}
+                        log.write(json.dumps({"name": n, "seed": seed, "record": rec}) + "\n")
                         log.flush()
                     records[n].append(rec)
                 print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
@@ -897,7 +913,7 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
                 diagnosis[n] = bias_diagnosis(truth, n, work, n_draws)
             except Exception as exc:  # noqa: BLE001  (said in the figures)
                 diagnosis[n] = {"error": f"{type(exc).__name__}: {exc}"}
-    res = {"seeds": [seed0, seed0 + n_replicates - 1], "replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
+    res = {"seeds": seed_list, "replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
            "truth_tsr_opt": {n: truth["data_sets"][n]["curve"]["tsr_opt"] for n in names},
            "effects": summarize(records), "bias_diagnosis": diagnosis, "effect_vs_noise": floor,
            "resolution": resol, "grid": {"alpha_nodes_deg": list(ALPHA_NODES), "eta_nodes": list(ETA_NODES)}}
@@ -920,8 +936,9 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
     res["time_budget_utc"] = (None if stop_at is None else
                               time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(stop_at)))
     how = (f"python -c \"import bench_powercurve as B; B.run({n_replicates}, {n_draws}, effects={names!r}, "
-           f"stop_at=<{res['time_budget_utc']} UTC>, reuse={tuple(reuse)!r}, seed0={seed0})\" (in benchmarks/)"
-           if effects or stop_at is not None or reuse or seed0 != SEED0 else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
+           f"stop_at=<{res['time_budget_utc']} UTC>, reuse={tuple(reuse)!r}, seed0={seed0}"
+           f"{'' if seeds is None else ', seeds=' + _ranges_words(seed_list)})\" (in benchmarks/)"
+           if effects or stop_at is not None or reuse or seed0 != SEED0 or seeds is not None else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
     publish("powercurve", res, command_line() if __name__ == "__main__" else how, markdown(res))
     return res
 
