@@ -920,7 +920,10 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
     old = {}
     if reuse:
         old = json.loads((ROOT / "docs" / "validation" / "data" / "powercurve.json").read_text())
-        res["reused_from"] = {"keys": list(reuse), "date": old.get("date"), "commit": old.get("commit")}
+        # figures the kept JSON itself had kept from an earlier run carry that run's date and commit
+        was = old.get("reused_from") or {}
+        src = was if set(reuse) <= set(was.get("keys", ())) else old
+        res["reused_from"] = {"keys": list(reuse), "date": src.get("date"), "commit": src.get("commit")}
         for k in reuse:
             res[k] = old.get(k)
     if "phase_vi" not in reuse:
