@@ -156,7 +156,10 @@ def replicate(truth: dict, name: str, seed: int, work: Path, n_draws: int) -> di
             "true_mwh": true, "calibrated_mwh": r["p50_mwh"], "nominal_mwh": r["nominal_aep_mwh"],
             "sigma_total_mwh": r["sigma_total_mwh"], "sigma_calibration_draws_mwh": sig_cal,
             "sigma_calibration_delta_mwh": r["sigma_calibration_delta_mwh"],
+            "sigma_calibration_sampling_mwh": r["sigma_calibration_sampling_mwh"],
+            "fit_scale": float(result.uncertainty.fit_scale),
             "covered_total": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_total_mwh"]),
+            "covered_sampling": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_calibration_sampling_mwh"]),
             "covered_calibration": bool(abs(r["p50_mwh"] - true) <= Z90 * sig_cal),
             "sigma_field_mwh": r["sigma_mwh"]["field between nodes"],
             "sigma_discrepancy_mwh": r["sigma_mwh"]["model discrepancy"],
@@ -425,6 +428,41 @@ def _discrepancy_summary(checks: list) -> dict | None:
             "units": {u: sum(x.get("units", "relative") == u for x in checks) for u in ("relative", "channel")}}
 
 
+def sampling_summary(a: list, err_cal: np.ndarray) -> dict:
+    """Issue 41's over-coverage: the posterior (Laplace) σ of the calibration against the spread of the
+    calibrated AEP over the replicates, and the sampling (frequentist, sandwich) σ
+    (:func:`calib.powercurve.sampling.sampling_covariance`) beside both. ``a``: the replicates' AEP records of one
+    distribution, ``err_cal`` their calibrated − true AEP [MWh]. Predicted coverage: the mean over the
+    replicates of :func:`calib.powercurve.sampling.interval_coverage` with the bias at the replicates' mean
+    error and the spread at the replicate's sampling σ; the observed share should agree within its
+    binomial interval if the sandwich is the spread and the error normal."""
+    from calib.powercurve.sampling import interval_coverage
+
+    ss = np.array([x.get("sigma_calibration_sampling_mwh", np.nan) for x in a], float)
+    if not np.all(np.isfinite(ss)) or err_cal.size < 2:
+        return {}
+    tot = np.array([x["sigma_total_mwh"] for x in a])
+    lap = np.array([x["sigma_calibration_delta_mwh"] for x in a])
+    bias = float(np.mean(err_cal))
+    n = err_cal.size
+    ratio = float(np.std(err_cal, ddof=1) / np.sqrt(np.mean(ss ** 2)))
+    lo, hi = _chi2_ends(n - 1)
+    return {"median_sigma_sampling_mwh": float(np.median(ss)), "median_sigma_laplace_mwh": float(np.median(lap)),
+            "sampling_over_laplace_median": float(np.median(ss / lap)),
+            "error_sd_over_sampling": ratio,
+            # its 95 % interval under normal errors: (n − 1) s²/σ² is χ² with n − 1 dof
+            "error_sd_over_sampling_ci95": [ratio * float(np.sqrt((n - 1) / hi)), ratio * float(np.sqrt((n - 1) / lo))],
+            "fit_scale_median": float(np.median([x.get("fit_scale", np.nan) for x in a])),
+            "coverage_90_sampling": float(np.mean([x["covered_sampling"] for x in a])),
+            "predicted_coverage_90_total": float(np.mean(interval_coverage(Z90 * tot, bias, ss))),
+            "predicted_coverage_90_sampling": float(np.mean(interval_coverage(Z90 * ss, bias, ss)))}
+
+
+def _chi2_ends(dof: int) -> tuple:
+    from scipy.stats import chi2
+    return chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)
+
+
 def summarize(records: dict) -> dict:
     """Per effect and distribution: coverage, median errors, delta/draws ratio."""
     out = {}
@@ -444,6 +482,7 @@ def summarize(records: dict) -> dict:
             per[dist] = {"replicates": len(a), "true_mwh": a[0]["true_mwh"],
                          "coverage_90_total": float(np.mean([x["covered_total"] for x in a])),
                          "coverage_90_calibration_only": float(np.mean([x["covered_calibration"] for x in a])),
+                         **sampling_summary(a, err_cal),
                          "median_abs_error_calibrated_mwh": float(np.median(np.abs(err_cal))),
                          "mean_error_calibrated_mwh": float(np.mean(err_cal)),
                          "abs_error_nominal_mwh": float(np.median(np.abs(err_nom))),
@@ -598,11 +637,41 @@ def _f(x, fmt):
     return "n/a" if x is None or not np.isfinite(x) else format(x, fmt)
 
 
+def sampling_lines(res: dict) -> list:
+    """The table of the posterior (Bayesian) and the sampling (frequentist) interval at a fixed truth."""
+    rows = [(name, dist, a) for name, s in res["effects"].items() for dist, a in s["aep"].items()
+            if "coverage_90_sampling" in a]
+    if not rows:
+        return []
+    lines = ["", "**The posterior interval and the sampling interval at a fixed truth** (90 %; σ in MWh; predicted "
+             "cover: at the replicates' mean error and each replicate's sampling σ, normal errors)", "",
+             "| hidden effect | Rayleigh mean | posterior σ, calibration (Laplace) | sampling σ (sandwich) "
+             "| error s.d. / sampling σ (95 % CI) | fit scale k | cover, posterior (predicted) "
+             "| cover, sampling (predicted) |", "|---|---|---|---|---|---|---|---|"]
+    for name, dist, a in rows:
+        lo, hi = a["error_sd_over_sampling_ci95"]
+        lines.append(f"| {LABELS.get(name, name)} | {dist.split()[1]} m/s | {a['median_sigma_laplace_mwh']:.3g} "
+                     f"| {a['median_sigma_sampling_mwh']:.3g} | {a['error_sd_over_sampling']:.2f} ({lo:.2f}–{hi:.2f}) "
+                     f"| {a['fit_scale_median']:.2f} | {100 * a['coverage_90_total']:.0f} % "
+                     f"({100 * a['predicted_coverage_90_total']:.0f} %) | {100 * a['coverage_90_sampling']:.0f} % "
+                     f"({100 * a['predicted_coverage_90_sampling']:.0f} %) |")
+    lines += ["", "Posterior interval: P50 ± 1.645 σ_total (the calibration's draws from the Laplace covariance, the "
+              "field between the nodes, the model discrepancy), the Bayesian statement for a truth drawn from the prior. "
+              "Sampling interval: P50 ± 1.645 σ_sampling, σ_sampling² = g k D K Kᵀ D gᵀ (the MAP's spread over repeated "
+              "noise, linearized; `calib.powercurve.sampling`), the frequentist statement at a fixed truth; it leaves "
+              "out the bias (the prior's shrinkage, the field between the nodes, the model form), so it covers only "
+              "where that bias is small against σ_sampling. Fit scale k = max(1, χ²/(N − n_eff)) multiplies the noise "
+              "variance in both."]
+    return lines
+
+
 def markdown(res: dict) -> str:
     gr = res.get("grid")
     field = "" if not gr else f" correction field {len(gr['alpha_nodes_deg'])} α × {len(gr['eta_nodes'])} η nodes,"
     lines = [f"Out-of-family truth (CCBlade {res.get('wisdem_version', '?')}), NREL 5-MW rigid,{field} "
-             f"{res['replicates']} noise replicates per effect, {res['draws']} posterior draws each.", "",
+             f"{res['replicates']} noise replicates per effect"
+             f"{' (noise seeds ' + _ranges_words(res['seeds']) + ')' if res.get('seeds') else ''}, "
+             f"{res['draws']} posterior draws each.", "",
              "**Coverage and sharpness of the 90 % interval of the AEP**", "",
              "| hidden effect | Rayleigh mean | true AEP [MWh] | 90 % cover | cover, empirical Bayes "
              "| half-width / median \\|error\\| | rms error / σ |", "|---|---|---|---|---|---|---|"]
@@ -613,6 +682,7 @@ def markdown(res: dict) -> str:
                          f"| {100 * a['coverage_90_total']:.0f} % | {_f(None if eb is None else 100 * eb, '.0f')} % "
                          f"| {_f(a.get('median_halfwidth_over_median_error'), '.2f')} "
                          f"| {_f(a.get('error_over_sigma_rms'), '.2f')} |")
+    lines += sampling_lines(res)
     lines += ["", "**Where the AEP's σ comes from** (medians over the replicates, MWh)", "",
               "| hidden effect | Rayleigh mean | nodal, data | nodal, prior | field between nodes (linear) "
               "| model discrepancy (linear) | total σ | error s.d. |", "|---|---|---|---|---|---|---|---|"]
@@ -757,6 +827,17 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _ranges_words(seeds) -> str:
+    """Seeds as runs of consecutive numbers, "54000-54030 + 54035-54049"."""
+    seeds, runs = sorted(seeds), []
+    for x in seeds:
+        if runs and x == runs[-1][1] + 1:
+            runs[-1][1] = x
+        else:
+            runs.append([x, x])
+    return " + ".join(f"{a}-{b}" if a != b else f"{a}" for a, b in runs)
+
+
 def records_path(n_draws: int) -> Path:
     """The replicates done so far (a killed run resumes from it): one JSON line per replicate."""
     path = ROOT / "bench_output" / "powercurve" / f"records_{n_draws}_draws.jsonl"
@@ -779,11 +860,13 @@ def _done(n_draws: int) -> dict:
 
 
 def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float | None = None,
-        reuse: tuple = ()) -> dict:
+        reuse: tuple = (), seed0: int = SEED0, seeds=None) -> dict:
     """Truths, replicates, figures; publishes ``powercurve.json`` (``run_all`` calls this).
 
     ``stop_at``: a time (``time.time()``) after which no further replicate round starts; the
-    figures then say how many replicates ran per effect (``replicates_run``). ``reuse``: keys of the
+    figures then say how many replicates ran per effect (``replicates_run``); ``seed0``: the first noise
+    seed (replicate k has seed ``seed0 + k``); ``seeds``: the noise seeds instead (then ``n_replicates`` is their
+    count; replicates run in parallel processes into the records file are collected this way). ``reuse``: keys of the
     published figures (``"phase_vi"``, ``"speed"``) kept from the JSON already published instead of
     re-run, with its date and commit under ``reused_from`` (the page says so); also ``"resolution"`` and
     ``"bias_diagnosis"`` (the noise-free diagnoses, the slowest part after the replicates).
@@ -801,18 +884,20 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
         records = {n: [] for n in names}
         done = _done(n_draws)
         with open(records_path(n_draws), "a") as log:
-            for k in range(n_replicates):
+            seed_list = [seed0 + k for k in range(n_replicates)] if seeds is None else [int(x) for x in seeds]
+            n_replicates = len(seed_list)
+            for k, seed in enumerate(seed_list):
                 if stop_at is not None and time.time() > stop_at:
                     print(f"[bench_powercurve] time budget reached after {k} replicates", flush=True)
                     break
                 for n in names:
-                    rec = done.get((n, SEED0 + k))
+                    rec = done.get((n, seed))
                     if rec is None:
                         try:
-                            rec = replicate(truth, n, SEED0 + k, work, n_draws)
+                            rec = replicate(truth, n, seed, work, n_draws)
                         except Exception as exc:  # noqa: BLE001  (counted, never dropped)
-                            rec = {"seed": SEED0 + k, "error": f"{type(exc).__name__}: {exc}"}
-                        log.write(json.dumps({"name": n, "seed": SEED0 + k, "record": rec}) + "\n")
+                            rec = {"seed": seed, "error": f"{type(exc).__name__}: {exc}"}
+                        log.write(json.dumps({"name": n, "seed": seed, "record": rec}) + "\n")
                         log.flush()
                     records[n].append(rec)
                 print(f"[bench_powercurve] replicate {k + 1}/{n_replicates}", flush=True)
@@ -828,14 +913,17 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
                 diagnosis[n] = bias_diagnosis(truth, n, work, n_draws)
             except Exception as exc:  # noqa: BLE001  (said in the figures)
                 diagnosis[n] = {"error": f"{type(exc).__name__}: {exc}"}
-    res = {"replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
+    res = {"seeds": seed_list, "replicates": min(len(r) for r in records.values()), "replicates_asked": n_replicates, "draws": n_draws, "wisdem_version": truth["wisdem_version"],
            "truth_tsr_opt": {n: truth["data_sets"][n]["curve"]["tsr_opt"] for n in names},
            "effects": summarize(records), "bias_diagnosis": diagnosis, "effect_vs_noise": floor,
            "resolution": resol, "grid": {"alpha_nodes_deg": list(ALPHA_NODES), "eta_nodes": list(ETA_NODES)}}
     old = {}
     if reuse:
         old = json.loads((ROOT / "docs" / "validation" / "data" / "powercurve.json").read_text())
-        res["reused_from"] = {"keys": list(reuse), "date": old.get("date"), "commit": old.get("commit")}
+        # figures the kept JSON itself had kept from an earlier run carry that run's date and commit
+        was = old.get("reused_from") or {}
+        src = was if set(reuse) <= set(was.get("keys", ())) else old
+        res["reused_from"] = {"keys": list(reuse), "date": src.get("date"), "commit": src.get("commit")}
         for k in reuse:
             res[k] = old.get(k)
     if "phase_vi" not in reuse:
@@ -851,8 +939,9 @@ def run(n_replicates: int = 50, n_draws: int = 200, effects=None, stop_at: float
     res["time_budget_utc"] = (None if stop_at is None else
                               time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(stop_at)))
     how = (f"python -c \"import bench_powercurve as B; B.run({n_replicates}, {n_draws}, effects={names!r}, "
-           f"stop_at=<{res['time_budget_utc']} UTC>, reuse={tuple(reuse)!r})\" (in benchmarks/)"
-           if effects or stop_at is not None or reuse else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
+           f"stop_at=<{res['time_budget_utc']} UTC>, reuse={tuple(reuse)!r}, seed0={seed0}"
+           f"{'' if seeds is None else ', seeds=' + _ranges_words(seed_list)})\" (in benchmarks/)"
+           if effects or stop_at is not None or reuse or seed0 != SEED0 or seeds is not None else f"python benchmarks/bench_powercurve.py {n_replicates} {n_draws}")
     publish("powercurve", res, command_line() if __name__ == "__main__" else how, markdown(res))
     return res
 

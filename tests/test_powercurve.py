@@ -504,3 +504,49 @@ def test_a_measured_histogram_headlines_the_aep(wind_tunnel_result, tmp_path, ca
     rows = {r["distribution"]: r for r in json.loads((out / "aep.json").read_text())["aep"]}
     h = next(r for k, r in rows.items() if k.startswith("histogram"))
     assert h["p50_mwh"] == pytest.approx(rows["Rayleigh 7 m/s"]["p50_mwh"], rel=5e-3)
+
+
+# ------------------------------------------------------------------------------ sampling (sandwich) σ, issue 41
+def test_the_sampling_covariance_is_the_sandwich_of_the_map(wind_tunnel_result):
+    """k D K Kᵀ D from the stored gain equals k H⁻¹ F H⁻¹ built here from the model's Jacobian at the estimate,
+    the noise σ and the stated prior (H = F + P⁻¹, F = MᵀM): another code path (direct inverses, not the
+    prior-whitened SVD). The same matrices give the Laplace covariance (F/k + P⁻¹)⁻¹ = Cov(p̂) − Cov_alias. The
+    AEP row's sampling σ is g Cov_s gᵀ with the delta method's gradient, and not in the total."""
+    from calib.powercurve.aep import aep_weights
+    from calib.powercurve.sampling import sampling_covariance
+    from calib.types import OperatingConditions
+    _, result = wind_tunnel_result
+    u, est = result.uncertainty, result.estimate
+    model = result.rebuild_model()
+    names = [c.name for c in model.channels]
+    idx = [names.index(c) for c in result.channels]
+    _, G = model.jacobian(est.p_hat, OperatingConditions(**result.conditions))
+    ok = result.fit.status_after == 0
+    M = (G[:, idx, :][ok] / result.fit.sigma[ok][:, :, None]).reshape(-1, G.shape[2]) * est.scale
+    sd = u.prior_std / est.scale
+    C = model.correction_field().node_correlation(float(result.provenance.settings["prior_correlation"]))
+    Pinv = np.linalg.inv(sd[:, None] * C * sd[None, :])
+    F, D = M.T @ M, np.outer(est.scale, est.scale)
+    Hi = np.linalg.inv(F + Pinv)
+    S = sampling_covariance(result)
+    np.testing.assert_allclose(S, u.fit_scale * (Hi @ F @ Hi) * D, rtol=0, atol=1e-9 * np.abs(S).max())
+    lap = u.cov_p - u.cov_alias
+    np.testing.assert_allclose(lap, np.linalg.inv(F / u.fit_scale + Pinv) * D, rtol=0, atol=1e-9 * np.abs(lap).max())
+    pc = calibrated_power_curve(result, iec_bins(5.0, 15.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=0)
+    row = pc.aep_table({"Rayleigh 7": lambda x: rayleigh_cdf(x, 7.0)})[0]
+    g = aep_weights(pc.wind_speed, lambda x: rayleigh_cdf(x, 7.0)) * pc.generator_efficiency / 1e6 @ pc.grad_power
+    assert row["sigma_calibration_sampling_mwh"] == pytest.approx(np.sqrt(g @ S @ g), rel=1e-9)
+    assert 0 < row["sigma_calibration_sampling_mwh"] < row["sigma_total_mwh"]
+    # a truncated result records no gain: no sampling σ, said as NaN
+    bare = result.replace(uncertainty=dataclasses.replace(u, gain=np.zeros((0, 0))))
+    assert sampling_covariance(bare) is None
+
+
+def test_interval_coverage_against_monte_carlo():
+    """Φ((h − b)/s) − Φ((−h − b)/s) against the share of 200 000 normal errors inside ±h."""
+    from calib.powercurve.sampling import interval_coverage
+    rng = np.random.default_rng(7)
+    for h, b, s in ((1.645, 0.0, 1.0), (2.0, 0.7, 1.3), (0.5, -1.0, 0.4)):
+        e = b + s * rng.standard_normal(200_000)
+        assert interval_coverage(h, b, s) == pytest.approx(np.mean(np.abs(e) <= h), abs=4e-3)
+    assert interval_coverage(1.6448536269514722, 0.0, 1.0) == pytest.approx(0.9, abs=1e-9)

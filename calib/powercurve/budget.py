@@ -29,6 +29,12 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
     the distribution has weight are left out of the draws' σ and counted. Without draws the delta
     method's σ enters the total.
 
+    ``sigma_calibration_sampling_mwh``: the spread of the calibrated AEP over repeated noise at a fixed
+    truth (frequentist, linearized: g Cov_s gᵀ with Cov_s the sandwich of
+    :func:`calib.powercurve.sampling.sampling_covariance`), not added to the total: the posterior σ is the
+    Bayesian statement (truth drawn from the prior), the sampling σ leaves out the prior's shrinkage, the
+    field between the nodes and the discrepancy, which at a fixed truth are a bias, not a spread.
+
     Beside it, for a MAP result with a prior check (``prior_split``): the delta method's
     calibration variance split into its data-determined and prior-dominated directions
     (``sigma_calibration_split_mwh``) and ``empirical_bayes``: the total σ and P90 with the
@@ -55,6 +61,7 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
             sig_delta = float(np.sqrt(max(g @ pc.cov @ g, 0.0)))
         else:
             sig_delta = float("nan")
+        sig_sampling = _sampling_sigma(pc, g if np.isfinite(sig_delta) else None)
         if getattr(pc, "discrepancy_cov", None) is not None:
             sig["model discrepancy"] = float(np.sqrt(max(c @ pc.discrepancy_cov @ c, 0.0)))
         else:
@@ -88,7 +95,17 @@ def aep_rows(pc, cdfs: dict, availability: float = 1.0) -> list[dict]:
                      "sigma_measurement_mwh": {k: meas[k] for k in ("A", "B", "total")}, "aep_mwh": central, "nominal_aep_mwh": nominal,
                      "draws_mean_aep_mwh": float(np.mean(aep_d)) if aep_d.size else float("nan"),
                      "sigma_mwh": sig, "sigma_calibration_delta_mwh": sig_delta, "sigma_total_mwh": total,
+                     "sigma_calibration_sampling_mwh": sig_sampling,
                      "p50_mwh": central, "p90_mwh": central - 1.2815515655446004 * total,
                      "draws_used": int(used.sum()), "draws_left_out": int((~used).sum()),
                      "availability": availability})
     return rows
+
+
+def _sampling_sigma(pc, g) -> float:
+    """√(g Cov_s gᵀ) with ``pc.sampling_cov`` (:func:`calib.powercurve.sampling.sampling_covariance`) and the AEP
+    gradient ``g`` [MWh per parameter unit]; NaN without either."""
+    cs = getattr(pc, "sampling_cov", None)
+    if g is None or cs is None or cs.shape != (g.size, g.size):
+        return float("nan")
+    return float(np.sqrt(max(g @ cs @ g, 0.0)))

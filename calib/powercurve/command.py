@@ -22,7 +22,7 @@ from calib.powercurve.aep import IEC_RAYLEIGH_MEANS, rayleigh_cdf, weibull_cdf
 from calib.powercurve.curve import CalibratedPowerCurve, calibrated_power_curve, iec_bins
 from calib.powercurve.measurement import parse_measurement
 from calib.powercurve.schedule import FixedSpeed, VariableSpeed, schedule_from_table
-from calib.powercurve.statements import delta_statement
+from calib.powercurve.statements import delta_statement, sampling_statement
 from calib.report.atomic import atomic_path, atomic_write_text
 
 __all__ = ["add_powercurve_arguments", "add_powercurve_parser", "parse_wind", "run_powercurve", "summary_paragraph",
@@ -206,9 +206,7 @@ def summary_paragraph(pc: CalibratedPowerCurve, rows) -> str:
                          f"draws' σ (which scatters by ±{100 * scatter:.0f} % with {pc.n_draws} draws)"
                          + (f", more than {100 * limit:.0f} % off at {_ranges(pc.wind_speed, np.isin(pc.wind_speed, off))} m/s."
                             if off.size else f", within {100 * limit:.0f} % in every bin with a spread."))
-    said = delta_statement(pc, r)
-    if said:
-        words.append(said)
+    words += [said for said in (delta_statement(pc, r), sampling_statement(r)) if said]
     if pc.simulations is not None:
         words.append(f"The FMU ran {pc.simulations} simulations for this power curve.")
     words.append(f"{pc.failed_draws} of {pc.n_draws} draws had a failed BEM solve in some bin "

@@ -23,6 +23,7 @@ from calib.powercurve.field import prior_split as split_prior
 from calib.powercurve.budget import aep_rows
 from calib.powercurve.fmu import FmuPowerModel, is_fmu_model
 from calib.powercurve.linearized import delta_method
+from calib.powercurve.sampling import sampling_covariance
 from calib.powercurve.terms import prediction_terms
 from calib.powercurve.schedule import ScheduledCurve
 from calib.powercurve.statements import posterior_statement, schedule_warnings
@@ -113,6 +114,9 @@ class CalibratedPowerCurve:
     prior_split : dict or None
         The nodal covariance by prior-dominated and data-determined directions and the empirical-Bayes
         amplitude (:func:`calib.powercurve.field.prior_split`); None when not a MAP result with a prior check.
+    sampling_cov : ndarray, shape (n_params, n_params) or None
+        The estimate's spread over repeated noise at a fixed truth (frequentist, linearized: the sandwich
+        k D K Kᵀ D of :func:`calib.powercurve.sampling.sampling_covariance`) [parameter units²]; None without a gain.
     """
 
     wind_speed: np.ndarray
@@ -141,6 +145,7 @@ class CalibratedPowerCurve:
     prior_split: dict | None = None
     simulations: int | None = None
     discrepancy_cov: np.ndarray | None = None
+    sampling_cov: np.ndarray | None = None
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -313,7 +318,8 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 disc, fld, tuple(measurements), envelope,
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
-                                fld_cov, split_prior(result, model, cov), n_sim, disc_cov)
+                                fld_cov, split_prior(result, model, cov), n_sim, disc_cov,
+                                sampling_covariance(result))
 
 
 def _solvable(model, schedule, name):

@@ -8,7 +8,7 @@ import numpy as np
 
 from calib.powercurve.schedule import ScheduledCurve
 
-__all__ = ["delta_statement", "posterior_statement", "schedule_warnings"]
+__all__ = ["delta_statement", "posterior_statement", "sampling_statement", "schedule_warnings"]
 
 
 def posterior_statement(result) -> list[str]:
@@ -115,3 +115,18 @@ def delta_statement(pc, row) -> str:
         why.append(f"neither a curvature of the draws' mean nor rated-power capping was found (the draws' σ scatters by "
                    f"±{100 * scatter:.0f} % with {n} draws)")
     return f"{head}, more than {100 * limit:.0f} % off: " + "; ".join(why) + "."
+
+
+def sampling_statement(row: dict) -> str:
+    """The AEP table row's sampling σ beside its posterior σ, in words (:mod:`calib.powercurve.sampling`): the
+    P50 ± 1.645 σ_total interval is the posterior's (a truth drawn from the prior); over repeated measurements
+    of one turbine the calibrated AEP itself spreads by the sampling σ, which leaves out the prior's shrinkage,
+    the field between the nodes and the model discrepancy (a bias at a fixed truth, not a spread)."""
+    ss = row.get("sigma_calibration_sampling_mwh", float("nan"))
+    if not np.isfinite(ss):
+        return ""
+    return (f"At {row['distribution']} the interval P50 ± 1.645 σ is the posterior's (Bayesian: for a truth drawn from "
+            f"the calibration's prior); repeated measurements of the same turbine would spread the calibrated AEP by "
+            f"{ss:.3g} MWh (1-σ, the estimate's sampling σ, noise only: frequentist, without the bias the prior, the "
+            f"field between the nodes and the model form leave at a fixed truth), against the posterior calibration "
+            f"σ of {row['sigma_calibration_delta_mwh']:.3g} MWh (delta method).")
