@@ -52,8 +52,9 @@ RAYLEIGH = (6.0, 8.0, 10.0)
 BINS = (3.0, 25.0, 0.5)
 Z90 = 1.6448536269514722
 #: First noise seed (41000-41049 published at 9a0decc, 51000-51049 at 8edf44a on the 6 × 5 field; 49xxx
-#: and 59xxx used in development; 52000-52049 published on the 12 × 5 field at 20ad3c0; 53000-53049 never
-#: used before issue 41's physical between-node lengths and ARD discrepancy, nothing tuned on them).
+#: and 59xxx used in development; 52000-52049 published on the 12 × 5 field at 20ad3c0, then issue 41's
+#: development seeds; 53000-53027 judged the physical between-node lengths and ARD discrepancy (8928abb);
+#: 54000-54049, passed as ``seeds``, judged the sampling σ (3a0941c). The next judgement needs a new range).
 SEED0 = 53000
 #: The correction field's α nodes [deg]: 12, every 1.82° from −4 to 16°. The 6 nodes of 4° (until
 #: 8edf44a) left a region-2 bias that the noise-free resolution test (:func:`resolution`) traces to the
