@@ -2,7 +2,9 @@
 
 The schedule (:mod:`calib.powercurve.schedule`) is solved at the estimate p̂ (the central curve),
 at the nominal parameters (the nominal model's curve) and at every posterior draw
-p_d ~ N(p̂, Cov(p̂)) (the Laplace covariance of the estimate, ``result.uncertainty.cov_p``), clipped
+p_d ~ N(p̂, Cov(p̂)) (the Laplace covariance of the estimate, ``result.uncertainty.cov_p``, re-formed
+with the fit scale under noise + discrepancy where a model discrepancy applies:
+:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`), clipped
 to the parameter bounds: the schedule is re-solved per draw, so a draw moves the optimal λ and
 the rated wind speed. Beside the draws' spread, the linearized (delta-method) 1-σ from the exact
 Jacobian at the central schedule (:func:`calib.powercurve.linearized.delta_method`). Failed BEM
@@ -17,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib.calibration.discrepancy import fit_discrepancy
+from calib.calibration.discrepancy_scale import discrepancy_aware_covariance
 from calib.errors import InputError
 from calib.powercurve.draws import solve_draws
 from calib.powercurve.field import prior_split as split_prior
@@ -277,13 +281,15 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
         schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
     v = np.asarray(wind_speed, float)
     p_hat, cov = _estimate(result, model)
+    est_cov = discrepancy_aware_covariance(result, fit_discrepancy(result) if result.fit.measured.size else None)
+    cov = est_cov.cov_p if est_cov.reformed else cov
     lower = np.array([q.lower for q in model.parameters], float)
     upper = np.array([q.upper for q in model.parameters], float)
     notes = []
     central = schedule.solve(model.solve, p_hat, v, air_density)
     nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
     warnings = schedule_warnings(schedule, central)
-    notes += posterior_statement(result)
+    notes += posterior_statement(result) + ([est_cov.note] if est_cov.note else [])
 
     disc, fld, envelope, fld_cov, disc_cov = prediction_terms(result, model, central, air_density, notes,
                                                               covariances=True)
@@ -319,7 +325,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
                                 fld_cov, split_prior(result, model, cov), n_sim, disc_cov,
-                                sampling_covariance(result))
+                                sampling_covariance(result, est_cov.fit_scale))
 
 
 def _solvable(model, schedule, name):
