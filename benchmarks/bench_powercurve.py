@@ -157,7 +157,7 @@ def replicate(truth: dict, name: str, seed: int, work: Path, n_draws: int) -> di
             "sigma_total_mwh": r["sigma_total_mwh"], "sigma_calibration_draws_mwh": sig_cal,
             "sigma_calibration_delta_mwh": r["sigma_calibration_delta_mwh"],
             "sigma_calibration_sampling_mwh": r["sigma_calibration_sampling_mwh"],
-            "fit_scale": float(result.uncertainty.fit_scale),
+            "fit_scale": float(result.uncertainty.fit_scale), "fit_scale_used": float(pc.fit_scale),
             "covered_total": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_total_mwh"]),
             "covered_sampling": bool(abs(r["p50_mwh"] - true) <= Z90 * r["sigma_calibration_sampling_mwh"]),
             "covered_calibration": bool(abs(r["p50_mwh"] - true) <= Z90 * sig_cal),

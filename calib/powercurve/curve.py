@@ -121,6 +121,9 @@ class CalibratedPowerCurve:
     sampling_cov : ndarray, shape (n_params, n_params) or None
         The estimate's spread over repeated noise at a fixed truth (frequentist, linearized: the sandwich
         k D K Kᵀ D of :func:`calib.powercurve.sampling.sampling_covariance`) [parameter units²]; None without a gain.
+    fit_scale : float
+        The noise-variance factor in ``cov`` and ``sampling_cov`` [-]: the result's k, or k' where a model
+        discrepancy carries the misfit (:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`).
     """
 
     wind_speed: np.ndarray
@@ -150,6 +153,7 @@ class CalibratedPowerCurve:
     simulations: int | None = None
     discrepancy_cov: np.ndarray | None = None
     sampling_cov: np.ndarray | None = None
+    fit_scale: float = 1.0
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -325,7 +329,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
                                 fld_cov, split_prior(result, model, cov), n_sim, disc_cov,
-                                sampling_covariance(result, est_cov.fit_scale))
+                                sampling_covariance(result, est_cov.fit_scale), est_cov.fit_scale)
 
 
 def _solvable(model, schedule, name):
