@@ -99,7 +99,7 @@ def test_the_fit_scale_under_noise_plus_discrepancy_is_the_dense_quadratic_form(
     assert out.fit_scale < out.recorded_fit_scale == lin.k
 
 
-def test_without_a_process_or_for_the_truncated_estimator_the_recorded_covariance_stays():
+def test_without_a_process_for_the_truncated_estimator_or_at_k_one_the_recorded_covariance_stays():
     result, disc, _ = _linear_problem(4106)
     empty = Discrepancy(("power",), {}, disc.offset, disc.span)
     for d in (None, empty):
@@ -108,6 +108,10 @@ def test_without_a_process_or_for_the_truncated_estimator_the_recorded_covarianc
     result.estimator = "truncated"
     out = discrepancy_aware_covariance(result, disc)
     assert not out.reformed and "not re-formed" in out.note
+    result.estimator = "map"
+    result.uncertainty.fit_scale = 1.0          # an estimated noise (ml, relative_ml): k = 1, nothing to remove
+    out = discrepancy_aware_covariance(result, disc)
+    assert not out.reformed and out.fit_scale == 1.0 and out.note == ""
 
 
 def test_the_misfit_a_known_discrepancy_explains_leaves_a_fit_scale_near_one():
