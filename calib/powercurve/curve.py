@@ -284,9 +284,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     if hasattr(schedule, "check_reachable"):
         schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
     v = np.asarray(wind_speed, float)
-    p_hat, cov = _estimate(result, model)
-    est_cov = discrepancy_aware_covariance(result, fit_discrepancy(result) if result.fit.measured.size else None)
-    cov = est_cov.cov_p if est_cov.reformed else cov
+    p_hat, cov, est_cov = _estimate(result, model)
     lower = np.array([q.lower for q in model.parameters], float)
     upper = np.array([q.upper for q in model.parameters], float)
     notes = []
@@ -349,7 +347,9 @@ def _solvable(model, schedule, name):
 
 
 def _estimate(result, model):
-    """p̂ and Cov(p̂) of ``result`` [parameter units], checked against ``model``'s parameters."""
+    """p̂ and Cov(p̂) of ``result`` [parameter units], checked against ``model``'s parameters, re-formed with k'
+    where a model discrepancy carries the misfit (:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`),
+    and the :class:`calib.calibration.discrepancy_scale.EstimateCovariance` that says so."""
     p_hat = np.asarray(result.estimate.p_hat, float)
     if p_hat.size != len(model.parameters):
         raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
@@ -360,4 +360,5 @@ def _estimate(result, model):
                          f"shape {cov.shape}, {int(np.count_nonzero(~np.isfinite(cov)))} non-finite entries; expected "
                          f"a finite {p_hat.size}x{p_hat.size} matrix): there is no posterior to draw from or to "
                          "linearize; re-run the calibration", result.name, field="uncertainty.cov_p")
-    return p_hat, cov
+    est_cov = discrepancy_aware_covariance(result, fit_discrepancy(result) if result.fit.measured.size else None)
+    return p_hat, (est_cov.cov_p if est_cov.reformed else cov), est_cov
