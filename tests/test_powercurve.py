@@ -550,3 +550,14 @@ def test_interval_coverage_against_monte_carlo():
         e = b + s * rng.standard_normal(200_000)
         assert interval_coverage(h, b, s) == pytest.approx(np.mean(np.abs(e) <= h), abs=4e-3)
     assert interval_coverage(1.6448536269514722, 0.0, 1.0) == pytest.approx(0.9, abs=1e-9)
+
+
+def test_reforming_the_laplace_covariance_with_the_recorded_fit_scale_is_the_recorded_one(wind_tunnel_result):
+    """calib.calibration.discrepancy_scale re-forms a real MAP result's Cov(p̂) from its recorded directions:
+    with the recorded k it is the recorded covariance to round-off, with k = 1 it is no wider."""
+    from calib.calibration.discrepancy_scale import reformed_laplace_covariance
+    _, result = wind_tunnel_result
+    cov = np.asarray(result.uncertainty.cov_p, float)
+    k = float(result.uncertainty.fit_scale)
+    np.testing.assert_allclose(reformed_laplace_covariance(result, k), cov, rtol=1e-8, atol=1e-12 * np.abs(cov).max())
+    assert np.all(np.linalg.eigvalsh(cov - reformed_laplace_covariance(result, 1.0)) > -1e-10 * np.abs(cov).max())

@@ -154,3 +154,24 @@ def test_the_report_says_where_and_why_the_delta_method_leaves_the_draws(wind_tu
     pc = calibrated_power_curve(small, v, schedule, n_draws=200, seed=4, model=model)
     row = next(r for r in pc.aep_table(distributions()) if r["distribution"] == "Rayleigh 8 m/s")
     assert delta_statement(pc, row).endswith("within 10 %.")
+
+
+def test_beside_a_discrepancy_the_power_curve_and_predict_use_the_covariance_at_k_prime(misfit_result):
+    """Where the power channel carries a discrepancy process, the power curve draws and linearizes from the
+    Laplace covariance re-formed at k' (calib.calibration.discrepancy_scale), its sandwich uses k' too, and
+    the prediction and the report's notes say so; k' ≤ the recorded k."""
+    from calib.calibration.discrepancy import fit_discrepancy
+    from calib.calibration.discrepancy_scale import discrepancy_aware_covariance
+    from calib.powercurve.sampling import sampling_covariance
+    from calib.types import OperatingConditions
+
+    est = discrepancy_aware_covariance(misfit_result, fit_discrepancy(misfit_result))
+    k = float(misfit_result.uncertainty.fit_scale)
+    assert est.reformed and 1.0 <= est.fit_scale <= k and est.recorded_fit_scale == k
+    pc = calibrated_power_curve(misfit_result, iec_bins(5.0, 15.0, 1.0), FixedSpeed(72.0, 3.0), n_draws=0)
+    assert pc.fit_scale == pytest.approx(est.fit_scale, rel=1e-12)
+    assert any("k' =" in n for n in pc.notes)
+    np.testing.assert_allclose(pc.sampling_cov, sampling_covariance(misfit_result) * est.fit_scale / k, rtol=1e-12)
+    cond = OperatingConditions(np.array([7.0, 10.0]), np.array([72.0, 72.0]), np.array([3.0, 3.0]), 1.225)
+    pred = misfit_result.predict(cond, misfit_result.rebuild_model())
+    assert "re-formed" in pred.discrepancy

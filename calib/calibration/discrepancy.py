@@ -110,6 +110,10 @@ class ChannelDiscrepancy:
         ell = np.broadcast_to(np.asarray(self.length, float), (3,))
         return ", ".join(f"{n} {v:.2g}" for n, v in zip(("λ", "pitch", "wind speed"), ell))
 
+    def prior_covariance(self, x: np.ndarray) -> np.ndarray:
+        """The process's prior covariance τ² k_ℓ(x, x) at scaled conditions ``x`` (n, 3) [-, in units u²]."""
+        return self.amplitude ** 2 * _kernel(x, x, self.length)
+
     def mean_square(self, x_new: np.ndarray) -> np.ndarray:
         """μ² + v of the discrepancy at scaled conditions ``x_new`` (n, 3) [-, relative²]."""
         k = self.amplitude ** 2 * _kernel(x_new, self.x, self.length)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.calibration.discrepancy import fit_discrepancy
+from calib.calibration.discrepancy_scale import discrepancy_aware_covariance
 from calib.checks.envelope import envelope_of
 from calib.errors import InputError
 
@@ -87,7 +88,11 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95,
     The variance of each output is g Cov(p̂) gᵀ with g its row of the model Jacobian at p̂
     and Cov(p̂) the covariance including the frozen directions (docs/theory.md, Predictions), plus
     the model discrepancy of a channel the calibration did not fit within its noise
-    (:mod:`calib.calibration.discrepancy`): an interval of the *model output* as a description of
+    (:mod:`calib.calibration.discrepancy`). Where a discrepancy applies, the MAP's Cov(p̂) is re-formed
+    with the fit scale of the residuals under noise + discrepancy
+    (:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`): the misfit is counted
+    once, in the discrepancy, not also in the parameters (Kennedy & O'Hagan 2001). An interval of the
+    *model output* as a description of
     the rotor, not of a new measurement (add the noise σ for that). At uncertain conditions
     (``condition_sigma``) the conditions' share diag(J_u Σ_u J_uᵀ) is added, J_u the outputs'
     sensitivities to the point's wind speed, rotor speed and pitch at p̂
@@ -126,7 +131,9 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95,
     G = G[:, idx, :]
     rep, representation = field_between_nodes(result, model, conditions, ev, G, idx)
     unc = result.uncertainty
-    cov = unc.cov_p if rep is None else unc.cov_p - unc.cov_alias
+    disc = fit_discrepancy(result) if result.fit.measured.size else None
+    est_cov = discrepancy_aware_covariance(result, disc)
+    cov = est_cov.cov_p if rep is None else est_cov.cov_p - unc.cov_alias
     var = np.einsum("kcj,jl,kcl->kc", np.nan_to_num(G), cov, np.nan_to_num(G))
     values = ev.values[:, idx]
     extras = ev.extras or {}
@@ -143,7 +150,6 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95,
         var = var + rep
         representation = (f"{representation}; inside the calibration envelope at the stated prior's amplitude, "
                           f"outside it {words}")
-    disc = fit_discrepancy(result) if result.fit.measured.size else None
     d_var = np.zeros(values.shape) if disc is None else \
         disc.variance(conditions.as_dict(), result.provenance.rotor_radius, np.nan_to_num(values))
     c_var = None
@@ -169,8 +175,15 @@ def predict_outputs(result, conditions, model, confidence: float = 0.95,
     return Prediction(tuple(result.channels), tuple(result.channel_units), values, std, values - z * std,
                       values + z * std, ev.status.copy(), tuple(ev.messages), confidence, tuple(envelope),
                       representation, np.where(ev.ok[:, None], np.sqrt(d_var), np.nan),
-                      "" if disc is None else disc.words(), np.where(ev.ok[:, None], field_std, np.nan), amplitude,
+                      _discrepancy_words(disc, est_cov), np.where(ev.ok[:, None], field_std, np.nan), amplitude,
                       None if c_var is None else np.where(ev.ok[:, None], np.sqrt(c_var), np.nan))
+
+
+def _discrepancy_words(disc, est_cov) -> str:
+    """The discrepancy in words, with what it did to the parameters' covariance."""
+    if disc is None:
+        return ""
+    return disc.words() + (f"; {est_cov.note}" if est_cov.note else "")
 
 
 #: Largest amplitude of the field between and beyond the nodes a band carries, in units of the stated

@@ -2,7 +2,9 @@
 
 The schedule (:mod:`calib.powercurve.schedule`) is solved at the estimate p̂ (the central curve),
 at the nominal parameters (the nominal model's curve) and at every posterior draw
-p_d ~ N(p̂, Cov(p̂)) (the Laplace covariance of the estimate, ``result.uncertainty.cov_p``), clipped
+p_d ~ N(p̂, Cov(p̂)) (the Laplace covariance of the estimate, ``result.uncertainty.cov_p``, re-formed
+with the fit scale under noise + discrepancy where a model discrepancy applies:
+:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`), clipped
 to the parameter bounds: the schedule is re-solved per draw, so a draw moves the optimal λ and
 the rated wind speed. Beside the draws' spread, the linearized (delta-method) 1-σ from the exact
 Jacobian at the central schedule (:func:`calib.powercurve.linearized.delta_method`). Failed BEM
@@ -17,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib.calibration.discrepancy import fit_discrepancy
+from calib.calibration.discrepancy_scale import discrepancy_aware_covariance
 from calib.errors import InputError
 from calib.powercurve.draws import solve_draws
 from calib.powercurve.field import prior_split as split_prior
@@ -117,6 +121,9 @@ class CalibratedPowerCurve:
     sampling_cov : ndarray, shape (n_params, n_params) or None
         The estimate's spread over repeated noise at a fixed truth (frequentist, linearized: the sandwich
         k D K Kᵀ D of :func:`calib.powercurve.sampling.sampling_covariance`) [parameter units²]; None without a gain.
+    fit_scale : float
+        The noise-variance factor in ``cov`` and ``sampling_cov`` [-]: the result's k, or k' where a model
+        discrepancy carries the misfit (:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`).
     """
 
     wind_speed: np.ndarray
@@ -146,6 +153,7 @@ class CalibratedPowerCurve:
     simulations: int | None = None
     discrepancy_cov: np.ndarray | None = None
     sampling_cov: np.ndarray | None = None
+    fit_scale: float = 1.0
 
     # ------------------------------------------------------------------ per bin
     @property
@@ -276,14 +284,14 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
     if hasattr(schedule, "check_reachable"):
         schedule.check_reachable(wind_speed, air_density, getattr(model.rotor, "source", "schedule"))
     v = np.asarray(wind_speed, float)
-    p_hat, cov = _estimate(result, model)
+    p_hat, cov, est_cov = _estimate(result, model)
     lower = np.array([q.lower for q in model.parameters], float)
     upper = np.array([q.upper for q in model.parameters], float)
     notes = []
     central = schedule.solve(model.solve, p_hat, v, air_density)
     nominal = schedule.solve(model.solve, model.chain.nominal(), v, air_density, guess=central)
     warnings = schedule_warnings(schedule, central)
-    notes += posterior_statement(result)
+    notes += posterior_statement(result) + ([est_cov.note] if est_cov.note else [])
 
     disc, fld, envelope, fld_cov, disc_cov = prediction_terms(result, model, central, air_density, notes,
                                                               covariances=True)
@@ -319,7 +327,7 @@ def calibrated_power_curve(result, wind_speed, schedule=None, air_density: float
                                 float(getattr(schedule, "generator_efficiency", 1.0)),
                                 float(model.rotor.rotor_radius), notes, n_clipped, seconds, n_pts, cov, warnings,
                                 fld_cov, split_prior(result, model, cov), n_sim, disc_cov,
-                                sampling_covariance(result))
+                                sampling_covariance(result, est_cov.fit_scale), est_cov.fit_scale)
 
 
 def _solvable(model, schedule, name):
@@ -339,7 +347,9 @@ def _solvable(model, schedule, name):
 
 
 def _estimate(result, model):
-    """p̂ and Cov(p̂) of ``result`` [parameter units], checked against ``model``'s parameters."""
+    """p̂ and Cov(p̂) of ``result`` [parameter units], checked against ``model``'s parameters, re-formed with k'
+    where a model discrepancy carries the misfit (:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`),
+    and the :class:`calib.calibration.discrepancy_scale.EstimateCovariance` that says so."""
     p_hat = np.asarray(result.estimate.p_hat, float)
     if p_hat.size != len(model.parameters):
         raise InputError(f"the result has {p_hat.size} parameters, the model {len(model.parameters)}", result.name,
@@ -350,4 +360,5 @@ def _estimate(result, model):
                          f"shape {cov.shape}, {int(np.count_nonzero(~np.isfinite(cov)))} non-finite entries; expected "
                          f"a finite {p_hat.size}x{p_hat.size} matrix): there is no posterior to draw from or to "
                          "linearize; re-run the calibration", result.name, field="uncertainty.cov_p")
-    return p_hat, cov
+    est_cov = discrepancy_aware_covariance(result, fit_discrepancy(result) if result.fit.measured.size else None)
+    return p_hat, (est_cov.cov_p if est_cov.reformed else cov), est_cov

@@ -28,7 +28,7 @@ from scipy.stats import norm
 __all__ = ["interval_coverage", "sampling_covariance"]
 
 
-def sampling_covariance(result) -> np.ndarray | None:
+def sampling_covariance(result, fit_scale: float | None = None) -> np.ndarray | None:
     """Cov(p̂) over repeated noise at a fixed truth, linearized: k D K Kᵀ D [parameter units²].
 
     Parameters
@@ -36,6 +36,10 @@ def sampling_covariance(result) -> np.ndarray | None:
     result : CalibrationResult
         A MAP result: ``uncertainty.gain`` (n, m·c) [scale units per whitened residual],
         ``uncertainty.fit_scale`` k [-] and ``estimate.scale`` D (n,) [parameter units per scale unit].
+    fit_scale : float, optional
+        k in place of the recorded one: k' where a model discrepancy carries the misfit
+        (:func:`calib.calibration.discrepancy_scale.discrepancy_aware_covariance`), whose fixed part is a
+        bias at a fixed truth, not noise [-].
 
     Returns
     -------
@@ -48,7 +52,7 @@ def sampling_covariance(result) -> np.ndarray | None:
     if K.ndim != 2 or not K.size or K.shape[0] != d.size:
         return None
     KD = d[:, None] * K
-    return float(unc.fit_scale) * (KD @ KD.T)
+    return float(unc.fit_scale if fit_scale is None else fit_scale) * (KD @ KD.T)
 
 
 def interval_coverage(halfwidth, bias, sd) -> np.ndarray:
