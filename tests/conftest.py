@@ -44,7 +44,7 @@ CRASH_LINES = ("corrupted double-linked list", "corrupted size vs. prev_size", "
                "Traceback (most recent call last)")
 #: Test modules that load FMUs (in-process, in FMU worker processes or in executor workers).
 FMU_MODULES = ("test_fmu_", "test_executors", "test_workflow_fmu_only", "test_conformance", "test_soak",
-               "test_diagnose_seams")
+               "test_diagnose_seams", "test_discrepancy_scale_paths")
 #: Tests whose FMU is made to crash on purpose (tests/data/fmu/FaultyRotor.py) may print a child's
 #: traceback: only heap and signal lines count there.
 EXPECTED_TRACEBACKS = ("test_fmu_faults",)
