@@ -54,7 +54,8 @@ Z90 = 1.6448536269514722
 #: First noise seed (41000-41049 published at 9a0decc, 51000-51049 at 8edf44a on the 6 × 5 field; 49xxx
 #: and 59xxx used in development; 52000-52049 published on the 12 × 5 field at 20ad3c0, then issue 41's
 #: development seeds; 53000-53027 judged the physical between-node lengths and ARD discrepancy (8928abb);
-#: 54000-54049, passed as ``seeds``, judged the sampling σ (3a0941c). The next judgement needs a new range).
+#: 54000-54049, passed as ``seeds``, judged the sampling σ (3a0941c); 55000-55049 the covariance at k' (0978d31);
+#: 56000-56049 the merged k' code (d9a5f0a). The next judgement needs a new range).
 SEED0 = 53000
 #: The correction field's α nodes [deg]: 12, every 1.82° from −4 to 16°. The 6 nodes of 4° (until
 #: 8edf44a) left a region-2 bias that the noise-free resolution test (:func:`resolution`) traces to the
