@@ -561,3 +561,45 @@ def test_reforming_the_laplace_covariance_with_the_recorded_fit_scale_is_the_rec
     k = float(result.uncertainty.fit_scale)
     np.testing.assert_allclose(reformed_laplace_covariance(result, k), cov, rtol=1e-8, atol=1e-12 * np.abs(cov).max())
     assert np.all(np.linalg.eigvalsh(cov - reformed_laplace_covariance(result, 1.0)) > -1e-10 * np.abs(cov).max())
+
+
+def test_the_delta_method_is_the_derivative_of_the_schedule_it_linearizes(wind_tunnel_result):
+    """The scheduled power's gradient (calib.powercurve.linearized.delta_method) against central differences of
+    the variable-speed schedule itself (λ* re-found as VariableSpeed.optimal_tsr finds it: the vertex of a
+    parabola through three grid points), along the direction that moves the power most per σ, ±0.05 σ. On
+    CCBlade replicate 56003 of bench_powercurve the earlier chain term, −(∂²C_P/∂λ∂p)/(∂²C_P/∂λ²) at λ* from
+    ±0.05 in λ, made the delta σ 6.2 × the draws' (the calibrated C_P(λ) has kinks at the correction nodes)."""
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    _, schedule = _variable_speed(model, "optimal")
+    v = iec_bins(5.0, 15.0, 1.0)
+    pc = calibrated_power_curve(result, v, schedule, n_draws=0, model=model)
+    r2 = pc.central.region == 2
+    g = np.nan_to_num(pc.grad_power)[r2].sum(axis=0)
+    e = 0.05 * pc.cov @ g / np.sqrt(g @ pc.cov @ g)
+    up = schedule.solve(model.solve, result.estimate.p_hat + e, v, pc.air_density)
+    down = schedule.solve(model.solve, result.estimate.p_hat - e, v, pc.air_density)
+    assert up.tsr_opt != down.tsr_opt                      # the step moves λ*: the chain term is exercised
+    fd = (up.power - down.power)[r2] / 2
+    lin = np.nan_to_num(pc.grad_power)[r2] @ e
+    np.testing.assert_allclose(fd, lin, rtol=0.02, atol=0.02 * np.abs(lin).max())
+
+
+def test_the_optimal_tsr_gradient_is_the_derivative_of_the_schedules_vertex(wind_tunnel_result):
+    """dλ*/dp (calib.powercurve.linearized._vertex_gradient) against central differences of
+    VariableSpeed.optimal_tsr itself, ±0.05 σ along the direction that moves λ* most per σ. (On this calibration the
+    earlier formula, −(∂²C_P/∂λ∂p)/(∂²C_P/∂λ²) at λ* from ±0.05 in λ, is 11 % off the schedule's own derivative.)"""
+    from calib.powercurve.linearized import _vertex_gradient
+
+    _, result = wind_tunnel_result
+    model = result.rebuild_model()
+    _, schedule = _variable_speed(model, "optimal")
+    p = result.estimate.p_hat
+    cov = result.uncertainty.cov_p
+    i_power = [c.name for c in model.channels].index("power")
+    g = _vertex_gradient(model, p, schedule, 1.225, i_power)
+    assert np.any(g)
+    e = 0.05 * cov @ g / np.sqrt(g @ cov @ g)
+    up, _ = schedule.optimal_tsr(model.solve, p + e, 1.225)
+    down, _ = schedule.optimal_tsr(model.solve, p - e, 1.225)
+    assert (up - down) / 2 == pytest.approx(g @ e, rel=0.01)

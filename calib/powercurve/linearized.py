@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.powercurve.schedule import ScheduledCurve
+from calib.powercurve.schedule import TSR_GRID, ScheduledCurve
 from calib.types import OperatingConditions
 
 __all__ = ["delta_method"]
@@ -16,9 +16,9 @@ def delta_method(model, p_hat, cov, central: ScheduledCurve, air_density: float,
     Region 2 and fixed schedules: σ² = g Cov gᵀ with g the exact row of the model Jacobian at the
     central operating point. When the schedule re-finds the optimal λ per parameter vector
     (``VariableSpeed(tsr_rule="optimal")``), the bins whose rotor speed is not at a limit also move
-    with λ*(p): g += ∂P/∂Ω · (∂Ω/∂λ) · dλ*/dp, with dλ*/dp = −(∂²C_P/∂λ∂p)/(∂²C_P/∂λ²) at λ*
-    (central differences of the exact Jacobian of C_P, ±0.05 in λ; ∂P/∂Ω by a 0.01 rpm forward
-    difference). Region 3: the pitch holds rated power, σ_P = 0, dβ/dp = −(∂P/∂p)/(∂P/∂β), and the
+    with λ*(p): g += ∂P/∂Ω · (∂Ω/∂λ) · dλ*/dp, with dλ*/dp the derivative of the schedule's own λ*, the
+    vertex of its parabola through three grid points (:func:`_vertex_gradient`, the exact Jacobian of C_P
+    there; ∂P/∂Ω by a 0.01 rpm forward difference). Region 3: the pitch holds rated power, σ_P = 0, dβ/dp = −(∂P/∂p)/(∂P/∂β), and the
     thrust moves by ∂T/∂p + ∂T/∂β dβ/dp (∂/∂β by a 0.01° forward difference).
 
     Returns
@@ -41,16 +41,8 @@ def delta_method(model, p_hat, cov, central: ScheduledCurve, air_density: float,
     if getattr(schedule, "tsr_rule", None) == "optimal" and np.isfinite(central.tsr_opt):
         k = np.flatnonzero((central.region == 2) & (rpm > schedule.min_rotor_speed + 1e-9)
                            & (rpm < schedule.max_rotor_speed - 1e-9))
-        if k.size:
-            h, lam = 0.05, central.tsr_opt + np.array([-0.05, 0.0, 0.05])
-            omega = schedule.max_rotor_speed * np.pi / 30
-            vl = omega * schedule.rotor_radius / lam
-            evl, Gl = model.jacobian(p_hat, OperatingConditions(vl, np.full(3, schedule.max_rotor_speed),
-                                                                np.full(3, schedule.fine_pitch), air_density))
-            q = 0.5 * air_density * np.pi * schedule.rotor_radius ** 2 * vl ** 3
-            cp, gcp = evl.values[:, names.index("power")] / q, Gl[:, names.index("power"), :] / q[:, None]
-            d2 = (cp[2] - 2 * cp[1] + cp[0]) / h ** 2
-            dlam_dp = -(gcp[2] - gcp[0]) / (2 * h) / d2 if d2 < 0 else np.zeros(gP.shape[1])
+        dlam_dp = _vertex_gradient(model, p_hat, schedule, air_density, names.index("power"))
+        if k.size and np.any(dlam_dp):
             r0, r1 = solve(k, rpm[k], beta[k]), solve(k, rpm[k] + 0.01, beta[k])
             drpm_dlam = v[k] / schedule.rotor_radius * 30 / np.pi
             gP[k] += ((r1.power - r0.power) / 0.01 * drpm_dlam)[:, None] * dlam_dp
@@ -71,3 +63,35 @@ def delta_method(model, p_hat, cov, central: ScheduledCurve, air_density: float,
     std = {name: np.where(bad, np.nan, np.sqrt(np.maximum(var(g), 0.0)))
            for name, g in (("power", gP), ("thrust", gT), ("pitch", g_pitch))}
     return std, np.where(bad[:, None], np.nan, gP), np.nan_to_num(g_pitch), dP_dpitch
+
+
+def _vertex_gradient(model, p_hat, schedule, air_density: float, i_power: int) -> np.ndarray:
+    """dλ*/dp of the schedule's optimal λ as :meth:`~calib.powercurve.schedule.VariableSpeed.optimal_tsr` finds
+    it [1 per parameter unit]: the vertex of the parabola through the best grid point and its neighbours,
+    λ* = λ_k + h (y₋ − y₊) / (2 (y₋ − 2y₀ + y₊)) (y the C_P at λ_k − h, λ_k, λ_k + h), differentiated with the
+    exact Jacobian of C_P at those three points (the grid and the best point held). Zero where the schedule
+    takes the grid point itself (the best point at the grid's edge, a parabola not concave, or its vertex
+    clipped to the three points). The derivative of the implemented λ*, not of the continuous maximum: where
+    the calibrated C_P(λ) has kinks (a correction field's nodes), −(∂²C_P/∂λ∂p)/(∂²C_P/∂λ²) at λ* can be
+    far from how the schedule's λ* moves."""
+    lam = schedule.design_tsr * TSR_GRID
+    omega = schedule.max_rotor_speed * np.pi / 30
+    vl = omega * schedule.rotor_radius / lam
+    ev, G = model.jacobian(p_hat, OperatingConditions(vl, np.full(lam.size, schedule.max_rotor_speed),
+                                                      np.full(lam.size, schedule.fine_pitch), air_density))
+    q = 0.5 * air_density * np.pi * schedule.rotor_radius ** 2 * vl ** 3
+    cp = np.where(ev.ok, ev.values[:, i_power] / q, -np.inf)
+    k = int(np.argmax(cp))
+    zero = np.zeros(G.shape[-1])
+    if not 0 < k < lam.size - 1 or not np.all(np.isfinite(cp[k - 1:k + 2])):
+        return zero
+    y = cp[k - 1:k + 2]
+    g = G[k - 1:k + 2, i_power, :] / q[k - 1:k + 2, None]
+    h = lam[k + 1] - lam[k]
+    d = y[0] - 2 * y[1] + y[2]
+    if d >= 0:
+        return zero
+    t = h * (y[0] - y[2]) / (2 * d)
+    if abs(t) >= h:
+        return zero
+    return h / 2 * ((g[0] - g[2]) * d - (y[0] - y[2]) * (g[0] - 2 * g[1] + g[2])) / d ** 2

@@ -7,8 +7,7 @@ Three kinds, chosen by name (:data:`SCHEDULE_KINDS`):
   C_P at fine pitch *of the model at hand* (``tsr_rule="optimal"``: re-found for every parameter
   vector, so the calibrated polars move it) or at the schedule's design value
   (``tsr_rule="design"``, as :func:`calib.bem.steady_control.steady_power_curve`), within the
-  rotor-speed limits; region 3 at rated aerodynamic power by pitch (Jonkman et al.,
-  NREL/TP-500-38060, §7).
+  rotor-speed limits; region 3 at rated aerodynamic power by pitch (Jonkman et al., NREL/TP-500-38060, §7).
 - ``fixed_speed``: one rotor speed and one pitch at every wind speed (a stall-regulated rotor
   such as the NREL Phase VI at 72 rpm and 3°).
 - ``table``: rotor speed and pitch interpolated in a user table of wind speed.
@@ -32,6 +31,8 @@ __all__ = ["FixedSpeed", "ScheduledCurve", "SCHEDULE_KINDS", "TableSchedule", "V
 
 #: Status of a bin whose region-3 pitch did not reach rated power within the iteration limit.
 PITCH_NOT_CONVERGED = 90
+#: The tip-speed ratios the optimal λ is searched on, in units of the design λ (13 points, ±35 %) [-].
+TSR_GRID = np.linspace(0.65, 1.35, 13)
 
 
 @dataclass(frozen=True, eq=False)
@@ -242,9 +243,8 @@ class VariableSpeed:
                 f"{self.rated_power / 1e6:.4g} MW by pitch")
 
     def optimal_tsr(self, solve, p, air_density) -> tuple[float, int]:
-        """λ of maximum C_P at fine pitch [-] (a 13-point grid ±35 % about the design λ, refined by
-        a parabola through the best three) and the number of BEM points it took."""
-        lam = self.design_tsr * np.linspace(0.65, 1.35, 13)
+        """λ of maximum C_P at fine pitch [-] on the design λ × :data:`TSR_GRID`, refined by a parabola; BEM points."""
+        lam = self.design_tsr * TSR_GRID
         omega = self.max_rotor_speed * np.pi / 30
         res = solve(p, OperatingConditions(omega * self.rotor_radius / lam, np.full(lam.size, self.max_rotor_speed),
                                            np.full(lam.size, self.fine_pitch), air_density))
