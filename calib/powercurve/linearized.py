@@ -77,16 +77,21 @@ def _vertex_gradient(model, p_hat, schedule, air_density: float, i_power: int) -
     lam = schedule.design_tsr * TSR_GRID
     omega = schedule.max_rotor_speed * np.pi / 30
     vl = omega * schedule.rotor_radius / lam
-    ev, G = model.jacobian(p_hat, OperatingConditions(vl, np.full(lam.size, schedule.max_rotor_speed),
-                                                      np.full(lam.size, schedule.fine_pitch), air_density))
+    cond = lambda i: OperatingConditions(vl[i], np.full(i.size, schedule.max_rotor_speed),  # noqa: E731
+                                         np.full(i.size, schedule.fine_pitch), air_density)
     q = 0.5 * air_density * np.pi * schedule.rotor_radius ** 2 * vl ** 3
-    cp = np.where(ev.ok, ev.values[:, i_power] / q, -np.inf)
+    res = model.solve(p_hat, cond(np.arange(lam.size)))          # values on the grid, the Jacobian at three
+    cp = np.where(res.ok, res.power / q, -np.inf)
     k = int(np.argmax(cp))
-    zero = np.zeros(G.shape[-1])
+    zero = np.zeros(np.asarray(p_hat).size)
     if not 0 < k < lam.size - 1 or not np.all(np.isfinite(cp[k - 1:k + 2])):
         return zero
-    y = cp[k - 1:k + 2]
-    g = G[k - 1:k + 2, i_power, :] / q[k - 1:k + 2, None]
+    three = np.arange(k - 1, k + 2)
+    ev, G = model.jacobian(p_hat, cond(three))
+    if not np.all(ev.ok):
+        return zero
+    y = ev.values[:, i_power] / q[three]
+    g = G[:, i_power, :] / q[three, None]
     h = lam[k + 1] - lam[k]
     d = y[0] - 2 * y[1] + y[2]
     if d >= 0:
