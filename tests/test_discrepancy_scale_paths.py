@@ -34,6 +34,12 @@ def _misfit(meas):
     return dataclasses.replace(meas, values=values)
 
 
+def _recorded(result, disc) -> EstimateCovariance:
+    """The result's recorded covariance, as before the discrepancy-aware one (the comparison's baseline)."""
+    k = float(result.uncertainty.fit_scale)
+    return EstimateCovariance(np.asarray(result.uncertainty.cov_p, float), k, k, float("nan"), False, "")
+
+
 @pytest.mark.parametrize("estimator", ["map", "truncated"])
 @pytest.mark.parametrize("model_kind", ["bem_field", "fmu_a"])
 def test_the_prediction_counts_the_misfit_once_on_each_path(model_kind, estimator, workdir, monkeypatch):
@@ -48,9 +54,7 @@ def test_the_prediction_counts_the_misfit_once_on_each_path(model_kind, estimato
         k = float(res.uncertainty.fit_scale)
         cond = conditions_of(model_kind)
         pred = res.predict(cond, model)
-        recorded = lambda r, d: EstimateCovariance(np.asarray(r.uncertainty.cov_p, float), k, k, float("nan"),  # noqa: E731
-                                                   False, "")
-        monkeypatch.setattr(prediction, "discrepancy_aware_covariance", recorded)
+        monkeypatch.setattr(prediction, "discrepancy_aware_covariance", _recorded)
         before = res.predict(cond, model)
     finally:
         if model_kind.startswith("fmu"):

@@ -18,8 +18,9 @@ def delta_method(model, p_hat, cov, central: ScheduledCurve, air_density: float,
     (``VariableSpeed(tsr_rule="optimal")``), the bins whose rotor speed is not at a limit also move
     with λ*(p): g += ∂P/∂Ω · (∂Ω/∂λ) · dλ*/dp, with dλ*/dp the derivative of the schedule's own λ*, the
     vertex of its parabola through three grid points (:func:`_vertex_gradient`, the exact Jacobian of C_P
-    there; ∂P/∂Ω by a 0.01 rpm forward difference). Region 3: the pitch holds rated power, σ_P = 0, dβ/dp = −(∂P/∂p)/(∂P/∂β), and the
-    thrust moves by ∂T/∂p + ∂T/∂β dβ/dp (∂/∂β by a 0.01° forward difference).
+    there; ∂P/∂Ω by a 0.01 rpm forward difference). Region 3: the pitch holds rated power, σ_P = 0,
+    dβ/dp = −(∂P/∂p)/(∂P/∂β), and the thrust moves by ∂T/∂p + ∂T/∂β dβ/dp (∂/∂β by a 0.01° forward
+    difference).
 
     Returns
     -------
